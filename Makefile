@@ -1,0 +1,29 @@
+# Two commands for a newcomer: `make demo` and `make test`. Both bootstrap the venv first.
+VENV ?= .venv
+SHELL := /bin/bash
+ACT := source $(VENV)/setup.bash &&
+SCENARIO ?=
+export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+
+.PHONY: venv demo test lint typecheck pytest colcon-check clean
+
+venv:
+	@./.ci/bootstrap.sh $(VENV)
+
+demo: venv
+	@$(ACT) demo $(SCENARIO)
+
+test: venv
+	@$(MAKE) --no-print-directory lint typecheck pytest
+
+lint:
+	@$(ACT) echo '[lint] ruff' && ruff check lf_predictor_ros sim_ros test setup.py
+
+typecheck:
+	@$(ACT) echo '[typecheck] mypy' && mypy
+
+pytest:
+	@$(ACT) echo '[pytest]' && python -m pytest $(PYTEST_ARGS)
+
+clean:
+	rm -rf build install log .pytest_cache .mypy_cache .ruff_cache *.egg-info

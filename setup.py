@@ -56,7 +56,6 @@ setup(
     maintainer_email='dev@lf-predictor.invalid',
     description='Learned low-frequency pose predictor (wave filter) for ship dynamic positioning',
     license='Apache-2.0',
-    tests_require=['pytest'],
     entry_points={
         'console_scripts': [e for e in CONSOLE_SCRIPTS if _module_exists(e)],
     },

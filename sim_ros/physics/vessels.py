@@ -1,0 +1,253 @@
+"""Vessel models: the thesis 1-DOF and 3-DOF models and the MSS supply vessel (3-DOF DP).
+
+All vessels share one state layout, a list of six floats [north m, east m, ψ rad, u m/s,
+v m/s, r rad/s] (η then ν), and one input layout, eight floats
+[τ_surge N, τ_sway N, τ_yaw N·m (body, from the actuators), f_north N, f_east N, f_yaw N·m
+(earth-fixed disturbance: wind, drift, first-order waves), v_c,north, v_c,east m/s (current)].
+Earth-fixed forces enter through G(ψ) = R(ψ)ᵀ; the current through the relative velocity
+ν_r = ν − R(ψ)ᵀ [v_c; 0] in the damping.
+
+Thesis models (Franz 2018 §5.1.2–5.1.3), diagonal, per DOF i:
+    η̇ = R(ψ) ν,   ν̇_i = a_i ν_r,i |ν_r,i| + b_i (τ_i + (R(ψ)ᵀ f)_i).
+1-DOF (eq. 5.5–5.7): a = −0.017 1/m, b = 0.00068 1/kg in surge, zero elsewhere (east and yaw
+stay 0, so R(ψ) = I and the model is exactly ẋ1 = x2, ẋ2 = a x2|x2| + b(τc + τ_wave)).
+3-DOF (eq. 5.8, A, B, G(ψ) not in the surviving text; our choice): A = diag(a, a, 10 a),
+B = diag(b, b, b), G(ψ) = R(ψ)ᵀ (earth-fixed wave forces to the body), J(ψ) = R(ψ). Surge and
+sway copy the 1-DOF dynamics; yaw has 10× the quadratic damping, so its quadratic-damping step
+response u(t) = u∞ tanh(t/T_q), T_q = 1/√(−a b τ), is √10 ≈ 3.2× faster for the same input
+(for τ = 100: T_q = 29 s in surge/sway, 9.3 s in yaw).
+
+Supply vessel (Fossen, Sagatun & Sørensen 1996; MSS `supply.m`; anchors §2): M ν̇ + D ν_r = τ +
+R(ψ)ᵀ f, η̇ = R(ψ) ν, linear damping, valid below about 3 m/s. M, D in SI from Mbis, Dbis:
+M = m T⁻¹ Mbis T⁻¹, D = m √(g/L) T⁻¹ Dbis T⁻¹, T⁻¹ = diag(1, 1, L). Open-loop time constants
+(eigenvalues of M⁻¹D) ≈ 88 s, 44 s, 11.5 s.
+
+First-order wave motion under force superposition (`wave_rates_fn`): the wave-frequency state
+x_WF (same layout) is the response of the model *linearized about the LF state* to the
+first-order wave force, and the total motion is x_LF + x_WF (Fossen 2011 §10.2's LF/WF
+separation). Integrating one nonlinear vessel with the wave force inside instead makes the
+quadratic damping rectify the ≈ 0.4 m/s wave velocity into a mean force, so that vessel and a
+wave-free twin drift apart by metres within minutes (measured: 7–25 m std over 10 min in the
+1-DOF scenarios); that rectified force is a second-order wave effect, which the environment
+models separately as the slowly varying drift bias.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from sim_ros.physics.integrate import RatesFn, State
+from sim_ros.physics.kinematics import FloatArray
+
+# --- thesis models, eq. 5.6-5.7 ---------------------------------------------------------------
+ONEDOF_A = -0.017  # 1/m, quadratic damping coefficient a (eq. 5.6)
+ONEDOF_B = 0.00068  # 1/kg, input gain b (eq. 5.7); equivalent mass 1/b ≈ 1471 kg
+THREEDOF_A = (ONEDOF_A, ONEDOF_A, 10.0 * ONEDOF_A)  # our choice, see module docstring
+THREEDOF_B = (ONEDOF_B, ONEDOF_B, ONEDOF_B)
+# Operating speeds of the documented linearization D_i = 2|a_i| u0_i / b_i (m/s, m/s, rad/s):
+# typical DP velocities; linear time constants 1/(2|a| u0) = 294 s, 294 s, 147 s.
+THESIS_OPERATING_SPEED = (0.1, 0.1, 0.02)
+
+# --- supply vessel, MSS supply.m ----------------------------------------------------------------
+SUPPLY_LENGTH = 76.2  # m, L
+SUPPLY_MASS = 6000e3  # kg, m
+GRAVITY = 9.81  # m/s²
+SUPPLY_MBIS = np.array([[1.1274, 0.0, 0.0], [0.0, 1.8902, -0.0744], [0.0, -0.0744, 0.1278]])
+SUPPLY_DBIS = np.array([[0.0358, 0.0, 0.0], [0.0, 0.1183, -0.0124], [0.0, -0.0041, 0.0308]])
+_T_INV = np.diag([1.0, 1.0, SUPPLY_LENGTH])
+SUPPLY_M = SUPPLY_MASS * _T_INV @ SUPPLY_MBIS @ _T_INV  # kg, kg·m, kg·m²
+SUPPLY_D = SUPPLY_MASS * math.sqrt(GRAVITY / SUPPLY_LENGTH) * _T_INV @ SUPPLY_DBIS @ _T_INV
+SUPPLY_CURRENT_SPEED = 0.5  # m/s, MSS SIMsupply.m
+SUPPLY_CURRENT_DIRECTION = math.radians(20.0)  # rad, β_c in MSS SIMsupply.m
+
+VESSEL_KINDS = ('onedof', 'threedof', 'supply')
+# f(x_LF, x_WF, input) → ẋ_WF; input = the 8 LF inputs + first-order wave force (3, earth)
+WaveRatesFn = Callable[[Sequence[float], Sequence[float], Sequence[float]], State]
+
+
+@dataclass(frozen=True)
+class LinearModel:
+    """Linear(ized) model M ν̇ + D ν = τ for observers and controller tuning (3×3, SI)."""
+
+    mass: FloatArray
+    damping: FloatArray
+    operating_speed: tuple[float, float, float]  # (m/s, m/s, rad/s), 0 where exact
+
+    def time_constants(self) -> FloatArray:
+        """Open-loop time constants 1/λ_i of M⁻¹D [s], sorted descending."""
+        eig = np.linalg.eigvals(np.linalg.solve(self.mass, self.damping)).real
+        return np.asarray(np.sort(1.0 / eig)[::-1], dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class ThesisVessel:
+    """Diagonal quadratic-damping model of the thesis (eq. 5.5 and 5.8)."""
+
+    quad_damping: tuple[float, float, float]  # a_i [1/m or 1/rad]
+    input_gain: tuple[float, float, float]  # b_i [1/kg or 1/(kg·m²)]
+    ndof: int
+
+    def __post_init__(self) -> None:
+        """Validate: a_i <= 0, b_i >= 0 and b_i > 0 on the used DOFs."""
+        if self.ndof not in (1, 3):
+            raise ValueError(f'thesis vessel ndof must be 1 or 3, got {self.ndof}')
+        if any(a > 0 for a in self.quad_damping) or any(b < 0 for b in self.input_gain):
+            raise ValueError('thesis vessel needs a_i <= 0 (damping) and b_i >= 0 (input gain)')
+        if any(b <= 0 for b in self.input_gain[: self.ndof]):
+            raise ValueError(f'input gain b must be > 0 on the {self.ndof} used DOFs')
+
+    def linearize(self, operating_speed: Sequence[float] = THESIS_OPERATING_SPEED
+                  ) -> LinearModel:
+        """M = diag(1/b), D = diag(2|a| u0 / b): slope of a u|u| at u0 (unused DOFs copy surge)."""
+        gains = [b if b > 0 else self.input_gain[0] for b in self.input_gain]
+        damps = [a if b > 0 else self.quad_damping[0]
+                 for a, b in zip(self.quad_damping, self.input_gain, strict=True)]
+        speeds = tuple(float(s) for s in operating_speed)
+        mass = np.diag([1.0 / b for b in gains])
+        damping = np.diag([2.0 * abs(a) * s / b for a, s, b in zip(damps, speeds, gains,
+                                                                     strict=True)])
+        return LinearModel(mass, damping, (speeds[0], speeds[1], speeds[2]))
+
+    def rates_fn(self) -> RatesFn:
+        """f(state, input) → state derivative (plain floats; see module docstring)."""
+        a_u, a_v, a_r = self.quad_damping
+        b_u, b_v, b_r = self.input_gain
+        cos, sin = math.cos, math.sin
+
+        def rates(x: Sequence[float], inp: Sequence[float]) -> State:
+            psi, u, v, r = x[2], x[3], x[4], x[5]
+            c, s = cos(psi), sin(psi)
+            fn, fe, vcn, vce = inp[3], inp[4], inp[6], inp[7]
+            ur = u - (c * vcn + s * vce)
+            vr = v - (-s * vcn + c * vce)
+            return [c * u - s * v, s * u + c * v, r,
+                    a_u * ur * abs(ur) + b_u * (inp[0] + c * fn + s * fe),
+                    a_v * vr * abs(vr) + b_v * (inp[1] - s * fn + c * fe),
+                    a_r * r * abs(r) + b_r * (inp[2] + inp[5])]
+
+        return rates
+
+    def wave_rates_fn(self) -> WaveRatesFn:
+        """First-order wave motion linearized about the LF state (force superposition).
+
+        ν̇_w,i = 2 a_i max(|ν_r,LF,i|, u0_i) ν_w,i + b_i (R(ψ_LF)ᵀ f_w)_i, η̇_w = R(ψ_LF) ν_w.
+        The slope is floored at the operating speed u0 of `linearize` (THESIS_OPERATING_SPEED)
+        so that the WF motion of a vessel at rest stays damped (time constant ≤ 294 s) instead
+        of integrating numerical error forever; the thesis model has no linear damping.
+        """
+        a_u, a_v, a_r = self.quad_damping
+        b_u, b_v, b_r = self.input_gain
+        floor_u, floor_v, floor_r = THESIS_OPERATING_SPEED
+        cos, sin = math.cos, math.sin
+
+        def rates(lf: Sequence[float], wf: Sequence[float], inp: Sequence[float]) -> State:
+            c, s = cos(lf[2]), sin(lf[2])
+            vcn, vce = inp[6], inp[7]
+            ur = max(abs(lf[3] - (c * vcn + s * vce)), floor_u)
+            vr = max(abs(lf[4] - (-s * vcn + c * vce)), floor_v)
+            rr = max(abs(lf[5]), floor_r)
+            u, v, r = wf[3], wf[4], wf[5]
+            fn, fe, fy = inp[8], inp[9], inp[10]
+            return [c * u - s * v, s * u + c * v, r,
+                    2.0 * a_u * ur * u + b_u * (c * fn + s * fe),
+                    2.0 * a_v * vr * v + b_v * (-s * fn + c * fe),
+                    2.0 * a_r * rr * r + b_r * fy]
+
+        return rates
+
+
+@dataclass(frozen=True)
+class SupplyVessel:
+    """Linear 3-DOF DP model M ν̇ + D ν_r = τ + R(ψ)ᵀ f (MSS supply.m)."""
+
+    mass: FloatArray
+    damping: FloatArray
+
+    def __post_init__(self) -> None:
+        """Validate: 3×3, M symmetric positive definite."""
+        if self.mass.shape != (3, 3) or self.damping.shape != (3, 3):
+            raise ValueError('supply vessel M and D must be 3×3')
+        if not np.allclose(self.mass, self.mass.T) or np.any(np.linalg.eigvalsh(self.mass) <= 0):
+            raise ValueError('supply vessel M must be symmetric positive definite')
+
+    @property
+    def ndof(self) -> int:
+        """Always 3."""
+        return 3
+
+    def linearize(self) -> LinearModel:
+        """The model is linear: (M, D) exactly."""
+        return LinearModel(self.mass.copy(), self.damping.copy(), (0.0, 0.0, 0.0))
+
+    def rates_fn(self) -> RatesFn:
+        """f(state, input) → state derivative (plain floats; see module docstring)."""
+        m_inv = np.linalg.inv(self.mass)
+        # ν̇ = M⁻¹ (g − D ν_r): precompute M⁻¹ and −M⁻¹D as nested float tuples
+        mi = [[float(v) for v in row] for row in m_inv]
+        md = [[float(v) for v in row] for row in -(m_inv @ self.damping)]
+        (p00, p01, p02), (p10, p11, p12), (p20, p21, p22) = mi
+        (q00, q01, q02), (q10, q11, q12), (q20, q21, q22) = md
+        cos, sin = math.cos, math.sin
+
+        def rates(x: Sequence[float], inp: Sequence[float]) -> State:
+            psi, u, v, r = x[2], x[3], x[4], x[5]
+            c, s = cos(psi), sin(psi)
+            fn, fe, vcn, vce = inp[3], inp[4], inp[6], inp[7]
+            ur = u - (c * vcn + s * vce)
+            vr = v - (-s * vcn + c * vce)
+            gx = inp[0] + c * fn + s * fe
+            gy = inp[1] - s * fn + c * fe
+            gn = inp[2] + inp[5]
+            return [c * u - s * v, s * u + c * v, r,
+                    p00 * gx + p01 * gy + p02 * gn + q00 * ur + q01 * vr + q02 * r,
+                    p10 * gx + p11 * gy + p12 * gn + q10 * ur + q11 * vr + q12 * r,
+                    p20 * gx + p21 * gy + p22 * gn + q20 * ur + q21 * vr + q22 * r]
+
+        return rates
+
+    def wave_rates_fn(self) -> WaveRatesFn:
+        """First-order wave motion (force superposition) of the linear model.
+
+        M ν̇_w + D ν_w = R(ψ_LF)ᵀ f_w, η̇_w = R(ψ_LF) ν_w (exact up to the ψ_w ν_LF coupling).
+        """
+        m_inv = np.linalg.inv(self.mass)
+        mi = [[float(v) for v in row] for row in m_inv]
+        md = [[float(v) for v in row] for row in -(m_inv @ self.damping)]
+        (p00, p01, p02), (p10, p11, p12), (p20, p21, p22) = mi
+        (q00, q01, q02), (q10, q11, q12), (q20, q21, q22) = md
+        cos, sin = math.cos, math.sin
+
+        def rates(lf: Sequence[float], wf: Sequence[float], inp: Sequence[float]) -> State:
+            c, s = cos(lf[2]), sin(lf[2])
+            u, v, r = wf[3], wf[4], wf[5]
+            fn, fe = inp[8], inp[9]
+            gx, gy, gn = c * fn + s * fe, -s * fn + c * fe, inp[10]
+            return [c * u - s * v, s * u + c * v, r,
+                    p00 * gx + p01 * gy + p02 * gn + q00 * u + q01 * v + q02 * r,
+                    p10 * gx + p11 * gy + p12 * gn + q10 * u + q11 * v + q12 * r,
+                    p20 * gx + p21 * gy + p22 * gn + q20 * u + q21 * v + q22 * r]
+
+        return rates
+
+
+Vessel = ThesisVessel | SupplyVessel
+
+ONEDOF = ThesisVessel((ONEDOF_A, 0.0, 0.0), (ONEDOF_B, 0.0, 0.0), ndof=1)
+THREEDOF = ThesisVessel(THREEDOF_A, THREEDOF_B, ndof=3)
+SUPPLY = SupplyVessel(SUPPLY_M.copy(), SUPPLY_D.copy())
+
+
+def make_vessel(kind: str) -> Vessel:
+    """The vessel called `kind` ('onedof', 'threedof' or 'supply')."""
+    vessels: dict[str, Vessel] = {'onedof': ONEDOF, 'threedof': THREEDOF, 'supply': SUPPLY}
+    if kind not in vessels:
+        raise ValueError(f'vessel must be one of {VESSEL_KINDS}, got {kind!r}')
+    return vessels[kind]
+
+
+def terminal_speed(quad_damping: float, input_gain: float, force: float) -> float:
+    """Steady speed of u̇ = a u|u| + b τ: sign(τ) √(b|τ|/−a) (thesis eq. 5.5)."""
+    return math.copysign(math.sqrt(input_gain * abs(force) / -quad_damping), force)

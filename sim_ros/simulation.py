@@ -1,0 +1,652 @@
+"""Scenario configuration and the Simulator composing the physics (ROS-free).
+
+Time base: the simulator produces one `SimSample` per output (sensor) period `sample_time`;
+inside, the vessel is integrated with RK4 at `internal_step` (sample_time must be an integer
+multiple), the command is held over the period (zero-order hold), and the shaft dynamics of the
+supply vessel are solved exactly between RK4 stages. Random streams are separate children of
+`np.random.SeedSequence(seed)` (waves, current, wind, drift, sensor noise, sensor faults,
+excitation), so one seed reproduces a run exactly and changing one source leaves the others.
+
+Ground truth:
+- `truth_pose` is the total true pose (LF motion + first-order wave motion), heading wrapped.
+- `truth_lf_pose` is the low-frequency pose. With **force superposition** (thesis eq. 5.2–5.4)
+  it is the pose of the *LF twin*: the vessel model driven by the same applied thrust and the
+  same LF environment (current, wind, drift) but no first-order wave force. The first-order
+  wave force drives a wave-frequency state integrated alongside (same RK4 step), the response
+  of the vessel model linearized about the twin's state (`vessels.*.wave_rates_fn`), and the
+  total pose is twin + WF motion. For the linear supply vessel this equals integrating a second
+  vessel with the wave force inside; for the thesis vessels with quadratic damping it drops the
+  rectified (second-order) mean force that would otherwise make vessel and twin drift apart
+  (see the vessels module docstring); slowly varying drift is modelled by the drift bias.
+  With **motion superposition** (Fossen 2011 §8.2.1) η = η_LF + η_w: the vessel is the LF
+  motion and truth_lf_pose is η_LF itself. Without waves (or σ = 0) the two truths coincide.
+- `measured_pose` = total truth + sensor noise (+ outliers), heading wrapped; on a dropout the
+  last valid measurement is repeated and `measured_valid` is False.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, fields
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sim_ros.control.pid import PidGains, PidState, gains_from_bandwidth, pid_step
+from sim_ros.physics import excitation as exc
+from sim_ros.physics import schedule as sched
+from sim_ros.physics.environment import EnvironmentConfig, EnvironmentGenerator, MarkovBias
+from sim_ros.physics.integrate import RatesFn, rk4_step
+from sim_ros.physics.kinematics import FloatArray, earth_to_body, rotation, wrap_angle
+from sim_ros.physics.sensors import SensorConfig, check_sensor_rate, sensor_errors
+from sim_ros.physics.thrusters import ThrusterConfig, allocate, generalized_thrust
+from sim_ros.physics.vessels import (
+    THESIS_OPERATING_SPEED,
+    LinearModel,
+    SupplyVessel,
+    ThesisVessel,
+    WaveRatesFn,
+    make_vessel,
+)
+from sim_ros.physics.waves import (
+    WAVE_MODELS,
+    ShapingFilter,
+    WaveGenerator,
+    stationary_covariance,
+)
+
+PACKAGE = 'lf_predictor_ros'
+REPO_ROOT = Path(__file__).resolve().parent.parent
+BLOCK = 1024  # output samples of noise generated at a time
+Vec3 = tuple[float, float, float]
+
+
+# ---------------------------------------------------------------------------------- scenario
+@dataclass(frozen=True)
+class WaveConfig:
+    """First-order waves: model, λ, σ per DOF (north, east, yaw), ω0 schedule."""
+
+    model: str = 'none'  # 'force' | 'motion' | 'none'
+    damping: float = 0.1  # λ
+    sigma: Vec3 = (0.0, 0.0, 0.0)  # force: N, N, N·m; motion: m, m, rad (per √rad/s)
+    peak_freq: sched.PeakFreqSchedule = field(default_factory=lambda: sched.constant(0.8))
+    peak_freq_resolution: float = 1e-3  # rad/s, ω0 rounding for the discretization cache
+
+
+@dataclass(frozen=True)
+class ExcitationConfig:
+    """Open-loop excitation on τc (thesis §5.2.2)."""
+
+    kind: str = 'none'  # 'none' | 'prbs' | 'multisine' | 'steps'
+    amplitude: Vec3 = (0.0, 0.0, 0.0)
+    clock_period: float = 10.0  # s, PRBS
+    frequencies: tuple[float, ...] = ()  # rad/s, multisine
+    table: tuple[tuple[float, ...], ...] = ()  # rows [t, τx, τy, τn], steps
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """The scenario's DP controller (sim_ros.control.pid)."""
+
+    enabled: bool = False
+    setpoint: Vec3 = (0.0, 0.0, 0.0)  # m, m, rad
+    bandwidth: Vec3 = (0.1, 0.1, 0.2)  # rad/s, ω_n
+    zeta: float = 1.0
+    setpoint_filter_time: float = 10.0  # s, T_f
+    velocity_filter_time: float = 1.0  # s, T_v
+    feedback: str = 'truth_lf'  # 'truth_lf' | 'measured'
+    tau_max: Vec3 | None = None  # None: the actuator limit
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Everything one simulation run needs; load with `load_scenario`."""
+
+    name: str = 'unnamed'
+    description: str = ''
+    vessel: str = 'onedof'  # 'onedof' | 'threedof' | 'supply'
+    sample_time: float = 0.1  # s, output/sensor period (1–100 Hz)
+    internal_step: float = 0.1  # s, RK4 step; sample_time / internal_step is an integer
+    duration: float = 600.0  # s
+    seed: int = 0
+    initial_pose: Vec3 = (0.0, 0.0, 0.0)
+    initial_velocity: Vec3 = (0.0, 0.0, 0.0)
+    actuator_limit: Vec3 | None = None  # |τ| limit of the thesis vessels (supply: thrusters)
+    waves: WaveConfig = field(default_factory=WaveConfig)
+    environment: EnvironmentConfig = field(default_factory=EnvironmentConfig)
+    sensors: SensorConfig = field(default_factory=SensorConfig)
+    excitation: ExcitationConfig = field(default_factory=ExcitationConfig)
+    controller: ControllerConfig = field(default_factory=ControllerConfig)
+
+    def __post_init__(self) -> None:
+        """Cross-field validation with messages that say what to change."""
+        make_vessel(self.vessel)
+        check_sensor_rate(self.sample_time)
+        if not (self.internal_step > 0.0) or self.internal_step > self.sample_time * (1 + 1e-9):
+            raise ValueError(f'internal_step {self.internal_step} s must be in (0, sample_time '
+                             f'= {self.sample_time} s]')
+        if abs(self.substeps * self.internal_step - self.sample_time) > 1e-9 * self.sample_time:
+            raise ValueError(f'sample_time {self.sample_time} s must be an integer multiple of '
+                             f'internal_step {self.internal_step} s')
+        if not (self.duration > 0.0):
+            raise ValueError(f'duration must be > 0 s, got {self.duration}')
+        if self.waves.model not in WAVE_MODELS:
+            raise ValueError(f'waves.model must be one of {WAVE_MODELS}, got '
+                             f'{self.waves.model!r}')
+        if self.waves.model != 'none' and not (0.0 < self.waves.damping < 1.0):
+            raise ValueError(f'waves.damping λ must be in (0, 1), typical 0.1; got '
+                             f'{self.waves.damping}')
+        if any(s < 0 for s in self.waves.sigma):
+            raise ValueError(f'waves.sigma must be >= 0 per DOF, got {self.waves.sigma}')
+        if self.excitation.kind not in exc.EXCITATION_KINDS:
+            raise ValueError(f'excitation.kind must be one of {exc.EXCITATION_KINDS}')
+        if self.controller.feedback not in ('truth_lf', 'measured'):
+            raise ValueError("controller.feedback must be 'truth_lf' or 'measured'")
+        for limit in (self.actuator_limit, self.controller.tau_max):
+            if limit is not None and any(v <= 0 for v in limit):
+                raise ValueError('force limits must be > 0 per DOF (or null for none)')
+
+    @property
+    def substeps(self) -> int:
+        """RK4 steps per output period."""
+        return max(1, round(self.sample_time / self.internal_step))
+
+    @property
+    def ndof(self) -> int:
+        """1 for the 1-DOF vessel, else 3."""
+        return 1 if self.vessel == 'onedof' else 3
+
+
+def _vec3(value: Any, key: str) -> Vec3:
+    if isinstance(value, int | float):
+        value = [value] * 3
+    if not isinstance(value, Sequence) or len(value) != 3:
+        raise ValueError(f'{key} must be a list of 3 numbers [north/surge, east/sway, yaw]')
+    return (float(value[0]), float(value[1]), float(value[2]))
+
+
+def _check_keys(data: Mapping[str, Any], allowed: Sequence[str], where: str) -> None:
+    unknown = sorted(set(data) - set(allowed))
+    if unknown:
+        raise ValueError(f'unknown key(s) {unknown} in {where}; allowed: {sorted(allowed)}')
+
+
+def _schedule(data: Any) -> sched.PeakFreqSchedule:
+    """peak_freq: number | {constant} | {table} | {steps: {initial, changes}} | {ramp} | preset."""
+    if isinstance(data, int | float):
+        return sched.constant(float(data))
+    if isinstance(data, str):
+        if data != 'thesis_fig_4_1':
+            raise ValueError(f"unknown peak_freq preset {data!r}; use 'thesis_fig_4_1'")
+        return sched.thesis_fig_4_1()
+    if not isinstance(data, Mapping) or len(data) != 1:
+        raise ValueError('waves.peak_freq is a number, a preset name, or one of {constant: w}, '
+                         '{table: [[t, w], ...]}, {steps: {initial: w, changes: [[t, w]]}}, '
+                         '{ramp: {t_start, t_end, start, end}}')
+    (kind, arg), = data.items()
+    if kind == 'constant':
+        return sched.constant(float(arg))
+    if kind == 'table':
+        return sched.table(arg)
+    if kind == 'steps':
+        return sched.steps(float(arg['initial']), [tuple(p) for p in arg.get('changes', [])])
+    if kind == 'ramp':
+        return sched.ramp(float(arg['t_start']), float(arg['t_end']), float(arg['start']),
+                          float(arg['end']))
+    raise ValueError(f'unknown peak_freq kind {kind!r}; use constant, table, steps or ramp')
+
+
+def _bias(data: Mapping[str, Any], where: str, ndim: int, default_t: float) -> MarkovBias:
+    _check_keys(data, ('mean', 'std', 'time_constant'), where)
+    zeros = [0.0] * ndim
+    mean = [float(v) for v in data.get('mean', zeros)]
+    std = [float(v) for v in data.get('std', zeros)]
+    if len(mean) != ndim or len(std) != ndim:
+        raise ValueError(f'{where}: mean and std need {ndim} values')
+    return MarkovBias(tuple(mean), tuple(std), float(data.get('time_constant', default_t)))
+
+
+def scenario_from_dict(data: Mapping[str, Any], name: str = 'unnamed') -> Scenario:
+    """Build and validate a Scenario from a parsed YAML mapping (SI units, radians)."""
+    top = [f.name for f in fields(Scenario)]
+    _check_keys(data, top, 'scenario')
+    kwargs: dict[str, Any] = {'name': str(data.get('name', name))}
+    for key in ('description', 'vessel'):
+        if key in data:
+            kwargs[key] = str(data[key])
+    for key in ('sample_time', 'internal_step', 'duration'):
+        if key in data:
+            kwargs[key] = float(data[key])
+    if 'internal_step' not in data and 'sample_time' in data:
+        kwargs['internal_step'] = float(data['sample_time'])
+    if 'seed' in data:
+        kwargs['seed'] = int(data['seed'])
+    for key in ('initial_pose', 'initial_velocity'):
+        if key in data:
+            kwargs[key] = _vec3(data[key], key)
+    if data.get('actuator_limit') is not None:
+        kwargs['actuator_limit'] = _vec3(data['actuator_limit'], 'actuator_limit')
+    if 'waves' in data:
+        w = dict(data['waves'])
+        _check_keys(w, [f.name for f in fields(WaveConfig)], 'waves')
+        kwargs['waves'] = WaveConfig(
+            model=str(w.get('model', 'none')), damping=float(w.get('damping', 0.1)),
+            sigma=_vec3(w.get('sigma', 0.0), 'waves.sigma'),
+            peak_freq=_schedule(w.get('peak_freq', 0.8)),
+            peak_freq_resolution=float(w.get('peak_freq_resolution', 1e-3)))
+    if 'environment' in data:
+        e = dict(data['environment'])
+        _check_keys(e, [f.name for f in fields(EnvironmentConfig)], 'environment')
+        kwargs['environment'] = EnvironmentConfig(
+            current_speed=float(e.get('current_speed', 0.0)),
+            current_direction=float(e.get('current_direction', 0.0)),
+            current_variation=_bias(e.get('current_variation', {}), 'current_variation', 2,
+                                    600.0),
+            wind=_bias(e.get('wind', {}), 'wind', 3, 300.0),
+            drift=_bias(e.get('drift', {}), 'drift', 3, 300.0))
+    if 'sensors' in data:
+        s = dict(data['sensors'])
+        _check_keys(s, [f.name for f in fields(SensorConfig)], 'sensors')
+        kwargs['sensors'] = SensorConfig(**{k: float(v) for k, v in s.items()})
+    if 'excitation' in data:
+        x = dict(data['excitation'])
+        _check_keys(x, [f.name for f in fields(ExcitationConfig)], 'excitation')
+        kwargs['excitation'] = ExcitationConfig(
+            kind=str(x.get('kind', 'none')), amplitude=_vec3(x.get('amplitude', 0.0),
+                                                               'excitation.amplitude'),
+            clock_period=float(x.get('clock_period', 10.0)),
+            frequencies=tuple(float(f) for f in x.get('frequencies', [])),
+            table=tuple(tuple(float(v) for v in row) for row in x.get('table', [])))
+    if 'controller' in data:
+        c = dict(data['controller'])
+        _check_keys(c, [f.name for f in fields(ControllerConfig)], 'controller')
+        kwargs['controller'] = ControllerConfig(
+            enabled=bool(c.get('enabled', False)),
+            setpoint=_vec3(c.get('setpoint', 0.0), 'controller.setpoint'),
+            bandwidth=_vec3(c.get('bandwidth', [0.1, 0.1, 0.2]), 'controller.bandwidth'),
+            zeta=float(c.get('zeta', 1.0)),
+            setpoint_filter_time=float(c.get('setpoint_filter_time', 10.0)),
+            velocity_filter_time=float(c.get('velocity_filter_time', 1.0)),
+            feedback=str(c.get('feedback', 'truth_lf')),
+            tau_max=None if c.get('tau_max') is None else _vec3(c['tau_max'],
+                                                                'controller.tau_max'))
+    return Scenario(**kwargs)
+
+
+def scenario_search_dirs() -> list[Path]:
+    """config/scenarios in the source tree, then in the installed share dir (if ROS is there)."""
+    dirs = [REPO_ROOT / 'config' / 'scenarios']
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        dirs.append(Path(get_package_share_directory(PACKAGE)) / 'config' / 'scenarios')
+    except Exception:  # noqa: BLE001 - ament index absent or package not installed
+        pass
+    return dirs
+
+
+def load_scenario(name_or_path: str | os.PathLike[str]) -> Scenario:
+    """Load a scenario by name (config/scenarios/NAME.yaml) or from a YAML file path."""
+    import yaml
+
+    text = str(name_or_path)
+    path = Path(text)
+    if not (text.endswith(('.yaml', '.yml')) or os.sep in text):
+        candidates = [d / f'{text}.yaml' for d in scenario_search_dirs()]
+        found = [c for c in candidates if c.is_file()]
+        if not found:
+            raise ValueError(f'scenario {text!r} not found in {[str(d) for d in candidates]}; '
+                             f'available: {available_scenarios()}')
+        path = found[0]
+    if not path.is_file():
+        raise ValueError(f'scenario file {path} does not exist')
+    with open(path, encoding='utf-8') as stream:
+        data = yaml.safe_load(stream)
+    if not isinstance(data, Mapping):
+        raise ValueError(f'scenario file {path} must hold a YAML mapping')
+    try:
+        return scenario_from_dict(data, name=path.stem)
+    except (TypeError, KeyError) as err:
+        raise ValueError(f'scenario file {path}: {err}') from err
+
+
+def available_scenarios() -> list[str]:
+    """Scenario names found in the search directories."""
+    names = {p.stem for d in scenario_search_dirs() if d.is_dir() for p in d.glob('*.yaml')}
+    return sorted(names)
+
+
+# --------------------------------------------------------------------------------- simulator
+@dataclass(frozen=True)
+class SimSample:
+    """One output sample (see docs/ARCHITECTURE.md)."""
+
+    t: float
+    measured_pose: FloatArray
+    measured_valid: bool
+    truth_pose: FloatArray
+    truth_lf_pose: FloatArray
+    thrust: FloatArray  # applied generalized force, body [N, N, N·m]
+    thrust_command: FloatArray
+    wave_peak_freq: float  # rad/s
+
+
+def _pose(state: Sequence[float]) -> FloatArray:
+    return np.array([state[0], state[1], wrap_angle(state[2])])
+
+
+class Simulator:
+    """Vessel + sea + sensors, stepped one output period at a time (see module docstring)."""
+
+    def __init__(self, scenario: Scenario, seed: int | None = None) -> None:
+        """Build the physics of `scenario`; `seed` overrides scenario.seed."""
+        self.scenario = scenario
+        self.seed = scenario.seed if seed is None else int(seed)
+        streams = [np.random.default_rng(s) for s in np.random.SeedSequence(self.seed).spawn(8)]
+        self.vessel = make_vessel(scenario.vessel)
+        self._rates = self.vessel.rates_fn()
+        self.sample_time = scenario.sample_time
+        self.ndof = scenario.ndof
+        self._substeps = scenario.substeps
+        self._h = scenario.sample_time / self._substeps
+        self._k = 0  # output samples done
+        mask = np.array([1.0, 0.0, 0.0]) if self.ndof == 1 else np.ones(3)
+        self._mask = mask
+        state = [*scenario.initial_pose, *scenario.initial_velocity]
+        if self.ndof == 1:
+            state = [state[0], 0.0, 0.0, state[3], 0.0, 0.0]
+        self._state: list[float] = state
+        waves = scenario.waves
+        sigma = np.asarray(waves.sigma) * mask
+        self._wave_model = waves.model if np.any(sigma > 0) else 'none'
+        self._waves: WaveGenerator | None = None
+        if self._wave_model != 'none':
+            step = self._h if self._wave_model == 'force' else self.sample_time
+            self._waves = WaveGenerator(self._wave_model, waves.damping, sigma, waves.peak_freq,
+                                        step, streams[0], waves.peak_freq_resolution)
+        self._wave_initial = np.zeros(3) if self._waves is None else self._waves.output.copy()
+        self._wf: list[float] | None = [0.0] * 6 if self._wave_model == 'force' else None
+        if self._wf is not None and self._waves is not None:
+            self._rates = _with_wave_motion(self._rates, self.vessel.wave_rates_fn())
+            self._wf = _initial_wave_motion(self._wave_linear_model(), self._state[2],
+                                            self._waves, streams[7])
+            self._state = [*self._state, *self._wf]
+        self._env = EnvironmentGenerator(scenario.environment, self.sample_time,
+                                         (streams[1], streams[2], streams[3]))
+        self._sensor_rngs = (streams[4], streams[5])
+        self._excitation = self._build_excitation(streams[6])
+        # actuators
+        self._thrusters: ThrusterConfig | None = None
+        if isinstance(self.vessel, SupplyVessel):
+            self._thrusters = ThrusterConfig()
+            self._rpm = np.zeros(self._thrusters.thrust_coeff.shape[0])
+            elapsed = np.arange(2 * self._substeps + 1) * (0.5 * self._h)
+            self._decay = np.exp(-elapsed / self._thrusters.shaft_time_constant)[:, None]
+        limit = scenario.actuator_limit
+        self._limit = None if limit is None else np.asarray(limit, dtype=np.float64)
+        self._blocks_left = 0
+        self._thrust = np.zeros(3)
+        self._refill()
+        total, lf = self._truths(None)
+        self._last_measured = total.copy()
+        self.sample = SimSample(0.0, total.copy(), True, total, lf, np.zeros(3), np.zeros(3),
+                                float(waves.peak_freq(0.0)))
+
+    # ------------------------------------------------------------------ public API
+    @property
+    def t(self) -> float:
+        """Simulated time [s] of the latest sample."""
+        return self._k * self.sample_time
+
+    def actuator_limit(self) -> FloatArray | None:
+        """|τ| limit per DOF: thruster capacity (supply) or scenario.actuator_limit (thesis)."""
+        if self._thrusters is not None:
+            return self._thrusters.max_generalized_force()
+        return None if self._limit is None else self._limit.copy()
+
+    def true_model(self) -> LinearModel:
+        """M and linear D (3×3); thesis vessels linearized at THESIS_OPERATING_SPEED."""
+        return self.vessel.linearize()
+
+    def excitation(self, t: float) -> FloatArray:
+        """The scenario's open-loop excitation τ_exc(t) (not added by `step`)."""
+        return self._excitation(t) * self._mask
+
+    def step(self, tau_command: FloatArray) -> SimSample:
+        """Advance one output period with `tau_command` (body, 3,) held; return the sample."""
+        command = np.asarray(tau_command, dtype=np.float64)
+        if command.shape != (3,) or not np.all(np.isfinite(command)):
+            raise ValueError('tau_command must be a finite (3,) array [N, N, N·m]')
+        command = command * self._mask
+        if self._blocks_left == 0:
+            self._refill()
+        i = BLOCK - self._blocks_left
+        self._blocks_left -= 1
+        stages = self._actuate(command)
+        h, rates = self._h, self._rates
+        tail = self._lf_tail[i]
+        for j in range(self._substeps):
+            s0, s1, s2 = stages[2 * j], stages[2 * j + 1], stages[2 * j + 2]
+            if self._wf is None:
+                self._state = rk4_step(rates, self._state, h, [*s0, *tail], [*s1, *tail],
+                                       [*s2, *tail])
+            else:
+                w0, w1, w2 = self._wave_force[i * self._substeps + j]
+                self._state = rk4_step(rates, self._state, h, [*s0, *tail, *w0],
+                                       [*s1, *tail, *w1], [*s2, *tail, *w2])
+        self._k += 1
+        total, lf = self._truths(i)
+        valid = bool(self._valid[i])
+        if valid:
+            measured = total + self._errors[i]
+            measured[2] = wrap_angle(float(measured[2]))
+            self._last_measured = measured.copy()
+        else:
+            measured = self._last_measured.copy()
+        self.sample = SimSample(self.t, measured, valid, total, lf, self._thrust.copy(),
+                                command, float(self._peak[i]))
+        return self.sample
+
+    # ------------------------------------------------------------------ internals
+    def _wave_linear_model(self) -> LinearModel:
+        """(M, D) of the WF dynamics at t = 0 (thesis vessels: slope at the initial speed)."""
+        if isinstance(self.vessel, ThesisVessel):
+            current = self.scenario.environment.mean_current()
+            rel = np.asarray(self._state[3:6]) - earth_to_body(
+                self._state[2], np.array([current[0], current[1], 0.0]))
+            speed = np.maximum(np.abs(rel), THESIS_OPERATING_SPEED)
+            return self.vessel.linearize(speed.tolist())
+        return self.vessel.linearize()
+
+    def _build_excitation(self, rng: np.random.Generator) -> exc.Excitation:
+        cfg = self.scenario.excitation
+        if cfg.kind == 'prbs':
+            return exc.prbs(cfg.amplitude, cfg.clock_period, self.scenario.duration, rng)
+        if cfg.kind == 'multisine':
+            return exc.multisine(cfg.amplitude, cfg.frequencies, rng)
+        if cfg.kind == 'steps':
+            return exc.steps(cfg.table)
+        return exc.no_excitation()
+
+    def _refill(self) -> None:
+        """Generate the next BLOCK output periods of every noise source at once."""
+        scn = self.scenario
+        current, env_force = self._env.next_block(BLOCK)
+        # per-step tails of the RK4 input: earth-fixed LF force (3) and current (2), as floats
+        self._lf_tail: list[list[float]] = np.hstack([env_force * self._mask, current]).tolist()
+        noise_rng, fault_rng = self._sensor_rngs
+        errors, valid = sensor_errors(scn.sensors, noise_rng.standard_normal((BLOCK, 3)),
+                                      fault_rng.random((BLOCK, 4)))
+        self._errors = errors * self._mask
+        self._valid = valid
+        times = (self._k + 1 + np.arange(BLOCK, dtype=np.float64)) * self.sample_time
+        self._peak = scn.waves.peak_freq.sample(times)
+        self._wave_motion = np.zeros((BLOCK, 3))
+        if self._waves is not None and self._wave_model == 'motion':
+            self._wave_motion, _ = self._waves.next_block(BLOCK)
+        if self._waves is not None and self._wave_model == 'force':
+            start = self._waves.output.copy()
+            forces, _ = self._waves.next_block(BLOCK * self._substeps)
+            # exact samples at the sub-step boundaries; RK4 stages use their linear interpolation
+            # (first-order hold). A zero-order hold would delay the force by h/2 and leave a
+            # constant WF velocity error b·τ(0)·h/2 that the weakly damped vessel turns into a
+            # metre-size position offset.
+            bounds = np.vstack([start[None, :], forces])
+            self._wave_force = np.stack([bounds[:-1], 0.5 * (bounds[:-1] + bounds[1:]),
+                                         bounds[1:]], axis=1).tolist()
+        self._blocks_left = BLOCK
+
+    def _actuate(self, command: FloatArray) -> list[list[float]]:
+        """Applied body force at the RK4 stage times (2·substeps + 1 rows)."""
+        if self._thrusters is None:
+            applied = command if self._limit is None else np.clip(command, -self._limit,
+                                                                  self._limit)
+            self._thrust = applied
+            row = applied.tolist()
+            return [row] * (2 * self._substeps + 1)
+        n_cmd = allocate(self._thrusters, command)
+        rpm = n_cmd + (self._rpm - n_cmd) * self._decay  # exact shaft response
+        self._rpm = rpm[-1].copy()
+        forces = generalized_thrust(self._thrusters, rpm)
+        self._thrust = forces[-1].copy()
+        result: list[list[float]] = forces.tolist()
+        return result
+
+    def _truths(self, index: int | None) -> tuple[FloatArray, FloatArray]:
+        """(total pose, LF pose) now; `index` is the block row, None for the initial sample."""
+        state = self._state
+        lf = _pose(state)
+        if self._wave_model == 'force':
+            total = _pose([state[0] + state[6], state[1] + state[7], state[2] + state[8]])
+        elif self._wave_model == 'motion':
+            wave = self._wave_initial if index is None else self._wave_motion[index]
+            total = lf + wave
+            total[2] = wrap_angle(float(total[2]))
+        else:
+            total = lf.copy()
+        return total, lf
+
+
+def _initial_wave_motion(model: LinearModel, heading: float, waves: WaveGenerator,
+                         rng: np.random.Generator) -> list[float]:
+    """WF state at t = 0 drawn from its stationary distribution given the wave-filter state.
+
+    WF motion of the linear(ized) vessel: η_w = (M s + D)⁻¹ f s⁻¹ with f = R(ψ)ᵀ K_ω s² x3
+    (per DOF, x3 the last section of the force filter). With the stable auxiliary state
+    q = (M s + D)⁻¹ R(ψ)ᵀ K_ω x3 this is η_w = q̇ = M⁻¹(R(ψ)ᵀ K_ω x3 − D q) (body axes, rotated to
+    earth with R(ψ)), ν_w = η̇_w. q is drawn from its stationary distribution conditioned on the
+    filter state (augmented Lyapunov equation). The WF position has no restoring force, so a
+    wrong start would stay as a permanent offset of the order of the WF motion itself.
+    """
+    shaping = waves.continuous_filter()
+    n = shaping.a.shape[0]
+    rot = rotation(heading)
+    m_inv = np.linalg.inv(model.mass)
+    # K_ω x3 per DOF (earth) as a linear map of the stacked filter state, body axes via R(ψ)ᵀ
+    pick_x3 = np.kron(np.diag(waves.sigma), shaping.c_integrals[1][None, :])  # (3, 3n)
+    pick_dx3 = np.kron(np.diag(waves.sigma), shaping.c_integrals[0][None, :])
+    a_aug = np.zeros((3 * n + 3, 3 * n + 3))
+    g_aug = np.zeros((3 * n + 3, 3))
+    for dof in range(3):
+        a_aug[dof * n:(dof + 1) * n, dof * n:(dof + 1) * n] = shaping.a
+        g_aug[dof * n:(dof + 1) * n, dof] = shaping.g[:, 0]
+    a_aug[3 * n:, :3 * n] = m_inv @ rot.T @ pick_x3
+    a_aug[3 * n:, 3 * n:] = -m_inv @ model.damping
+    cov = stationary_covariance(ShapingFilter(a_aug, g_aug, np.zeros((1, 3 * n + 3)),
+                                              np.zeros((2, 3 * n + 3))))
+    x_f = waves.state.reshape(-1)
+    p_xx, p_qx, p_qq = cov[:3 * n, :3 * n], cov[3 * n:, :3 * n], cov[3 * n:, 3 * n:]
+    gain = np.linalg.lstsq(p_xx, p_qx.T, rcond=None)[0].T
+    cond_cov = p_qq - gain @ p_qx.T
+    vals, vecs = np.linalg.eigh(0.5 * (cond_cov + cond_cov.T))
+    q = gain @ x_f + vecs @ (np.sqrt(np.clip(vals, 0.0, None)) * rng.standard_normal(3))
+    force = rot.T @ (pick_x3 @ x_f)  # body-axis K_ω x3
+    force_rate = rot.T @ (pick_dx3 @ x_f)
+    q_dot = m_inv @ (force - model.damping @ q)
+    nu_w = m_inv @ (force_rate - model.damping @ q_dot)
+    eta_w = rot @ q_dot
+    return [*eta_w.tolist(), *nu_w.tolist()]
+
+
+def _with_wave_motion(lf_rates: RatesFn, wf_rates: WaveRatesFn) -> RatesFn:
+    """Rates of the 12-state [x_LF, x_WF] with 11 inputs (8 LF inputs + wave force)."""
+
+    def rates(x: Sequence[float], inp: Sequence[float]) -> list[float]:
+        lf = x[:6]
+        return lf_rates(lf, inp) + wf_rates(lf, x[6:], inp)
+
+    return rates
+
+
+# ------------------------------------------------------------------------------- offline run
+@dataclass(frozen=True)
+class SimRecord:
+    """Arrays of one run, one row per output sample t = T, 2T, ….
+
+    thrust_command[k] is the command held during the period ending at t[k]; measured_valid is
+    1.0 or 0.0 (dropout).
+    """
+
+    t: FloatArray
+    measured_pose: FloatArray
+    measured_valid: FloatArray
+    truth_pose: FloatArray
+    truth_lf_pose: FloatArray
+    thrust: FloatArray
+    thrust_command: FloatArray
+    wave_peak_freq: FloatArray
+
+
+def controller_gains(scenario: Scenario, model: LinearModel) -> PidGains:
+    """PID gains of the scenario from the vessel's (linearized) M and D diagonals."""
+    ctl = scenario.controller
+    return gains_from_bandwidth(np.diag(model.mass), ctl.bandwidth, ctl.zeta,
+                                np.diag(model.damping), ctl.setpoint_filter_time,
+                                ctl.velocity_filter_time)
+
+
+def simulate(scenario: Scenario, seed: int | None = None, duration: float | None = None,
+             controller: bool | None = None, feedback: str | None = None) -> SimRecord:
+    """Run `scenario` offline and return its arrays.
+
+    Closed loop with the scenario's PID (`controller` True; default from the scenario) fed by
+    `feedback` ('truth_lf' or 'measured'; default from the scenario), or open loop with the
+    scenario's excitation. In closed loop the excitation is added to the PID command.
+    """
+    sim = Simulator(scenario, seed)
+    use_pid = scenario.controller.enabled if controller is None else bool(controller)
+    source = scenario.controller.feedback if feedback is None else feedback
+    if source not in ('truth_lf', 'measured'):
+        raise ValueError("feedback must be 'truth_lf' or 'measured'")
+    total = scenario.duration if duration is None else float(duration)
+    count = int(round(total / scenario.sample_time))
+    out = {k: np.empty((count, 3)) for k in ('measured_pose', 'truth_pose', 'truth_lf_pose',
+                                              'thrust', 'thrust_command')}
+    t = np.empty(count)
+    valid = np.empty(count)
+    peak = np.empty(count)
+    gains = controller_gains(scenario, sim.true_model())
+    limit = scenario.controller.tau_max or sim.actuator_limit()
+    setpoint = np.asarray(scenario.controller.setpoint)
+    state = PidState()
+    for k in range(count):
+        tau = sim.excitation(sim.t)
+        if use_pid:
+            pose = sim.sample.truth_lf_pose if source == 'truth_lf' else sim.sample.measured_pose
+            tau_pid, state = pid_step(state, gains, pose, setpoint, sim.sample_time, limit)
+            tau = tau + tau_pid
+        sample = sim.step(tau)
+        t[k], valid[k], peak[k] = sample.t, sample.measured_valid, sample.wave_peak_freq
+        out['measured_pose'][k] = sample.measured_pose
+        out['truth_pose'][k] = sample.truth_pose
+        out['truth_lf_pose'][k] = sample.truth_lf_pose
+        out['thrust'][k] = sample.thrust
+        out['thrust_command'][k] = sample.thrust_command
+    return SimRecord(t, out['measured_pose'], valid, out['truth_pose'], out['truth_lf_pose'],
+                     out['thrust'], out['thrust_command'], peak)
+
+
+__all__ = ['ControllerConfig', 'ExcitationConfig', 'Scenario', 'SimRecord', 'SimSample',
+           'Simulator', 'WaveConfig', 'available_scenarios', 'controller_gains', 'load_scenario',
+           'scenario_from_dict', 'simulate']

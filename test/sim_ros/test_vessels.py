@@ -1,0 +1,129 @@
+"""Vessel dynamics: supply vessel time constants and step response, 1-DOF terminal velocity."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from sim_ros.physics import thrusters, vessels
+from sim_ros.physics.integrate import rk4_step
+from sim_ros.simulation import ExcitationConfig, Scenario, Simulator, simulate
+
+
+def _integrate(vessel: vessels.Vessel, tau: tuple[float, float, float], duration: float,
+               step: float, state: list[float] | None = None) -> list[list[float]]:
+    rates = vessel.rates_fn()
+    x = state or [0.0] * 6
+    inp = [*tau, 0.0, 0.0, 0.0, 0.0, 0.0]
+    out = [x]
+    for _ in range(int(round(duration / step))):
+        x = rk4_step(rates, x, step, inp, inp, inp)
+        out.append(x)
+    return out
+
+
+def test_supply_matrices_and_time_constants() -> None:
+    """M, D in SI (anchors §2) and open-loop time constants ≈ 88 / 44 / 11.5 s."""
+    assert vessels.SUPPLY_M[1, 2] == pytest.approx(-3.4016e7, rel=1e-4)
+    assert vessels.SUPPLY_M[2, 2] == pytest.approx(4.4524e9, rel=1e-4)
+    assert vessels.SUPPLY_D[2, 1] == pytest.approx(-6.7258e5, rel=1e-4)
+    assert vessels.SUPPLY_D[2, 2] == pytest.approx(3.8501e8, rel=1e-4)
+    consts = vessels.SUPPLY.linearize().time_constants()
+    np.testing.assert_allclose(consts, [88.0, 44.0, 11.5], rtol=0.015)
+
+
+def test_supply_surge_step_response_first_order() -> None:
+    """Surge is decoupled: u(t) = F/D11 (1 − e^{−t/T}); 63.2 % is reached at T = M11/D11."""
+    force = 5e4  # N
+    traj = np.array(_integrate(vessels.SUPPLY, (force, 0.0, 0.0), 400.0, 0.1))
+    u = traj[:, 3]
+    u_inf = force / vessels.SUPPLY_D[0, 0]
+    t63 = np.interp((1 - math.exp(-1)) * u_inf, u, np.arange(len(u)) * 0.1)
+    assert t63 == pytest.approx(vessels.SUPPLY_M[0, 0] / vessels.SUPPLY_D[0, 0], rel=1e-3)
+    assert t63 == pytest.approx(88.0, rel=0.01)
+    assert traj[-1, 4] == 0.0 and traj[-1, 5] == 0.0
+
+
+def test_supply_velocity_matches_matrix_exponential() -> None:
+    """ν(t) = (I − e^{−M⁻¹D t}) D⁻¹ τ for a combined step; RK4 at 0.1 s to 1e-7 relative."""
+    tau = np.array([3e4, 2e4, 4e6])
+    traj = np.array(_integrate(vessels.SUPPLY, (3e4, 2e4, 4e6), 60.0, 0.1))
+    a = np.linalg.solve(vessels.SUPPLY_M, vessels.SUPPLY_D)
+    for t in (5.0, 11.5, 30.0, 60.0):
+        expected = (np.eye(3) - scipy.linalg.expm(-a * t)) @ np.linalg.solve(vessels.SUPPLY_D, tau)
+        np.testing.assert_allclose(traj[int(round(t / 0.1)), 3:], expected, rtol=1e-7,
+                                   atol=1e-12)
+
+
+def test_onedof_terminal_velocity_and_tanh_transient() -> None:
+    """u̇ = a u|u| + bτ from rest: u = u∞ tanh(t/T_q), u∞ = √(bτ/−a), T_q = 1/√(−a b τ)."""
+    tau = 10.0  # N
+    a, b = vessels.ONEDOF_A, vessels.ONEDOF_B
+    u_inf = math.sqrt(b * tau / -a)
+    assert vessels.terminal_speed(a, b, tau) == pytest.approx(u_inf)
+    assert u_inf == pytest.approx(0.632456, rel=1e-5)
+    traj = np.array(_integrate(vessels.ONEDOF, (tau, 0.0, 0.0), 400.0, 0.05))
+    t_q = 1.0 / math.sqrt(-a * b * tau)
+    for t in (10.0, 30.0, 100.0):
+        assert traj[int(round(t / 0.05)), 3] == pytest.approx(u_inf * math.tanh(t / t_q),
+                                                              rel=1e-7)
+    assert traj[-1, 3] == pytest.approx(u_inf * math.tanh(400.0 / t_q), rel=1e-7)
+    assert np.all(traj[:, [1, 2, 4, 5]] == 0.0)
+    long_run = _integrate(vessels.ONEDOF, (tau, 0.0, 0.0), 4000.0, 0.5)
+    assert long_run[-1][3] == pytest.approx(u_inf, rel=1e-9)
+
+
+def test_onedof_terminal_velocity_through_simulator() -> None:
+    """The Simulator with a constant τ via a step excitation: position grows at u∞."""
+    scn = Scenario(vessel='onedof', sample_time=1.0, internal_step=0.1, duration=600.0,
+                   excitation=ExcitationConfig(kind='steps', table=((0.0, -20.0, 5.0, 5.0),)))
+    rec = simulate(scn, seed=0, controller=False)
+    speed = (rec.truth_pose[-1, 0] - rec.truth_pose[-101, 0]) / 100.0
+    assert speed == pytest.approx(-math.sqrt(vessels.ONEDOF_B * 20.0 / -vessels.ONEDOF_A),
+                                  rel=1e-6)
+    assert np.all(rec.truth_pose[:, 1:] == 0.0)
+    np.testing.assert_array_equal(rec.thrust[:, 1:], 0.0)
+
+
+def test_threedof_yaw_faster_than_surge() -> None:
+    """Our 3-DOF choice: same τ → yaw reaches 76 % (tanh 1) √10 × sooner than surge."""
+    traj = np.array(_integrate(vessels.THREEDOF, (10.0, 0.0, 10.0), 200.0, 0.05))
+    t = np.arange(len(traj)) * 0.05
+    level = math.tanh(1.0)
+    u_inf = vessels.terminal_speed(vessels.THREEDOF_A[0], vessels.THREEDOF_B[0], 10.0)
+    r_inf = vessels.terminal_speed(vessels.THREEDOF_A[2], vessels.THREEDOF_B[2], 10.0)
+    t_surge = np.interp(level * u_inf, traj[:, 3], t)
+    t_yaw = np.interp(level * r_inf, traj[:, 5], t)
+    assert t_surge / t_yaw == pytest.approx(math.sqrt(10.0), rel=1e-3)
+
+
+def test_linearization_documented_operating_speed() -> None:
+    """Thesis vessels: M = 1/b, D = 2|a|u0/b; the supply vessel returns M, D exactly."""
+    lin = vessels.ONEDOF.linearize()
+    assert lin.mass[0, 0] == pytest.approx(1 / 0.00068)
+    assert lin.damping[0, 0] == pytest.approx(2 * 0.017 * 0.1 / 0.00068)
+    assert lin.mass[0, 0] / lin.damping[0, 0] == pytest.approx(1 / (2 * 0.017 * 0.1))
+    np.testing.assert_array_equal(vessels.SUPPLY.linearize().mass, vessels.SUPPLY_M)
+
+
+def test_thrust_allocation_saturation_and_shaft_lag() -> None:
+    """Allocation reproduces τ, RPM saturate at n_max, shafts follow with T_n = 1 s."""
+    cfg = thrusters.ThrusterConfig()
+    tau = np.array([2e5, 1e5, 3e6])
+    n_c = thrusters.allocate(cfg, tau)
+    np.testing.assert_allclose(thrusters.generalized_thrust(cfg, n_c), tau, rtol=1e-9)
+    f_max = cfg.max_generalized_force()
+    assert f_max[0] == pytest.approx(2 * 31.2 * 160**2)  # ≈ 1.6 MN (2 × 799 kN)
+    big = thrusters.allocate(cfg, np.array([1e8, 0.0, 0.0]))
+    np.testing.assert_allclose(np.abs(big[4:]), 160.0)
+    n = thrusters.shaft_speed(np.zeros(6), n_c, np.array([1.0]), 1.0)
+    np.testing.assert_allclose(n[0], n_c * (1 - math.exp(-1)), rtol=1e-12)
+    sim = Simulator(Scenario(vessel='supply', sample_time=0.1, duration=100.0), seed=0)
+    for _ in range(100):
+        sample = sim.step(tau)
+    np.testing.assert_allclose(sample.thrust, tau, rtol=1e-4)  # e^{-10} left of the lag
+    for _ in range(50):
+        sample = sim.step(np.array([1e8, -1e8, 1e10]))
+    assert np.all(np.abs(sample.thrust) <= f_max * (1 + 1e-9))

@@ -1,0 +1,332 @@
+"""Every tuning quantity of the adaptive LF predictor (thesis Algorithm 4.1), validated.
+
+Unit system: every WINDOW (γ, Δ, N, ε, α, β) is given in SECONDS, so one parameter set works at
+any sample rate; the ``*_samples`` properties convert them to sample counts with the sample time
+(rounded to the nearest sample). The rules of Algorithm 4.1 are checked on those sample counts,
+which is what the algorithm uses. Regressor orders (``nu``, ``ny``, ``nfb``) are in samples,
+frequencies in rad/s.
+
+Defaults target a supply-vessel DP at ``sample_time`` = 0.5 s (the thesis likely used 1 s; a 10 Hz
+sensor is decimated by the caller): 600 s of training data (1200 samples per DOF) keeps one
+retraining cheap, a retraining every 60 s, a 20 min frequency-estimation window (the sea state is
+stationary for 20 min to 3 h, thesis §3.3).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields
+from dataclasses import replace as dataclass_replace
+import math
+import numbers
+from typing import Any
+
+from lf_predictor_ros.core.frequency import welch_resolution
+
+TRAINERS = ('lm', 'lbfgs', 'adam')
+TRAINING_MODES = ('series_parallel', 'parallel')
+NDOF_VALUES = (1, 3)
+# γ rule: the Welch bin must be at most this fraction of the wave band width, so the band holds
+# at least 20 bins and the peak refinement has several bins per peak.
+MAX_BIN_FRACTION_OF_BAND = 1.0 / 20.0
+# N rule: training examples left after the regressor start-up and the masked transient.
+MIN_TRAINING_EXAMPLES = 20
+_WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'transient_length',
+                  'filter_window', 'append_length')
+_INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed')
+_STR_FIELDS = ('trainer', 'training_mode')
+
+
+def _doc(doc: str, unit: str = '') -> dict[str, str]:
+    """Field metadata read by the ROS parameter helper (description and unit)."""
+    return {'doc': doc, 'unit': unit}
+
+
+@dataclass(frozen=True)
+class PredictorParams:
+    """Parameters of Algorithm 4.1 (thesis §4.5); windows in seconds, see the module docstring.
+
+    ``initial_wave_peak_freq`` = 0.0 means "no prior" (a ROS parameter cannot hold None); use
+    :attr:`wave_peak_prior` to read it as ``float | None``.
+    """
+
+    ndof: int = field(default=1, metadata=_doc('degrees of freedom used: 1 (surge) or 3'))
+    sample_time: float = field(default=0.5, metadata=_doc('predictor sample time h', 's'))
+    nu: int = field(default=2, metadata=_doc('delayed control inputs n_u (thesis §4.4)',
+                                             'samples'))
+    ny: int = field(default=2, metadata=_doc('delayed measured positions n_y', 'samples'))
+    nfb: int = field(default=2, metadata=_doc('delayed LF-estimate feedbacks n_fb', 'samples'))
+    estimation_window: float = field(
+        default=1200.0, metadata=_doc('frequency-estimation window γ (eq. 4.3)', 's'))
+    retrain_period: float = field(
+        default=60.0, metadata=_doc('time Δ between two trainings', 's'))
+    training_window: float = field(
+        default=600.0, metadata=_doc('training window N (eq. 4.2)', 's'))
+    transient_length: float = field(
+        default=30.0, metadata=_doc('filter transient length ε (§4.2.2)', 's'))
+    filter_window: float = field(
+        default=180.0, metadata=_doc('filtered window α, α ≥ Δ + 2ε (eq. 4.4)', 's'))
+    append_length: float = field(
+        default=120.0, metadata=_doc('appending length β, Δ + ε ≤ β < α − ε (eq. 4.5)', 's'))
+    highpass_cutoff: float = field(
+        default=0.2, metadata=_doc('high-pass cutoff ωHP before the PSD (§4.2.1)', 'rad/s'))
+    notch_zeta: float = field(
+        default=0.5, metadata=_doc('notch width: relative damping of the notch poles', ''))
+    notch_depth: float = field(
+        default=0.05, metadata=_doc('notch depth: gain at the notch frequency (< 1)', ''))
+    lowpass_offset: float = field(
+        default=0.2, metadata=_doc('low-pass cutoff above the notch, ωLP = ω0 + offset '
+                                   '(thesis Fig. 4.8)', 'rad/s'))
+    wave_band: tuple[float, ...] = field(
+        default=(0.25, 1.4), metadata=_doc('(low, high) band searched for ω0; thesis eq. 3.9 '
+                                           'is 0.3–1.3, widened so edge peaks are interior',
+                                           'rad/s'))
+    min_peak_ratio: float = field(
+        default=5.0, metadata=_doc('peak PSD over median in-band PSD for a clear peak', ''))
+    hidden_units: int = field(default=10, metadata=_doc('neurons per hidden layer'))
+    hidden_layers: int = field(default=1, metadata=_doc('hidden layers'))
+    max_epochs: int = field(default=100, metadata=_doc('epochs per training'))
+    max_train_seconds: float = field(
+        default=20.0, metadata=_doc('wall-clock limit of one training', 's'))
+    weight_decay: float = field(
+        default=1e-4, metadata=_doc('weight penalty of the loss (MSEREG, thesis eq. 2.8)', ''))
+    derivative_weight: float = field(
+        default=0.1, metadata=_doc('weight of the derivative-error loss term', ''))
+    trainer: str = field(default='lm', metadata=_doc('training algorithm: lm, lbfgs or adam'))
+    training_mode: str = field(
+        default='series_parallel', metadata=_doc('series_parallel or parallel (BPTT)'))
+    seed: int = field(default=0, metadata=_doc('seed of the network initialization'))
+    initial_wave_peak_freq: float = field(
+        default=0.0, metadata=_doc('prior ω0 before the first estimate; 0 = none', 'rad/s'))
+
+    def __post_init__(self) -> None:
+        """Coerce numbers to their field types and check every rule (raises ValueError)."""
+        self._coerce_types()
+        self._check_positive()
+        self._check_choices()
+        self._check_frequencies()
+        self._check_windows()
+
+    # ---- conversions -------------------------------------------------------------------------
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, Any]) -> PredictorParams:
+        """Build from a mapping (YAML, ROS parameters); unknown keys raise ValueError."""
+        unknown = sorted(set(values) - set(cls.field_names()))
+        if unknown:
+            raise ValueError(f'unknown PredictorParams key(s) {unknown}: valid keys are '
+                             f'{list(cls.field_names())}')
+        return cls(**dict(values))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict (wave_band as a list) that ``from_dict`` turns back into an equal object."""
+        values = asdict(self)
+        values['wave_band'] = list(self.wave_band)
+        return values
+
+    def replace(self, **changes: Any) -> PredictorParams:
+        """Copy with ``changes`` applied and every rule checked again."""
+        unknown = sorted(set(changes) - set(self.field_names()))
+        if unknown:
+            raise ValueError(f'unknown PredictorParams key(s) {unknown}: valid keys are '
+                             f'{list(self.field_names())}')
+        return dataclass_replace(self, **changes)
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        """Names of all parameters, in declaration order."""
+        return tuple(f.name for f in fields(cls))
+
+    # ---- derived quantities ------------------------------------------------------------------
+
+    @property
+    def estimation_samples(self) -> int:
+        """γ in samples."""
+        return self._samples(self.estimation_window)
+
+    @property
+    def retrain_samples(self) -> int:
+        """Δ in samples."""
+        return self._samples(self.retrain_period)
+
+    @property
+    def training_samples(self) -> int:
+        """N in samples."""
+        return self._samples(self.training_window)
+
+    @property
+    def transient_samples(self) -> int:
+        """ε in samples."""
+        return self._samples(self.transient_length)
+
+    @property
+    def filter_samples(self) -> int:
+        """α in samples."""
+        return self._samples(self.filter_window)
+
+    @property
+    def append_samples(self) -> int:
+        """β in samples."""
+        return self._samples(self.append_length)
+
+    @property
+    def max_lag(self) -> int:
+        """Longest regressor, max(nu, ny, nfb) [samples]."""
+        return max(self.nu, self.ny, self.nfb)
+
+    @property
+    def nyquist_freq(self) -> float:
+        """Nyquist frequency π / h [rad/s]."""
+        return math.pi / self.sample_time
+
+    @property
+    def wave_peak_prior(self) -> float | None:
+        """The prior ω0 [rad/s], or None when ``initial_wave_peak_freq`` is 0."""
+        return self.initial_wave_peak_freq if self.initial_wave_peak_freq > 0.0 else None
+
+    def lowpass_cutoff(self, notch_freq: float) -> float:
+        """ωLP = ωnotch + lowpass_offset [rad/s] (thesis Fig. 4.8)."""
+        return notch_freq + self.lowpass_offset
+
+    def _samples(self, seconds: float) -> int:
+        return int(round(seconds / self.sample_time))
+
+    # ---- validation --------------------------------------------------------------------------
+
+    def _coerce_types(self) -> None:
+        for name in _INT_FIELDS:
+            value = getattr(self, name)
+            if isinstance(value, bool) or not _is_integral(value):
+                raise ValueError(f'{name} must be an integer, got {value!r}')
+            object.__setattr__(self, name, int(value))
+        for f in fields(self):
+            if f.name in _INT_FIELDS or f.name in _STR_FIELDS or f.name == 'wave_band':
+                continue
+            object.__setattr__(self, f.name, _finite_float(f.name, getattr(self, f.name)))
+        band = self.wave_band
+        if isinstance(band, (str, bytes)) or len(band) != 2:
+            raise ValueError(f'wave_band must be two numbers (low, high) in rad/s, got {band!r}')
+        object.__setattr__(self, 'wave_band',
+                           tuple(_finite_float('wave_band', edge) for edge in band))
+
+    def _check_positive(self) -> None:
+        for name in ('sample_time', *_WINDOW_FIELDS, 'highpass_cutoff', 'notch_zeta',
+                     'lowpass_offset', 'max_train_seconds'):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f'positivity rule: {name} must be > 0, got '
+                                 f'{getattr(self, name)!r}: give a positive value')
+        for name in ('weight_decay', 'derivative_weight', 'initial_wave_peak_freq'):
+            if getattr(self, name) < 0.0:
+                raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
+                                 f'{getattr(self, name)!r}')
+        for name in ('nu', 'ny', 'nfb'):
+            if getattr(self, name) < 0:
+                raise ValueError(f'positivity rule: {name} must be ≥ 0 (number of delays), got '
+                                 f'{getattr(self, name)!r}')
+        if self.ny + self.nfb < 1:
+            raise ValueError(f'regressor rule: ny + nfb must be ≥ 1 (the network must see a '
+                             f'position, thesis §4.4), got ny = {self.ny}, nfb = {self.nfb}')
+        for name in ('hidden_units', 'hidden_layers', 'max_epochs'):
+            if getattr(self, name) < 1:
+                raise ValueError(f'positivity rule: {name} must be ≥ 1, got '
+                                 f'{getattr(self, name)!r}')
+        for name in _WINDOW_FIELDS:
+            if self._samples(getattr(self, name)) < 1:
+                raise ValueError(f'{name} = {getattr(self, name)} s is shorter than one sample '
+                                 f'(sample_time {self.sample_time} s): lengthen it')
+        if not 0.0 < self.notch_depth < 1.0:
+            raise ValueError(f'notch depth rule: notch_depth must lie in (0, 1) (gain at the '
+                             f'notch frequency), got {self.notch_depth!r}')
+        if not self.min_peak_ratio > 1.0:
+            raise ValueError(f'peak ratio rule: min_peak_ratio must exceed 1 (a peak above the '
+                             f'band median), got {self.min_peak_ratio!r}')
+
+    def _check_choices(self) -> None:
+        if self.ndof not in NDOF_VALUES:
+            raise ValueError(f'ndof rule: ndof must be 1 or 3, got {self.ndof!r}')
+        if self.trainer not in TRAINERS:
+            raise ValueError(f'trainer rule: trainer must be one of {TRAINERS}, got '
+                             f'{self.trainer!r}')
+        if self.training_mode not in TRAINING_MODES:
+            raise ValueError(f'training mode rule: training_mode must be one of '
+                             f'{TRAINING_MODES}, got {self.training_mode!r}')
+        if self.max_train_seconds > self.retrain_period:
+            raise ValueError(
+                f'training time rule: max_train_seconds = {self.max_train_seconds} s exceeds '
+                f'retrain_period Δ = {self.retrain_period} s: one training must end before the '
+                'next is due; lower max_train_seconds or raise retrain_period')
+
+    def _check_frequencies(self) -> None:
+        low, high = self.wave_band
+        nyquist = self.nyquist_freq
+        if not 0.0 < low < high:
+            raise ValueError(f'wave band rule: wave_band must satisfy 0 < low < high, got '
+                             f'{self.wave_band!r} rad/s: order the edges')
+        if not high + self.lowpass_offset < nyquist:
+            raise ValueError(
+                f'Nyquist rule: wave_band high {high} + lowpass_offset {self.lowpass_offset} = '
+                f'{high + self.lowpass_offset:.4g} rad/s must stay below π/sample_time = '
+                f'{nyquist:.4g} rad/s: sample faster or narrow the band')
+        if not self.highpass_cutoff < high:
+            raise ValueError(
+                f'high-pass rule: highpass_cutoff ωHP = {self.highpass_cutoff} rad/s must lie '
+                f'below or inside the wave band {self.wave_band!r} (thesis §4.2.1): lower it')
+        prior = self.wave_peak_prior
+        if prior is not None and not low <= prior <= high:
+            raise ValueError(f'prior rule: initial_wave_peak_freq = {prior} rad/s lies outside '
+                             f'the wave band {self.wave_band!r}: use a value inside it or 0 '
+                             '(no prior)')
+
+    def _check_windows(self) -> None:
+        delta, eps = self.retrain_samples, self.transient_samples
+        alpha, beta = self.filter_samples, self.append_samples
+        n_train, gamma = self.training_samples, self.estimation_samples
+        h = self.sample_time
+        if alpha < delta + 2 * eps:
+            raise ValueError(
+                f'rule α ≥ Δ + 2ε (thesis eq. 4.4): filter_window α = {alpha * h:g} s is shorter '
+                f'than retrain_period Δ + 2 × transient_length ε = {delta * h:g} + 2 × '
+                f'{eps * h:g} s: raise filter_window to at least {(delta + 2 * eps) * h:g} s')
+        if beta < delta + eps:
+            raise ValueError(
+                f'rule Δ + ε ≤ β (thesis eq. 4.5): append_length β = {beta * h:g} s is shorter '
+                f'than retrain_period Δ + transient_length ε = {(delta + eps) * h:g} s, so the '
+                'transient at the end of the old targets would stay: raise append_length')
+        if beta >= alpha - eps:
+            raise ValueError(
+                f'rule β < α − ε (thesis eq. 4.5): append_length β = {beta * h:g} s reaches '
+                f'into the start transient of the filtered window (α − ε = '
+                f'{(alpha - eps) * h:g} s): lower append_length or raise filter_window')
+        if n_train < alpha:
+            raise ValueError(
+                f'rule N ≥ α: training_window N = {n_train * h:g} s is shorter than '
+                f'filter_window α = {alpha * h:g} s: raise training_window')
+        needed = eps + self.max_lag + MIN_TRAINING_EXAMPLES
+        if n_train < needed:
+            raise ValueError(
+                f'rule N ≥ ε + max regressor + {MIN_TRAINING_EXAMPLES}: training_window N has '
+                f'{n_train} samples, needs {needed} (ε {eps}, regressors {self.max_lag}): raise '
+                'training_window or shorten the regressors')
+        resolution = welch_resolution(gamma, h)
+        max_bin = MAX_BIN_FRACTION_OF_BAND * (self.wave_band[1] - self.wave_band[0])
+        if resolution > max_bin:
+            raise ValueError(
+                f'spectral resolution rule: estimation_window γ = {gamma * h:g} s gives a Welch '
+                f'bin of {resolution:.3g} rad/s, more than 1/20 of the wave band width '
+                f'({max_bin:.3g} rad/s): raise estimation_window')
+
+
+def _is_integral(value: Any) -> bool:
+    """True for ints and for floats with an integer value (YAML may give 2.0)."""
+    if isinstance(value, numbers.Integral):
+        return True
+    return isinstance(value, float) and math.isfinite(value) and value.is_integer()
+
+
+def _finite_float(name: str, value: Any) -> float:
+    """``value`` as a finite float, else ValueError naming the parameter."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ValueError(f'{name} must be a number, got {value!r}')
+    number = float(value)
+    if not math.isfinite(number):
+        raise ValueError(f'{name} must be finite, got {value!r}')
+    return number

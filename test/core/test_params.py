@@ -1,0 +1,145 @@
+"""PredictorParams: defaults, sample counts, every rule of Algorithm 4.1 and conversions."""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+
+from lf_predictor_ros.core.params import PredictorParams
+
+# A legal tiny configuration used to reach the "N long enough for the regressors" rule:
+# h = 0.5 s, Δ = 2, ε = 2, α = 8, β = 4 samples satisfy eqs. 4.4/4.5.
+_TINY = {'retrain_period': 1.0, 'transient_length': 1.0, 'filter_window': 4.0,
+         'append_length': 2.0, 'max_train_seconds': 0.5}
+
+# (changes, regex the message must contain): each breaks exactly one rule of the defaults
+# (h = 0.5 s, Δ = 60 s, ε = 30 s, α = 180 s, β = 120 s, N = 600 s, γ = 1200 s).
+RULE_CASES: list[tuple[str, dict[str, Any], str]] = [
+    ('ndof', {'ndof': 2}, r'ndof rule.*got 2'),
+    ('sample_time zero', {'sample_time': 0.0}, r'positivity rule: sample_time must be > 0'),
+    ('sample_time negative', {'sample_time': -0.1}, r'sample_time must be > 0, got -0\.1'),
+    ('retrain_period', {'retrain_period': 0.0}, r'retrain_period must be > 0'),
+    ('transient_length', {'transient_length': -1.0}, r'transient_length must be > 0'),
+    ('estimation_window', {'estimation_window': -5.0}, r'estimation_window must be > 0'),
+    ('highpass_cutoff', {'highpass_cutoff': 0.0}, r'highpass_cutoff must be > 0'),
+    ('notch_zeta', {'notch_zeta': 0.0}, r'notch_zeta must be > 0'),
+    ('lowpass_offset', {'lowpass_offset': -0.2}, r'lowpass_offset must be > 0'),
+    ('max_train_seconds', {'max_train_seconds': 0.0}, r'max_train_seconds must be > 0'),
+    ('weight_decay', {'weight_decay': -1e-3}, r'weight_decay must be ≥ 0'),
+    ('derivative_weight', {'derivative_weight': -0.1}, r'derivative_weight must be ≥ 0'),
+    ('nu', {'nu': -1}, r'nu must be ≥ 0'),
+    ('ny+nfb', {'ny': 0, 'nfb': 0}, r'regressor rule: ny \+ nfb must be ≥ 1'),
+    ('hidden_units', {'hidden_units': 0}, r'hidden_units must be ≥ 1'),
+    ('hidden_layers', {'hidden_layers': 0}, r'hidden_layers must be ≥ 1'),
+    ('max_epochs', {'max_epochs': 0}, r'max_epochs must be ≥ 1'),
+    ('sub-sample window', {'transient_length': 0.2}, r'transient_length = 0\.2 s is shorter '
+                                                      r'than one sample'),
+    ('notch_depth 1', {'notch_depth': 1.0}, r'notch depth rule.*got 1\.0'),
+    ('notch_depth 0', {'notch_depth': 0.0}, r'notch depth rule'),
+    ('min_peak_ratio', {'min_peak_ratio': 1.0}, r'peak ratio rule'),
+    ('trainer', {'trainer': 'sgd'}, r"trainer rule.*'sgd'"),
+    ('training_mode', {'training_mode': 'teacher'}, r"training mode rule.*'teacher'"),
+    ('training time', {'max_train_seconds': 61.0}, r'training time rule: max_train_seconds = '
+                                                   r'61\.0 s exceeds retrain_period'),
+    ('band order', {'wave_band': (1.3, 0.3)}, r'wave band rule'),
+    ('band negative', {'wave_band': (-0.1, 1.3)}, r'wave band rule'),
+    ('band arity', {'wave_band': (0.3,)}, r'wave_band must be two numbers'),
+    ('nyquist', {'sample_time': 2.0}, r'Nyquist rule: .*1\.6 rad/s must stay below '
+                                      r'π/sample_time = 1\.571'),
+    ('highpass in band', {'highpass_cutoff': 1.5}, r'high-pass rule: highpass_cutoff ωHP = 1\.5'),
+    ('prior outside band', {'initial_wave_peak_freq': 2.0}, r'prior rule'),
+    ('prior negative', {'initial_wave_peak_freq': -0.5}, r'initial_wave_peak_freq must be ≥ 0'),
+    ('eq 4.4', {'filter_window': 100.0}, r'α ≥ Δ \+ 2ε \(thesis eq\. 4\.4\): filter_window '
+                                         r'α = 100 s.*at least 120 s'),
+    ('eq 4.5 lower', {'append_length': 80.0}, r'Δ \+ ε ≤ β \(thesis eq\. 4\.5\): append_length '
+                                              r'β = 80 s.*90 s'),
+    ('eq 4.5 upper', {'append_length': 150.0}, r'β < α − ε \(thesis eq\. 4\.5\): append_length '
+                                               r'β = 150 s.*α − ε = 150 s'),
+    ('N ≥ α', {'training_window': 150.0}, r'rule N ≥ α: training_window N = 150 s'),
+    ('N regressors', {**_TINY, 'training_window': 5.0}, r'rule N ≥ ε \+ max regressor \+ 20: '
+                                                        r'training_window N has 10 samples, '
+                                                        r'needs 24'),
+    ('spectral resolution', {'estimation_window': 200.0}, r'spectral resolution rule: '
+                                                          r'estimation_window γ = 200 s'),
+    ('non-integer', {'nu': 2.5}, r'nu must be an integer'),
+    ('bool as int', {'ndof': True}, r'ndof must be an integer'),
+    ('nan', {'sample_time': math.nan}, r'sample_time must be finite'),
+    ('string number', {'retrain_period': '60'}, r'retrain_period must be a number'),
+]
+
+
+@pytest.mark.parametrize(('changes', 'message'), [c[1:] for c in RULE_CASES],
+                         ids=[c[0] for c in RULE_CASES])
+def test_every_rule_rejects_a_violating_value(changes: dict[str, Any], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        PredictorParams(**changes)
+    with pytest.raises(ValueError, match=message):
+        PredictorParams().replace(**changes)
+
+
+def test_defaults_and_sample_counts() -> None:
+    params = PredictorParams()
+    assert params.sample_time == 0.5
+    assert (params.retrain_samples, params.transient_samples, params.filter_samples,
+            params.append_samples, params.training_samples, params.estimation_samples) == (
+                120, 60, 360, 240, 1200, 2400)
+    assert params.max_lag == 2
+    assert params.nyquist_freq == pytest.approx(2.0 * math.pi)
+    assert params.lowpass_cutoff(0.3) == pytest.approx(0.5)  # thesis Fig. 4.8
+    assert params.wave_peak_prior is None
+    assert PredictorParams(initial_wave_peak_freq=0.6).wave_peak_prior == 0.6
+
+
+def test_windows_in_seconds_are_rate_independent() -> None:
+    slow = PredictorParams(sample_time=1.0)
+    fast = PredictorParams(sample_time=0.1)
+    assert fast.filter_samples == 10 * slow.filter_samples == 1800
+    assert fast.append_samples == 10 * slow.append_samples == 1200
+
+
+def test_boundaries_of_eqs_4_4_and_4_5_are_accepted() -> None:
+    # β = Δ + ε exactly; α one sample above Δ + 2ε (α = Δ + 2ε leaves no β: Δ + ε ≤ β < Δ + ε).
+    params = PredictorParams(append_length=90.0, filter_window=120.5)
+    assert (params.append_samples, params.filter_samples) == (180, 241)
+    with pytest.raises(ValueError, match='eq. 4.5'):
+        PredictorParams(append_length=90.0, filter_window=120.0)
+
+
+def test_numbers_are_coerced() -> None:
+    raw: dict[str, Any] = {'nu': np.int64(3), 'ny': 2.0, 'retrain_period': 60,
+                           'wave_band': [0.3, 1.3]}  # as YAML / numpy would hand them over
+    params = PredictorParams(**raw)
+    assert isinstance(params.nu, int) and params.nu == 3
+    assert isinstance(params.ny, int)
+    assert isinstance(params.retrain_period, float)
+    assert params.wave_band == (0.3, 1.3)
+
+
+def test_dict_round_trip_and_unknown_keys() -> None:
+    params = PredictorParams(ndof=3, trainer='adam', wave_band=(0.3, 1.3), seed=4)
+    values = params.to_dict()
+    assert values['wave_band'] == [0.3, 1.3]
+    assert values['ndof'] == 3
+    assert PredictorParams.from_dict(values) == params
+    with pytest.raises(ValueError, match=r"unknown PredictorParams key\(s\) \['gamma'\]: valid "
+                                         r"keys are \[.*'estimation_window'"):
+        PredictorParams.from_dict({**values, 'gamma': 600.0})
+    with pytest.raises(ValueError, match=r"\['gamma'\]"):
+        params.replace(gamma=600.0)
+
+
+def test_replace_revalidates_and_keeps_the_original() -> None:
+    params = PredictorParams()
+    changed = params.replace(retrain_period=30.0, append_length=90.0)
+    assert changed.retrain_samples == 60 and params.retrain_samples == 120
+    with pytest.raises(ValueError, match='eq. 4.4'):
+        params.replace(transient_length=70.0)
+
+
+def test_field_metadata_documents_every_parameter() -> None:
+    from dataclasses import fields
+    for f in fields(PredictorParams):
+        assert f.metadata['doc'], f.name
+    assert {f.name: f.metadata['unit'] for f in fields(PredictorParams)}['filter_window'] == 's'

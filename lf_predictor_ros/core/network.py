@@ -1,0 +1,567 @@
+"""NNARMAX network for one-step LF-position prediction (thesis §2.2, §2.3, §4.4, §5.1).
+
+Structure (thesis eq. 2.2, one or more hidden layers):
+
+    x_s = (x − x_mean) / x_std                           input standardization (thesis §2.2.4)
+    h_1 = tanh(W_1 x_s + b_1), …, h_L = tanh(W_L h_{L−1} + b_L)     (eq. 2.1, 2.4)
+    o   = V h_L + v_0 (+ B x_s)                          linear output (+ optional linear bypass)
+    ŷLF(t + 1) = y_mean + y_std · o                      output de-standardization
+
+x is the raw regressor row of ``regressors.build_regressors`` (forces, measured positions, LF
+feedback). The standardization statistics live in registered buffers, so a ``state_dict`` (and a
+checkpoint) carries everything needed to reproduce a prediction. Positions and feedback share the
+y statistics, so the output is in the units of y.
+
+The linear bypass B (default on) is our addition to the thesis network: a tanh network only
+interpolates (thesis §2.5), while a DP vessel slowly drifts to positions outside the training
+window. The bypass starts as persistence (ŷLF(t + 1) = fb(t)), so an untrained network holds the
+last LF value and training learns the correction; switch it off for the plain eq. 2.2 network.
+
+Heading: the network works on unwrapped heading (a continuous signal); the caller unwraps the
+measured yaw before building regressors and wraps the predicted yaw to (−π, π] afterwards.
+
+The predict path uses ``NumpyNnarmax``: an immutable numpy copy of the weights, so a prediction
+costs microseconds, needs no autograd, and a retrained network is put in service by swapping one
+reference (atomic in Python).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, fields
+import io
+import json
+import os
+from pathlib import Path
+import tempfile
+from typing import Any, cast
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+import torch
+
+from lf_predictor_ros.core.regressors import (
+    as_series,
+    build_regressors,
+    first_index,
+    n_regressors,
+    regressor_vector,
+)
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    'CHECKPOINT_FORMAT',
+    'CHECKPOINT_VERSION',
+    'NnarmaxNet',
+    'NnarmaxSpec',
+    'NumpyNnarmax',
+    'build_regressors',
+    'load_checkpoint',
+    'predict_step',
+    'save_checkpoint',
+]
+
+CHECKPOINT_FORMAT = 'lf_predictor_ros.nnarmax'
+CHECKPOINT_VERSION = 1
+_STD_FLOOR_REL = 1e-12  # [-] a channel with std below this × max(1, |mean|) is not scaled
+
+
+def _check_count(name: str, value: object, allowed: str, minimum: int) -> None:
+    """Raise ValueError unless ``value`` is an int ≥ ``minimum`` (bool is not an int here)."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise ValueError(f'NnarmaxSpec.{name} must be {allowed}, got {value!r}')
+
+
+@dataclass(frozen=True)
+class NnarmaxSpec:
+    """Shape of an NNARMAX network (thesis §4.4, Algorithm 4.1 line 1).
+
+    ``n_outputs``: position channels (1: surge/north only, 3: north, east, yaw);
+    ``n_inputs_u``: force channels (1 or 3); ``nu``, ``ny``, ``nfb``: number of delayed forces,
+    measured positions and LF feedback values; ``hidden_units`` per hidden layer;
+    ``hidden_layers`` ≥ 1 (the thesis uses one); ``linear_bypass``: add a linear input→output
+    path (see module docstring).
+    """
+
+    n_outputs: int
+    n_inputs_u: int
+    nu: int
+    ny: int
+    nfb: int
+    hidden_units: int
+    hidden_layers: int = 1
+    linear_bypass: bool = True
+
+    def __post_init__(self) -> None:
+        """Validate the spec; raise ValueError naming the broken rule."""
+        for name in ('n_outputs', 'n_inputs_u'):
+            value = getattr(self, name)
+            if value not in (1, 3) or isinstance(value, bool):
+                raise ValueError(
+                    f'NnarmaxSpec.{name} must be 1 or 3 (1-DOF surge or 3-DOF north/east/yaw), '
+                    f'got {value!r}'
+                )
+        for name in ('nu', 'ny', 'nfb'):
+            _check_count(name, getattr(self, name), 'an int ≥ 0 (number of delays)', 0)
+        if self.ny + self.nfb < 1:
+            raise ValueError(
+                'NnarmaxSpec needs ny + nfb ≥ 1: the network must see a position (measured or '
+                'fed back) to predict the next one'
+            )
+        _check_count('hidden_units', self.hidden_units, 'an int ≥ 1', 1)
+        _check_count('hidden_layers', self.hidden_layers, 'an int ≥ 1', 1)
+        if not isinstance(self.linear_bypass, bool):
+            raise ValueError(
+                f'NnarmaxSpec.linear_bypass must be a bool, got {self.linear_bypass!r}'
+            )
+
+    @property
+    def n_regressors(self) -> int:
+        """Length of one regressor row."""
+        return n_regressors(self)
+
+    @property
+    def first_index(self) -> int:
+        """First sample index with a full regressor history, max(nu, ny, nfb) − 1."""
+        return first_index(self)
+
+    def to_dict(self) -> dict[str, int | bool]:
+        """Plain dict (for checkpoints and logs)."""
+        return dict(asdict(self))
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, Any]) -> NnarmaxSpec:
+        """Inverse of ``to_dict``; unknown or missing keys raise ValueError."""
+        names = {f.name for f in fields(cls)}
+        unknown = set(values) - names
+        if unknown:
+            raise ValueError(
+                f'unknown NnarmaxSpec fields {sorted(unknown)}; expected {sorted(names)}'
+            )
+        try:
+            return cls(**dict(values))
+        except TypeError as exc:
+            raise ValueError(f'incomplete NnarmaxSpec {dict(values)}: {exc}') from exc
+
+
+def _safe_std(std: FloatArray, mean: FloatArray) -> FloatArray:
+    """Standard deviation with constant channels mapped to 1 (no division by ~0)."""
+    floor = _STD_FLOOR_REL * np.maximum(1.0, np.abs(mean))
+    return np.where(std > floor, std, 1.0)
+
+
+class NnarmaxNet(torch.nn.Module):
+    """NNARMAX network: raw regressor rows (rows, n_regressors) → ŷLF(t + 1) (rows, n_outputs)."""
+
+    u_mean: torch.Tensor
+    u_std: torch.Tensor
+    y_mean: torch.Tensor
+    y_std: torch.Tensor
+
+    def __init__(self, spec: NnarmaxSpec, *, seed: int = 0) -> None:
+        """Create the layers in float64 and initialize them reproducibly from ``seed``."""
+        super().__init__()
+        self.spec = spec
+        widths = [spec.n_regressors] + [spec.hidden_units] * spec.hidden_layers
+        self.hidden = torch.nn.ModuleList(
+            torch.nn.Linear(widths[i], widths[i + 1], dtype=torch.float64)
+            for i in range(spec.hidden_layers)
+        )
+        self.output = torch.nn.Linear(spec.hidden_units, spec.n_outputs, dtype=torch.float64)
+        self.bypass: torch.nn.Linear | None = (
+            torch.nn.Linear(spec.n_regressors, spec.n_outputs, bias=False, dtype=torch.float64)
+            if spec.linear_bypass
+            else None
+        )
+        f64 = torch.float64
+        self.register_buffer('u_mean', torch.zeros(spec.n_inputs_u, dtype=f64))
+        self.register_buffer('u_std', torch.ones(spec.n_inputs_u, dtype=f64))
+        self.register_buffer('y_mean', torch.zeros(spec.n_outputs, dtype=f64))
+        self.register_buffer('y_std', torch.ones(spec.n_outputs, dtype=f64))
+        self.reset_parameters(seed)
+
+    def reset_parameters(self, seed: int) -> None:
+        """Seeded initialization: hidden layers U(±1/√fan_in), output 0, bypass = persistence.
+
+        With a zero output layer the untrained network is exactly the bypass, i.e. it predicts
+        ŷLF(t + 1) = fb(t) (or y(t) when nfb = 0); without a bypass it predicts the window mean.
+        """
+        generator = torch.Generator().manual_seed(seed)
+        with torch.no_grad():
+            for layer in self.hidden_layers():
+                bound = 1.0 / float(np.sqrt(layer.in_features))
+                layer.weight.copy_(_uniform(layer.weight.shape, bound, generator))
+                layer.bias.copy_(_uniform(layer.bias.shape, bound, generator))
+            self.output.weight.zero_()
+            self.output.bias.zero_()
+            if self.bypass is not None:
+                self.bypass.weight.copy_(_persistence_matrix(self.spec))
+
+    def hidden_layers(self) -> list[torch.nn.Linear]:
+        """The tanh layers, input side first."""
+        return [cast(torch.nn.Linear, layer) for layer in self.hidden]
+
+    def regressor_standardization(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(mean, std) of every regressor column, expanded from the u and y statistics."""
+        spec = self.spec
+        mean = torch.cat(
+            (self.u_mean.repeat(spec.nu), self.y_mean.repeat(spec.ny + spec.nfb))
+        )
+        std = torch.cat((self.u_std.repeat(spec.nu), self.y_std.repeat(spec.ny + spec.nfb)))
+        return mean, std
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Predict ŷLF(t + 1) for raw regressor rows ``x`` of shape (rows, n_regressors)."""
+        x_mean, x_std = self.regressor_standardization()
+        x_s = (x - x_mean) / x_std
+        hidden = x_s
+        for layer in self.hidden_layers():
+            hidden = torch.tanh(layer(hidden))
+        out: torch.Tensor = self.output(hidden)
+        if self.bypass is not None:
+            out = out + self.bypass(x_s)
+        return self.y_mean + self.y_std * out
+
+    def free_run(
+        self, x_static: torch.Tensor, fb_init: torch.Tensor, *, differentiable: bool = True
+    ) -> torch.Tensor:
+        """Parallel (recurrent) run: the feedback regressors are the network's own predictions.
+
+        ``x_static`` (rows, n_static): the force and measured-position columns of the regressor
+        rows (everything but the feedback block); ``fb_init`` (nfb, n_outputs): the feedback
+        values before the first row, oldest first. Returns ŷLF(t + 1) for every row, equal to
+        calling ``forward`` row by row with the feedback block replaced by earlier outputs, but
+        the feedback-free part of the first layer is computed once for the whole window and the
+        recursion runs in standardized units (the feedback shares the y statistics, so the
+        standardized feedback is the raw output o itself). With ``differentiable`` the recursion
+        is built from torch ops (BPTT, forward-mode AD); without it, it runs in numpy on detached
+        weights, about 3× faster, for evaluations that need no gradient.
+        """
+        spec = self.spec
+        if spec.nfb == 0:
+            return self.forward(x_static)
+        n_static = x_static.shape[1]
+        x_mean, x_std = self.regressor_standardization()
+        x_s = (x_static - x_mean[:n_static]) / x_std[:n_static]
+        layers = self.hidden_layers()
+        first = layers[0]
+        hidden_pre = x_s @ first.weight[:, :n_static].T + first.bias
+        out_static = self.output.bias.expand(x_s.shape[0], spec.n_outputs)
+        if self.bypass is not None:
+            out_static = out_static + x_s @ self.bypass.weight[:, :n_static].T
+        recursion = _Recursion(
+            hidden_fb=first.weight[:, n_static:],
+            bypass_fb=None if self.bypass is None else self.bypass.weight[:, n_static:],
+            output_weight=self.output.weight,
+            deeper=tuple((layer.weight, layer.bias) for layer in layers[1:]),
+        )
+        fb_standardized = (fb_init - self.y_mean) / self.y_std
+        if differentiable:
+            outputs = recursion.run_torch(hidden_pre, out_static, fb_standardized)
+        else:
+            outputs = torch.from_numpy(
+                recursion.run_numpy(hidden_pre, out_static, fb_standardized)
+            )
+        return self.y_mean + self.y_std * outputs
+
+    def set_standardization(
+        self, u: ArrayLike, y: ArrayLike, *, preserve_function: bool = True
+    ) -> None:
+        """Set the standardization buffers from training data (thesis §2.2.4).
+
+        ``u`` (n, n_inputs_u) forces and ``y`` (n, n_outputs) positions (unwrapped heading).
+        With ``preserve_function`` the weights are transformed exactly so the network computes the
+        same function as before (a warm start stays a warm start when the window's mean and spread
+        move); without it only the buffers change.
+        """
+        u_series = as_series(u, self.spec.n_inputs_u, 'u')
+        y_series = as_series(y, self.spec.n_outputs, 'y')
+        if u_series.shape[0] < 2 or y_series.shape[0] < 2:
+            raise ValueError('set_standardization needs at least 2 samples of u and y')
+        if not (np.all(np.isfinite(u_series)) and np.all(np.isfinite(y_series))):
+            raise ValueError(
+                'set_standardization got NaN/inf in u or y: drop invalid samples first'
+            )
+        u_mean = u_series.mean(axis=0)
+        y_mean = y_series.mean(axis=0)
+        u_std = _safe_std(u_series.std(axis=0), u_mean)
+        y_std = _safe_std(y_series.std(axis=0), y_mean)
+        new = {
+            'u_mean': torch.from_numpy(u_mean),
+            'u_std': torch.from_numpy(u_std),
+            'y_mean': torch.from_numpy(y_mean),
+            'y_std': torch.from_numpy(y_std),
+        }
+        with torch.no_grad():
+            if preserve_function:
+                self._reparameterize(new)
+            for name, value in new.items():
+                getattr(self, name).copy_(value)
+
+    def _reparameterize(self, new: Mapping[str, torch.Tensor]) -> None:
+        """Transform the weights so the function is unchanged under new statistics ``new``.
+
+        x_s,old = a ⊙ x_s,new + c with a = std_new/std_old, c = (mean_new − mean_old)/std_old, and
+        o_new = k ⊙ o_old + (y_mean_old − y_mean_new)/y_std_new with k = y_std_old/y_std_new.
+        """
+        spec = self.spec
+        old_mean, old_std = self.regressor_standardization()
+        lag_blocks = spec.ny + spec.nfb
+        new_mean = torch.cat((new['u_mean'].repeat(spec.nu), new['y_mean'].repeat(lag_blocks)))
+        new_std = torch.cat((new['u_std'].repeat(spec.nu), new['y_std'].repeat(lag_blocks)))
+        scale_in = new_std / old_std
+        shift_in = (new_mean - old_mean) / old_std
+        first = self.hidden_layers()[0]
+        first.bias.add_(first.weight @ shift_in)
+        first.weight.mul_(scale_in)
+        k = self.y_std / new['y_std']
+        out_bias = self.output.bias.clone()
+        if self.bypass is not None:
+            out_bias += self.bypass.weight @ shift_in
+            self.bypass.weight.mul_(scale_in).mul_(k[:, None])
+        self.output.weight.mul_(k[:, None])
+        self.output.bias.copy_(k * out_bias + (self.y_mean - new['y_mean']) / new['y_std'])
+
+    @classmethod
+    def from_state(cls, spec: NnarmaxSpec, state: Mapping[str, torch.Tensor]) -> NnarmaxNet:
+        """Build a network from a spec and a state_dict (strict; ValueError on a mismatch)."""
+        net = cls(spec)
+        try:
+            net.load_state_dict(dict(state), strict=True)
+        except (RuntimeError, KeyError) as exc:
+            raise ValueError(
+                f'state_dict does not fit NnarmaxSpec {spec.to_dict()}: {exc}'.splitlines()[0]
+            ) from exc
+        return net
+
+
+@dataclass(frozen=True)
+class _Recursion:
+    """Feedback-dependent part of one NNARMAX step, in standardized units (see ``free_run``)."""
+
+    hidden_fb: torch.Tensor  # (H, nfb·n_out) first-layer weights of the feedback block
+    bypass_fb: torch.Tensor | None  # (n_out, nfb·n_out) bypass weights of the feedback block
+    output_weight: torch.Tensor  # (n_out, H)
+    deeper: tuple[tuple[torch.Tensor, torch.Tensor], ...]  # (weight, bias) of layers 2…L
+
+    def run_torch(
+        self, hidden_pre: torch.Tensor, out_static: torch.Tensor, fb_init: torch.Tensor
+    ) -> torch.Tensor:
+        """Standardized outputs o for every row, differentiable."""
+        feedback = list(fb_init.unbind(0))  # oldest first
+        outputs = []
+        for hidden_row, out_row in zip(hidden_pre.unbind(0), out_static.unbind(0), strict=True):
+            fb_vector = torch.cat(feedback[::-1]) if len(feedback) > 1 else feedback[0]
+            hidden = torch.tanh(hidden_row + self.hidden_fb @ fb_vector)
+            for weight, bias in self.deeper:
+                hidden = torch.tanh(weight @ hidden + bias)
+            out = out_row + self.output_weight @ hidden
+            if self.bypass_fb is not None:
+                out = out + self.bypass_fb @ fb_vector
+            outputs.append(out)
+            feedback = feedback[1:] + [out]
+        return torch.stack(outputs)
+
+    def run_numpy(
+        self, hidden_pre: torch.Tensor, out_static: torch.Tensor, fb_init: torch.Tensor
+    ) -> FloatArray:
+        """Standardized outputs o for every row, in numpy on detached values (no gradient)."""
+        hidden_rows = _detached(hidden_pre)
+        out_rows = _detached(out_static)
+        hidden_fb = _detached(self.hidden_fb)
+        bypass_fb = None if self.bypass_fb is None else _detached(self.bypass_fb)
+        output_weight = _detached(self.output_weight)
+        deeper = [(_detached(weight), _detached(bias)) for weight, bias in self.deeper]
+        feedback = list(_detached(fb_init))
+        outputs = np.empty_like(out_rows)
+        with np.errstate(over='ignore', invalid='ignore'):  # a diverging trial step: inf
+            for row in range(out_rows.shape[0]):
+                fb_vector = np.concatenate(feedback[::-1]) if len(feedback) > 1 else feedback[0]
+                hidden = np.tanh(hidden_rows[row] + hidden_fb @ fb_vector)
+                for weight, bias in deeper:
+                    hidden = np.tanh(weight @ hidden + bias)
+                out = out_rows[row] + output_weight @ hidden
+                if bypass_fb is not None:
+                    out = out + bypass_fb @ fb_vector
+                outputs[row] = out
+                feedback = feedback[1:] + [out]
+        return outputs
+
+
+def _detached(tensor: torch.Tensor) -> FloatArray:
+    """float64 numpy view of a tensor without gradient tracking."""
+    array: FloatArray = tensor.detach().cpu().numpy()
+    return array
+
+
+def _uniform(shape: torch.Size, bound: float, generator: torch.Generator) -> torch.Tensor:
+    """U(−bound, bound) samples in float64 from an explicit generator."""
+    return (torch.rand(shape, generator=generator, dtype=torch.float64) * 2.0 - 1.0) * bound
+
+
+def _persistence_matrix(spec: NnarmaxSpec) -> torch.Tensor:
+    """Bypass weights (standardized units) that output the newest feedback (or measured) value."""
+    matrix = torch.zeros(spec.n_outputs, spec.n_regressors, dtype=torch.float64)
+    block_start = spec.nu * spec.n_inputs_u
+    if spec.nfb > 0:
+        block_start += spec.ny * spec.n_outputs
+    for channel in range(spec.n_outputs):
+        matrix[channel, block_start + channel] = 1.0
+    return matrix
+
+
+def _frozen(array: torch.Tensor) -> FloatArray:
+    """Detached float64 numpy copy marked read-only."""
+    copy = np.array(array.detach().cpu().numpy(), dtype=np.float64, copy=True)
+    copy.setflags(write=False)
+    return copy
+
+
+@dataclass(frozen=True, eq=False)
+class NumpyNnarmax:
+    """Immutable numpy copy of an ``NnarmaxNet`` for the real-time predict path.
+
+    Computes exactly ``NnarmaxNet.forward`` (float64) without torch. Arrays are read-only; a new
+    network is published by replacing the reference to the whole object.
+    """
+
+    spec: NnarmaxSpec
+    x_mean: FloatArray
+    x_std: FloatArray
+    hidden_weights: tuple[FloatArray, ...]
+    hidden_biases: tuple[FloatArray, ...]
+    output_weight: FloatArray
+    output_bias: FloatArray
+    bypass_weight: FloatArray | None
+    y_mean: FloatArray
+    y_std: FloatArray
+
+    @classmethod
+    def from_module(cls, net: NnarmaxNet) -> NumpyNnarmax:
+        """Copy the weights and standardization of ``net`` (the module is not modified)."""
+        x_mean, x_std = net.regressor_standardization()
+        return cls(
+            spec=net.spec,
+            x_mean=_frozen(x_mean),
+            x_std=_frozen(x_std),
+            hidden_weights=tuple(_frozen(layer.weight) for layer in net.hidden_layers()),
+            hidden_biases=tuple(_frozen(layer.bias) for layer in net.hidden_layers()),
+            output_weight=_frozen(net.output.weight),
+            output_bias=_frozen(net.output.bias),
+            bypass_weight=None if net.bypass is None else _frozen(net.bypass.weight),
+            y_mean=_frozen(net.y_mean),
+            y_std=_frozen(net.y_std),
+        )
+
+    def forward(self, x: FloatArray) -> FloatArray:
+        """ŷLF(t + 1) for regressor rows (rows, n_regressors) or one row (n_regressors,)."""
+        x_s = (x - self.x_mean) / self.x_std
+        hidden = x_s
+        for weight, bias in zip(self.hidden_weights, self.hidden_biases, strict=True):
+            hidden = np.tanh(hidden @ weight.T + bias)
+        out = hidden @ self.output_weight.T + self.output_bias
+        if self.bypass_weight is not None:
+            out = out + x_s @ self.bypass_weight.T
+        result: FloatArray = self.y_mean + self.y_std * out
+        return result
+
+
+def predict_step(
+    net: NumpyNnarmax | NnarmaxNet,
+    u_hist: FloatArray,
+    y_hist: FloatArray,
+    fb_hist: FloatArray,
+) -> FloatArray:
+    """One-step prediction ŷLF(t + 1), shape (n_outputs,) (thesis Algorithm 4.1 lines 14–17).
+
+    Histories are time series, oldest first and newest (time t) last, with at least nu, ny, nfb
+    rows: ``u_hist`` forces, ``y_hist`` measured positions (unwrapped heading), ``fb_hist`` the
+    previous LF predictions. Use a ``NumpyNnarmax`` for the real-time path (tens of µs); a
+    ``NnarmaxNet`` is accepted and evaluated under ``torch.inference_mode``.
+    """
+    x = regressor_vector(u_hist, y_hist, fb_hist, net.spec)
+    if isinstance(net, NumpyNnarmax):
+        return net.forward(x)
+    with torch.inference_mode():
+        prediction: FloatArray = net(torch.from_numpy(x)[None, :])[0].numpy().copy()
+    return prediction
+
+
+def save_checkpoint(
+    path: str | os.PathLike[str],
+    spec: NnarmaxSpec,
+    state: Mapping[str, torch.Tensor],
+    meta: Mapping[str, Any] | None = None,
+) -> None:
+    """Write spec, state_dict and JSON metadata to ``path`` atomically (temp file + rename).
+
+    The state must fit the spec (checked by loading it into a fresh network) and ``meta`` must be
+    JSON-serializable (e.g. training loss, ω0, time stamps).
+    """
+    NnarmaxNet.from_state(spec, state)
+    try:
+        meta_json = json.dumps(dict(meta or {}))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'checkpoint meta must be JSON-serializable: {exc}') from exc
+    payload = {
+        'format': CHECKPOINT_FORMAT,
+        'version': CHECKPOINT_VERSION,
+        'spec': spec.to_dict(),
+        'state': {name: value.detach().cpu().clone() for name, value in state.items()},
+        'meta_json': meta_json,
+    }
+    target = Path(path)
+    handle, tmp_name = tempfile.mkstemp(prefix=f'.{target.name}.', dir=target.parent or '.')
+    try:
+        with os.fdopen(handle, 'wb') as stream:
+            torch.save(payload, stream)
+        os.replace(tmp_name, target)
+    except BaseException:
+        Path(tmp_name).unlink(missing_ok=True)
+        raise
+
+
+def load_checkpoint(
+    path: str | os.PathLike[str], expected_spec: NnarmaxSpec | None = None
+) -> tuple[NnarmaxSpec, dict[str, torch.Tensor], dict[str, Any]]:
+    """Read a checkpoint written by ``save_checkpoint``: ``(spec, state_dict, meta)``.
+
+    Raises ValueError for a corrupt or foreign file, a different format version, a state that does
+    not fit its spec, or a spec different from ``expected_spec`` (when given). A missing file
+    raises FileNotFoundError.
+    """
+    raw = Path(path).read_bytes()
+    try:
+        payload = torch.load(io.BytesIO(raw), map_location='cpu', weights_only=True)
+    except Exception as exc:  # torch raises many types for a damaged zip/pickle
+        raise ValueError(
+            f'checkpoint {path} is corrupt or not a torch file ({type(exc).__name__}); delete '
+            'it and train again'
+        ) from exc
+    if not isinstance(payload, dict) or payload.get('format') != CHECKPOINT_FORMAT:
+        raise ValueError(
+            f'{path} is not an NNARMAX checkpoint (format tag {CHECKPOINT_FORMAT!r} missing)'
+        )
+    version = payload.get('version')
+    if version != CHECKPOINT_VERSION:
+        raise ValueError(
+            f'checkpoint {path} has format version {version!r}, this software reads version '
+            f'{CHECKPOINT_VERSION}: retrain the network or convert the file'
+        )
+    try:
+        spec = NnarmaxSpec.from_dict(payload['spec'])
+        state = {str(name): value for name, value in payload['state'].items()}
+        meta = json.loads(payload['meta_json'])
+    except (KeyError, TypeError, AttributeError, json.JSONDecodeError) as exc:
+        raise ValueError(
+            f'checkpoint {path} is corrupt: missing or damaged field ({exc})'
+        ) from exc
+    if expected_spec is not None and spec != expected_spec:
+        raise ValueError(
+            f'checkpoint {path} holds a network {spec.to_dict()}, but {expected_spec.to_dict()} '
+            'was expected: change the predictor parameters or retrain'
+        )
+    if not isinstance(meta, dict):
+        raise ValueError(f'checkpoint {path} is corrupt: meta is not a JSON object')
+    NnarmaxNet.from_state(spec, state)
+    return spec, state, meta

@@ -1,0 +1,709 @@
+"""Model-agnostic trainer for regressor networks (thesis §2.2.2–2.2.3, §4.3, Alg. 4.1 l. 36–40).
+
+In the spirit of karpathy/minGPT's trainer, this module knows nothing about layers. It needs a
+``torch.nn.Module`` with a ``spec`` (``nu``, ``ny``, ``nfb``, ``n_outputs``, ``n_inputs_u``) whose
+``forward`` maps raw regressor rows (``regressors.build_regressors`` layout) to the next LF
+position, a ``free_run(x_static, fb_init)`` for the parallel mode and, when
+``TrainSettings.standardize`` is on, a ``set_standardization(u, y)`` method (``NnarmaxNet`` has
+all three).
+
+Objective (thesis eq. 2.6 and 2.8 with a = 1, b = ``weight_decay``, plus our derivative term):
+
+    J(w) = MSE + d · MSE_Δ + b · Σ w_j²
+    MSE   = mean over kept samples and channels of ((ŷLF(t+1) − yT(t+1)) / s)²
+    MSE_Δ = mean over kept consecutive pairs of ((Δŷ − ΔyT) / s_Δ)²,  Δx(t+1) = x(t+1) − x(t)
+
+s is the per-channel standard deviation of the kept targets and s_Δ the RMS of their first
+differences, so the loss is dimensionless, treats metres and radians alike and is comparable
+between candidate networks on the same window. The derivative term answers the thesis's closed-loop
+failure (§5.4.2: the prediction's derivative had the wrong sign, so a PID's D-term steered with the
+waves). Samples with ``mask`` False (the last ε, thesis Algorithm 4.1 line 38) contribute no error.
+
+Modes (thesis §2.3; Narendra & Parthasarathy 1990):
+- ``series_parallel``: the feedback regressors are the targets yT: a feed-forward problem.
+- ``parallel``: the feedback regressors are the network's own predictions, unrolled over the
+  window from yT at the first row; gradients go through the whole recursion (backpropagation
+  through time for L-BFGS/Adam, dynamic backpropagation for the LM Jacobian). Train
+  series-parallel first and warm-start the parallel run: from an untrained network and a short
+  window LM can settle in a poor, unstable local minimum (seen with 300 samples, not with 600).
+
+Algorithms:
+- ``lm``: Levenberg–Marquardt, thesis eq. 2.7, w ← w − (JᵀJ + μI)⁻¹ Jᵀε, with the residual vector
+  ε = [√(1/N)·e; √(d/N_Δ)·e_Δ; √b·w] so that ‖ε‖² = J(w); μ adapts as in MATLAB ``trainlm``
+  (× ``lm_mu_dec`` after a successful step, × ``lm_mu_inc`` until a step succeeds). The Jacobian
+  comes from per-row reverse-mode Jacobians (``vmap(jacrev)``) and, in parallel mode, the
+  dynamic-backpropagation recursion through the feedback (see ``_prediction_jacobian``).
+- ``lbfgs``: ``torch.optim.LBFGS`` with strong-Wolfe line search, one iteration per epoch.
+- ``adam``: full-batch Adam, one step per epoch.
+
+Training never modifies the network passed in: it deep-copies it, warm-starts from its weights and
+returns a new state_dict. It honours ``max_epochs``, ``max_seconds`` (wall time) and a
+``threading.Event``, checked between epochs and between LM damping retries. It runs torch on one
+thread (``torch.set_num_threads(1)``, restored afterwards) because the predict path and the other
+processes share the cores. Call ``warm_up()`` once at start-up: the first Jacobian makes torch
+import ``torch._dynamo`` (≈ 2 s, holding the GIL), which must not happen in the first retraining.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+import copy
+from dataclasses import dataclass
+import math
+import threading
+import time
+from typing import Literal, cast
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+import torch
+from torch.func import functional_call, jacrev, vmap
+
+from lf_predictor_ros.core.network import NnarmaxNet, NnarmaxSpec
+from lf_predictor_ros.core.regressors import as_series, build_regressors, n_static_regressors
+
+FloatArray = NDArray[np.float64]
+Algorithm = Literal['lm', 'lbfgs', 'adam']
+Mode = Literal['series_parallel', 'parallel']
+
+_ALGORITHMS = ('lm', 'lbfgs', 'adam')
+_MODES = ('series_parallel', 'parallel')
+_SCALE_FLOOR = 1e-12  # [-] relative floor below which a target channel is not normalized
+
+
+@dataclass(frozen=True)
+class TrainSettings:
+    """Hyper-parameters of one training run (thesis §4.3, Table A.x).
+
+    ``weight_decay`` is b of eq. 2.8 (on all weights and biases, standardized units);
+    ``derivative_weight`` is d of the derivative term; ``lm_mu0``/``lm_mu_inc``/``lm_mu_dec``/
+    ``lm_mu_max`` drive eq. 2.7 (MATLAB ``trainlm`` defaults); ``lr`` is Adam's step size;
+    ``min_grad`` stops when ‖∇J‖ falls below it; ``loss_goal`` stops when the MSE part reaches it;
+    ``standardize`` re-computes the input/output standardization from the window (exactly
+    function-preserving, so the warm start is kept); ``seed`` is recorded for stochastic variants
+    (mini-batches, restarts): the three full-batch algorithms here use no randomness, so a run is
+    reproducible bit for bit without touching torch's global RNG.
+    """
+
+    algorithm: Algorithm = 'lm'
+    mode: Mode = 'series_parallel'
+    max_epochs: int = 100
+    max_seconds: float = 10.0
+    weight_decay: float = 0.0
+    derivative_weight: float = 0.0
+    lm_mu0: float = 1e-3
+    lm_mu_inc: float = 10.0
+    lm_mu_dec: float = 0.1
+    lm_mu_max: float = 1e10
+    lr: float = 1e-2
+    min_grad: float = 1e-10
+    loss_goal: float = 0.0
+    standardize: bool = True
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        """Validate; raise ValueError naming the broken rule."""
+        if self.algorithm not in _ALGORITHMS:
+            raise ValueError(f'TrainSettings.algorithm must be one of {_ALGORITHMS}, got '
+                             f'{self.algorithm!r}')
+        if self.mode not in _MODES:
+            raise ValueError(f'TrainSettings.mode must be one of {_MODES}, got {self.mode!r}')
+        epochs = self.max_epochs
+        if isinstance(epochs, bool) or not isinstance(epochs, int) or epochs < 0:
+            raise ValueError(f'TrainSettings.max_epochs must be an int ≥ 0, got {epochs!r}')
+        if not self.max_seconds > 0.0:
+            raise ValueError(
+                f'TrainSettings.max_seconds must be > 0 s (math.inf for no limit), got '
+                f'{self.max_seconds}'
+            )
+        for name in ('weight_decay', 'derivative_weight', 'min_grad', 'loss_goal'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f'TrainSettings.{name} must be a finite number ≥ 0, got {value}')
+        if not (math.isfinite(self.lm_mu0) and self.lm_mu0 > 0.0):
+            raise ValueError(f'TrainSettings.lm_mu0 must be > 0, got {self.lm_mu0}')
+        if not (self.lm_mu_inc > 1.0 and 0.0 < self.lm_mu_dec < 1.0):
+            raise ValueError(
+                'TrainSettings needs lm_mu_inc > 1 and 0 < lm_mu_dec < 1 (μ grows after a failed '
+                f'step, shrinks after a good one), got {self.lm_mu_inc}, {self.lm_mu_dec}'
+            )
+        if not self.lm_mu_max > self.lm_mu0:
+            raise ValueError(
+                f'TrainSettings.lm_mu_max must exceed lm_mu0, got {self.lm_mu_max} ≤ {self.lm_mu0}'
+            )
+        if not (math.isfinite(self.lr) and self.lr > 0.0):
+            raise ValueError(f'TrainSettings.lr must be > 0, got {self.lr}')
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    """Outcome of ``train``.
+
+    ``state_dict``: the trained weights and standardization (load into a net of the same spec);
+    ``loss``/``initial_loss``: MSE part of the objective on the masked window after/before;
+    ``epochs``: completed epochs (LM: accepted or attempted weight updates); ``seconds``: wall
+    time; ``converged``: stopped because a convergence criterion held; ``stopped_reason``: one of
+    'max_epochs', 'max_seconds', 'stop_event', 'loss_goal', 'min_grad', 'mu_max', 'non_finite';
+    ``loss_history``: MSE part after every epoch; ``objective``/``initial_objective``: the full
+    objective J(w) (with derivative and weight-decay terms) after/before. Never
+    ``objective > initial_objective``; the MSE part alone may rise when d or b > 0.
+    """
+
+    state_dict: dict[str, torch.Tensor]
+    loss: float
+    initial_loss: float
+    epochs: int
+    seconds: float
+    converged: bool
+    stopped_reason: str
+    loss_history: tuple[float, ...] = ()
+    objective: float = math.nan
+    initial_objective: float = math.nan
+
+
+@dataclass(frozen=True)
+class _Window:
+    """Training window as tensors, prepared once per run."""
+
+    x_series: torch.Tensor  # (rows, n_reg) regressors with the targets as feedback
+    fb_init: torch.Tensor  # (nfb, n_out) targets at first−nfb+1 … first (oldest first)
+    target: torch.Tensor  # (rows − 1, n_out) yT(t + 1) for row t
+    keep: torch.Tensor  # (rows − 1,) bool: target counts
+    keep_pair: torch.Tensor  # (rows − 2,) bool: both targets of a difference count
+    scale: torch.Tensor  # (n_out,) std of kept targets
+    diff_scale: torch.Tensor  # (n_out,) RMS of kept target differences
+    first: int
+
+
+class _WindowPredictor(torch.nn.Module):
+    """Runs a regressor network over a window, series-parallel (batch) or parallel (unrolled)."""
+
+    def __init__(self, net: NnarmaxNet, n_static: int, nfb: int) -> None:
+        """Wrap ``net``; the feedback block is the last ``nfb`` lag blocks of a regressor row."""
+        super().__init__()
+        self.net = net
+        self.n_static = n_static
+        self.nfb = nfb
+
+    def forward(
+        self, x_series: torch.Tensor, fb_init: torch.Tensor, parallel: bool
+    ) -> torch.Tensor:
+        """Predictions ŷLF(t + 1) for every row t of the window, shape (rows, n_out)."""
+        if not parallel or self.nfb == 0:
+            prediction: torch.Tensor = self.net(x_series)
+            return prediction
+        free_run: torch.Tensor = self.net.free_run(
+            x_series[:, : self.n_static], fb_init, differentiable=torch.is_grad_enabled()
+        )
+        return free_run
+
+
+def _channel_scale(values: FloatArray) -> FloatArray:
+    """Per-channel normalization: the given spread, or 1 for a (near-)constant channel."""
+    return np.where(values > _SCALE_FLOOR, values, 1.0)
+
+
+def _prepare_window(
+    spec: NnarmaxSpec, u: ArrayLike, y: ArrayLike, targets: ArrayLike, mask: ArrayLike | None
+) -> _Window:
+    """Validate the arrays and build the regressors, targets and masks of one window."""
+    target_series = as_series(targets, spec.n_outputs, 'targets')
+    x_series, first = build_regressors(u, y, target_series, spec)
+    n = target_series.shape[0]
+    keep_all = np.ones(n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    if keep_all.shape != (n,):
+        raise ValueError(f'mask must have shape ({n},) like the targets, got {keep_all.shape}')
+    if n - first < 3:
+        raise ValueError(
+            f'window too short: {n} samples leave fewer than 3 regressor rows after the first '
+            f'{first}; collect more data before training'
+        )
+    if not (np.all(np.isfinite(x_series)) and np.all(np.isfinite(target_series))):
+        raise ValueError('u, y and targets must be finite: drop or fill invalid samples first')
+    target = target_series[first + 1 :]
+    keep = keep_all[first + 1 :]
+    keep_pair = keep[1:] & keep[:-1]
+    if keep.sum() < 2:
+        raise ValueError('mask keeps fewer than 2 training targets: the window is all transient')
+    scale = _channel_scale(target[keep].std(axis=0))
+    diffs = np.diff(target, axis=0)[keep_pair]
+    diff_rms = np.sqrt(np.mean(diffs**2, axis=0)) if diffs.size else np.ones(spec.n_outputs)
+    return _Window(
+        x_series=torch.from_numpy(x_series),
+        fb_init=torch.from_numpy(target_series[first - spec.nfb + 1 : first + 1].copy()),
+        target=torch.from_numpy(target.copy()),
+        keep=torch.from_numpy(keep.copy()),
+        keep_pair=torch.from_numpy(keep_pair.copy()),
+        scale=torch.from_numpy(scale),
+        diff_scale=torch.from_numpy(_channel_scale(diff_rms)),
+        first=first,
+    )
+
+
+def _mse_residuals(prediction: torch.Tensor, window: _Window) -> torch.Tensor:
+    """Normalized errors of the kept samples, scaled so that their squared sum is the MSE."""
+    error = ((prediction[:-1] - window.target) / window.scale)[window.keep]
+    return error.reshape(-1) / math.sqrt(error.numel())
+
+
+def _derivative_residuals(
+    prediction: torch.Tensor, window: _Window, derivative_weight: float
+) -> torch.Tensor:
+    """Errors of the first differences, scaled so their squared sum is d · MSE_Δ."""
+    fitted = prediction[:-1]
+    error = ((fitted[1:] - fitted[:-1]) - (window.target[1:] - window.target[:-1]))
+    error = (error / window.diff_scale)[window.keep_pair]
+    if error.numel() == 0:
+        return error.reshape(-1)
+    return error.reshape(-1) * math.sqrt(derivative_weight / error.numel())
+
+
+def _data_residuals(
+    prediction: torch.Tensor, window: _Window, derivative_weight: float
+) -> torch.Tensor:
+    """Residual vector of the data terms (MSE and, if weighted, derivative)."""
+    parts = [_mse_residuals(prediction, window)]
+    if derivative_weight > 0.0:
+        parts.append(_derivative_residuals(prediction, window, derivative_weight))
+    return torch.cat(parts)
+
+
+def _mse(prediction: torch.Tensor, window: _Window) -> float:
+    """The MSE part of the objective (the reported loss)."""
+    return float(torch.sum(_mse_residuals(prediction.detach(), window) ** 2))
+
+
+@dataclass
+class _Run:
+    """Mutable bookkeeping of one training run (local to ``train``)."""
+
+    settings: TrainSettings
+    stop_event: threading.Event | None
+    start: float
+    history: list[float]
+
+    def stop_reason(self) -> str | None:
+        """'stop_event' or 'max_seconds' when the run must end now, else None."""
+        if self.stop_event is not None and self.stop_event.is_set():
+            return 'stop_event'
+        if time.monotonic() - self.start >= self.settings.max_seconds:
+            return 'max_seconds'
+        return None
+
+    def goal_reached(self) -> bool:
+        """True when the latest MSE is at or below the loss goal."""
+        return bool(self.history) and self.history[-1] <= self.settings.loss_goal
+
+
+_CONVERGED = ('loss_goal', 'min_grad', 'mu_max')
+# closure evaluations per L-BFGS iteration: 1 + up to 25 strong-Wolfe trials (torch's max_ls);
+# torch's default max_eval = 1.25·max_iter would starve the line search at max_iter = 1
+_LBFGS_MAX_EVAL = 26
+
+
+def train(
+    net: NnarmaxNet,
+    u: ArrayLike,
+    y: ArrayLike,
+    targets: ArrayLike,
+    mask: ArrayLike | None,
+    settings: TrainSettings,
+    *,
+    stop_event: threading.Event | None = None,
+) -> TrainResult:
+    """Train a copy of ``net`` on one window (thesis Algorithm 4.1, lines 36–40).
+
+    ``u`` (n, n_inputs_u) forces, ``y`` (n, n_outputs) measured positions, ``targets`` (n,
+    n_outputs) LF targets yT, all on one time base with unwrapped heading; ``mask`` (n,) bool,
+    False for targets that must not contribute (the last ε transient samples), None for all.
+    The network predicts yT(t + 1) from row t. Returns the best weights found; ``net`` itself is
+    not modified.
+    """
+    start = time.monotonic()
+    previous_threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return _train(net, u, y, targets, mask, settings, stop_event, start)
+    finally:
+        torch.set_num_threads(previous_threads)
+
+
+def _train(
+    net: NnarmaxNet,
+    u: ArrayLike,
+    y: ArrayLike,
+    targets: ArrayLike,
+    mask: ArrayLike | None,
+    settings: TrainSettings,
+    stop_event: threading.Event | None,
+    start: float,
+) -> TrainResult:
+    """Body of ``train`` (runs with one torch thread)."""
+    spec = net.spec
+    window = _prepare_window(spec, u, y, targets, mask)
+    model = copy.deepcopy(net)
+    if settings.standardize:
+        model.set_standardization(u, y, preserve_function=True)
+    runner = _WindowPredictor(model, n_static_regressors(spec), spec.nfb)
+    parallel = settings.mode == 'parallel'
+    with torch.no_grad():
+        initial_objective, prediction = _objective(runner, window, parallel, settings)
+        initial_loss = _mse(prediction, window)
+    run = _Run(settings, stop_event, start, [])
+    optimizers: dict[str, Callable[[_WindowPredictor, _Window, bool, _Run], str]] = {
+        'lm': _levenberg_marquardt,
+        'lbfgs': _lbfgs,
+        'adam': _adam,
+    }
+    reason = 'max_epochs'
+    if settings.max_epochs > 0:
+        reason = run.stop_reason() or optimizers[settings.algorithm](runner, window, parallel, run)
+    with torch.no_grad():
+        objective, prediction = _objective(runner, window, parallel, settings)
+        loss = _mse(prediction, window)
+    state = {name: value.detach().clone() for name, value in model.state_dict().items()}
+    return TrainResult(
+        state_dict=state,
+        loss=loss,
+        initial_loss=initial_loss,
+        epochs=len(run.history),
+        seconds=time.monotonic() - start,
+        converged=reason in _CONVERGED,
+        stopped_reason=reason,
+        loss_history=tuple(run.history),
+        objective=float(objective),
+        initial_objective=float(initial_objective),
+    )
+
+
+def _objective(
+    runner: _WindowPredictor, window: _Window, parallel: bool, settings: TrainSettings
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(J(w), prediction) with autograd through the runner's parameters."""
+    prediction = runner(window.x_series, window.fb_init, parallel)
+    residuals = _data_residuals(prediction, window, settings.derivative_weight)
+    objective = torch.sum(residuals**2)
+    if settings.weight_decay > 0.0:
+        weights = torch.nn.utils.parameters_to_vector(runner.parameters())
+        objective = objective + settings.weight_decay * torch.sum(weights**2)
+    return objective, prediction
+
+
+@dataclass(frozen=True)
+class _FlatParameters:
+    """Names and shapes of a module's parameters, to move between a flat vector and a dict."""
+
+    names: tuple[str, ...]
+    shapes: tuple[torch.Size, ...]
+    sizes: tuple[int, ...]
+
+    @classmethod
+    def of(cls, module: torch.nn.Module) -> _FlatParameters:
+        """Layout of ``module.parameters()`` (the order of ``parameters_to_vector``)."""
+        named = list(module.named_parameters())
+        return cls(
+            names=tuple(name for name, _ in named),
+            shapes=tuple(param.shape for _, param in named),
+            sizes=tuple(param.numel() for _, param in named),
+        )
+
+    def unflatten(self, flat: torch.Tensor, prefix: str = '') -> dict[str, torch.Tensor]:
+        """Parameter dict for ``functional_call`` from a flat weight vector."""
+        parts = flat.split(list(self.sizes))
+        return {
+            prefix + name: part.view(shape)
+            for name, part, shape in zip(self.names, parts, self.shapes, strict=True)
+        }
+
+
+def _window_prediction(
+    runner: _WindowPredictor, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
+    parallel: bool,
+) -> torch.Tensor:
+    """Predictions over the window with the weights ``flat`` (the runner is not modified)."""
+    buffers = {'net.' + name: value for name, value in runner.net.named_buffers()}
+    params = layout.unflatten(flat, prefix='net.')
+    prediction: torch.Tensor = functional_call(
+        runner, {**params, **buffers}, (window.x_series, window.fb_init, parallel)
+    )
+    return prediction
+
+
+def _prediction_jacobian(
+    runner: _WindowPredictor, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
+    parallel: bool,
+) -> torch.Tensor:
+    """dŷLF(t + 1)/dw for every row, shape (rows, n_out, n_weights).
+
+    Each row's output depends on its own regressor only, so the per-row Jacobians come from a
+    reverse-mode Jacobian of one row, vectorized over the rows (``vmap(jacrev)``): n_out backward
+    passes of a tiny network instead of n_weights forward passes over the window. In parallel
+    mode the feedback regressors are earlier outputs, and the total derivative follows the
+    dynamic-backpropagation recursion (Narendra & Parthasarathy 1991, IEEE TNN 2(2)):
+
+        S_r = ∂f/∂w|_r + Σ_k ∂f/∂fb_k|_r · S_{r−k−1},   S_r = dŷ_r/dw,
+
+    where fb_k is feedback lag k and rows before the first see targets (S = 0).
+    """
+    net = runner.net
+    buffers = dict(net.named_buffers())
+
+    def one_row(weights: torch.Tensor, x_row: torch.Tensor) -> torch.Tensor:
+        params = layout.unflatten(weights)
+        out: torch.Tensor = functional_call(net, {**params, **buffers}, (x_row[None, :],))
+        return out[0]
+
+    if not parallel or runner.nfb == 0:
+        jac_w: torch.Tensor = vmap(jacrev(one_row), in_dims=(None, 0))(flat, window.x_series)
+        return jac_w
+    nfb, n_out = runner.nfb, window.target.shape[1]
+    with torch.no_grad():
+        prediction = _window_prediction(runner, layout, flat, window, parallel=True)
+    history = torch.cat((window.fb_init, prediction))  # feedback values, oldest first
+    rows = prediction.shape[0]
+    lag_index = (nfb - 1 + torch.arange(rows))[:, None] - torch.arange(nfb)[None, :]
+    x_parallel = torch.cat(
+        (window.x_series[:, : runner.n_static], history[lag_index].reshape(rows, nfb * n_out)),
+        dim=1,
+    )
+    jac_w, jac_x = vmap(jacrev(one_row, argnums=(0, 1)), in_dims=(None, 0))(flat, x_parallel)
+    direct = jac_w.numpy()
+    feedback_gain = jac_x[:, :, runner.n_static :].reshape(rows, n_out, nfb, n_out).numpy()
+    total = np.empty_like(direct)
+    for row in range(rows):
+        sensitivity = direct[row].copy()
+        for lag in range(min(nfb, row)):
+            sensitivity += feedback_gain[row, :, lag, :] @ total[row - lag - 1]
+        total[row] = sensitivity
+    return torch.from_numpy(total)
+
+
+def _residual_jacobian(
+    jac_prediction: torch.Tensor, window: _Window, derivative_weight: float
+) -> torch.Tensor:
+    """Jacobian of the data residuals from that of the predictions (the map is affine)."""
+    offset = _data_residuals(torch.zeros(jac_prediction.shape[:2], dtype=torch.float64), window,
+                             derivative_weight)
+
+    def linear_part(prediction: torch.Tensor) -> torch.Tensor:
+        return _data_residuals(prediction, window, derivative_weight) - offset
+
+    jacobian: torch.Tensor = vmap(linear_part, in_dims=2, out_dims=1)(jac_prediction)
+    return jacobian
+
+
+def _levenberg_marquardt(
+    runner: _WindowPredictor, window: _Window, parallel: bool, run: _Run
+) -> str:
+    """Levenberg–Marquardt (thesis eq. 2.7) with trainlm-style μ adaptation."""
+    settings = run.settings
+    layout = _FlatParameters.of(runner.net)
+    decay = settings.weight_decay
+
+    def residual_fn(flat: torch.Tensor) -> torch.Tensor:
+        prediction = _window_prediction(runner, layout, flat, window, parallel)
+        return _data_residuals(prediction, window, settings.derivative_weight)
+
+    def objective_of(flat: torch.Tensor, residuals: torch.Tensor) -> float:
+        return float(torch.sum(residuals**2) + decay * torch.sum(flat**2))
+
+    with torch.no_grad():
+        weights = torch.nn.utils.parameters_to_vector(runner.net.parameters()).detach().clone()
+        residuals = residual_fn(weights)
+    objective = objective_of(weights, residuals)
+    identity = torch.eye(weights.numel(), dtype=weights.dtype)
+    mu = settings.lm_mu0
+    reason = 'max_epochs'
+    for _ in range(settings.max_epochs):
+        stop = run.stop_reason()
+        if stop is not None:
+            reason = stop
+            break
+        jacobian = _residual_jacobian(
+            _prediction_jacobian(runner, layout, weights, window, parallel),
+            window,
+            settings.derivative_weight,
+        )
+        gradient = jacobian.T @ residuals + decay * weights  # ½ ∇J
+        if float(torch.linalg.vector_norm(2.0 * gradient)) <= settings.min_grad:
+            reason = 'min_grad'
+            break
+        gauss_newton = jacobian.T @ jacobian + decay * identity
+        accepted = False
+        while not accepted:
+            step = torch.linalg.solve(gauss_newton + mu * identity, gradient)
+            candidate = weights - step
+            with torch.no_grad():
+                candidate_residuals = residual_fn(candidate)
+            candidate_objective = objective_of(candidate, candidate_residuals)
+            if math.isfinite(candidate_objective) and candidate_objective < objective:
+                weights, residuals, objective = candidate, candidate_residuals, candidate_objective
+                mu = max(mu * settings.lm_mu_dec, 1e-20)
+                accepted = True
+            else:
+                mu *= settings.lm_mu_inc
+                if mu > settings.lm_mu_max:
+                    break
+                if run.stop_reason() is not None:
+                    break
+        run.history.append(float(torch.sum(_mse_residuals_from(residuals, window) ** 2)))
+        if mu > settings.lm_mu_max:
+            reason = 'mu_max'
+            break
+        if not accepted:
+            reason = run.stop_reason() or reason
+            break
+        if run.goal_reached():
+            reason = 'loss_goal'
+            break
+    torch.nn.utils.vector_to_parameters(weights, runner.net.parameters())
+    return reason
+
+
+def _mse_residuals_from(residuals: torch.Tensor, window: _Window) -> torch.Tensor:
+    """The MSE block at the head of a data-residual vector."""
+    n_mse = int(window.keep.sum()) * window.target.shape[1]
+    return residuals[:n_mse]
+
+
+def _gradient_descent(
+    runner: _WindowPredictor,
+    window: _Window,
+    parallel: bool,
+    run: _Run,
+    optimizer: torch.optim.Optimizer,
+) -> str:
+    """Shared epoch loop of the autograd optimizers; returns with the best weights seen.
+
+    Adam and L-BFGS do not decrease the objective monotonically, so the objective is evaluated
+    after every step (one extra forward pass) and the best weights, starting with the warm
+    start, are restored at the end.
+    """
+    settings = run.settings
+
+    def closure() -> torch.Tensor:
+        optimizer.zero_grad()
+        objective, _ = _objective(runner, window, parallel, settings)
+        objective.backward()
+        return objective
+
+    def evaluate() -> tuple[float, float]:
+        with torch.no_grad():
+            objective, prediction = _objective(runner, window, parallel, settings)
+        return float(objective), _mse(prediction, window)
+
+    best_objective, _ = evaluate()
+    best_state = copy.deepcopy(runner.state_dict())
+    reason = 'max_epochs'
+    for _ in range(settings.max_epochs):
+        stop = run.stop_reason()
+        if stop is not None:
+            reason = stop
+            break
+        optimizer.step(cast(Callable[[], float], closure))
+        objective, mse = evaluate()
+        if not math.isfinite(objective):
+            reason = 'non_finite'
+            break
+        if objective < best_objective:
+            best_objective = objective
+            best_state = copy.deepcopy(runner.state_dict())
+        run.history.append(mse)
+        if _gradient_norm(runner) <= settings.min_grad:
+            reason = 'min_grad'
+            break
+        if run.goal_reached():
+            reason = 'loss_goal'
+            break
+    runner.load_state_dict(best_state)
+    return reason
+
+
+def _gradient_norm(module: torch.nn.Module) -> float:
+    """Euclidean norm of the current gradients of a module's parameters."""
+    grads = [param.grad.reshape(-1) for param in module.parameters() if param.grad is not None]
+    return float(torch.linalg.vector_norm(torch.cat(grads))) if grads else math.inf
+
+
+def _lbfgs(runner: _WindowPredictor, window: _Window, parallel: bool, run: _Run) -> str:
+    """L-BFGS with strong-Wolfe line search, one iteration per epoch."""
+    optimizer = torch.optim.LBFGS(
+        runner.parameters(), lr=1.0, max_iter=1, max_eval=_LBFGS_MAX_EVAL, history_size=20,
+        line_search_fn='strong_wolfe', tolerance_grad=0.0, tolerance_change=0.0,
+    )
+    return _gradient_descent(runner, window, parallel, run, optimizer)
+
+
+def _adam(runner: _WindowPredictor, window: _Window, parallel: bool, run: _Run) -> str:
+    """Full-batch Adam, one step per epoch."""
+    optimizer = torch.optim.Adam(runner.parameters(), lr=run.settings.lr)
+    return _gradient_descent(runner, window, parallel, run, optimizer)
+
+
+def _as_net(
+    net_or_state: NnarmaxNet | Mapping[str, torch.Tensor], spec: NnarmaxSpec
+) -> NnarmaxNet:
+    """The network itself, or a fresh one loaded from a state_dict."""
+    if isinstance(net_or_state, NnarmaxNet):
+        if net_or_state.spec != spec:
+            raise ValueError(f'network spec {net_or_state.spec} differs from {spec}')
+        return net_or_state
+    return NnarmaxNet.from_state(spec, net_or_state)
+
+
+def predict_window(
+    net: NnarmaxNet, u: ArrayLike, y: ArrayLike, targets: ArrayLike, mode: Mode
+) -> tuple[FloatArray, int]:
+    """Predictions over a window: ``(prediction, first)``, prediction[k] = ŷLF(first + k + 1).
+
+    ``series_parallel``: one-step predictions with the targets as feedback; ``parallel``: free run
+    with the network's own predictions as feedback, started from the targets at the first row.
+    The last row predicts one sample beyond the window.
+    """
+    if mode not in _MODES:
+        raise ValueError(f'mode must be one of {_MODES}, got {mode!r}')
+    spec = net.spec
+    target_series = as_series(targets, spec.n_outputs, 'targets')
+    x_series, first = build_regressors(u, y, target_series, spec)
+    fb_init = target_series[first - spec.nfb + 1 : first + 1].copy()
+    runner = _WindowPredictor(net, n_static_regressors(spec), spec.nfb)
+    with torch.inference_mode():
+        prediction = runner(
+            torch.from_numpy(x_series), torch.from_numpy(fb_init), mode == 'parallel'
+        )
+    return prediction.numpy().copy(), first
+
+
+def evaluate_loss(
+    net_or_state: NnarmaxNet | Mapping[str, torch.Tensor],
+    spec: NnarmaxSpec,
+    u: ArrayLike,
+    y: ArrayLike,
+    targets: ArrayLike,
+    mask: ArrayLike | None,
+    mode: Mode,
+) -> float:
+    """The MSE part of the training objective of a network (or state_dict) on a window.
+
+    The same number ``train`` reports as ``loss``, so candidates can be compared on one window.
+    """
+    if mode not in _MODES:
+        raise ValueError(f'mode must be one of {_MODES}, got {mode!r}')
+    net = _as_net(net_or_state, spec)
+    window = _prepare_window(spec, u, y, targets, mask)
+    runner = _WindowPredictor(net, n_static_regressors(spec), spec.nfb)
+    with torch.inference_mode():
+        prediction = runner(window.x_series, window.fb_init, mode == 'parallel')
+    return _mse(prediction, window)
+
+
+def warm_up() -> None:
+    """Run one tiny training so torch's lazy imports happen now (≈ 2 s), not mid-operation.
+
+    ``torch.func`` imports ``torch._dynamo`` (and sympy) on the first Jacobian; on a worker thread
+    that import would hold the GIL and stall the real-time predict path for seconds.
+    """
+    spec = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=1, ny=1, nfb=1, hidden_units=2)
+    data = np.linspace(0.0, 1.0, 16)[:, np.newaxis] ** 2
+    modes: tuple[Mode, ...] = ('series_parallel', 'parallel')
+    for mode in modes:
+        train(NnarmaxNet(spec), data, data, data, None, TrainSettings(mode=mode, max_epochs=1))

@@ -1,0 +1,103 @@
+"""Causal notch + low-pass cascade wave filter as an LF estimator (anchors §4).
+
+The classical DP wave filter (Fossen 2011, §11.3.2; MSS ``notchFilter.m``): the measured pose
+runs through the notch at ω0 and a low-pass, sample by sample. It is causal, so it lags the LF
+motion by seconds at the controller bandwidth: this is the baseline the learned predictor has to
+beat. Heading is unwrapped before filtering so a crossing of ±π is not seen as a 2π step.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lf_predictor_ros.core.estimator import EstimatorStatus, check_ndof, wrap_to_pi
+from lf_predictor_ros.core.filters import (
+    DEFAULT_LOWPASS_OFFSET,
+    DEFAULT_NOTCH_DEPTH,
+    DEFAULT_NOTCH_ZETA,
+    CausalFilter,
+    design_wave_filter,
+)
+
+FloatArray = NDArray[np.float64]
+_YAW = 2  # index of heading in a pose
+
+
+class CascadeFilter:
+    """Notch + low-pass wave filter (filters.design_wave_filter) run causally per DOF.
+
+    Implements `LfEstimator`; the force input is ignored. Components beyond `ndof` are 0.
+    """
+
+    def __init__(
+        self,
+        ndof: int,
+        sample_time: float,
+        wave_peak_freq: float,
+        *,
+        notch_zeta: float = DEFAULT_NOTCH_ZETA,
+        notch_depth: float = DEFAULT_NOTCH_DEPTH,
+        lowpass_offset: float = DEFAULT_LOWPASS_OFFSET,
+    ) -> None:
+        """Design the filter for ω0 = wave_peak_freq [rad/s] at sample_time [s]."""
+        self.ndof = check_ndof(ndof)
+        self.sample_time = float(sample_time)
+        self._design = {
+            'notch_zeta': notch_zeta,
+            'notch_depth': notch_depth,
+            'lowpass_offset': lowpass_offset,
+        }
+        self._wave_peak_freq = float(wave_peak_freq)
+        sos = design_wave_filter(self._wave_peak_freq, self.sample_time, **self._design)
+        self._filter = CausalFilter(sos, self.ndof)
+        self._last_yaw: float | None = None
+        self._unwrapped_yaw = 0.0
+
+    @property
+    def wave_peak_freq(self) -> float:
+        """Current notch frequency ω0 [rad/s]."""
+        return self._wave_peak_freq
+
+    def set_wave_peak_freq(self, wave_peak_freq: float) -> None:
+        """Retune the notch to a new ω0 [rad/s], keeping the output continuous."""
+        sos = design_wave_filter(float(wave_peak_freq), self.sample_time, **self._design)
+        self._filter.retune(sos)
+        self._wave_peak_freq = float(wave_peak_freq)
+
+    def _continuous_yaw(self, yaw: float) -> float:
+        """Heading unwrapped against the previous sample (steps below π per sample)."""
+        if self._last_yaw is None:
+            self._unwrapped_yaw = yaw
+        else:
+            self._unwrapped_yaw += float(wrap_to_pi(yaw - self._last_yaw))
+        self._last_yaw = yaw
+        return self._unwrapped_yaw
+
+    def update(self, t: float, pose: FloatArray, force: FloatArray) -> FloatArray:
+        """Filter one measured pose (3,) at time t [s]; return the LF pose estimate (3,)."""
+        measured = np.asarray(pose, dtype=np.float64)
+        if measured.shape != (3,) or not np.all(np.isfinite(measured)):
+            raise ValueError(f'pose must be 3 finite numbers [north, east, yaw], got {pose}')
+        channels = measured[: self.ndof].copy()
+        if self.ndof == 3:
+            channels[_YAW] = self._continuous_yaw(float(measured[_YAW]))
+        filtered = self._filter.filter(channels)
+        estimate = np.zeros(3)
+        estimate[: self.ndof] = filtered
+        if self.ndof == 3:
+            estimate[_YAW] = float(wrap_to_pi(filtered[_YAW]))
+        return estimate
+
+    def reset(self) -> None:
+        """Forget the filter state and heading history."""
+        self._filter.reset()
+        self._last_yaw = None
+        self._unwrapped_yaw = 0.0
+
+    def status(self) -> EstimatorStatus:
+        """Always 'ok' with the notch frequency in use."""
+        return EstimatorStatus(
+            state='ok',
+            wave_peak_freq=self._wave_peak_freq,
+            message=f'notch + low-pass cascade at {self._wave_peak_freq:.3f} rad/s',
+        )

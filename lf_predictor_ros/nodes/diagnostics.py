@@ -1,0 +1,87 @@
+"""Build ``diagnostic_msgs/DiagnosticArray`` messages for ``/diagnostics``.
+
+One status per node: a name (``'<node>: <what>'``), a level (OK / WARN / ERROR / STALE), a
+one-line message and key/value pairs. Values are formatted for people reading
+``ros2 topic echo /diagnostics`` or ``rqt_runtime_monitor``: floats with 6 significant digits,
+booleans as ``true``/``false``.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+import math
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+DiagnosticValue = float | int | bool | str
+
+_LEVELS: dict[str, bytes] = {
+    'OK': DiagnosticStatus.OK,
+    'WARN': DiagnosticStatus.WARN,
+    'ERROR': DiagnosticStatus.ERROR,
+    'STALE': DiagnosticStatus.STALE,
+}
+
+
+def level_byte(level: str | int | bytes) -> bytes:
+    """Normalize a level given as a name ('OK', 'warn'), an int 0–3 or a byte to a byte."""
+    if isinstance(level, str):
+        key = level.upper()
+        if key not in _LEVELS:
+            raise ValueError(f'diagnostic level must be one of {sorted(_LEVELS)}, got {level!r}')
+        return _LEVELS[key]
+    value = level[0] if isinstance(level, bytes) and len(level) == 1 else level
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 3:
+        raise ValueError(
+            f'diagnostic level must be 0 (OK), 1 (WARN), 2 (ERROR) or 3 (STALE), got {level!r}')
+    return bytes([value])
+
+
+def format_value(value: DiagnosticValue) -> str:
+    """Format one diagnostic value: floats '%.6g' (nan/inf spelled out), bools lower case."""
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isnan(value):
+            return 'nan'
+        if math.isinf(value):
+            return 'inf' if value > 0 else '-inf'
+        return f'{value:.6g}'
+    return str(value)
+
+
+def make_status(
+    name: str,
+    level: str | int | bytes,
+    message: str,
+    values: Mapping[str, DiagnosticValue] | None = None,
+    hardware_id: str = '',
+) -> DiagnosticStatus:
+    """One ``DiagnosticStatus`` with its key/value pairs in the mapping's order."""
+    status = DiagnosticStatus()
+    status.level = level_byte(level)
+    status.name = name
+    status.message = message
+    status.hardware_id = hardware_id
+    status.values = [
+        KeyValue(key=str(key), value=format_value(value)) for key, value in (values or {}).items()
+    ]
+    return status
+
+
+def make_diagnostic_array(
+    name: str,
+    level: str | int | bytes,
+    message: str,
+    values: Mapping[str, DiagnosticValue] | None = None,
+    stamp: Time | None = None,
+    hardware_id: str = '',
+) -> DiagnosticArray:
+    """A ``DiagnosticArray`` holding one status; ``stamp`` defaults to zero (unset)."""
+    array = DiagnosticArray()
+    if stamp is not None:
+        array.header.stamp = Time(sec=stamp.sec, nanosec=stamp.nanosec)
+    array.status = [make_status(name, level, message, values, hardware_id)]
+    return array

@@ -1,0 +1,428 @@
+"""Simulator node: vessel + sea in simulated time, published on the interface-contract topics.
+
+Thin adapter around ``sim_ros.simulation.Simulator`` (the ROS-free core). Each simulation step
+advances one output sample period with the held ``thrust_command`` and publishes, all stamped with
+the simulated time of the sample:
+
+- ``/clock`` (rosgraph_msgs/Clock): the simulator owns simulated time;
+- ``thrust`` (WrenchStamped, ``base_link_fsd``): forces actually applied (allocation, saturation);
+- ``truth/pose``, ``truth/lf_pose`` (PoseStamped, ``map_ned``) when ``publish_truth``;
+- ``measured_pose`` (PoseStamped, ``map_ned``), skipped on a sensor dropout, published last so
+  that a consumer triggered by it already has the thrust of the same sample.
+
+``/diagnostics`` (1 Hz wall): wave peak frequency, missing-command flag (WARN), speed factor
+achieved, lockstep timeouts.
+
+The first tick publishes the initial state (t = 0, zero thrust) before any step, so a controller
+answers it exactly as ``sim_ros.simulation.simulate`` calls its PID before the first step.
+
+Commands: zero-order hold of the last ``thrust_command``. With no command yet, or when the last
+one was received more than ``command_timeout`` simulated seconds ago, the vessel gets zero thrust
+and the diagnostics say WARN.
+
+Timing. Steps are driven by a wall-clock (steady) timer, so the node runs whether or not anyone
+uses simulated time (it must not wait on the /clock it publishes). Every ``tick_period`` it makes
+as many steps as needed to keep simulated time at ``speed_factor`` × wall time (re-anchoring when
+it falls more than ``MAX_BACKLOG`` behind rather than bursting); ``speed_factor = 0`` steps as fast
+as possible, yielding to the executor after one ``tick_period`` of work.
+
+Lockstep (``lockstep:=true``), for deterministic closed loops over DDS at 20–100× real time and
+beyond. After publishing the sample at time t_k the simulator does not step again until a
+``thrust_command`` stamped ≥ t_k has arrived; controllers stamp their command with the stamp of
+the pose they answered (measured pose and truth at t_k, a predictor's lf_pose at t_k + h), so
+"stamped ≥ t_k" means "computed from the newest sample". The step is then made inside the
+command callback, so a step costs one DDS round trip and no timer latency. This makes the closed
+loop independent of scheduling: the same seed gives the same run at any speed. Fallbacks:
+
+- before the first command (controller not started or not yet discovered), the simulator waits
+  indefinitely and re-publishes the sample every ``lockstep_timeout`` wall seconds, so discovery
+  order and start-up time do not change the run;
+- afterwards, when no answer comes within ``lockstep_timeout`` wall seconds (e.g. a sensor dropout
+  skipped ``measured_pose`` and the controller listens to it, or a best-effort pose was lost), it
+  steps on with the held command and counts a ``lockstep_timeouts`` in the diagnostics: a run
+  with zero timeouts is reproducible.
+
+Run: ``simulator --ros-args --params-file config/simulator.yaml -p speed_factor:=0
+-p lockstep:=true``.
+"""
+# rclpy's Node, Future and logger methods are untyped in Jazzy.
+# mypy: disable-error-code="no-untyped-call"
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+import math
+import sys
+import time
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+import numpy as np
+from numpy.typing import NDArray
+import rclpy
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.task import Future
+from rclpy.utilities import remove_ros_args, try_shutdown
+from rosgraph_msgs.msg import Clock as ClockMsg
+
+from lf_predictor_ros.nodes.conversions import (
+    msg_to_force,
+    ns_to_stamp,
+    pose_to_msg,
+    sec_to_ns,
+    stamp_to_ns,
+    wrench_to_msg,
+)
+from lf_predictor_ros.nodes.diagnostics import make_diagnostic_array
+from lf_predictor_ros.nodes.params import LiveParameters
+from lf_predictor_ros.nodes.qos import command_qos, publisher_qos
+from sim_ros.physics.schedule import constant
+from sim_ros.simulation import Scenario, SimSample, Simulator, load_scenario
+
+NODE_NAME = 'simulator'
+MAX_BACKLOG = 1.0  # [s wall] lag behind the speed factor after which pacing re-anchors
+
+
+def _doc(doc: str, unit: str = '', read_only: bool = False) -> dict[str, Any]:
+    meta: dict[str, Any] = {'doc': doc, 'read_only': read_only}
+    if unit:
+        meta['unit'] = unit
+    return meta
+
+
+@dataclass(frozen=True)
+class SimulatorConfig:
+    """Parameters of the simulator node (validated; see the module docstring for timing)."""
+
+    scenario: str = field(default='supply_closed_loop', metadata=_doc(
+        'scenario name in config/scenarios/ or a YAML path', read_only=True))
+    seed: int = field(default=0, metadata=_doc(
+        'seed of every noise source; one seed reproduces a run', read_only=True))
+    speed_factor: float = field(default=1.0, metadata=_doc(
+        'simulated seconds per wall second; 0 = as fast as possible', '-'))
+    lockstep: bool = field(default=False, metadata=_doc(
+        'wait for the thrust_command answering each sample before the next step'))
+    lockstep_timeout: float = field(default=0.5, metadata=_doc(
+        'wall time to wait for a command in lockstep before stepping on', 's'))
+    command_timeout: float = field(default=1.0, metadata=_doc(
+        'simulated age after which the held thrust_command is dropped (zero thrust)', 's'))
+    publish_truth: bool = field(default=True, metadata=_doc(
+        'publish truth/pose and truth/lf_pose'))
+    duration: float = field(default=0.0, metadata=_doc(
+        'simulated time after which the node stops and exits; 0 = run until shut down', 's'))
+    initial_pose: list[float] = field(default_factory=list, metadata=_doc(
+        "scenario override: initial pose [north m, east m, yaw rad]; [] = the scenario's",
+        read_only=True))
+    wave_peak_freq: float = field(default=0.0, metadata=_doc(
+        "scenario override: constant wave peak frequency ω0; 0 = the scenario's schedule",
+        'rad/s', read_only=True))
+    tick_period: float = field(default=0.01, metadata=_doc(
+        'wall period of the stepping timer', 's', read_only=True))
+    diagnostics_period: float = field(default=1.0, metadata=_doc(
+        'wall period of /diagnostics', 's', read_only=True))
+
+    def __post_init__(self) -> None:
+        """Check every rule; the message says what to change."""
+        if not self.scenario:
+            raise ValueError('scenario must name a scenario or a YAML file, e.g. '
+                             'supply_closed_loop')
+        if not (math.isfinite(self.speed_factor) and self.speed_factor >= 0.0):
+            raise ValueError(f'speed_factor must be >= 0 (0 = as fast as possible), got '
+                             f'{self.speed_factor}')
+        positive = {'lockstep_timeout': self.lockstep_timeout,
+                    'command_timeout': self.command_timeout,
+                    'tick_period': self.tick_period,
+                    'diagnostics_period': self.diagnostics_period}
+        for name, value in positive.items():
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f'{name} must be a positive number of seconds, got {value}')
+        if not (math.isfinite(self.duration) and self.duration >= 0.0):
+            raise ValueError(f'duration must be >= 0 s (0 = run forever), got {self.duration}')
+        if self.initial_pose and (len(self.initial_pose) != 3 or not all(
+                math.isfinite(v) for v in self.initial_pose)):
+            raise ValueError(f'initial_pose must be [] or 3 finite values [north, east, yaw], '
+                             f'got {self.initial_pose}')
+        if not (math.isfinite(self.wave_peak_freq) and self.wave_peak_freq >= 0.0):
+            raise ValueError(f'wave_peak_freq must be 0 (scenario schedule) or > 0 rad/s, got '
+                             f'{self.wave_peak_freq}')
+
+    def scenario_with_overrides(self) -> Scenario:
+        """Load the scenario and apply this node's overrides (validated by Scenario)."""
+        scenario = load_scenario(self.scenario)
+        if self.initial_pose:
+            north, east, yaw = self.initial_pose
+            scenario = replace(scenario, initial_pose=(north, east, yaw))
+        if self.wave_peak_freq > 0.0:
+            waves = replace(scenario.waves, peak_freq=constant(self.wave_peak_freq))
+            scenario = replace(scenario, waves=waves)
+        return scenario
+
+
+class StepPacer:
+    """How many steps are due at a wall time to hold simulated time at ``speed_factor``× wall."""
+
+    def __init__(self, sample_time: float, speed_factor: float, wall_now: float) -> None:
+        self._sample_time = sample_time
+        self.reset(speed_factor, wall_now)
+
+    def reset(self, speed_factor: float, wall_now: float) -> None:
+        """Re-anchor: count steps from ``wall_now`` at a (new) speed factor."""
+        self._speed_factor = speed_factor
+        self._anchor_wall = wall_now
+        self._steps_since_anchor = 0
+
+    def due(self, wall_now: float) -> int:
+        """Steps due now (a large number when the speed factor is 0)."""
+        if self._speed_factor == 0.0:
+            return sys.maxsize
+        sim_elapsed = (wall_now - self._anchor_wall) * self._speed_factor
+        due = math.floor(sim_elapsed / self._sample_time + 1e-9) - self._steps_since_anchor
+        backlog_wall = due * self._sample_time / self._speed_factor
+        if backlog_wall > MAX_BACKLOG:  # fell behind (slow machine, lockstep): do not burst
+            self.reset(self._speed_factor, wall_now)
+            return 1
+        return max(due, 0)
+
+    def stepped(self, steps: int) -> None:
+        """Record steps made."""
+        self._steps_since_anchor += steps
+
+
+@dataclass
+class _Published:
+    """The messages of the last step, kept for lockstep re-publication."""
+
+    messages: list[tuple[Any, Any]] = field(default_factory=list)
+
+
+class SimulatorNode(Node):
+    """Steps a ``Simulator`` in wall-clock-paced or lockstep simulated time."""
+
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **node_kwargs)
+        self._params = LiveParameters(self, SimulatorConfig, on_change=self._on_config_change)
+        config = self._params.value
+        self._sim = Simulator(config.scenario_with_overrides(), seed=config.seed)
+        self._sample_time = float(self._sim.sample_time)
+        self.done: Future = Future()
+
+        qos = publisher_qos()
+        self._clock_pub = self.create_publisher(ClockMsg, '/clock', qos)
+        self._measured_pub = self.create_publisher(PoseStamped, 'measured_pose', qos)
+        self._thrust_pub = self.create_publisher(WrenchStamped, 'thrust', qos)
+        self._truth_pub = self.create_publisher(PoseStamped, 'truth/pose', qos)
+        self._truth_lf_pub = self.create_publisher(PoseStamped, 'truth/lf_pose', qos)
+        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', qos)
+        self.create_subscription(WrenchStamped, 'thrust_command', self._on_command, command_qos())
+
+        self._command: NDArray[np.float64] | None = None
+        self._command_stamp_ns = -1
+        self._command_received_t = -math.inf  # [s sim]
+        self._last_step_ns: int | None = None
+        self._last_published = _Published()
+        self._wait_start = time.monotonic()  # [s wall] start of the current lockstep wait
+        self._steps = 0
+        self._lockstep_timeouts = 0
+        self._dropouts = 0
+        self._invalid_commands = 0
+        self._wave_peak_freq = math.nan
+        self._pacer = StepPacer(self._sample_time, config.speed_factor, time.monotonic())
+        self._diag_mark = (time.monotonic(), float(self._sim.t))
+
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(config.tick_period, self._advance, clock=steady)
+        self.create_timer(config.diagnostics_period, self._publish_diagnostics, clock=steady)
+        self.get_logger().info(
+            f'scenario {config.scenario!r} seed {config.seed}: {self._sim.ndof}-DOF, sample time '
+            f'{self._sample_time} s, speed factor {config.speed_factor}, lockstep '
+            f'{config.lockstep}')
+
+    @property
+    def config(self) -> SimulatorConfig:
+        """Current validated parameters."""
+        return self._params.value
+
+    @property
+    def sim_time(self) -> float:
+        """Simulated time of the last step [s]."""
+        return float(self._sim.t)
+
+    @property
+    def steps(self) -> int:
+        """Number of steps made."""
+        return self._steps
+
+    @property
+    def lockstep_timeouts(self) -> int:
+        """Lockstep waits that ended by timeout after the first command."""
+        return self._lockstep_timeouts
+
+    def _on_config_change(self, config: SimulatorConfig) -> None:
+        self._pacer.reset(config.speed_factor, time.monotonic())
+
+    # -- commands -------------------------------------------------------------------------
+    def _on_command(self, msg: WrenchStamped) -> None:
+        try:
+            force = msg_to_force(msg)
+        except ValueError as error:
+            self._invalid_commands += 1
+            self.get_logger().warning(f'ignoring thrust_command: {error}',
+                                      throttle_duration_sec=5.0)
+            return
+        self._command = force
+        self._command_stamp_ns = stamp_to_ns(msg.header.stamp)
+        self._command_received_t = float(self._sim.t)
+        if self.config.lockstep:
+            self._advance()
+
+    def held_command(self) -> tuple[NDArray[np.float64], bool]:
+        """The command applied to the next step and whether it is missing (zero thrust)."""
+        age = float(self._sim.t) - self._command_received_t
+        if self._command is None or age > self.config.command_timeout:
+            return np.zeros(3), True
+        return self._command.copy(), False
+
+    # -- stepping -------------------------------------------------------------------------
+    def _lockstep_ready(self) -> bool:
+        """Whether lockstep allows the next step (always true without lockstep)."""
+        if not self.config.lockstep or self._last_step_ns is None:
+            return True
+        if self._command_stamp_ns >= self._last_step_ns:
+            return True
+        if time.monotonic() - self._wait_start < self.config.lockstep_timeout:
+            return False
+        if self._command is None:  # controller not up yet: offer the sample again, keep waiting
+            self._republish()
+            self._wait_start = time.monotonic()
+            return False
+        self._lockstep_timeouts += 1
+        return True
+
+    def _advance(self) -> None:
+        """Make the steps that are due and allowed, for at most one tick of wall time."""
+        if self.done.done():
+            return
+        if self._last_step_ns is None:  # first call: offer the initial state (t = 0)
+            self._publish_sample(self._sim.sample)
+        config = self.config
+        start = time.monotonic()
+        due = self._pacer.due(start)
+        made = 0
+        while made < due and self._lockstep_ready():
+            self._step()
+            made += 1
+            if config.duration > 0.0 and float(self._sim.t) >= config.duration - 1e-9:
+                self._finish()
+                break
+            if time.monotonic() - start > config.tick_period:
+                break
+        self._pacer.stepped(made)
+
+    def _step(self) -> None:
+        tau, _ = self.held_command()
+        self._publish_sample(self._sim.step(tau))
+        self._steps += 1
+
+    def _publish_sample(self, sample: SimSample) -> None:
+        stamp = ns_to_stamp(sec_to_ns(float(sample.t)))
+        messages: list[tuple[Any, Any]] = [(self._clock_pub, ClockMsg(clock=stamp)),
+                                           (self._thrust_pub, wrench_to_msg(sample.thrust, stamp))]
+        if self.config.publish_truth:
+            messages.append((self._truth_pub, pose_to_msg(sample.truth_pose, stamp)))
+            messages.append((self._truth_lf_pub, pose_to_msg(sample.truth_lf_pose, stamp)))
+        if bool(sample.measured_valid):
+            messages.append((self._measured_pub, pose_to_msg(sample.measured_pose, stamp)))
+        else:
+            self._dropouts += 1
+        self._wave_peak_freq = float(sample.wave_peak_freq)
+        self._last_step_ns = stamp_to_ns(stamp)
+        self._last_published = _Published(messages)
+        self._wait_start = time.monotonic()
+        for publisher, message in messages:
+            publisher.publish(message)
+
+    def _republish(self) -> None:
+        for publisher, message in self._last_published.messages:
+            if publisher is not self._clock_pub:
+                publisher.publish(message)
+
+    def _finish(self) -> None:
+        self._publish_diagnostics()
+        self.get_logger().info(f'duration {self.config.duration} s reached after {self._steps} '
+                               f'steps; stopping')
+        self.done.set_result(True)
+
+    # -- diagnostics ----------------------------------------------------------------------
+    def _publish_diagnostics(self) -> None:
+        wall_now, sim_now = time.monotonic(), float(self._sim.t)
+        wall_then, sim_then = self._diag_mark
+        self._diag_mark = (wall_now, sim_now)
+        achieved = (sim_now - sim_then) / (wall_now - wall_then) if wall_now > wall_then else 0.0
+        _, missing = self.held_command()
+        config = self.config
+        if missing:
+            level, message = 'WARN', 'no thrust_command (or stale): applying zero thrust'
+        else:
+            level, message = 'OK', 'running'
+        values: dict[str, float | int | bool | str] = {
+            'sim_time': sim_now,
+            'steps': self._steps,
+            'wave_peak_freq': self._wave_peak_freq,
+            'command_missing': missing,
+            'command_age': sim_now - self._command_received_t,
+            'speed_factor': config.speed_factor,
+            'speed_factor_achieved': achieved,
+            'lockstep': config.lockstep,
+            'lockstep_timeouts': self._lockstep_timeouts,
+            'sensor_dropouts': self._dropouts,
+            'invalid_commands': self._invalid_commands,
+            'scenario': config.scenario,
+            'seed': config.seed,
+        }
+        self._diag_pub.publish(make_diagnostic_array(
+            f'{self.get_name()}: simulation', level, message, values,
+            stamp=ns_to_stamp(sec_to_ns(sim_now))))
+
+
+def _parse_cli(argv: Sequence[str]) -> None:
+    """Handle ``--help`` (exit 0) and reject unknown non-ROS arguments (exit 2)."""
+    parser = argparse.ArgumentParser(
+        prog=NODE_NAME,
+        description='Vessel and sea simulator node (publishes measured_pose, thrust, '
+                    'truth/pose, truth/lf_pose, /clock, /diagnostics; subscribes thrust_command).',
+        epilog='ROS arguments: --ros-args -p speed_factor:=0 -p lockstep:=true '
+               '--params-file config/simulator.yaml -r __ns:=/vessel. Parameters: '
+               + ', '.join(f.name for f in SimulatorConfig.__dataclass_fields__.values()) + '.')
+    parser.parse_args(list(remove_ros_args(list(argv)))[1:])
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console script ``simulator``; returns the exit code."""
+    _parse_cli(sys.argv if args is None else args)
+    rclpy.init(args=args)
+    try:
+        node = SimulatorNode()
+    except (ValueError, FileNotFoundError) as error:
+        rclpy.logging.get_logger(NODE_NAME).fatal(f'invalid configuration: {error}')
+        try_shutdown()
+        return 1
+    try:
+        if node.config.duration > 0.0:
+            rclpy.spin_until_future_complete(node, node.done)
+        else:
+            rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,191 @@
+"""`recorder`: record ROS topics to an MCAP bag with rosbag2's conventions.
+
+    recorder [--ros-args -p output:=run.mcap -p topics:="['/measured_pose', '/thrust']"]
+
+ROS parameters (`--ros-args -p NAME:=VALUE`):
+- `output` (string): bag path; default `runs/record-<YYYYmmdd-HHMMSS>.mcap` under the working
+  directory. An existing file is never overwritten.
+- `topics` (string array): topics to record; default every topic of the interface contract.
+  An entry is `name` or `name:pkg/msg/Type`; names of the contract and names given with a type
+  are subscribed at once, other names when discovery shows their type.
+- `chunk_size` (int, bytes): chunk size, default 262144 (256 KiB).
+- `compression` (string): `zstd` (default), `lz4` or `none`.
+
+Subscriptions are raw (the CDR bytes go straight to the file) with a best-effort, volatile,
+keep_last 100 QoS, which matches every publisher (reliable or best effort). A channel is created
+at a topic's first message; its `offered_qos_profiles` and `topic_type_hash` are those of the
+publishers seen then.
+
+Times: log time = receive time on the node clock, so it is simulated time when the node runs
+with `use_sim_time:=true` (0 until the first /clock message arrives); publish time = the
+publisher's source timestamp (system time), as rosbag2 does.
+
+Shutdown: SIGINT and SIGTERM are handled by rclpy (the context is shut down and spin returns);
+the bag is then closed in `finally`, so an interrupted recording is a finished file. A SIGKILL
+loses at most the open chunk: at most `chunk_size` bytes or 1 s of data (a steady-clock timer
+flushes the open chunk every second).
+"""
+# rclpy's API is partly untyped (QoSProfile, loggers, destroy_node).
+# mypy: disable-error-code="no-untyped-call"
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from datetime import datetime
+import functools
+import sys
+from typing import Any
+
+import rclpy
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
+from rclpy.executors import ExternalShutdownException
+from rclpy.logging import get_logger
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.utilities import remove_ros_args, try_shutdown
+
+from lf_predictor_ros.bag.mcap_writer import (
+    DEFAULT_CHUNK_SIZE,
+    DEFAULT_MAX_CHUNK_DURATION,
+    BagError,
+    BagWriter,
+)
+from lf_predictor_ros.bag.msgdefs import full_definition
+from lf_predictor_ros.bag.ros_codec import message_class, publishers_qos_yaml
+
+# Topics of the interface contract (shared/reference/interfaces.md) and their types.
+CONTRACT_TOPICS: dict[str, str] = {
+    '/measured_pose': 'geometry_msgs/msg/PoseStamped',
+    '/thrust': 'geometry_msgs/msg/WrenchStamped',
+    '/thrust_command': 'geometry_msgs/msg/WrenchStamped',
+    '/lf_pose': 'geometry_msgs/msg/PoseStamped',
+    '/wave_peak_frequency': 'std_msgs/msg/Float64',
+    '/truth/pose': 'geometry_msgs/msg/PoseStamped',
+    '/truth/lf_pose': 'geometry_msgs/msg/PoseStamped',
+    '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
+    '/clock': 'rosgraph_msgs/msg/Clock',
+}
+
+# Best effort matches reliable and best-effort publishers; depth absorbs short write stalls.
+RECORD_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                        reliability=ReliabilityPolicy.BEST_EFFORT,
+                        durability=DurabilityPolicy.VOLATILE)
+# Not the node's name: rosout would try (and fail) to publish records made after a signal.
+LOGGER_NAME = 'lf_predictor_ros.recorder'
+DISCOVERY_PERIOD = 0.5  # [s] how often to look for the types of topics given without one
+
+
+def default_output_path() -> str:
+    """`runs/record-<local time>.mcap`."""
+    return f'runs/record-{datetime.now().strftime("%Y%m%d-%H%M%S")}.mcap'
+
+
+def parse_topic_entry(entry: str) -> tuple[str, str | None]:
+    """`'name'` or `'name:pkg/msg/Type'` -> (name, type or None)."""
+    name, _, type_name = entry.partition(':')
+    if not name:
+        raise ValueError(f'topic entry {entry!r} has no name; write /name or /name:pkg/msg/Type')
+    return name, type_name or None
+
+
+class RecorderNode(Node):
+    """Subscribes raw to the topics and appends every message to a BagWriter."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('recorder', **kwargs)
+        output = str(self.declare_parameter('output', '').value) or default_output_path()
+        topics = list(self.declare_parameter('topics', list(CONTRACT_TOPICS)).value or [])
+        chunk_size = int(self.declare_parameter('chunk_size', DEFAULT_CHUNK_SIZE).value)
+        compression = str(self.declare_parameter('compression', 'zstd').value)
+        self.writer = BagWriter(output, chunk_size=chunk_size, compression=compression)
+        self._channels: dict[str, int] = {}
+        self._waiting: set[str] = set()
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        for entry in topics:
+            name, type_name = parse_topic_entry(str(entry))
+            resolved = self.resolve_topic_name(name)
+            type_name = type_name or CONTRACT_TOPICS.get(resolved)
+            if type_name is None:
+                self._waiting.add(resolved)
+            else:
+                self._subscribe(resolved, type_name)
+        if self._waiting:
+            self.create_timer(DISCOVERY_PERIOD, self._discover, clock=steady)
+        self.create_timer(DEFAULT_MAX_CHUNK_DURATION, self.writer.flush, clock=steady)
+        self.get_logger().info(f'recording {len(topics)} topics to {self.writer.path}')
+
+    def _subscribe(self, topic: str, type_name: str) -> None:
+        """Raw subscription; ValueError if the type's class or .msg file is not installed."""
+        full_definition(type_name)  # fail here, not in the first callback
+        callback = functools.partial(self._on_message, topic, type_name)
+        self.create_subscription(message_class(type_name), topic, callback, RECORD_QOS,
+                                 raw=True)
+
+    def _discover(self) -> None:
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self._waiting and types:
+                self._waiting.discard(topic)
+                try:
+                    self._subscribe(topic, types[0])
+                except ValueError as err:
+                    self.get_logger().error(f'not recording {topic}: {err}')
+                    continue
+                self.get_logger().info(f'recording {topic} ({types[0]})')
+
+    def _on_message(self, topic: str, type_name: str, data: bytes,
+                    info: dict[str, int]) -> None:
+        log_time_ns = self.get_clock().now().nanoseconds
+        channel = self._channels.get(topic)
+        if channel is None:
+            qos_yaml, type_hash = publishers_qos_yaml(self, topic)
+            channel = self.writer.add_topic(topic, type_name, qos_yaml, type_hash=type_hash)
+            self._channels[topic] = channel
+        publish_time_ns = int(info.get('source_timestamp', 0)) or log_time_ns
+        self.writer.write(channel, log_time_ns, data, publish_time_ns)
+
+    def destroy_node(self) -> None:
+        """Finish the bag, then destroy the node."""
+        self.writer.close()
+        # Not the node logger: after a signal the context is down and /rosout is gone.
+        get_logger(LOGGER_NAME).info(f'wrote {self.writer.message_count} messages to '
+                                         f'{self.writer.path}')
+        super().destroy_node()
+
+
+def _parse_cli(args: Sequence[str] | None) -> None:
+    """Handle --help (and reject unknown options) before rclpy starts."""
+    parser = argparse.ArgumentParser(
+        prog='recorder',
+        description='Record ROS topics to an MCAP bag (rosbag2 conventions). Stop with Ctrl-C '
+                    'or SIGTERM; the file is finished either way.',
+        epilog='ROS parameters (--ros-args -p NAME:=VALUE): output (path, default '
+               'runs/record-<time>.mcap), topics (string array, default the contract topics: '
+               f'{", ".join(CONTRACT_TOPICS)}), chunk_size (bytes, default {DEFAULT_CHUNK_SIZE}),'
+               ' compression (zstd | lz4 | none).')
+    argv = remove_ros_args(list(args) if args is not None else sys.argv)
+    parser.parse_args(argv[1:])
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Entry point of the `recorder` executable; returns the exit code."""
+    _parse_cli(args)
+    rclpy.init(args=None if args is None else list(args))
+    try:
+        node = RecorderNode()
+    except (BagError, ValueError) as err:
+        get_logger(LOGGER_NAME).error(str(err))
+        try_shutdown()
+        return 1
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

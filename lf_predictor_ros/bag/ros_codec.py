@@ -1,0 +1,123 @@
+"""ROS side of the bag tools: message classes, CDR (de)serialization, QoS <-> rosbag2 YAML.
+
+The MCAP writer and reader are ROS-free and deal in bytes; this module turns bytes into ROS
+message objects and back with rclpy's own type support, so what is written is exactly what a
+ROS publisher sends. `rosidl_runtime_py` is not a dependency: message classes are imported
+from `pkg.msg` like rosidl_runtime_py.utilities.get_message does.
+"""
+# rclpy's QoSProfile constructor is untyped.
+# mypy: disable-error-code="no-untyped-call"
+from __future__ import annotations
+
+from collections.abc import Sequence
+import importlib
+from typing import Any
+
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.qos import (
+    DurabilityPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+)
+from rclpy.serialization import deserialize_message, serialize_message
+import yaml
+
+from lf_predictor_ros.bag.mcap_writer import (
+    INFINITE_DURATION_NS,
+    qos_profile_dict,
+    qos_profiles_yaml,
+)
+from lf_predictor_ros.bag.msgdefs import split_type_name
+
+_CLASS_CACHE: dict[str, type[Any]] = {}
+
+
+def message_class(type_name: str) -> type[Any]:
+    """The Python class of `pkg/msg/Type` (ValueError if the package is not installed)."""
+    cached = _CLASS_CACHE.get(type_name)
+    if cached is not None:
+        return cached
+    package, interface, name = split_type_name(type_name)
+    try:
+        module = importlib.import_module(f'{package}.{interface}')
+        cls: type[Any] = getattr(module, name)
+    except (ImportError, AttributeError):
+        raise ValueError(f'message type {type_name} is not importable as '
+                         f'{package}.{interface}.{name}; install or source the {package} '
+                         'package') from None
+    _CLASS_CACHE[type_name] = cls
+    return cls
+
+
+def type_name_of(message: Any) -> str:
+    """`pkg/msg/Type` of a message instance or class."""
+    cls = message if isinstance(message, type) else type(message)
+    return f'{cls.__module__.split(".")[0]}/msg/{cls.__name__}'
+
+
+def serialize(message: Any) -> bytes:
+    """CDR bytes of a ROS message, as a publisher would send them."""
+    return bytes(serialize_message(message))
+
+
+def deserialize(data: bytes, type_name: str) -> Any:
+    """The ROS message of type `type_name` encoded in CDR `data`."""
+    return deserialize_message(data, message_class(type_name))
+
+
+def qos_to_dict(qos: QoSProfile) -> dict[str, Any]:
+    """A QoS profile as one rosbag2 v9 `offered_qos_profiles` entry."""
+    return qos_profile_dict(
+        history=_policy_name(qos.history),
+        depth=int(qos.depth),
+        reliability=_policy_name(qos.reliability),
+        durability=_policy_name(qos.durability),
+        deadline_ns=_duration_ns(qos.deadline),
+        lifespan_ns=_duration_ns(qos.lifespan),
+        liveliness=_policy_name(qos.liveliness),
+        liveliness_lease_duration_ns=_duration_ns(qos.liveliness_lease_duration),
+        avoid_ros_namespace_conventions=bool(qos.avoid_ros_namespace_conventions),
+    )
+
+
+def offered_qos_yaml(profiles: Sequence[QoSProfile]) -> str:
+    """`offered_qos_profiles` channel metadata for the publishers' QoS profiles."""
+    return qos_profiles_yaml([qos_to_dict(q) for q in profiles])
+
+
+def publishers_qos_yaml(node: Node, topic: str) -> tuple[str, str]:
+    """(`offered_qos_profiles` text, RIHS01 type hash) of the publishers `node` sees on topic."""
+    infos = node.get_publishers_info_by_topic(topic)
+    type_hash = str(infos[0].topic_type_hash) if infos else ''
+    return offered_qos_yaml([info.qos_profile for info in infos]), type_hash
+
+
+def qos_from_yaml(text: str, *, default_depth: int = 10) -> QoSProfile:
+    """A publisher QoS that reproduces the recorded offers (first profile; rosbag2's rule).
+
+    Reliability and durability come from the recording; history is keep_last `default_depth`
+    (a recorded 'unknown' history cannot be requested). Empty text gives the contract's default
+    publisher profile: reliable, volatile, keep_last 10.
+    """
+    profiles = yaml.safe_load(text) if text else None
+    qos = QoSProfile(depth=default_depth, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.VOLATILE)
+    if not profiles:
+        return qos
+    first = profiles[0]
+    if str(first.get('reliability')) == 'best_effort':
+        qos.reliability = ReliabilityPolicy.BEST_EFFORT
+    if str(first.get('durability')) == 'transient_local':
+        qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
+    return qos
+
+
+def _policy_name(policy: Any) -> str:
+    """The rmw string of a policy value ('keep_last', 'reliable', 'unknown', ...)."""
+    return str(policy.short_key)
+
+
+def _duration_ns(duration: Duration) -> int:
+    nanoseconds = int(duration.nanoseconds)
+    return INFINITE_DURATION_NS if nanoseconds < 0 else nanoseconds

@@ -1,0 +1,110 @@
+"""play over DDS: messages arrive in order, in scaled real time, with /clock."""
+# rclpy and mcap are partly untyped.
+# mypy: disable-error-code="no-untyped-call"
+from __future__ import annotations
+
+from pathlib import Path
+import subprocess
+import sys
+import time
+from typing import Any
+
+from geometry_msgs.msg import PoseStamped
+import pytest
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Float64
+
+from lf_predictor_ros.bag.mcap_writer import BagWriter
+from lf_predictor_ros.bag.ros_codec import serialize
+
+pytestmark = pytest.mark.filterwarnings('ignore::DeprecationWarning:lark.*')
+
+REPO = Path(__file__).resolve().parents[2]
+START_NS = 2_000_000_000  # [ns] bag start time
+SAMPLE_NS = 50_000_000  # [ns] 20 Hz poses
+N_POSES = 10
+RATE = 2.0  # playback speed factor
+TIMEOUT = 20.0  # [s] start-up + discovery + playback on a loaded machine
+
+
+def _write_bag(path: Path) -> None:
+    """Poses at 20 Hz, a frequency estimate every 4th sample, and a recorded /clock."""
+    with BagWriter(path) as writer:
+        pose_channel = writer.add_topic('/measured_pose', 'geometry_msgs/msg/PoseStamped')
+        freq_channel = writer.add_topic('/wave_peak_frequency', 'std_msgs/msg/Float64')
+        clock_channel = writer.add_topic('/clock', 'rosgraph_msgs/msg/Clock')
+        for i in range(N_POSES):
+            t_ns = START_NS + i * SAMPLE_NS
+            pose = PoseStamped()
+            pose.pose.position.x = float(i)
+            writer.write(pose_channel, t_ns, serialize(pose))
+            writer.write(clock_channel, t_ns, serialize(Clock()))  # zeros: must not be played
+            if i % 4 == 0:
+                writer.write(freq_channel, t_ns + 1, serialize(Float64(data=0.1 * i)))
+
+
+@pytest.mark.dds
+def test_play_publishes_in_order_with_clock(tmp_path: Path, ros_context: Any,
+                                            dds_env: dict[str, str]) -> None:
+    bag = tmp_path / 'play.mcap'
+    _write_bag(bag)
+    node = Node('play_listener', context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    poses: list[tuple[float, int]] = []
+    frequencies: list[float] = []
+    clocks: list[int] = []
+    qos = QoSProfile(depth=100)
+
+    def on_pose(message: Any, info: dict[str, int]) -> None:
+        poses.append((message.pose.position.x, info['source_timestamp']))
+
+    def on_frequency(message: Any) -> None:
+        frequencies.append(message.data)
+
+    def on_clock(message: Any) -> None:
+        clocks.append(message.clock.sec * 10**9 + message.clock.nanosec)
+
+    node.create_subscription(PoseStamped, '/measured_pose', on_pose, qos)  # type: ignore[arg-type]
+    node.create_subscription(Float64, '/wave_peak_frequency', on_frequency, qos)
+    node.create_subscription(Clock, '/clock', on_clock, qos)
+    play = subprocess.Popen(
+        [sys.executable, '-m', 'lf_predictor_ros.bag.play', str(bag), '--clock',
+         '--rate', str(RATE), '--wait-for-subscribers', '10'],
+        cwd=REPO, env=dds_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + TIMEOUT
+        while play.poll() is None and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.02)
+        end = time.monotonic() + 0.5  # let the last messages arrive
+        while time.monotonic() < end and len(poses) < N_POSES:
+            executor.spin_once(timeout_sec=0.02)
+        assert play.poll() == 0, play.communicate()
+    finally:
+        if play.poll() is None:
+            play.kill()
+        play.communicate(timeout=5.0)
+        executor.shutdown()
+        node.destroy_node()
+    assert [x for x, _ in poses] == [float(i) for i in range(N_POSES)]
+    assert frequencies == pytest.approx([0.0, 0.4, 0.8])
+    # Scaled real time: the last pose leaves (N - 1) * 50 ms / 2 = 225 ms after the first.
+    spread = (poses[-1][1] - poses[0][1]) / 1e9
+    assert 0.2 <= spread <= 0.6
+    # /clock carries bag time, never the recorded zeros, ending at the last message's time.
+    assert clocks and clocks == sorted(clocks)
+    assert clocks[0] >= START_NS
+    assert clocks[-1] == START_NS + (N_POSES - 1) * SAMPLE_NS
+
+
+def test_play_help_and_missing_bag() -> None:
+    result = subprocess.run([sys.executable, '-m', 'lf_predictor_ros.bag.play', '--help'],
+                            cwd=REPO, capture_output=True, text=True, timeout=TIMEOUT)
+    assert result.returncode == 0 and '--rate' in result.stdout and '--clock' in result.stdout
+    result = subprocess.run([sys.executable, '-m', 'lf_predictor_ros.bag.play', 'missing.mcap'],
+                            cwd=REPO, capture_output=True, text=True, timeout=TIMEOUT)
+    assert result.returncode == 1 and 'does not exist' in result.stderr
+    assert 'Traceback' not in result.stderr

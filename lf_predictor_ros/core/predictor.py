@@ -1,0 +1,443 @@
+"""The adaptive LF predictor: thesis Algorithm 4.1 as a real-time estimator.
+
+`AdaptivePredictor.update(t, pose, force)` is called once per sample (uniform grid, sample time h;
+`core.alignment` makes that grid from real sensor streams) and returns the LF pose predicted for
+t + h (lines 14–17). Every Δ samples it hands a *copy* of its buffers to a worker thread that runs
+`core.retraining.run_retraining` (frequency estimate → zero-phase targets → training →
+validation). Finished results are picked up at the start of a later `update` with a non-blocking
+queue read, and an accepted network is put in service by replacing one reference to an immutable
+`NumpyNnarmax`: the predict path never waits for training and never sees mixed weights.
+
+Before the first accepted training, and whenever the network cannot predict (a new data segment
+after a gap, a non-finite output), the output comes from a causal notch + low-pass cascade tuned to
+the latest ω0 estimate (or the prior), and `status().state` says 'warming_up' or 'fallback'.
+
+Conventions: positions [m], heading [rad], forces [N, N, N·m] in the body frame. Internally the
+heading is unwrapped (continuous across ±π) and, for 3 DOF, forces are rotated to the earth frame
+with the measured heading (u = R(ψ)τ, Fossen 2011 §7.1: η̈ ≈ R(ψ)ν̇), so the network does not have
+to learn the rotation the thesis found hard (§5.3). Outputs have the heading wrapped to (−π, π];
+for 1 DOF only the north component is estimated and east/yaw are 0.
+
+Bad input: `update` raises ValueError for a non-finite or wrongly shaped pose/force and leaves its
+state unchanged (the node filters such samples before they get here). A training that raises is
+caught on the worker; the network in service stays, and the status reports the error.
+"""
+from __future__ import annotations
+
+from collections import deque
+import math
+from pathlib import Path
+import queue
+import threading
+import time
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+import torch
+
+from lf_predictor_ros.core.baselines.cascade import CascadeFilter
+from lf_predictor_ros.core.estimator import EstimatorState, EstimatorStatus
+from lf_predictor_ros.core.frequency import FrequencyEstimate
+from lf_predictor_ros.core.heading import ContinuousHeading, wrap_angle
+from lf_predictor_ros.core.network import (
+    NnarmaxNet,
+    NumpyNnarmax,
+    load_checkpoint,
+    predict_step,
+    save_checkpoint,
+)
+from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.retraining import (
+    RetrainResult,
+    Snapshot,
+    first_training_samples,
+    network_spec,
+    run_retraining,
+)
+from lf_predictor_ros.core.targets import TargetWindow
+from lf_predictor_ros.core.training import warm_up
+
+# Sanity guard: a prediction farther from the newest measurement than this many RMS of the
+# wave-frequency motion seen in training (plus a floor) is not believed; the cascade stands in
+# and the feedback history is re-seeded from it (stops a free-running recursion from running away).
+GUARD_SPREADS = 6.0
+GUARD_FLOOR = np.array([0.5, 0.5, 0.02])  # [m, m, rad]
+
+FloatArray = NDArray[np.float64]
+
+
+class _JobOutcome:
+    """A finished job: a result, or the exception it raised."""
+
+    def __init__(self, generation: int, result: RetrainResult | None,
+                 error: BaseException | None, saved_error: str | None = None) -> None:
+        self.generation = generation
+        self.result = result
+        self.error = error
+        self.saved_error = saved_error
+
+
+class AdaptivePredictor:
+    """Adaptive NNARMAX LF-pose predictor (implements `core.estimator.LfEstimator`)."""
+
+    def __init__(self, params: PredictorParams, *, background: bool = True,
+                 checkpoint_path: str | None = None) -> None:
+        self.params = params
+        self.ndof = params.ndof
+        self.sample_time = params.sample_time
+        self.background = background
+        self.checkpoint_path = checkpoint_path
+        self._capacity = max(params.training_samples + params.transient_samples,
+                             params.estimation_samples, params.filter_samples) + params.max_lag
+        self._first_training = first_training_samples(params)
+        self._outcomes: queue.SimpleQueue[_JobOutcome] = queue.SimpleQueue()
+        self._stop = threading.Event()
+        self._worker: threading.Thread | None = None
+        self._generation = 0
+        self._model: NumpyNnarmax | None = None
+        self._state_dict: dict[str, torch.Tensor] | None = None
+        self._frequency: FrequencyEstimate | float | None = params.wave_peak_prior
+        self._trainings = 0
+        self._rejected = 0
+        self._overruns = 0
+        self._errors = 0
+        self._last_loss: float | None = None
+        self._train_seconds: float | None = None
+        self._model_time: float | None = None
+        self._message = 'collecting data'
+        self._last_error: str | None = None
+        self._fallback = CascadeFilter(params.ndof, params.sample_time, self._fallback_freq(),
+                                       notch_zeta=params.notch_zeta,
+                                       notch_depth=params.notch_depth,
+                                       lowpass_offset=params.lowpass_offset)
+        self._now: float | None = None
+        self._segment = 0
+        self._fb_next: int = -1
+        self._wave_spread: FloatArray | None = None
+        self._guard_trips = 0
+        self._start_segment()
+        if background:
+            warm_up()  # import torch's lazy modules now, not on the first training
+
+    # ---- the LfEstimator interface ----------------------------------------------------------
+
+    def update(self, t: float, pose: FloatArray, force: FloatArray) -> FloatArray:
+        """Add the sample at time t; return the LF pose predicted for t + h (see module doc)."""
+        pose_arr, force_arr = _checked(pose, 'pose'), _checked(force, 'force')
+        if not math.isfinite(t):
+            raise ValueError(f'sample time stamp must be finite, got {t}')
+        self._now = t
+        self._collect_outcomes(t)
+        y = self._position(pose_arr)
+        u = self._force_channels(force_arr, pose_arr[2])
+        self._u.append(u)
+        self._y.append(y)
+        self._k += 1
+        lf_now = self._fallback.update(t, pose_arr, force_arr)
+        if self._fb_next != self._k:  # no network prediction exists for this sample
+            self._fb.append(self._position(lf_now, update_heading=False))
+        prediction = self._predict()
+        if prediction is not None and not self._plausible(prediction, y):
+            self._guard_trips += 1
+            self._message = 'network prediction implausible: cascade fallback'
+            prediction = None
+            self._fb.clear()
+            self._fb.append(self._position(lf_now, update_heading=False))
+        if prediction is None:
+            self._used_network = False
+            estimate = self._position(lf_now, update_heading=False)
+            self._fb_next = -1
+        else:
+            self._used_network = True
+            estimate = prediction
+            self._fb.append(prediction)
+            self._fb_next = self._k + 1
+        self._maybe_retrain(t)
+        return self._output(estimate)
+
+    def reset(self) -> None:
+        """Forget everything learned and collected (parameters stay); a running job is dropped."""
+        self._stop.set()
+        self._generation += 1
+        self._stop = threading.Event()
+        self._worker = None
+        self._model = None
+        self._state_dict = None
+        self._frequency = self.params.wave_peak_prior
+        self._trainings = self._rejected = 0
+        self._last_loss = self._train_seconds = self._model_time = None
+        self._last_error = None
+        self._wave_spread = None
+        self._message = 'reset: collecting data'
+        self._fallback.set_wave_peak_freq(self._fallback_freq())
+        self.restart_segment()
+
+    def status(self) -> EstimatorStatus:
+        """Health for diagnostics (state, ω0, last loss and training time, model age, fill)."""
+        state: EstimatorState
+        if self._model is None:
+            state = 'error' if self._last_error and self._trainings == 0 and \
+                self._errors > 0 else 'warming_up'
+        else:
+            state = 'trained' if self._used_network else 'fallback'
+        age = None
+        if self._model_time is not None and self._now is not None:
+            age = max(0.0, self._now - self._model_time)
+        return EstimatorStatus(
+            state=state, wave_peak_freq=self.wave_peak_freq, message=self._message,
+            last_loss=self._last_loss, train_seconds=self._train_seconds, model_age=age,
+            buffer_fill=min(1.0, len(self._y) / self._capacity), trainings=self._trainings,
+            rejected_trainings=self._rejected)
+
+    # ---- extra controls ---------------------------------------------------------------------
+
+    def restart_segment(self) -> None:
+        """Start a new data segment (after a gap or a time jump): the trained network stays.
+
+        Regressors and training windows never span the restart: buffers, targets and feedback
+        are cleared; predictions resume once max(nu, ny, nfb) new samples have arrived.
+        """
+        self._segment += 1
+        self._start_segment()
+        self._fallback.reset()
+
+    def request_retrain(self) -> tuple[bool, str]:
+        """Ask for a training at the next sample; (False, reason) when it cannot happen."""
+        if len(self._y) < self._first_training:
+            return False, (f'not enough data: {len(self._y)} of {self._first_training} samples '
+                           'needed for the first training')
+        if self._job_running():
+            return False, 'a training is already running'
+        self._retrain_requested = True
+        return True, 'training starts with the next sample'
+
+    def wait_for_training(self, timeout: float | None = None) -> bool:
+        """Block until the running job (if any) finishes; for tests and offline tools only."""
+        worker = self._worker
+        if worker is None:
+            return True
+        worker.join(timeout)
+        return not worker.is_alive()
+
+    def close(self) -> None:
+        """Stop a running training (it is abandoned at its next epoch boundary)."""
+        self._stop.set()
+        self.wait_for_training(timeout=5.0)
+
+    @property
+    def wave_peak_freq(self) -> float | None:
+        """Latest ω0 estimate [rad/s] (or the prior), None before the first estimate."""
+        if isinstance(self._frequency, FrequencyEstimate):
+            return self._frequency.wave_peak_freq
+        return self._frequency
+
+    @property
+    def model(self) -> NumpyNnarmax | None:
+        """The network in service (immutable), None before the first accepted training."""
+        return self._model
+
+    @property
+    def counters(self) -> dict[str, int]:
+        """Trainings accepted/rejected, overruns (a retrain due while one ran), errors."""
+        return {'trainings': self._trainings, 'rejected_trainings': self._rejected,
+                'overruns': self._overruns, 'training_errors': self._errors,
+                'guard_trips': self._guard_trips,
+                'segments': self._segment}
+
+    @property
+    def targets(self) -> TargetWindow | None:
+        """Current target window (for inspection and plots)."""
+        return self._targets
+
+    def save(self, path: str) -> None:
+        """Write the network in service to a checkpoint; ValueError if there is none."""
+        if self._state_dict is None:
+            raise ValueError('no trained network to save yet: wait for the first training')
+        save_checkpoint(path, network_spec(self.params), self._state_dict, self._meta())
+
+    def load(self, path: str) -> None:
+        """Warm start from a checkpoint; ValueError (clear message) if it does not fit."""
+        spec, state, meta = load_checkpoint(path, expected_spec=network_spec(self.params))
+        if float(meta.get('sample_time', self.sample_time)) != self.sample_time:
+            raise ValueError(f'checkpoint {path} was trained at sample_time '
+                             f'{meta.get("sample_time")} s, this predictor runs at '
+                             f'{self.sample_time} s: use the same sample_time or retrain')
+        self._state_dict = state
+        self._model = NumpyNnarmax.from_module(NnarmaxNet.from_state(spec, state))
+        self._model_time = None
+        freq = meta.get('wave_peak_freq')
+        if isinstance(freq, (int, float)) and freq > 0:
+            self._frequency = float(freq)
+            self._fallback.set_wave_peak_freq(float(freq))
+        self._last_loss = meta.get('loss')
+        self._message = f'warm start from {Path(path).name}'
+
+    # ---- internals --------------------------------------------------------------------------
+
+    def _start_segment(self) -> None:
+        self._u: deque[FloatArray] = deque(maxlen=self._capacity)
+        self._y: deque[FloatArray] = deque(maxlen=self._capacity)
+        self._fb: deque[FloatArray] = deque(maxlen=max(1, self.params.nfb))
+        self._heading = ContinuousHeading()
+        self._k = -1
+        self._fb_next = -1
+        self._last_train_k: int | None = None
+        self._targets: TargetWindow | None = None
+        self._retrain_requested = False
+        self._used_network = False
+
+    def _fallback_freq(self) -> float:
+        freq = self.wave_peak_freq
+        if freq is None:
+            low, high = self.params.wave_band
+            freq = math.sqrt(low * high)  # geometric band centre until ω0 is estimated
+        return float(freq)
+
+    def _position(self, pose: FloatArray, update_heading: bool = True) -> FloatArray:
+        if self.ndof == 1:
+            return np.array([pose[0]])
+        yaw = float(pose[2])
+        if update_heading:
+            yaw = self._heading.update(yaw)
+        else:
+            ref = self._heading.value
+            yaw = yaw if ref is None else ref + float(wrap_angle(yaw - ref))
+        return np.array([pose[0], pose[1], yaw])
+
+    def _force_channels(self, force: FloatArray, yaw: float) -> FloatArray:
+        if self.ndof == 1:
+            return np.array([force[0]])
+        c, s = math.cos(yaw), math.sin(yaw)
+        return np.array([c * force[0] - s * force[1], s * force[0] + c * force[1], force[2]])
+
+    def _predict(self) -> FloatArray | None:
+        model, p = self._model, self.params
+        if model is None or len(self._y) < p.max_lag or len(self._fb) < p.nfb:
+            return None
+        u_hist = np.array(list(self._u)[-max(p.nu, 1):])
+        y_hist = np.array(list(self._y)[-max(p.ny, 1):])
+        fb_hist = np.array(list(self._fb)[-max(p.nfb, 1):])
+        prediction = predict_step(model, u_hist, y_hist, fb_hist)
+        if not np.all(np.isfinite(prediction)):
+            self._message = 'network output not finite: cascade fallback'
+            return None
+        return np.asarray(prediction, dtype=np.float64)
+
+    def _plausible(self, prediction: FloatArray, y: FloatArray) -> bool:
+        spread = self._wave_spread
+        if spread is None:
+            return True
+        bound = GUARD_SPREADS * spread + GUARD_FLOOR[:self.ndof]
+        return bool(np.all(np.abs(prediction - y) <= bound))
+
+    def _output(self, estimate: FloatArray) -> FloatArray:
+        out = np.zeros(3)
+        out[:self.ndof] = estimate
+        if self.ndof == 3:
+            out[2] = float(wrap_angle(out[2]))
+        return out
+
+    def _job_running(self) -> bool:
+        return self._worker is not None and self._worker.is_alive()
+
+    def _maybe_retrain(self, t: float) -> None:
+        n = len(self._y)
+        if n < self._first_training:
+            return
+        due = self._last_train_k is None or \
+            self._k - self._last_train_k >= self.params.retrain_samples
+        if not (due or self._retrain_requested):
+            return
+        if self._job_running():
+            if self._k == (self._last_train_k or 0) + self.params.retrain_samples:
+                self._overruns += 1
+            return
+        self._retrain_requested = False
+        self._last_train_k = self._k
+        snapshot = Snapshot(u=np.array(self._u), y=np.array(self._y), end_index=self._k,
+                            segment=self._segment)
+        args = (self._generation, snapshot, self._state_dict, self._targets, self._frequency,
+                self._stop)
+        if self.background:
+            self._worker = threading.Thread(target=self._job, args=args,
+                                            name='lf-predictor-training', daemon=True)
+            self._worker.start()
+        else:
+            self._job(*args)
+            self._collect_outcomes(t)
+
+    def _job(self, generation: int, snapshot: Snapshot,
+             incumbent: dict[str, torch.Tensor] | None, targets: TargetWindow | None,
+             frequency: FrequencyEstimate | float | None, stop: threading.Event) -> None:
+        """Worker body: never raises; the outcome goes through the queue."""
+        try:
+            result = run_retraining(self.params, snapshot, incumbent, targets, frequency, stop)
+        except Exception as exc:  # noqa: BLE001 - any failure must keep the node alive
+            self._outcomes.put(_JobOutcome(generation, None, exc))
+            return
+        saved_error = None
+        if result.accepted and result.state_dict is not None and self.checkpoint_path:
+            try:
+                save_checkpoint(self.checkpoint_path, network_spec(self.params),
+                                result.state_dict, self._meta(result))
+            except (OSError, ValueError) as exc:
+                saved_error = f'checkpoint not saved: {exc}'
+        self._outcomes.put(_JobOutcome(generation, result, None, saved_error))
+
+    def _collect_outcomes(self, t: float) -> None:
+        while True:
+            try:
+                outcome = self._outcomes.get_nowait()
+            except queue.Empty:
+                return
+            if outcome.generation == self._generation:
+                self._apply(outcome, t)
+
+    def _apply(self, outcome: _JobOutcome, t: float) -> None:
+        if outcome.error is not None or outcome.result is None:
+            self._errors += 1
+            self._last_error = f'{type(outcome.error).__name__}: {outcome.error}'
+            self._message = f'training failed, network in service kept ({self._last_error})'
+            return
+        result = outcome.result
+        self._train_seconds = result.seconds
+        if result.segment == self._segment:
+            self._targets = result.targets
+        self._frequency = result.frequency
+        self._fallback.set_wave_peak_freq(result.frequency.wave_peak_freq)
+        if result.accepted and result.model is not None:
+            self._model, self._state_dict = result.model, result.state_dict
+            self._wave_spread = result.wave_spread
+            self._model_time = t
+            self._trainings += 1
+            self._last_loss = result.loss
+            self._last_error = None
+            self._message = (f'trained #{self._trainings}: loss {result.loss:.3g} in '
+                             f'{result.seconds:.2f} s, ω0 {result.frequency.wave_peak_freq:.3f}')
+        else:
+            self._rejected += 1
+            self._message = f'training rejected: {result.reason}'
+        if outcome.saved_error:
+            self._message += f'; {outcome.saved_error}'
+
+    def _meta(self, result: RetrainResult | None = None) -> dict[str, Any]:
+        meta: dict[str, Any] = {'sample_time': self.sample_time, 'ndof': self.ndof,
+                                'params': _jsonable(self.params.to_dict()),
+                                'saved_unix_time': time.time()}
+        freq = result.frequency.wave_peak_freq if result else self.wave_peak_freq
+        meta['wave_peak_freq'] = freq
+        meta['loss'] = result.loss if result else self._last_loss
+        return meta
+
+
+def _checked(value: FloatArray, name: str) -> FloatArray:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f'{name} must be 3 finite numbers [north, east, yaw] / [X, Y, N], got '
+                         f'{value!r}')
+    return arr
+
+
+def _jsonable(values: dict[str, Any]) -> dict[str, Any]:
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}

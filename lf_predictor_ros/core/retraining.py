@@ -1,0 +1,194 @@
+"""One retraining of the LF predictor: thesis Algorithm 4.1 lines 18–40 as a pure function.
+
+    snapshot of the last samples (u, y)                       lines 3–8
+      → wave peak frequency ω0 from the last γ samples      lines 19–23 (§4.2.1)
+      → notch at ω0 + low-pass at ωLP, zero phase, last α   lines 24–29 (§4.2.2)
+      → targets: append to the previous ones                lines 30–35 (eq. 4.4, 4.5)
+      → train on the last N samples, last ε masked          lines 36–40 (§4.3)
+      → validate the candidate against the network in service
+
+`run_retraining` touches no shared state: it gets copies and returns a `RetrainResult`, so it can
+run on the predictor's worker thread (or inline, for deterministic replay) and the caller decides
+what to put in service. A candidate is rejected (and the network in service kept) when its weights
+or loss are not finite, when training diverged (loss above its start), or when it is worse than the
+network in service on the newest targets.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+import threading
+import time
+
+import numpy as np
+from numpy.typing import NDArray
+import torch
+
+from lf_predictor_ros.core.filters import design_wave_filter, zero_phase
+from lf_predictor_ros.core.frequency import FrequencyEstimate, estimate_wave_peak_freq
+from lf_predictor_ros.core.network import NnarmaxNet, NnarmaxSpec, NumpyNnarmax
+from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.targets import TargetWindow, training_mask
+from lf_predictor_ros.core.training import TrainSettings, evaluate_loss, train
+
+FloatArray = NDArray[np.float64]
+
+# A candidate must not be worse than the network in service by more than this factor on the
+# newest targets (1.0 = strictly no worse; a little slack avoids freezing on numerical noise).
+ACCEPT_LOSS_RATIO = 1.02
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """Copies of the predictor's data at the retraining instant.
+
+    ``u`` (n, n_inputs_u) forces, ``y`` (n, ndof) positions with unwrapped heading, newest last;
+    ``end_index`` is the sample index (since the segment started) of the newest row.
+    """
+
+    u: FloatArray
+    y: FloatArray
+    end_index: int
+    segment: int
+
+
+@dataclass(frozen=True)
+class RetrainResult:
+    """What one retraining produced; ``model`` is None when the candidate was rejected."""
+
+    segment: int
+    end_index: int
+    frequency: FrequencyEstimate
+    targets: TargetWindow
+    model: NumpyNnarmax | None
+    state_dict: dict[str, torch.Tensor] | None
+    loss: float
+    incumbent_loss: float | None
+    accepted: bool
+    reason: str
+    seconds: float
+    epochs: int
+    wave_spread: FloatArray | None = None
+
+
+def network_spec(params: PredictorParams) -> NnarmaxSpec:
+    """The network shape the parameters ask for (one output and one force per DOF)."""
+    return NnarmaxSpec(n_outputs=params.ndof, n_inputs_u=params.ndof, nu=params.nu,
+                       ny=params.ny, nfb=params.nfb, hidden_units=params.hidden_units,
+                       hidden_layers=params.hidden_layers)
+
+
+def train_settings(params: PredictorParams) -> TrainSettings:
+    """Trainer settings from the predictor parameters."""
+    return TrainSettings(algorithm=params.trainer,  # type: ignore[arg-type]
+                         mode=params.training_mode,  # type: ignore[arg-type]
+                         max_epochs=params.max_epochs, max_seconds=params.max_train_seconds,
+                         weight_decay=params.weight_decay,
+                         derivative_weight=params.derivative_weight, seed=params.seed)
+
+
+def first_training_samples(params: PredictorParams) -> int:
+    """Samples needed before the first training: α and half of γ (enough spectral resolution)."""
+    return max(params.filter_samples + params.max_lag + 1,
+               min(params.estimation_samples, 2 * params.filter_samples))
+
+
+def estimate_frequency(params: PredictorParams, y: FloatArray,
+                       previous: FrequencyEstimate | float | None) -> FrequencyEstimate:
+    """Algorithm 4.1 lines 19–23 on the last γ samples."""
+    window = y[-params.estimation_samples:]
+    return estimate_wave_peak_freq(window, params.sample_time,
+                                   highpass_cutoff=params.highpass_cutoff,
+                                   wave_band=(params.wave_band[0], params.wave_band[1]),
+                                   min_peak_ratio=params.min_peak_ratio, previous=previous)
+
+
+def make_targets(params: PredictorParams, y: FloatArray, end_index: int,
+                 wave_peak_freq: float, previous: TargetWindow | None) -> TargetWindow:
+    """Algorithm 4.1 lines 24–35: zero-phase notch + low-pass and appending.
+
+    The first targets (``previous`` None, or too old to append without a gap) come from filtering
+    everything available up to N + ε samples, minus the last ε.
+    """
+    sos = design_wave_filter(wave_peak_freq, params.sample_time, notch_zeta=params.notch_zeta,
+                             notch_depth=params.notch_depth,
+                             lowpass_offset=params.lowpass_offset)
+    eps, beta = params.transient_samples, params.append_samples
+    if previous is not None:
+        shift = end_index - previous.end_index
+        if 0 < shift <= beta and len(previous) >= beta - shift:
+            filtered = zero_phase(y[-params.filter_samples:], sos)
+            return previous.append(filtered, end_index, beta, max_len=params.training_samples)
+    span = min(len(y), params.training_samples + eps)
+    return TargetWindow.start(zero_phase(y[-span:], sos), end_index, eps)
+
+
+def training_window(params: PredictorParams, snapshot: Snapshot,
+                    targets: TargetWindow) -> tuple[FloatArray, FloatArray, FloatArray,
+                                                    NDArray[np.bool_]]:
+    """(u, y, targets, mask) over the samples that have targets, the last ε masked out."""
+    if targets.end_index != snapshot.end_index:
+        raise ValueError(f'targets end at sample {targets.end_index}, data at '
+                         f'{snapshot.end_index}: make the targets from this snapshot')
+    n_t = len(targets)
+    u = snapshot.u[-n_t:]
+    y = snapshot.y[-n_t:]
+    mask = training_mask(n_t, params.transient_samples)
+    return u, y, np.asarray(targets.values).reshape(n_t, -1), mask
+
+
+def run_retraining(params: PredictorParams, snapshot: Snapshot,
+                   incumbent: dict[str, torch.Tensor] | None,
+                   previous_targets: TargetWindow | None,
+                   previous_frequency: FrequencyEstimate | float | None,
+                   stop_event: threading.Event | None = None) -> RetrainResult:
+    """One full retraining (see module docstring); never modifies its arguments."""
+    start = time.monotonic()
+    frequency = estimate_frequency(params, snapshot.y, previous_frequency)
+    targets = make_targets(params, snapshot.y, snapshot.end_index, frequency.wave_peak_freq,
+                           previous_targets)
+    u, y, t_values, mask = training_window(params, snapshot, targets)
+    spec = network_spec(params)
+    if incumbent is None:
+        net = NnarmaxNet(spec, seed=params.seed)
+    else:
+        net = NnarmaxNet.from_state(spec, incumbent)
+    settings = train_settings(params)
+    result = train(net, u, y, t_values, mask, settings, stop_event=stop_event)
+    incumbent_loss = None
+    if incumbent is not None:
+        incumbent_loss = evaluate_loss(incumbent, spec, u, y, t_values, mask, settings.mode)
+    accepted, reason = _judge(result.loss, result.objective, result.initial_objective,
+                              incumbent_loss, result.state_dict)
+    model = NumpyNnarmax.from_module(NnarmaxNet.from_state(spec, result.state_dict)) \
+        if accepted else None
+    return RetrainResult(segment=snapshot.segment, end_index=snapshot.end_index,
+                         frequency=frequency, targets=targets, model=model,
+                         state_dict=result.state_dict if accepted else None,
+                         loss=result.loss, incumbent_loss=incumbent_loss, accepted=accepted,
+                         reason=reason, seconds=time.monotonic() - start, epochs=result.epochs,
+                         wave_spread=wave_spread(y, t_values, mask))
+
+
+def wave_spread(y: FloatArray, targets: FloatArray, mask: NDArray[np.bool_]) -> FloatArray:
+    """RMS of measurement minus target per DOF on the kept samples: the WF motion + noise."""
+    diff = (y - targets)[mask]
+    if diff.size == 0:
+        return np.full(y.shape[1], np.inf)
+    return np.asarray(np.sqrt(np.mean(diff ** 2, axis=0)), dtype=np.float64)
+
+
+def _judge(loss: float, objective: float, initial_objective: float,
+           incumbent_loss: float | None, state: dict[str, torch.Tensor]) -> tuple[bool, str]:
+    if not math.isfinite(loss) or not all(bool(torch.isfinite(v).all()) for v in state.values()):
+        return False, 'candidate has non-finite weights or loss'
+    # The full objective (MSE + derivative + weight terms) is what training minimizes; the MSE
+    # part alone may legitimately rise when those terms are on.
+    if math.isfinite(initial_objective) and objective > initial_objective * ACCEPT_LOSS_RATIO:
+        return False, (f'training diverged (objective {objective:.3g} > start '
+                       f'{initial_objective:.3g})')
+    if incumbent_loss is not None and math.isfinite(incumbent_loss) and \
+            loss > incumbent_loss * ACCEPT_LOSS_RATIO:
+        return False, (f'candidate worse than the network in service on the newest targets '
+                       f'({loss:.3g} > {incumbent_loss:.3g})')
+    return True, 'accepted'

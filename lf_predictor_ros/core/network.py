@@ -17,6 +17,12 @@ interpolates (thesis §2.5), while a DP vessel slowly drifts to positions outsid
 window. The bypass starts as persistence (ŷLF(t + 1) = fb(t)), so an untrained network holds the
 last LF value and training learns the correction; switch it off for the plain eq. 2.2 network.
 
+Relative coordinates (``NnarmaxSpec.relative``, our addition): a wave filter is translation
+invariant — moving the vessel 10 m moves its LF estimate 10 m — but a tanh network fed absolute
+positions is not, and fails as soon as the vessel leaves the positions of its training window.
+With ``relative`` the network sees y(t−i) − y(t) and fb(t−i) − y(t) and predicts
+ŷLF(t + 1) − y(t); y(t) is added back to the output. Forces are unchanged.
+
 Heading: the network works on unwrapped heading (a continuous signal); the caller unwraps the
 measured yaw before building regressors and wraps the predicted yaw to (−π, π] afterwards.
 
@@ -80,7 +86,8 @@ class NnarmaxSpec:
     ``n_inputs_u``: force channels (1 or 3); ``nu``, ``ny``, ``nfb``: number of delayed forces,
     measured positions and LF feedback values; ``hidden_units`` per hidden layer;
     ``hidden_layers`` ≥ 1 (the thesis uses one); ``linear_bypass``: add a linear input→output
-    path (see module docstring).
+    path (see module docstring); ``relative``: position regressors and the output are taken
+    relative to the newest measured position y(t) (translation invariance, see module docstring).
     """
 
     n_outputs: int
@@ -91,6 +98,7 @@ class NnarmaxSpec:
     hidden_units: int
     hidden_layers: int = 1
     linear_bypass: bool = True
+    relative: bool = False
 
     def __post_init__(self) -> None:
         """Validate the spec; raise ValueError naming the broken rule."""
@@ -110,6 +118,11 @@ class NnarmaxSpec:
             )
         _check_count('hidden_units', self.hidden_units, 'an int ≥ 1', 1)
         _check_count('hidden_layers', self.hidden_layers, 'an int ≥ 1', 1)
+        if not isinstance(self.relative, bool):
+            raise ValueError(f'NnarmaxSpec.relative must be a bool, got {self.relative!r}')
+        if self.relative and self.ny < 1:
+            raise ValueError('NnarmaxSpec.relative needs ny ≥ 1: positions are taken relative '
+                             'to the newest measured position y(t)')
         if not isinstance(self.linear_bypass, bool):
             raise ValueError(
                 f'NnarmaxSpec.linear_bypass must be a bool, got {self.linear_bypass!r}'
@@ -212,6 +225,13 @@ class NnarmaxNet(torch.nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Predict ŷLF(t + 1) for raw regressor rows ``x`` of shape (rows, n_regressors)."""
+        if self.spec.relative:
+            offset = _position_offset(self.spec)
+            ref = x[:, offset:offset + self.spec.n_outputs]
+            return ref + self._forward_absolute(x - _relative_shift(self.spec, ref))
+        return self._forward_absolute(x)
+
+    def _forward_absolute(self, x: torch.Tensor) -> torch.Tensor:
         x_mean, x_std = self.regressor_standardization()
         x_s = (x - x_mean) / x_std
         hidden = x_s
@@ -241,6 +261,12 @@ class NnarmaxNet(torch.nn.Module):
         if spec.nfb == 0:
             return self.forward(x_static)
         n_static = x_static.shape[1]
+        ref_s: torch.Tensor | None = None
+        if spec.relative:
+            offset = _position_offset(spec)
+            ref = x_static[:, offset:offset + spec.n_outputs]
+            x_static = x_static - _relative_shift(spec, ref)[:, :n_static]
+            ref_s = ref / self.y_std  # y_mean is 0 in relative mode
         x_mean, x_std = self.regressor_standardization()
         x_s = (x_static - x_mean[:n_static]) / x_std[:n_static]
         layers = self.hidden_layers()
@@ -257,10 +283,10 @@ class NnarmaxNet(torch.nn.Module):
         )
         fb_standardized = (fb_init - self.y_mean) / self.y_std
         if differentiable:
-            outputs = recursion.run_torch(hidden_pre, out_static, fb_standardized)
+            outputs = recursion.run_torch(hidden_pre, out_static, fb_standardized, ref_s)
         else:
             outputs = torch.from_numpy(
-                recursion.run_numpy(hidden_pre, out_static, fb_standardized)
+                recursion.run_numpy(hidden_pre, out_static, fb_standardized, ref_s)
             )
         return self.y_mean + self.y_std * outputs
 
@@ -286,6 +312,11 @@ class NnarmaxNet(torch.nn.Module):
         y_mean = y_series.mean(axis=0)
         u_std = _safe_std(u_series.std(axis=0), u_mean)
         y_std = _safe_std(y_series.std(axis=0), y_mean)
+        if self.spec.relative:
+            # Relative positions are centred on 0; their spread is the window's spread about its
+            # mean (wave motion + LF movement), not the distance from the origin.
+            y_mean = np.zeros_like(y_mean)
+            y_std = _safe_std(y_series.std(axis=0), y_mean)
         new = {
             'u_mean': torch.from_numpy(u_mean),
             'u_std': torch.from_numpy(u_std),
@@ -345,27 +376,39 @@ class _Recursion:
     deeper: tuple[tuple[torch.Tensor, torch.Tensor], ...]  # (weight, bias) of layers 2…L
 
     def run_torch(
-        self, hidden_pre: torch.Tensor, out_static: torch.Tensor, fb_init: torch.Tensor
+        self, hidden_pre: torch.Tensor, out_static: torch.Tensor, fb_init: torch.Tensor,
+        ref: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """Standardized outputs o for every row, differentiable."""
+        """Standardized outputs o for every row, differentiable.
+
+        With ``ref`` (rows, n_out) — relative mode — the feedback enters relative to the row's
+        reference and the reference is added back to the output.
+        """
         feedback = list(fb_init.unbind(0))  # oldest first
         outputs = []
-        for hidden_row, out_row in zip(hidden_pre.unbind(0), out_static.unbind(0), strict=True):
+        for row, (hidden_row, out_row) in enumerate(
+                zip(hidden_pre.unbind(0), out_static.unbind(0), strict=True)):
             fb_vector = torch.cat(feedback[::-1]) if len(feedback) > 1 else feedback[0]
+            if ref is not None:
+                fb_vector = fb_vector - ref[row].repeat(len(feedback))
             hidden = torch.tanh(hidden_row + self.hidden_fb @ fb_vector)
             for weight, bias in self.deeper:
                 hidden = torch.tanh(weight @ hidden + bias)
             out = out_row + self.output_weight @ hidden
             if self.bypass_fb is not None:
                 out = out + self.bypass_fb @ fb_vector
+            if ref is not None:
+                out = out + ref[row]
             outputs.append(out)
             feedback = feedback[1:] + [out]
         return torch.stack(outputs)
 
     def run_numpy(
-        self, hidden_pre: torch.Tensor, out_static: torch.Tensor, fb_init: torch.Tensor
+        self, hidden_pre: torch.Tensor, out_static: torch.Tensor, fb_init: torch.Tensor,
+        ref: torch.Tensor | None = None,
     ) -> FloatArray:
         """Standardized outputs o for every row, in numpy on detached values (no gradient)."""
+        refs = None if ref is None else _detached(ref)
         hidden_rows = _detached(hidden_pre)
         out_rows = _detached(out_static)
         hidden_fb = _detached(self.hidden_fb)
@@ -377,12 +420,16 @@ class _Recursion:
         with np.errstate(over='ignore', invalid='ignore'):  # a diverging trial step: inf
             for row in range(out_rows.shape[0]):
                 fb_vector = np.concatenate(feedback[::-1]) if len(feedback) > 1 else feedback[0]
+                if refs is not None:
+                    fb_vector = fb_vector - np.tile(refs[row], len(feedback))
                 hidden = np.tanh(hidden_rows[row] + hidden_fb @ fb_vector)
                 for weight, bias in deeper:
                     hidden = np.tanh(weight @ hidden + bias)
                 out = out_rows[row] + output_weight @ hidden
                 if bypass_fb is not None:
                     out = out + bypass_fb @ fb_vector
+                if refs is not None:
+                    out = out + refs[row]
                 outputs[row] = out
                 feedback = feedback[1:] + [out]
         return outputs
@@ -408,6 +455,17 @@ def _persistence_matrix(spec: NnarmaxSpec) -> torch.Tensor:
     for channel in range(spec.n_outputs):
         matrix[channel, block_start + channel] = 1.0
     return matrix
+
+
+def _position_offset(spec: NnarmaxSpec) -> int:
+    """Column of y(t) (the newest measured position) in a regressor row."""
+    return spec.nu * spec.n_inputs_u
+
+
+def _relative_shift(spec: NnarmaxSpec, ref: torch.Tensor) -> torch.Tensor:
+    """Per-row shift that makes the position and feedback blocks relative to ``ref`` = y(t)."""
+    zeros = torch.zeros(ref.shape[0], spec.nu * spec.n_inputs_u, dtype=ref.dtype)
+    return torch.cat((zeros, ref.repeat(1, spec.ny + spec.nfb)), dim=1)
 
 
 def _frozen(array: torch.Tensor) -> FloatArray:
@@ -455,6 +513,18 @@ class NumpyNnarmax:
 
     def forward(self, x: FloatArray) -> FloatArray:
         """ŷLF(t + 1) for regressor rows (rows, n_regressors) or one row (n_regressors,)."""
+        spec = self.spec
+        if spec.relative:
+            offset = _position_offset(spec)
+            ref = x[..., offset:offset + spec.n_outputs]
+            shift = np.concatenate(
+                (np.zeros(x.shape[:-1] + (spec.nu * spec.n_inputs_u,)),
+                 np.tile(ref, spec.ny + spec.nfb)), axis=-1)
+            result: FloatArray = ref + self._forward_absolute(x - shift)
+            return result
+        return self._forward_absolute(x)
+
+    def _forward_absolute(self, x: FloatArray) -> FloatArray:
         x_s = (x - self.x_mean) / self.x_std
         hidden = x_s
         for weight, bias in zip(self.hidden_weights, self.hidden_biases, strict=True):

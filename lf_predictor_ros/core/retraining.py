@@ -75,7 +75,7 @@ def network_spec(params: PredictorParams) -> NnarmaxSpec:
     """The network shape the parameters ask for (one output and one force per DOF)."""
     return NnarmaxSpec(n_outputs=params.ndof, n_inputs_u=params.ndof, nu=params.nu,
                        ny=params.ny, nfb=params.nfb, hidden_units=params.hidden_units,
-                       hidden_layers=params.hidden_layers)
+                       hidden_layers=params.hidden_layers, relative=True)
 
 
 def train_settings(params: PredictorParams) -> TrainSettings:

@@ -11,11 +11,12 @@ from lf_predictor_ros.core.params import PredictorParams
 
 # A legal tiny configuration used to reach the "N long enough for the regressors" rule:
 # h = 0.5 s, Δ = 2, ε = 2, α = 8, β = 4 samples satisfy eqs. 4.4/4.5.
-_TINY = {'retrain_period': 1.0, 'transient_length': 1.0, 'filter_window': 4.0,
-         'append_length': 2.0, 'max_train_seconds': 0.5}
+_TINY = {'sample_time': 0.5, 'nu': 2, 'ny': 2, 'nfb': 2, 'retrain_period': 1.0,
+         'transient_length': 1.0, 'filter_window': 4.0, 'append_length': 2.0,
+         'max_train_seconds': 0.5}
 
 # (changes, regex the message must contain): each breaks exactly one rule of the defaults
-# (h = 0.5 s, Δ = 60 s, ε = 30 s, α = 180 s, β = 120 s, N = 600 s, γ = 1200 s).
+# (h = 1 s, Δ = 60 s, ε = 30 s, α = 180 s, β = 120 s, N = 600 s, γ = 1200 s).
 RULE_CASES: list[tuple[str, dict[str, Any], str]] = [
     ('ndof', {'ndof': 2}, r'ndof rule.*got 2'),
     ('sample_time zero', {'sample_time': 0.0}, r'positivity rule: sample_time must be > 0'),
@@ -80,13 +81,14 @@ def test_every_rule_rejects_a_violating_value(changes: dict[str, Any], message: 
 
 
 def test_defaults_and_sample_counts() -> None:
-    params = PredictorParams()
-    assert params.sample_time == 0.5
+    params = PredictorParams(sample_time=0.5, nu=2, ny=2, nfb=2)
     assert (params.retrain_samples, params.transient_samples, params.filter_samples,
             params.append_samples, params.training_samples, params.estimation_samples) == (
                 120, 60, 360, 240, 1200, 2400)
     assert params.max_lag == 2
     assert params.nyquist_freq == pytest.approx(2.0 * math.pi)
+    assert PredictorParams().sample_time == 1.0
+    assert PredictorParams().max_lag == 12
     assert params.lowpass_cutoff(0.3) == pytest.approx(0.5)  # thesis Fig. 4.8
     assert params.wave_peak_prior is None
     assert PredictorParams(initial_wave_peak_freq=0.6).wave_peak_prior == 0.6
@@ -101,10 +103,10 @@ def test_windows_in_seconds_are_rate_independent() -> None:
 
 def test_boundaries_of_eqs_4_4_and_4_5_are_accepted() -> None:
     # β = Δ + ε exactly; α one sample above Δ + 2ε (α = Δ + 2ε leaves no β: Δ + ε ≤ β < Δ + ε).
-    params = PredictorParams(append_length=90.0, filter_window=120.5)
+    params = PredictorParams(sample_time=0.5, append_length=90.0, filter_window=120.5)
     assert (params.append_samples, params.filter_samples) == (180, 241)
     with pytest.raises(ValueError, match='eq. 4.5'):
-        PredictorParams(append_length=90.0, filter_window=120.0)
+        PredictorParams(sample_time=0.5, append_length=90.0, filter_window=120.0)
 
 
 def test_numbers_are_coerced() -> None:
@@ -131,7 +133,7 @@ def test_dict_round_trip_and_unknown_keys() -> None:
 
 
 def test_replace_revalidates_and_keeps_the_original() -> None:
-    params = PredictorParams()
+    params = PredictorParams(sample_time=0.5)
     changed = params.replace(retrain_period=30.0, append_length=90.0)
     assert changed.retrain_samples == 60 and params.retrain_samples == 120
     with pytest.raises(ValueError, match='eq. 4.4'):

@@ -120,7 +120,8 @@ def _build_by_appending(y: NDArray[np.float64], sos: NDArray[np.float64],
 
 
 def test_appended_targets_equal_whole_signal_filtering_away_from_transients() -> None:
-    params = PredictorParams()  # h = 0.5 s, Δ = 120, ε = 60, α = 360, β = 240, N = 1200 samples
+    # h = 0.5 s, Δ = 120, ε = 60, α = 360, β = 240, N = 1200 samples
+    params = PredictorParams(sample_time=0.5)
     sample_time = params.sample_time
     y = _signal(8000, sample_time)
     # the test's own zero-phase wave filter: 4th-order Butterworth low-pass at 0.3 rad/s

@@ -82,8 +82,16 @@ class AdaptivePredictor:
     """Adaptive NNARMAX LF-pose predictor (implements `core.estimator.LfEstimator`)."""
 
     def __init__(self, params: PredictorParams, *, background: bool = True,
-                 checkpoint_path: str | None = None) -> None:
+                 checkpoint_path: str | None = None, max_trainings: int | None = None) -> None:
+        """Create an untrained predictor.
+
+        ``background``: train on a worker thread (True, for nodes) or inline at the retraining
+        instant (False: deterministic, for replay and benchmarks). ``checkpoint_path``: the worker
+        saves every accepted network there. ``max_trainings``: stop retraining after that many
+        accepted trainings (1 gives the thesis's static network; None = adaptive).
+        """
         self.params = params
+        self.max_trainings = max_trainings
         self.ndof = params.ndof
         self.sample_time = params.sample_time
         self.background = background
@@ -344,6 +352,8 @@ class AdaptivePredictor:
     def _maybe_retrain(self, t: float) -> None:
         n = len(self._y)
         if n < self._first_training:
+            return
+        if self.max_trainings is not None and self._trainings >= self.max_trainings:
             return
         due = self._last_train_k is None or \
             self._k - self._last_train_k >= self.params.retrain_samples

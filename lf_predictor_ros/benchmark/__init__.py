@@ -1,0 +1,1 @@
+"""Scenario suite: the adaptive predictor against the classical wave filters."""

@@ -323,7 +323,7 @@ class BagWriter:
                 or time.monotonic() - self._chunk_wall_start >= self.max_chunk_duration)
 
     def _finish_chunk(self) -> None:
-        self._mcap.flush()  # type: ignore[no-untyped-call]
+        self._mcap.flush()
         self._chunk_bytes = 0
 
     def _close_locked(self) -> None:
@@ -331,9 +331,9 @@ class BagWriter:
             return
         self._closed = True
         try:
-            self._mcap.flush()  # type: ignore[no-untyped-call]
+            self._mcap.flush()
             self._mcap.add_metadata(METADATA_NAME, {METADATA_KEY: self._metadata_yaml()})
-            self._mcap.finish()  # type: ignore[no-untyped-call]
+            self._mcap.finish()
         finally:
             self._stream.close()
 

@@ -29,7 +29,7 @@ def _profile(
     reliability: ReliabilityPolicy, depth: int, durability: DurabilityPolicy,
 ) -> QoSProfile:
     """A keep_last profile (QoSProfile's constructor takes untyped **kwargs)."""
-    return QoSProfile(  # type: ignore[no-untyped-call]
+    return QoSProfile(
         history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=reliability,
         durability=durability)
 

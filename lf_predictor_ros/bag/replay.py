@@ -1,0 +1,782 @@
+"""`replay`: run the adaptive LF predictor over a recorded bag, offline and deterministically.
+
+    replay INPUT -o OUTPUT.mcap [--params-file FILE] [--pose-topic T] [--thrust-topic T]
+           [--lf-topic T] [--truth-topic T] [--seed N] [--metrics FILE.json]
+           [--load-model CKPT] [--save-model CKPT] [--no-progress] [--force]
+
+INPUT is an `.mcap` file or a rosbag2 directory (`BagReader`). Messages are taken in log-time
+order; thrust (WrenchStamped, default `/thrust`) goes to `InputAligner.add_force` and pose
+(PoseStamped, default `/measured_pose`) to `InputAligner.add_pose`, both at their header stamps
+(the log time when a stamp is zero, i.e. unset). Every aligned sample goes to
+`AdaptivePredictor(params, background=False)`: trainings run inline at the retrain instant, so a
+replay with the same seed and parameters gives the same output bit for bit. A sample flagged
+`segment_start` (other than the first) calls `restart_segment()`, as the node does.
+
+OUTPUT gets every input message (same bytes, log and publish times; same channel types, schema
+text, QoS metadata and type hash) plus, with the log time of the pose message that produced them:
+- the estimate on `--lf-topic` (PoseStamped, header.stamp = sample time + sample_time);
+- `/wave_peak_frequency` (Float64) with every estimate once ω0 is known;
+- `/diagnostics` (DiagnosticArray) every `diagnostics_period` (1 s) of bag time, with the keys of
+  the predictor node (`predictor_diagnostics`).
+An input topic with the name of an output estimate topic (a bag recorded with a live predictor)
+is not copied (a warning says so); input `/diagnostics` are copied and ours added.
+
+`--params-file` is a ROS 2 parameters YAML as used by the predictor node (`/**:` and/or
+`predictor:` → `ros__parameters:`): PredictorParams fields, aligner settings (`max_gap`,
+`thrust_timeout`, `backward_jump`, `max_speed`, `max_abs_position`), `frame_id` and
+`diagnostics_period` are used; the node-only keys `model_path`, `autostart` and `use_sim_time`
+are ignored (use `--load-model`); any other key is refused. `--seed` overrides `seed`.
+
+When the truth topic (default `/truth/lf_pose`) is present, a metrics table compares, after
+warm-up (from the first sample whose estimate came from a trained network; from the start if none
+did), the predictor, the raw measurement and the causal notch + low-pass cascade tuned to the
+final ω0 estimate, each against the truth linearly interpolated to the estimate's stamp
+(`core.evaluation.score`). `--metrics` writes them with the run information as JSON.
+
+Exit codes: 0 success; 1 data problem (missing topic, corrupt or foreign file, wrong message
+type, no pose in the bag, incompatible checkpoint, nothing to save); 2 usage (bad arguments,
+bad parameters file, output exists without `--force`). An incomplete input (writer killed, no
+summary) is replayed as far as it can be read; the run is flagged `partial` (warning on stderr,
+`partial: true` in the metrics JSON and in every diagnostics message).
+"""
+# rclpy's message constructors are untyped.
+# mypy: disable-error-code="no-untyped-call"
+from __future__ import annotations
+
+import argparse
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, fields
+import json
+import math
+import os
+from pathlib import Path
+import sys
+import time
+from typing import Any, TextIO
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
+from numpy.typing import NDArray
+from std_msgs.msg import Float64
+import torch
+import yaml
+
+from lf_predictor_ros.bag.mcap_reader import BagError, BagReader
+from lf_predictor_ros.bag.mcap_writer import BagWriter
+from lf_predictor_ros.bag.ros_codec import deserialize, offered_qos_yaml, serialize
+from lf_predictor_ros.core.alignment import AlignedSample, AlignerSettings, InputAligner
+from lf_predictor_ros.core.baselines.cascade import CascadeFilter
+from lf_predictor_ros.core.estimator import EstimatorStatus, wrap_to_pi
+from lf_predictor_ros.core.evaluation import DEFAULT_WAVE_BAND, Metrics, format_table, score
+from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.predictor import AdaptivePredictor
+from lf_predictor_ros.nodes.conversions import (
+    FRAME_EARTH,
+    NS_PER_S,
+    msg_to_force,
+    msg_to_pose,
+    pose_to_msg,
+    sec_to_stamp,
+    stamp_to_ns,
+)
+from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, make_diagnostic_array
+from lf_predictor_ros.nodes.qos import publisher_qos
+
+FloatArray = NDArray[np.float64]
+
+EXIT_OK = 0
+EXIT_DATA = 1  # the bag, a checkpoint or the data in it is the problem
+EXIT_USAGE = 2  # the command line or the parameters file is the problem
+
+POSE_TYPE = 'geometry_msgs/msg/PoseStamped'
+WRENCH_TYPE = 'geometry_msgs/msg/WrenchStamped'
+FLOAT_TYPE = 'std_msgs/msg/Float64'
+DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
+WAVE_TOPIC = '/wave_peak_frequency'
+DIAGNOSTICS_TOPIC = '/diagnostics'
+DIAGNOSTICS_NAME = 'replay: lf predictor'
+DEFAULT_DIAGNOSTICS_PERIOD = 1.0  # [s of bag time]
+PROGRESS_PERIOD = 0.2  # [s wall] between two progress-bar redraws
+PROGRESS_WIDTH = 30  # [characters] of the bar itself
+
+ALIGNER_KEYS = tuple(f.name for f in fields(AlignerSettings) if f.name != 'sample_time')
+NODE_KEYS_USED = ('frame_id', 'diagnostics_period')
+NODE_KEYS_IGNORED = ('model_path', 'autostart', 'use_sim_time')
+_LEVEL_OF_STATE = {'warming_up': 'OK', 'trained': 'OK', 'ok': 'OK', 'fallback': 'WARN',
+                   'error': 'ERROR'}
+
+
+class UsageError(Exception):
+    """The command line or the parameters file is wrong (exit code 2)."""
+
+
+# ---------------------------------------------------------------------------------- options
+@dataclass(frozen=True)
+class ReplayOptions:
+    """Command-line options of `replay`."""
+
+    input: str
+    output: str
+    params_file: str | None = None
+    pose_topic: str = '/measured_pose'
+    thrust_topic: str = '/thrust'
+    lf_topic: str = '/lf_pose'
+    truth_topic: str = '/truth/lf_pose'
+    seed: int | None = None
+    metrics: str | None = None
+    load_model: str | None = None
+    save_model: str | None = None
+    progress: bool = True
+    force: bool = False
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argparse parser of `replay` (usage errors exit 2)."""
+    parser = argparse.ArgumentParser(
+        prog='replay',
+        description='Run the adaptive LF predictor over a recorded bag (offline, deterministic '
+                    'for a seed) and write a new bag with the estimates, and metrics.')
+    parser.add_argument('input', help='.mcap file or rosbag2 directory')
+    parser.add_argument('-o', '--output', required=True, help='output .mcap file')
+    parser.add_argument('--params-file', metavar='FILE',
+                        help='ROS 2 parameters YAML of the predictor node')
+    parser.add_argument('--pose-topic', default='/measured_pose', metavar='T',
+                        help='measured pose topic (default /measured_pose)')
+    parser.add_argument('--thrust-topic', default='/thrust', metavar='T',
+                        help='applied thrust topic (default /thrust)')
+    parser.add_argument('--lf-topic', default='/lf_pose', metavar='T',
+                        help='output LF estimate topic (default /lf_pose)')
+    parser.add_argument('--truth-topic', default='/truth/lf_pose', metavar='T',
+                        help='true LF pose topic for metrics (default /truth/lf_pose)')
+    parser.add_argument('--seed', type=int, metavar='N',
+                        help='network initialization seed (overrides the params file)')
+    parser.add_argument('--metrics', metavar='FILE.json', help='write metrics and run info')
+    parser.add_argument('--load-model', metavar='CKPT', help='warm start from a checkpoint')
+    parser.add_argument('--save-model', metavar='CKPT',
+                        help='save the network in service at the end')
+    parser.add_argument('--no-progress', action='store_true',
+                        help='no progress bar (it is shown only on a terminal anyway)')
+    parser.add_argument('--force', action='store_true', help='overwrite OUTPUT if it exists')
+    return parser
+
+
+def parse_args(argv: Sequence[str] | None) -> ReplayOptions:
+    """Parse the arguments (without the program name); argparse exits 2 on usage errors."""
+    ns = build_parser().parse_args(list(argv) if argv is not None else sys.argv[1:])
+    return ReplayOptions(input=ns.input, output=ns.output, params_file=ns.params_file,
+                         pose_topic=ns.pose_topic, thrust_topic=ns.thrust_topic,
+                         lf_topic=ns.lf_topic, truth_topic=ns.truth_topic, seed=ns.seed,
+                         metrics=ns.metrics, load_model=ns.load_model,
+                         save_model=ns.save_model, progress=not ns.no_progress,
+                         force=ns.force)
+
+
+# ---------------------------------------------------------------------------- params file
+@dataclass(frozen=True)
+class ReplayConfig:
+    """Everything taken from the parameters file (and --seed)."""
+
+    params: PredictorParams
+    aligner: AlignerSettings
+    frame_id: str = FRAME_EARTH
+    diagnostics_period: float = DEFAULT_DIAGNOSTICS_PERIOD  # [s of bag time]
+
+
+def _node_sections(document: Any, path: str) -> list[Mapping[str, Any]]:
+    """The `ros__parameters` mappings for the predictor node, `/**` first."""
+    if not isinstance(document, Mapping):
+        raise UsageError(f'parameters file {path!r} is not a ROS 2 parameters YAML (a mapping '
+                         'of node names to ros__parameters); see config/predictor.yaml')
+    wildcard, specific = [], []
+    for name, section in document.items():
+        key = str(name)
+        if key in ('/**', '**'):
+            wildcard.append(section)
+        elif key.rstrip('/').split('/')[-1] == 'predictor':
+            specific.append(section)
+    found = []
+    for section in wildcard + specific:
+        if not isinstance(section, Mapping) or not isinstance(
+                section.get('ros__parameters'), Mapping):
+            raise UsageError(f'parameters file {path!r}: a node section has no '
+                             '`ros__parameters:` mapping; write `/**:` then '
+                             '`  ros__parameters:` then the parameters')
+        found.append(section['ros__parameters'])
+    if not found:
+        raise UsageError(f'parameters file {path!r} has no `/**:` or `predictor:` section (it '
+                         f'has {[str(k) for k in document]}); put the parameters under '
+                         '`/**: ros__parameters:`')
+    return found
+
+
+def _flatten(values: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
+    """Nested parameter mappings to ROS dotted names."""
+    flat: dict[str, Any] = {}
+    for key, value in values.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            flat.update(_flatten(value, f'{name}.'))
+        else:
+            flat[name] = value
+    return flat
+
+
+def load_config(params_file: str | None, seed: int | None = None) -> ReplayConfig:
+    """PredictorParams, aligner settings and node settings from a ROS 2 params file.
+
+    Raises UsageError naming the file and the broken rule (unreadable file, unknown key,
+    invalid value).
+    """
+    values: dict[str, Any] = {}
+    if params_file is not None:
+        try:
+            document = yaml.safe_load(Path(params_file).read_text(encoding='utf-8'))
+        except OSError as err:
+            raise UsageError(f'cannot read parameters file {params_file!r}: '
+                             f'{err.strerror or err}') from None
+        except yaml.YAMLError as err:
+            raise UsageError(f'parameters file {params_file!r} is not valid YAML: '
+                             f'{" ".join(str(err).split())}') from None
+        for section in _node_sections(document, params_file):
+            values.update(_flatten(section))
+    for key in NODE_KEYS_IGNORED:
+        values.pop(key, None)
+    known = set(PredictorParams.field_names()) | set(ALIGNER_KEYS) | set(NODE_KEYS_USED)
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise UsageError(f'parameters file {params_file!r}: unknown key(s) {unknown}; valid '
+                         f'keys are the PredictorParams fields, the aligner settings '
+                         f'{list(ALIGNER_KEYS)} and {list(NODE_KEYS_USED)}')
+    if seed is not None:
+        values['seed'] = seed
+    predictor_values = {k: v for k, v in values.items() if k in PredictorParams.field_names()}
+    aligner_values = {k: v for k, v in values.items() if k in ALIGNER_KEYS}
+    try:
+        params = PredictorParams.from_dict(predictor_values)
+        aligner = AlignerSettings(sample_time=params.sample_time, **aligner_values)
+        frame_id = str(values.get('frame_id', FRAME_EARTH))
+        period = float(values.get('diagnostics_period', DEFAULT_DIAGNOSTICS_PERIOD))
+    except (TypeError, ValueError) as err:
+        raise UsageError(f'parameters file {params_file!r}: {err}') from None
+    if not (period > 0.0 and math.isfinite(period)):
+        raise UsageError(f'parameters file {params_file!r}: diagnostics_period must be > 0 s, '
+                         f'got {period}')
+    return ReplayConfig(params, aligner, frame_id, period)
+
+
+# --------------------------------------------------------------------------- diagnostics
+def predictor_diagnostics(status: EstimatorStatus, counters: Mapping[str, int],
+                          aligner_counters: Mapping[str, int], stamp: Time, *,
+                          samples: int, name: str = DIAGNOSTICS_NAME,
+                          extra: Mapping[str, DiagnosticValue] | None = None) -> DiagnosticArray:
+    """/diagnostics of the predictor with the predictor node's level, message and keys.
+
+    Level by state: warming_up / trained → OK, fallback → WARN, error → ERROR; message
+    '<state>: <status message>'. Keys as `nodes.predictor_node` publishes them: state,
+    wave_peak_freq, last_loss, train_seconds, model_age, buffer_fill (nan when unknown),
+    trainings, rejected_trainings, overruns, training_errors, guard_trips, segments, samples,
+    dropped (= invalid + out_of_order + outliers), invalid, out_of_order, outliers, gaps, resets,
+    stale_thrust; then `extra`.
+    """
+    def number(value: float | None) -> float:
+        return math.nan if value is None else float(value)
+
+    invalid = int(aligner_counters.get('invalid', 0))
+    out_of_order = int(aligner_counters.get('out_of_order', 0))
+    outliers = int(aligner_counters.get('outliers', 0))
+    values: dict[str, DiagnosticValue] = {
+        'state': status.state,
+        'wave_peak_freq': number(status.wave_peak_freq),
+        'last_loss': number(status.last_loss),
+        'train_seconds': number(status.train_seconds),
+        'model_age': number(status.model_age),
+        'buffer_fill': number(status.buffer_fill),
+        'trainings': int(status.trainings),
+        'rejected_trainings': int(status.rejected_trainings),
+        'overruns': int(counters.get('overruns', 0)),
+        'training_errors': int(counters.get('training_errors', 0)),
+        'guard_trips': int(counters.get('guard_trips', 0)),
+        'segments': int(counters.get('segments', 0)),
+        'samples': int(samples),
+        'dropped': invalid + out_of_order + outliers,
+        'invalid': invalid,
+        'out_of_order': out_of_order,
+        'outliers': outliers,
+        'gaps': int(aligner_counters.get('gaps', 0)),
+        'resets': int(aligner_counters.get('resets', 0)),
+        'stale_thrust': int(aligner_counters.get('stale_force_samples', 0)),
+    }
+    values.update(extra or {})
+    level = _LEVEL_OF_STATE.get(status.state, 'WARN')
+    return make_diagnostic_array(name, level, f'{status.state}: {status.message}', values,
+                                 stamp=stamp)
+
+
+# ------------------------------------------------------------------------------ progress
+class Progress:
+    """A one-line text progress bar on a terminal stream; silent when disabled."""
+
+    def __init__(self, stream: TextIO, start_ns: int, end_ns: int, enabled: bool) -> None:
+        self._stream = stream
+        self._start_ns = start_ns
+        self._span_ns = max(1, end_ns - start_ns)
+        self._enabled = enabled
+        self._last_draw = -math.inf
+        self._drawn = False
+
+    def update(self, log_time_ns: int, messages: int, force: bool = False) -> None:
+        """Redraw at most every PROGRESS_PERIOD wall seconds."""
+        if not self._enabled:
+            return
+        now = time.monotonic()
+        if not force and now - self._last_draw < PROGRESS_PERIOD:
+            return
+        self._last_draw = now
+        fraction = min(1.0, max(0.0, (log_time_ns - self._start_ns) / self._span_ns))
+        filled = int(round(fraction * PROGRESS_WIDTH))
+        bar = '#' * filled + '-' * (PROGRESS_WIDTH - filled)
+        self._stream.write(f'\rreplay [{bar}] {100.0 * fraction:5.1f} % {messages} msgs')
+        self._stream.flush()
+        self._drawn = True
+
+    def finish(self) -> None:
+        """End the bar's line."""
+        if self._drawn:
+            self._stream.write('\n')
+            self._stream.flush()
+
+
+# -------------------------------------------------------------------------------- replay
+@dataclass
+class SampleLog:
+    """What the replay produced per aligned sample, for the metrics."""
+
+    t: list[float] = field(default_factory=list)  # [s] grid time of the sample
+    pose: list[FloatArray] = field(default_factory=list)  # aligned measured pose at t
+    force: list[FloatArray] = field(default_factory=list)
+    estimate: list[FloatArray] = field(default_factory=list)  # predicted for t + h
+    segment_start: list[bool] = field(default_factory=list)
+    network: list[bool] = field(default_factory=list)  # estimate came from the network
+
+
+@dataclass
+class ReplayResult:
+    """Outcome of one replay."""
+
+    messages_in: int = 0
+    messages_out: int = 0
+    estimates: int = 0
+    wall_time: float = 0.0  # [s]
+    bag_duration: float = 0.0  # [s] log-time span of the input
+    partial: bool = False
+    problem: str | None = None
+    warnings: list[str] = field(default_factory=list)
+    counters: dict[str, int] = field(default_factory=dict)
+    aligner_counters: dict[str, int] = field(default_factory=dict)
+    final_wave_peak_freq: float | None = None
+    final_state: str = ''
+    samples: SampleLog = field(default_factory=SampleLog)
+    truth_t: list[float] = field(default_factory=list)
+    truth_pose: list[FloatArray] = field(default_factory=list)
+    metrics: dict[str, Metrics] | None = None
+    evaluation_start: float | None = None  # [s]
+
+    @property
+    def realtime_factor(self) -> float:
+        """Bag seconds replayed per wall second."""
+        return self.bag_duration / self.wall_time if self.wall_time > 0.0 else math.inf
+
+
+def _stamp_seconds(message: Any, log_time_ns: int) -> float:
+    """Header stamp [s]; the log time when the stamp is unset (zero)."""
+    ns = stamp_to_ns(message.header.stamp)
+    return (ns if ns > 0 else log_time_ns) / NS_PER_S
+
+
+def _check_input_topics(reader: BagReader, options: ReplayOptions) -> dict[str, str]:
+    topics = reader.topics()
+    for topic, expected in ((options.pose_topic, POSE_TYPE), (options.thrust_topic, WRENCH_TYPE)):
+        if topic not in topics:
+            raise BagError(f'topic {topic!r} is not in bag {str(reader.path)!r}; it has '
+                           f'{sorted(topics)} (choose with --pose-topic / --thrust-topic)')
+        if topics[topic] != expected:
+            raise BagError(f'topic {topic!r} in bag {str(reader.path)!r} has type '
+                           f'{topics[topic]}, expected {expected}')
+    truth = options.truth_topic
+    if truth in topics and topics[truth] != POSE_TYPE:
+        raise BagError(f'truth topic {truth!r} has type {topics[truth]}, expected {POSE_TYPE}')
+    return topics
+
+
+class _Replayer:
+    """Streams one bag through aligner and predictor into the writer."""
+
+    def __init__(self, options: ReplayOptions, config: ReplayConfig, reader: BagReader,
+                 writer: BagWriter, result: ReplayResult) -> None:
+        self.options = options
+        self.config = config
+        self.reader = reader
+        self.writer = writer
+        self.result = result
+        self.h = config.params.sample_time
+        self.aligner = InputAligner(config.aligner)
+        self.predictor = AdaptivePredictor(config.params, background=False)
+        self.next_diagnostics: float | None = None
+        self.first_sample = True
+        self.channels: dict[int, int] = {}
+        qos = offered_qos_yaml([publisher_qos()])
+        self.lf_channel = writer.add_topic(options.lf_topic, POSE_TYPE, qos)
+        self.wave_channel = writer.add_topic(WAVE_TOPIC, FLOAT_TYPE, qos)
+        self.replaced = {options.lf_topic, WAVE_TOPIC}
+        self._copy_channels(qos)
+
+    def _copy_channels(self, qos: str) -> None:
+        diagnostics_channel = None
+        for info in self.reader.topic_infos().values():
+            if info.topic in self.replaced:
+                self.result.warnings.append(
+                    f'input topic {info.topic!r} is replaced by the replay output, not copied')
+                continue
+            if info.topic == DIAGNOSTICS_TOPIC and info.type_name != DIAGNOSTICS_TYPE:
+                raise BagError(f'input topic {DIAGNOSTICS_TOPIC!r} has type {info.type_name}, '
+                               f'expected {DIAGNOSTICS_TYPE}')
+            channel = self.writer.add_topic(info.topic, info.type_name,
+                                            info.offered_qos_profiles or None,
+                                            type_hash=info.type_hash,
+                                            definition=info.definition or None)
+            if info.topic == DIAGNOSTICS_TOPIC:
+                diagnostics_channel = channel
+        self._diagnostics_channel = diagnostics_channel if diagnostics_channel is not None \
+            else self.writer.add_topic(DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE, qos)
+
+    def load(self, path: str) -> None:
+        """Warm start (ValueError for an incompatible or corrupt checkpoint)."""
+        self.predictor.load(path)
+
+    def run(self, progress: Progress) -> None:
+        """Copy every message, feed pose and thrust, write the estimates."""
+        out_channels: dict[str, int] = {}
+        for channel, message in self.reader.records():
+            topic = channel.topic
+            self.result.messages_in += 1
+            if topic not in self.replaced:
+                out = out_channels.get(topic)
+                if out is None:
+                    out = out_channels[topic] = self.writer.add_topic(
+                        topic, self.reader.topics()[topic])
+                self._write(out, message.log_time, message.data, message.publish_time)
+            if topic == self.options.thrust_topic:
+                self._thrust(message.data, message.log_time)
+            elif topic == self.options.pose_topic:
+                self._pose(message.data, message.log_time)
+            elif topic == self.options.truth_topic:
+                self._truth(message.data, message.log_time)
+            progress.update(message.log_time, self.result.messages_in)
+        progress.update(self.reader.end_time_ns, self.result.messages_in, force=True)
+
+    def _write(self, channel: int, log_time_ns: int, data: bytes,
+               publish_time_ns: int | None = None) -> None:
+        self.writer.write(channel, log_time_ns, data, publish_time_ns)
+        self.result.messages_out += 1
+
+    def _decode(self, data: bytes, type_name: str, topic: str) -> Any:
+        try:
+            return deserialize(data, type_name)
+        except Exception as err:  # rclpy raises plain exceptions on malformed CDR
+            raise BagError(f'a message on {topic!r} does not decode as {type_name} ({err}); '
+                           'the bag is corrupt') from None
+
+    def _thrust(self, data: bytes, log_time_ns: int) -> None:
+        message = self._decode(data, WRENCH_TYPE, self.options.thrust_topic)
+        try:
+            force: object = msg_to_force(message)
+        except ValueError:
+            force = np.full(3, np.nan)  # the aligner drops and counts it
+        self.aligner.add_force(_stamp_seconds(message, log_time_ns), force)
+
+    def _truth(self, data: bytes, log_time_ns: int) -> None:
+        message = self._decode(data, POSE_TYPE, self.options.truth_topic)
+        try:
+            pose = msg_to_pose(message)
+        except ValueError:
+            return
+        self.result.truth_t.append(_stamp_seconds(message, log_time_ns))
+        self.result.truth_pose.append(pose)
+
+    def _pose(self, data: bytes, log_time_ns: int) -> None:
+        message = self._decode(data, POSE_TYPE, self.options.pose_topic)
+        try:
+            pose: object = msg_to_pose(message)
+        except ValueError:
+            pose = np.full(3, np.nan)  # the aligner drops and counts it
+        for sample in self.aligner.add_pose(_stamp_seconds(message, log_time_ns), pose):
+            self._sample(sample, log_time_ns)
+
+    def _sample(self, sample: AlignedSample, log_time_ns: int) -> None:
+        if sample.segment_start and not self.first_sample:
+            self.predictor.restart_segment()
+        self.first_sample = False
+        estimate = self.predictor.update(sample.t, sample.pose, sample.force)
+        status = self.predictor.status()
+        log = self.result.samples
+        log.t.append(sample.t)
+        log.pose.append(sample.pose)
+        log.force.append(sample.force)
+        log.estimate.append(estimate)
+        log.segment_start.append(sample.segment_start)
+        log.network.append(status.state == 'trained')
+        self.result.estimates += 1
+        lf_msg = pose_to_msg(estimate, sample.t + self.h, self.config.frame_id)
+        self._write(self.lf_channel, log_time_ns, serialize(lf_msg))
+        freq = self.predictor.wave_peak_freq
+        if freq is not None:
+            self._write(self.wave_channel, log_time_ns, serialize(Float64(data=float(freq))))
+        if self.next_diagnostics is None or sample.t >= self.next_diagnostics - 1e-9:
+            self._diagnostics(sample.t, log_time_ns, status)
+            period = self.config.diagnostics_period
+            base = sample.t if self.next_diagnostics is None else self.next_diagnostics
+            steps = max(1, math.floor((sample.t - base) / period + 1e-9) + 1)
+            self.next_diagnostics = base + steps * period
+
+    def _diagnostics(self, t: float, log_time_ns: int, status: EstimatorStatus) -> None:
+        extra: dict[str, DiagnosticValue] = {
+            'warm_start': bool(self.options.load_model),
+            'model_file': self.options.load_model or '',
+            'partial': self.result.partial,
+        }
+        array = predictor_diagnostics(status, self.predictor.counters,
+                                      self.aligner.counters.as_dict(), sec_to_stamp(t),
+                                      samples=self.result.estimates, extra=extra)
+        self._write(self._diagnostics_channel, log_time_ns, serialize(array))
+
+
+def replay(options: ReplayOptions, config: ReplayConfig,
+           progress_stream: TextIO | None = None) -> ReplayResult:
+    """Run the replay; raises BagError (data), UsageError (arguments) or ValueError (model)."""
+    output = Path(options.output)
+    if output.exists() and not options.force:
+        raise UsageError(f'output {options.output!r} exists already; choose another path or '
+                         'pass --force to overwrite it')
+    if output.exists() and output.resolve() == _input_file(options.input).resolve():
+        raise UsageError('output must not be the input bag; choose another path')
+    result = ReplayResult()
+    wall_start = time.monotonic()
+    with BagReader(options.input, allow_incomplete=True) as reader:
+        _check_input_topics(reader, options)
+        if not reader.complete:
+            result.partial = True
+            result.problem = reader.problem
+            result.warnings.append(f'input bag is incomplete ({reader.problem}); replaying the '
+                                   'readable part, results are flagged partial')
+        result.bag_duration = max(0.0, (reader.end_time_ns - reader.start_time_ns) / NS_PER_S)
+        stream = progress_stream if progress_stream is not None else sys.stderr
+        progress = Progress(stream, reader.start_time_ns, reader.end_time_ns,
+                            options.progress and stream.isatty())
+        try:
+            with BagWriter(output, overwrite=options.force) as writer:
+                replayer = _Replayer(options, config, reader, writer, result)
+                if options.load_model:
+                    replayer.load(options.load_model)
+                try:
+                    replayer.run(progress)
+                finally:
+                    progress.finish()
+                    replayer.predictor.close()
+        except BaseException:
+            output.unlink(missing_ok=True)
+            raise
+    result.wall_time = time.monotonic() - wall_start
+    result.counters = dict(replayer.predictor.counters)
+    result.aligner_counters = replayer.aligner.counters.as_dict()
+    result.final_wave_peak_freq = replayer.predictor.wave_peak_freq
+    result.final_state = replayer.predictor.status().state
+    if result.estimates == 0:
+        output.unlink(missing_ok=True)
+        raise BagError(f'bag {options.input!r} ends without any usable pose on '
+                       f'{options.pose_topic!r}: nothing to replay')
+    if options.save_model:
+        try:
+            replayer.predictor.save(options.save_model)
+        except (OSError, ValueError) as err:
+            raise ValueError(f'cannot save the model to {options.save_model!r}: {err}') from None
+    if result.truth_t:
+        result.metrics, result.evaluation_start = evaluate(result, config)
+    return result
+
+
+def _input_file(path: str) -> Path:
+    bag = Path(path)
+    if bag.is_dir():
+        return bag / '__directory__'
+    return bag
+
+
+# ---------------------------------------------------------------------------- evaluation
+def _interpolate_pose(t_query: FloatArray, t: FloatArray, poses: FloatArray) -> FloatArray:
+    """Linear interpolation of poses (n, 3) at t_query; heading along the unwrapped path."""
+    order = np.argsort(t, kind='stable')
+    t_sorted, p_sorted = t[order], poses[order]
+    out = np.empty((t_query.size, 3))
+    for column in range(3):
+        values = np.unwrap(p_sorted[:, column]) if column == 2 else p_sorted[:, column]
+        out[:, column] = np.interp(t_query, t_sorted, values)
+    out[:, 2] = wrap_to_pi(out[:, 2])
+    return out
+
+
+def _cascade_estimates(log: SampleLog, params: PredictorParams,
+                       wave_peak_freq: float) -> FloatArray:
+    """The causal cascade at a fixed ω0 over the aligned samples (reset at segment starts)."""
+    cascade = CascadeFilter(params.ndof, params.sample_time, wave_peak_freq,
+                            notch_zeta=params.notch_zeta, notch_depth=params.notch_depth,
+                            lowpass_offset=params.lowpass_offset)
+    out = np.empty((len(log.t), 3))
+    for k, (t, pose, force) in enumerate(zip(log.t, log.pose, log.force, strict=True)):
+        if log.segment_start[k] and k > 0:
+            cascade.reset()
+        out[k] = cascade.update(t, pose, force)
+    return out
+
+
+def evaluate(result: ReplayResult,
+             config: ReplayConfig) -> tuple[dict[str, Metrics] | None, float | None]:
+    """Predictor, raw measurement and cascade vs truth on common stamps after warm-up.
+
+    The predictor's estimate from the sample at t is valid at t + h; the measurement and the
+    cascade at t. All three are compared on the grid stamps where each has a value, from the
+    first sample whose estimate came from the network (from the start if none did), inside the
+    truth's time span. Returns (None, None) when fewer than 3 stamps remain.
+    """
+    params = config.params
+    log = result.samples
+    h = params.sample_time
+    t = np.asarray(log.t, dtype=np.float64)
+    grid = np.rint(t / h).astype(np.int64)
+    network_k = [k for k, used in enumerate(log.network) if used]
+    start = float(t[network_k[0]]) if network_k else float(t[0])
+    freq = result.final_wave_peak_freq
+    if freq is None:
+        freq = math.sqrt(params.wave_band[0] * params.wave_band[1])
+    series = {
+        'predictor': dict(zip((grid + 1).tolist(), log.estimate, strict=True)),
+        'measurement': dict(zip(grid.tolist(), log.pose, strict=True)),
+        'cascade': dict(zip(grid.tolist(), _cascade_estimates(log, params, freq), strict=True)),
+    }
+    truth_t = np.asarray(result.truth_t, dtype=np.float64)
+    truth_pose = np.asarray(result.truth_pose, dtype=np.float64).reshape(-1, 3)
+    common = set(series['predictor']) & set(series['measurement'])
+    keys = np.array(sorted(k for k in common
+                           if k * h >= start - 1e-9 and truth_t.min() <= k * h <= truth_t.max()),
+                    dtype=np.int64)
+    if keys.size < 3:
+        result.warnings.append('fewer than 3 samples overlap the truth after warm-up: '
+                               'no metrics')
+        return None, start
+    stamps = (keys * h).astype(np.float64)
+    truth = _interpolate_pose(stamps, truth_t, truth_pose)
+    metrics = {name: score(stamps, np.array([values[k] for k in keys.tolist()]), truth,
+                           params.ndof, DEFAULT_WAVE_BAND)
+               for name, values in series.items()}
+    return metrics, start
+
+
+# ------------------------------------------------------------------------------- report
+def summary_lines(result: ReplayResult, options: ReplayOptions) -> list[str]:
+    """Human-readable summary (stdout)."""
+    counters = result.counters
+    lines = [
+        f'replay: {result.messages_in} messages in, {result.messages_out} out '
+        f'({result.estimates} estimates) -> {options.output}',
+        f'replay: {counters.get("trainings", 0)} trainings '
+        f'({counters.get("rejected_trainings", 0)} rejected, '
+        f'{counters.get("training_errors", 0)} errors), final state {result.final_state}, '
+        f'wave peak frequency {_fmt(result.final_wave_peak_freq)} rad/s',
+        f'replay: {result.bag_duration:.1f} s of bag in {result.wall_time:.2f} s wall '
+        f'({result.realtime_factor:.1f} x real time)' + (' [PARTIAL]' if result.partial else ''),
+    ]
+    if result.metrics:
+        lines.append(f'metrics vs {options.truth_topic} from t = {result.evaluation_start:.1f} s '
+                     '(after warm-up):')
+        lines.append(format_table(result.metrics))
+    elif result.metrics is None and result.truth_t:
+        lines.append('replay: no metrics (too little overlap with the truth)')
+    else:
+        lines.append(f'replay: no {options.truth_topic} in the bag: no metrics')
+    return lines
+
+
+def _fmt(value: float | None) -> str:
+    return 'unknown' if value is None else f'{value:.4g}'
+
+
+def metrics_document(result: ReplayResult, options: ReplayOptions,
+                     config: ReplayConfig) -> dict[str, Any]:
+    """The JSON written by --metrics."""
+    return {
+        'input': str(options.input),
+        'output': str(options.output),
+        'partial': result.partial,
+        'problem': result.problem,
+        'seed': config.params.seed,
+        'params': config.params.to_dict(),
+        'topics': {'pose': options.pose_topic, 'thrust': options.thrust_topic,
+                   'lf': options.lf_topic, 'truth': options.truth_topic},
+        'messages_in': result.messages_in,
+        'messages_out': result.messages_out,
+        'estimates': result.estimates,
+        'wall_time': result.wall_time,
+        'bag_duration': result.bag_duration,
+        'realtime_factor': result.realtime_factor,
+        'trainings': result.counters.get('trainings', 0),
+        'counters': result.counters,
+        'aligner_counters': result.aligner_counters,
+        'final_state': result.final_state,
+        'final_wave_peak_freq': result.final_wave_peak_freq,
+        'evaluation_start': result.evaluation_start,
+        'wave_band': list(DEFAULT_WAVE_BAND),
+        'metrics': (None if result.metrics is None
+                    else {name: m.to_dict() for name, m in result.metrics.items()}),
+    }
+
+
+def _write_json(path: str, document: Mapping[str, Any]) -> None:
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = target.with_name(target.name + '.tmp')
+    tmp.write_text(json.dumps(document, indent=2, allow_nan=True) + '\n', encoding='utf-8')
+    os.replace(tmp, target)
+
+
+# --------------------------------------------------------------------------------- main
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the `replay` executable; returns the exit code."""
+    options = parse_args(argv)
+    torch.set_num_threads(1)  # deterministic and polite on shared cores
+    try:
+        config = load_config(options.params_file, options.seed)
+        result = replay(options, config)
+    except UsageError as err:
+        print(f'replay: error: {err}', file=sys.stderr)
+        return EXIT_USAGE
+    except (BagError, ValueError, OSError) as err:
+        print(f'replay: error: {err}', file=sys.stderr)
+        return EXIT_DATA
+    except KeyboardInterrupt:
+        print('replay: interrupted; output removed', file=sys.stderr)
+        return 130
+    for warning in result.warnings:
+        print(f'replay: warning: {warning}', file=sys.stderr)
+    print('\n'.join(summary_lines(result, options)))
+    if options.metrics:
+        try:
+            _write_json(options.metrics, metrics_document(result, options, config))
+        except OSError as err:
+            print(f'replay: error: cannot write metrics {options.metrics!r}: '
+                  f'{err.strerror or err}', file=sys.stderr)
+            return EXIT_DATA
+    return EXIT_OK
+
+
+if __name__ == '__main__':
+    sys.exit(main())

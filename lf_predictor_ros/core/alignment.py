@@ -191,8 +191,11 @@ class InputAligner:
         while self._next_grid <= t1 + 1e-9:
             tg = self._next_grid
             w = 0.0 if t1 <= t0 else min(max((tg - t0) / (t1 - t0), 0.0), 1.0)
-            pose = p0 + w * (p1 - p0)
-            pose[2] = _wrap(float(p0[2]) + w * dyaw)
+            if w >= 1.0:  # exactly on the new pose: no rounding from interpolation
+                pose = p1.copy()
+            else:
+                pose = p0 + w * (p1 - p0)
+                pose[2] = _wrap(float(p0[2]) + w * dyaw)
             out.append(self._sample(tg, pose))
             self._next_grid = round((tg + step) / step) * step
         return out

@@ -1,0 +1,641 @@
+"""Tests of the real-time adaptive predictor (`core.predictor.AdaptivePredictor`).
+
+Small Algorithm 4.1 windows at h = 1 s (Δ 20, N 200, ε 10, α 60, β 40 samples, γ 480 samples:
+the shortest γ the spectral resolution rule accepts) so a test sees several trainings in a few
+hundred samples. Inline mode (background=False) is deterministic; the background tests measure
+the wall time of every `update` while a long training runs on the worker thread.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+import functools
+import math
+from pathlib import Path
+import time
+
+import numpy as np
+from numpy.typing import NDArray
+import pytest
+import torch
+
+from lf_predictor_ros.core import predictor as predictor_module
+from lf_predictor_ros.core.baselines.cascade import CascadeFilter
+from lf_predictor_ros.core.network import NumpyNnarmax, predict_step
+from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.predictor import AdaptivePredictor
+from lf_predictor_ros.core.regressors import regressor_vector
+from lf_predictor_ros.core.retraining import first_training_samples
+from sim_ros.simulation import load_scenario, simulate
+
+# torch loads its forward-AD decompositions once per process via the deprecated torch.jit.script
+pytestmark = pytest.mark.filterwarnings(
+    'ignore:`torch.jit.script` is deprecated:DeprecationWarning'
+)
+
+FloatArray = NDArray[np.float64]
+SMALL = PredictorParams(sample_time=1.0, retrain_period=20.0, training_window=200.0,
+                        transient_length=10.0, filter_window=60.0, append_length=40.0,
+                        estimation_window=480.0, max_epochs=5)
+FIRST_TRAINING = 120  # [samples] max(α + max_lag + 1, min(γ, 2α)) = 2α for max_lag < 60
+DELTA = 20  # [samples] retrain period
+WAVE_PEAK_FREQ = 0.8  # [rad/s] ω0 of the onedof_excited scenario and of the synthetic waves
+BAND_CENTRE = math.sqrt(0.25 * 1.4)  # [rad/s] fallback notch before any ω0 estimate
+# Background mode: a training that keeps running for about 2 s of wall time.
+# Adam has no convergence stop here (min_grad 1e-10, no loss goal), so it uses the full 2 s.
+LONG = SMALL.replace(trainer='adam', max_epochs=1_000_000, max_train_seconds=2.0)
+LATENCY_BOUND = 0.050  # [s] generous bound on one update while a training runs
+SENSOR_PERIOD = 0.002  # [s] pause between two updates in the background tests
+
+
+@pytest.fixture(autouse=True)
+def _one_thread() -> None:
+    """Trainings in these tests run on one core (the machine is shared)."""
+    torch.set_num_threads(1)
+
+
+# ---- data ----------------------------------------------------------------------------------
+
+@functools.cache
+def onedof_record(seed: int, duration: float) -> tuple[FloatArray, FloatArray, FloatArray,
+                                                       FloatArray]:
+    """(t, measured pose, thrust, true LF pose) of the onedof_excited scenario at h = 1 s."""
+    record = simulate(load_scenario('onedof_excited'), seed, duration)
+    arrays = (record.t, record.measured_pose, record.thrust, record.truth_lf_pose)
+    for array in arrays:
+        array.setflags(write=False)
+    return arrays
+
+
+@functools.cache
+def synthetic_onedof(n: int, seed: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(t, pose, force): bounded LF motion (±4 m) + waves around 0.8 rad/s (0.35 m RMS)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n, dtype=float)  # [s] at h = 1 s
+    pose = np.zeros((n, 3))
+    pose[:, 0] = 4.0 * np.sin(2.0 * math.pi * t / 400.0) + _waves(t, 0.35, rng)
+    force = np.zeros((n, 3))
+    force[:, 0] = 5.0 * np.sign(np.sin(2.0 * math.pi * t / 97.0))  # [N] square wave
+    for array in (t, pose, force):
+        array.setflags(write=False)
+    return t, pose, force
+
+
+def _waves(t: FloatArray, rms: float, rng: np.random.Generator) -> FloatArray:
+    """Sum of 5 sinusoids at 0.96–1.04 × ω0 with random phases, total RMS ``rms``."""
+    freqs = WAVE_PEAK_FREQ * np.array([0.96, 0.98, 1.0, 1.02, 1.04])  # [rad/s]
+    phases = rng.uniform(0.0, 2.0 * math.pi, size=freqs.size)
+    amplitude = rms * math.sqrt(2.0 / freqs.size)
+    total: FloatArray = np.sum(
+        [amplitude * np.sin(w * t + p) for w, p in zip(freqs, phases, strict=True)], axis=0)
+    return total
+
+
+def wrap(angle: FloatArray) -> FloatArray:
+    """Angle wrapped to (−π, π]."""
+    wrapped: FloatArray = np.pi - np.mod(np.pi - angle, 2.0 * np.pi)
+    return wrapped
+
+
+@functools.cache
+def synthetic_threedof(n: int, seed: int) -> tuple[FloatArray, FloatArray, FloatArray,
+                                                   FloatArray]:
+    """(t, pose, force, LF yaw unwrapped): heading oscillating about π, crossing ±π often."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n, dtype=float)  # [s] at h = 1 s
+    lf_yaw = np.pi + 0.6 * np.sin(2.0 * math.pi * t / 90.0)  # [rad]
+    pose = np.zeros((n, 3))
+    pose[:, 0] = 5.0 * np.sin(2.0 * math.pi * t / 500.0) + _waves(t, 0.3, rng)  # [m]
+    pose[:, 1] = 3.0 * np.sin(2.0 * math.pi * t / 700.0 + 1.0) + _waves(t, 0.3, rng)  # [m]
+    pose[:, 2] = wrap(lf_yaw + _waves(t, 0.01, rng))
+    force = np.zeros((n, 3))
+    force[:, 0] = 5e3 * np.sign(np.sin(2.0 * math.pi * t / 97.0))  # [N]
+    force[:, 1] = 3e3 * np.sign(np.sin(2.0 * math.pi * t / 131.0))  # [N]
+    force[:, 2] = 1e5 * np.sign(np.sin(2.0 * math.pi * t / 83.0))  # [N·m]
+    return t, pose, force, lf_yaw
+
+
+def feed(predictor: AdaptivePredictor, t: FloatArray, pose: FloatArray, force: FloatArray,
+         start: int, stop: int, offset: float = 0.0) -> FloatArray:
+    """Outputs of ``update`` for samples start…stop−1 (north shifted by ``offset`` metres)."""
+    shift = np.array([offset, 0.0, 0.0])
+    return np.array([predictor.update(float(t[i]), pose[i] + shift, force[i])
+                     for i in range(start, stop)])
+
+
+def total_trainings(predictor: AdaptivePredictor) -> int:
+    """Accepted + rejected trainings."""
+    status = predictor.status()
+    return status.trainings + status.rejected_trainings
+
+
+def trained_predictor(n_samples: int = 200, **changes: object) -> AdaptivePredictor:
+    """Inline predictor fed the first ``n_samples`` of the onedof_excited record (seed 5)."""
+    t, pose, force, _ = onedof_record(5, 400.0)
+    predictor = AdaptivePredictor(SMALL.replace(**changes), background=False)
+    feed(predictor, t, pose, force, 0, n_samples)
+    return predictor
+
+
+# ---- warm-up, training schedule, outputs ---------------------------------------------------
+
+def test_first_training_sample_count() -> None:
+    assert first_training_samples(SMALL) == FIRST_TRAINING
+
+
+@pytest.mark.parametrize(('prior', 'notch'), [(0.0, BAND_CENTRE), (0.7, 0.7)])
+def test_output_is_the_cascade_fallback_before_the_first_training(prior: float,
+                                                                   notch: float) -> None:
+    t, pose, force, _ = onedof_record(5, 400.0)
+    predictor = AdaptivePredictor(SMALL.replace(initial_wave_peak_freq=prior), background=False)
+    cascade = CascadeFilter(1, 1.0, notch, notch_zeta=SMALL.notch_zeta,
+                            notch_depth=SMALL.notch_depth, lowpass_offset=SMALL.lowpass_offset)
+    for i in range(FIRST_TRAINING - 1):
+        out = predictor.update(float(t[i]), pose[i], force[i])
+        np.testing.assert_allclose(out, cascade.update(float(t[i]), pose[i], force[i]),
+                                   rtol=0.0, atol=1e-12)
+        status = predictor.status()
+        assert status.state == 'warming_up'
+        assert status.trainings == 0
+    assert predictor.model is None
+    params = predictor.params
+    capacity = max(params.training_samples + params.transient_samples,
+                   params.estimation_samples, params.filter_samples) + params.max_lag
+    assert predictor.status().buffer_fill == pytest.approx((FIRST_TRAINING - 1) / capacity)
+    assert predictor.wave_peak_freq == (prior if prior > 0.0 else None)
+
+
+@functools.cache
+def inline_run(n: int) -> tuple[FloatArray, tuple[int, ...], tuple[str, ...],
+                                AdaptivePredictor]:
+    """Inline predictor over n samples of onedof_excited (seed 5): outputs, trainings, states."""
+    t, pose, force, _ = onedof_record(5, 400.0)
+    predictor = AdaptivePredictor(SMALL, background=False)
+    counts, states, outputs = [], [], []
+    for i in range(n):
+        outputs.append(predictor.update(float(t[i]), pose[i], force[i]))
+        counts.append(total_trainings(predictor))
+        states.append(predictor.status().state)
+    out = np.array(outputs)
+    out.setflags(write=False)
+    return out, tuple(counts), tuple(states), predictor
+
+
+def lf_rmse(estimate: FloatArray, start: int) -> float:
+    """RMSE of predictions for t + h (rows start…) against the true LF north at t + h."""
+    _, _, _, lf = onedof_record(5, 400.0)
+    n = estimate.shape[0]
+    return float(np.sqrt(np.mean((estimate[start:n - 1, 0] - lf[start + 1:n, 0]) ** 2)))
+
+
+def test_trainings_happen_every_delta_samples_and_outputs_stay_finite() -> None:
+    out, counts, states, predictor = inline_run(400)
+    increments = [i + 1 for i in range(1, 400) if counts[i] > counts[i - 1]]
+    # first training at sample 120, then one every Δ = 20 samples: 120, 140, …, 400
+    assert counts[0] == 0
+    assert increments == list(range(FIRST_TRAINING, 401, DELTA))
+    assert counts[-1] == 15
+    status = predictor.status()
+    assert status.trainings >= 1
+    assert predictor.counters['training_errors'] == 0
+    assert all(state == 'warming_up' for state in states[:FIRST_TRAINING - 1])
+    after = states[FIRST_TRAINING:]
+    assert set(after) <= {'trained', 'fallback'}
+    assert after.count('trained') >= 0.9 * len(after)  # measured 280 of 280
+    assert status.state == 'trained'
+    assert np.all(np.isfinite(out))
+    np.testing.assert_array_equal(out[:, 1:], 0.0)  # 1 DOF: east and yaw are 0
+    assert predictor.wave_peak_freq is not None
+    assert abs(predictor.wave_peak_freq - WAVE_PEAK_FREQ) < 0.05 * WAVE_PEAK_FREQ
+    assert status.last_loss is not None and math.isfinite(status.last_loss)
+    assert status.model_age is not None and 0.0 <= status.model_age <= DELTA
+
+
+def test_predictions_beat_the_causal_cascade_against_the_true_lf_motion() -> None:
+    t, pose, force, _ = onedof_record(5, 400.0)
+    out, _, _, predictor = inline_run(400)
+    cascade = CascadeFilter(1, 1.0, WAVE_PEAK_FREQ, notch_zeta=SMALL.notch_zeta,
+                            notch_depth=SMALL.notch_depth, lowpass_offset=SMALL.lowpass_offset)
+    # the cascade estimates LF(t); used as the estimate for t + h like the prediction
+    baseline = np.array([cascade.update(float(t[i]), pose[i], force[i]) for i in range(400)])
+    start = 200  # five trainings done
+    predicted, classical = lf_rmse(out, start), lf_rmse(baseline, start)
+    print(f'RMSE vs true LF from sample {start}: predictor {predicted:.3f} m, cascade '
+          f'{classical:.3f} m')
+    assert predicted < classical  # measured 0.716 m vs 1.213 m
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    'with the small test windows the prediction of the LF pose at t + h is further from the '
+    'true LF motion (RMSE 0.716 m) than the bare measurement y(t) (0.564 m): the predictor adds '
+    'error instead of removing the wave motion'))
+def test_predictions_beat_the_measurement_itself_against_the_true_lf_motion() -> None:
+    _, pose, _, _ = onedof_record(5, 400.0)
+    out, _, _, _ = inline_run(400)
+    start = 200
+    assert lf_rmse(out, start) < lf_rmse(pose[:400], start)  # y(t) as the estimate of LF(t + h)
+
+
+def test_threedof_heading_output_wrapped_and_continuous_across_pi() -> None:
+    n = 300
+    t, pose, force, lf_yaw = synthetic_threedof(n, seed=11)
+    crossings = int(np.sum(np.abs(np.diff(pose[:, 2])) > np.pi))
+    assert crossings >= 6  # the measured heading jumps ±2π this often
+    predictor = AdaptivePredictor(SMALL.replace(ndof=3), background=False)
+    out = feed(predictor, t, pose, force, 0, n)
+    assert np.all(np.isfinite(out))
+    assert total_trainings(predictor) == 10
+    assert predictor.status().trainings >= 1
+    yaw = out[:, 2]
+    assert np.all(yaw > -np.pi) and np.all(yaw <= np.pi)
+    assert int(np.sum(np.abs(np.diff(yaw)) > np.pi)) >= 6  # the output crosses ±π too
+    steps = np.abs(np.diff(np.unwrap(yaw)))
+    # LF rate ≤ 0.042 rad/s; a guard switch between the lagging cascade and the network gives
+    # steps up to 0.21 rad (measured); a 2π wrap error would be a 6.28 rad step.
+    assert float(np.max(steps)) < 0.5  # [rad]
+    # prediction for t + h against the LF heading at t + h, modulo 2π
+    error = wrap(yaw[:-1] - lf_yaw[1:])
+    assert float(np.sqrt(np.mean(error[FIRST_TRAINING:] ** 2))) < 0.1  # [rad] measured 0.032
+
+
+# ---- background mode -----------------------------------------------------------------------
+
+class PredictSpy:
+    """Wraps ``predict_step`` and records the network and histories of every call."""
+
+    def __init__(self, original: Callable[..., FloatArray]) -> None:
+        self.original = original
+        self.calls: list[tuple[NumpyNnarmax, FloatArray, FloatArray, FloatArray,
+                               FloatArray]] = []
+
+    def __call__(self, net: NumpyNnarmax, u_hist: FloatArray, y_hist: FloatArray,
+                 fb_hist: FloatArray) -> FloatArray:
+        """Call the real predict_step and remember its arguments and result."""
+        result = self.original(net, u_hist, y_hist, fb_hist)
+        self.calls.append((net, np.array(u_hist), np.array(y_hist), np.array(fb_hist),
+                           np.array(result)))
+        return result
+
+
+def test_background_training_never_blocks_update_and_swaps_atomically(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    spy = PredictSpy(predict_step)
+    monkeypatch.setattr(predictor_module, 'predict_step', spy)
+    t, pose, force = synthetic_onedof(4000, seed=21)
+    predictor = AdaptivePredictor(LONG, background=True)
+    try:
+        latencies: list[float] = []
+        running: list[bool] = []
+        models: list[NumpyNnarmax | None] = []
+        train_seconds: list[float | None] = []
+        records: list[tuple[int, int, FloatArray]] = []  # (spy calls before, after, output)
+        i = 0
+        while i < len(t) and predictor.counters['trainings'] < 2:
+            before = len(spy.calls)
+            guard = predictor.counters['guard_trips']
+            start = time.perf_counter()
+            out = predictor.update(float(t[i]), pose[i], force[i])
+            latencies.append(time.perf_counter() - start)
+            running.append(not predictor.wait_for_training(0.0))
+            models.append(predictor.model)
+            train_seconds.append(predictor.status().train_seconds)
+            if predictor.counters['guard_trips'] == guard:
+                records.append((before, len(spy.calls), out))
+            i += 1
+            time.sleep(SENSOR_PERIOD)
+        assert predictor.counters['trainings'] == 2, 'two trainings within 4000 samples'
+        lat = np.array(latencies) * 1e3  # [ms]
+        p50, p99, worst = np.percentile(lat, 50), np.percentile(lat, 99), lat.max()
+        first_swap = next(k for k, model in enumerate(models) if model is not None)
+        print(f'update latency during background training: p50 {p50:.3f} ms, p99 {p99:.3f} ms, '
+              f'max {worst:.3f} ms over {lat.size} calls; first training '
+              f'{train_seconds[first_swap]:.2f} s, {first_swap - FIRST_TRAINING} updates served '
+              'meanwhile')
+        assert worst < LATENCY_BOUND * 1e3
+        # the first training starts at sample 120 and keeps running for ~2 s: every update in
+        # between is served (by the cascade) while the worker is alive, none waits for it
+        assert all(running[FIRST_TRAINING - 1:first_swap])
+        assert first_swap - FIRST_TRAINING >= 100
+        assert predictor.counters['overruns'] >= 1
+        assert train_seconds[first_swap] == pytest.approx(2.0, abs=0.6)  # max_train_seconds
+        check_atomic_swap(spy, models, records)
+    finally:
+        predictor.close()
+
+
+def check_atomic_swap(spy: PredictSpy, models: list[NumpyNnarmax | None],
+                      records: list[tuple[int, int, FloatArray]]) -> None:
+    """Every network output is exactly the old or the new network's output, never a mix."""
+    in_service = [m for k, m in enumerate(models) if m is not None and (k == 0 or
+                                                                         models[k - 1] is not m)]
+    assert len(in_service) == 2
+    old, new = in_service
+    assert old is not new
+    for model in in_service:
+        arrays = (model.x_mean, model.x_std, model.output_weight, *model.hidden_weights)
+        assert not any(array.flags.writeable for array in arrays)
+    swap = models.index(new)
+    compared = discriminating = 0
+    for before, after, out in records:
+        if after == before:
+            continue  # no network prediction in this call (fallback)
+        net, u_hist, y_hist, fb_hist, result = spy.calls[before]
+        x = regressor_vector(u_hist, y_hist, fb_hist, net.spec)
+        old_out, new_out = old.forward(x), new.forward(x)
+        assert net is old or net is new
+        expected = old_out if net is old else new_out
+        assert out[0] == expected[0] == result[0]
+        compared += 1
+        discriminating += int(abs(old_out[0] - new_out[0]) > 1e-9)
+    assert compared >= 50
+    assert discriminating >= 0.9 * compared
+    # calls up to the swap used the old network, calls from the swap on the new one
+    used = [spy.calls[before][0] for before, after, _ in records if after > before]
+    first_new = used.index(new)
+    assert all(net is old for net in used[:first_new])
+    assert all(net is new for net in used[first_new:])
+    assert swap > 0
+
+
+def test_request_retrain() -> None:
+    t, pose, force, _ = onedof_record(5, 400.0)
+    predictor = AdaptivePredictor(SMALL, background=False)
+    feed(predictor, t, pose, force, 0, 50)
+    assert predictor.request_retrain() == (
+        False, 'not enough data: 50 of 120 samples needed for the first training')
+    feed(predictor, t, pose, force, 50, 130)  # first training at sample 120
+    assert total_trainings(predictor) == 1
+    ok, reason = predictor.request_retrain()
+    assert ok and reason == 'training starts with the next sample'
+    feed(predictor, t, pose, force, 130, 131)
+    assert total_trainings(predictor) == 2  # at sample 131 instead of 140
+    feed(predictor, t, pose, force, 131, 150)
+    assert total_trainings(predictor) == 2
+    feed(predictor, t, pose, force, 150, 151)
+    assert total_trainings(predictor) == 3  # Δ = 20 samples after the requested one
+
+
+def test_request_retrain_refused_while_a_training_runs() -> None:
+    t, pose, force = synthetic_onedof(200, seed=22)
+    predictor = AdaptivePredictor(LONG, background=True)
+    try:
+        feed(predictor, t, pose, force, 0, FIRST_TRAINING)
+        assert not predictor.wait_for_training(0.0)
+        assert predictor.request_retrain() == (False, 'a training is already running')
+    finally:
+        predictor.close()
+
+
+# ---- reset, restart_segment ----------------------------------------------------------------
+
+def test_reset_forgets_everything_and_behaves_like_a_new_predictor() -> None:
+    t, pose, force, _ = onedof_record(5, 400.0)
+    predictor = trained_predictor(200)
+    assert predictor.status().trainings >= 1
+    predictor.reset()
+    status = predictor.status()
+    assert status.state == 'warming_up'
+    assert (status.trainings, status.rejected_trainings) == (0, 0)
+    assert predictor.model is None and predictor.targets is None
+    assert predictor.wave_peak_freq is None
+    assert status.buffer_fill == 0.0
+    fresh = AdaptivePredictor(SMALL, background=False)
+    np.testing.assert_array_equal(feed(predictor, t, pose, force, 200, 350),
+                                  feed(fresh, t, pose, force, 200, 350))
+    assert total_trainings(predictor) == total_trainings(fresh) == 2
+
+
+def test_reset_discards_the_result_of_a_running_training() -> None:
+    t, pose, force = synthetic_onedof(300, seed=23)
+    predictor = AdaptivePredictor(LONG, background=True)
+    try:
+        feed(predictor, t, pose, force, 0, FIRST_TRAINING)
+        worker = predictor._worker  # the job reset() abandons
+        assert worker is not None and worker.is_alive()
+        predictor.reset()
+        start = time.monotonic()
+        worker.join(5.0)
+        assert not worker.is_alive()
+        assert time.monotonic() - start < 1.5  # stopped at an epoch boundary, not after 2 s
+        feed(predictor, t, pose, force, FIRST_TRAINING, FIRST_TRAINING + 10)
+        status = predictor.status()
+        assert status.state == 'warming_up'
+        assert (status.trainings, status.rejected_trainings) == (0, 0)
+        assert predictor.model is None
+        assert predictor.counters['training_errors'] == 0
+    finally:
+        predictor.close()
+
+
+def test_restart_segment_keeps_the_network_and_no_regressor_spans_the_restart() -> None:
+    t, pose, force, _ = onedof_record(5, 400.0)
+    predictor = trained_predictor(200)
+    model = predictor.model
+    assert model is not None
+    segments = predictor.counters['segments']
+    trainings = total_trainings(predictor)
+    predictor.restart_segment()
+    assert predictor.model is model
+    assert predictor.targets is None
+    assert predictor.counters['segments'] == segments + 1
+    jump = 1000.0  # [m] the position jumps across the restart
+    lag = predictor.params.max_lag  # samples before the network can predict again
+    assert predictor.wave_peak_freq is not None
+    cascade = CascadeFilter(1, 1.0, predictor.wave_peak_freq, notch_zeta=SMALL.notch_zeta,
+                            notch_depth=SMALL.notch_depth, lowpass_offset=SMALL.lowpass_offset)
+    shifted = pose[200:] + np.array([jump, 0.0, 0.0])
+    fallback = np.array([cascade.update(float(t[200 + k]), shifted[k], force[200 + k])
+                         for k in range(lag)])
+    first = feed(predictor, t, pose, force, 200, 200 + lag - 1, offset=jump)
+    np.testing.assert_allclose(first, fallback[:lag - 1], rtol=0.0, atol=1e-9)
+    assert predictor.status().state == 'fallback'  # fewer than max_lag samples
+    network = feed(predictor, t, pose, force, 200 + lag - 1, 200 + lag, offset=jump)
+    assert predictor.status().state == 'trained'  # the network predicts after max_lag samples
+    x = regressor_vector(force[200:200 + lag, :1], shifted[:lag, :1], fallback[:, :1],
+                         model.spec)
+    assert network[0, 0] == pytest.approx(float(model.forward(x)[0]), abs=1e-9)
+    rest = feed(predictor, t, pose, force, 200 + lag, 200 + FIRST_TRAINING - 1, offset=jump)
+    outputs = np.vstack([first, network, rest])
+    assert np.all(np.abs(outputs[:, 0] - shifted[:len(outputs), 0]) < 5.0)  # [m] no pollution
+    assert total_trainings(predictor) == trainings  # no training before 120 new samples
+    feed(predictor, t, pose, force, 200 + FIRST_TRAINING - 1, 200 + FIRST_TRAINING,
+         offset=jump)
+    assert total_trainings(predictor) == trainings + 1
+    targets = predictor.targets
+    assert targets is not None
+    assert targets.start_index >= 0 and targets.end_index == FIRST_TRAINING - 1
+    assert float(np.min(targets.values)) > jump - 200.0  # only post-restart data
+
+
+# ---- failures --------------------------------------------------------------------------------
+
+def crash(*_args: object, **_kwargs: object) -> None:
+    """A run_retraining stand-in that fails."""
+    raise RuntimeError('simulated training crash')
+
+
+def test_worker_exception_keeps_the_network_in_service(monkeypatch: pytest.MonkeyPatch) -> None:
+    t, pose, force, _ = onedof_record(5, 400.0)
+    predictor = trained_predictor(150)
+    model = predictor.model
+    trainings = predictor.status().trainings
+    assert model is not None
+    monkeypatch.setattr(predictor_module, 'run_retraining', crash)
+    out = feed(predictor, t, pose, force, 150, 165)  # the training due at sample 160 fails
+    assert predictor.counters['training_errors'] == 1
+    assert predictor.model is model
+    status = predictor.status()
+    assert status.trainings == trainings
+    assert status.state in ('trained', 'fallback')
+    assert status.message == ('training failed, network in service kept (RuntimeError: '
+                              'simulated training crash)')
+    assert np.all(np.isfinite(out))
+
+
+def test_worker_exception_before_any_network_reports_error(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    t, pose, force = synthetic_onedof(200, seed=24)
+    monkeypatch.setattr(predictor_module, 'run_retraining', crash)
+    predictor = AdaptivePredictor(SMALL, background=True)
+    try:
+        feed(predictor, t, pose, force, 0, FIRST_TRAINING)
+        assert predictor.wait_for_training(5.0)
+        out = feed(predictor, t, pose, force, FIRST_TRAINING, FIRST_TRAINING + 1)
+        status = predictor.status()
+        assert status.state == 'error'
+        assert 'RuntimeError: simulated training crash' in status.message
+        assert predictor.counters['training_errors'] == 1
+        assert predictor.model is None
+        assert np.all(np.isfinite(out))
+    finally:
+        predictor.close()
+
+
+def test_rejected_candidate_keeps_the_incumbent(monkeypatch: pytest.MonkeyPatch) -> None:
+    from lf_predictor_ros.core import retraining
+    from lf_predictor_ros.core.training import TrainResult
+
+    t, pose, force, _ = onedof_record(5, 400.0)
+    predictor = trained_predictor(150)
+    model = predictor.model
+    assert model is not None
+    status = predictor.status()
+
+    def nan_train(net: torch.nn.Module, *_args: object, **_kwargs: object) -> TrainResult:
+        state = {k: v.clone() for k, v in net.state_dict().items()}
+        state['output.bias'][0] = math.nan
+        return TrainResult(state_dict=state, loss=0.0, initial_loss=1.0, epochs=1,
+                           seconds=0.0, converged=False, stopped_reason='non_finite',
+                           objective=0.0, initial_objective=1.0)
+
+    monkeypatch.setattr(retraining, 'train', nan_train)
+    out = feed(predictor, t, pose, force, 150, 165)
+    assert predictor.model is model
+    after = predictor.status()
+    assert after.trainings == status.trainings
+    assert after.rejected_trainings == status.rejected_trainings + 1
+    assert after.message == 'training rejected: candidate has non-finite weights or loss'
+    assert np.all(np.isfinite(out))
+
+
+# ---- checkpoints -----------------------------------------------------------------------------
+
+def test_save_load_round_trip_gives_the_same_network(tmp_path: Path) -> None:
+    t, pose, force, _ = onedof_record(5, 400.0)
+    source = trained_predictor(200)
+    path = tmp_path / 'lf.pt'
+    source.save(str(path))
+    target = AdaptivePredictor(SMALL, background=False)
+    target.load(str(path))
+    assert source.model is not None and target.model is not None
+    rows = np.random.default_rng(31).normal(size=(50, source.model.spec.n_regressors)) * 10.0
+    np.testing.assert_array_equal(target.model.forward(rows), source.model.forward(rows))
+    assert target.wave_peak_freq == source.wave_peak_freq
+    assert target.status().message == 'warm start from lf.pt'
+    # same network and same data from a common start: the same predictions
+    twin = AdaptivePredictor(SMALL, background=False)
+    twin.load(str(path))
+    out_a = feed(target, t, pose, force, 200, 300)
+    out_b = feed(twin, t, pose, force, 200, 300)
+    np.testing.assert_array_equal(out_a, out_b)
+    assert target.status().state in ('trained', 'fallback')
+
+
+def test_checkpoint_written_after_each_accepted_training(tmp_path: Path) -> None:
+    t, pose, force, _ = onedof_record(5, 400.0)
+    path = tmp_path / 'auto.pt'
+    predictor = AdaptivePredictor(SMALL, background=False, checkpoint_path=str(path))
+    feed(predictor, t, pose, force, 0, FIRST_TRAINING)
+    assert predictor.status().trainings == 1
+    assert path.exists()
+    loaded = AdaptivePredictor(SMALL, background=False)
+    loaded.load(str(path))
+    assert predictor.model is not None and loaded.model is not None
+    rows = np.random.default_rng(32).normal(size=(20, predictor.model.spec.n_regressors))
+    np.testing.assert_array_equal(loaded.model.forward(rows), predictor.model.forward(rows))
+
+
+def test_incompatible_checkpoints_raise_clear_errors(tmp_path: Path) -> None:
+    source = trained_predictor(FIRST_TRAINING)
+    path = tmp_path / 'trained.pt'
+    source.save(str(path))
+    nu = SMALL.nu
+    other = AdaptivePredictor(SMALL.replace(nu=nu + 1), background=False)
+    with pytest.raises(ValueError, match=rf"'nu': {nu},.*'nu': {nu + 1},.*was expected: change "
+                                         r'the predictor parameters or retrain'):
+        other.load(str(path))
+    assert other.model is None
+    slower = AdaptivePredictor(SMALL.replace(sample_time=0.5), background=False)
+    with pytest.raises(ValueError, match=r'trained at sample_time 1.0 s, this predictor runs at '
+                                         r'0.5 s'):
+        slower.load(str(path))
+    assert slower.model is None
+    corrupt = tmp_path / 'corrupt.pt'
+    corrupt.write_bytes(b'not a checkpoint')
+    with pytest.raises(ValueError, match='corrupt or not a torch file'):
+        other.load(str(corrupt))
+    with pytest.raises(ValueError, match='no trained network to save yet'):
+        AdaptivePredictor(SMALL, background=False).save(str(tmp_path / 'none.pt'))
+
+
+# ---- bad input -------------------------------------------------------------------------------
+
+BAD_INPUTS: list[tuple[float, object, object]] = [
+    (0.0, np.array([math.nan, 0.0, 0.0]), np.zeros(3)),
+    (0.0, np.zeros(3), np.array([0.0, math.inf, 0.0])),
+    (0.0, np.zeros(2), np.zeros(3)),
+    (0.0, np.zeros(3), np.zeros((3, 1))),
+    (math.nan, np.zeros(3), np.zeros(3)),
+]
+
+
+def test_bad_input_raises_and_leaves_the_state_unchanged() -> None:
+    t, pose, force, _ = onedof_record(5, 400.0)
+    clean = AdaptivePredictor(SMALL, background=False)
+    dirty = AdaptivePredictor(SMALL, background=False)
+    bad_at = {10, FIRST_TRAINING - 1, FIRST_TRAINING + 5, 150}
+    for i in range(160):
+        if i in bad_at:
+            for stamp, bad_pose, bad_force in BAD_INPUTS:
+                with pytest.raises(ValueError, match='must be'):
+                    dirty.update(stamp if math.isnan(stamp) else float(t[i]),
+                                 bad_pose, bad_force)  # type: ignore[arg-type]
+        expected = clean.update(float(t[i]), pose[i], force[i])
+        np.testing.assert_array_equal(dirty.update(float(t[i]), pose[i], force[i]), expected)
+    assert dirty.counters == clean.counters
+    fields = ('state', 'wave_peak_freq', 'last_loss', 'model_age', 'buffer_fill', 'trainings',
+              'rejected_trainings')
+    dirty_status, clean_status = dirty.status(), clean.status()
+    for name in fields:
+        assert getattr(dirty_status, name) == getattr(clean_status, name), name
+
+
+def test_close_stops_a_running_training_promptly() -> None:
+    t, pose, force = synthetic_onedof(200, seed=25)
+    predictor = AdaptivePredictor(LONG, background=True)
+    feed(predictor, t, pose, force, 0, FIRST_TRAINING)
+    worker = predictor._worker
+    assert worker is not None and worker.is_alive()
+    start = time.monotonic()
+    predictor.close()
+    assert not worker.is_alive()
+    assert time.monotonic() - start < 1.5  # [s] the training alone would run 2 s

@@ -1,0 +1,342 @@
+"""Tests of one retraining (thesis Algorithm 4.1 lines 18–40, `core.retraining`).
+
+Bookkeeping of the targets (first filtering, appending by Δ, restart after a shift > β), the
+training window with the last ε masked, a full retraining on simulated 1-DOF data (ω0 and the
+one-step predictions against the targets), and the validation that rejects bad candidates.
+Sample time 1 s, so every window in seconds is also its length in samples.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+import functools
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from lf_predictor_ros.core import retraining
+from lf_predictor_ros.core.filters import design_wave_filter, zero_phase
+from lf_predictor_ros.core.network import NnarmaxNet
+from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.regressors import build_regressors
+from lf_predictor_ros.core.retraining import (
+    ACCEPT_LOSS_RATIO,
+    Snapshot,
+    make_targets,
+    network_spec,
+    run_retraining,
+    training_window,
+)
+from lf_predictor_ros.core.targets import TargetWindow
+from lf_predictor_ros.core.training import TrainResult
+from sim_ros.simulation import load_scenario, simulate
+
+# torch loads its forward-AD decompositions once per process via the deprecated torch.jit.script
+pytestmark = pytest.mark.filterwarnings(
+    'ignore:`torch.jit.script` is deprecated:DeprecationWarning'
+)
+
+# Small Algorithm 4.1 windows at h = 1 s: Δ 20, N 200, ε 10, α 60, β 40 samples. γ = 480 samples
+# is the shortest window the spectral resolution rule accepts for the default wave band.
+SMALL = PredictorParams(sample_time=1.0, retrain_period=20.0, training_window=200.0,
+                        transient_length=10.0, filter_window=60.0, append_length=40.0,
+                        estimation_window=480.0, max_epochs=5)
+DELTA, N_TRAIN, EPS, ALPHA, BETA = 20, 200, 10, 60, 40  # [samples] at h = 1 s
+WAVE_PEAK_FREQ = 0.8  # [rad/s] ω0 of the onedof_excited scenario and of the synthetic waves
+
+
+@pytest.fixture(autouse=True)
+def _one_thread() -> None:
+    """Trainings in these tests run on one core (the machine is shared)."""
+    torch.set_num_threads(1)
+
+
+def test_small_params_match_the_sample_counts_used_below() -> None:
+    assert (SMALL.retrain_samples, SMALL.training_samples, SMALL.transient_samples,
+            SMALL.filter_samples, SMALL.append_samples) == (DELTA, N_TRAIN, EPS, ALPHA, BETA)
+
+
+@functools.cache
+def synthetic_positions(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(y (n, 1), lf (n, 1)): slow LF motion plus waves around ω0 = 0.8 rad/s, 0.35 m RMS."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n, dtype=float)  # [s] at h = 1 s
+    lf = 4.0 * np.sin(2.0 * math.pi * t / 400.0) + 0.01 * t  # [m]
+    phases = rng.uniform(0.0, 2.0 * math.pi, size=5)
+    freqs = WAVE_PEAK_FREQ * np.array([0.96, 0.98, 1.0, 1.02, 1.04])  # [rad/s]
+    waves = sum(0.5 / math.sqrt(5.0) * np.sin(w * t + p) for w, p in zip(freqs, phases,
+                                                                         strict=True))
+    y = (lf + waves)[:, None]
+    y.setflags(write=False)
+    lf2 = lf[:, None]
+    lf2.setflags(write=False)
+    return y, lf2
+
+
+def wave_sos() -> np.ndarray:
+    """The notch + low-pass that make_targets designs for ω0 = 0.8 rad/s with SMALL."""
+    return design_wave_filter(WAVE_PEAK_FREQ, SMALL.sample_time, notch_zeta=SMALL.notch_zeta,
+                              notch_depth=SMALL.notch_depth,
+                              lowpass_offset=SMALL.lowpass_offset)
+
+
+# ---- make_targets: Algorithm 4.1 lines 24–35 ---------------------------------------------------
+
+@pytest.mark.parametrize(('n_data', 'expected_len'), [(150, 150 - EPS), (400, N_TRAIN)])
+def test_first_targets_filter_up_to_n_plus_eps_samples(n_data: int, expected_len: int) -> None:
+    y, lf = synthetic_positions(n_data, seed=1)
+    targets = make_targets(SMALL, y, n_data - 1, WAVE_PEAK_FREQ, None)
+    span = min(n_data, N_TRAIN + EPS)
+    assert len(targets) == expected_len == span - EPS
+    assert targets.end_index == n_data - 1
+    assert targets.start_index == n_data - expected_len
+    expected = zero_phase(y[-span:], wave_sos())[EPS:]
+    np.testing.assert_allclose(targets.values.reshape(-1, 1), expected, rtol=0.0, atol=1e-12)
+    # Zero-phase notch + low-pass: away from the newest ε samples the targets are the LF motion
+    # (waves 0.25–0.41 m RMS over the window; measured 0.002–0.003 m left).
+    kept = targets.values.reshape(-1)[:-EPS]
+    lf_kept = lf[targets.start_index:targets.end_index + 1 - EPS, 0]
+    wave_rms = float(np.std(y[targets.start_index:targets.end_index + 1 - EPS, 0] - lf_kept))
+    assert wave_rms > 0.2  # [m]
+    assert float(np.sqrt(np.mean((kept - lf_kept) ** 2))) < 0.05 * wave_rms
+
+
+def test_targets_append_after_a_shift_of_delta() -> None:
+    y, _ = synthetic_positions(400, seed=2)
+    first = make_targets(SMALL, y[:300], 299, WAVE_PEAK_FREQ, None)
+    y_later = y[:300 + DELTA]
+    second = make_targets(SMALL, y_later, 299 + DELTA, WAVE_PEAK_FREQ, first)
+    filtered = zero_phase(y_later[-ALPHA:], wave_sos())
+    reference = first.append(filtered, 299 + DELTA, BETA, max_len=N_TRAIN)
+    assert second.end_index == reference.end_index == 299 + DELTA
+    np.testing.assert_array_equal(second.values, reference.values)
+    # What appending means, number by number (lines 31–33): N = 200 targets, the oldest Δ of the
+    # previous ones dropped, the previous ones kept up to β − Δ before their end, then the
+    # newest β of the filtered window.
+    values = second.values.reshape(-1)
+    assert len(second) == N_TRAIN
+    kept = first.values.reshape(-1)[DELTA:len(first) - (BETA - DELTA)]
+    np.testing.assert_array_equal(values[:len(kept)], kept)
+    np.testing.assert_allclose(values[len(kept):], filtered[-BETA:, 0], rtol=0.0, atol=1e-12)
+    assert len(kept) + BETA == N_TRAIN
+    # The restart would give different numbers in the overlap: appending really happened.
+    restarted = TargetWindow.start(zero_phase(y_later[-(N_TRAIN + EPS):], wave_sos()),
+                                   299 + DELTA, EPS)
+    assert float(np.max(np.abs(restarted.values - second.values))) > 1e-6
+
+
+def test_targets_grow_by_delta_until_n() -> None:
+    y, _ = synthetic_positions(400, seed=3)
+    first = make_targets(SMALL, y[:120], 119, WAVE_PEAK_FREQ, None)
+    assert len(first) == 120 - EPS
+    second = make_targets(SMALL, y[:140], 139, WAVE_PEAK_FREQ, first)
+    assert len(second) == 120 - EPS + DELTA
+    assert second.start_index == first.start_index == EPS
+
+
+@pytest.mark.parametrize('shift', [BETA + 1, 2 * BETA, 0, -5])
+def test_targets_restart_when_appending_would_leave_a_gap(shift: int) -> None:
+    y, _ = synthetic_positions(500, seed=4)
+    end = 300
+    previous = make_targets(SMALL, y[:end + 1], end, WAVE_PEAK_FREQ, None)
+    y_now = y[:end + shift + 1]
+    result = make_targets(SMALL, y_now, end + shift, WAVE_PEAK_FREQ, previous)
+    fresh = make_targets(SMALL, y_now, end + shift, WAVE_PEAK_FREQ, None)
+    assert result.end_index == end + shift
+    assert len(result) == N_TRAIN
+    np.testing.assert_array_equal(result.values, fresh.values)
+
+
+def test_make_targets_does_not_modify_its_inputs() -> None:
+    y, _ = synthetic_positions(300, seed=5)
+    y_copy = np.array(y)
+    previous = make_targets(SMALL, y[:280], 279, WAVE_PEAK_FREQ, None)
+    before = np.array(previous.values)
+    make_targets(SMALL, y, 299, WAVE_PEAK_FREQ, previous)
+    np.testing.assert_array_equal(y, y_copy)
+    np.testing.assert_array_equal(previous.values, before)
+    assert previous.end_index == 279
+
+
+# ---- training_window ---------------------------------------------------------------------------
+
+def test_training_window_is_aligned_to_the_targets_with_the_last_eps_masked() -> None:
+    rng = np.random.default_rng(6)
+    n = 250
+    u = rng.normal(size=(n, 1))
+    y = np.cumsum(rng.normal(size=(n, 1)), axis=0)
+    snapshot = Snapshot(u=u, y=y, end_index=1000 + n - 1, segment=3)
+    targets = make_targets(SMALL, y, snapshot.end_index, WAVE_PEAK_FREQ, None)
+    u_w, y_w, t_w, mask = training_window(SMALL, snapshot, targets)
+    assert len(targets) == N_TRAIN
+    assert u_w.shape == y_w.shape == t_w.shape == (N_TRAIN, 1)
+    np.testing.assert_array_equal(u_w, u[-N_TRAIN:])
+    np.testing.assert_array_equal(y_w, y[-N_TRAIN:])
+    np.testing.assert_array_equal(t_w, targets.values)
+    assert mask.shape == (N_TRAIN,)
+    assert int(mask.sum()) == N_TRAIN - EPS
+    assert not mask[-EPS:].any()
+    assert mask[:-EPS].all()
+
+
+def test_training_window_rejects_targets_of_another_instant() -> None:
+    y, _ = synthetic_positions(300, seed=7)
+    snapshot = Snapshot(u=np.zeros_like(y), y=np.array(y), end_index=299, segment=0)
+    stale = make_targets(SMALL, y[:280], 279, WAVE_PEAK_FREQ, None)
+    with pytest.raises(ValueError, match='targets end at sample 279, data at 299'):
+        training_window(SMALL, snapshot, stale)
+
+
+# ---- run_retraining on simulated data ----------------------------------------------------------
+
+RETRAIN = SMALL.replace(training_window=300.0, estimation_window=600.0, max_epochs=30,
+                        max_train_seconds=10.0)
+
+
+@functools.cache
+def simulated_snapshot(seed: int, duration: float) -> tuple[Snapshot, np.ndarray]:
+    """Snapshot of the onedof_excited scenario (h = 1 s) and the true LF north position."""
+    record = simulate(load_scenario('onedof_excited'), seed, duration)
+    assert record.t[1] - record.t[0] == pytest.approx(1.0)
+    assert np.allclose(record.wave_peak_freq, WAVE_PEAK_FREQ)
+    y = np.array(record.measured_pose[:, :1])
+    u = np.array(record.thrust[:, :1])
+    snapshot = Snapshot(u=u, y=y, end_index=len(y) - 1, segment=1)
+    return snapshot, np.array(record.truth_lf_pose[:, :1])
+
+
+def one_step_rmse(result: retraining.RetrainResult, snapshot: Snapshot) -> tuple[float, float]:
+    """(network, raw measurement) RMSE against the targets over the kept samples of the window.
+
+    Series-parallel one-step predictions ŷ(t + 1) with the targets as feedback, as trained.
+    """
+    assert result.model is not None
+    u_w, y_w, t_w, mask = training_window(RETRAIN, snapshot, result.targets)
+    x_rows, first = build_regressors(u_w, y_w, t_w, result.model.spec)
+    prediction = result.model.forward(x_rows)[:-1]
+    keep = mask[first + 1:]
+    net_error = (prediction - t_w[first + 1:])[keep]
+    raw_error = (y_w[first + 1:] - t_w[first + 1:])[keep]
+    return float(np.sqrt(np.mean(net_error ** 2))), float(np.sqrt(np.mean(raw_error ** 2)))
+
+
+@pytest.mark.parametrize('seed', [1, 3])
+def test_run_retraining_estimates_omega0_and_predicts_the_targets(seed: int) -> None:
+    snapshot, _ = simulated_snapshot(seed, 700.0)
+    u_before, y_before = np.array(snapshot.u), np.array(snapshot.y)
+    result = run_retraining(RETRAIN, snapshot, None, None, None)
+    relative_error = abs(result.frequency.wave_peak_freq - WAVE_PEAK_FREQ) / WAVE_PEAK_FREQ
+    assert result.frequency.confident
+    assert relative_error < 0.03  # measured 1.9 % (seed 1), 1.1 % (seed 3)
+    assert result.accepted
+    assert result.reason == 'accepted'
+    assert result.model is not None and result.state_dict is not None
+    assert math.isfinite(result.loss) and result.incumbent_loss is None
+    assert result.end_index == snapshot.end_index and result.segment == 1
+    assert result.targets.end_index == snapshot.end_index
+    assert len(result.targets) == RETRAIN.training_samples
+    assert 1 <= result.epochs <= RETRAIN.max_epochs
+    net_rmse, raw_rmse = one_step_rmse(result, snapshot)
+    assert raw_rmse > 0.4  # [m] the wave motion the filter must remove (≈ 0.5 m RMS)
+    # measured (nu 4, ny 12, nfb 0, relative): 0.21 m vs 0.61 m (seed 1), 0.42 m vs 0.56 m (seed 3)
+    assert net_rmse < 0.9 * raw_rmse
+    # wave_spread: RMS of measurement − target on the kept samples = the WF motion + noise
+    assert result.wave_spread is not None
+    assert result.wave_spread[0] == pytest.approx(raw_rmse, rel=0.05)
+    np.testing.assert_array_equal(snapshot.u, u_before)
+    np.testing.assert_array_equal(snapshot.y, y_before)
+
+
+def test_warm_started_retraining_appends_targets_and_is_judged_against_the_incumbent() -> None:
+    full, _ = simulated_snapshot(1, 700.0)
+    earlier = Snapshot(u=full.u[:-DELTA], y=full.y[:-DELTA], end_index=full.end_index - DELTA,
+                       segment=1)
+    first = run_retraining(RETRAIN, earlier, None, None, None)
+    assert first.accepted and first.state_dict is not None
+    incumbent = {k: v.clone() for k, v in first.state_dict.items()}
+    second = run_retraining(RETRAIN, full, first.state_dict, first.targets, first.frequency)
+    for name, value in first.state_dict.items():
+        assert torch.equal(value, incumbent[name])
+    expected_targets = make_targets(RETRAIN, full.y, full.end_index,
+                                    second.frequency.wave_peak_freq, first.targets)
+    np.testing.assert_array_equal(second.targets.values, expected_targets.values)
+    assert second.incumbent_loss is not None and math.isfinite(second.incumbent_loss)
+    if second.accepted:
+        assert second.loss <= ACCEPT_LOSS_RATIO * second.incumbent_loss
+    else:
+        assert 'worse than the network in service' in second.reason
+    assert abs(second.frequency.wave_peak_freq - WAVE_PEAK_FREQ) < 0.03 * WAVE_PEAK_FREQ
+
+
+# ---- candidate validation ----------------------------------------------------------------------
+
+def fake_train(state: dict[str, torch.Tensor], loss: float, objective: float = 1.0,
+               initial_objective: float = 1.0) -> Callable[..., TrainResult]:
+    """A stand-in for ``training.train`` that returns the given state and numbers."""
+    def train(*_args: object, **_kwargs: object) -> TrainResult:
+        return TrainResult(state_dict=state, loss=loss, initial_loss=1.0, epochs=1, seconds=0.0,
+                           converged=False, stopped_reason='max_epochs', objective=objective,
+                           initial_objective=initial_objective)
+    return train
+
+
+def nan_state() -> dict[str, torch.Tensor]:
+    """Weights of a fresh network with one NaN in the output layer."""
+    state = {k: v.clone() for k, v in NnarmaxNet(network_spec(RETRAIN)).state_dict().items()}
+    state['output.weight'][0, 0] = math.nan
+    return state
+
+
+@pytest.mark.parametrize(('make_state', 'loss', 'objective', 'initial', 'reason'), [
+    (nan_state, 0.01, 0.01, 1.0, 'candidate has non-finite weights or loss'),
+    (None, math.nan, 0.01, 1.0, 'candidate has non-finite weights or loss'),
+    (None, 0.01, 2.0, 1.0, 'training diverged (objective 2 > start 1)'),
+])
+def test_broken_candidate_is_rejected(monkeypatch: pytest.MonkeyPatch, make_state: object,
+                                      loss: float, objective: float, initial: float,
+                                      reason: str) -> None:
+    snapshot, _ = simulated_snapshot(1, 700.0)
+    state = nan_state() if make_state is not None else dict(
+        NnarmaxNet(network_spec(RETRAIN)).state_dict())
+    monkeypatch.setattr(retraining, 'train', fake_train(state, loss, objective, initial))
+    result = run_retraining(RETRAIN, snapshot, None, None, None)
+    assert not result.accepted
+    assert result.reason == reason
+    assert result.model is None and result.state_dict is None
+    # the frequency and targets are still reported (the predictor keeps them)
+    assert abs(result.frequency.wave_peak_freq - WAVE_PEAK_FREQ) < 0.03 * WAVE_PEAK_FREQ
+    assert result.targets.end_index == snapshot.end_index
+
+
+def test_candidate_worse_than_the_incumbent_is_rejected(monkeypatch: pytest.MonkeyPatch) -> None:
+    snapshot, _ = simulated_snapshot(1, 700.0)
+    good = run_retraining(RETRAIN, snapshot, None, None, None)
+    assert good.accepted and good.state_dict is not None
+    incumbent_loss = good.loss
+    # An untrained network (persistence: ŷ(t + 1) = feedback) reported with a loss 10× worse.
+    untrained = dict(NnarmaxNet(network_spec(RETRAIN)).state_dict())
+    monkeypatch.setattr(retraining, 'train', fake_train(untrained, 10.0 * incumbent_loss))
+    result = run_retraining(RETRAIN, snapshot, good.state_dict, good.targets, good.frequency)
+    assert result.incumbent_loss is not None
+    assert result.incumbent_loss == pytest.approx(incumbent_loss, rel=0.05)
+    assert not result.accepted
+    assert result.reason.startswith('candidate worse than the network in service on the newest '
+                                    'targets')
+    assert result.model is None and result.state_dict is None
+
+
+@pytest.mark.parametrize(('ratio', 'accepted'), [(1.01, True), (1.05, False)])
+def test_acceptance_tolerance_against_the_incumbent(monkeypatch: pytest.MonkeyPatch,
+                                                    ratio: float, accepted: bool) -> None:
+    snapshot, _ = simulated_snapshot(1, 700.0)
+    good = run_retraining(RETRAIN, snapshot, None, None, None)
+    assert good.state_dict is not None
+    monkeypatch.setattr(retraining, 'train', fake_train(dict(good.state_dict), 0.0))
+    probe = run_retraining(RETRAIN, snapshot, good.state_dict, good.targets, good.frequency)
+    assert probe.incumbent_loss is not None
+    loss = ratio * probe.incumbent_loss
+    monkeypatch.setattr(retraining, 'train', fake_train(dict(good.state_dict), loss))
+    result = run_retraining(RETRAIN, snapshot, good.state_dict, good.targets, good.frequency)
+    assert result.accepted is accepted
+    assert ACCEPT_LOSS_RATIO == pytest.approx(1.02)

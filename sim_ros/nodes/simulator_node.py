@@ -36,14 +36,32 @@ loop independent of scheduling: the same seed gives the same run at any speed. F
 
 - before the first command (controller not started or not yet discovered), the simulator waits
   indefinitely and re-publishes the sample every ``lockstep_timeout`` wall seconds, so discovery
-  order and start-up time do not change the run;
+  order and start-up time do not change the run; it offers the first sample only once a
+  ``thrust_command`` publisher has been discovered and ``DISCOVERY_GRACE`` has passed, so the
+  single answer of a controller behind an estimator (which ignores a re-offered stamp) is not
+  lost to a publisher that has not matched the subscription yet;
 - afterwards, when no answer comes within ``lockstep_timeout`` wall seconds (e.g. a sensor dropout
   skipped ``measured_pose`` and the controller listens to it, or a best-effort pose was lost), it
   steps on with the held command and counts a ``lockstep_timeouts`` in the diagnostics: a run
   with zero timeouts is reproducible.
 
+Lockstep through a slower estimator (``lockstep_period`` > 0 [s sim], a multiple of the sample
+time). A predictor in the loop answers only once per its own sample time h (e.g. 0.5 s) while the
+simulator steps at 0.1 s. The simulator then steps freely between lockstep instants
+t_k = k · ``lockstep_period`` and waits only at them. Its command answers the pose of t_k but is
+stamped with the predictor's lf_pose stamp t_k + h, so the wait at t_k is for a command stamped
+≥ t_k + ``lockstep_lead`` (set the lead to h): a plain "stamped ≥ t_k" would already be met by
+the previous instant's answer (stamped t_{k-1} + h = t_k for h = period), the simulator would
+run one period ahead of its controller and the run would depend on scheduling. A command
+stamped later than needed also counts (it only comes later). It cannot deadlock: every wait
+after the first command ends within ``lockstep_timeout`` wall seconds (counted), e.g. when a
+dropout removed the pose of t_k; the late answer is held from its arrival and the next instant
+waits for its own answer again, so the loop re-synchronizes at once. ``command_timeout`` must
+exceed ``lockstep_period``, else the held command would go stale between two answers.
+
 Run: ``simulator --ros-args --params-file config/simulator.yaml -p speed_factor:=0
--p lockstep:=true``.
+-p lockstep:=true`` (with a predictor at h = 0.5 s: ``-p lockstep_period:=0.5
+-p lockstep_lead:=0.5``).
 """
 # rclpy's Node, Future and logger methods are untyped in Jazzy.
 # mypy: disable-error-code="no-untyped-call"
@@ -86,6 +104,10 @@ from sim_ros.simulation import Scenario, SimSample, Simulator, load_scenario
 
 NODE_NAME = 'simulator'
 MAX_BACKLOG = 1.0  # [s wall] lag behind the speed factor after which pacing re-anchors
+# [s wall] lockstep start: time between discovering a thrust_command publisher and offering the
+# first sample, so that publisher has matched this node's subscription too (discovery is not
+# simultaneous at both ends)
+DISCOVERY_GRACE = 0.5
 
 
 def _doc(doc: str, unit: str = '', read_only: bool = False) -> dict[str, Any]:
@@ -109,6 +131,13 @@ class SimulatorConfig:
         'wait for the thrust_command answering each sample before the next step'))
     lockstep_timeout: float = field(default=0.5, metadata=_doc(
         'wall time to wait for a command in lockstep before stepping on', 's'))
+    lockstep_period: float = field(default=0.0, metadata=_doc(
+        'lockstep: wait only at multiples of this simulated time (a multiple of the sample '
+        'time); 0 = wait after every step', 's', read_only=True))
+    lockstep_lead: float = field(default=0.0, metadata=_doc(
+        'lockstep: how far ahead of the answered sample the controller stamps its command '
+        '(the predictor sample time h when the controller follows lf_pose)', 's',
+        read_only=True))
     command_timeout: float = field(default=1.0, metadata=_doc(
         'simulated age after which the held thrust_command is dropped (zero thrust)', 's'))
     publish_truth: bool = field(default=True, metadata=_doc(
@@ -141,6 +170,15 @@ class SimulatorConfig:
         for name, value in positive.items():
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'{name} must be a positive number of seconds, got {value}')
+        for name, value in {'lockstep_period': self.lockstep_period,
+                            'lockstep_lead': self.lockstep_lead}.items():
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f'{name} must be >= 0 s (0 = off), got {value}')
+        if self.lockstep_period >= self.command_timeout:
+            raise ValueError(f'command_timeout ({self.command_timeout} s) must exceed '
+                             f'lockstep_period ({self.lockstep_period} s): the command answering '
+                             f'one lockstep instant is held until the next; raise '
+                             f'command_timeout or shorten lockstep_period')
         if not (math.isfinite(self.duration) and self.duration >= 0.0):
             raise ValueError(f'duration must be >= 0 s (0 = run forever), got {self.duration}')
         if self.initial_pose and (len(self.initial_pose) != 3 or not all(
@@ -161,6 +199,18 @@ class SimulatorConfig:
             waves = replace(scenario.waves, peak_freq=constant(self.wave_peak_freq))
             scenario = replace(scenario, waves=waves)
         return scenario
+
+
+def lockstep_period_ns(period: float, sample_time: float) -> int:
+    """``lockstep_period`` [s] in integer ns, checked to be 0 or a multiple of ``sample_time``."""
+    if period == 0.0:
+        return 0
+    ratio = period / sample_time
+    if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio):
+        raise ValueError(f'lockstep_period ({period} s) must be 0 or a whole multiple of the '
+                         f"scenario's sample time ({sample_time} s), e.g. the predictor's "
+                         f'sample time')
+    return round(ratio) * sec_to_ns(sample_time)
 
 
 class StepPacer:
@@ -209,6 +259,8 @@ class SimulatorNode(Node):
         config = self._params.value
         self._sim = Simulator(config.scenario_with_overrides(), seed=config.seed)
         self._sample_time = float(self._sim.sample_time)
+        self._lockstep_period_ns = lockstep_period_ns(config.lockstep_period, self._sample_time)
+        self._lockstep_lead_ns = sec_to_ns(config.lockstep_lead)
         self.done: Future = Future()
 
         qos = publisher_qos()
@@ -218,7 +270,10 @@ class SimulatorNode(Node):
         self._truth_pub = self.create_publisher(PoseStamped, 'truth/pose', qos)
         self._truth_lf_pub = self.create_publisher(PoseStamped, 'truth/lf_pose', qos)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', qos)
-        self.create_subscription(WrenchStamped, 'thrust_command', self._on_command, command_qos())
+        command_sub = self.create_subscription(WrenchStamped, 'thrust_command', self._on_command,
+                                               command_qos())
+        self._command_topic: str = command_sub.topic_name
+        self._peer_seen_at: float | None = None  # [s wall] first sight of a command publisher
 
         self._command: NDArray[np.float64] | None = None
         self._command_stamp_ns = -1
@@ -292,7 +347,9 @@ class SimulatorNode(Node):
         """Whether lockstep allows the next step (always true without lockstep)."""
         if not self.config.lockstep or self._last_step_ns is None:
             return True
-        if self._command_stamp_ns >= self._last_step_ns:
+        if self._lockstep_period_ns > 0 and self._last_step_ns % self._lockstep_period_ns != 0:
+            return True  # between lockstep instants: step freely with the held command
+        if self._command_stamp_ns >= self._last_step_ns + self._lockstep_lead_ns:
             return True
         if time.monotonic() - self._wait_start < self.config.lockstep_timeout:
             return False
@@ -308,6 +365,8 @@ class SimulatorNode(Node):
         if self.done.done():
             return
         if self._last_step_ns is None:  # first call: offer the initial state (t = 0)
+            if not self._command_peer_ready():
+                return
             self._publish_sample(self._sim.sample)
         config = self.config
         start = time.monotonic()
@@ -322,6 +381,25 @@ class SimulatorNode(Node):
             if time.monotonic() - start > config.tick_period:
                 break
         self._pacer.stepped(made)
+
+    def _command_peer_ready(self) -> bool:
+        """Lockstep start: wait until a thrust_command publisher is known, plus a grace time.
+
+        The answer to the initial sample is published once; if it went out before the
+        controller's publisher had matched this node's subscription it would be lost and the
+        loop would never start (an estimator drops the re-offered sample as a repeated stamp).
+        """
+        if not self.config.lockstep:
+            return True
+        now = time.monotonic()
+        if self.count_publishers(self._command_topic) == 0:
+            self._peer_seen_at = None
+            return False
+        if self._peer_seen_at is None:
+            self._peer_seen_at = now
+            self.get_logger().info('thrust_command publisher discovered; starting lockstep in '
+                                   f'{DISCOVERY_GRACE} s')
+        return now - self._peer_seen_at >= DISCOVERY_GRACE
 
     def _step(self) -> None:
         tau, _ = self.held_command()
@@ -378,6 +456,7 @@ class SimulatorNode(Node):
             'speed_factor': config.speed_factor,
             'speed_factor_achieved': achieved,
             'lockstep': config.lockstep,
+            'lockstep_period': config.lockstep_period,
             'lockstep_timeouts': self._lockstep_timeouts,
             'sensor_dropouts': self._dropouts,
             'invalid_commands': self._invalid_commands,

@@ -1,0 +1,1 @@
+"""Closed-loop demo: the node graph over DDS (`demo`), its processes and its report."""

@@ -1,0 +1,207 @@
+"""Tests of the demo: report on synthetic arrays, lockstep through a slower estimator, full run."""
+# rclpy's Parameter and Node.destroy_node are untyped in Jazzy.
+# mypy: disable-error-code="no-untyped-call"
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+import time
+
+from geometry_msgs.msg import WrenchStamped
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+
+from lf_predictor_ros.demo import demo, processes
+from lf_predictor_ros.demo.report import (
+    LoopRun,
+    RunData,
+    Trace,
+    compute_metrics,
+    loop_metrics,
+    match_by_stamp,
+    retrain_times_from_diagnostics,
+    write_report,
+)
+from lf_predictor_ros.nodes.conversions import ns_to_stamp, sec_to_ns, wrench_to_msg
+from sim_ros.nodes import simulator_node
+from sim_ros.nodes.simulator_node import SimulatorNode
+
+PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
+
+
+def _synthetic_run(seed: int = 3) -> RunData:
+    """3-DOF run, 600 s at 0.1 s: LF drift + WF sine (0.8 rad/s) + noise; lf_pose = truth + 0.1.
+
+    Predictor-loop thrust has a wave-band sine of amplitude 1e4 N in surge, the raw loop 1e5 N,
+    so the wave-band power ratio is (1e4)² / (1e5)² = 0.01.
+    """
+    rng = np.random.default_rng(seed)
+    t = np.arange(1, 6001, dtype=np.float64) * 0.1  # [s]
+    lf = np.column_stack([0.5 * np.sin(0.01 * t), 0.3 * np.cos(0.01 * t),
+                          0.01 * np.sin(0.005 * t)])
+    wave = np.sin(0.8 * t)[:, None] * np.array([0.5, 0.5, 0.01])
+    measured = lf + wave + rng.normal(0.0, 0.05, (t.size, 3))
+    lf_t = t[4::5]  # predictor grid 0.5, 1.0, … s
+    estimate = lf[4::5] + np.array([0.1, -0.1, 0.0])
+    base = np.array([3e4, 2e4, 5e5])
+    thrust_pred = base + np.outer(np.sin(0.8 * t), [1e4, 0.0, 0.0])
+    thrust_raw = base + np.outer(np.sin(0.8 * t), [1e5, 0.0, 0.0])
+    loops = {'predictor': LoopRun(t, lf, thrust_pred), 'raw_measurement': LoopRun(t, lf,
+                                                                                  thrust_raw)}
+    return RunData(ndof=3, measured_pose=Trace(t, measured), truth_lf_pose=Trace(t, lf),
+                   lf_pose=Trace(lf_t, estimate),
+                   wave_peak_freq=Trace(np.array([200.0, 400.0]), np.array([[0.79], [0.81]])),
+                   wave_peak_freq_truth=Trace(t, np.full((t.size, 1), 0.8)), loops=loops,
+                   retrain_times=(200.0, 260.0), run_info={'scenario': 'synthetic', 'seed': seed})
+
+
+def test_report_metrics_match_analytic_values_and_files_are_written(tmp_path: Path) -> None:
+    run = _synthetic_run()
+    metrics = compute_metrics(run, warmup=100.0)
+    est = metrics['estimation']
+    # constant offset 0.1 m: RMSE 0.1, rate error 0, lag 0
+    assert est['north']['rmse'] == pytest.approx(0.1, abs=1e-12)
+    assert est['east']['rmse'] == pytest.approx(0.1, abs=1e-12)
+    assert est['yaw']['rmse'] == pytest.approx(0.0, abs=1e-12)
+    assert est['north']['derivative_rmse'] == pytest.approx(0.0, abs=1e-9)
+    assert est['samples'] == 1001  # 0.5 s grid from 100 s to 600 s
+    # sine of amplitude A in the band: power A²/2 (Welch, Hann; 10 % tolerance for leakage)
+    pred = metrics['closed_loop']['predictor']
+    assert pred['thrust_wave_band_power']['north'] == pytest.approx(0.5e8, rel=0.1)
+    assert metrics['thrust_wave_band_power_ratio']['north'] == pytest.approx(0.01, rel=0.02)
+    # position offsets: max excursion = max |(n, e)| of the LF drift after 100 s
+    t = run.loops['predictor'].t
+    lf = run.loops['predictor'].truth_lf_pose[t >= 100.0]
+    assert pred['max_excursion'] == pytest.approx(float(np.max(np.hypot(lf[:, 0], lf[:, 1]))))
+    # total variation of a sine over whole periods ≈ 4 A per period
+    periods = (600.0 - 100.0) * 0.8 / (2 * math.pi)
+    assert pred['thrust_total_variation']['north'] == pytest.approx(4e4 * periods, rel=0.01)
+    assert metrics['run']['retrain_times'] == [200.0, 260.0]
+
+    paths = write_report(run, tmp_path, warmup=100.0)
+    assert paths.png.read_bytes()[:8] == PNG_SIGNATURE and paths.png.stat().st_size > 20_000
+    loaded = json.loads(paths.metrics.read_text())
+    assert set(loaded) >= {'estimation', 'closed_loop', 'run', 'warmup',
+                           'thrust_wave_band_power_ratio'}
+    text = paths.markdown.read_text()
+    assert '![report](report.png)' in text and '| north | 0.1 |' in text
+
+
+def test_match_by_stamp_and_retrain_times() -> None:
+    first = Trace(np.array([0.5, 1.0, 1.5], dtype=np.float64), np.array([[1.0], [2.0], [3.0]]))
+    second = Trace(np.arange(0, 21, dtype=np.float64) * 0.1, np.arange(21, dtype=float)[:, None])
+    t, a, b = match_by_stamp(first, second)
+    assert t.tolist() == [0.5, 1.0, 1.5]  # 0.1 * 5 != 0.5 in floats, equal to the ns
+    assert a[:, 0].tolist() == [1.0, 2.0, 3.0] and b[:, 0].tolist() == [5.0, 10.0, 15.0]
+    diagnostics = [(1.0, 'predictor', {'trainings': '0'}), (2.0, 'simulator', {'steps': '3'}),
+                   (3.0, 'predictor', {'trainings': '1'}), (4.0, 'predictor', {'trainings': '1'}),
+                   (5.0, 'predictor', {'trainings': '3'})]
+    assert retrain_times_from_diagnostics(diagnostics) == [3.0, 5.0]
+
+
+def test_loop_metrics_rejects_too_short_a_run() -> None:
+    loop = LoopRun(np.array([1.0, 2.0]), np.zeros((2, 3)), np.zeros((2, 3)))
+    with pytest.raises(ValueError, match='warm-up'):
+        loop_metrics(loop, 3, (0.0, 0.0, 0.0), (0.3, 1.3), 0.0)
+
+
+def test_isolated_environment_and_plan(tmp_path: Path) -> None:
+    env = processes.isolated_environment({'PATH': '/bin'}, 4321)
+    assert env['ROS_DOMAIN_ID'] == '22' and env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
+    assert processes.isolated_environment({'ROS_DOMAIN_ID': '7'}, 4321)['ROS_DOMAIN_ID'] == '7'
+    assert all(1 <= processes.domain_id_from_pid(pid) <= 100 for pid in range(0, 400, 7))
+    plan = demo.plan_run(demo.parse_args(['supply_closed_loop', '--duration', '30',
+                                          '--output-dir', str(tmp_path)]))
+    assert plan.seed == 6 and plan.duration == 30.0 and plan.predictor_sample_time == 0.5
+    sim_args = demo.node_commands(plan)['simulator'][1]
+    assert 'lockstep_period:=0.5' in sim_args and 'lockstep_lead:=0.5' in sim_args
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('/**:\n  ros__parameters:\n    sample_time: 0.25\n')
+    with pytest.raises(ValueError, match='whole multiple'):
+        demo.plan_run(demo.parse_args(['onedof_feedback', '--predictor-params', str(bad)]))
+
+
+def _command(stamp: float) -> WrenchStamped:
+    return wrench_to_msg(np.array([1e4, 0.0, 0.0]), ns_to_stamp(sec_to_ns(stamp)))
+
+
+def test_lockstep_period_waits_only_at_multiples_for_the_lead_stamped_answer(
+        ros_context: object) -> None:
+    """Sample time 0.1 s, period = lead = 0.5 s: an answer stamped t_k + 0.5 releases 5 steps."""
+    node = SimulatorNode(context=ros_context, parameter_overrides=[
+        Parameter('lockstep', value=True), Parameter('lockstep_period', value=0.5),
+        Parameter('lockstep_lead', value=0.5), Parameter('lockstep_timeout', value=0.2),
+        Parameter('speed_factor', value=0.0)])
+    try:
+        node._peer_seen_at = -math.inf  # no controller process here: skip the discovery wait
+        node.count_publishers = lambda topic_name: 1  # type: ignore[method-assign]
+        node._advance()  # offers t = 0 and waits (no command yet)
+        assert node.steps == 0
+        node._on_command(_command(0.5))  # answer to t = 0: steps freely to 0.5
+        assert node.steps == 5 and node.sim_time == pytest.approx(0.5)
+        node._on_command(_command(0.5))  # a repeat of the old answer: no step
+        assert node.steps == 5
+        node._on_command(_command(1.0))  # answer to 0.5
+        assert node.steps == 10 and node.lockstep_timeouts == 0
+        time.sleep(0.25)  # no answer to 1.0 within lockstep_timeout: step on, count it
+        node._advance()
+        assert node.steps == 15 and node.lockstep_timeouts == 1
+    finally:
+        node.destroy_node()
+
+
+def test_lockstep_period_must_be_a_multiple_and_below_command_timeout() -> None:
+    assert simulator_node.lockstep_period_ns(0.5, 0.1) == 500_000_000
+    assert simulator_node.lockstep_period_ns(0.0, 0.1) == 0
+    with pytest.raises(ValueError, match='whole multiple'):
+        simulator_node.lockstep_period_ns(0.25, 0.1)
+    with pytest.raises(ValueError, match='command_timeout'):
+        simulator_node.SimulatorConfig(lockstep_period=1.0, command_timeout=1.0)
+
+
+@pytest.mark.dds
+@pytest.mark.slow
+def test_demo_closed_loop_over_dds_writes_every_artifact_and_holds_the_vessel(
+        tmp_path: Path, dds_env: dict[str, str]) -> None:
+    """Supply vessel, 240 s simulated, predictor windows shortened so one training happens.
+
+    Bound on the excursion: the closed loop of test/sim_ros/test_nodes.py (same forces, same
+    PID, Kp = M ω_n²) keeps the LF pose within |F|max / Kp: 3.1 m north, 2.2 m east, so 3.8 m
+    horizontally, when the controller sees the true LF pose. Here it sees the predictor's
+    estimate; its error (a causal notch + low-pass before the first training, ≲ 1 m, the WF
+    amplitude 0.5 m std) adds to the offset the PID holds, so allow 3.8 + 1.2 = 5 m. Without
+    control the current alone carries the vessel 120 m in 240 s.
+    """
+    params = tmp_path / 'short.yaml'
+    # first training after max(α, min(γ, 2α)) = 60 s of data; a training takes a few wall
+    # seconds, i.e. up to ~100 simulated seconds at 20x real time
+    params.write_text('/**:\n  ros__parameters:\n    estimation_window: 600.0\n'
+                      '    training_window: 100.0\n    retrain_period: 20.0\n'
+                      '    transient_length: 10.0\n    filter_window: 60.0\n'
+                      '    append_length: 40.0\n    max_epochs: 10\n'
+                      '    max_train_seconds: 3.0\n')
+    start = time.monotonic()
+    code = demo.main(['supply_closed_loop', '--duration', '240', '--output-dir',
+                      str(tmp_path / 'runs'), '--predictor-params', str(params)])
+    wall = time.monotonic() - start
+    assert code == 0
+    (run_dir,) = (tmp_path / 'runs').iterdir()
+    assert {p.name for p in (run_dir / 'logs').iterdir()} == {
+        'recorder.log', 'predictor.log', 'dp_controller.log', 'simulator.log'}
+    from lf_predictor_ros.bag.series import read_series
+
+    series = read_series(run_dir / 'run.mcap', ['/truth/lf_pose', '/lf_pose'])
+    assert series['/truth/lf_pose'].stamp[-1] == pytest.approx(240.0)
+    assert series['/lf_pose'].stamp.size > 0.9 * 240 / 0.5
+    assert (run_dir / 'report.png').read_bytes()[:8] == PNG_SIGNATURE
+    metrics = json.loads((run_dir / 'metrics.json').read_text())
+    assert set(metrics) >= {'estimation', 'closed_loop', 'run', 'thrust_wave_band_power_ratio'}
+    assert set(metrics['closed_loop']) == {'predictor', 'raw_measurement', 'ideal'}
+    assert metrics['run']['trainings'] >= 1
+    assert (run_dir / 'report.md').read_text().startswith('# Demo run: supply_closed_loop')
+    truth = series['/truth/lf_pose'].values
+    assert float(np.max(np.hypot(truth[:, 0], truth[:, 1]))) < 5.0
+    print(f"demo: {metrics['run']['real_time_factor']:.1f}x real time, {wall:.0f} s wall in "
+          f"total, lockstep timeouts {metrics['run']['lockstep_timeouts']}")

@@ -5,7 +5,7 @@ ACT := source $(VENV)/setup.bash &&
 SCENARIO ?=
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
-.PHONY: venv demo test lint typecheck pytest colcon-check clean
+.PHONY: venv demo test lint typecheck pytest benchmark clean
 
 venv:
 	@./.ci/bootstrap.sh $(VENV)
@@ -24,6 +24,9 @@ typecheck:
 
 pytest:
 	@$(ACT) echo '[pytest]' && python -m pytest $(PYTEST_ARGS)
+
+benchmark: venv
+	@$(ACT) benchmark $(BENCHMARK_ARGS)
 
 clean:
 	rm -rf build install log .pytest_cache .mypy_cache .ruff_cache *.egg-info

@@ -30,7 +30,12 @@ fi
 pkg_hash=$( (cat setup.py setup.cfg package.xml; find lf_predictor_ros sim_ros config -name '*.py' -o -name '*.yaml' | sort) | sha256sum | cut -c1-16)
 if [ "$(cat "$VENV/.pkg-stamp" 2>/dev/null)" != "$pkg_hash" ]; then
   echo "[bootstrap] installing $PKG (editable)"
-  "${PIP[@]}" install -c .ci/constraints.txt --no-deps --no-build-isolation -e .
+  if ! "${PIP[@]}" install -c .ci/constraints.txt --no-deps --no-build-isolation -e . \
+      > "$VENV/.pkg-install.log" 2>&1; then
+    cat "$VENV/.pkg-install.log" >&2
+    echo "[bootstrap] installing $PKG failed (log above)" >&2
+    exit 1
+  fi
   echo "$pkg_hash" > "$VENV/.pkg-stamp"
 fi
 

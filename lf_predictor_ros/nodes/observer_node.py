@@ -1,0 +1,391 @@
+"""Observer node: the classical wave filters behind the predictor's topics, for A/B tests.
+
+Same input path and outputs as the ``predictor`` node (thin adapter: message → numpy → core →
+message): ``thrust`` (WrenchStamped) → ``InputAligner.add_force``; ``measured_pose``
+(PoseStamped) → ``InputAligner.add_pose`` → for each grid sample the estimator's ``update`` →
+``lf_pose`` (PoseStamped, ``header.stamp`` = the sample time: a baseline estimates the LF pose
+*now*, it does not predict) and ``/diagnostics``. Inputs use the sensor-data QoS, publishers are
+reliable keep_last 10; all data times are message stamps.
+
+``method``:
+- ``passive_observer``: nonlinear passive observer (Fossen & Strand 1999; Fossen 2011 §11.4.1;
+  MSS ``exPassiveObs.m``) with the vessel model ``mass_matrix``/``damping_matrix`` (defaults: the
+  MSS supply vessel, ``sim_ros.physics.vessels`` SUPPLY_M/SUPPLY_D) and K3/K4 from
+  ``bias_gains(vessel_mass, vessel_length)``;
+- ``cascade``: causal notch + low-pass (Fossen 2011 §11.3.2; MSS ``notchFilter.m``).
+
+ω0: ``wave_peak_freq`` > 0 fixes it. With 0 it follows the ``wave_peak_frequency`` topic
+(published by a predictor node) and uses ``default_wave_peak_freq`` until the first message; a
+change above ``RETUNE_TOLERANCE`` retunes the filter (state kept).
+
+Runtime parameter changes are validated (the reason of a rejection is returned); an accepted
+change re-creates the estimator and the aligner (its state restarts from the next pose).
+Exceptions in callbacks are caught, counted (``callback_errors``) and reported in diagnostics.
+"""
+# rclpy's Node and logger methods are untyped in Jazzy.
+# mypy: disable-error-code="no-untyped-call"
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+import math
+import sys
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+import numpy as np
+from numpy.typing import NDArray
+from rcl_interfaces.msg import SetParametersResult
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.utilities import remove_ros_args, try_shutdown
+from std_msgs.msg import Float64
+
+from lf_predictor_ros.core.alignment import AlignedSample, AlignerSettings, InputAligner
+from lf_predictor_ros.core.baselines.cascade import CascadeFilter
+from lf_predictor_ros.core.baselines.observer import PassiveObserver, bias_gains
+from lf_predictor_ros.nodes.conversions import (
+    FRAME_BODY,
+    FRAME_EARTH,
+    msg_to_force,
+    msg_to_pose,
+    pose_to_msg,
+    sec_to_stamp,
+    stamp_to_sec,
+)
+from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, make_diagnostic_array
+from lf_predictor_ros.nodes.params import declare_and_load, field_specs, validated_update
+from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
+from sim_ros.physics.vessels import SUPPLY_D, SUPPLY_LENGTH, SUPPLY_M, SUPPLY_MASS
+
+NODE_NAME = 'observer'
+METHODS = ('passive_observer', 'cascade')
+RETUNE_TOLERANCE = 1e-3  # [rad/s] smaller ω0 changes from the topic do not retune the filter
+
+FloatArray = NDArray[np.float64]
+
+
+def _meta(doc: str, unit: str = '', read_only: bool = False) -> dict[str, Any]:
+    meta: dict[str, Any] = {'doc': doc, 'read_only': read_only}
+    if unit:
+        meta['unit'] = unit
+    return meta
+
+
+def _row_major(matrix: FloatArray) -> list[float]:
+    return [float(v) for v in np.asarray(matrix, dtype=np.float64).reshape(-1)]
+
+
+@dataclass(frozen=True)
+class ObserverConfig:
+    """Parameters of the observer node (validated; see the module docstring)."""
+
+    method: str = field(default='passive_observer', metadata=_meta(
+        'baseline: passive_observer (Fossen & Strand 1999) or cascade (notch + low-pass)'))
+    wave_peak_freq: float = field(default=0.0, metadata=_meta(
+        'fixed wave peak frequency ω0; 0 = follow the wave_peak_frequency topic', 'rad/s'))
+    default_wave_peak_freq: float = field(default=0.8, metadata=_meta(
+        'ω0 used until the wave_peak_frequency topic has spoken (wave_peak_freq = 0)', 'rad/s'))
+    mass_matrix: list[float] = field(default_factory=lambda: _row_major(SUPPLY_M), metadata=_meta(
+        'vessel inertia M incl. added mass, 9 values row-major (MSS supply vessel)',
+        'kg, kg·m, kg·m²'))
+    damping_matrix: list[float] = field(
+        default_factory=lambda: _row_major(SUPPLY_D), metadata=_meta(
+            'linear damping D, 9 values row-major (MSS supply vessel)',
+            'N·s/m, N·s, N·m·s'))
+    vessel_mass: float = field(default=SUPPLY_MASS, metadata=_meta(
+        'vessel mass m for the K3/K4 scaling (bias_gains)', 'kg'))
+    vessel_length: float = field(default=SUPPLY_LENGTH, metadata=_meta(
+        'vessel length L for the K3/K4 scaling (bias_gains)', 'm'))
+    ndof: int = field(default=3, metadata=_meta('degrees of freedom estimated: 1 (surge) or 3'))
+    sample_time: float = field(default=0.5, metadata=_meta('estimator sample time h', 's'))
+    frame_id: str = field(default=FRAME_EARTH, metadata=_meta(
+        'frame of measured_pose (expected) and of lf_pose (published)'))
+    max_gap: float = field(default=5.0, metadata=_meta(
+        'pose gap that starts a new data segment (estimator restarts)', 's'))
+    thrust_timeout: float = field(default=2.0, metadata=_meta(
+        'thrust older than this counts as stale (zero force used)', 's'))
+    backward_jump: float = field(default=5.0, metadata=_meta(
+        'backward stamp jump that restarts the stream', 's'))
+    max_speed: float = field(default=20.0, metadata=_meta(
+        'pose jumps faster than this are dropped as outliers', 'm/s'))
+    diagnostics_period: float = field(default=1.0, metadata=_meta(
+        '/diagnostics period on the node clock', 's', read_only=True))
+
+    def __post_init__(self) -> None:
+        """Check every rule; the message says what to change."""
+        if self.method not in METHODS:
+            raise ValueError(f'method must be one of {METHODS}, got {self.method!r}')
+        if self.ndof not in (1, 3):
+            raise ValueError(f'ndof must be 1 (surge) or 3 (surge, sway, yaw), got {self.ndof}')
+        if not (math.isfinite(self.wave_peak_freq) and self.wave_peak_freq >= 0.0):
+            raise ValueError(f'wave_peak_freq must be 0 (follow the topic) or > 0 rad/s, got '
+                             f'{self.wave_peak_freq}')
+        for name in ('default_wave_peak_freq', 'vessel_mass', 'vessel_length', 'sample_time',
+                     'diagnostics_period'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f'{name} must be a positive finite number, got {value}')
+        for name in ('mass_matrix', 'damping_matrix'):
+            values = getattr(self, name)
+            if len(values) != 9 or not all(math.isfinite(v) for v in values):
+                raise ValueError(f'{name} must be 9 finite numbers (3×3 row-major), got '
+                                 f'{len(values)} values')
+        if not self.frame_id:
+            raise ValueError("frame_id must not be empty: use the pose frame, e.g. 'map_ned'")
+        self.aligner_settings()  # raises for invalid aligner rules
+
+    def aligner_settings(self) -> AlignerSettings:
+        """Aligner rules of this configuration."""
+        return AlignerSettings(sample_time=self.sample_time, max_gap=self.max_gap,
+                               thrust_timeout=self.thrust_timeout,
+                               backward_jump=self.backward_jump, max_speed=self.max_speed)
+
+    def initial_wave_peak_freq(self) -> float:
+        """ω0 [rad/s] to start with: the fixed value or the default."""
+        return self.wave_peak_freq if self.wave_peak_freq > 0.0 else self.default_wave_peak_freq
+
+
+def make_estimator(config: ObserverConfig,
+                   wave_peak_freq: float) -> CascadeFilter | PassiveObserver:
+    """The baseline ``config.method`` tuned to ω0 (ValueError if the model does not fit)."""
+    if config.method == 'cascade':
+        return CascadeFilter(config.ndof, config.sample_time, wave_peak_freq)
+    k3, k4 = bias_gains(config.vessel_mass, config.vessel_length, config.ndof)
+    return PassiveObserver(
+        config.ndof, config.sample_time, wave_peak_freq,
+        np.reshape(config.mass_matrix, (3, 3)), np.reshape(config.damping_matrix, (3, 3)),
+        k3=k3, k4=k4)
+
+
+class ObserverNode(Node):
+    """Runs a classical LF estimator (passive observer or cascade) on aligned inputs."""
+
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **node_kwargs)
+        self._config: ObserverConfig = declare_and_load(self, ObserverConfig)
+        self._wave_peak_freq = self._config.initial_wave_peak_freq()
+        self._wave_source = 'parameter' if self._config.wave_peak_freq > 0.0 else 'default'
+        self._estimator = make_estimator(self._config, self._wave_peak_freq)
+        self._aligner = InputAligner(self._config.aligner_settings())
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._samples = 0
+        self._invalid_messages = 0
+        self._unexpected_frame = 0
+        self._warned_frames: set[str] = set()
+        self._callback_errors = 0
+        self._errors_reported = 0
+        self._last_error = ''
+        qos = publisher_qos()
+        self._lf_pub = self.create_publisher(PoseStamped, 'lf_pose', qos)
+        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', qos)
+        self.create_subscription(WrenchStamped, 'thrust', self.on_thrust, sensor_qos())
+        self.create_subscription(PoseStamped, 'measured_pose', self.on_pose, sensor_qos())
+        self.create_subscription(Float64, 'wave_peak_frequency', self.on_wave_peak_frequency,
+                                 sensor_qos())
+        self.create_timer(self._config.diagnostics_period, self.publish_diagnostics)
+        self.get_logger().info(
+            f'{self._config.method}, {self._config.ndof}-DOF, sample time '
+            f'{self._config.sample_time} s, ω0 {self._wave_peak_freq:.3f} rad/s '
+            f'({self._wave_source})')
+
+    @property
+    def config(self) -> ObserverConfig:
+        """The parameters in use."""
+        return self._config
+
+    @property
+    def estimator(self) -> CascadeFilter | PassiveObserver:
+        """The baseline in use."""
+        return self._estimator
+
+    @property
+    def wave_peak_freq(self) -> float:
+        """ω0 in use [rad/s]."""
+        return self._wave_peak_freq
+
+    # ---- runtime parameters --------------------------------------------------------------
+
+    def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        config, reason = validated_update(self._config, parameters)
+        if config is None:
+            return SetParametersResult(successful=False, reason=reason)
+        if config is self._config:
+            return SetParametersResult(successful=True, reason='')
+        freq = self._wave_peak_freq
+        if config.wave_peak_freq > 0.0:
+            freq, source = config.wave_peak_freq, 'parameter'
+        elif self._wave_source == 'topic':
+            source = 'topic'
+        else:
+            freq, source = config.default_wave_peak_freq, 'default'
+        try:
+            estimator = make_estimator(config, freq)
+        except ValueError as error:
+            return SetParametersResult(successful=False, reason=str(error))
+        self._config, self._estimator = config, estimator
+        self._wave_peak_freq, self._wave_source = freq, source
+        self._aligner = InputAligner(config.aligner_settings())
+        self.get_logger().info(f'parameters changed: {config.method} re-created, state restarts')
+        return SetParametersResult(successful=True, reason='')
+
+    # ---- data path -----------------------------------------------------------------------
+
+    def on_wave_peak_frequency(self, msg: Float64) -> None:
+        """Follow ω0 from the topic when ``wave_peak_freq`` is 0."""
+        try:
+            value = float(msg.data)
+            if self._config.wave_peak_freq > 0.0 or not (math.isfinite(value) and value > 0.0):
+                return
+            self._wave_source = 'topic'
+            if abs(value - self._wave_peak_freq) <= RETUNE_TOLERANCE:
+                return
+            self._estimator.set_wave_peak_freq(value)
+            self._wave_peak_freq = value
+        except Exception as error:  # noqa: BLE001 - a callback must never kill the node
+            self._count_error('wave_peak_frequency', error)
+
+    def on_thrust(self, msg: WrenchStamped) -> None:
+        """Store an applied force (zero-order hold in the aligner)."""
+        try:
+            self._check_frame('thrust', msg.header.frame_id, FRAME_BODY)
+            try:
+                force = msg_to_force(msg)
+            except ValueError:
+                self._invalid_messages += 1
+                return
+            self._aligner.add_force(stamp_to_sec(msg.header.stamp), force)
+        except Exception as error:  # noqa: BLE001 - a callback must never kill the node
+            self._count_error('thrust', error)
+
+    def on_pose(self, msg: PoseStamped) -> None:
+        """Align a measured pose; estimate and publish for every completed grid sample."""
+        try:
+            self._check_frame('measured_pose', msg.header.frame_id, self._config.frame_id)
+            try:
+                pose = msg_to_pose(msg)
+            except ValueError:
+                self._invalid_messages += 1
+                return
+            for sample in self._aligner.add_pose(stamp_to_sec(msg.header.stamp), pose):
+                self._process(sample)
+        except Exception as error:  # noqa: BLE001 - a callback must never kill the node
+            self._count_error('measured_pose', error)
+
+    def _process(self, sample: AlignedSample) -> None:
+        if sample.segment_start:
+            self._estimator.reset()  # never filter across a gap or a time jump
+        lf_pose = self._estimator.update(sample.t, sample.pose, sample.force)
+        self._samples += 1
+        self._lf_pub.publish(pose_to_msg(lf_pose, sec_to_stamp(sample.t), self._config.frame_id))
+
+    def _check_frame(self, topic: str, frame_id: str, expected: str) -> None:
+        if frame_id == expected:
+            return
+        self._unexpected_frame += 1
+        if topic not in self._warned_frames:
+            self._warned_frames.add(topic)
+            self.get_logger().warning(
+                f"{topic} arrives in frame '{frame_id}', expected '{expected}': used as is, "
+                'counted in diagnostics (unexpected_frame); this warning is not repeated')
+
+    def _count_error(self, where: str, error: BaseException) -> None:
+        self._callback_errors += 1
+        self._last_error = f'{where}: {type(error).__name__}: {error}'
+        self.get_logger().error(f'callback failed ({self._last_error})',
+                                throttle_duration_sec=5.0)
+
+    # ---- diagnostics ---------------------------------------------------------------------
+
+    def diagnostic_values(self) -> tuple[str, str, dict[str, DiagnosticValue]]:
+        """(level, message, key values) of the current state, as published."""
+        status = self._estimator.status()
+        aligned = self._aligner.counters
+        invalid = aligned.invalid + self._invalid_messages
+        level, message = 'OK', f'{status.state}: {status.message}'
+        if self._callback_errors > self._errors_reported:
+            level, message = 'ERROR', f'callback error: {self._last_error}'
+        values: dict[str, DiagnosticValue] = {
+            'method': self._config.method,
+            'state': status.state,
+            'wave_peak_freq': self._wave_peak_freq,
+            'wave_peak_source': self._wave_source,
+            'samples': self._samples,
+            'dropped': invalid + aligned.out_of_order + aligned.outliers,
+            'invalid': invalid,
+            'out_of_order': aligned.out_of_order,
+            'outliers': aligned.outliers,
+            'gaps': aligned.gaps,
+            'resets': aligned.resets,
+            'stale_thrust': aligned.stale_force_samples,
+            'unexpected_frame': self._unexpected_frame,
+            'callback_errors': self._callback_errors,
+            'last_error': self._last_error,
+        }
+        return level, message, values
+
+    def publish_diagnostics(self) -> None:
+        """Publish one DiagnosticArray (timer callback; never raises)."""
+        try:
+            level, message, values = self.diagnostic_values()
+            self._errors_reported = self._callback_errors
+            self._diag_pub.publish(make_diagnostic_array(
+                f'{self.get_name()}: {self._config.method}', level, message, values,
+                stamp=self.get_clock().now().to_msg()))
+        except Exception as error:  # noqa: BLE001
+            self._count_error('diagnostics', error)
+
+
+def parameter_table() -> str:
+    """One line per ROS parameter: name, default and description with unit (for ``--help``)."""
+    lines = []
+    for spec in field_specs(ObserverConfig):
+        default = spec.default
+        if spec.container is not None:
+            default = [float(f'{v:.6g}') for v in default] if spec.element is float else list(
+                default)
+        flag = ' (read-only)' if spec.read_only else ''
+        lines.append(f'  {spec.field:<24} {default!r:<18} {spec.description}{flag}')
+    return '\n'.join(lines)
+
+
+def _parse_cli(argv: Sequence[str]) -> None:
+    """Handle ``--help`` (exit 0, parameter table) and reject unknown non-ROS arguments."""
+    parser = argparse.ArgumentParser(
+        prog=NODE_NAME,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description='Classical LF estimators (passive observer, notch + low-pass cascade) on '
+                    'the predictor topics: subscribes measured_pose, thrust, '
+                    'wave_peak_frequency; publishes lf_pose (stamped t) and /diagnostics.',
+        epilog='ROS arguments: --ros-args -p method:=cascade --params-file config/observer.yaml'
+               '\n\nParameters (name, default, description [unit]); a run-time change '
+               're-creates the estimator:\n' + parameter_table())
+    parser.parse_args(list(remove_ros_args(list(argv)))[1:])
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console script ``observer``; returns the exit code."""
+    _parse_cli(sys.argv if args is None else args)
+    rclpy.init(args=args)
+    try:
+        node = ObserverNode()
+    except (ValueError, TypeError) as error:
+        rclpy.logging.get_logger(NODE_NAME).fatal(f'invalid configuration: {error}')
+        try_shutdown()
+        return 1
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,587 @@
+"""Predictor node: the adaptive LF pose predictor (thesis Algorithm 4.1) behind ROS topics.
+
+A ``rclpy`` lifecycle node and a thin adapter: message → numpy → ``core`` → message.
+
+Data path (all times are message stamps, so the node works with ``use_sim_time`` and bags):
+``thrust`` (WrenchStamped, sensor-data QoS) → ``InputAligner.add_force``; ``measured_pose``
+(PoseStamped, sensor-data QoS) → ``InputAligner.add_pose`` → for each aligned grid sample
+``AdaptivePredictor.update`` → ``lf_pose`` (PoseStamped, ``header.stamp`` = sample time +
+``sample_time``, the instant the prediction is valid for, frame ``frame_id``) and
+``wave_peak_frequency`` (Float64 [rad/s], once ω0 is known). A sample that starts a new data
+segment (gap, time jump, reset) restarts the predictor's segment; the trained network stays.
+
+Training runs on the core's worker thread; no callback ever waits for it. With ``model_path``
+set, the node loads that checkpoint at configure time (warm start) and the worker saves after
+each accepted training (after a run-time change of the network structure the file then holds the
+new shape). A file that does not fit the parameters or is corrupt is refused with an ERROR log,
+the node starts cold and does not save over the refused file.
+
+``/diagnostics`` (DiagnosticArray, every ``diagnostics_period`` of the node clock): level OK
+while warming up or trained, WARN in fallback, ERROR in error (or after a callback failed since
+the last report); key values: predictor status and counters, aligner counters, frames.
+
+Services: ``~/retrain`` (std_srvs/Trigger: ``request_retrain()``'s answer) and ``~/reset``
+(forget the network, data, ω0 and counters of trainings; state becomes warming_up).
+
+Lifecycle: parameters are declared and validated at construction (invalid → FATAL, exit 1);
+configure builds aligner, predictor, publishers, subscriptions, services and the diagnostics
+timer; activate enables publishing and data input (inputs are ignored while inactive); cleanup
+and shutdown stop training and release everything. ``autostart`` (default true) configures and
+activates at start, so ``ros2 run lf_predictor_ros predictor`` just works.
+
+Runtime parameter changes are validated (the reason of a rejection is returned) and applied as:
+- ``PredictorParams`` fields: the predictor is re-created with the new values (logged). When
+  neither the network structure (ndof, nu, ny, nfb, hidden_units, hidden_layers) nor
+  sample_time changes, the trained network and ω0 are carried over (warm start); otherwise it
+  starts cold. Collected data restarts in both cases (the next training needs a full window).
+- aligner settings (max_gap, thrust_timeout, backward_jump, max_speed): a new aligner, a new
+  data segment. ``frame_id``: immediately.
+- ``model_path``, ``diagnostics_period``, ``autostart``: read-only (set them at start).
+
+Never does an exception in a callback kill the node: it is caught, counted (``callback_errors``),
+logged and reported in the diagnostics. An input whose ``frame_id`` is not the expected one
+(``frame_id`` for poses, ``base_link_fsd`` for thrust) is used, counted (``unexpected_frame``) and
+warned about once per topic.
+"""
+# rclpy's Node, lifecycle and logger methods are untyped in Jazzy.
+# mypy: disable-error-code="no-untyped-call"
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+import math
+import os
+import sys
+import tempfile
+from typing import TYPE_CHECKING, Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.parameter import Parameter
+from rclpy.utilities import ok, remove_ros_args, try_shutdown
+from std_msgs.msg import Float64
+from std_srvs.srv import Trigger
+
+from lf_predictor_ros.core.alignment import AlignedSample, AlignerSettings, InputAligner
+from lf_predictor_ros.core.estimator import EstimatorStatus
+from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.nodes.conversions import (
+    FRAME_BODY,
+    FRAME_EARTH,
+    msg_to_force,
+    msg_to_pose,
+    pose_to_msg,
+    sec_to_stamp,
+    stamp_to_sec,
+)
+from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, make_diagnostic_array
+from lf_predictor_ros.nodes.params import convert_value, field_specs, validated_update
+from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
+
+if TYPE_CHECKING:  # torch is imported on configure, so --help and bad parameters answer fast
+    from lf_predictor_ros.core.predictor import AdaptivePredictor
+
+NODE_NAME = 'predictor'
+# PredictorParams fields that change the network (or its time base): a change starts cold.
+STRUCTURE_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'sample_time')
+NOTE_STRUCTURE = ' (run-time change: re-creates the predictor cold, data restarts)'
+NOTE_TUNING = (' (run-time change: re-creates the predictor keeping the trained network, '
+               'data restarts)')
+
+
+
+def _meta(doc: str, unit: str = '', read_only: bool = False) -> dict[str, Any]:
+    meta: dict[str, Any] = {'doc': doc, 'read_only': read_only}
+    if unit:
+        meta['unit'] = unit
+    return meta
+
+
+@dataclass(frozen=True)
+class PredictorNodeSettings:
+    """Node settings besides the ``PredictorParams`` (validated; see the module docstring)."""
+
+    model_path: str = field(default='', metadata=_meta(
+        "checkpoint: loaded at start (warm start), saved after each accepted training; '' = "
+        'none', read_only=True))
+    frame_id: str = field(default=FRAME_EARTH, metadata=_meta(
+        'frame of measured_pose (expected) and of lf_pose (published)'))
+    max_gap: float = field(default=5.0, metadata=_meta(
+        'pose gap that starts a new data segment (no interpolation across)', 's'))
+    thrust_timeout: float = field(default=2.0, metadata=_meta(
+        'thrust older than this counts as stale (zero force used)', 's'))
+    backward_jump: float = field(default=5.0, metadata=_meta(
+        'backward stamp jump that restarts the stream (simulator reset, bag loop)', 's'))
+    max_speed: float = field(default=20.0, metadata=_meta(
+        'pose jumps faster than this are dropped as outliers', 'm/s'))
+    diagnostics_period: float = field(default=1.0, metadata=_meta(
+        '/diagnostics period on the node clock', 's', read_only=True))
+    autostart: bool = field(default=True, metadata=_meta(
+        'configure and activate at start (false: wait for lifecycle transitions)',
+        read_only=True))
+
+    def __post_init__(self) -> None:
+        """Check every rule; the message says what to change."""
+        if not self.frame_id:
+            raise ValueError("frame_id must not be empty: use the pose frame, e.g. 'map_ned'")
+        for name in ('max_gap', 'thrust_timeout', 'backward_jump', 'max_speed',
+                     'diagnostics_period'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f'{name} must be a positive finite number, got {value}')
+
+    def aligner_settings(self, sample_time: float) -> AlignerSettings:
+        """Aligner rules at the predictor's sample time (ValueError if they do not fit)."""
+        return AlignerSettings(sample_time=sample_time, max_gap=self.max_gap,
+                               thrust_timeout=self.thrust_timeout,
+                               backward_jump=self.backward_jump, max_speed=self.max_speed)
+
+
+def parameter_table(classes: Sequence[type[Any]]) -> str:
+    """One line per ROS parameter: name, default and description with unit (for ``--help``)."""
+    lines = []
+    for cls in classes:
+        for spec in field_specs(cls):
+            default = list(spec.default) if spec.container is not None else spec.default
+            flag = ' (read-only)' if spec.read_only else ''
+            lines.append(f'  {spec.field:<24} {default!r:<18} {spec.description}{flag}')
+    return '\n'.join(lines)
+
+
+def _declare(node: LifecycleNode, cls: type[Any],
+             note: Callable[[str], str] | None = None) -> Any:
+    """Declare one parameter per dataclass field (description + ``note``); return the instance.
+
+    Like ``nodes.params.declare_and_load``, with a per-field note on run-time changes appended
+    to the description. Raises ValueError when the loaded values break a rule.
+    """
+    values: dict[str, Any] = {}
+    for spec in field_specs(cls):
+        default = list(spec.default) if spec.container is not None else spec.default
+        descriptor = ParameterDescriptor(
+            name=spec.field, description=spec.description + (note(spec.field) if note else ''),
+            read_only=spec.read_only, dynamic_typing=True)
+        parameter = node.declare_parameter(spec.field, default, descriptor)
+        values[spec.field] = convert_value(parameter.value, spec, spec.field)
+    return cls(**values)
+
+
+def _change_note(name: str) -> str:
+    return NOTE_STRUCTURE if name in STRUCTURE_FIELDS else NOTE_TUNING
+
+
+def _number(value: float | None) -> float:
+    return math.nan if value is None else float(value)
+
+
+def diagnostic_level(status: EstimatorStatus) -> str:
+    """Level of a predictor state: warming_up/trained/ok → OK, fallback → WARN, error → ERROR."""
+    return {'fallback': 'WARN', 'error': 'ERROR'}.get(status.state, 'OK')
+
+
+class PredictorNode(LifecycleNode):
+    """Lifecycle node running ``AdaptivePredictor`` on aligned pose and thrust messages."""
+
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **node_kwargs)
+        self._params: PredictorParams = _declare(self, PredictorParams, _change_note)
+        self._settings: PredictorNodeSettings = _declare(self, PredictorNodeSettings)
+        self._settings.aligner_settings(self._params.sample_time)  # cross-check at start
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._aligner: InputAligner | None = None
+        self._predictor: AdaptivePredictor | None = None
+        self._active = False
+        self._subscriptions_in_use: list[Any] = []
+        self._services_in_use: list[Any] = []
+        self._timer: Any = None
+        self._lf_pub: Any = None
+        self._freq_pub: Any = None
+        self._diag_pub: Any = None
+        self._samples = 0  # aligned samples processed in total
+        self._samples_in_run = 0  # since the predictor was (re-)created or reset
+        self._invalid_messages = 0  # failed conversions (bad quaternion, negative stamp)
+        self._unexpected_frame = 0
+        self._warned_frames: set[str] = set()
+        self._callback_errors = 0
+        self._errors_reported = 0
+        self._last_error = ''
+        self._warm_start = False
+        self._model_file = 'none'
+        self._save_path: str | None = None
+        if self._settings.autostart:
+            if self.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+                raise RuntimeError('autostart: configure failed (see the ERROR above)')
+            self.trigger_activate()
+
+    # ---- read-only views -----------------------------------------------------------------
+
+    @property
+    def params(self) -> PredictorParams:
+        """The predictor parameters in use."""
+        return self._params
+
+    @property
+    def settings(self) -> PredictorNodeSettings:
+        """The node settings in use."""
+        return self._settings
+
+    @property
+    def predictor(self) -> AdaptivePredictor | None:
+        """The predictor (None while unconfigured)."""
+        return self._predictor
+
+    # ---- lifecycle -----------------------------------------------------------------------
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Build aligner, predictor (warm start), publishers, inputs, services and timer."""
+        try:
+            self._aligner = InputAligner(self._settings.aligner_settings(self._params.sample_time))
+            self._predictor = self._new_predictor(self._params)
+            self._load_model()
+        except (ValueError, OSError) as error:
+            self.get_logger().error(f'configure failed: {error}')
+            return TransitionCallbackReturn.FAILURE
+        qos = publisher_qos()
+        self._lf_pub = self.create_lifecycle_publisher(PoseStamped, 'lf_pose', qos)
+        self._freq_pub = self.create_lifecycle_publisher(Float64, 'wave_peak_frequency', qos)
+        self._diag_pub = self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics', qos)
+        self._subscriptions_in_use = [
+            self.create_subscription(WrenchStamped, 'thrust', self.on_thrust, sensor_qos()),
+            self.create_subscription(PoseStamped, 'measured_pose', self.on_pose, sensor_qos())]
+        self._services_in_use = [self.create_service(Trigger, '~/retrain', self._on_retrain),
+                                 self.create_service(Trigger, '~/reset', self._on_reset)]
+        self._timer = self.create_timer(self._settings.diagnostics_period,
+                                        self.publish_diagnostics)
+        p = self._params
+        self.get_logger().info(
+            f'configured: {p.ndof}-DOF, sample time {p.sample_time} s, retrain every '
+            f'{p.retrain_period} s on {p.training_window} s, trainer {p.trainer}; model '
+            f'{self._model_file}')
+        return super().on_configure(state)
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Enable the publishers and the data input."""
+        self._active = True
+        self.get_logger().info('active: predicting on measured_pose + thrust')
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop publishing; inputs are ignored until activated again (state is kept)."""
+        self._active = False
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop training and release predictor, publishers, inputs, services and timer."""
+        self._release()
+        return super().on_cleanup(state)
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Same as cleanup, from any state."""
+        self._release()
+        return super().on_shutdown(state)
+
+    def _release(self) -> None:
+        self._active = False
+        if self._predictor is not None:
+            self._predictor.close()  # waits ≤ 5 s for the worker's next epoch boundary
+        self._predictor = None
+        self._aligner = None
+        for subscription in self._subscriptions_in_use:
+            self.destroy_subscription(subscription)
+        for service in self._services_in_use:
+            self.destroy_service(service)
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+        self._subscriptions_in_use, self._services_in_use, self._timer = [], [], None
+        for publisher in (self._lf_pub, self._freq_pub, self._diag_pub):
+            if publisher is not None:
+                self.destroy_lifecycle_publisher(publisher)
+        self._lf_pub = self._freq_pub = self._diag_pub = None
+
+    def destroy_node(self) -> None:
+        """Stop a running training before the node goes."""
+        if self._predictor is not None:
+            self._predictor.close()
+        super().destroy_node()
+
+    # ---- predictor construction ----------------------------------------------------------
+
+    def _new_predictor(self, params: PredictorParams) -> AdaptivePredictor:
+        from lf_predictor_ros.core.predictor import AdaptivePredictor  # torch: loaded on first use
+
+        self._samples_in_run = 0
+        return AdaptivePredictor(params, background=True, checkpoint_path=self._save_path)
+
+    def _load_model(self) -> None:
+        """Warm start from ``model_path`` when it exists; refuse a file that does not fit."""
+        assert self._predictor is not None
+        path = self._settings.model_path
+        self._warm_start = False
+        self._save_path = path or None
+        if not path:
+            self._model_file = 'none'
+        elif not os.path.exists(path):
+            self._model_file = f'{path} (not found: cold start, saved after training)'
+        else:
+            try:
+                self._predictor.load(path)
+            except (ValueError, OSError) as error:
+                self._save_path = None  # never overwrite a file we could not read
+                self._model_file = f'{path} refused: {error}'
+                self.get_logger().error(
+                    f'model file {path} refused, starting cold and not saving over it: {error}')
+            else:
+                self._warm_start = True
+                self._model_file = f'{path} (warm start)'
+                self.get_logger().info(f'warm start from {path}')
+        self._predictor.checkpoint_path = self._save_path
+
+    def _replace_predictor(self, params: PredictorParams) -> None:
+        """Re-create the predictor; carry the network over when its structure is unchanged."""
+        old = self._predictor
+        keep = old is not None and old.model is not None and all(
+            getattr(old.params, name) == getattr(params, name) for name in STRUCTURE_FIELDS)
+        new = self._new_predictor(params)
+        if old is not None and keep:
+            with tempfile.TemporaryDirectory() as folder:
+                path = os.path.join(folder, 'carry_over.pt')
+                old.save(path)
+                new.load(path)
+        if old is not None:
+            old.reset()  # drops a running training without waiting for it
+        self._predictor = new
+        how = 'trained network kept' if keep else 'starting cold'
+        self.get_logger().info(f'parameters changed: predictor re-created ({how}); data restarts')
+
+    # ---- runtime parameters --------------------------------------------------------------
+
+    def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        new_params, reason = validated_update(self._params, parameters)
+        if new_params is None:
+            return SetParametersResult(successful=False, reason=reason)
+        new_settings, reason = validated_update(self._settings, parameters)
+        if new_settings is None:
+            return SetParametersResult(successful=False, reason=reason)
+        try:
+            aligner_settings = new_settings.aligner_settings(new_params.sample_time)
+        except ValueError as error:
+            return SetParametersResult(successful=False, reason=str(error))
+        try:
+            self._apply(new_params, new_settings, aligner_settings)
+        except Exception as error:  # noqa: BLE001 - keep the node alive, report the reason
+            self._count_error('parameter change', error)
+            return SetParametersResult(successful=False, reason=f'could not apply: {error}')
+        return SetParametersResult(successful=True, reason='')
+
+    def _apply(self, params: PredictorParams, settings: PredictorNodeSettings,
+               aligner_settings: AlignerSettings) -> None:
+        configured = self._predictor is not None
+        if configured and params != self._params:
+            self._replace_predictor(params)
+        if self._aligner is not None and aligner_settings != self._aligner.settings:
+            self._aligner = InputAligner(aligner_settings)
+            self.get_logger().info('aligner settings changed: new data segment')
+        self._params, self._settings = params, settings
+
+    # ---- data path -----------------------------------------------------------------------
+
+    def on_thrust(self, msg: WrenchStamped) -> None:
+        """Store an applied force (zero-order hold in the aligner)."""
+        if not self._active or self._aligner is None:
+            return
+        try:
+            self._check_frame('thrust', msg.header.frame_id, FRAME_BODY)
+            try:
+                force = msg_to_force(msg)
+            except ValueError:
+                self._invalid_messages += 1
+                return
+            self._aligner.add_force(stamp_to_sec(msg.header.stamp), force)
+        except Exception as error:  # noqa: BLE001 - a callback must never kill the node
+            self._count_error('thrust', error)
+
+    def on_pose(self, msg: PoseStamped) -> None:
+        """Align a measured pose; predict and publish for every completed grid sample."""
+        if not self._active or self._aligner is None:
+            return
+        try:
+            self._check_frame('measured_pose', msg.header.frame_id, self._settings.frame_id)
+            try:
+                pose = msg_to_pose(msg)
+            except ValueError:
+                self._invalid_messages += 1
+                return
+            for sample in self._aligner.add_pose(stamp_to_sec(msg.header.stamp), pose):
+                self._process(sample)
+        except Exception as error:  # noqa: BLE001 - a callback must never kill the node
+            self._count_error('measured_pose', error)
+
+    def _process(self, sample: AlignedSample) -> None:
+        predictor = self._predictor
+        assert predictor is not None
+        if sample.segment_start and self._samples_in_run > 0:
+            predictor.restart_segment()
+        lf_pose = predictor.update(sample.t, sample.pose, sample.force)
+        self._samples += 1
+        self._samples_in_run += 1
+        stamp = sec_to_stamp(sample.t + self._params.sample_time)  # valid at t + h
+        self._lf_pub.publish(pose_to_msg(lf_pose, stamp, self._settings.frame_id))
+        wave_peak_freq = predictor.wave_peak_freq
+        if wave_peak_freq is not None:
+            self._freq_pub.publish(Float64(data=float(wave_peak_freq)))
+
+    def _check_frame(self, topic: str, frame_id: str, expected: str) -> None:
+        if frame_id == expected:
+            return
+        self._unexpected_frame += 1
+        if topic not in self._warned_frames:
+            self._warned_frames.add(topic)
+            self.get_logger().warning(
+                f"{topic} arrives in frame '{frame_id}', expected '{expected}': used as is, "
+                'counted in diagnostics (unexpected_frame); this warning is not repeated')
+
+    def _count_error(self, where: str, error: BaseException) -> None:
+        self._callback_errors += 1
+        self._last_error = f'{where}: {type(error).__name__}: {error}'
+        self.get_logger().error(f'callback failed ({self._last_error})',
+                                throttle_duration_sec=5.0)
+
+    # ---- services ------------------------------------------------------------------------
+
+    def _on_retrain(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        try:
+            if self._predictor is None:
+                response.success, response.message = False, 'predictor not configured'
+            else:
+                response.success, response.message = self._predictor.request_retrain()
+        except Exception as error:  # noqa: BLE001
+            self._count_error('~/retrain', error)
+            response.success, response.message = False, f'retrain failed: {error}'
+        return response
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        try:
+            if self._predictor is None or self._aligner is None:
+                response.success, response.message = False, 'predictor not configured'
+                return response
+            self._predictor.reset()
+            self._aligner.reset()
+            self._samples_in_run = 0
+            self._warm_start = False
+            status = self._predictor.status()
+            response.success = True
+            response.message = (f'predictor reset: state {status.state}, network, data and ω0 '
+                                'forgotten')
+            self.get_logger().info(response.message)
+        except Exception as error:  # noqa: BLE001
+            self._count_error('~/reset', error)
+            response.success, response.message = False, f'reset failed: {error}'
+        return response
+
+    # ---- diagnostics ---------------------------------------------------------------------
+
+    def diagnostic_values(self) -> tuple[str, str, dict[str, DiagnosticValue]]:
+        """(level, message, key values) of the current state, as published."""
+        predictor, aligner = self._predictor, self._aligner
+        if predictor is None or aligner is None:
+            return 'WARN', 'not configured', {}
+        status = predictor.status()
+        counters = predictor.counters
+        aligned = aligner.counters
+        invalid = aligned.invalid + self._invalid_messages
+        level, message = diagnostic_level(status), f'{status.state}: {status.message}'
+        if self._callback_errors > self._errors_reported:
+            level, message = 'ERROR', f'callback error: {self._last_error}'
+        values: dict[str, DiagnosticValue] = {
+            'state': status.state,
+            'wave_peak_freq': _number(status.wave_peak_freq),
+            'last_loss': _number(status.last_loss),
+            'train_seconds': _number(status.train_seconds),
+            'model_age': _number(status.model_age),
+            'buffer_fill': _number(status.buffer_fill),
+            'trainings': status.trainings,
+            'rejected_trainings': status.rejected_trainings,
+            'overruns': counters['overruns'],
+            'training_errors': counters['training_errors'],
+            'guard_trips': counters['guard_trips'],
+            'segments': counters['segments'],
+            'samples': self._samples,
+            'dropped': invalid + aligned.out_of_order + aligned.outliers,
+            'invalid': invalid,
+            'out_of_order': aligned.out_of_order,
+            'outliers': aligned.outliers,
+            'gaps': aligned.gaps,
+            'resets': aligned.resets,
+            'stale_thrust': aligned.stale_force_samples,
+            'unexpected_frame': self._unexpected_frame,
+            'callback_errors': self._callback_errors,
+            'last_error': self._last_error,
+            'warm_start': self._warm_start,
+            'model_file': self._model_file,
+            'active': self._active,
+        }
+        return level, message, values
+
+    def publish_diagnostics(self) -> None:
+        """Publish one DiagnosticArray (timer callback; never raises)."""
+        try:
+            level, message, values = self.diagnostic_values()
+            self._errors_reported = self._callback_errors
+            if self._diag_pub is not None:
+                self._diag_pub.publish(make_diagnostic_array(
+                    f'{self.get_name()}: lf predictor', level, message, values,
+                    stamp=self.get_clock().now().to_msg()))
+        except Exception as error:  # noqa: BLE001
+            self._count_error('diagnostics', error)
+
+
+def _parse_cli(argv: Sequence[str]) -> None:
+    """Handle ``--help`` (exit 0, parameter table) and reject unknown non-ROS arguments."""
+    parser = argparse.ArgumentParser(
+        prog=NODE_NAME,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description='Learned LF pose predictor (lifecycle node). Subscribes measured_pose '
+                    '(PoseStamped) and thrust (WrenchStamped); publishes lf_pose (stamped t + '
+                    'sample_time), wave_peak_frequency, /diagnostics; services ~/retrain, '
+                    '~/reset.',
+        epilog='ROS arguments: --ros-args -p NAME:=VALUE --params-file config/predictor.yaml '
+               '-r __ns:=/vessel\n\nParameters (name, default, description [unit]). A run-time '
+               'change of a predictor parameter re-creates the predictor (the trained network is '
+               'kept unless ndof, nu, ny, nfb, hidden_units, hidden_layers or sample_time '
+               'change); collected data restarts.\n'
+               + parameter_table([PredictorParams, PredictorNodeSettings]))
+    parser.parse_args(list(remove_ros_args(list(argv)))[1:])
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console script ``predictor``; returns the exit code."""
+    _parse_cli(sys.argv if args is None else args)
+    rclpy.init(args=args)
+    try:
+        node = PredictorNode()
+    except (ValueError, TypeError, RuntimeError) as error:
+        if not ok():  # Ctrl-C while starting: the context went away under us
+            return 0
+        rclpy.logging.get_logger(NODE_NAME).fatal(f'invalid configuration: {error}')
+        try_shutdown()
+        return 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        try_shutdown()
+        return 0
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

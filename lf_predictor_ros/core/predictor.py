@@ -51,6 +51,7 @@ from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.retraining import (
     RetrainResult,
     Snapshot,
+    estimate_frequency,
     first_training_samples,
     network_spec,
     run_retraining,
@@ -71,11 +72,13 @@ class _JobOutcome:
     """A finished job: a result, or the exception it raised."""
 
     def __init__(self, generation: int, result: RetrainResult | None,
-                 error: BaseException | None, saved_error: str | None = None) -> None:
+                 error: BaseException | None, saved_error: str | None = None,
+                 frequency: FrequencyEstimate | None = None) -> None:
         self.generation = generation
         self.result = result
         self.error = error
         self.saved_error = saved_error
+        self.frequency = frequency  # set by a frequency-only job (before the first training)
 
 
 class AdaptivePredictor:
@@ -184,7 +187,9 @@ class AdaptivePredictor:
     def status(self) -> EstimatorStatus:
         """Health for diagnostics (state, ω0, last loss and training time, model age, fill)."""
         state: EstimatorState
-        if self._model is None:
+        if self._model is None and self._trainings > 0:
+            state = 'fallback'  # the network was retired: worse than the cascade
+        elif self._model is None:
             state = 'error' if self._last_error and self._trainings == 0 and \
                 self._errors > 0 else 'warming_up'
         else:
@@ -291,6 +296,7 @@ class AdaptivePredictor:
         self._k = -1
         self._fb_next = -1
         self._last_train_k: int | None = None
+        self._last_freq_k: int | None = None
         self._targets: TargetWindow | None = None
         self._retrain_requested = False
         self._used_network = False
@@ -352,6 +358,7 @@ class AdaptivePredictor:
     def _maybe_retrain(self, t: float) -> None:
         n = len(self._y)
         if n < self._first_training:
+            self._maybe_estimate_frequency(n)
             return
         if self.max_trainings is not None and self._trainings >= self.max_trainings:
             return
@@ -376,6 +383,32 @@ class AdaptivePredictor:
         else:
             self._job(*args)
             self._collect_outcomes(t)
+
+    def _maybe_estimate_frequency(self, n: int) -> None:
+        """Before the first training: estimate ω0 early (every Δ) to tune the fallback cascade."""
+        if isinstance(self._frequency, FrequencyEstimate) or n < self._first_training // 2:
+            return
+        if self._last_freq_k is not None and \
+                self._k - self._last_freq_k < self.params.retrain_samples:
+            return
+        if self._job_running():
+            return
+        self._last_freq_k = self._k
+        args = (self._generation, np.array(self._y), self._frequency)
+        if self.background:
+            self._worker = threading.Thread(target=self._frequency_job, args=args,
+                                            name='lf-predictor-frequency', daemon=True)
+            self._worker.start()
+        else:
+            self._frequency_job(*args)
+
+    def _frequency_job(self, generation: int, y: FloatArray,
+                       previous: FrequencyEstimate | float | None) -> None:
+        try:
+            estimate = estimate_frequency(self.params, y, previous)
+        except (ValueError, FloatingPointError):
+            return  # too little data for the spectrum yet: try again after Δ
+        self._outcomes.put(_JobOutcome(generation, None, None, frequency=estimate))
 
     def _job(self, generation: int, snapshot: Snapshot,
              incumbent: dict[str, torch.Tensor] | None, targets: TargetWindow | None,
@@ -405,6 +438,13 @@ class AdaptivePredictor:
                 self._apply(outcome, t)
 
     def _apply(self, outcome: _JobOutcome, t: float) -> None:
+        if outcome.frequency is not None:
+            if outcome.frequency.confident or self._frequency is None:
+                self._frequency = outcome.frequency
+                self._fallback.set_wave_peak_freq(outcome.frequency.wave_peak_freq)
+                self._message = (f'collecting data; ω0 ≈ {outcome.frequency.wave_peak_freq:.3f} '
+                                 'rad/s, cascade fallback tuned to it')
+            return
         if outcome.error is not None or outcome.result is None:
             self._errors += 1
             self._last_error = f'{type(outcome.error).__name__}: {outcome.error}'
@@ -428,6 +468,9 @@ class AdaptivePredictor:
         else:
             self._rejected += 1
             self._message = f'training rejected: {result.reason}'
+            if result.retire_incumbent and self._model is not None:
+                self._model = None  # weights stay as the next warm start
+                self._message += '; network in service is worse than the cascade: retired'
         if outcome.saved_error:
             self._message += f'; {outcome.saved_error}'
 

@@ -15,7 +15,7 @@ network in service on the newest targets.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 import threading
 import time
@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 import torch
 
+from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.filters import design_wave_filter, zero_phase
 from lf_predictor_ros.core.frequency import FrequencyEstimate, estimate_wave_peak_freq
 from lf_predictor_ros.core.network import NnarmaxNet, NnarmaxSpec, NumpyNnarmax
@@ -36,6 +37,8 @@ FloatArray = NDArray[np.float64]
 # A candidate must not be worse than the network in service by more than this factor on the
 # newest targets (1.0 = strictly no worse; a little slack avoids freezing on numerical noise).
 ACCEPT_LOSS_RATIO = 1.02
+# An ω0 estimate this close (relative) to a wave-band edge is not trusted if an earlier one exists.
+EDGE_MARGIN = 0.05
 
 
 @dataclass(frozen=True)
@@ -69,6 +72,8 @@ class RetrainResult:
     seconds: float
     epochs: int
     wave_spread: FloatArray | None = None
+    baseline_loss: float | None = None
+    retire_incumbent: bool = False
 
 
 def network_spec(params: PredictorParams) -> NnarmaxSpec:
@@ -97,10 +102,18 @@ def estimate_frequency(params: PredictorParams, y: FloatArray,
                        previous: FrequencyEstimate | float | None) -> FrequencyEstimate:
     """Algorithm 4.1 lines 19–23 on the last γ samples."""
     window = y[-params.estimation_samples:]
-    return estimate_wave_peak_freq(window, params.sample_time,
-                                   highpass_cutoff=params.highpass_cutoff,
-                                   wave_band=(params.wave_band[0], params.wave_band[1]),
-                                   min_peak_ratio=params.min_peak_ratio, previous=previous)
+    estimate = estimate_wave_peak_freq(window, params.sample_time,
+                                       highpass_cutoff=params.highpass_cutoff,
+                                       wave_band=(params.wave_band[0], params.wave_band[1]),
+                                       min_peak_ratio=params.min_peak_ratio, previous=previous)
+    low, high = params.wave_band
+    at_edge = not low * (1 + EDGE_MARGIN) < estimate.wave_peak_freq < high * (1 - EDGE_MARGIN)
+    prev = previous.wave_peak_freq if isinstance(previous, FrequencyEstimate) else previous
+    if at_edge and prev is not None:
+        # A peak on the band edge is most often LF motion leaking through the high-pass (a large
+        # DP excursion) or noise, not the sea: keep the previous estimate and say so.
+        return replace(estimate, wave_peak_freq=float(prev), confident=False)
+    return estimate
 
 
 def make_targets(params: PredictorParams, y: FloatArray, end_index: int,
@@ -158,8 +171,13 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
     incumbent_loss = None
     if incumbent is not None:
         incumbent_loss = evaluate_loss(incumbent, spec, u, y, t_values, mask, settings.mode)
+    baseline = cascade_loss(params, y, t_values, mask, frequency.wave_peak_freq)
     accepted, reason = _judge(result.loss, result.objective, result.initial_objective,
                               incumbent_loss, result.state_dict)
+    if accepted and result.loss > baseline:
+        accepted, reason = False, (f'candidate no better than the causal notch + low-pass on '
+                                   f'the newest targets ({result.loss:.3g} > {baseline:.3g})')
+    retire = not accepted and incumbent_loss is not None and incumbent_loss > baseline
     model = NumpyNnarmax.from_module(NnarmaxNet.from_state(spec, result.state_dict)) \
         if accepted else None
     return RetrainResult(segment=snapshot.segment, end_index=snapshot.end_index,
@@ -167,7 +185,39 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
                          state_dict=result.state_dict if accepted else None,
                          loss=result.loss, incumbent_loss=incumbent_loss, accepted=accepted,
                          reason=reason, seconds=time.monotonic() - start, epochs=result.epochs,
-                         wave_spread=wave_spread(y, t_values, mask))
+                         wave_spread=wave_spread(y, t_values, mask), baseline_loss=baseline,
+                         retire_incumbent=retire)
+
+
+def cascade_loss(params: PredictorParams, y: FloatArray, targets: FloatArray,
+                 mask: NDArray[np.bool_], wave_peak_freq: float) -> float:
+    """The trainer's loss (normalized MSE vs the targets) of the causal cascade on a window.
+
+    The cascade (notch at ω0 + low-pass, the predictor's own fallback) runs over the window from
+    steady state; its output at t stands for the estimate of t + h, exactly as when it is the
+    predictor's fallback. Its first ε samples (start-up) and the masked targets are not scored.
+    A network is only put in service when it beats this number: the learned filter must earn its
+    place against the classical one on the newest data.
+    """
+    ndof = params.ndof
+    cascade = CascadeFilter(ndof, params.sample_time, wave_peak_freq,
+                            notch_zeta=params.notch_zeta, notch_depth=params.notch_depth,
+                            lowpass_offset=params.lowpass_offset)
+    pose = np.zeros(3)
+    out = np.empty_like(y)
+    for k in range(len(y)):
+        pose[:ndof] = y[k]
+        out[k] = cascade.update(k * params.sample_time, pose, np.zeros(3))[:ndof]
+    if ndof == 3:  # the cascade wraps yaw; compare on the unwrapped scale of y
+        out[:, 2] = y[:, 2] + np.angle(np.exp(1j * (out[:, 2] - y[:, 2])))
+    keep = mask.copy()
+    keep[:params.transient_samples + 1] = False
+    if keep.sum() < 2:
+        return math.inf
+    error = out[:-1][keep[1:]] - targets[1:][keep[1:]]
+    scale = targets[mask].std(axis=0)
+    scale = np.where(scale > 1e-12, scale, 1.0)
+    return float(np.mean((error / scale) ** 2))
 
 
 def wave_spread(y: FloatArray, targets: FloatArray, mask: NDArray[np.bool_]) -> FloatArray:

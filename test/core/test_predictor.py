@@ -149,10 +149,12 @@ def test_output_is_the_cascade_fallback_before_the_first_training(prior: float,
     predictor = AdaptivePredictor(SMALL.replace(initial_wave_peak_freq=prior), background=False)
     cascade = CascadeFilter(1, 1.0, notch, notch_zeta=SMALL.notch_zeta,
                             notch_depth=SMALL.notch_depth, lowpass_offset=SMALL.lowpass_offset)
+    first_estimate = FIRST_TRAINING // 2  # ω0 is estimated early to tune the fallback
     for i in range(FIRST_TRAINING - 1):
         out = predictor.update(float(t[i]), pose[i], force[i])
-        np.testing.assert_allclose(out, cascade.update(float(t[i]), pose[i], force[i]),
-                                   rtol=0.0, atol=1e-12)
+        expected = cascade.update(float(t[i]), pose[i], force[i])
+        if i < first_estimate:
+            np.testing.assert_allclose(out, expected, rtol=0.0, atol=1e-12)
         status = predictor.status()
         assert status.state == 'warming_up'
         assert status.trainings == 0
@@ -161,7 +163,10 @@ def test_output_is_the_cascade_fallback_before_the_first_training(prior: float,
     capacity = max(params.training_samples + params.transient_samples,
                    params.estimation_samples, params.filter_samples) + params.max_lag
     assert predictor.status().buffer_fill == pytest.approx((FIRST_TRAINING - 1) / capacity)
-    assert predictor.wave_peak_freq == (prior if prior > 0.0 else None)
+    # The early estimate (from 60–100 s of data: coarse Welch bins) replaced the prior / band
+    # centre: within 10 % of the true 0.8 rad/s, against 26 % for the band centre.
+    assert predictor.wave_peak_freq == pytest.approx(WAVE_PEAK_FREQ, rel=0.10)
+    assert 'cascade fallback tuned' in predictor.status().message
 
 
 @functools.cache
@@ -498,8 +503,13 @@ def test_worker_exception_before_any_network_reports_error(
     predictor = AdaptivePredictor(SMALL, background=True)
     try:
         feed(predictor, t, pose, force, 0, FIRST_TRAINING)
-        assert predictor.wait_for_training(5.0)
-        out = feed(predictor, t, pose, force, FIRST_TRAINING, FIRST_TRAINING + 1)
+        # An early ω0-only job may still hold the worker at the first-training sample, which
+        # then starts one sample later: feed until the crash has been collected.
+        for i in range(FIRST_TRAINING, FIRST_TRAINING + 5):
+            assert predictor.wait_for_training(5.0)
+            out = feed(predictor, t, pose, force, i, i + 1)
+            if predictor.counters['training_errors']:
+                break
         status = predictor.status()
         assert status.state == 'error'
         assert 'RuntimeError: simulated training crash' in status.message

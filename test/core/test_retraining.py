@@ -340,3 +340,47 @@ def test_acceptance_tolerance_against_the_incumbent(monkeypatch: pytest.MonkeyPa
     result = run_retraining(RETRAIN, snapshot, good.state_dict, good.targets, good.frequency)
     assert result.accepted is accepted
     assert ACCEPT_LOSS_RATIO == pytest.approx(1.02)
+
+
+# ---- the classical yardstick and the ω0 edge rule ---------------------------------------------
+
+def test_cascade_loss_is_between_the_network_and_the_raw_measurement() -> None:
+    snapshot, _ = simulated_snapshot(1, 700.0)
+    result = run_retraining(RETRAIN, snapshot, None, None, None)
+    assert result.accepted and result.baseline_loss is not None
+    u_w, y_w, t_w, mask = training_window(RETRAIN, snapshot, result.targets)
+    baseline = retraining.cascade_loss(RETRAIN, y_w, t_w, mask, result.frequency.wave_peak_freq)
+    assert baseline == result.baseline_loss
+    # raw measurement (ŷ(t+1) = y(t)) in the same normalized units is clearly worse
+    keep = mask.copy()
+    keep[:RETRAIN.transient_samples + 1] = False
+    raw = np.mean(((y_w[:-1] - t_w[1:])[keep[1:]] / t_w[mask].std(axis=0)) ** 2)
+    assert result.loss < baseline < raw
+
+
+def test_candidate_no_better_than_the_cascade_is_rejected_and_retires_the_incumbent(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    snapshot, _ = simulated_snapshot(1, 700.0)
+    good = run_retraining(RETRAIN, snapshot, None, None, None)
+    assert good.baseline_loss is not None and good.state_dict is not None
+    worse = 2.0 * good.baseline_loss
+    monkeypatch.setattr(retraining, 'train', fake_train(dict(good.state_dict), worse))
+    first = run_retraining(RETRAIN, snapshot, None, None, None)
+    assert not first.accepted and not first.retire_incumbent
+    assert first.reason.startswith('candidate no better than the causal notch + low-pass')
+    # An incumbent that is itself worse than the cascade on this window is retired.
+    untrained = dict(NnarmaxNet(network_spec(RETRAIN)).state_dict())  # persistence = raw
+    result = run_retraining(RETRAIN, snapshot, untrained, good.targets, good.frequency)
+    assert not result.accepted and result.retire_incumbent
+
+
+def test_wave_peak_estimate_on_the_band_edge_keeps_the_previous_one() -> None:
+    t = np.arange(1200.0)
+    rng = np.random.default_rng(3)
+    # A strong oscillation just inside the band's lower edge (0.25 rad/s), no waves at all.
+    y = (2.0 * np.sin(0.255 * t) + 0.01 * rng.standard_normal(t.size))[:, None]
+    params = RETRAIN.replace(estimation_window=1200.0)
+    alone = retraining.estimate_frequency(params, y, None)
+    assert alone.wave_peak_freq < params.wave_band[0] * (1 + retraining.EDGE_MARGIN)
+    kept = retraining.estimate_frequency(params, y, 0.8)
+    assert kept.wave_peak_freq == 0.8 and not kept.confident

@@ -75,6 +75,9 @@ class PredictorParams:
         default=0.2, metadata=_doc('high-pass cutoff ωHP before the PSD (§4.2.1)', 'rad/s'))
     notch_zeta: float = field(
         default=0.5, metadata=_doc('notch width: relative damping of the notch poles', ''))
+    fallback_notch_zeta: float = field(
+        default=0.1, metadata=_doc('notch width of the causal cascade fallback (narrower than '
+                                   "the targets' notch: less phase lag in a DP loop)", ''))
     notch_depth: float = field(
         default=0.05, metadata=_doc('notch depth: gain at the notch frequency (< 1)', ''))
     lowpass_offset: float = field(
@@ -214,6 +217,7 @@ class PredictorParams:
 
     def _check_positive(self) -> None:
         for name in ('sample_time', *_WINDOW_FIELDS, 'highpass_cutoff', 'notch_zeta',
+                     'fallback_notch_zeta',
                      'lowpass_offset', 'max_train_seconds'):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f'positivity rule: {name} must be > 0, got '

@@ -119,7 +119,7 @@ class AdaptivePredictor:
         self._message = 'collecting data'
         self._last_error: str | None = None
         self._fallback = CascadeFilter(params.ndof, params.sample_time, self._fallback_freq(),
-                                       notch_zeta=params.notch_zeta,
+                                       notch_zeta=params.fallback_notch_zeta,
                                        notch_depth=params.notch_depth,
                                        lowpass_offset=params.lowpass_offset)
         self._now: float | None = None

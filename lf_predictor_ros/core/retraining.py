@@ -201,7 +201,7 @@ def cascade_loss(params: PredictorParams, y: FloatArray, targets: FloatArray,
     """
     ndof = params.ndof
     cascade = CascadeFilter(ndof, params.sample_time, wave_peak_freq,
-                            notch_zeta=params.notch_zeta, notch_depth=params.notch_depth,
+                            notch_zeta=params.fallback_notch_zeta, notch_depth=params.notch_depth,
                             lowpass_offset=params.lowpass_offset)
     pose = np.zeros(3)
     out = np.empty_like(y)

@@ -147,7 +147,7 @@ def test_output_is_the_cascade_fallback_before_the_first_training(prior: float,
                                                                    notch: float) -> None:
     t, pose, force, _ = onedof_record(5, 400.0)
     predictor = AdaptivePredictor(SMALL.replace(initial_wave_peak_freq=prior), background=False)
-    cascade = CascadeFilter(1, 1.0, notch, notch_zeta=SMALL.notch_zeta,
+    cascade = CascadeFilter(1, 1.0, notch, notch_zeta=SMALL.fallback_notch_zeta,
                             notch_depth=SMALL.notch_depth, lowpass_offset=SMALL.lowpass_offset)
     first_estimate = FIRST_TRAINING // 2  # ω0 is estimated early to tune the fallback
     for i in range(FIRST_TRAINING - 1):
@@ -218,7 +218,7 @@ def test_trainings_happen_every_delta_samples_and_outputs_stay_finite() -> None:
 def test_predictions_beat_the_causal_cascade_against_the_true_lf_motion() -> None:
     t, pose, force, _ = onedof_record(5, 400.0)
     out, _, _, predictor = inline_run(400)
-    cascade = CascadeFilter(1, 1.0, WAVE_PEAK_FREQ, notch_zeta=SMALL.notch_zeta,
+    cascade = CascadeFilter(1, 1.0, WAVE_PEAK_FREQ, notch_zeta=SMALL.fallback_notch_zeta,
                             notch_depth=SMALL.notch_depth, lowpass_offset=SMALL.lowpass_offset)
     # the cascade estimates LF(t); used as the estimate for t + h like the prediction
     baseline = np.array([cascade.update(float(t[i]), pose[i], force[i]) for i in range(400)])
@@ -445,7 +445,8 @@ def test_restart_segment_keeps_the_network_and_no_regressor_spans_the_restart() 
     jump = 1000.0  # [m] the position jumps across the restart
     lag = predictor.params.max_lag  # samples before the network can predict again
     assert predictor.wave_peak_freq is not None
-    cascade = CascadeFilter(1, 1.0, predictor.wave_peak_freq, notch_zeta=SMALL.notch_zeta,
+    cascade = CascadeFilter(1, 1.0, predictor.wave_peak_freq,
+                            notch_zeta=SMALL.fallback_notch_zeta,
                             notch_depth=SMALL.notch_depth, lowpass_offset=SMALL.lowpass_offset)
     shifted = pose[200:] + np.array([jump, 0.0, 0.0])
     fallback = np.array([cascade.update(float(t[200 + k]), shifted[k], force[200 + k])

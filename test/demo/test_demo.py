@@ -114,9 +114,9 @@ def test_isolated_environment_and_plan(tmp_path: Path) -> None:
     assert all(1 <= processes.domain_id_from_pid(pid) <= 100 for pid in range(0, 400, 7))
     plan = demo.plan_run(demo.parse_args(['supply_closed_loop', '--duration', '30',
                                           '--output-dir', str(tmp_path)]))
-    assert plan.seed == 6 and plan.duration == 30.0 and plan.predictor_sample_time == 0.5
+    assert plan.seed == 6 and plan.duration == 30.0 and plan.predictor_sample_time == 1.0
     sim_args = demo.node_commands(plan)['simulator'][1]
-    assert 'lockstep_period:=0.5' in sim_args and 'lockstep_lead:=0.5' in sim_args
+    assert 'lockstep_period:=1.0' in sim_args and 'lockstep_lead:=1.0' in sim_args
     bad = tmp_path / 'bad.yaml'
     bad.write_text('/**:\n  ros__parameters:\n    sample_time: 0.25\n')
     with pytest.raises(ValueError, match='whole multiple'):
@@ -194,7 +194,8 @@ def test_demo_closed_loop_over_dds_writes_every_artifact_and_holds_the_vessel(
 
     series = read_series(run_dir / 'run.mcap', ['/truth/lf_pose', '/lf_pose'])
     assert series['/truth/lf_pose'].stamp[-1] == pytest.approx(240.0)
-    assert series['/lf_pose'].stamp.size > 0.9 * 240 / 0.5
+    h = 1.0  # predictor sample time of config/demo.yaml: one lf_pose per h
+    assert series['/lf_pose'].stamp.size > 0.9 * 240 / h
     assert (run_dir / 'report.png').read_bytes()[:8] == PNG_SIGNATURE
     metrics = json.loads((run_dir / 'metrics.json').read_text())
     assert set(metrics) >= {'estimation', 'closed_loop', 'run', 'thrust_wave_band_power_ratio'}

@@ -159,12 +159,14 @@ def test_pose_and_thrust_in_lf_pose_out_training_and_warm_start(
     assert [stamp_to_ns(m.header.stamp) for m in lf] == [(k + 2) * NS_PER_S for k in range(n)]
     assert record.t[0] == 1.0 and record.t[-1] == 180.0
     assert {m.header.frame_id for m in lf} == {'map_ned'}
-    # before the first training the output is the deterministic cascade fallback: it equals an
-    # offline AdaptivePredictor fed the same samples
+    # before the first ω0 estimate (from half the first-training data; it retunes the fallback
+    # on the worker thread, so its exact sample depends on timing) the output is the
+    # deterministic cascade fallback: it equals an offline AdaptivePredictor fed the same samples
+    early = FIRST_TRAINING // 2
     offline = AdaptivePredictor(PredictorParams(**SMALL), background=False)
     expected = [offline.update(float(record.t[k]), record.measured_pose[k], record.thrust[k])
-                for k in range(FIRST_TRAINING)]
-    got = np.array([msg_to_pose(m) for m in lf[:FIRST_TRAINING]])
+                for k in range(early)]
+    got = np.array([msg_to_pose(m) for m in lf[:early]])
     np.testing.assert_allclose(got, np.array(expected), rtol=0.0, atol=1e-9)
     # ω0 estimated from the data: the scenario's waves peak at 0.8 rad/s; the estimate is good to
     # half a Welch bin of the shortest window a training used (120 samples: 0.21 rad/s bins)
@@ -253,9 +255,16 @@ def test_services_reset_and_retrain(
     answer = call(retrain)
     assert not answer.success and f'not enough data: 100 of {FIRST_TRAINING}' in answer.message
     _feed(node, record, range(100, 150))
-    assert node.predictor is not None and node.predictor.wait_for_training(timeout=30.0)
-    _feed(node, record, range(150, 152))  # the next sample picks the finished result up
-    assert int(node.diagnostic_values()[2]['trainings']) >= 1
+    # An early ω0-only job may hold the worker when the first training is due, which then starts
+    # a sample later: feed until a training has been collected (accepted, or rejected for not
+    # beating the causal cascade on the newest targets).
+    for k in range(150, 160):
+        assert node.predictor is not None and node.predictor.wait_for_training(timeout=30.0)
+        _feed(node, record, range(k, k + 1))  # the next sample picks the finished result up
+        values = node.diagnostic_values()[2]
+        if int(values['trainings']) + int(values['rejected_trainings']) >= 1:
+            break
+    assert int(values['trainings']) + int(values['rejected_trainings']) >= 1
     assert node.predictor.wait_for_training(timeout=30.0)  # a periodic training may have started
     answer = call(retrain)
     assert answer.success and answer.message == 'training starts with the next sample'

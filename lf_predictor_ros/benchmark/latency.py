@@ -1,0 +1,96 @@
+"""Predictor node callback latency and CPU use at 10 Hz and 100 Hz input (issue 5 benchmark).
+
+    python -m lf_predictor_ros.benchmark.latency [--minutes 30] [--speed 20]
+
+Builds the `predictor` node in-process (shipped defaults, ndof 3), feeds it simulated
+supply-vessel pose + thrust messages by calling its subscription callbacks at `--speed` × real
+time, and times every pose callback (wall clock, `time.perf_counter`). Callbacks are split into
+"idle" and "while training" (the core's worker thread busy). Prints p50 / p99 / max, the number
+of trainings, and the process CPU time per simulated hour.
+"""
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+import resource
+import sys
+import time
+
+import numpy as np
+import rclpy
+from rclpy.context import Context
+from rclpy.parameter import Parameter
+from rclpy.utilities import try_shutdown
+
+from lf_predictor_ros.nodes.conversions import pose_to_msg, wrench_to_msg
+from lf_predictor_ros.nodes.predictor_node import PredictorNode
+from sim_ros.simulation import load_scenario, simulate
+
+
+def _cpu_seconds() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
+def measure(rate_hz: float, minutes: float, speed: float) -> dict[str, float]:
+    """Run one input rate; return latency percentiles [ms] and CPU use."""
+    scenario = load_scenario('supply_closed_loop')
+    record = simulate(scenario, seed=11, duration=minutes * 60.0)
+    times = np.arange(record.t[0], record.t[-1], 1.0 / rate_hz)  # resample to the input rate
+    poses = np.column_stack([np.interp(times, record.t, record.measured_pose[:, i])
+                             for i in range(3)])
+    forces = np.column_stack([np.interp(times, record.t, record.thrust[:, i]) for i in range(3)])
+    context = Context()
+    rclpy.init(context=context)
+    node = PredictorNode(context=context, parameter_overrides=[Parameter('ndof', value=3)])
+    idle: list[float] = []
+    busy: list[float] = []
+    cpu0, wall0 = _cpu_seconds(), time.monotonic()
+    try:
+        for k in range(len(times)):
+            target = wall0 + (times[k] - times[0]) / speed
+            pause = target - time.monotonic()
+            if pause > 0:
+                time.sleep(pause)
+            t = float(times[k])
+            node.on_thrust(wrench_to_msg(forces[k], t))
+            msg = pose_to_msg(poses[k], t)
+            predictor = node.predictor
+            training = predictor is not None and not predictor.wait_for_training(0.0)
+            start = time.perf_counter()
+            node.on_pose(msg)
+            (busy if training else idle).append(time.perf_counter() - start)
+        predictor = node.predictor
+        counters = predictor.counters if predictor is not None else {}
+    finally:
+        node.destroy_node()
+        try_shutdown(context=context)
+    cpu, wall = _cpu_seconds() - cpu0, time.monotonic() - wall0
+    simulated_hours = (times[-1] - times[0]) / 3600.0
+
+    def pct(values: list[float], q: float) -> float:
+        return float(np.percentile(values, q) * 1e3) if values else float('nan')
+    return {'rate_hz': rate_hz, 'callbacks': len(times), 'idle_p50_ms': pct(idle, 50),
+            'idle_p99_ms': pct(idle, 99), 'busy_p50_ms': pct(busy, 50),
+            'busy_p99_ms': pct(busy, 99), 'max_ms': pct(idle + busy, 100),
+            'callbacks_while_training': len(busy), 'trainings': counters.get('trainings', 0),
+            'cpu_s_per_sim_hour': cpu / simulated_hours, 'cpu_share': cpu / wall}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point (`python -m lf_predictor_ros.benchmark.latency`)."""
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--minutes', type=float, default=30.0, help='simulated minutes per rate')
+    parser.add_argument('--speed', type=float, default=20.0, help='× real time feed')
+    parser.add_argument('--rates', type=float, nargs='*', default=[10.0, 100.0])
+    args = parser.parse_args(argv)
+    for rate in args.rates:
+        result = measure(rate, args.minutes, args.speed)
+        print(' '.join(f'{k}={v:.4g}' if isinstance(v, float) else f'{k}={v}'
+                       for k, v in result.items()), flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

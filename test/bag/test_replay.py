@@ -32,6 +32,7 @@ from lf_predictor_ros.bag.mcap_reader import BagReader
 from lf_predictor_ros.bag.mcap_writer import BagWriter, qos_profile_dict, qos_profiles_yaml
 from lf_predictor_ros.bag.ros_codec import deserialize, serialize
 from lf_predictor_ros.bag.series import read_diagnostics, read_series
+from lf_predictor_ros.bag.sim_bag import write_record
 from lf_predictor_ros.core.alignment import InputAligner
 from lf_predictor_ros.core.evaluation import run_estimator
 from lf_predictor_ros.core.params import PredictorParams
@@ -86,19 +87,7 @@ def run_replay(*args: str | Path) -> tuple[int, str, str]:
 def write_sim_bag(path: Path, record: SimRecord, duration: float | None = None,
                   truth: bool = True) -> Path:
     """Thrust, truth and measured pose of each sample (in that order, same log time = stamp)."""
-    with BagWriter(path) as writer:
-        pose_ch = writer.add_topic('/measured_pose', POSE, BEST_EFFORT_QOS)
-        thrust_ch = writer.add_topic('/thrust', WRENCH)
-        truth_ch = writer.add_topic('/truth/lf_pose', POSE) if truth else -1
-        for k, t in enumerate(record.t):
-            if duration is not None and t > duration:
-                break
-            ns = int(round(t * 1e9))
-            writer.write(thrust_ch, ns, serialize(wrench_to_msg(record.thrust[k], t)))
-            if truth:
-                writer.write(truth_ch, ns, serialize(pose_to_msg(record.truth_lf_pose[k], t)))
-            writer.write(pose_ch, ns, serialize(pose_to_msg(record.measured_pose[k], t)))
-    return path
+    return write_record(path, record, duration=duration, truth=truth)
 
 
 @pytest.fixture(scope='module')

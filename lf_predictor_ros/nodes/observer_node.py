@@ -39,10 +39,9 @@ import numpy as np
 from numpy.typing import NDArray
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.utilities import remove_ros_args, try_shutdown
+from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64
 
 from lf_predictor_ros.core.alignment import AlignedSample, AlignerSettings, InputAligner
@@ -60,6 +59,7 @@ from lf_predictor_ros.nodes.conversions import (
 from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, make_diagnostic_array
 from lf_predictor_ros.nodes.params import declare_and_load, field_specs, validated_update
 from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
+from lf_predictor_ros.nodes.runner import spin_node
 from sim_ros.physics.vessels import SUPPLY_D, SUPPLY_LENGTH, SUPPLY_M, SUPPLY_MASS
 
 NODE_NAME = 'observer'
@@ -371,20 +371,7 @@ def main(args: list[str] | None = None) -> int:
     """Console script ``observer``; returns the exit code."""
     _parse_cli(sys.argv if args is None else args)
     rclpy.init(args=args)
-    try:
-        node = ObserverNode()
-    except (ValueError, TypeError) as error:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f'invalid configuration: {error}')
-        try_shutdown()
-        return 1
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        try_shutdown()
-    return 0
+    return spin_node(ObserverNode, config_errors=(ValueError, TypeError), logger_name=NODE_NAME)
 
 
 if __name__ == '__main__':

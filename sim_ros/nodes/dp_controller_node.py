@@ -41,14 +41,14 @@ import numpy as np
 import rclpy
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.utilities import remove_ros_args, try_shutdown
+from rclpy.utilities import remove_ros_args
 
 from lf_predictor_ros.nodes.conversions import msg_to_pose, stamp_to_ns, wrench_to_msg
 from lf_predictor_ros.nodes.diagnostics import make_diagnostic_array
 from lf_predictor_ros.nodes.params import LiveParameters, declare_and_load
 from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
+from lf_predictor_ros.nodes.runner import spin_node
 from sim_ros.control.pid import PidGains, PidState, gains_from_bandwidth, pid_step
 from sim_ros.physics.vessels import SUPPLY_M
 from sim_ros.simulation import Simulator, load_scenario
@@ -266,20 +266,8 @@ def main(args: list[str] | None = None) -> int:
     """Console script ``dp_controller``; returns the exit code."""
     _parse_cli(sys.argv if args is None else args)
     rclpy.init(args=args)
-    try:
-        node = DpControllerNode()
-    except (ValueError, FileNotFoundError) as error:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f'invalid configuration: {error}')
-        try_shutdown()
-        return 1
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        try_shutdown()
-    return 0
+    return spin_node(DpControllerNode, config_errors=(ValueError, FileNotFoundError),
+                     logger_name=NODE_NAME)
 
 
 if __name__ == '__main__':

@@ -82,10 +82,9 @@ from numpy.typing import NDArray
 import rclpy
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.task import Future
-from rclpy.utilities import remove_ros_args, try_shutdown
+from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock as ClockMsg
 
 from lf_predictor_ros.nodes.conversions import (
@@ -99,6 +98,7 @@ from lf_predictor_ros.nodes.conversions import (
 from lf_predictor_ros.nodes.diagnostics import make_diagnostic_array
 from lf_predictor_ros.nodes.params import LiveParameters
 from lf_predictor_ros.nodes.qos import command_qos, publisher_qos
+from lf_predictor_ros.nodes.runner import spin_node
 from sim_ros.physics.schedule import constant
 from sim_ros.simulation import Scenario, SimSample, Simulator, load_scenario
 
@@ -484,23 +484,12 @@ def main(args: list[str] | None = None) -> int:
     """Console script ``simulator``; returns the exit code."""
     _parse_cli(sys.argv if args is None else args)
     rclpy.init(args=args)
-    try:
-        node = SimulatorNode()
-    except (ValueError, FileNotFoundError) as error:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f'invalid configuration: {error}')
-        try_shutdown()
-        return 1
-    try:
-        if node.config.duration > 0.0:
-            rclpy.spin_until_future_complete(node, node.done)
-        else:
-            rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        try_shutdown()
-    return 0
+
+    def until(node: Node) -> Future | None:
+        assert isinstance(node, SimulatorNode)
+        return node.done if node.config.duration > 0.0 else None  # exit at the scenario's end
+    return spin_node(SimulatorNode, config_errors=(ValueError, FileNotFoundError),
+                     logger_name=NODE_NAME, until=until)
 
 
 if __name__ == '__main__':

@@ -1,0 +1,42 @@
+"""The Jazzy `main()` pattern shared by every node executable (ros2/examples, jazzy branch).
+
+    rclpy.init(args=args)
+    return spin_node(lambda: MyNode(), config_errors=(ValueError,), logger_name='my_node')
+
+A node whose constructor rejects its configuration logs FATAL with the reason and the process
+exits 1; Ctrl-C and an external shutdown end the spin quietly; the node is always destroyed and
+the context shut down (`try_shutdown`, safe when a signal already did it).
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.task import Future
+from rclpy.utilities import try_shutdown
+
+
+def spin_node(make_node: Callable[[], Node], *,
+              config_errors: tuple[type[BaseException], ...], logger_name: str,
+              until: Callable[[Node], Future | None] | None = None) -> int:
+    """Create the node, spin it until shutdown (or until ``until``'s future); exit code 0/1."""
+    try:
+        node = make_node()
+    except config_errors as error:
+        rclpy.logging.get_logger(logger_name).fatal(f'invalid configuration: {error}')
+        try_shutdown()
+        return 1
+    try:
+        done = until(node) if until is not None else None
+        if done is not None:
+            rclpy.spin_until_future_complete(node, done)
+        else:
+            rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        try_shutdown()
+    return 0

@@ -80,7 +80,12 @@ from lf_predictor_ros.nodes.conversions import (
     sec_to_stamp,
     stamp_to_ns,
 )
-from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, make_diagnostic_array
+from lf_predictor_ros.nodes.diagnostics import (
+    DiagnosticValue,
+    input_values,
+    make_diagnostic_array,
+    predictor_values,
+)
 from lf_predictor_ros.nodes.qos import publisher_qos
 
 FloatArray = NDArray[np.float64]
@@ -279,33 +284,9 @@ def predictor_diagnostics(status: EstimatorStatus, counters: Mapping[str, int],
     dropped (= invalid + out_of_order + outliers), invalid, out_of_order, outliers, gaps, resets,
     stale_thrust; then `extra`.
     """
-    def number(value: float | None) -> float:
-        return math.nan if value is None else float(value)
-
-    invalid = int(aligner_counters.get('invalid', 0))
-    out_of_order = int(aligner_counters.get('out_of_order', 0))
-    outliers = int(aligner_counters.get('outliers', 0))
     values: dict[str, DiagnosticValue] = {
-        'state': status.state,
-        'wave_peak_freq': number(status.wave_peak_freq),
-        'last_loss': number(status.last_loss),
-        'train_seconds': number(status.train_seconds),
-        'model_age': number(status.model_age),
-        'buffer_fill': number(status.buffer_fill),
-        'trainings': int(status.trainings),
-        'rejected_trainings': int(status.rejected_trainings),
-        'overruns': int(counters.get('overruns', 0)),
-        'training_errors': int(counters.get('training_errors', 0)),
-        'guard_trips': int(counters.get('guard_trips', 0)),
-        'segments': int(counters.get('segments', 0)),
-        'samples': int(samples),
-        'dropped': invalid + out_of_order + outliers,
-        'invalid': invalid,
-        'out_of_order': out_of_order,
-        'outliers': outliers,
-        'gaps': int(aligner_counters.get('gaps', 0)),
-        'resets': int(aligner_counters.get('resets', 0)),
-        'stale_thrust': int(aligner_counters.get('stale_force_samples', 0)),
+        **predictor_values(status, counters),
+        **input_values(aligner_counters, samples),
     }
     values.update(extra or {})
     level = _LEVEL_OF_STATE.get(status.state, 'WARN')

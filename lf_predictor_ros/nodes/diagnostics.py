@@ -13,6 +13,8 @@ import math
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
+from lf_predictor_ros.core.estimator import EstimatorStatus
+
 DiagnosticValue = float | int | bool | str
 
 _LEVELS: dict[str, bytes] = {
@@ -85,3 +87,48 @@ def make_diagnostic_array(
         array.header.stamp = Time(sec=stamp.sec, nanosec=stamp.nanosec)
     array.status = [make_status(name, level, message, values, hardware_id)]
     return array
+
+
+def _number(value: float | None) -> float:
+    return math.nan if value is None else float(value)
+
+
+def predictor_values(status: EstimatorStatus,
+                     counters: Mapping[str, int]) -> dict[str, DiagnosticValue]:
+    """Key values of the adaptive predictor's health (node and replay publish the same keys)."""
+    return {
+        'state': status.state,
+        'wave_peak_freq': _number(status.wave_peak_freq),
+        'last_loss': _number(status.last_loss),
+        'train_seconds': _number(status.train_seconds),
+        'model_age': _number(status.model_age),
+        'buffer_fill': _number(status.buffer_fill),
+        'trainings': int(status.trainings),
+        'rejected_trainings': int(status.rejected_trainings),
+        'overruns': int(counters.get('overruns', 0)),
+        'training_errors': int(counters.get('training_errors', 0)),
+        'guard_trips': int(counters.get('guard_trips', 0)),
+        'segments': int(counters.get('segments', 0)),
+    }
+
+
+def input_values(aligner: Mapping[str, int], samples: int,
+                 invalid_messages: int = 0) -> dict[str, DiagnosticValue]:
+    """Key values of the input chain: samples predicted and what the aligner dropped or reset.
+
+    ``aligner`` is `InputAligner.counters.as_dict()`; ``invalid_messages`` counts messages that
+    did not even decode (e.g. a zero quaternion) and are added to ``invalid``.
+    """
+    invalid = int(aligner.get('invalid', 0)) + invalid_messages
+    out_of_order = int(aligner.get('out_of_order', 0))
+    outliers = int(aligner.get('outliers', 0))
+    return {
+        'samples': int(samples),
+        'dropped': invalid + out_of_order + outliers,
+        'invalid': invalid,
+        'out_of_order': out_of_order,
+        'outliers': outliers,
+        'gaps': int(aligner.get('gaps', 0)),
+        'resets': int(aligner.get('resets', 0)),
+        'stale_thrust': int(aligner.get('stale_force_samples', 0)),
+    }

@@ -56,7 +56,7 @@ from lf_predictor_ros.nodes.conversions import (
     sec_to_stamp,
     stamp_to_sec,
 )
-from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, make_diagnostic_array
+from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, input_values, make_diagnostic_array
 from lf_predictor_ros.nodes.params import declare_and_load, field_specs, validated_update
 from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
 from lf_predictor_ros.nodes.runner import spin_node
@@ -304,8 +304,6 @@ class ObserverNode(Node):
     def diagnostic_values(self) -> tuple[str, str, dict[str, DiagnosticValue]]:
         """(level, message, key values) of the current state, as published."""
         status = self._estimator.status()
-        aligned = self._aligner.counters
-        invalid = aligned.invalid + self._invalid_messages
         level, message = 'OK', f'{status.state}: {status.message}'
         if self._callback_errors > self._errors_reported:
             level, message = 'ERROR', f'callback error: {self._last_error}'
@@ -314,14 +312,8 @@ class ObserverNode(Node):
             'state': status.state,
             'wave_peak_freq': self._wave_peak_freq,
             'wave_peak_source': self._wave_source,
-            'samples': self._samples,
-            'dropped': invalid + aligned.out_of_order + aligned.outliers,
-            'invalid': invalid,
-            'out_of_order': aligned.out_of_order,
-            'outliers': aligned.outliers,
-            'gaps': aligned.gaps,
-            'resets': aligned.resets,
-            'stale_thrust': aligned.stale_force_samples,
+            **input_values(self._aligner.counters.as_dict(), self._samples,
+                           self._invalid_messages),
             'unexpected_frame': self._unexpected_frame,
             'callback_errors': self._callback_errors,
             'last_error': self._last_error,

@@ -79,7 +79,12 @@ from lf_predictor_ros.nodes.conversions import (
     sec_to_stamp,
     stamp_to_sec,
 )
-from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, make_diagnostic_array
+from lf_predictor_ros.nodes.diagnostics import (
+    DiagnosticValue,
+    input_values,
+    make_diagnostic_array,
+    predictor_values,
+)
 from lf_predictor_ros.nodes.params import convert_value, field_specs, validated_update
 from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
 
@@ -173,10 +178,6 @@ def _declare(node: LifecycleNode, cls: type[Any],
 
 def _change_note(name: str) -> str:
     return NOTE_STRUCTURE if name in STRUCTURE_FIELDS else NOTE_TUNING
-
-
-def _number(value: float | None) -> float:
-    return math.nan if value is None else float(value)
 
 
 def diagnostic_level(status: EstimatorStatus) -> str:
@@ -491,33 +492,12 @@ class PredictorNode(LifecycleNode):
         if predictor is None or aligner is None:
             return 'WARN', 'not configured', {}
         status = predictor.status()
-        counters = predictor.counters
-        aligned = aligner.counters
-        invalid = aligned.invalid + self._invalid_messages
         level, message = diagnostic_level(status), f'{status.state}: {status.message}'
         if self._callback_errors > self._errors_reported:
             level, message = 'ERROR', f'callback error: {self._last_error}'
         values: dict[str, DiagnosticValue] = {
-            'state': status.state,
-            'wave_peak_freq': _number(status.wave_peak_freq),
-            'last_loss': _number(status.last_loss),
-            'train_seconds': _number(status.train_seconds),
-            'model_age': _number(status.model_age),
-            'buffer_fill': _number(status.buffer_fill),
-            'trainings': status.trainings,
-            'rejected_trainings': status.rejected_trainings,
-            'overruns': counters['overruns'],
-            'training_errors': counters['training_errors'],
-            'guard_trips': counters['guard_trips'],
-            'segments': counters['segments'],
-            'samples': self._samples,
-            'dropped': invalid + aligned.out_of_order + aligned.outliers,
-            'invalid': invalid,
-            'out_of_order': aligned.out_of_order,
-            'outliers': aligned.outliers,
-            'gaps': aligned.gaps,
-            'resets': aligned.resets,
-            'stale_thrust': aligned.stale_force_samples,
+            **predictor_values(status, predictor.counters),
+            **input_values(aligner.counters.as_dict(), self._samples, self._invalid_messages),
             'unexpected_frame': self._unexpected_frame,
             'callback_errors': self._callback_errors,
             'last_error': self._last_error,

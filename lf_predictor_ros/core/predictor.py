@@ -24,6 +24,7 @@ caught on the worker; the network in service stays, and the status reports the e
 """
 from __future__ import annotations
 
+import atexit
 from collections import deque
 import math
 from pathlib import Path
@@ -31,6 +32,7 @@ import queue
 import threading
 import time
 from typing import Any
+import weakref
 
 import numpy as np
 from numpy.typing import NDArray
@@ -66,6 +68,21 @@ GUARD_SPREADS = 6.0
 GUARD_FLOOR = np.array([0.5, 0.5, 0.02])  # [m, m, rad]
 
 FloatArray = NDArray[np.float64]
+
+
+_LIVE_PREDICTORS: weakref.WeakSet[AdaptivePredictor] = weakref.WeakSet()
+
+
+@atexit.register
+def _stop_training_at_exit() -> None:
+    """Stop running trainings before the interpreter exits.
+
+    A torch training still running on a daemon thread while Python finalizes aborts the process
+    ('terminate called without an active exception'); stopping it at an epoch boundary and
+    joining it lets a script that forgot `close()` exit cleanly.
+    """
+    for predictor in list(_LIVE_PREDICTORS):
+        predictor.close()
 
 
 class _JobOutcome:
@@ -130,6 +147,7 @@ class AdaptivePredictor:
         self._start_segment()
         if background:
             warm_up()  # import torch's lazy modules now, not on the first training
+            _LIVE_PREDICTORS.add(self)
 
     # ---- the LfEstimator interface ----------------------------------------------------------
 
@@ -329,9 +347,9 @@ class AdaptivePredictor:
         model, p = self._model, self.params
         if model is None or len(self._y) < p.max_lag or len(self._fb) < p.nfb:
             return None
-        u_hist = np.array(list(self._u)[-max(p.nu, 1):])
-        y_hist = np.array(list(self._y)[-max(p.ny, 1):])
-        fb_hist = np.array(list(self._fb)[-max(p.nfb, 1):])
+        u_hist = _newest(self._u, max(p.nu, 1))  # only the rows the regressors need:
+        y_hist = _newest(self._y, max(p.ny, 1))  # the buffers hold up to N + ε samples
+        fb_hist = _newest(self._fb, max(p.nfb, 1))
         prediction = predict_step(model, u_hist, y_hist, fb_hist)
         if not np.all(np.isfinite(prediction)):
             self._message = 'network output not finite: cascade fallback'
@@ -482,6 +500,12 @@ class AdaptivePredictor:
         meta['wave_peak_freq'] = freq
         meta['loss'] = result.loss if result else self._last_loss
         return meta
+
+
+def _newest(rows: deque[FloatArray], count: int) -> FloatArray:
+    """The newest ``count`` rows of a buffer, oldest first, without copying the rest."""
+    n = min(count, len(rows))
+    return np.array([rows[i] for i in range(-n, 0)])
 
 
 def _checked(value: FloatArray, name: str) -> FloatArray:

@@ -650,3 +650,39 @@ def test_close_stops_a_running_training_promptly() -> None:
     predictor.close()
     assert not worker.is_alive()
     assert time.monotonic() - start < 1.5  # [s] the training alone would run 2 s
+
+
+EXIT_WHILE_TRAINING = r"""
+import time
+from sim_ros.simulation import load_scenario, simulate
+from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.predictor import AdaptivePredictor
+params = PredictorParams(sample_time=1.0, retrain_period=20.0, training_window=200.0,
+                         transient_length=10.0, filter_window=60.0, append_length=40.0,
+                         estimation_window=600.0, max_epochs=30, max_train_seconds=10.0)
+record = simulate(load_scenario('onedof_feedback'), seed=4, duration=180.0)
+predictor = AdaptivePredictor(params, background=True)
+for k in range(len(record.t)):
+    predictor.update(float(record.t[k]), record.measured_pose[k], record.thrust[k])
+    if k == 120:
+        predictor.wait_for_training(30)
+    time.sleep(0.002)
+assert predictor._worker is not None and predictor._worker.is_alive(), 'no training running'
+print('exiting while training')
+"""
+
+
+def test_interpreter_exit_while_training_is_clean() -> None:
+    """A script that exits without close() while torch trains on the worker must not abort.
+
+    Without the predictor's atexit hook this script exits 134 ('terminate called without an
+    active exception') every time: a Levenberg–Marquardt training was still running in torch.
+    """
+    import subprocess
+    import sys
+
+    result = subprocess.run([sys.executable, '-c', EXIT_WHILE_TRAINING], capture_output=True,
+                            text=True, timeout=120)
+    assert 'exiting while training' in result.stdout, result.stderr
+    assert result.returncode == 0, result.stderr
+    assert 'terminate called' not in result.stderr

@@ -42,7 +42,7 @@ NS_PER_S = 1_000_000_000  # [ns/s]
 SMALL: dict[str, Any] = {'sample_time': 1.0, 'nu': 4, 'ny': 12, 'nfb': 0, 'hidden_units': 6,
          'retrain_period': 20.0, 'training_window': 200.0, 'transient_length': 10.0,
          'filter_window': 60.0, 'append_length': 40.0,
-         'estimation_window': 600.0, 'max_epochs': 5, 'max_train_seconds': 10.0}
+         'estimation_window': 600.0, 'max_epochs': 30, 'max_train_seconds': 10.0}
 FIRST_TRAINING = first_training_samples(PredictorParams(**SMALL))  # [samples] 120
 DIAGNOSTIC_KEYS = {'state', 'wave_peak_freq', 'last_loss', 'train_seconds', 'model_age',
                    'buffer_fill', 'trainings', 'rejected_trainings', 'overruns', 'guard_trips',
@@ -54,8 +54,13 @@ torch.set_num_threads(1)
 
 @pytest.fixture(scope='module')
 def record() -> SimRecord:
-    """1-DOF vessel with PRBS thrust and waves at ω0 = 0.8 rad/s, sampled at 1 s."""
-    return simulate(load_scenario('onedof_excited'), seed=3, duration=180.0)
+    """1-DOF vessel under PID feedback, waves at ω0 = 0.8 rad/s, sampled at 1 s.
+
+    Chosen so that the small network beats the causal cascade on every retraining (4 of 4
+    accepted when run inline); this file tests the node's plumbing and warm start, not accuracy
+    on the hard PRBS-excited case (docs/RESULTS.md).
+    """
+    return simulate(load_scenario('onedof_feedback'), seed=4, duration=180.0)
 
 
 @pytest.fixture
@@ -150,8 +155,12 @@ def test_pose_and_thrust_in_lf_pose_out_training_and_warm_start(
         end = time.monotonic() + 2.0
         while len(probe.messages['lf_pose']) <= k and time.monotonic() < end:
             executor.spin_once(timeout_sec=0.01)
-        if k == FIRST_TRAINING:  # in real time a training has 20 s; here give it the time it needs
-            assert node.predictor is not None and node.predictor.wait_for_training(timeout=30.0)
+        # In real time a training has 20 s; here give it the time it needs. Wait at every sample
+        # until the first training is in: an early ω0-only job may hold the worker when the first
+        # training is due, which then starts a few samples later.
+        if k >= FIRST_TRAINING - 1 and node.predictor is not None and \
+                node.predictor.counters['trainings'] == 0:
+            assert node.predictor.wait_for_training(timeout=30.0)
     _spin_for(executor, 0.5)  # diagnostics at 5 Hz
 
     lf = probe.messages['lf_pose']
@@ -175,7 +184,7 @@ def test_pose_and_thrust_in_lf_pose_out_training_and_warm_start(
     assert freqs and freqs[-1] == pytest.approx(0.8, abs=half_bin)
     report = _last_report(probe)
     assert DIAGNOSTIC_KEYS <= set(report)
-    assert int(report['trainings']) >= 1
+    assert int(report['trainings']) >= 1, str(sorted(report.items()))  # keys, for debugging
     assert report['state'] in ('trained', 'fallback')
     assert int(report['samples']) == n
     assert float(report['wave_peak_freq']) == pytest.approx(freqs[-1], rel=1e-5)

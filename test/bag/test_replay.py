@@ -524,3 +524,18 @@ def test_a_pose_gap_restarts_the_segment(work: Path, record: SimRecord,
     np.testing.assert_allclose(lf.stamp, np.r_[2.0:22.0, 32.0:62.0], atol=1e-9)
     last = read_diagnostics(output)[-1][2]
     assert (last['gaps'], last['segments'], last['samples']) == ('1', '1', '50')
+
+
+def test_pose_rows_store_rows_compactly_and_round_trip() -> None:
+    from lf_predictor_ros.bag.replay import PoseRows
+
+    rows = PoseRows()
+    data = np.arange(30.0).reshape(10, 3) * 0.1
+    for row in data:
+        rows.append(row)
+    assert len(rows) == 10
+    np.testing.assert_array_equal(np.asarray(rows), data)
+    np.testing.assert_array_equal(rows[-1], data[-1])
+    np.testing.assert_array_equal(np.array(list(rows)), data)
+    with pytest.raises(IndexError):
+        rows[10]

@@ -57,7 +57,14 @@ from lf_predictor_ros.nodes.conversions import (
     stamp_to_sec,
 )
 from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, input_values, make_diagnostic_array
-from lf_predictor_ros.nodes.params import declare_and_load, field_specs, validated_update
+from lf_predictor_ros.nodes.params import (
+    declare_and_load,
+    field_specs,
+    validated_update,
+)
+from lf_predictor_ros.nodes.params import (
+    param_meta as _meta,
+)
 from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
 from lf_predictor_ros.nodes.runner import spin_node
 from sim_ros.physics.vessels import SUPPLY_D, SUPPLY_LENGTH, SUPPLY_M, SUPPLY_MASS
@@ -67,13 +74,6 @@ METHODS = ('passive_observer', 'cascade')
 RETUNE_TOLERANCE = 1e-3  # [rad/s] smaller ω0 changes from the topic do not retune the filter
 
 FloatArray = NDArray[np.float64]
-
-
-def _meta(doc: str, unit: str = '', read_only: bool = False) -> dict[str, Any]:
-    meta: dict[str, Any] = {'doc': doc, 'read_only': read_only}
-    if unit:
-        meta['unit'] = unit
-    return meta
 
 
 def _row_major(matrix: FloatArray) -> list[float]:

@@ -51,6 +51,18 @@ class FieldSpec:
     read_only: bool
 
 
+def param_meta(doc: str, unit: str = '', read_only: bool = False) -> dict[str, Any]:
+    """Field metadata for a node's config dataclass: description, unit, read-only flag.
+
+    `declare_and_load` turns it into the parameter's descriptor:
+    ``field(default=1.0, metadata=param_meta('command timeout', 's'))``.
+    """
+    meta: dict[str, Any] = {'doc': doc, 'read_only': read_only}
+    if unit:
+        meta['unit'] = unit
+    return meta
+
+
 def _parse_type(hint: Any, owner: str, name: str) -> tuple[type, type | None]:
     """Return (element type, container) of a supported annotation, or raise TypeError."""
     if hint in _SCALARS:

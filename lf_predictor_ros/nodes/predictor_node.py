@@ -86,6 +86,7 @@ from lf_predictor_ros.nodes.diagnostics import (
     predictor_values,
 )
 from lf_predictor_ros.nodes.params import convert_value, field_specs, validated_update
+from lf_predictor_ros.nodes.params import param_meta as _meta
 from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
 
 if TYPE_CHECKING:  # torch is imported on configure, so --help and bad parameters answer fast
@@ -98,13 +99,6 @@ NOTE_STRUCTURE = ' (run-time change: re-creates the predictor cold, data restart
 NOTE_TUNING = (' (run-time change: re-creates the predictor keeping the trained network, '
                'data restarts)')
 
-
-
-def _meta(doc: str, unit: str = '', read_only: bool = False) -> dict[str, Any]:
-    meta: dict[str, Any] = {'doc': doc, 'read_only': read_only}
-    if unit:
-        meta['unit'] = unit
-    return meta
 
 
 @dataclass(frozen=True)

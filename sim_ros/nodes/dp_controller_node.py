@@ -47,6 +47,7 @@ from rclpy.utilities import remove_ros_args
 from lf_predictor_ros.nodes.conversions import msg_to_pose, stamp_to_ns, wrench_to_msg
 from lf_predictor_ros.nodes.diagnostics import make_diagnostic_array
 from lf_predictor_ros.nodes.params import LiveParameters, declare_and_load
+from lf_predictor_ros.nodes.params import param_meta as _meta
 from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
 from lf_predictor_ros.nodes.runner import spin_node
 from sim_ros.control.pid import PidGains, PidState, gains_from_bandwidth, pid_step
@@ -55,13 +56,6 @@ from sim_ros.simulation import Simulator, load_scenario
 
 NODE_NAME = 'dp_controller'
 NS_PER_S = 1e9  # [ns/s]
-
-
-def _meta(doc: str, unit: str = '', read_only: bool = False) -> dict[str, Any]:
-    meta: dict[str, Any] = {'doc': doc, 'read_only': read_only}
-    if unit:
-        meta['unit'] = unit
-    return meta
 
 
 @dataclass(frozen=True)

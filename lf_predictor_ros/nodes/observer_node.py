@@ -57,6 +57,7 @@ from lf_predictor_ros.nodes.conversions import (
     stamp_to_sec,
 )
 from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, input_values, make_diagnostic_array
+from lf_predictor_ros.nodes.health import InputHealth
 from lf_predictor_ros.nodes.params import (
     declare_and_load,
     field_specs,
@@ -162,7 +163,7 @@ def make_estimator(config: ObserverConfig,
         k3=k3, k4=k4)
 
 
-class ObserverNode(Node):
+class ObserverNode(InputHealth, Node):
     """Runs a classical LF estimator (passive observer or cascade) on aligned inputs."""
 
     def __init__(self, **node_kwargs: Any) -> None:
@@ -175,11 +176,7 @@ class ObserverNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._samples = 0
         self._invalid_messages = 0
-        self._unexpected_frame = 0
-        self._warned_frames: set[str] = set()
-        self._callback_errors = 0
-        self._errors_reported = 0
-        self._last_error = ''
+        self._init_input_health()
         qos = publisher_qos()
         self._lf_pub = self.create_publisher(PoseStamped, 'lf_pose', qos)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', qos)
@@ -282,22 +279,6 @@ class ObserverNode(Node):
         lf_pose = self._estimator.update(sample.t, sample.pose, sample.force)
         self._samples += 1
         self._lf_pub.publish(pose_to_msg(lf_pose, sec_to_stamp(sample.t), self._config.frame_id))
-
-    def _check_frame(self, topic: str, frame_id: str, expected: str) -> None:
-        if frame_id == expected:
-            return
-        self._unexpected_frame += 1
-        if topic not in self._warned_frames:
-            self._warned_frames.add(topic)
-            self.get_logger().warning(
-                f"{topic} arrives in frame '{frame_id}', expected '{expected}': used as is, "
-                'counted in diagnostics (unexpected_frame); this warning is not repeated')
-
-    def _count_error(self, where: str, error: BaseException) -> None:
-        self._callback_errors += 1
-        self._last_error = f'{where}: {type(error).__name__}: {error}'
-        self.get_logger().error(f'callback failed ({self._last_error})',
-                                throttle_duration_sec=5.0)
 
     # ---- diagnostics ---------------------------------------------------------------------
 

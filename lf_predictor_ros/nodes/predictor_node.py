@@ -85,6 +85,7 @@ from lf_predictor_ros.nodes.diagnostics import (
     make_diagnostic_array,
     predictor_values,
 )
+from lf_predictor_ros.nodes.health import InputHealth
 from lf_predictor_ros.nodes.params import convert_value, field_specs, validated_update
 from lf_predictor_ros.nodes.params import param_meta as _meta
 from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
@@ -179,7 +180,7 @@ def diagnostic_level(status: EstimatorStatus) -> str:
     return {'fallback': 'WARN', 'error': 'ERROR'}.get(status.state, 'OK')
 
 
-class PredictorNode(LifecycleNode):
+class PredictorNode(InputHealth, LifecycleNode):
     """Lifecycle node running ``AdaptivePredictor`` on aligned pose and thrust messages."""
 
     def __init__(self, **node_kwargs: Any) -> None:
@@ -200,11 +201,7 @@ class PredictorNode(LifecycleNode):
         self._samples = 0  # aligned samples processed in total
         self._samples_in_run = 0  # since the predictor was (re-)created or reset
         self._invalid_messages = 0  # failed conversions (bad quaternion, negative stamp)
-        self._unexpected_frame = 0
-        self._warned_frames: set[str] = set()
-        self._callback_errors = 0
-        self._errors_reported = 0
-        self._last_error = ''
+        self._init_input_health()
         self._warm_start = False
         self._model_file = 'none'
         self._save_path: str | None = None
@@ -429,22 +426,6 @@ class PredictorNode(LifecycleNode):
         wave_peak_freq = predictor.wave_peak_freq
         if wave_peak_freq is not None:
             self._freq_pub.publish(Float64(data=float(wave_peak_freq)))
-
-    def _check_frame(self, topic: str, frame_id: str, expected: str) -> None:
-        if frame_id == expected:
-            return
-        self._unexpected_frame += 1
-        if topic not in self._warned_frames:
-            self._warned_frames.add(topic)
-            self.get_logger().warning(
-                f"{topic} arrives in frame '{frame_id}', expected '{expected}': used as is, "
-                'counted in diagnostics (unexpected_frame); this warning is not repeated')
-
-    def _count_error(self, where: str, error: BaseException) -> None:
-        self._callback_errors += 1
-        self._last_error = f'{where}: {type(error).__name__}: {error}'
-        self.get_logger().error(f'callback failed ({self._last_error})',
-                                throttle_duration_sec=5.0)
 
     # ---- services ------------------------------------------------------------------------
 

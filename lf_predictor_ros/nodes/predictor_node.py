@@ -60,10 +60,9 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
-from rclpy.utilities import ok, remove_ros_args, try_shutdown
+from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
@@ -89,6 +88,7 @@ from lf_predictor_ros.nodes.health import InputHealth
 from lf_predictor_ros.nodes.params import convert_value, field_specs, validated_update
 from lf_predictor_ros.nodes.params import param_meta as _meta
 from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
+from lf_predictor_ros.nodes.runner import spin_node
 
 if TYPE_CHECKING:  # torch is imported on configure, so --help and bad parameters answer fast
     from lf_predictor_ros.core.predictor import AdaptivePredictor
@@ -517,26 +517,8 @@ def main(args: list[str] | None = None) -> int:
     """Console script ``predictor``; returns the exit code."""
     _parse_cli(sys.argv if args is None else args)
     rclpy.init(args=args)
-    try:
-        node = PredictorNode()
-    except (ValueError, TypeError, RuntimeError) as error:
-        if not ok():  # Ctrl-C while starting: the context went away under us
-            return 0
-        rclpy.logging.get_logger(NODE_NAME).fatal(f'invalid configuration: {error}')
-        try_shutdown()
-        return 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        try_shutdown()
-        return 0
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        try_shutdown()
-    return 0
-
+    return spin_node(PredictorNode, config_errors=(ValueError, TypeError, RuntimeError),
+                     logger_name=NODE_NAME)
 
 if __name__ == '__main__':
     sys.exit(main())

@@ -15,7 +15,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.task import Future
-from rclpy.utilities import try_shutdown
+from rclpy.utilities import ok, try_shutdown
 
 
 def spin_node(make_node: Callable[[], Node], *,
@@ -25,9 +25,14 @@ def spin_node(make_node: Callable[[], Node], *,
     try:
         node = make_node()
     except config_errors as error:
+        if not ok():  # Ctrl-C while starting: the context went away under the node
+            return 0
         rclpy.logging.get_logger(logger_name).fatal(f'invalid configuration: {error}')
         try_shutdown()
         return 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        try_shutdown()
+        return 0
     try:
         done = until(node) if until is not None else None
         if done is not None:

@@ -16,8 +16,9 @@ filters are discretized exactly (zero-order hold is not needed: the input is noi
 Loan's method (Van Loan 1978, "Computing integrals involving the matrix exponential"): the
 sampled state has exactly the covariance of the continuous process whatever the step, so
 statistics do not depend on the step size. The filter is realized with σ = 1 and the output is
-scaled by σ per DOF; when ω0 changes the state is kept and the discretization switches (ω0 is
-rounded to `peak_freq_resolution`, each value discretized once and cached).
+scaled by σ per DOF; when ω0 changes the discretization switches (ω0 is rounded to
+`peak_freq_resolution`, each value discretized once and cached) and the state is carried over
+whitened (`rescale_state`), so a step in ω0 gives no transient.
 """
 from __future__ import annotations
 
@@ -152,6 +153,21 @@ def shaping_step(state: FloatArray, disc: DiscreteShapingFilter, noise: FloatArr
     return np.asarray(state @ disc.ad.T + noise @ disc.noise_factor.T, dtype=np.float64)
 
 
+def rescale_state(state: FloatArray, old: DiscreteShapingFilter,
+                  new: DiscreteShapingFilter) -> FloatArray:
+    """Carry a (ndof, n) state stack across a change of ω0: x_new = L_new L_old⁻¹ x_old.
+
+    L is the square root (``_factor``) of the filter's stationary covariance, so the whitened state
+    L⁻¹ x is kept and a state that was typical for the old sea is typical for the new one. Keeping
+    x itself is wrong for the force model: its states scale like ω0⁻⁶ (x3 of three cascaded
+    sections with DC gain 1/ω0² each), so a step 0.3 → 1.25 rad/s multiplied the force by ~10³
+    for a few wave periods and, integrated twice by a vessel without a position spring, left a
+    permanent WF offset of kilometres. Pure: returns a new array.
+    """
+    whitened = np.linalg.pinv(_factor(old.stationary_cov)) @ state.T
+    return np.asarray((_factor(new.stationary_cov) @ whitened).T, dtype=np.float64)
+
+
 class WaveGenerator:
     """Wave-frequency signal per DOF (north, east, yaw), produced in blocks for speed.
 
@@ -181,6 +197,7 @@ class WaveGenerator:
         self.resolution = float(peak_freq_resolution)
         self.steps_done = 0
         disc = self._disc(self.schedule(0.0))
+        self._key = int(round(self.schedule(0.0) / self.resolution))
         self.state = rng.standard_normal((NDOF_WAVES, disc.ad.shape[0])) @ _factor(
             disc.stationary_cov).T
         self.output = (self.state @ disc.c) * self.sigma
@@ -209,6 +226,9 @@ class WaveGenerator:
             stop = start + int(np.argmax(keys[start:] != keys[start])) if np.any(
                 keys[start:] != keys[start]) else count
             disc = self._disc(float(peak[start]))
+            if int(keys[start]) != self._key:
+                state = rescale_state(state, self._disc(self._key * self.resolution), disc)
+                self._key = int(keys[start])
             forced = noise[start:stop] @ disc.noise_factor.T
             ad_t = np.ascontiguousarray(disc.ad.T)
             states = np.empty((stop - start, NDOF_WAVES, dim))

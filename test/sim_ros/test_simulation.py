@@ -22,7 +22,7 @@ from sim_ros.simulation import (
 )
 
 SCENARIOS = ['onedof_reference', 'onedof_excited', 'onedof_no_excitation', 'onedof_feedback',
-             'threedof_open_loop', 'supply_closed_loop', 'omega_schedule']
+             'threedof_open_loop', 'supply_closed_loop', 'omega_schedule', 'omega_steps']
 
 
 def test_all_scenarios_load_and_validate() -> None:
@@ -38,6 +38,8 @@ def test_all_scenarios_load_and_validate() -> None:
     assert scn.environment.current_direction == pytest.approx(math.radians(20.0), abs=1e-6)
     sched = load_scenario('omega_schedule').waves.peak_freq
     assert sched(0.0) == 1.25 and sched(4 * 3600.0) == 0.3
+    steps = load_scenario('omega_steps').waves.peak_freq
+    assert [steps(t) for t in (3599.0, 3600.0, 7199.0, 7200.0)] == [1.25, 0.3, 0.3, 1.25]
 
 
 @pytest.mark.parametrize(('change', 'message'), [

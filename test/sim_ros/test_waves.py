@@ -99,3 +99,37 @@ def test_fig_4_1_schedule() -> None:
         schedule.table([[10.0, 1.0], [5.0, 1.0]])
     with pytest.raises(ValueError, match='rad/s'):
         schedule.constant(20.0)
+
+
+@pytest.mark.parametrize(('before', 'after'), [(0.3, 1.25), (1.25, 0.3)])
+def test_force_after_an_omega_step_has_the_new_sea_state_level(before: float,
+                                                               after: float) -> None:
+    """No transient at a step of ω0: the force right after it has the new stationary std.
+
+    Keeping the raw state (states scale like ω0⁻⁶) gave a force ≈ 10³ × too large for several
+    wave periods after 0.3 → 1.25 rad/s.
+    """
+    step, t_step = 0.05, 600.0  # s
+    sched = schedule.steps(before, [(t_step, after)])
+    gen = waves.WaveGenerator('force', DAMPING, np.ones(3), sched, step,
+                              np.random.default_rng(5))
+    out, _ = gen.next_block(int((t_step + 60.0) / step))
+    right_after = out[int(t_step / step):]  # the 60 s after the step, 3 DOFs
+    expected = np.sqrt(waves.analytic_variance('force', after, DAMPING, 1.0))
+    ratio = float(right_after.std() / expected)
+    assert 0.3 < ratio < 3.0
+
+
+def test_rescale_state_maps_one_stationary_covariance_onto_the_other() -> None:
+    """x_new = L_new L_old⁻¹ x_old turns Cov = P_old into Cov = P_new exactly."""
+    old = waves.discretize('force', 0.3, DAMPING, 0.05)
+    new = waves.discretize('force', 1.25, DAMPING, 0.05)
+    basis = np.eye(6)
+    transform = waves.rescale_state(basis, old, new).T  # column j is the image of e_j
+    mapped = transform @ old.stationary_cov @ transform.T
+    np.testing.assert_allclose(mapped, new.stationary_cov, rtol=1e-6,
+                               atol=1e-9 * np.abs(new.stationary_cov).max())
+    state = np.arange(18.0).reshape(3, 6)
+    copy = state.copy()
+    waves.rescale_state(state, old, new)
+    np.testing.assert_array_equal(state, copy)  # pure

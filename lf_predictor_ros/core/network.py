@@ -157,6 +157,18 @@ class NnarmaxSpec:
             raise ValueError(f'incomplete NnarmaxSpec {dict(values)}: {exc}') from exc
 
 
+def relative_spread(y: FloatArray, ny: int) -> FloatArray:
+    """RMS of y(t − i) − y(t) over i = 1 … max(1, ny − 1) and all t, per channel.
+
+    The scale of a relative network's position regressors and of its output ŷLF(t + 1) − y(t).
+    """
+    lags = range(1, min(max(1, ny - 1), y.shape[0] - 1) + 1)
+    if not lags:
+        return np.asarray(y.std(axis=0), dtype=np.float64)
+    squares = [np.mean((y[:-lag] - y[lag:]) ** 2, axis=0) for lag in lags]
+    return np.asarray(np.sqrt(np.mean(squares, axis=0)), dtype=np.float64)
+
+
 def _safe_std(std: FloatArray, mean: FloatArray) -> FloatArray:
     """Standard deviation with constant channels mapped to 1 (no division by ~0)."""
     floor = _STD_FLOOR_REL * np.maximum(1.0, np.abs(mean))
@@ -242,6 +254,43 @@ class NnarmaxNet(torch.nn.Module):
             out = out + self.bypass(x_s)
         return self.y_mean + self.y_std * out
 
+    def fit_linear_bypass(self, x: torch.Tensor, target: torch.Tensor, keep: torch.Tensor,
+                          ridge: float = 1e-6) -> None:
+        """Solve the linear bypass and output bias by ridge least squares, in place.
+
+        ``x`` (rows, n_regressors) raw regressor rows, ``target`` (rows, n_outputs) the values
+        ŷLF(t + 1) should take, ``keep`` (rows,) bool rows that count. The tanh part is held
+        fixed and the bypass B and bias v0 minimize ‖ŷLF − target‖² + ridge·rows·‖B‖² in
+        standardized units, i.e. the linear ARX model (eq. 2.2 without hidden layer) on the
+        residual of the tanh part. A linear least-squares problem has one global optimum, found
+        in one solve; gradient-based training then starts from it (series-parallel only: the
+        feedback columns must hold the targets). No-op without a bypass.
+        """
+        if self.bypass is None:
+            return
+        with torch.no_grad():
+            ref = torch.zeros_like(target)
+            if self.spec.relative:
+                offset = _position_offset(self.spec)
+                ref = x[:, offset:offset + self.spec.n_outputs]
+                x = x - _relative_shift(self.spec, ref)
+            x_mean, x_std = self.regressor_standardization()
+            x_s = ((x - x_mean) / x_std)[keep]
+            hidden = x_s
+            for layer in self.hidden_layers():
+                hidden = torch.tanh(layer(hidden))
+            wanted = (target[keep] - ref[keep] - self.y_mean) / self.y_std
+            residual = wanted - (hidden @ self.output.weight.T)
+            design = torch.cat((x_s, torch.ones(x_s.shape[0], 1, dtype=x_s.dtype)), dim=1)
+            penalty = ridge * design.shape[0] * torch.eye(design.shape[1], dtype=x_s.dtype)
+            penalty[-1, -1] = 0.0  # the bias is not penalized
+            # lstsq (minimum norm) rather than solve: in relative mode the y(t) − y(t) column
+            # is identically 0, so without a ridge the normal matrix is singular
+            solution = torch.linalg.lstsq(design.T @ design + penalty, design.T @ residual,
+                                          driver='gelsd').solution
+            self.bypass.weight.copy_(solution[:-1].T)
+            self.output.bias.copy_(solution[-1])
+
     def free_run(
         self, x_static: torch.Tensor, fb_init: torch.Tensor, *, differentiable: bool = True
     ) -> torch.Tensor:
@@ -313,10 +362,12 @@ class NnarmaxNet(torch.nn.Module):
         u_std = _safe_std(u_series.std(axis=0), u_mean)
         y_std = _safe_std(y_series.std(axis=0), y_mean)
         if self.spec.relative:
-            # Relative positions are centred on 0; their spread is the window's spread about its
-            # mean (wave motion + LF movement), not the distance from the origin.
+            # Relative positions y(t−i) − y(t) are centred on 0 and their size is the motion
+            # within the regressor span (wave motion + a few seconds of drift), not the window's
+            # spread: over a 10-min window a drifting vessel spreads tens of metres, which would
+            # squeeze every relative regressor and output into a sliver of the tanh range.
             y_mean = np.zeros_like(y_mean)
-            y_std = _safe_std(y_series.std(axis=0), y_mean)
+            y_std = _safe_std(relative_spread(y_series, self.spec.ny), y_mean)
         new = {
             'u_mean': torch.from_numpy(u_mean),
             'u_std': torch.from_numpy(u_std),

@@ -38,6 +38,7 @@ _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'tra
                   'filter_window', 'append_length')
 _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed')
 _STR_FIELDS = ('trainer', 'training_mode')
+_BOOL_FIELDS = ('linear_init',)
 
 
 def _doc(doc: str, unit: str = '') -> dict[str, str]:
@@ -99,6 +100,9 @@ class PredictorParams:
     derivative_weight: float = field(
         default=0.1, metadata=_doc('weight of the derivative-error loss term', ''))
     trainer: str = field(default='lm', metadata=_doc('training algorithm: lm, lbfgs or adam'))
+    linear_init: bool = field(
+        default=False, metadata=_doc('solve the linear bypass by least squares before each '
+                                     'training (the network then refines a linear ARX model)'))
     training_mode: str = field(
         default='series_parallel', metadata=_doc('series_parallel or parallel (BPTT)'))
     seed: int = field(default=0, metadata=_doc('seed of the network initialization'))
@@ -205,8 +209,13 @@ class PredictorParams:
             if isinstance(value, bool) or not _is_integral(value):
                 raise ValueError(f'{name} must be an integer, got {value!r}')
             object.__setattr__(self, name, int(value))
+        for name in _BOOL_FIELDS:
+            value = getattr(self, name)
+            if not isinstance(value, bool):
+                raise ValueError(f'{name} must be true or false, got {value!r}')
+            object.__setattr__(self, name, bool(value))
         for f in fields(self):
-            if f.name in _INT_FIELDS or f.name in _STR_FIELDS or f.name == 'wave_band':
+            if f.name in (*_INT_FIELDS, *_STR_FIELDS, *_BOOL_FIELDS, 'wave_band'):
                 continue
             object.__setattr__(self, f.name, _finite_float(f.name, getattr(self, f.name)))
         band = self.wave_band

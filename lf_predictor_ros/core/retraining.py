@@ -30,7 +30,7 @@ from lf_predictor_ros.core.frequency import FrequencyEstimate, estimate_wave_pea
 from lf_predictor_ros.core.network import NnarmaxNet, NnarmaxSpec, NumpyNnarmax
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.targets import TargetWindow, training_mask
-from lf_predictor_ros.core.training import TrainSettings, evaluate_loss, train
+from lf_predictor_ros.core.training import TrainSettings, evaluate_loss, loss_scale, train
 
 FloatArray = NDArray[np.float64]
 
@@ -89,7 +89,8 @@ def train_settings(params: PredictorParams) -> TrainSettings:
                          mode=params.training_mode,  # type: ignore[arg-type]
                          max_epochs=params.max_epochs, max_seconds=params.max_train_seconds,
                          weight_decay=params.weight_decay,
-                         derivative_weight=params.derivative_weight, seed=params.seed)
+                         derivative_weight=params.derivative_weight,
+                         linear_init=params.linear_init, seed=params.seed)
 
 
 def first_training_samples(params: PredictorParams) -> int:
@@ -191,7 +192,7 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
 
 def cascade_loss(params: PredictorParams, y: FloatArray, targets: FloatArray,
                  mask: NDArray[np.bool_], wave_peak_freq: float) -> float:
-    """The trainer's loss (normalized MSE vs the targets) of the causal cascade on a window.
+    """The trainer's loss of the causal cascade on a window (MSE vs the targets, ``loss_scale``).
 
     The cascade (notch at ω0 + low-pass, the predictor's own fallback) runs over the window from
     steady state; its output at t stands for the estimate of t + h, exactly as when it is the
@@ -215,8 +216,7 @@ def cascade_loss(params: PredictorParams, y: FloatArray, targets: FloatArray,
     if keep.sum() < 2:
         return math.inf
     error = out[:-1][keep[1:]] - targets[1:][keep[1:]]
-    scale = targets[mask].std(axis=0)
-    scale = np.where(scale > 1e-12, scale, 1.0)
+    scale = loss_scale(network_spec(params), y[:-1], targets[1:], mask[1:])
     return float(np.mean((error / scale) ** 2))
 
 

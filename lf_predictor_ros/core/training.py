@@ -79,9 +79,11 @@ class TrainSettings:
     ``lm_mu_max`` drive eq. 2.7 (MATLAB ``trainlm`` defaults); ``lr`` is Adam's step size;
     ``min_grad`` stops when ‖∇J‖ falls below it; ``loss_goal`` stops when the MSE part reaches it;
     ``standardize`` re-computes the input/output standardization from the window (exactly
-    function-preserving, so the warm start is kept); ``seed`` is recorded for stochastic variants
-    (mini-batches, restarts): the three full-batch algorithms here use no randomness, so a run is
-    reproducible bit for bit without touching torch's global RNG.
+    function-preserving, so the warm start is kept); ``linear_init`` solves the linear bypass by
+    least squares before the first epoch (``NnarmaxNet.fit_linear_bypass``); ``seed`` is
+    recorded for stochastic variants (mini-batches, restarts): the three full-batch algorithms
+    here use no randomness, so a run is reproducible bit for bit without touching torch's global
+    RNG.
     """
 
     algorithm: Algorithm = 'lm'
@@ -98,6 +100,7 @@ class TrainSettings:
     min_grad: float = 1e-10
     loss_goal: float = 0.0
     standardize: bool = True
+    linear_init: bool = False
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -169,7 +172,7 @@ class _Window:
     target: torch.Tensor  # (rows − 1, n_out) yT(t + 1) for row t
     keep: torch.Tensor  # (rows − 1,) bool: target counts
     keep_pair: torch.Tensor  # (rows − 2,) bool: both targets of a difference count
-    scale: torch.Tensor  # (n_out,) std of kept targets
+    scale: torch.Tensor  # (n_out,) loss normalization (``loss_scale``)
     diff_scale: torch.Tensor  # (n_out,) RMS of kept target differences
     first: int
 
@@ -202,6 +205,33 @@ def _channel_scale(values: FloatArray) -> FloatArray:
     return np.where(values > _SCALE_FLOOR, values, 1.0)
 
 
+def y_series_of(spec: NnarmaxSpec, y: ArrayLike, n: int) -> FloatArray:
+    """The measured positions as an (n, n_outputs) series (validated length)."""
+    series = as_series(y, spec.n_outputs, 'y')
+    if series.shape[0] != n:
+        raise ValueError(f'y has {series.shape[0]} samples, the targets {n}: align them first')
+    return series
+
+
+def loss_scale(spec: NnarmaxSpec, y_now: ArrayLike, target_next: ArrayLike,
+               keep: ArrayLike) -> FloatArray:
+    """Per-channel normalization of the training loss, shape (n_outputs,).
+
+    Absolute networks: the std of the kept targets yT(t + 1) (thesis: normalized MSE). Relative
+    networks (``spec.relative``) predict ŷLF(t + 1) − y(t), so the loss is normalized by the RMS
+    of yT(t + 1) − y(t), the size of what they actually predict. The absolute spread would mostly
+    measure how far the vessel drifted in the window (tens of metres), make a 0.2 m error look
+    like 1e-4 and let the weight penalty (eq. 2.8) dominate the fit.
+    ``y_now`` (rows, n_out) is y(t) and ``target_next`` (rows, n_out) yT(t + 1) for the same rows.
+    """
+    kept = np.asarray(keep, dtype=bool)
+    target = as_series(target_next, spec.n_outputs, 'targets')[kept]
+    if not spec.relative:
+        return _channel_scale(target.std(axis=0))
+    step = target - as_series(y_now, spec.n_outputs, 'y')[kept]
+    return _channel_scale(np.sqrt(np.mean(step ** 2, axis=0)))
+
+
 def _prepare_window(
     spec: NnarmaxSpec, u: ArrayLike, y: ArrayLike, targets: ArrayLike, mask: ArrayLike | None
 ) -> _Window:
@@ -224,7 +254,7 @@ def _prepare_window(
     keep_pair = keep[1:] & keep[:-1]
     if keep.sum() < 2:
         raise ValueError('mask keeps fewer than 2 training targets: the window is all transient')
-    scale = _channel_scale(target[keep].std(axis=0))
+    scale = loss_scale(spec, y_series_of(spec, y, n)[first : n - 1], target, keep)
     diffs = np.diff(target, axis=0)[keep_pair]
     diff_rms = np.sqrt(np.mean(diffs**2, axis=0)) if diffs.size else np.ones(spec.n_outputs)
     return _Window(
@@ -343,6 +373,8 @@ def _train(
     model = copy.deepcopy(net)
     if settings.standardize:
         model.set_standardization(u, y, preserve_function=True)
+    if settings.linear_init:
+        model.fit_linear_bypass(window.x_series[:-1], window.target, window.keep)
     runner = _WindowPredictor(model, n_static_regressors(spec), spec.nfb)
     parallel = settings.mode == 'parallel'
     with torch.no_grad():
@@ -384,8 +416,22 @@ def _objective(
     objective = torch.sum(residuals**2)
     if settings.weight_decay > 0.0:
         weights = torch.nn.utils.parameters_to_vector(runner.parameters())
-        objective = objective + settings.weight_decay * torch.sum(weights**2)
+        decay = decay_vector(runner.net, settings.weight_decay)
+        objective = objective + torch.sum(decay * weights**2)
     return objective, prediction
+
+
+def decay_vector(net: torch.nn.Module, weight_decay: float) -> torch.Tensor:
+    """Per-parameter weight penalty b of eq. 2.8, flat in ``parameters()`` order.
+
+    The tanh part (hidden layers, output layer) gets ``weight_decay``; the linear bypass gets
+    none: it is the linear ARX model, solved by least squares at ``linear_init`` and shrinking it
+    pulls the prediction toward the raw measurement y(t), not toward a smoother function.
+    """
+    parts = [torch.zeros(p.numel(), dtype=torch.float64) if name.startswith('bypass.')
+             else torch.full((p.numel(),), weight_decay, dtype=torch.float64)
+             for name, p in net.named_parameters()]
+    return torch.cat(parts) if parts else torch.zeros(0, dtype=torch.float64)
 
 
 @dataclass(frozen=True)
@@ -497,14 +543,14 @@ def _levenberg_marquardt(
     """Levenberg–Marquardt (thesis eq. 2.7) with trainlm-style μ adaptation."""
     settings = run.settings
     layout = _FlatParameters.of(runner.net)
-    decay = settings.weight_decay
+    decay = decay_vector(runner.net, settings.weight_decay)
 
     def residual_fn(flat: torch.Tensor) -> torch.Tensor:
         prediction = _window_prediction(runner, layout, flat, window, parallel)
         return _data_residuals(prediction, window, settings.derivative_weight)
 
     def objective_of(flat: torch.Tensor, residuals: torch.Tensor) -> float:
-        return float(torch.sum(residuals**2) + decay * torch.sum(flat**2))
+        return float(torch.sum(residuals**2) + torch.sum(decay * flat**2))
 
     with torch.no_grad():
         weights = torch.nn.utils.parameters_to_vector(runner.net.parameters()).detach().clone()
@@ -527,7 +573,7 @@ def _levenberg_marquardt(
         if float(torch.linalg.vector_norm(2.0 * gradient)) <= settings.min_grad:
             reason = 'min_grad'
             break
-        gauss_newton = jacobian.T @ jacobian + decay * identity
+        gauss_newton = jacobian.T @ jacobian + torch.diag(decay)
         accepted = False
         while not accepted:
             step = torch.linalg.solve(gauss_newton + mu * identity, gradient)

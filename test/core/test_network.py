@@ -16,6 +16,7 @@ from lf_predictor_ros.core.network import (
     NumpyNnarmax,
     load_checkpoint,
     predict_step,
+    relative_spread,
     save_checkpoint,
 )
 from lf_predictor_ros.core.regressors import build_regressors, regressor_vector
@@ -263,3 +264,52 @@ def test_checkpoint_refuses_other_version_and_other_spec(tmp_path: Path) -> None
         save_checkpoint(path, other_spec, NnarmaxNet(SPEC_3DOF).state_dict())
     with pytest.raises(ValueError, match='JSON'):
         save_checkpoint(path, SPEC_3DOF, NnarmaxNet(SPEC_3DOF).state_dict(), {'x': object()})
+
+
+def test_relative_spread_of_a_ramp_is_the_rms_of_the_lag_offsets() -> None:
+    """y(t) = c·t: y(t − i) − y(t) = −i·c, so the RMS over i = 1…ny−1 is c·√(mean i²)."""
+    c = 0.3  # m/sample
+    y = c * np.arange(200.0)[:, None]
+    ny = 5
+    expected = c * np.sqrt(np.mean(np.arange(1, ny) ** 2))  # √7.5·c
+    assert relative_spread(y, ny)[0] == pytest.approx(expected, rel=1e-12)
+    assert relative_spread(y, 1)[0] == pytest.approx(c, rel=1e-12)  # one lag at least
+
+
+def test_relative_standardization_uses_the_regressor_span_not_the_window_spread() -> None:
+    """A drifting window (spread ≈ 58 m) with 0.1 m steps: y_std is ≈ the step size scale."""
+    spec = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=1, ny=3, nfb=0, hidden_units=2,
+                       relative=True)
+    y = 0.1 * np.arange(2000.0)[:, None]  # m
+    net = NnarmaxNet(spec)
+    net.set_standardization(np.ones((2000, 1)) + np.arange(2000.0)[:, None], y)
+    assert float(net.y_mean[0]) == 0.0
+    assert float(net.y_std[0]) == pytest.approx(0.1 * np.sqrt(2.5), rel=1e-9)
+
+
+@pytest.mark.parametrize('relative', [False, True])
+def test_fit_linear_bypass_recovers_a_linear_arx_system_exactly(relative: bool) -> None:
+    """Noise-free y(t+1) = 1.6 y(t) − 0.6 y(t−1) + 0.2 u(t) + 0.1: one solve, error ~ 1e-9.
+
+    The y coefficients sum to 1 (a vessel without a position spring), so the system is
+    translation invariant and the relative network can represent it as well.
+    """
+    rng = np.random.default_rng(3)
+    n = 400
+    u = rng.normal(size=(n, 1))
+    y = np.zeros((n, 1))
+    for t in range(1, n - 1):
+        y[t + 1] = 1.6 * y[t] - 0.6 * y[t - 1] + 0.2 * u[t] + 0.1
+    spec = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=1, ny=2, nfb=0, hidden_units=3,
+                       relative=relative)
+    net = NnarmaxNet(spec, seed=1)
+    net.set_standardization(u, y)
+    x, first = build_regressors(u, y, y, spec)
+    x_t = torch.from_numpy(x[:-1])
+    target = torch.from_numpy(y[first + 1:])
+    keep = torch.ones(len(target), dtype=torch.bool)
+    keep[:5] = False  # rows left out must not matter for an exact fit
+    net.fit_linear_bypass(x_t, target, keep, ridge=0.0)
+    with torch.no_grad():
+        error = net(x_t) - target
+    assert float(error.abs().max()) < 1e-8

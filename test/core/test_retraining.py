@@ -29,7 +29,7 @@ from lf_predictor_ros.core.retraining import (
     training_window,
 )
 from lf_predictor_ros.core.targets import TargetWindow
-from lf_predictor_ros.core.training import TrainResult
+from lf_predictor_ros.core.training import TrainResult, loss_scale
 from sim_ros.simulation import load_scenario, simulate
 
 # torch loads its forward-AD decompositions once per process via the deprecated torch.jit.script
@@ -354,7 +354,8 @@ def test_cascade_loss_is_between_the_network_and_the_raw_measurement() -> None:
     # raw measurement (ŷ(t+1) = y(t)) in the same normalized units is clearly worse
     keep = mask.copy()
     keep[:RETRAIN.transient_samples + 1] = False
-    raw = np.mean(((y_w[:-1] - t_w[1:])[keep[1:]] / t_w[mask].std(axis=0)) ** 2)
+    scale = loss_scale(network_spec(RETRAIN), y_w[:-1], t_w[1:], mask[1:])
+    raw = np.mean(((y_w[:-1] - t_w[1:])[keep[1:]] / scale) ** 2)
     assert result.loss < baseline < raw
 
 

@@ -84,11 +84,11 @@ def test_defaults_and_sample_counts() -> None:
     params = PredictorParams(sample_time=0.5, nu=2, ny=2, nfb=2)
     assert (params.retrain_samples, params.transient_samples, params.filter_samples,
             params.append_samples, params.training_samples, params.estimation_samples) == (
-                120, 60, 360, 240, 1200, 2400)
+                120, 60, 360, 240, 2400, 2400)
     assert params.max_lag == 2
     assert params.nyquist_freq == pytest.approx(2.0 * math.pi)
     assert PredictorParams().sample_time == 1.0
-    assert PredictorParams().max_lag == 12
+    assert PredictorParams().max_lag == 24
     assert params.lowpass_cutoff(0.3) == pytest.approx(0.5)  # thesis Fig. 4.8
     assert params.wave_peak_prior is None
     assert PredictorParams(initial_wave_peak_freq=0.6).wave_peak_prior == 0.6
@@ -145,3 +145,10 @@ def test_field_metadata_documents_every_parameter() -> None:
     for f in fields(PredictorParams):
         assert f.metadata['doc'], f.name
     assert {f.name: f.metadata['unit'] for f in fields(PredictorParams)}['filter_window'] == 's'
+
+
+def test_linear_init_must_be_a_bool() -> None:
+    assert PredictorParams().linear_init is True
+    assert PredictorParams(linear_init=False).linear_init is False
+    with pytest.raises(ValueError, match='linear_init must be true or false'):
+        PredictorParams(linear_init=1)  # type: ignore[arg-type]

@@ -20,11 +20,20 @@ So a SIGKILL loses at most the open chunk: at most `chunk_size` bytes and, provi
 called at least every `max_chunk_duration` seconds while the stream is idle (the recorder does),
 at most `max_chunk_duration` seconds of recording. The truncated file has no summary;
 `mcap_reader.BagReader` reads it and `mcap_reader.recover` rewrites it complete.
+
+Write failure (disk full: ENOSPC, EDQUOT, or EFBIG from a file-size limit; or any other OSError
+of the file): the writer stops for good. It cuts the file back to the end of the last complete
+chunk (`ftruncate` needs no free space), so the file is like one from a killed writer: every
+finished chunk is readable and `recover` rewrites them as a finished bag. The call that met the
+error raises `BagWriteError` (path, bytes kept, errno); later `write()` calls raise it again,
+`flush()` does nothing and `close()` only closes the file (a summary cannot be written). The
+messages of the failed chunk are counted in `lost_count`.
 """
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+import errno
 import os
 from pathlib import Path
 import threading
@@ -59,8 +68,28 @@ COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
                 'none': CompressionType.NONE}
 
 
+# errno values that mean "no room for the bytes": no space, quota, file-size limit (RLIMIT_FSIZE).
+DISK_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
+
+
 class BagError(ValueError):
     """A bag cannot be written or read: bad path, corrupt or foreign file, bad arguments."""
+
+
+class BagWriteError(BagError):
+    """Writing the bag file failed (disk full or an I/O error); the writer has stopped.
+
+    `bytes_kept` is the file's length after the cut back to the last complete chunk;
+    `errno` the operating system's error number; `disk_full` whether it means no room.
+    """
+
+    def __init__(self, message: str, *, path: Path, bytes_kept: int, errno_value: int | None
+                 ) -> None:
+        super().__init__(message)
+        self.path = path
+        self.bytes_kept = bytes_kept
+        self.errno = errno_value
+        self.disk_full = errno_value in DISK_FULL_ERRNOS
 
 
 def rmw_time(nanoseconds: int) -> dict[str, int]:
@@ -134,6 +163,11 @@ class _DirectStream:
     def flush(self) -> None:
         """Nothing buffered here; the OS has every byte already."""
 
+    def truncate(self, size: int) -> None:
+        """Cut the file to `size` bytes (frees space; works on a full disk)."""
+        self._raw.truncate(size)
+        self._position = size
+
     def close(self) -> None:
         self._raw.close()
 
@@ -189,7 +223,13 @@ class BagWriter:
             self.path.unlink(missing_ok=True)
             raise BagError(f'{err}; install the Python package for it or use '
                            "compression='none'") from None
-        self._mcap.start(profile=PROFILE, library=LIBRARY)
+        try:
+            self._mcap.start(profile=PROFILE, library=LIBRARY)
+        except OSError as err:
+            raw.close()
+            self.path.unlink(missing_ok=True)
+            raise BagError(f'cannot write bag {str(self.path)!r}: {err.strerror or err}; '
+                           'choose an output path with free space') from None
         self._schemas: dict[str, int] = {}
         self._topics: dict[str, _TopicStats] = {}
         self._by_channel: dict[int, _TopicStats] = {}
@@ -200,6 +240,10 @@ class BagWriter:
         self._start_ns: int | None = None
         self._end_ns = 0
         self._message_count = 0
+        self._chunk_messages = 0
+        self._lost_count = 0
+        self._error: BagWriteError | None = None
+        self._good_offset = self._stream.tell()  # [bytes] end of the last complete record
         self._chunk_bytes = 0
         self._chunk_first_log_ns = 0
         self._chunk_wall_start = 0.0
@@ -219,8 +263,23 @@ class BagWriter:
 
     @property
     def message_count(self) -> int:
-        """Messages written so far."""
+        """Messages accepted by `write()` so far (see `lost_count` after a write failure)."""
         return self._message_count
+
+    @property
+    def lost_count(self) -> int:
+        """Accepted messages that never reached the file (the chunk open at a write failure)."""
+        return self._lost_count
+
+    @property
+    def bytes_written(self) -> int:
+        """Bytes in the file (after a write failure: up to the end of the last complete chunk)."""
+        return self._stream.tell()
+
+    @property
+    def error(self) -> BagWriteError | None:
+        """The write failure that stopped the writer, or None."""
+        return self._error
 
     def topics(self) -> dict[str, str]:
         """Topics added so far and their type names."""
@@ -265,6 +324,8 @@ class BagWriter:
         if log_time_ns < 0:
             raise BagError(f'log time must be >= 0 ns, got {log_time_ns}')
         with self._guard('write'):
+            if self._error is not None:
+                raise self._error
             stats = self._stats_of(channel_id)
             publish = log_time_ns if publish_time_ns is None else publish_time_ns
             if self._chunk_bytes == 0:
@@ -273,6 +334,7 @@ class BagWriter:
             self._mcap.add_message(channel_id, log_time_ns, bytes(data), publish)
             stats.message_count += 1
             self._message_count += 1
+            self._chunk_messages += 1
             self._start_ns = log_time_ns if self._start_ns is None else min(self._start_ns,
                                                                             log_time_ns)
             self._end_ns = max(self._end_ns, log_time_ns)
@@ -281,16 +343,21 @@ class BagWriter:
                 self._finish_chunk()
 
     def flush(self) -> None:
-        """Finish the open chunk so it is on disk (call at least every max_chunk_duration)."""
+        """Finish the open chunk so it is on disk (call at least every max_chunk_duration).
+
+        Does nothing once a write failure stopped the writer.
+        """
         with self._guard('flush'):
-            if self._chunk_bytes:
+            if self._chunk_bytes and self._error is None:
                 self._finish_chunk()
 
     def close(self) -> None:
         """Write the rosbag2 metadata record, the summary and the footer; close the file.
 
         Idempotent. From a signal handler that interrupted a write on this thread, the close is
-        done right after that write returns.
+        done right after that write returns. After a write failure it only closes the file; a
+        failure while writing the summary raises `BagWriteError` (the file then ends at the last
+        complete chunk, like one from a killed writer).
         """
         if self._closed:
             return
@@ -323,17 +390,52 @@ class BagWriter:
                 or time.monotonic() - self._chunk_wall_start >= self.max_chunk_duration)
 
     def _finish_chunk(self) -> None:
-        self._mcap.flush()
+        try:
+            self._mcap.flush()
+        except OSError as err:
+            raise self._stop_writing(err) from None
         self._chunk_bytes = 0
+        self._chunk_messages = 0
+        self._good_offset = self._stream.tell()
+
+    def _stop_writing(self, err: OSError) -> BagWriteError:
+        """Record a write failure: cut the partial chunk off, count its messages as lost."""
+        try:
+            self._stream.truncate(self._good_offset)
+        except OSError:
+            pass  # the partial record stays; readers stop at it
+        self._lost_count = self._chunk_messages
+        self._chunk_messages = self._chunk_bytes = 0
+        kept = self.bytes_written
+        reason = err.strerror or str(err)
+        if err.errno in DISK_FULL_ERRNOS:
+            what = f'disk full ({reason})'
+            advice = 'free space (or raise the file-size limit)'
+        else:
+            what = f'write error ({reason})'
+            advice = 'check the disk'
+        self._error = BagWriteError(
+            f'{what}: stopped writing bag {str(self.path)!r} after {kept} bytes; '
+            f'{self._message_count - self._lost_count} messages are in the file, '
+            f'{self._lost_count} of the open chunk are lost and later ones are not written; '
+            f'{advice}, then run recover() on the file for a finished copy',
+            path=self.path, bytes_kept=kept, errno_value=err.errno)
+        return self._error
 
     def _close_locked(self) -> None:
         if self._closed:
             return
         self._closed = True
+        if self._error is not None:
+            self._stream.close()  # no summary can be written; the file ends at a chunk
+            return
         try:
-            self._mcap.flush()
+            if self._chunk_bytes:
+                self._finish_chunk()
             self._mcap.add_metadata(METADATA_NAME, {METADATA_KEY: self._metadata_yaml()})
             self._mcap.finish()
+        except OSError as err:
+            raise self._stop_writing(err) from None
         finally:
             self._stream.close()
 

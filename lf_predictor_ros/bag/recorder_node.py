@@ -24,6 +24,15 @@ Shutdown: SIGINT and SIGTERM are handled by rclpy (the context is shut down and 
 the bag is then closed in `finally`, so an interrupted recording is a finished file. A SIGKILL
 loses at most the open chunk: at most `chunk_size` bytes or 1 s of data (a steady-clock timer
 flushes the open chunk every second).
+
+Disk full (or any other write error of the bag file): the recorder logs ONE error naming the
+path, the bytes kept and "disk full", stops writing and keeps running (no exception leaves a
+callback). The file is cut back to its last complete chunk, so it reads like one from a killed
+recorder and `mcap_reader.recover` rewrites it finished. Every message received and not in the
+file (the failed chunk's and all later ones) is counted in `dropped_messages`, which is published
+from then on, once per second, as an ERROR status on `/diagnostics` (a healthy recorder publishes
+nothing, so it never records itself). On shutdown the file is closed without a summary and the
+process exits 1.
 """
 # rclpy's API is partly untyped (QoSProfile, loggers, destroy_node).
 # mypy: disable-error-code="no-untyped-call"
@@ -36,6 +45,7 @@ import functools
 import sys
 from typing import Any
 
+from diagnostic_msgs.msg import DiagnosticArray
 import rclpy
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
@@ -49,10 +59,13 @@ from lf_predictor_ros.bag.mcap_writer import (
     DEFAULT_CHUNK_SIZE,
     DEFAULT_MAX_CHUNK_DURATION,
     BagError,
+    BagWriteError,
     BagWriter,
 )
 from lf_predictor_ros.bag.msgdefs import full_definition
 from lf_predictor_ros.bag.ros_codec import message_class, publishers_qos_yaml
+from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, make_diagnostic_array
+from lf_predictor_ros.nodes.qos import publisher_qos
 
 # Topics of the interface contract (shared/reference/interfaces.md) and their types.
 CONTRACT_TOPICS: dict[str, str] = {
@@ -74,6 +87,7 @@ RECORD_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
 # Not the node's name: rosout would try (and fail) to publish records made after a signal.
 LOGGER_NAME = 'lf_predictor_ros.recorder'
 DISCOVERY_PERIOD = 0.5  # [s] how often to look for the types of topics given without one
+STATUS_PERIOD = 1.0  # [s] /diagnostics period after a write failure (steady clock)
 
 
 def default_output_path() -> str:
@@ -101,6 +115,9 @@ class RecorderNode(Node):
         self.writer = BagWriter(output, chunk_size=chunk_size, compression=compression)
         self._channels: dict[str, int] = {}
         self._waiting: set[str] = set()
+        self.dropped_messages = 0  # received but not in the file (after a write failure)
+        self._failure: str = ''  # the one error logged; '' while healthy
+        self._diag_pub: Any = None  # created at a write failure (a healthy bag has no trace)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         for entry in topics:
             name, type_name = parse_topic_entry(str(entry))
@@ -112,7 +129,8 @@ class RecorderNode(Node):
                 self._subscribe(resolved, type_name)
         if self._waiting:
             self.create_timer(DISCOVERY_PERIOD, self._discover, clock=steady)
-        self.create_timer(DEFAULT_MAX_CHUNK_DURATION, self.writer.flush, clock=steady)
+        self.create_timer(DEFAULT_MAX_CHUNK_DURATION, self._flush, clock=steady)
+        self.create_timer(STATUS_PERIOD, self.publish_status, clock=steady)
         self.get_logger().info(f'recording {len(topics)} topics to {self.writer.path}')
 
     def _subscribe(self, topic: str, type_name: str) -> None:
@@ -135,21 +153,88 @@ class RecorderNode(Node):
 
     def _on_message(self, topic: str, type_name: str, data: bytes,
                     info: dict[str, int]) -> None:
-        log_time_ns = self.get_clock().now().nanoseconds
-        channel = self._channels.get(topic)
-        if channel is None:
-            qos_yaml, type_hash = publishers_qos_yaml(self, topic)
-            channel = self.writer.add_topic(topic, type_name, qos_yaml, type_hash=type_hash)
-            self._channels[topic] = channel
-        publish_time_ns = int(info.get('source_timestamp', 0)) or log_time_ns
-        self.writer.write(channel, log_time_ns, data, publish_time_ns)
+        if self._failure:
+            self.dropped_messages += 1
+            return
+        try:
+            log_time_ns = self.get_clock().now().nanoseconds
+            channel = self._channels.get(topic)
+            if channel is None:
+                qos_yaml, type_hash = publishers_qos_yaml(self, topic)
+                channel = self.writer.add_topic(topic, type_name, qos_yaml, type_hash=type_hash)
+                self._channels[topic] = channel
+            publish_time_ns = int(info.get('source_timestamp', 0)) or log_time_ns
+            self.writer.write(channel, log_time_ns, data, publish_time_ns)
+        except BagWriteError as err:
+            self._stop(err)
+        except Exception as err:  # noqa: BLE001 - a callback must never kill the recorder
+            self.dropped_messages += 1
+            self.get_logger().error(f'message on {topic} not recorded: {err}',
+                                    throttle_duration_sec=5.0)
+
+    def _flush(self) -> None:
+        """Steady timer: put the open chunk on disk (a write failure may show up here)."""
+        try:
+            self.writer.flush()
+        except BagWriteError as err:
+            self._stop(err)
+
+    def _stop(self, err: BagWriteError) -> None:
+        """After a write failure: log it once, count what is lost, report on /diagnostics."""
+        if self._failure:
+            return
+        self._failure = str(err)
+        self.dropped_messages += self.writer.lost_count
+        # Not the node logger: this may run in destroy_node, after /rosout is gone.
+        get_logger(LOGGER_NAME).error(f'{err}. The recorder keeps running and counts the '
+                                      'messages it cannot record (dropped_messages on '
+                                      '/diagnostics).')
+        try:
+            self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
+                                                   publisher_qos())
+        except Exception as error:  # noqa: BLE001 - e.g. the context is going down
+            get_logger(LOGGER_NAME).warning(f'no /diagnostics publisher: {error}')
+        self.publish_status()
+
+    @property
+    def failed(self) -> bool:
+        """Whether a write failure stopped the recording."""
+        return bool(self._failure)
+
+    def publish_status(self) -> None:
+        """After a write failure: one ERROR status on /diagnostics (healthy: nothing)."""
+        if not self._failure or self._diag_pub is None:
+            return
+        writer = self.writer
+        values: dict[str, DiagnosticValue] = {
+            'path': str(writer.path), 'bytes_written': writer.bytes_written,
+            'messages_in_file': writer.message_count - writer.lost_count,
+            'dropped_messages': self.dropped_messages}
+        try:
+            self._diag_pub.publish(make_diagnostic_array(
+                'recorder: bag', 'ERROR', self._failure, values,
+                stamp=self.get_clock().now().to_msg()))
+        except Exception as err:  # noqa: BLE001 - e.g. the context is going down
+            get_logger(LOGGER_NAME).warning(f'recorder status not published: {err}')
 
     def destroy_node(self) -> None:
-        """Finish the bag, then destroy the node."""
-        self.writer.close()
+        """Finish the bag (or, after a write failure, close what is there), destroy the node."""
         # Not the node logger: after a signal the context is down and /rosout is gone.
-        get_logger(LOGGER_NAME).info(f'wrote {self.writer.message_count} messages to '
-                                         f'{self.writer.path}')
+        logger = get_logger(LOGGER_NAME)
+        try:
+            self.writer.close()
+        except BagWriteError as err:  # the summary did not fit on the disk
+            self._stop(err)
+        except OSError as err:
+            logger.error(f'closing {self.writer.path} failed: {err}')
+        writer = self.writer
+        if self._failure:
+            logger.error(f'{writer.path} is incomplete ({writer.bytes_written} bytes, '
+                         f'{writer.message_count - writer.lost_count} messages; '
+                         f'{self.dropped_messages} dropped after the write failure): run '
+                         'recover() on it for a finished copy')
+        else:
+            logger.info(f'wrote {writer.message_count} messages to {writer.path}')
         super().destroy_node()
 
 
@@ -184,7 +269,7 @@ def main(args: Sequence[str] | None = None) -> int:
     finally:
         node.destroy_node()
         try_shutdown()
-    return 0
+    return 1 if node.failed else 0
 
 
 if __name__ == '__main__':

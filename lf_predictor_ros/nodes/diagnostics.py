@@ -114,7 +114,11 @@ def predictor_values(status: EstimatorStatus,
 
 def input_values(aligner: Mapping[str, int], samples: int,
                  invalid_messages: int = 0) -> dict[str, DiagnosticValue]:
-    """Key values of the input chain: samples predicted and what the aligner dropped or reset.
+    """Key values of the input chain: messages received, samples predicted, what was dropped.
+
+    ``poses_accepted`` / ``forces_accepted`` count the messages the aligner took (not dropped as
+    invalid, out of order or outlier): on a clean feed, a publisher's count minus
+    ``poses_accepted`` is what the transport (the DDS reader queue) lost.
 
     ``aligner`` is `InputAligner.counters.as_dict()`; ``invalid_messages`` counts messages that
     did not even decode (e.g. a zero quaternion) and are added to ``invalid``.
@@ -123,6 +127,8 @@ def input_values(aligner: Mapping[str, int], samples: int,
     out_of_order = int(aligner.get('out_of_order', 0))
     outliers = int(aligner.get('outliers', 0))
     return {
+        'poses_accepted': int(aligner.get('poses', 0)),
+        'forces_accepted': int(aligner.get('forces', 0)),
         'samples': int(samples),
         'dropped': invalid + out_of_order + outliers,
         'invalid': invalid,

@@ -47,7 +47,8 @@ FIRST_TRAINING = first_training_samples(PredictorParams(**SMALL))  # [samples] 1
 DIAGNOSTIC_KEYS = {'state', 'wave_peak_freq', 'last_loss', 'train_seconds', 'model_age',
                    'buffer_fill', 'trainings', 'rejected_trainings', 'overruns', 'guard_trips',
                    'dropped', 'invalid', 'out_of_order', 'outliers', 'gaps', 'resets',
-                   'stale_thrust', 'unexpected_frame', 'callback_errors'}
+                   'stale_thrust', 'unexpected_frame', 'callback_errors',
+                   'poses_accepted', 'forces_accepted'}
 
 torch.set_num_threads(1)
 
@@ -187,6 +188,7 @@ def test_pose_and_thrust_in_lf_pose_out_training_and_warm_start(
     assert int(report['trainings']) >= 1, str(sorted(report.items()))  # keys, for debugging
     assert report['state'] in ('trained', 'fallback')
     assert int(report['samples']) == n
+    assert int(report['poses_accepted']) == n  # 1 Hz poses: one per sample, none lost
     assert float(report['wave_peak_freq']) == pytest.approx(freqs[-1], rel=1e-5)
     assert int(report['dropped']) == 0 and int(report['unexpected_frame']) == 0
     # the worker saved the accepted network

@@ -25,8 +25,9 @@ Ground truth:
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -647,6 +648,125 @@ def simulate(scenario: Scenario, seed: int | None = None, duration: float | None
                      out['thrust'], out['thrust_command'], peak)
 
 
-__all__ = ['ControllerConfig', 'ExcitationConfig', 'Scenario', 'SimRecord', 'SimSample',
-           'Simulator', 'WaveConfig', 'available_scenarios', 'controller_gains', 'load_scenario',
-           'scenario_from_dict', 'simulate']
+
+# ------------------------------------------------------------------- closed loop on an estimate
+PoseEstimator = Callable[[float, FloatArray, FloatArray], FloatArray]
+
+
+@dataclass(frozen=True)
+class ClosedLoopRun:
+    """A closed-loop run with the PID fed by an estimator (`simulate_in_loop`).
+
+    ``estimate_t[j]`` is the time of the j-th estimator call and ``estimates[j]`` the pose it
+    returned (non-finite values kept as returned; the PID held the last finite one instead, and
+    ``nonfinite_estimates`` counts them). ``aborted_at`` is the time [s] the run was stopped
+    because the true LF pose left ``abort_excursion`` (None: ran to the end), in which case the
+    record holds the samples up to and including that time.
+    """
+
+    record: SimRecord
+    estimate_t: FloatArray
+    estimates: FloatArray
+    nonfinite_estimates: int
+    aborted_at: float | None
+
+
+def _call_period_samples(period: float, sample_time: float) -> int:
+    """Output samples per estimator call; the period must be a whole number of them."""
+    stride = int(round(period / sample_time))
+    if not (period > 0.0) or stride < 1 or abs(stride * sample_time - period) > 1e-9 * period:
+        raise ValueError(f'estimator period {period} s must be a positive integer multiple of '
+                         f'the scenario sample_time {sample_time} s (e.g. 1.0 s at 10 Hz)')
+    return stride
+
+
+def _excursion(lf_pose: FloatArray, setpoint: FloatArray, ndof: int) -> float:
+    """Horizontal distance [m] of the LF pose from the setpoint (1 DOF: |north offset|)."""
+    offset = lf_pose - setpoint
+    return float(abs(offset[0]) if ndof == 1 else math.hypot(offset[0], offset[1]))
+
+
+def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | None,
+                     estimate: PoseEstimator, period: float, *,
+                     abort_excursion: float | None = None,
+                     pid_period: float | None = None) -> ClosedLoopRun:
+    """Closed loop with the scenario's PID acting on the pose an estimator returns.
+
+    The same loop as `simulate` (gains `controller_gains`, `pid_step` every sample_time, the
+    limit ``controller.tau_max`` or the actuator capacity, the scenario's setpoint, excitation
+    added to the command), except that the PID is fed ``estimate(t, measured_pose (3,),
+    applied_thrust (3,)) -> pose (3,)`` instead of a true or measured pose. The estimator is
+    called at t = period, 2·period, … with the sample of that instant (copies of
+    ``sample.measured_pose`` and ``sample.thrust``); between calls the PID holds the last
+    estimate (zero-order hold), before the first call it uses the first measurement (t = 0). A
+    non-finite estimate is not used: the last finite one is held and the event counted.
+
+    ``pid_period`` [s] (default sample_time): how often the PID runs (dt = pid_period), its
+    command held in between. ``pid_period = period`` is the DDS pipeline, where the
+    dp_controller node answers each lf_pose once and the simulator holds the command.
+
+    The run is deterministic for a seed and a deterministic estimator; it stops early when the
+    true LF pose leaves ``abort_excursion`` [m] from the setpoint (a diverged loop).
+    """
+    stride = _call_period_samples(period, scenario.sample_time)
+    pid_stride = _call_period_samples(scenario.sample_time if pid_period is None else pid_period,
+                                      scenario.sample_time)
+    pid_dt = scenario.sample_time if pid_period is None else pid_stride * scenario.sample_time
+    if abort_excursion is not None and not (abort_excursion > 0.0):
+        raise ValueError(f'abort_excursion must be > 0 m (or None), got {abort_excursion}')
+    sim = Simulator(scenario, seed)
+    total = scenario.duration if duration is None else float(duration)
+    count = int(round(total / scenario.sample_time))
+    out = {k: np.empty((count, 3)) for k in ('measured_pose', 'truth_pose', 'truth_lf_pose',
+                                              'thrust', 'thrust_command')}
+    t, valid, peak = np.empty(count), np.empty(count), np.empty(count)
+    gains = controller_gains(scenario, sim.true_model())
+    limit = scenario.controller.tau_max or sim.actuator_limit()
+    setpoint = np.asarray(scenario.controller.setpoint, dtype=np.float64)
+    held = sim.sample.measured_pose.copy()
+    state = PidState()
+    calls: list[float] = []
+    returned: list[FloatArray] = []
+    nonfinite = 0
+    aborted_at: float | None = None
+    done = count
+    tau_pid = np.zeros(3)
+    for k in range(count):
+        if k % pid_stride == 0:
+            tau_pid, state = pid_step(state, gains, held, setpoint, pid_dt, limit)
+        sample = sim.step(sim.excitation(sim.t) + tau_pid)
+        t[k], valid[k], peak[k] = sample.t, sample.measured_valid, sample.wave_peak_freq
+        out['measured_pose'][k] = sample.measured_pose
+        out['truth_pose'][k] = sample.truth_pose
+        out['truth_lf_pose'][k] = sample.truth_lf_pose
+        out['thrust'][k] = sample.thrust
+        out['thrust_command'][k] = sample.thrust_command
+        if (k + 1) % stride == 0:
+            value = np.array(estimate(sample.t, sample.measured_pose.copy(),
+                                      sample.thrust.copy()), dtype=np.float64)
+            if value.shape != (3,):
+                raise ValueError(f'the estimator must return a (3,) pose [north, east, yaw], '
+                                 f'got shape {value.shape}')
+            calls.append(sample.t)
+            returned.append(value)
+            if np.all(np.isfinite(value)):
+                held = value.copy()
+            else:
+                nonfinite += 1
+        if abort_excursion is not None and not (
+                _excursion(sample.truth_lf_pose, setpoint, sim.ndof) <= abort_excursion):
+            aborted_at, done = sample.t, k + 1
+            break
+    keep = slice(0, done)
+    record = SimRecord(t[keep], out['measured_pose'][keep], valid[keep], out['truth_pose'][keep],
+                       out['truth_lf_pose'][keep], out['thrust'][keep],
+                       out['thrust_command'][keep], peak[keep])
+    estimates = np.array(returned, dtype=np.float64).reshape(-1, 3)
+    return ClosedLoopRun(record, np.array(calls, dtype=np.float64), estimates, nonfinite,
+                         aborted_at)
+
+
+__all__ = ['ClosedLoopRun', 'ControllerConfig', 'ExcitationConfig', 'PoseEstimator', 'Scenario',
+           'SimRecord', 'SimSample', 'Simulator', 'WaveConfig', 'available_scenarios',
+           'controller_gains', 'load_scenario', 'scenario_from_dict', 'simulate',
+           'simulate_in_loop']

@@ -13,10 +13,19 @@ Metrics (anchors §6), per DOF:
   every shift compares equally long, fully overlapping series), refined by a parabola through
   the peak; positive when the estimate lags the truth. The fixed window avoids the bias toward
   zero shift that a plain full cross-correlation has on non-stationary LF motion (DP moves).
+
+Closed-loop metrics (`loop_metrics`, anchors §6), of one DP loop over t ≥ start, from the true LF
+pose and the applied thrust: ``position_rmse`` = √mean(Δn² + Δe²) [m] from the setpoint,
+``heading_rmse`` [rad] (3 DOF, wrapped), ``max_excursion`` = max √(Δn² + Δe²) [m] (1 DOF: the
+north offset |Δn| in both), ``thrust_wave_band_power`` per DOF (`band_power` of the thrust [N²,
+N², (N·m)²]) and ``thrust_total_variation`` per DOF = Σ|τ[k+1] − τ[k]| [N, N, N·m] (actuator
+wear).
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -197,6 +206,41 @@ def score(
             estimate_lag(est_c[:, i], tru_c[:, i], sample_time, max_lag) for i in range(ndof)
         ),
     )
+
+
+@dataclass(frozen=True)
+class LoopRun:
+    """One closed loop: true LF pose and applied thrust (n, 3) on a common time grid t (n,)."""
+
+    t: FloatArray
+    truth_lf_pose: FloatArray
+    thrust: FloatArray
+
+
+def loop_metrics(loop: LoopRun, ndof: int, setpoint: Sequence[float],
+                 wave_band: tuple[float, float], start: float) -> dict[str, Any]:
+    """Station-keeping and thrust metrics of one loop over t ≥ start (module docstring)."""
+    keep = loop.t >= start
+    t, pose, thrust = loop.t[keep], loop.truth_lf_pose[keep], loop.thrust[keep]
+    if t.size < 3:
+        raise ValueError(f'a closed loop needs >= 3 samples after the warm-up ({start} s) to be '
+                         f'scored, got {t.size}: run longer or shorten the warm-up')
+    offset = pose - np.asarray(setpoint, dtype=np.float64)
+    horizontal = np.hypot(offset[:, 0], offset[:, 1]) if ndof == 3 else np.abs(offset[:, 0])
+    sample_time = float(np.median(np.diff(t)))
+    out: dict[str, Any] = {
+        'samples': int(t.size),
+        'position_rmse': float(np.sqrt(np.mean(horizontal**2))),
+        'max_excursion': float(np.max(horizontal)),
+        'thrust_wave_band_power': {
+            DOF_NAMES[i]: band_power(thrust[:, i], sample_time, wave_band) for i in range(ndof)},
+        'thrust_total_variation': {
+            DOF_NAMES[i]: float(np.sum(np.abs(np.diff(thrust[:, i])))) for i in range(ndof)},
+    }
+    if ndof == 3:
+        heading_error = np.angle(np.exp(1j * offset[:, _YAW]))  # wrapped to (−π, π]
+        out['heading_rmse'] = float(np.sqrt(np.mean(heading_error**2)))
+    return out
 
 
 def format_table(results: dict[str, Metrics]) -> str:

@@ -11,7 +11,8 @@ Metrics (``metrics.json``), all over t ≥ ``warmup`` [s sim]:
   of the error, lag.
 - ``closed_loop``: per loop (``predictor``: the DDS run with the predictor's lf_pose fed to the
   controller; ``raw_measurement``: offline, controller fed ``measured_pose``; ``ideal``: offline,
-  controller fed the true LF pose), from the true LF pose and the applied thrust:
+  controller fed the true LF pose), `core.evaluation.loop_metrics` of the true LF pose and the
+  applied thrust:
   ``position_rmse`` = √mean(Δn² + Δe²) [m] from the setpoint, ``heading_rmse`` [rad] (3 DOF),
   ``max_excursion`` = max √(Δn² + Δe²) [m] (1 DOF: max |Δn|), ``thrust_wave_band_power`` per DOF
   (Welch PSD of the thrust integrated over the wave band [N², N², (N·m)²], `band_power`) and
@@ -40,7 +41,9 @@ from numpy.typing import NDArray  # noqa: E402
 from lf_predictor_ros.core.evaluation import (  # noqa: E402
     DEFAULT_WAVE_BAND,
     DOF_NAMES,
+    LoopRun,
     band_power,
+    loop_metrics,
     score,
 )
 
@@ -73,15 +76,6 @@ class Trace:
         """The samples at t ≥ start."""
         keep = self.t >= start
         return Trace(self.t[keep], self.values[keep])
-
-
-@dataclass(frozen=True)
-class LoopRun:
-    """One closed loop: true LF pose and applied thrust (n, 3) on a common time grid."""
-
-    t: FloatArray
-    truth_lf_pose: FloatArray
-    thrust: FloatArray
 
 
 @dataclass(frozen=True)
@@ -138,32 +132,6 @@ def retrain_times_from_diagnostics(
             times.append(float(stamp))
         last[name] = max(count, last.get(name, 0))
     return times
-
-
-def loop_metrics(loop: LoopRun, ndof: int, setpoint: Sequence[float],
-                 wave_band: tuple[float, float], start: float) -> dict[str, Any]:
-    """Station-keeping and thrust metrics of one loop over t ≥ start (see the module doc)."""
-    keep = loop.t >= start
-    t, pose, thrust = loop.t[keep], loop.truth_lf_pose[keep], loop.thrust[keep]
-    if t.size < 3:
-        raise ValueError(f'a closed loop needs >= 3 samples after the warm-up ({start} s) to be '
-                         f'scored, got {t.size}: run longer or shorten the warm-up')
-    offset = pose - np.asarray(setpoint, dtype=np.float64)
-    horizontal = np.hypot(offset[:, 0], offset[:, 1]) if ndof == 3 else np.abs(offset[:, 0])
-    sample_time = float(np.median(np.diff(t)))
-    out: dict[str, Any] = {
-        'samples': int(t.size),
-        'position_rmse': float(np.sqrt(np.mean(horizontal**2))),
-        'max_excursion': float(np.max(horizontal)),
-        'thrust_wave_band_power': {
-            DOF_NAMES[i]: band_power(thrust[:, i], sample_time, wave_band) for i in range(ndof)},
-        'thrust_total_variation': {
-            DOF_NAMES[i]: float(np.sum(np.abs(np.diff(thrust[:, i])))) for i in range(ndof)},
-    }
-    if ndof == 3:
-        heading_error = np.angle(np.exp(1j * offset[:, 2]))  # wrapped to (−π, π]
-        out['heading_rmse'] = float(np.sqrt(np.mean(heading_error**2)))
-    return out
 
 
 def compute_metrics(run: RunData, warmup: float) -> dict[str, Any]:

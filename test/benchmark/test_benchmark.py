@@ -1,34 +1,64 @@
-"""The benchmark suite's smoke run (issue 6 fast mode): not a timing test."""
+"""The benchmark suite: smoke run, closed loops per estimator, results page and its targets."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from lf_predictor_ros.benchmark.benchmark import main
-from lf_predictor_ros.benchmark.suite import ESTIMATORS, run_case
+from lf_predictor_ros.benchmark.adaptation import AdaptationEvent
+from lf_predictor_ros.benchmark.benchmark import main, render, write_figures
+from lf_predictor_ros.benchmark.suite import (
+    ESTIMATORS,
+    LOOP_ESTIMATORS,
+    AdaptationSeries,
+    CaseResult,
+    EstimatorSetup,
+    LoopSeries,
+    make_estimator,
+    predictor_params,
+    run_case,
+    score_adaptation,
+)
+from lf_predictor_ros.core.evaluation import DEFAULT_WAVE_BAND, LoopRun, Metrics, loop_metrics
+from sim_ros.simulation import Simulator, load_scenario, simulate, simulate_in_loop
 
 
 @pytest.mark.slow
-def test_fast_suite_writes_results_page_and_json(tmp_path: Path) -> None:
+def test_fast_suite_writes_results_page_json_and_figures(tmp_path: Path) -> None:
+    """--fast on onedof_feedback (600 s, every estimator open and closed loop): ~10 s."""
     page, raw = tmp_path / 'RESULTS.md', tmp_path / 'results.json'
-    assert main(['--fast', '-o', str(page), '--json', str(raw)]) == 0
+    assert main(['--fast', '--scenarios', 'onedof_feedback', '-o', str(page), '--json',
+                 str(raw)]) == 0
     text = page.read_text()
-    assert '### onedof_feedback' in text and '### supply_closed_loop' in text
-    assert 'adaptive / cascade ≤ 0.5' in text
-    cases = json.loads(raw.read_text())['cases']
-    assert {c['scenario'] for c in cases} == {'onedof_feedback', 'supply_closed_loop'}
-    for case in cases:
-        assert set(case['metrics']) == set(ESTIMATORS)
-        for metrics in case['metrics'].values():
-            for dof in ('north', 'east', 'yaw')[:case['ndof']]:
-                assert np.isfinite(metrics[dof]['rmse'])
-        # The learned filter trained and is far better than no filter at all.
-        assert case['info']['adaptive_counters']['trainings'] >= 2
-        raw_rmse = case['metrics']['raw']['north']['rmse']
-        assert case['metrics']['adaptive']['north']['rmse'] < 0.6 * raw_rmse
+    assert '### onedof_feedback' in text and 'adaptive / cascade ≤ 0.5' in text
+    assert '#### closed loop' in text and 'not part of this table' not in text
+    for row in ('adaptive loop stable (bounded, no limit cycle) in every seed',
+                'thrust wave-band power adaptive / raw ≤ 0.10 per DOF',
+                'position RMSE adaptive / observer ≤ 1.2'):
+        assert row in text
+    assert '![onedof_feedback](results/onedof_feedback_closed_loop.png)' in text
+    assert (tmp_path / 'results' / 'onedof_feedback_closed_loop.png').stat().st_size > 10_000
+    (case,) = json.loads(raw.read_text())['cases']
+    assert set(case['metrics']) == set(ESTIMATORS)
+    assert set(case['closed_loop']) == set(LOOP_ESTIMATORS)
+    for metrics in case['metrics'].values():
+        assert np.isfinite(metrics['north']['rmse'])
+    # The learned filter trained and is far better than no filter at all (open loop).
+    assert case['info']['adaptive_counters']['trainings'] >= 2
+    raw_rmse = case['metrics']['raw']['north']['rmse']
+    assert case['metrics']['adaptive']['north']['rmse'] < 0.6 * raw_rmse
+    loops = case['closed_loop']
+    assert loops['adaptive']['counters']['trainings'] >= 2
+    assert loops['frozen']['counters']['trainings'] == 1
+    assert loops['ideal']['stability']['stable'] and loops['raw']['stability']['stable']
+    # the raw measurement puts the waves into the thrust; the wave filters keep them out
+    raw_power = loops['raw']['thrust_wave_band_power']['north']
+    for name in ('adaptive', 'cascade', 'observer'):
+        assert loops[name]['thrust_wave_band_power']['north'] < 0.1 * raw_power
+    assert loops['ideal']['position_rmse'] < loops['raw']['position_rmse']
 
 
 def test_unknown_scenario_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
@@ -38,6 +68,137 @@ def test_unknown_scenario_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -
 
 def test_smoother_beats_raw_and_frozen_stops_training() -> None:
     case = run_case('onedof_feedback', 3, duration=600.0,
-                    estimators=('frozen', 'smoother', 'raw'))
+                    estimators=('frozen', 'smoother', 'raw'), loop_estimators=())
     assert case.info['frozen_counters']['trainings'] == 1
     assert case.metrics['smoother'].rmse[0] < 0.5 * case.metrics['raw'].rmse[0]
+    assert case.closed_loop == {} and case.adaptation is None
+
+
+def test_closed_loops_share_the_seed_and_match_the_simulator() -> None:
+    """Supply vessel, 400 s: ideal = the scenario's own run; raw = PID on the held measurement.
+
+    Same seed in every loop: the sensor noise (measured − total truth) is identical. The raw
+    loop feeds 0.5 m of wave motion to the PID: ≥ 100× the ideal loop's wave-band thrust.
+    """
+    duration = 400.0
+    case = run_case('supply_closed_loop', 2, duration=duration, estimators=('raw',),
+                    loop_estimators=('ideal', 'raw', 'cascade'))
+    assert set(case.closed_loop) == {'ideal', 'raw', 'cascade'}
+    scn = load_scenario('supply_closed_loop')
+    ideal = simulate(scn, seed=2, duration=duration)
+    expected = loop_metrics(LoopRun(ideal.t, ideal.truth_lf_pose, ideal.thrust), 3,
+                            scn.controller.setpoint, DEFAULT_WAVE_BAND, case.warmup)
+    for key in ('position_rmse', 'max_excursion', 'heading_rmse'):
+        assert case.closed_loop['ideal'][key] == expected[key]
+    run = simulate_in_loop(scn, 2, duration, lambda t, y, u: y, 1.0, pid_period=1.0)
+    raw = loop_metrics(LoopRun(run.record.t, run.record.truth_lf_pose, run.record.thrust), 3,
+                       scn.controller.setpoint, DEFAULT_WAVE_BAND, case.warmup)
+    assert case.closed_loop['raw']['position_rmse'] == raw['position_rmse']
+    noise_ideal = ideal.measured_pose - ideal.truth_pose
+    noise_raw = run.record.measured_pose - run.record.truth_pose
+    ok = (ideal.measured_valid == 1) & (run.record.measured_valid == 1)
+    np.testing.assert_allclose(noise_ideal[ok, :2], noise_raw[ok, :2], atol=1e-9)
+    for dof in ('north', 'east', 'yaw'):
+        assert (case.closed_loop['raw']['thrust_wave_band_power'][dof]
+                > 100.0 * case.closed_loop['ideal']['thrust_wave_band_power'][dof])
+    ideal_stab = case.closed_loop['ideal']['stability']
+    assert ideal_stab['stable'] and ideal_stab['excursion_bound'] == 5.0
+    assert case.closed_loop['raw']['stability']['bounded']
+    assert case.closed_loop['raw']['nonfinite_estimates'] == 0
+    series = case.loop_series['raw']
+    assert series.t.shape == (400,) and series.offset.shape == (400, 3)
+    assert series.thrust_psd.shape[1] == 3
+
+
+def test_the_smoother_cannot_be_in_a_loop() -> None:
+    scn = load_scenario('onedof_feedback')
+    params = predictor_params(scn)
+    setup = EstimatorSetup(1, 1.0, params, Simulator(scn, 0).true_model(), 0.8)
+    with pytest.raises(ValueError, match='non-causal'):
+        make_estimator('smoother', setup)
+    with pytest.raises(ValueError, match='smoother is non-causal'):
+        run_case('onedof_feedback', 1, duration=60.0, estimators=('raw',),
+                 loop_estimators=('ideal', 'smoother'))
+    with pytest.raises(ValueError, match='unknown estimator'):
+        make_estimator('kalman', setup)
+
+
+def _metrics(rmse: float) -> Metrics:
+    return Metrics(1, 100, (rmse,), (0.0,), (0.0,), (0.0,))
+
+
+def _loop(rmse: float, power: float, stable: bool = True) -> dict[str, object]:
+    return {'position_rmse': rmse, 'max_excursion': 2 * rmse,
+            'thrust_wave_band_power': {'north': power}, 'thrust_total_variation': {'north': 1.0},
+            'stability': {'stable': stable, 'reason': 'ok' if stable else 'limit cycle'}}
+
+
+def _case(seed: int, adaptive_power: float, adaptive_stable: bool = True) -> CaseResult:
+    loops = {'ideal': _loop(0.5, 1.0), 'adaptive': _loop(1.1, adaptive_power, adaptive_stable),
+             'observer': _loop(1.0, 5.0), 'raw': _loop(2.0, 100.0)}
+    return CaseResult('onedof_feedback', seed, 1, 600.0, 300.0,
+                      {'adaptive': _metrics(0.2), 'observer': _metrics(0.2)},
+                      {'params': {'retrain_period': 60.0}}, closed_loop=loops)
+
+
+def test_closed_loop_targets_on_the_page() -> None:
+    """Means over seeds: power ratio (8 + 12)/2 / 100 = 0.10 (met), RMSE ratio 1.1 (met)."""
+    page = render([_case(2, 8.0), _case(3, 12.0)], set(), 'benchmark test', 1.0)
+    assert '| adaptive loop stable (bounded, no limit cycle) in every seed | 2/2 seeds | met |' \
+        in page
+    assert '| thrust wave-band power adaptive / raw ≤ 0.10 per DOF | north 0.100 | met |' in page
+    assert '| position RMSE adaptive / observer ≤ 1.2 | 1.10 | met |' in page
+    assert '| position RMSE adaptive / ideal (info) | 2.20 | |' in page
+    assert '| ideal | 0.5 | – | 1 | 1 | 1 | yes |' in page
+    worse = render([_case(2, 8.0), _case(3, 14.0, adaptive_stable=False)], set(), 'b', 1.0)
+    assert '| 1/2 seeds | MISSED |' in worse
+    assert 'north 0.110 | MISSED |' in worse
+    assert 'NO (seed 3: limit cycle)' in worse
+
+
+def test_adaptation_targets_on_the_page_and_figures(tmp_path: Path) -> None:
+    """Recovery ≤ 2Δ = 120 s at every change and frozen ≥ 3× adaptive: one of each missed."""
+    events = [AdaptationEvent(3600.0, 0.1, 60.0, 0.11, 0.5, 0.5 / 0.11),
+              AdaptationEvent(10800.0, 0.5, math.inf, 0.9, 2.0, 2.0 / 0.9)]
+    t = np.arange(0.0, 20000.0, 10.0)
+    series = AdaptationSeries(t, np.full(t.size, 0.1), np.full(t.size, 0.4),
+                              np.full(t.size, 0.8), (3600.0, 10800.0), 60.0)
+    loop = LoopSeries(t[:50], np.zeros((50, 1)), np.linspace(0.0, 3.0, 20),
+                      np.ones((20, 1)))
+    case = CaseResult('omega_schedule', 2, 1, 20000.0, 480.0, {'adaptive': _metrics(1.0)},
+                      {'params': {'retrain_period': 60.0}}, adaptation=events,
+                      adaptation_series=series, loop_series={'ideal': loop})
+    links = write_figures([case], set(), tmp_path / 'RESULTS.md')
+    assert links == {'omega_schedule': ['results/omega_schedule_closed_loop.png',
+                                        'results/omega_schedule_adaptation.png']}
+    assert (tmp_path / 'results' / 'omega_schedule_adaptation.png').stat().st_size > 10_000
+    page = render([case], set(), 'b', 1.0, links)
+    assert '| 2 | 3600 | 1.25 → 0.30 | 0.1 | 0.11 | 0.5 | 60 | 4.55 |' in page
+    assert '| 2 | 10800 | 0.30 → 0.56 | 0.5 | 0.9 | 2 | inf | 2.22 |' in page  # ω0(20000 s)
+    assert 'within 2Δ = 120 s after every change | 1/2 changes | MISSED |' in page
+    assert '| frozen ≥ 3× adaptive RMSE over the 2Δ after every change | min 2.22 | MISSED |' \
+        in page
+    assert '![omega_schedule](results/omega_schedule_adaptation.png)' in page
+    assert case.to_dict()['adaptation'][1]['recovery_time'] == math.inf
+
+
+def test_score_adaptation_on_the_thesis_schedule_grid() -> None:
+    """Fig. 4.1 corners inside the scored record; frozen error 4× the adaptive one everywhere."""
+    scn = load_scenario('omega_schedule')
+    params = predictor_params(scn)
+    t = np.arange(1.0, 28801.0)
+    truth = np.zeros((t.size, 3))
+    adaptive = np.zeros((t.size, 3))
+    adaptive[:, 0] = 0.1 * np.sin(0.8 * t)  # RMS 0.1/√2 in every window
+    data = {'t': t, 'truth': truth, 'omega': scn.waves.peak_freq.sample(t)}
+    outputs = {'adaptive': adaptive, 'frozen': 4.0 * adaptive}
+    scored = score_adaptation(scn, data, outputs, params, begin=480)
+    assert scored is not None
+    events, series = scored
+    assert [e.time for e in events] == [3600.0, 10800.0, 18000.0, 25200.0]
+    for event in events:
+        assert event.steady_rmse == pytest.approx(0.1 / math.sqrt(2.0), rel=0.02)
+        assert event.recovery_time == 0.0
+        assert event.frozen_ratio == pytest.approx(4.0, rel=1e-9)
+    assert series.window == 60.0 and series.t[0] == 481.0
+    assert score_adaptation(scn, data, {'adaptive': adaptive}, params, begin=480) is None

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 from numpy.typing import NDArray
@@ -9,7 +10,14 @@ import pytest
 from scipy import signal
 
 from lf_predictor_ros.core.estimator import EstimatorStatus
-from lf_predictor_ros.core.evaluation import Metrics, format_table, run_estimator, score
+from lf_predictor_ros.core.evaluation import (
+    LoopRun,
+    Metrics,
+    format_table,
+    loop_metrics,
+    run_estimator,
+    score,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -156,3 +164,27 @@ def test_score_rejects_bad_input() -> None:
         score(t, np.zeros((10, 3)), np.zeros((10, 3)), 2)
     with pytest.raises(ValueError, match='wave_band'):
         score(t, np.zeros((10, 3)), np.zeros((10, 3)), 3, wave_band=(1.3, 0.3))
+
+
+def test_loop_metrics_of_a_synthetic_loop() -> None:
+    """3 m north + 4 m east off the setpoint: 5 m; yaw ±0.1 rad across ±π; A = 2 N thrust line."""
+    n = 4000
+    t = np.arange(n, dtype=np.float64)
+    setpoint = (10.0, -2.0, math.pi - 0.05)
+    pose = np.column_stack([np.full(n, 13.0), np.full(n, 2.0),
+                            np.where(np.arange(n) % 2 == 0, -math.pi + 0.05, math.pi - 0.15)])
+    thrust = np.column_stack([2.0 * np.sin(0.8 * t), t, np.full(n, 7.0)])
+    pose[:1000] = 1e3  # before the warm-up: ignored
+    out = loop_metrics(LoopRun(t, pose, thrust), 3, setpoint, (0.3, 1.3), start=1000.0)
+    assert out['samples'] == 3000
+    assert out['position_rmse'] == pytest.approx(5.0, rel=1e-12)
+    assert out['max_excursion'] == pytest.approx(5.0, rel=1e-12)
+    assert out['heading_rmse'] == pytest.approx(0.1, rel=1e-9)
+    power = out['thrust_wave_band_power']
+    assert power['north'] == pytest.approx(2.0, rel=0.05)  # A²/2
+    assert power['yaw'] == 0.0
+    variation = out['thrust_total_variation']
+    assert variation['east'] == pytest.approx(2999.0) and variation['yaw'] == 0.0
+    one = loop_metrics(LoopRun(t, pose, thrust), 1, setpoint, (0.3, 1.3), start=1000.0)
+    assert one['position_rmse'] == pytest.approx(3.0) and 'heading_rmse' not in one
+    assert set(one['thrust_total_variation']) == {'north'}

@@ -5,8 +5,10 @@ as the thesis Fig. 4.1 ramps: `change_times`), with the rolling RMSE r(t) of the
 trailing window Δ (the retraining period; `rolling_rmse`):
 
 - steady RMSE: the median of the adaptive predictor's r(t) over the settled part of the
-  preceding segment, its second half (the segment runs from the previous change, or the start of
-  the scored record, to this change);
+  FOLLOWING segment, its second half (the segment runs from this change to the next one, or the
+  end of the record): the level the predictor settles to in the new sea. The preceding
+  segment's level is the wrong yardstick when the sea gets harder: at ω0 = 0.3 rad/s the waves
+  overlap the LF band and no causal filter gets back to its error at 1.25 rad/s;
 - recovery time: the first time τ ≥ 0 after the change from which the adaptive r(t) stays within
   `TOLERANCE` × steady for a full window Δ (so a lucky dip does not count), searched up to the
   next change (or the end); +inf if it never does. Target: τ ≤ 2Δ;
@@ -132,9 +134,9 @@ def adaptation_events(t: FloatArray, adaptive_error: FloatArray, frozen_error: F
     inside = [c for c in changes if times[0] < c <= times[-1]]
     events = []
     for i, change in enumerate(inside):
-        previous = inside[i - 1] if i > 0 else float(times[0])
         following = inside[i + 1] if i + 1 < len(inside) else math.inf
-        settled = (times >= 0.5 * (previous + change)) & (times < change)
+        segment_end = min(following, float(times[-1]) + _uniform_step(times))
+        settled = (times >= 0.5 * (change + segment_end)) & (times < segment_end)
         values = rolling[settled]
         values = values[np.isfinite(values)]
         steady = float(np.median(values)) if values.size else math.nan

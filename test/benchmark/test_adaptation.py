@@ -55,21 +55,39 @@ def test_recovery_time_and_frozen_ratio_known_answer() -> None:
     assert event.to_dict()['recovery_time'] == 108.0
 
 
-def test_steady_rmse_from_the_preceding_segment_and_no_recovery() -> None:
-    """Two changes: steady is the median over the second half of the preceding segment.
+def test_steady_rmse_is_the_settled_level_of_the_following_segment() -> None:
+    """Two changes (1000 s, 2000 s); steady = median r(t) over the second half after each.
 
-    First segment [0, 1000): error 2 over [0, 500), 1 over [500, 1000): steady 1 (only the
-    second half). After 1000 the error stays at 3 until the next change at 2000: never back.
-    The second change's steady is 3 (its preceding segment), and the error 3 is within 1.2×3.
+    After 1000: error 5 until 1300, then 3: steady 3, bound 3.6. A trailing 60-s window with nb
+    samples of 5 has RMS² = (25 nb + 9 (60 − nb))/60 ≤ 12.96 for nb ≤ 14, i.e. from s = 1345:
+    recovery 345 s. After 2000: error 1, steady 1, bound 1.2: nb samples of 3 allowed while
+    (9 nb + 60 − nb)/60 ≤ 1.44, nb ≤ 3, from s = 2056: recovery 56 s. Frozen = 3 × adaptive.
     """
     t = np.arange(0.0, 3000.0)
-    adaptive = np.where(t < 500.0, 2.0, 1.0)
-    adaptive[t >= 1000.0] = 3.0
+    adaptive = np.ones_like(t)
+    adaptive[(t >= 1000.0) & (t < 2000.0)] = 3.0
+    adaptive[(t >= 1000.0) & (t < 1300.0)] = 5.0
     first, second = adaptation_events(t, adaptive, 3.0 * adaptive, (1000.0, 2000.0, 5000.0),
                                       60.0)
-    assert first.steady_rmse == 1.0 and math.isinf(first.recovery_time)
-    assert second.steady_rmse == 3.0 and second.recovery_time == 0.0
+    assert first.steady_rmse == 3.0 and first.recovery_time == 345.0
+    assert second.steady_rmse == 1.0 and second.recovery_time == 56.0
     assert first.frozen_ratio == pytest.approx(3.0)
+
+
+def test_a_level_never_reached_again_is_no_recovery() -> None:
+    """A predictor already at its new level recovers at once; one whose rolling RMSE keeps
+    swinging (a 10-s burst every 50 s: between 10 and 20 burst samples in every 60-s window)
+    never stays within 1.2× its median for a full window: +inf."""
+    t = np.arange(0.0, 2000.0)
+    adaptive = np.ones_like(t)
+    adaptive[t >= 1000.0] = 4.0
+    (event,) = adaptation_events(t, adaptive, adaptive, (1000.0,), 60.0)
+    assert event.steady_rmse == 4.0
+    assert event.recovery_time == 0.0  # already at its (bad) steady level
+    spiky = np.ones_like(t)
+    spiky[t >= 1000.0] = np.where(np.arange(1000) % 50 < 10, 10.0, 1.0)  # a burst every 50 s
+    (burst,) = adaptation_events(t, spiky, spiky, (1000.0,), 60.0)
+    assert math.isinf(burst.recovery_time)  # every 60-s window holds a burst
 
 
 def test_invalid_inputs_are_rejected() -> None:

@@ -75,9 +75,11 @@ def test_steady_rmse_is_the_settled_level_of_the_following_segment() -> None:
 
 
 def test_a_level_never_reached_again_is_no_recovery() -> None:
-    """A predictor already at its new level recovers at once; one whose rolling RMSE keeps
-    swinging (a 10-s burst every 50 s: between 10 and 20 burst samples in every 60-s window)
-    never stays within 1.2× its median for a full window: +inf."""
+    """At its new level at once: recovery 0; a rolling RMSE that keeps swinging: +inf.
+
+    The swing: a 10-s burst every 50 s, so every 60-s window holds 10–20 burst samples and never
+    stays within 1.2× its median for a full window.
+    """
     t = np.arange(0.0, 2000.0)
     adaptive = np.ones_like(t)
     adaptive[t >= 1000.0] = 4.0

@@ -22,7 +22,10 @@ warm-up):
   environmental forces has a broadband error: one sinusoid explains well under half of it (test:
   a seeded first-order Gauss–Markov error explains < 0.3; the thesis's unstable static-network
   loop, §5.4.2, oscillated). Only frequencies with ≥ 3 cycles in the record are checked, so a
-  short scored record checks a narrower band (reported as ``checked_band``).
+  short scored record checks a narrower band (reported as ``checked_band``). A scenario with a
+  periodic excitation (the 1-DOF multisine) makes even the ideal loop "oscillate": an
+  oscillation the ideal loop shows at the same frequency with ≥ `FORCED_SHARE` of the amplitude
+  is the forced response, not a limit cycle (``assess(..., reference=ideal offsets)``).
 
 Thrust hitting its limit is reported (``saturated_fraction``, share of samples with any DOF of
 the command at the limit) but is not part of the verdict: a saturated oscillation shows in e.
@@ -45,6 +48,7 @@ HEADING_FLOOR = math.radians(10.0)  # [rad] smallest heading-error bound
 ABORT_EXCURSION = 100.0  # [m] a closed-loop run is stopped here: diverged (unbounded)
 LIMIT_CYCLE_SHARE = 0.5  # share of the LF error variance one sinusoid must explain
 LIMIT_CYCLE_AMPLITUDE = (0.1, 0.1, math.radians(0.5))  # [m, m, rad] smallest cycle that counts
+FORCED_SHARE = 0.5  # an oscillation with ≥ this × its amplitude in the ideal loop is forced
 MIN_CYCLES = 3.0  # cycles of a frequency the scored record must hold for it to be checked
 ZERO_PADDING = 8  # periodogram length / record length (finer peak location)
 _YAW = 2
@@ -111,6 +115,19 @@ def dominant_oscillation(x: FloatArray, sample_time: float, max_freq: float,
     return Oscillation(peak, float(math.hypot(coef[0], coef[1])), share)
 
 
+def amplitude_at(x: FloatArray, sample_time: float, frequency: float) -> float:
+    """Amplitude of the least-squares sinusoid at ``frequency`` [rad/s] in detrended x."""
+    values = np.asarray(x, dtype=np.float64)
+    if values.size < 8 or not math.isfinite(frequency) or not np.all(np.isfinite(values)):
+        return 0.0
+    detrended = signal.detrend(values, type='linear')
+    t = np.arange(values.size) * sample_time
+    design = np.column_stack([np.cos(frequency * t), np.sin(frequency * t),
+                              np.ones(values.size)])
+    coef = np.linalg.lstsq(design, detrended, rcond=None)[0]
+    return float(math.hypot(coef[0], coef[1]))
+
+
 def checked_band(samples: int, sample_time: float, wave_band_low: float,
                  min_cycles: float = MIN_CYCLES) -> tuple[float, float]:
     """Frequencies [rad/s] searched for a limit cycle in a record of `samples` samples."""
@@ -149,8 +166,14 @@ def max_offsets(offset: FloatArray, ndof: int) -> tuple[float, float]:
 
 
 def assess(offset: FloatArray, sample_time: float, ndof: int, bounds: tuple[float, float],
-           wave_band_low: float, aborted: bool) -> Stability:
-    """Stability of one loop from its scored LF pose offsets (n, ndof) (module docstring)."""
+           wave_band_low: float, aborted: bool,
+           reference: FloatArray | None = None) -> Stability:
+    """Stability of one loop from its scored LF pose offsets (n, ndof) (module docstring).
+
+    ``reference``: the ideal loop's offsets on the same samples; an oscillation the ideal loop
+    has too (≥ `FORCED_SHARE` of the amplitude at the same frequency) is the response to the
+    scenario's own excitation, not a limit cycle.
+    """
     band = checked_band(max(offset.shape[0], 1), sample_time, wave_band_low)
     finite = bool(np.all(np.isfinite(offset)))
     excursion, heading = max_offsets(offset, ndof) if finite else (math.inf, math.inf)
@@ -168,7 +191,8 @@ def assess(offset: FloatArray, sample_time: float, ndof: int, bounds: tuple[floa
     bounded = not reasons
     oscillations = tuple(dominant_oscillation(offset[:, i], sample_time, wave_band_low)
                          for i in range(ndof)) if finite else ()
-    cycles = [i for i, osc in enumerate(oscillations) if is_limit_cycle(osc, i)]
+    cycles = [i for i, osc in enumerate(oscillations) if is_limit_cycle(osc, i)
+              and not _forced(osc, reference, i, sample_time)]
     for i in cycles:
         osc = oscillations[i]
         reasons.append(f'limit cycle in DOF {i}: {osc.amplitude:.3g} at {osc.frequency:.3g} '
@@ -176,6 +200,15 @@ def assess(offset: FloatArray, sample_time: float, ndof: int, bounds: tuple[floa
     return Stability(stable=bounded and not cycles, bounded=bounded, limit_cycle=bool(cycles),
                      reason='; '.join(reasons) or 'bounded, no limit cycle',
                      excursion_bound=bounds[0], checked_band=band, oscillations=oscillations)
+
+
+def _forced(oscillation: Oscillation, reference: FloatArray | None, dof: int,
+            sample_time: float) -> bool:
+    """True when the ideal loop oscillates at the same frequency with a comparable amplitude."""
+    if reference is None or reference.shape[0] < 8:
+        return False
+    ideal = amplitude_at(reference[:, dof], sample_time, oscillation.frequency)
+    return ideal >= FORCED_SHARE * oscillation.amplitude
 
 
 def saturated_fraction(thrust_command: FloatArray, limit: FloatArray | None, ndof: int) -> float:

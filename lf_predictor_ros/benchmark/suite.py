@@ -336,6 +336,7 @@ def run_closed_loops(scenario: Scenario, seed: int, duration: float | None,
     results: dict[str, dict[str, Any]] = {}
     series: dict[str, LoopSeries] = {}
     bounds = (math.inf, math.inf)
+    ideal_offset = np.empty((0, ndof))
     for name in order:
         begin = time.monotonic()
         outcome = _run_loop(name, scenario, seed, duration, setup, ideal)
@@ -344,11 +345,14 @@ def run_closed_loops(scenario: Scenario, seed: int, duration: float | None,
         offset = stability.pose_offset(rec.truth_lf_pose[keep], setpoint, ndof)
         if name == 'ideal':
             bounds = stability.excursion_bounds(*stability.max_offsets(offset, ndof))
+            ideal_offset = offset
         loop = LoopRun(rec.t, rec.truth_lf_pose, rec.thrust)
         metrics = (loop_metrics(loop, ndof, tuple(setpoint), DEFAULT_WAVE_BAND, start)
                    if np.count_nonzero(keep) >= 3 else _nan_loop_metrics(ndof))
+        same_samples = ideal_offset.shape == offset.shape and name != 'ideal'
         verdict = stability.assess(offset, scenario.sample_time, ndof, bounds,
-                                   DEFAULT_WAVE_BAND[0], outcome.aborted)
+                                   DEFAULT_WAVE_BAND[0], outcome.aborted,
+                                   reference=ideal_offset if same_samples else None)
         metrics['stability'] = verdict.to_dict()
         metrics['saturated_fraction'] = stability.saturated_fraction(
             rec.thrust_command[keep], None if limit is None else np.asarray(limit), ndof)

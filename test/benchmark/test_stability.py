@@ -91,6 +91,21 @@ def test_assess_bounded_and_limit_cycle_verdicts() -> None:
     assert not gone.bounded and gone.reason.startswith('diverged')
 
 
+def test_an_oscillation_the_ideal_loop_has_too_is_forced_not_a_limit_cycle() -> None:
+    """0.5 m at 0.007 rad/s (a multisine line) in both loops: forced; only in one: a cycle."""
+    t = np.arange(N) * DT
+    forcing = 0.5 * np.sin(0.007 * t)
+    ideal = (forcing + 0.05 * _gauss_markov(7))[:, None]
+    loop = (1.1 * forcing + 0.05 * _gauss_markov(8))[:, None]
+    alone = assess(loop, DT, 1, (5.0, HEADING_FLOOR), 0.3, aborted=False)
+    assert alone.limit_cycle  # without a reference the rule alone would flag it
+    forced = assess(loop, DT, 1, (5.0, HEADING_FLOOR), 0.3, aborted=False, reference=ideal)
+    assert forced.stable and not forced.limit_cycle
+    calm_ideal = (0.05 * _gauss_markov(7))[:, None]
+    own = assess(loop, DT, 1, (5.0, HEADING_FLOOR), 0.3, aborted=False, reference=calm_ideal)
+    assert own.limit_cycle and not own.stable
+
+
 def test_pose_offset_wraps_heading_and_saturation_share() -> None:
     pose = np.array([[1.0, 2.0, math.pi - 0.1], [0.0, 0.0, -math.pi + 0.1]])
     offset = pose_offset(pose, np.array([1.0, 0.0, -math.pi + 0.1]), 3)

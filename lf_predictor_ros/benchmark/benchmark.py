@@ -202,7 +202,8 @@ def _adaptation_table(cases: list[CaseResult]) -> list[str]:
     lines = ['#### adaptation to ω0 changes', '',
              f'Rolling RMSE over Δ = {window:g} s of the open-loop LF error. Steady = median of '
              "the adaptive predictor's rolling RMSE over the second half of the following "
-             f'segment (its settled level in the new sea); recovery = time after the change until the rolling RMSE stays ≤ '
+             'segment (its settled level in the new sea); recovery = time after the change '
+             'until the rolling RMSE stays ≤ '
              f'{TOLERANCE}× steady for Δ (inf: not before the next change); ratio = frozen / '
              f'adaptive RMSE over the {RECOVERY_WINDOWS:g}Δ after the change. Changes are the '
              'steps and ramp corners of the schedule; ω0 just before the change → at the end of '

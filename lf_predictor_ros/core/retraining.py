@@ -39,6 +39,9 @@ FloatArray = NDArray[np.float64]
 ACCEPT_LOSS_RATIO = 1.02
 # An ω0 estimate this close (relative) to a wave-band edge is not trusted if an earlier one exists.
 EDGE_MARGIN = 0.05
+# ω0 moving by more than this (relative) between retrainings is a new sea state (see
+# `sea_state_estimate`): the training window restarts on the newest data.
+SEA_CHANGE_RATIO = 0.25
 
 
 @dataclass(frozen=True)
@@ -117,6 +120,50 @@ def estimate_frequency(params: PredictorParams, y: FloatArray,
     return estimate
 
 
+def sea_state_estimate(params: PredictorParams, y: FloatArray,
+                       previous: FrequencyEstimate | float | None) -> FrequencyEstimate:
+    """ω0 for this retraining: the γ-window estimate, unless the sea has just changed.
+
+    The γ window (20 min) resolves the peak finely but keeps the old sea's peak for up to γ
+    after a change of sea state (a swell arriving, the wind turning): on the thesis Fig. 4.1 steps
+    the estimate switched 600–900 s late, and every target in between was filtered at the wrong
+    ω0. So ω0 is also estimated on the newest ``change_samples`` (max(α, γ/4)); when that estimate
+    is confident and more than ``SEA_CHANGE_RATIO`` away from the γ-window one, it wins.
+    """
+    long = estimate_frequency(params, y, previous)
+    short_len = change_samples(params)
+    if len(y) < 2 * short_len:
+        return long
+    window = y[-short_len:]
+    short = estimate_wave_peak_freq(window, params.sample_time,
+                                    highpass_cutoff=params.highpass_cutoff,
+                                    wave_band=(params.wave_band[0], params.wave_band[1]),
+                                    min_peak_ratio=params.min_peak_ratio, previous=None)
+    low, high = params.wave_band
+    interior = low * (1 + EDGE_MARGIN) < short.wave_peak_freq < high * (1 - EDGE_MARGIN)
+    if short.confident and interior and _relative_change(short.wave_peak_freq,
+                                                         long.wave_peak_freq) > SEA_CHANGE_RATIO:
+        return short
+    return long
+
+
+def change_samples(params: PredictorParams) -> int:
+    """Samples of the short window that detects a change of sea state: max(α, γ/4)."""
+    return max(params.filter_samples, params.estimation_samples // 4)
+
+
+def sea_state_changed(previous: FrequencyEstimate | float | None,
+                      current: FrequencyEstimate) -> bool:
+    """True when ω0 moved by more than ``SEA_CHANGE_RATIO`` since the previous retraining."""
+    prev = previous.wave_peak_freq if isinstance(previous, FrequencyEstimate) else previous
+    return prev is not None and _relative_change(current.wave_peak_freq,
+                                                 float(prev)) > SEA_CHANGE_RATIO
+
+
+def _relative_change(value: float, reference: float) -> float:
+    return abs(value - reference) / reference if reference > 0.0 else math.inf
+
+
 def make_targets(params: PredictorParams, y: FloatArray, end_index: int,
                  wave_peak_freq: float, previous: TargetWindow | None) -> TargetWindow:
     """Algorithm 4.1 lines 24–35: zero-phase notch + low-pass and appending.
@@ -158,9 +205,15 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
                    stop_event: threading.Event | None = None) -> RetrainResult:
     """One full retraining (see module docstring); never modifies its arguments."""
     start = time.monotonic()
-    frequency = estimate_frequency(params, snapshot.y, previous_frequency)
-    targets = make_targets(params, snapshot.y, snapshot.end_index, frequency.wave_peak_freq,
-                           previous_targets)
+    frequency = sea_state_estimate(params, snapshot.y, previous_frequency)
+    if sea_state_changed(previous_frequency, frequency):
+        # a new sea: the old targets were filtered at the old ω0 and the old data shows the old
+        # waves, so the training window restarts on the newest samples and grows back to N
+        targets = make_targets(params, snapshot.y[-change_samples(params):],
+                               snapshot.end_index, frequency.wave_peak_freq, None)
+    else:
+        targets = make_targets(params, snapshot.y, snapshot.end_index,
+                               frequency.wave_peak_freq, previous_targets)
     u, y, t_values, mask = training_window(params, snapshot, targets)
     spec = network_spec(params)
     if incumbent is None:

@@ -385,3 +385,45 @@ def test_wave_peak_estimate_on_the_band_edge_keeps_the_previous_one() -> None:
     assert alone.wave_peak_freq < params.wave_band[0] * (1 + retraining.EDGE_MARGIN)
     kept = retraining.estimate_frequency(params, y, 0.8)
     assert kept.wave_peak_freq == 0.8 and not kept.confident
+
+
+@functools.cache
+def omega_step_snapshot(after_step: float) -> Snapshot:
+    """omega_steps (1.25 → 0.3 rad/s at 3600 s), cut ``after_step`` seconds after the step."""
+    record = simulate(load_scenario('omega_steps'), 1, 3600.0 + after_step)
+    y = np.array(record.measured_pose[:, :1])
+    u = np.array(record.thrust[:, :1])
+    return Snapshot(u=u, y=y, end_index=len(y) - 1, segment=1)
+
+
+def test_a_new_sea_is_seen_on_the_short_window_and_restarts_the_training_window() -> None:
+    """A step 1.25 → 0.3 rad/s: seen 400 s later on the short window; the targets restart.
+
+    The 20-min window still peaks at the old sea; the newest max(α, γ/4) = 300 s find the new
+    one, and the training window restarts on those samples.
+    """
+    params = PredictorParams()  # γ = 1200 s: the short window is 300 s
+    assert retraining.change_samples(params) == 300
+    snapshot = omega_step_snapshot(400.0)
+    long = retraining.estimate_frequency(params, snapshot.y, 1.25)
+    assert long.wave_peak_freq == pytest.approx(1.25, rel=0.05)  # the old sea still dominates
+    estimate = retraining.sea_state_estimate(params, snapshot.y, 1.25)
+    assert estimate.wave_peak_freq == pytest.approx(0.3, rel=0.1)
+    assert retraining.sea_state_changed(1.25, estimate)
+    old = make_targets(params, snapshot.y[:-60], snapshot.end_index - 60, 1.25, None)
+    result = run_retraining(params.replace(max_epochs=2), snapshot, None, old, 1.25)
+    assert result.frequency.wave_peak_freq == pytest.approx(0.3, rel=0.1)
+    # restarted: the filtered newest 300 samples minus the ε start transient, not N = 1200
+    assert len(result.targets) == 300 - params.transient_samples
+    assert result.targets.end_index == snapshot.end_index
+
+
+def test_a_steady_sea_keeps_the_long_window_estimate() -> None:
+    """Long before the step only the 1.25 rad/s sea is there: both windows agree."""
+    params = PredictorParams()
+    snapshot = omega_step_snapshot(-600.0)  # 3000 s of the first sea
+    long = retraining.estimate_frequency(params, snapshot.y, None)
+    estimate = retraining.sea_state_estimate(params, snapshot.y, None)
+    assert estimate == long
+    assert not retraining.sea_state_changed(long.wave_peak_freq, estimate)
+    assert not retraining.sea_state_changed(None, estimate)

@@ -242,7 +242,9 @@ def _stability_rule() -> str:
             f'{stability.EXCURSION_FACTOR:g} × ideal, {math.degrees(stability.HEADING_FLOOR):g}°'
             f'), not diverged beyond {stability.ABORT_EXCURSION:g} m) and no limit cycle (one LF '
             f'sinusoid explaining ≥ {stability.LIMIT_CYCLE_SHARE:.0%} of the pose-error variance '
-            f'with an amplitude ≥ {lc[0]:g} m / {math.degrees(lc[2]):g}°); see '
+            f'with an amplitude ≥ {lc[0]:g} m / {math.degrees(lc[2]):g}°, unless the ideal loop '
+            f'shows it too with ≥ {stability.FORCED_SHARE:.0%} of the amplitude: then it is the '
+            "response to the scenario's own excitation); see "
             '`lf_predictor_ros/benchmark/stability.py`.')
 
 

@@ -349,7 +349,8 @@ def run_closed_loops(scenario: Scenario, seed: int, duration: float | None,
         loop = LoopRun(rec.t, rec.truth_lf_pose, rec.thrust)
         metrics = (loop_metrics(loop, ndof, tuple(setpoint), DEFAULT_WAVE_BAND, start)
                    if np.count_nonzero(keep) >= 3 else _nan_loop_metrics(ndof))
-        same_samples = ideal_offset.shape == offset.shape and name != 'ideal'
+        # the ideal loop is the reference itself: what it shows is the forced response
+        same_samples = ideal_offset.shape == offset.shape
         verdict = stability.assess(offset, scenario.sample_time, ndof, bounds,
                                    DEFAULT_WAVE_BAND[0], outcome.aborted,
                                    reference=ideal_offset if same_samples else None)

@@ -53,7 +53,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.utilities import remove_ros_args, try_shutdown
+from rclpy.utilities import ok, remove_ros_args, try_shutdown
 
 from lf_predictor_ros.bag.mcap_writer import (
     DEFAULT_CHUNK_SIZE,
@@ -266,6 +266,11 @@ def main(args: Sequence[str] | None = None) -> int:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:  # noqa: BLE001 - only swallowed when it is the shutdown race
+        if ok():
+            raise
+        # SIGINT shut the context down while the executor was in rcl_wait: rcl reports that as
+        # an error ('failed to wait on wait set'); it is an ordinary shutdown.
     finally:
         node.destroy_node()
         try_shutdown()

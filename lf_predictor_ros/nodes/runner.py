@@ -41,6 +41,11 @@ def spin_node(make_node: Callable[[], Node], *,
             rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:  # noqa: BLE001 - only swallowed when it is the shutdown race
+        if ok():
+            raise
+        # a signal shut the context down while the executor was in rcl_wait, which rcl reports
+        # as an error ('failed to wait on wait set'): an ordinary shutdown
     finally:
         node.destroy_node()
         try_shutdown()

@@ -279,7 +279,7 @@ def test_recorder_process_with_a_file_size_limit(tmp_path: Path, ros_context: An
             recorder.kill()
             recorder.communicate(timeout=EXIT_TIMEOUT)
     assert recorder.returncode == 1, stderr  # a recording that lost data is a failure
-    assert 'Traceback' not in stderr
+    assert 'Traceback' not in stderr, stderr  # the whole log, to see what raised
     assert stderr.count('disk full') == 1, stderr
     assert 'File too large' in stderr and str(output) in stderr
     assert output.stat().st_size <= FILE_SIZE_LIMIT

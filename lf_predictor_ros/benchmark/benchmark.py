@@ -292,7 +292,9 @@ def render(results: list[CaseResult], tuning: set[int], command: str, wall: floa
              'estimator called every h = 1 s, its output held in between), plus `ideal` (PID on '
              'the true LF pose); the smoother is non-causal and cannot be in a loop. '
              + _stability_rule(), '',
-             f'Tuning seeds (not in the tables): {sorted(tuning) or "none"}.', '']
+             f'Tuning seeds (not in the tables): {sorted(tuning) or "none"}.', '',
+             'What the numbers say, and why the MISSED targets are missed: '
+             '`docs/BENCHMARKS.md`, "Scenario suite summary".', '']
     by_scenario: dict[str, list[CaseResult]] = {}
     for case in results:
         if case.seed not in tuning:

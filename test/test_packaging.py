@@ -103,3 +103,24 @@ def test_venv_gives_ros2_run_layout() -> None:
     # ...and as a plain command on the venv's PATH.
     for name in _registered_executables():
         assert shutil.which(name) == str(prefix / 'bin' / name)
+
+
+def test_readme_parameter_table_shows_the_shipped_defaults() -> None:
+    """Every PredictorParams field is in the README table with its current default."""
+    import dataclasses
+    import re
+
+    from lf_predictor_ros.core.params import PredictorParams
+
+    readme = (REPO / 'README.md').read_text(encoding='utf-8')
+    rows = dict(re.findall(r'^\| `(\w+)` \| ([^|]+) \|', readme, flags=re.MULTILINE))
+    defaults = PredictorParams()
+    for field in dataclasses.fields(PredictorParams):
+        value = getattr(defaults, field.name)
+        if isinstance(value, bool):
+            shown = 'true' if value else 'false'
+        elif isinstance(value, tuple):
+            shown = '[' + ', '.join(str(v) for v in value) + ']'
+        else:
+            shown = str(value)
+        assert rows.get(field.name, '').strip() == shown, field.name

@@ -196,9 +196,20 @@ def scenario_ndof(scenario: Scenario) -> int:
 
 def predictor_params(scenario: Scenario, overrides: dict[str, Any] | None = None,
                      ) -> PredictorParams:
-    """Default predictor parameters for a scenario (ndof, h = max(1 s, sensor period))."""
-    h = max(1.0, scenario.sample_time)
-    return PredictorParams(ndof=scenario_ndof(scenario), sample_time=h, **(overrides or {}))
+    """Default predictor parameters for a scenario (ndof, h = max(1 s, sensor period)).
+
+    ``overrides`` win, ``sample_time`` included (h must stay a multiple of the sensor period).
+    """
+    values: dict[str, Any] = {'ndof': scenario_ndof(scenario),
+                              'sample_time': max(1.0, scenario.sample_time)}
+    values.update(overrides or {})
+    params = PredictorParams(**values)
+    ratio = params.sample_time / scenario.sample_time
+    if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-9:
+        raise ValueError(f'predictor sample_time {params.sample_time} s must be a whole multiple '
+                         f"of the scenario's sensor period {scenario.sample_time} s: the "
+                         'benchmark decimates the measurements to it')
+    return params
 
 
 def _observer(setup: EstimatorSetup, mistuned: bool) -> PassiveObserver:

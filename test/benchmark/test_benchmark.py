@@ -202,3 +202,13 @@ def test_score_adaptation_on_the_thesis_schedule_grid() -> None:
         assert event.frozen_ratio == pytest.approx(4.0, rel=1e-9)
     assert series.window == 60.0 and series.t[0] == 481.0
     assert score_adaptation(scn, data, {'adaptive': adaptive}, params, begin=480) is None
+
+
+def test_predictor_params_overrides_win_and_the_sample_time_must_fit_the_sensor() -> None:
+    supply = load_scenario('supply_closed_loop')  # 10 Hz sensors
+    assert predictor_params(supply).sample_time == 1.0
+    assert predictor_params(supply, {'sample_time': 0.5}).sample_time == 0.5
+    with pytest.raises(ValueError, match='whole multiple'):
+        predictor_params(supply, {'sample_time': 0.25 + 0.01})
+    with pytest.raises(ValueError, match='whole multiple'):
+        predictor_params(load_scenario('onedof_excited'), {'sample_time': 0.5})  # 1 Hz sensor

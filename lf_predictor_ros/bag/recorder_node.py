@@ -49,11 +49,10 @@ from diagnostic_msgs.msg import DiagnosticArray
 import rclpy
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.utilities import ok, remove_ros_args, try_shutdown
+from rclpy.utilities import remove_ros_args, try_shutdown
 
 from lf_predictor_ros.bag.mcap_writer import (
     DEFAULT_CHUNK_SIZE,
@@ -66,6 +65,7 @@ from lf_predictor_ros.bag.msgdefs import full_definition
 from lf_predictor_ros.bag.ros_codec import message_class, publishers_qos_yaml
 from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, make_diagnostic_array
 from lf_predictor_ros.nodes.qos import publisher_qos
+from lf_predictor_ros.nodes.runner import spin_until_shutdown
 
 # Topics of the interface contract (shared/reference/interfaces.md) and their types.
 CONTRACT_TOPICS: dict[str, str] = {
@@ -262,18 +262,7 @@ def main(args: Sequence[str] | None = None) -> int:
         get_logger(LOGGER_NAME).error(str(err))
         try_shutdown()
         return 1
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:  # noqa: BLE001 - only swallowed when it is the shutdown race
-        if ok():
-            raise
-        # SIGINT shut the context down while the executor was in rcl_wait: rcl reports that as
-        # an error ('failed to wait on wait set'); it is an ordinary shutdown.
-    finally:
-        node.destroy_node()
-        try_shutdown()
+    spin_until_shutdown(node)
     return 1 if node.failed else 0
 
 

@@ -33,6 +33,15 @@ def spin_node(make_node: Callable[[], Node], *,
     except (KeyboardInterrupt, ExternalShutdownException):
         try_shutdown()
         return 0
+    spin_until_shutdown(node, until)
+    return 0
+
+
+def spin_until_shutdown(node: Node, until: Callable[[Node], Future | None] | None = None) -> None:
+    """Spin ``node`` until Ctrl-C, an external shutdown or ``until``'s future; then destroy it.
+
+    The context is shut down afterwards (`try_shutdown`, safe when a signal already did it).
+    """
     try:
         done = until(node) if until is not None else None
         if done is not None:
@@ -49,4 +58,3 @@ def spin_node(make_node: Callable[[], Node], *,
     finally:
         node.destroy_node()
         try_shutdown()
-    return 0

@@ -9,11 +9,12 @@ all three).
 
 Objective (thesis eq. 2.6 and 2.8 with a = 1, b = ``weight_decay``, plus our derivative term):
 
-    J(w) = MSE + d · MSE_Δ + b · Σ w_j²
+    J(w) = MSE + d · MSE_Δ + b · Σ w_j²   (sum over the tanh part: the linear bypass is free)
     MSE   = mean over kept samples and channels of ((ŷLF(t+1) − yT(t+1)) / s)²
     MSE_Δ = mean over kept consecutive pairs of ((Δŷ − ΔyT) / s_Δ)²,  Δx(t+1) = x(t+1) − x(t)
 
-s is the per-channel standard deviation of the kept targets and s_Δ the RMS of their first
+s is the per-channel scale of what the network predicts (``loss_scale``: the std of the kept
+targets, or for a relative network the RMS of yT(t+1) − y(t)) and s_Δ the RMS of the targets' first
 differences, so the loss is dimensionless, treats metres and radians alike and is comparable
 between candidate networks on the same window. The derivative term answers the thesis's closed-loop
 failure (§5.4.2: the prediction's derivative had the wrong sign, so a PID's D-term steered with the
@@ -74,7 +75,8 @@ _SCALE_FLOOR = 1e-12  # [-] relative floor below which a target channel is not n
 class TrainSettings:
     """Hyper-parameters of one training run (thesis §4.3, Table A.x).
 
-    ``weight_decay`` is b of eq. 2.8 (on all weights and biases, standardized units);
+    ``weight_decay`` is b of eq. 2.8 (on the weights and biases of the tanh part, standardized
+    units; the linear bypass is not penalized, see ``decay_vector``);
     ``derivative_weight`` is d of the derivative term; ``lm_mu0``/``lm_mu_inc``/``lm_mu_dec``/
     ``lm_mu_max`` drive eq. 2.7 (MATLAB ``trainlm`` defaults); ``lr`` is Adam's step size;
     ``min_grad`` stops when ‖∇J‖ falls below it; ``loss_goal`` stops when the MSE part reaches it;
@@ -205,7 +207,7 @@ def _channel_scale(values: FloatArray) -> FloatArray:
     return np.where(values > _SCALE_FLOOR, values, 1.0)
 
 
-def y_series_of(spec: NnarmaxSpec, y: ArrayLike, n: int) -> FloatArray:
+def _y_series(spec: NnarmaxSpec, y: ArrayLike, n: int) -> FloatArray:
     """The measured positions as an (n, n_outputs) series (validated length)."""
     series = as_series(y, spec.n_outputs, 'y')
     if series.shape[0] != n:
@@ -254,7 +256,7 @@ def _prepare_window(
     keep_pair = keep[1:] & keep[:-1]
     if keep.sum() < 2:
         raise ValueError('mask keeps fewer than 2 training targets: the window is all transient')
-    scale = loss_scale(spec, y_series_of(spec, y, n)[first : n - 1], target, keep)
+    scale = loss_scale(spec, _y_series(spec, y, n)[first : n - 1], target, keep)
     diffs = np.diff(target, axis=0)[keep_pair]
     diff_rms = np.sqrt(np.mean(diffs**2, axis=0)) if diffs.size else np.ones(spec.n_outputs)
     return _Window(

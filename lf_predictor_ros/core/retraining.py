@@ -103,21 +103,26 @@ def first_training_samples(params: PredictorParams) -> int:
 
 
 def estimate_frequency(params: PredictorParams, y: FloatArray,
-                       previous: FrequencyEstimate | float | None) -> FrequencyEstimate:
-    """Algorithm 4.1 lines 19–23 on the last γ samples."""
-    window = y[-params.estimation_samples:]
+                       previous: FrequencyEstimate | float | None,
+                       samples: int | None = None) -> FrequencyEstimate:
+    """Algorithm 4.1 lines 19–23 on the last γ samples (or the last ``samples``)."""
+    window = y[-(params.estimation_samples if samples is None else samples):]
     estimate = estimate_wave_peak_freq(window, params.sample_time,
                                        highpass_cutoff=params.highpass_cutoff,
                                        wave_band=(params.wave_band[0], params.wave_band[1]),
                                        min_peak_ratio=params.min_peak_ratio, previous=previous)
-    low, high = params.wave_band
-    at_edge = not low * (1 + EDGE_MARGIN) < estimate.wave_peak_freq < high * (1 - EDGE_MARGIN)
     prev = previous.wave_peak_freq if isinstance(previous, FrequencyEstimate) else previous
-    if at_edge and prev is not None:
+    if not _band_interior(params, estimate.wave_peak_freq) and prev is not None:
         # A peak on the band edge is most often LF motion leaking through the high-pass (a large
         # DP excursion) or noise, not the sea: keep the previous estimate and say so.
         return replace(estimate, wave_peak_freq=float(prev), confident=False)
     return estimate
+
+
+def _band_interior(params: PredictorParams, wave_peak_freq: float) -> bool:
+    """True unless ω0 lies within ``EDGE_MARGIN`` of a wave-band edge."""
+    low, high = params.wave_band
+    return low * (1 + EDGE_MARGIN) < wave_peak_freq < high * (1 - EDGE_MARGIN)
 
 
 def sea_state_estimate(params: PredictorParams, y: FloatArray,
@@ -134,15 +139,9 @@ def sea_state_estimate(params: PredictorParams, y: FloatArray,
     short_len = change_samples(params)
     if len(y) < 2 * short_len:
         return long
-    window = y[-short_len:]
-    short = estimate_wave_peak_freq(window, params.sample_time,
-                                    highpass_cutoff=params.highpass_cutoff,
-                                    wave_band=(params.wave_band[0], params.wave_band[1]),
-                                    min_peak_ratio=params.min_peak_ratio, previous=None)
-    low, high = params.wave_band
-    interior = low * (1 + EDGE_MARGIN) < short.wave_peak_freq < high * (1 - EDGE_MARGIN)
-    if short.confident and interior and _relative_change(short.wave_peak_freq,
-                                                         long.wave_peak_freq) > SEA_CHANGE_RATIO:
+    short = estimate_frequency(params, y, None, samples=short_len)
+    if (short.confident and _band_interior(params, short.wave_peak_freq)
+            and _relative_change(short.wave_peak_freq, long.wave_peak_freq) > SEA_CHANGE_RATIO):
         return short
     return long
 

@@ -599,6 +599,30 @@ class SimRecord:
     wave_peak_freq: FloatArray
 
 
+class _RecordBuffer:
+    """Preallocated arrays of a run, filled one `SimSample` at a time (`simulate*`)."""
+
+    _POSES = ('measured_pose', 'truth_pose', 'truth_lf_pose', 'thrust', 'thrust_command')
+
+    def __init__(self, count: int) -> None:
+        self.poses = {k: np.empty((count, 3)) for k in self._POSES}
+        self.t, self.valid, self.peak = np.empty(count), np.empty(count), np.empty(count)
+
+    def store(self, k: int, sample: SimSample) -> None:
+        """Row k := the sample."""
+        self.t[k], self.peak[k] = sample.t, sample.wave_peak_freq
+        self.valid[k] = sample.measured_valid
+        for name in self._POSES:
+            self.poses[name][k] = getattr(sample, name)
+
+    def record(self, rows: int | None = None) -> SimRecord:
+        """The first ``rows`` rows (all by default) as a `SimRecord`."""
+        keep = slice(0, rows)
+        p = {name: values[keep] for name, values in self.poses.items()}
+        return SimRecord(self.t[keep], p['measured_pose'], self.valid[keep], p['truth_pose'],
+                         p['truth_lf_pose'], p['thrust'], p['thrust_command'], self.peak[keep])
+
+
 def controller_gains(scenario: Scenario, model: LinearModel) -> PidGains:
     """PID gains of the scenario from the vessel's (linearized) M and D diagonals."""
     ctl = scenario.controller
@@ -622,11 +646,7 @@ def simulate(scenario: Scenario, seed: int | None = None, duration: float | None
         raise ValueError("feedback must be 'truth_lf' or 'measured'")
     total = scenario.duration if duration is None else float(duration)
     count = int(round(total / scenario.sample_time))
-    out = {k: np.empty((count, 3)) for k in ('measured_pose', 'truth_pose', 'truth_lf_pose',
-                                              'thrust', 'thrust_command')}
-    t = np.empty(count)
-    valid = np.empty(count)
-    peak = np.empty(count)
+    buffer = _RecordBuffer(count)
     gains = controller_gains(scenario, sim.true_model())
     limit = scenario.controller.tau_max or sim.actuator_limit()
     setpoint = np.asarray(scenario.controller.setpoint)
@@ -637,15 +657,8 @@ def simulate(scenario: Scenario, seed: int | None = None, duration: float | None
             pose = sim.sample.truth_lf_pose if source == 'truth_lf' else sim.sample.measured_pose
             tau_pid, state = pid_step(state, gains, pose, setpoint, sim.sample_time, limit)
             tau = tau + tau_pid
-        sample = sim.step(tau)
-        t[k], valid[k], peak[k] = sample.t, sample.measured_valid, sample.wave_peak_freq
-        out['measured_pose'][k] = sample.measured_pose
-        out['truth_pose'][k] = sample.truth_pose
-        out['truth_lf_pose'][k] = sample.truth_lf_pose
-        out['thrust'][k] = sample.thrust
-        out['thrust_command'][k] = sample.thrust_command
-    return SimRecord(t, out['measured_pose'], valid, out['truth_pose'], out['truth_lf_pose'],
-                     out['thrust'], out['thrust_command'], peak)
+        buffer.store(k, sim.step(tau))
+    return buffer.record()
 
 
 
@@ -717,9 +730,7 @@ def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | Non
     sim = Simulator(scenario, seed)
     total = scenario.duration if duration is None else float(duration)
     count = int(round(total / scenario.sample_time))
-    out = {k: np.empty((count, 3)) for k in ('measured_pose', 'truth_pose', 'truth_lf_pose',
-                                              'thrust', 'thrust_command')}
-    t, valid, peak = np.empty(count), np.empty(count), np.empty(count)
+    buffer = _RecordBuffer(count)
     gains = controller_gains(scenario, sim.true_model())
     limit = scenario.controller.tau_max or sim.actuator_limit()
     setpoint = np.asarray(scenario.controller.setpoint, dtype=np.float64)
@@ -735,12 +746,7 @@ def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | Non
         if k % pid_stride == 0:
             tau_pid, state = pid_step(state, gains, held, setpoint, pid_dt, limit)
         sample = sim.step(sim.excitation(sim.t) + tau_pid)
-        t[k], valid[k], peak[k] = sample.t, sample.measured_valid, sample.wave_peak_freq
-        out['measured_pose'][k] = sample.measured_pose
-        out['truth_pose'][k] = sample.truth_pose
-        out['truth_lf_pose'][k] = sample.truth_lf_pose
-        out['thrust'][k] = sample.thrust
-        out['thrust_command'][k] = sample.thrust_command
+        buffer.store(k, sample)
         if (k + 1) % stride == 0:
             value = np.array(estimate(sample.t, sample.measured_pose.copy(),
                                       sample.thrust.copy()), dtype=np.float64)
@@ -757,10 +763,7 @@ def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | Non
                 _excursion(sample.truth_lf_pose, setpoint, sim.ndof) <= abort_excursion):
             aborted_at, done = sample.t, k + 1
             break
-    keep = slice(0, done)
-    record = SimRecord(t[keep], out['measured_pose'][keep], valid[keep], out['truth_pose'][keep],
-                       out['truth_lf_pose'][keep], out['thrust'][keep],
-                       out['thrust_command'][keep], peak[keep])
+    record = buffer.record(done)
     estimates = np.array(returned, dtype=np.float64).reshape(-1, 3)
     return ClosedLoopRun(record, np.array(calls, dtype=np.float64), estimates, nonfinite,
                          aborted_at)

@@ -107,12 +107,8 @@ def dominant_oscillation(x: FloatArray, sample_time: float, max_freq: float,
     if not np.any(inside):
         return Oscillation(math.nan, 0.0, 0.0)
     peak = float(omega[inside][int(np.argmax(spectrum[inside]))])
-    t = np.arange(n) * sample_time
-    design = np.column_stack([np.cos(peak * t), np.sin(peak * t), np.ones(n)])
-    coef = np.linalg.lstsq(design, detrended, rcond=None)[0]
-    residual = detrended - design @ coef
-    share = 1.0 - float(residual @ residual) / variance
-    return Oscillation(peak, float(math.hypot(coef[0], coef[1])), share)
+    amplitude, residual = _fit_sinusoid(detrended, sample_time, peak)
+    return Oscillation(peak, amplitude, 1.0 - float(residual @ residual) / variance)
 
 
 def amplitude_at(x: FloatArray, sample_time: float, frequency: float) -> float:
@@ -120,12 +116,17 @@ def amplitude_at(x: FloatArray, sample_time: float, frequency: float) -> float:
     values = np.asarray(x, dtype=np.float64)
     if values.size < 8 or not math.isfinite(frequency) or not np.all(np.isfinite(values)):
         return 0.0
-    detrended = signal.detrend(values, type='linear')
-    t = np.arange(values.size) * sample_time
+    return _fit_sinusoid(signal.detrend(values, type='linear'), sample_time, frequency)[0]
+
+
+def _fit_sinusoid(detrended: FloatArray, sample_time: float,
+                  frequency: float) -> tuple[float, FloatArray]:
+    """(amplitude, residual) of the least-squares a·cos + b·sin + c fit at ``frequency``."""
+    t = np.arange(detrended.size) * sample_time
     design = np.column_stack([np.cos(frequency * t), np.sin(frequency * t),
-                              np.ones(values.size)])
+                              np.ones(detrended.size)])
     coef = np.linalg.lstsq(design, detrended, rcond=None)[0]
-    return float(math.hypot(coef[0], coef[1]))
+    return float(math.hypot(coef[0], coef[1])), detrended - design @ coef
 
 
 def checked_band(samples: int, sample_time: float, wave_band_low: float,

@@ -3,7 +3,7 @@
 # mypy: disable-error-code="no-untyped-call"
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 import signal
 import subprocess
@@ -24,7 +24,7 @@ pytestmark = pytest.mark.filterwarnings('ignore::DeprecationWarning:lark.*')
 
 REPO = Path(__file__).resolve().parents[2]
 N_MESSAGES = 45  # chunks close every 10 poses (1024 B): 5 wait for the 1 s flush timer
-MATCH_TIMEOUT = 15.0  # [s] recorder start-up + discovery on a loaded machine
+WaitSubscribed = Callable[[Any, subprocess.Popen[str]], None]  # conftest fixture
 EXIT_TIMEOUT = 10.0  # [s]
 
 
@@ -46,17 +46,13 @@ def processes() -> Iterator[list[subprocess.Popen[str]]]:
         process.communicate(timeout=EXIT_TIMEOUT)
 
 
-def _publish_poses(context: Any, recorder: subprocess.Popen[str]) -> list[float]:
+def _publish_poses(context: Any, recorder: subprocess.Popen[str],
+                   wait_until_subscribed: WaitSubscribed) -> list[float]:
     """Wait for the recorder's subscription, publish N poses; returns the x values sent."""
     node = Node('pose_source', context=context)
     try:
         publisher = node.create_publisher(PoseStamped, '/measured_pose', 10)
-        deadline = time.monotonic() + MATCH_TIMEOUT
-        while publisher.get_subscription_count() == 0:
-            assert recorder.poll() is None, recorder.communicate()
-            assert time.monotonic() < deadline, 'recorder never subscribed'
-            time.sleep(0.02)
-        time.sleep(0.2)  # the subscriber's side of the match
+        wait_until_subscribed(publisher, recorder)
         sent = []
         for i in range(N_MESSAGES):
             message = PoseStamped()
@@ -83,11 +79,12 @@ def _xs_by_rosbags(path: Path) -> list[float]:
 @pytest.mark.parametrize('stop_signal', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_signal_finishes_the_file(tmp_path: Path, ros_context: Any, dds_env: dict[str, str],
                                   processes: list[subprocess.Popen[str]],
-                                  stop_signal: signal.Signals) -> None:
+                                  stop_signal: signal.Signals,
+                                  wait_until_subscribed: WaitSubscribed) -> None:
     output = tmp_path / 'rec.mcap'
     recorder = _start_recorder(output, dds_env)
     processes.append(recorder)
-    sent = _publish_poses(ros_context, recorder)
+    sent = _publish_poses(ros_context, recorder, wait_until_subscribed)
     recorder.send_signal(stop_signal)
     _, stderr = recorder.communicate(timeout=EXIT_TIMEOUT)
     assert recorder.returncode == 0, stderr
@@ -105,11 +102,12 @@ def test_signal_finishes_the_file(tmp_path: Path, ros_context: Any, dds_env: dic
 @pytest.mark.dds
 def test_sigkill_keeps_everything_flushed(tmp_path: Path, ros_context: Any,
                                           dds_env: dict[str, str],
-                                          processes: list[subprocess.Popen[str]]) -> None:
+                                          processes: list[subprocess.Popen[str]],
+                                          wait_until_subscribed: WaitSubscribed) -> None:
     output = tmp_path / 'killed.mcap'
     recorder = _start_recorder(output, dds_env)
     processes.append(recorder)
-    sent = _publish_poses(ros_context, recorder)
+    sent = _publish_poses(ros_context, recorder, wait_until_subscribed)
     time.sleep(1.2)  # > 1 s: the recorder's steady timer has flushed the open chunk
     recorder.send_signal(signal.SIGKILL)
     recorder.communicate(timeout=EXIT_TIMEOUT)
@@ -138,18 +136,14 @@ def test_unwritable_output_exits_nonzero_without_traceback(
 @pytest.mark.dds
 def test_topic_without_type_is_recorded_after_discovery(
         tmp_path: Path, ros_context: Any, dds_env: dict[str, str],
-        processes: list[subprocess.Popen[str]]) -> None:
+        processes: list[subprocess.Popen[str]], wait_until_subscribed: WaitSubscribed) -> None:
     output = tmp_path / 'discovered.mcap'
     recorder = _start_recorder(output, dds_env, '-p', "topics:=['/extra']")
     processes.append(recorder)
     node = Node('extra_source', context=ros_context)
     try:
         publisher = node.create_publisher(Float64, '/extra', 10)
-        deadline = time.monotonic() + MATCH_TIMEOUT
-        while publisher.get_subscription_count() == 0:
-            assert recorder.poll() is None and time.monotonic() < deadline
-            time.sleep(0.02)
-        time.sleep(0.2)
+        wait_until_subscribed(publisher, recorder)
         for i in range(5):
             publisher.publish(Float64(data=float(i)))
             time.sleep(0.005)

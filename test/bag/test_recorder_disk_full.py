@@ -9,7 +9,7 @@ fails with EFBIG exactly as on a full disk).
 # mypy: disable-error-code="no-untyped-call"
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 import errno
 import os
 from pathlib import Path
@@ -232,9 +232,10 @@ FILE_SIZE_LIMIT = 4096  # [bytes] header + schema + a few chunks of poses
 
 
 @pytest.mark.dds
-def test_recorder_process_with_a_file_size_limit(tmp_path: Path, ros_context: Any,
-                                                 executor: SingleThreadedExecutor,
-                                                 dds_env: dict[str, str]) -> None:
+def test_recorder_process_with_a_file_size_limit(
+        tmp_path: Path, ros_context: Any, executor: SingleThreadedExecutor,
+        dds_env: dict[str, str],
+        wait_until_subscribed: Callable[[Any, subprocess.Popen[str]], None]) -> None:
     output = tmp_path / 'limited.mcap'
     env = {**dds_env, 'ROS_LOG_DIR': str(tmp_path / 'ros_log'), 'PYTHONDONTWRITEBYTECODE': '1'}
     recorder = subprocess.Popen(
@@ -255,12 +256,7 @@ def test_recorder_process_with_a_file_size_limit(tmp_path: Path, ros_context: An
     executor.add_node(node)
     try:
         publisher = node.create_publisher(PoseStamped, '/measured_pose', 10)
-        deadline = time.monotonic() + MATCH_TIMEOUT
-        while publisher.get_subscription_count() == 0:
-            assert recorder.poll() is None, recorder.communicate()
-            assert time.monotonic() < deadline, 'recorder never subscribed'
-            time.sleep(0.02)
-        time.sleep(0.2)  # the subscriber's side of the match
+        wait_until_subscribed(publisher, recorder)
         for i in range(N_POSES):
             publisher.publish(_pose(i))
             time.sleep(0.005)

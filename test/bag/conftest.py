@@ -1,0 +1,27 @@
+"""Shared fixtures of the bag tests."""
+from __future__ import annotations
+
+from collections.abc import Callable
+import subprocess
+import time
+from typing import Any
+
+import pytest
+
+MATCH_TIMEOUT = 15.0  # [s] recorder start-up + discovery on a loaded machine
+
+
+def _wait_until_subscribed(publisher: Any, recorder: subprocess.Popen[str]) -> None:
+    """Block until ``recorder`` subscribed to ``publisher``'s topic (it must not die meanwhile)."""
+    deadline = time.monotonic() + MATCH_TIMEOUT
+    while publisher.get_subscription_count() == 0:
+        assert recorder.poll() is None, recorder.communicate()
+        assert time.monotonic() < deadline, 'recorder never subscribed'
+        time.sleep(0.02)
+    time.sleep(0.2)  # the subscriber's side of the match
+
+
+@pytest.fixture
+def wait_until_subscribed() -> Callable[[Any, subprocess.Popen[str]], None]:
+    """``wait_until_subscribed(publisher, recorder_process)``: see `_wait_until_subscribed`."""
+    return _wait_until_subscribed

@@ -173,12 +173,8 @@ def _status_values(msg: DiagnosticArray) -> dict[str, str] | None:
 
 
 @pytest.mark.dds
-def test_recorder_node_logs_once_keeps_running_and_counts_drops(
-        tmp_path: Path, ros_context: Any, executor: SingleThreadedExecutor,
-        capfd: pytest.CaptureFixture[str]) -> None:
-    output = tmp_path / 'node.mcap'
-    recorder = _recorder(ros_context, output)
-    monitor = Node('monitor', context=ros_context)
+def _collect_statuses(node: Node) -> list[dict[str, str]]:
+    """Subscribe ``node`` to /diagnostics; the returned list fills with the recorder's statuses."""
     statuses: list[dict[str, str]] = []
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
@@ -186,8 +182,18 @@ def test_recorder_node_logs_once_keeps_running_and_counts_drops(
         if values is not None:
             statuses.append(values)
 
-    monitor.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics,
-                                QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+    node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics,
+                             QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+    return statuses
+
+
+def test_recorder_node_logs_once_keeps_running_and_counts_drops(
+        tmp_path: Path, ros_context: Any, executor: SingleThreadedExecutor,
+        capfd: pytest.CaptureFixture[str]) -> None:
+    output = tmp_path / 'node.mcap'
+    recorder = _recorder(ros_context, output)
+    monitor = Node('monitor', context=ros_context)
+    statuses = _collect_statuses(monitor)
     executor.add_node(recorder)
     executor.add_node(monitor)
     try:
@@ -245,14 +251,7 @@ def test_recorder_process_with_a_file_size_limit(
          '-p', 'compression:=none'],
         cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     node = Node('pose_source', context=ros_context)
-    statuses: list[dict[str, str]] = []
-
-    def on_diagnostics(msg: DiagnosticArray) -> None:
-        values = _status_values(msg)
-        if values is not None:
-            statuses.append(values)
-
-    node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
+    statuses = _collect_statuses(node)
     executor.add_node(node)
     try:
         publisher = node.create_publisher(PoseStamped, '/measured_pose', 10)

@@ -1,18 +1,26 @@
-"""Input-health bookkeeping shared by the estimator nodes (predictor, observer).
+"""Input handling shared by the estimator nodes (predictor, observer).
 
-Counts messages in an unexpected frame (WARN once per topic) and exceptions caught in callbacks
-(ERROR, throttled), so a callback never kills the node and `/diagnostics` can say what happened.
+Feeds thrust and pose messages into an `InputAligner` (message → numpy → aligner), counting
+messages that do not convert (`_invalid_messages`), messages in an unexpected frame (WARN once per
+topic) and exceptions caught in callbacks (ERROR, throttled), so a callback never kills the node
+and `/diagnostics` can say what happened.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.impl.rcutils_logger import RcutilsLogger
+
+from lf_predictor_ros.core.alignment import AlignedSample, InputAligner
+from lf_predictor_ros.nodes.conversions import FRAME_BODY, msg_to_force, msg_to_pose, stamp_to_sec
 
 
 class InputHealth:
     """Mixin for an rclpy node: call `_init_input_health()` in `__init__` before any callback."""
 
+    _invalid_messages: int
     _unexpected_frame: int
     _warned_frames: set[str]
     _callback_errors: int
@@ -23,6 +31,7 @@ class InputHealth:
         def get_logger(self) -> RcutilsLogger: ...
 
     def _init_input_health(self) -> None:
+        self._invalid_messages = 0  # failed conversions (bad quaternion, negative stamp)
         self._unexpected_frame = 0
         self._warned_frames = set()
         self._callback_errors = 0
@@ -44,3 +53,31 @@ class InputHealth:
         self._last_error = f'{where}: {type(error).__name__}: {error}'
         self.get_logger().error(f'callback failed ({self._last_error})',
                                 throttle_duration_sec=5.0)
+
+    def _feed_thrust(self, msg: WrenchStamped, aligner: InputAligner) -> None:
+        """Store an applied force in the aligner (zero-order hold); never raises."""
+        try:
+            self._check_frame('thrust', msg.header.frame_id, FRAME_BODY)
+            try:
+                force = msg_to_force(msg)
+            except ValueError:
+                self._invalid_messages += 1
+                return
+            aligner.add_force(stamp_to_sec(msg.header.stamp), force)
+        except Exception as error:  # noqa: BLE001 - a callback must never kill the node
+            self._count_error('thrust', error)
+
+    def _feed_pose(self, msg: PoseStamped, aligner: InputAligner, frame_id: str,
+                   process: Callable[[AlignedSample], None]) -> None:
+        """Align a measured pose and ``process`` every grid sample it completes; never raises."""
+        try:
+            self._check_frame('measured_pose', msg.header.frame_id, frame_id)
+            try:
+                pose = msg_to_pose(msg)
+            except ValueError:
+                self._invalid_messages += 1
+                return
+            for sample in aligner.add_pose(stamp_to_sec(msg.header.stamp), pose):
+                process(sample)
+        except Exception as error:  # noqa: BLE001 - a callback must never kill the node
+            self._count_error('measured_pose', error)

@@ -48,13 +48,9 @@ from lf_predictor_ros.core.alignment import AlignedSample, AlignerSettings, Inpu
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.baselines.observer import PassiveObserver, bias_gains
 from lf_predictor_ros.nodes.conversions import (
-    FRAME_BODY,
     FRAME_EARTH,
-    msg_to_force,
-    msg_to_pose,
     pose_to_msg,
     sec_to_stamp,
-    stamp_to_sec,
 )
 from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, input_values, make_diagnostic_array
 from lf_predictor_ros.nodes.health import InputHealth
@@ -175,7 +171,6 @@ class ObserverNode(InputHealth, Node):
         self._aligner = InputAligner(self._config.aligner_settings())
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._samples = 0
-        self._invalid_messages = 0
         self._init_input_health()
         qos = publisher_qos()
         self._lf_pub = self.create_publisher(PoseStamped, 'lf_pose', qos)
@@ -248,30 +243,11 @@ class ObserverNode(InputHealth, Node):
 
     def on_thrust(self, msg: WrenchStamped) -> None:
         """Store an applied force (zero-order hold in the aligner)."""
-        try:
-            self._check_frame('thrust', msg.header.frame_id, FRAME_BODY)
-            try:
-                force = msg_to_force(msg)
-            except ValueError:
-                self._invalid_messages += 1
-                return
-            self._aligner.add_force(stamp_to_sec(msg.header.stamp), force)
-        except Exception as error:  # noqa: BLE001 - a callback must never kill the node
-            self._count_error('thrust', error)
+        self._feed_thrust(msg, self._aligner)
 
     def on_pose(self, msg: PoseStamped) -> None:
         """Align a measured pose; estimate and publish for every completed grid sample."""
-        try:
-            self._check_frame('measured_pose', msg.header.frame_id, self._config.frame_id)
-            try:
-                pose = msg_to_pose(msg)
-            except ValueError:
-                self._invalid_messages += 1
-                return
-            for sample in self._aligner.add_pose(stamp_to_sec(msg.header.stamp), pose):
-                self._process(sample)
-        except Exception as error:  # noqa: BLE001 - a callback must never kill the node
-            self._count_error('measured_pose', error)
+        self._feed_pose(msg, self._aligner, self._config.frame_id, self._process)
 
     def _process(self, sample: AlignedSample) -> None:
         if sample.segment_start:

@@ -70,13 +70,9 @@ from lf_predictor_ros.core.alignment import AlignedSample, AlignerSettings, Inpu
 from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.nodes.conversions import (
-    FRAME_BODY,
     FRAME_EARTH,
-    msg_to_force,
-    msg_to_pose,
     pose_to_msg,
     sec_to_stamp,
-    stamp_to_sec,
 )
 from lf_predictor_ros.nodes.diagnostics import (
     DiagnosticValue,
@@ -200,7 +196,6 @@ class PredictorNode(InputHealth, LifecycleNode):
         self._diag_pub: Any = None
         self._samples = 0  # aligned samples processed in total
         self._samples_in_run = 0  # since the predictor was (re-)created or reset
-        self._invalid_messages = 0  # failed conversions (bad quaternion, negative stamp)
         self._init_input_health()
         self._warm_start = False
         self._model_file = 'none'
@@ -384,34 +379,13 @@ class PredictorNode(InputHealth, LifecycleNode):
 
     def on_thrust(self, msg: WrenchStamped) -> None:
         """Store an applied force (zero-order hold in the aligner)."""
-        if not self._active or self._aligner is None:
-            return
-        try:
-            self._check_frame('thrust', msg.header.frame_id, FRAME_BODY)
-            try:
-                force = msg_to_force(msg)
-            except ValueError:
-                self._invalid_messages += 1
-                return
-            self._aligner.add_force(stamp_to_sec(msg.header.stamp), force)
-        except Exception as error:  # noqa: BLE001 - a callback must never kill the node
-            self._count_error('thrust', error)
+        if self._active and self._aligner is not None:
+            self._feed_thrust(msg, self._aligner)
 
     def on_pose(self, msg: PoseStamped) -> None:
         """Align a measured pose; predict and publish for every completed grid sample."""
-        if not self._active or self._aligner is None:
-            return
-        try:
-            self._check_frame('measured_pose', msg.header.frame_id, self._settings.frame_id)
-            try:
-                pose = msg_to_pose(msg)
-            except ValueError:
-                self._invalid_messages += 1
-                return
-            for sample in self._aligner.add_pose(stamp_to_sec(msg.header.stamp), pose):
-                self._process(sample)
-        except Exception as error:  # noqa: BLE001 - a callback must never kill the node
-            self._count_error('measured_pose', error)
+        if self._active and self._aligner is not None:
+            self._feed_pose(msg, self._aligner, self._settings.frame_id, self._process)
 
     def _process(self, sample: AlignedSample) -> None:
         predictor = self._predictor

@@ -216,7 +216,6 @@ class PredictorParams:
             value = getattr(self, name)
             if not isinstance(value, bool):
                 raise ValueError(f'{name} must be true or false, got {value!r}')
-            object.__setattr__(self, name, bool(value))
         for f in fields(self):
             if f.name in (*_INT_FIELDS, *_STR_FIELDS, *_BOOL_FIELDS, 'wave_band'):
                 continue

@@ -9,6 +9,7 @@ from typing import Any
 import pytest
 
 MATCH_TIMEOUT = 15.0  # [s] recorder start-up + discovery on a loaded machine
+SUBSCRIBER_SETTLE = 1.0  # [s] after the publisher sees the subscription
 
 
 def _wait_until_subscribed(publisher: Any, recorder: subprocess.Popen[str]) -> None:
@@ -18,7 +19,9 @@ def _wait_until_subscribed(publisher: Any, recorder: subprocess.Popen[str]) -> N
         assert recorder.poll() is None, recorder.communicate()
         assert time.monotonic() < deadline, 'recorder never subscribed'
         time.sleep(0.02)
-    time.sleep(0.2)  # the subscriber's side of the match
+    # the subscriber's side of the match completes a little later; 0.2 s lost the first 37
+    # poses once in six loaded runs (test_signal_finishes_the_file)
+    time.sleep(SUBSCRIBER_SETTLE)
 
 
 @pytest.fixture

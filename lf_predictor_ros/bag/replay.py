@@ -23,8 +23,8 @@ is not copied (a warning says so); input `/diagnostics` are copied and ours adde
 
 `--params-file` is a ROS 2 parameters YAML as used by the predictor node (`/**:` and/or
 `predictor:` → `ros__parameters:`): PredictorParams fields, aligner settings (`max_gap`,
-`thrust_timeout`, `backward_jump`, `max_speed`, `max_abs_position`), `frame_id` and
-`diagnostics_period` are used; the node-only keys `model_path`, `autostart` and `use_sim_time`
+`thrust_timeout`, `backward_jump`, `max_speed`, `max_abs_position`, `average_poses`), `frame_id`
+and `diagnostics_period` are used; the node-only keys `model_path`, `autostart` and `use_sim_time`
 are ignored (use `--load-model`); any other key is refused. `--seed` overrides `seed`.
 
 When the truth topic (default `/truth/lf_pose`) is present, a metrics table compares, after

@@ -1,8 +1,9 @@
 """One benchmark case: simulate a scenario, run every estimator on the same data, score them.
 
 ROS-free (numpy, scipy, torch via the core). Every estimator sees the same measurements, resampled
-to the predictor's sample time h (decimation of the simulator's output), and is scored against the
-simulator's LF ground truth after a warm-up (the first training plus two retraining periods):
+to the predictor's sample time h as the predictor node does it (`InputAligner`: the mean of the
+measured poses of each interval), and is scored against the simulator's LF ground truth after a
+warm-up (the first training plus two retraining periods):
 
 | name | what |
 |---|---|
@@ -22,12 +23,12 @@ factory (`make_estimator`) for both uses below.
 run (closed-loop scenarios: the PID on the true LF pose). Scores: `core.evaluation.score`.
 
 **Closed loop** (scenarios with ``controller.enabled``): one run of
-`sim_ros.simulation.simulate_in_loop` per estimator, same seed (same waves, environment and
-sensor noise), the scenario's PID fed that estimator's output. The estimator is called every h
-with the measurement and the applied thrust of that instant (the same decimated input as open
-loop) and the PID holds its output in between. The predictor's output is its prediction for
-t + h, used at once (it compensates the hold); the baselines return their estimate at t. The
-loop `ideal` is the PID on the true LF pose (the scenario's own run: the reference), `smoother`
+`sim_ros.simulation.simulate_in_loop` per estimator, same seed (same waves, environment and sensor
+noise), the scenario's PID fed that estimator's output. The estimator is called every h with the
+mean measured pose of the interval and the applied thrust of that instant (the same decimated input
+as open loop) and the PID holds its output in between. The predictor's output is its prediction for
+t + h, used at once (it compensates the hold); the baselines return their estimate at t. The loop
+`ideal` is the PID on the true LF pose (the scenario's own run: the reference), `smoother`
 has no loop (it is non-causal: it needs the whole record before it outputs anything). Scores:
 `core.evaluation.loop_metrics` after the open-loop warm-up and the stability verdict of
 `benchmark.stability` (bounds relative to the ideal loop).
@@ -38,7 +39,7 @@ has no loop (it is non-causal: it needs the whole record before it outputs anyth
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 import math
 import time
@@ -55,6 +56,7 @@ from lf_predictor_ros.benchmark.adaptation import (
     change_times,
     rolling_rmse,
 )
+from lf_predictor_ros.core.alignment import block_mean_poses, mean_pose
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.baselines.observer import PassiveObserver
 from lf_predictor_ros.core.baselines.smoother import smooth_poses
@@ -246,9 +248,15 @@ def make_estimator(name: str, setup: EstimatorSetup) -> StreamingEstimator:
 
 
 def _decimate(record: SimRecord, stride: int) -> dict[str, FloatArray]:
+    """The record on the grid h: every ``stride``-th sample.
+
+    The measured pose is averaged over the interval (`InputAligner`, ``average_poses`` on);
+    thrust, truth and ω0 are those of the grid instant.
+    """
     sl = slice(stride - 1, None, stride)
-    return {'t': record.t[sl], 'y': record.measured_pose[sl], 'u': record.thrust[sl],
-            'truth': record.truth_lf_pose[sl], 'omega': record.wave_peak_freq[sl]}
+    return {'t': record.t[sl], 'y': block_mean_poses(record.measured_pose, stride),
+            'u': record.thrust[sl], 'truth': record.truth_lf_pose[sl],
+            'omega': record.wave_peak_freq[sl]}
 
 
 def _run_streaming(stream: StreamingEstimator, data: dict[str, FloatArray]) -> FloatArray:
@@ -311,19 +319,44 @@ class _LoopOutcome:
     info: dict[str, Any]
 
 
+class _GridInput:
+    """A loop's estimator fed as the predictor node feeds it: one call per grid interval h.
+
+    Called by `simulate_in_loop` at every sensor sample; every ``stride``-th call it passes the
+    estimator the mean of the interval's measured poses (`InputAligner` with ``average_poses``
+    on: the anti-aliasing of the decimation, as `_decimate` does for the open loop) and the thrust
+    of that instant, and returns the estimate; in between it returns the last one (the PID holds
+    it).
+    """
+
+    def __init__(self, stream: StreamingEstimator, schedule: Callable[[float], float],
+                 stride: int) -> None:
+        self.stream = stream
+        self.schedule = schedule
+        self.stride = stride
+        self._poses: list[FloatArray] = []
+        self._held: FloatArray | None = None
+
+    def __call__(self, t: float, pose: FloatArray, thrust: FloatArray) -> FloatArray:
+        """The estimate to hold after this sensor sample."""
+        self._poses.append(pose)
+        if len(self._poses) == self.stride:
+            mean = mean_pose(np.array(self._poses))
+            self._poses = []
+            self._held = self.stream.step(t, mean, thrust, self.schedule(t))
+        return pose if self._held is None else self._held
+
+
 def _run_loop(name: str, scenario: Scenario, seed: int, duration: float | None,
               setup: EstimatorSetup, ideal: SimRecord) -> _LoopOutcome:
     if name == 'ideal':
         return _LoopOutcome(ideal, False, {})
     stream = make_estimator(name, setup)
-    schedule = scenario.waves.peak_freq
-
-    def estimate(t: float, pose: FloatArray, thrust: FloatArray) -> FloatArray:
-        return stream.step(t, pose, thrust, schedule(t))
-
+    grid_input = _GridInput(stream, scenario.waves.peak_freq,
+                            max(1, int(round(setup.sample_time / scenario.sample_time))))
     # the PID runs once per estimate (h) and the thruster command is held, as `dp_controller`
     # does on each /lf_pose message in the DDS pipeline
-    run = simulate_in_loop(scenario, seed, duration, estimate, setup.sample_time,
+    run = simulate_in_loop(scenario, seed, duration, grid_input, scenario.sample_time,
                            abort_excursion=stability.ABORT_EXCURSION,
                            pid_period=setup.sample_time)
     info: dict[str, Any] = {'nonfinite_estimates': run.nonfinite_estimates,

@@ -110,6 +110,9 @@ class ObserverConfig:
         'backward stamp jump that restarts the stream', 's'))
     max_speed: float = field(default=20.0, metadata=_meta(
         'pose jumps faster than this are dropped as outliers', 'm/s'))
+    average_poses: bool = field(default=True, metadata=_meta(
+        'grid sample = mean of the poses received in its interval (anti-aliasing of a sensor '
+        'faster than sample_time); false: the pose interpolated at the grid instant'))
     diagnostics_period: float = field(default=1.0, metadata=_meta(
         '/diagnostics period on the node clock', 's', read_only=True))
 
@@ -140,7 +143,8 @@ class ObserverConfig:
         """Aligner rules of this configuration."""
         return AlignerSettings(sample_time=self.sample_time, max_gap=self.max_gap,
                                thrust_timeout=self.thrust_timeout,
-                               backward_jump=self.backward_jump, max_speed=self.max_speed)
+                               backward_jump=self.backward_jump, max_speed=self.max_speed,
+                               average_poses=self.average_poses)
 
     def initial_wave_peak_freq(self) -> float:
         """ω0 [rad/s] to start with: the fixed value or the default."""

@@ -34,8 +34,8 @@ Runtime parameter changes are validated (the reason of a rejection is returned) 
   neither the network structure (ndof, nu, ny, nfb, hidden_units, hidden_layers) nor
   sample_time changes, the trained network and ω0 are carried over (warm start); otherwise it
   starts cold. Collected data restarts in both cases (the next training needs a full window).
-- aligner settings (max_gap, thrust_timeout, backward_jump, max_speed): a new aligner, a new
-  data segment. ``frame_id``: immediately.
+- aligner settings (max_gap, thrust_timeout, backward_jump, max_speed, average_poses): a new
+  aligner, a new data segment. ``frame_id``: immediately.
 - ``model_path``, ``diagnostics_period``, ``autostart``: read-only (set them at start).
 
 Never does an exception in a callback kill the node: it is caught, counted (``callback_errors``),
@@ -115,6 +115,9 @@ class PredictorNodeSettings:
         'backward stamp jump that restarts the stream (simulator reset, bag loop)', 's'))
     max_speed: float = field(default=20.0, metadata=_meta(
         'pose jumps faster than this are dropped as outliers', 'm/s'))
+    average_poses: bool = field(default=True, metadata=_meta(
+        'grid sample = mean of the poses received in its interval (anti-aliasing of a sensor '
+        'faster than sample_time); false: the pose interpolated at the grid instant'))
     diagnostics_period: float = field(default=1.0, metadata=_meta(
         '/diagnostics period on the node clock', 's', read_only=True))
     autostart: bool = field(default=True, metadata=_meta(
@@ -135,7 +138,8 @@ class PredictorNodeSettings:
         """Aligner rules at the predictor's sample time (ValueError if they do not fit)."""
         return AlignerSettings(sample_time=sample_time, max_gap=self.max_gap,
                                thrust_timeout=self.thrust_timeout,
-                               backward_jump=self.backward_jump, max_speed=self.max_speed)
+                               backward_jump=self.backward_jump, max_speed=self.max_speed,
+                               average_poses=self.average_poses)
 
 
 def parameter_table(classes: Sequence[type[Any]]) -> str:

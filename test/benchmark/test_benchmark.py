@@ -22,6 +22,7 @@ from lf_predictor_ros.benchmark.suite import (
     run_case,
     score_adaptation,
 )
+from lf_predictor_ros.core.alignment import mean_pose
 from lf_predictor_ros.core.evaluation import DEFAULT_WAVE_BAND, LoopRun, Metrics, loop_metrics
 from sim_ros.simulation import Simulator, load_scenario, simulate, simulate_in_loop
 
@@ -77,6 +78,8 @@ def test_smoother_beats_raw_and_frozen_stops_training() -> None:
 def test_closed_loops_share_the_seed_and_match_the_simulator() -> None:
     """Supply vessel, 400 s: ideal = the scenario's own run; raw = PID on the held measurement.
 
+    The measurement is the mean of each 1 s interval's ten 10 Hz poses (the aligner's).
+
     Same seed in every loop: the sensor noise (measured − total truth) is identical. The raw
     loop feeds 0.5 m of wave motion to the PID: ≥ 100× the ideal loop's wave-band thrust.
     """
@@ -90,7 +93,17 @@ def test_closed_loops_share_the_seed_and_match_the_simulator() -> None:
                             scn.controller.setpoint, DEFAULT_WAVE_BAND, case.warmup)
     for key in ('position_rmse', 'max_excursion', 'heading_rmse'):
         assert case.closed_loop['ideal'][key] == expected[key]
-    run = simulate_in_loop(scn, 2, duration, lambda t, y, u: y, 1.0, pid_period=1.0)
+    poses: list[np.ndarray] = []
+    held: list[np.ndarray] = []
+
+    def interval_mean(t: float, y: np.ndarray, u: np.ndarray) -> np.ndarray:
+        poses.append(y)
+        if len(poses) % 10 == 0:
+            held[:] = [mean_pose(np.array(poses[-10:]))]
+        return held[0] if held else y
+
+    assert scn.sample_time == pytest.approx(0.1)
+    run = simulate_in_loop(scn, 2, duration, interval_mean, 0.1, pid_period=1.0)
     raw = loop_metrics(LoopRun(run.record.t, run.record.truth_lf_pose, run.record.thrust), 3,
                        scn.controller.setpoint, DEFAULT_WAVE_BAND, case.warmup)
     assert case.closed_loop['raw']['position_rmse'] == raw['position_rmse']

@@ -6,7 +6,12 @@ import math
 import numpy as np
 import pytest
 
-from lf_predictor_ros.core.alignment import AlignerSettings, InputAligner
+from lf_predictor_ros.core.alignment import (
+    AlignerSettings,
+    InputAligner,
+    block_mean_poses,
+    mean_pose,
+)
 
 
 def _feed(aligner: InputAligner, times: np.ndarray, poses: np.ndarray) -> list:
@@ -17,7 +22,7 @@ def _feed(aligner: InputAligner, times: np.ndarray, poses: np.ndarray) -> list:
 
 
 def test_resamples_10hz_ramp_to_2hz_grid_exactly() -> None:
-    aligner = InputAligner(AlignerSettings(sample_time=0.5))
+    aligner = InputAligner(AlignerSettings(sample_time=0.5, average_poses=False))
     t = np.arange(0.03, 20.0, 0.1)
     poses = np.stack([2.0 * t, -t, 0.01 * t], axis=1)  # a ramp interpolates exactly
     out = _feed(aligner, t, poses)
@@ -26,6 +31,49 @@ def test_resamples_10hz_ramp_to_2hz_grid_exactly() -> None:
     got = np.array([s.pose for s in out])
     np.testing.assert_allclose(got, np.stack([2 * grid, -grid, 0.01 * grid], axis=1), atol=1e-9)
     assert out[0].segment_start and not any(s.segment_start for s in out[1:])
+
+
+def test_average_is_the_interval_mean_of_a_faster_sensor() -> None:
+    aligner = InputAligner(AlignerSettings(sample_time=0.5))
+    t = np.arange(0.03, 20.0, 0.1)
+    poses = np.stack([2.0 * t, -t, 0.01 * t], axis=1)
+    out = _feed(aligner, t, poses)
+    grid = np.array([s.t for s in out])
+    np.testing.assert_allclose(grid, np.arange(0.5, 20.0, 0.5), atol=1e-12)
+    # the five poses in (t_k − 0.5, t_k] are stamped t_k − 0.47 … t_k − 0.07: mean t_k − 0.27
+    mean_t = grid - 0.27
+    got = np.array([s.pose for s in out])
+    np.testing.assert_allclose(got, np.stack([2 * mean_t, -mean_t, 0.01 * mean_t], axis=1),
+                               atol=1e-9)
+
+
+def test_average_divides_white_noise_by_root_of_block_size() -> None:
+    rng = np.random.default_rng(3)
+    t = np.arange(0.1, 2000.0 + 1e-9, 0.1)  # 10 poses per 1 s grid interval
+    noise = np.zeros((t.size, 3))
+    noise[:, 0] = rng.normal(0.0, 1.0, t.size)
+    out = _feed(InputAligner(AlignerSettings(sample_time=1.0)), t, noise)
+    std = np.std([s.pose[0] for s in out])
+    assert std == pytest.approx(1.0 / math.sqrt(10.0), rel=0.05)
+    picked = _feed(InputAligner(AlignerSettings(sample_time=1.0, average_poses=False)), t, noise)
+    assert np.std([s.pose[0] for s in picked]) == pytest.approx(1.0, rel=0.05)
+
+
+def test_block_mean_poses_equals_the_aligner_on_a_regular_grid() -> None:
+    rng = np.random.default_rng(4)
+    t = np.arange(1, 201) * 0.1  # 0.1 … 20.0 s; grid points every 10th sample
+    poses = np.cumsum(rng.normal(0.0, 0.1, (t.size, 3)), axis=0)
+    poses[:, 2] = np.remainder(poses[:, 2] + 3.0 + math.pi, 2 * math.pi) - math.pi  # near ±π
+    out = _feed(InputAligner(AlignerSettings(sample_time=1.0)), t, poses)
+    blocks = block_mean_poses(poses, 10)
+    np.testing.assert_allclose(np.array([s.pose for s in out]), blocks, atol=1e-12)
+
+
+def test_mean_pose_averages_heading_across_pi() -> None:
+    pose = mean_pose(np.array([[0.0, 2.0, math.pi - 0.1], [2.0, 4.0, -math.pi + 0.3]]))
+    np.testing.assert_allclose(pose, [1.0, 3.0, -math.pi + 0.1], atol=1e-12)
+    with pytest.raises(ValueError, match='shape'):
+        mean_pose(np.zeros((0, 3)))
 
 
 def test_heading_interpolates_along_shortest_arc_across_pi() -> None:

@@ -106,6 +106,10 @@ class PredictorParams:
     linear_init: bool = field(
         default=True, metadata=_doc('solve the linear bypass by least squares before each '
                                      'training (the network then refines a linear ARX model)'))
+    wave_augmentation: float = field(
+        default=0.0, metadata=_doc('RMS of the synthetic wave-band motion in the wave-invariance '
+                                   'copy of the training window, relative to the measured wave '
+                                   'motion; 0 = no copy (core/augmentation.py)', ''))
     training_mode: str = field(
         default='series_parallel', metadata=_doc('series_parallel or parallel (BPTT)'))
     seed: int = field(default=0, metadata=_doc('seed of the network initialization'))
@@ -233,7 +237,8 @@ class PredictorParams:
             if not getattr(self, name) > 0.0:
                 raise ValueError(f'positivity rule: {name} must be > 0, got '
                                  f'{getattr(self, name)!r}: give a positive value')
-        for name in ('weight_decay', 'derivative_weight', 'initial_wave_peak_freq'):
+        for name in ('weight_decay', 'derivative_weight', 'initial_wave_peak_freq',
+                     'wave_augmentation'):
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')

@@ -24,6 +24,11 @@ import numpy as np
 from numpy.typing import NDArray
 import torch
 
+from lf_predictor_ros.core.augmentation import (
+    augment_window,
+    band_limited_motion,
+    periodic_zero_phase,
+)
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.filters import design_wave_filter, zero_phase
 from lf_predictor_ros.core.frequency import FrequencyEstimate, estimate_wave_peak_freq
@@ -214,32 +219,62 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
         targets = make_targets(params, snapshot.y, snapshot.end_index,
                                frequency.wave_peak_freq, previous_targets)
     u, y, t_values, mask = training_window(params, snapshot, targets)
+    spread = wave_spread(y, t_values, mask)
     spec = network_spec(params)
     if incumbent is None:
         net = NnarmaxNet(spec, seed=params.seed)
     else:
         net = NnarmaxNet.from_state(spec, incumbent)
     settings = train_settings(params)
-    result = train(net, u, y, t_values, mask, settings, stop_event=stop_event)
+    result = train(net, *training_data(params, snapshot, u, y, t_values, mask, spread,
+                                       frequency.wave_peak_freq),
+                   settings, stop_event=stop_event)
+    loss = result.loss if params.wave_augmentation == 0.0 else \
+        evaluate_loss(result.state_dict, spec, u, y, t_values, mask, settings.mode)
     incumbent_loss = None
     if incumbent is not None:
         incumbent_loss = evaluate_loss(incumbent, spec, u, y, t_values, mask, settings.mode)
     baseline = cascade_loss(params, y, t_values, mask, frequency.wave_peak_freq)
-    accepted, reason = _judge(result.loss, result.objective, result.initial_objective,
+    accepted, reason = _judge(loss, result.objective, result.initial_objective,
                               incumbent_loss, result.state_dict)
-    if accepted and result.loss > baseline:
+    if accepted and loss > baseline:
         accepted, reason = False, (f'candidate no better than the causal notch + low-pass on '
-                                   f'the newest targets ({result.loss:.3g} > {baseline:.3g})')
+                                   f'the newest targets ({loss:.3g} > {baseline:.3g})')
     retire = not accepted and incumbent_loss is not None and incumbent_loss > baseline
     model = NumpyNnarmax.from_module(NnarmaxNet.from_state(spec, result.state_dict)) \
         if accepted else None
     return RetrainResult(segment=snapshot.segment, end_index=snapshot.end_index,
                          frequency=frequency, targets=targets, model=model,
                          state_dict=result.state_dict if accepted else None,
-                         loss=result.loss, incumbent_loss=incumbent_loss, accepted=accepted,
+                         loss=loss, incumbent_loss=incumbent_loss, accepted=accepted,
                          reason=reason, seconds=time.monotonic() - start, epochs=result.epochs,
-                         wave_spread=wave_spread(y, t_values, mask), baseline_loss=baseline,
+                         wave_spread=spread, baseline_loss=baseline,
                          retire_incumbent=retire)
+
+
+def training_data(params: PredictorParams, snapshot: Snapshot, u: FloatArray, y: FloatArray,
+                  targets: FloatArray, mask: NDArray[np.bool_], spread: FloatArray,
+                  wave_peak_freq: float,
+                  ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
+    """What the trainer fits: the window, plus its wave-invariance copy when enabled.
+
+    ``params.wave_augmentation`` > 0 appends the copy of `augmentation.augment_window` with
+    synthetic wave-band motion of ``wave_augmentation`` × the window's wave spread (its measured
+    WF RMS) per DOF, over [wave band low edge, Nyquist]. The generator is seeded by the
+    predictor seed, the segment and the sample index, so a replay trains on the same data.
+    """
+    if params.wave_augmentation == 0.0 or not np.all(np.isfinite(spread)):
+        return u, y, targets, mask
+    rng = np.random.default_rng([params.seed, snapshot.segment, snapshot.end_index])
+    motion = band_limited_motion(len(y), y.shape[1], params.sample_time,
+                                 (params.lowpass_cutoff(wave_peak_freq), params.nyquist_freq),
+                                 params.wave_augmentation * spread, rng)
+    sos = design_wave_filter(wave_peak_freq, params.sample_time, notch_zeta=params.notch_zeta,
+                             notch_depth=params.notch_depth,
+                             lowpass_offset=params.lowpass_offset)
+    return augment_window(u, y, targets, mask, motion,
+                          periodic_zero_phase(motion, sos, params.sample_time),
+                          params.max_lag + 1)
 
 
 def cascade_loss(params: PredictorParams, y: FloatArray, targets: FloatArray,

@@ -1,0 +1,101 @@
+"""Wave-invariance augmentation of a training window (our addition to thesis §4.3).
+
+The thesis trains the network on the newest N samples only, so the learned filter is defined by
+the sea it has seen: at frequencies where the window holds no wave energy its gain is whatever
+the fit left there. Measured on the Fig. 4.1 steps: the filter learned in a 0.3 rad/s sea passed
+1.25 rad/s motion with gain 0.99, the one learned at 1.25 rad/s passed 0.3 rad/s with gain 1.14,
+so for the Δs after every change of sea state the predictor put the new waves into the LF pose.
+
+A DP engineer knows more than the window shows: motion anywhere in the wave band is wave-frequency
+motion, never LF motion (the premise of every wave filter, Fossen 2011 §11.3.4). This module turns
+that knowledge into data. It appends to the window a copy of itself with synthetic wave motion
+added to the measured positions: band-limited Gaussian motion spread evenly over
+[wave band low edge, Nyquist], with the RMS of the window's own wave motion. The forces and the LF
+targets of the copy are unchanged (waves move the vessel, not its LF pose or the thrust), so the
+fit is asked to give the same LF estimate with and without the extra waves: a stop band over the
+whole wave band, learned along with the data. The copy's first ``guard`` targets are masked (their
+regressors would reach back across the join into the real window).
+
+Pure functions of numpy arrays; the random motion comes from a seeded generator, so a retraining
+is reproducible.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lf_predictor_ros.core.filters import frequency_response
+
+FloatArray = NDArray[np.float64]
+
+
+def band_limited_motion(n_samples: int, channels: int, sample_time: float,
+                        band: tuple[float, float], rms: FloatArray,
+                        rng: np.random.Generator) -> FloatArray:
+    """Gaussian motion (n_samples, channels) with a flat spectrum on ``band`` [rad/s].
+
+    White noise with every FFT bin outside ``band`` zeroed, then scaled per channel to exactly
+    ``rms`` (channels with rms 0 stay 0). ``band`` is clipped to (0, π / sample_time].
+    """
+    if n_samples < 2:
+        raise ValueError(f'need at least 2 samples of motion, got {n_samples}')
+    rms = np.broadcast_to(np.asarray(rms, dtype=np.float64), (channels,))
+    if not np.all(np.isfinite(rms)) or np.any(rms < 0.0):
+        raise ValueError(f'rms must be finite and ≥ 0 per channel, got {rms}')
+    low, high = band
+    nyquist = math.pi / sample_time
+    if not 0.0 <= low < min(high, nyquist):
+        raise ValueError(f'band {band} rad/s must satisfy 0 ≤ low < high and low < Nyquist '
+                         f'{nyquist:.4g} rad/s')
+    omega = 2.0 * math.pi * np.fft.rfftfreq(n_samples, d=sample_time)  # [rad/s]
+    inside = (omega >= low) & (omega <= high)
+    if not inside.any():
+        raise ValueError(f'no frequency bin of a {n_samples}-sample window lies in {band} rad/s: '
+                         'lengthen the window or widen the band')
+    spectrum = np.fft.rfft(rng.standard_normal((n_samples, channels)), axis=0)
+    spectrum[~inside] = 0.0
+    motion = np.fft.irfft(spectrum, n=n_samples, axis=0)
+    level = np.sqrt(np.mean(motion ** 2, axis=0))
+    result: FloatArray = motion * np.where(level > 0.0, rms / np.where(level > 0.0, level, 1.0),
+                                           0.0)
+    return result
+
+
+def periodic_zero_phase(motion: FloatArray, sos: FloatArray, sample_time: float) -> FloatArray:
+    """Zero-phase filtering of a periodic series: every bin times |H(e^{jωh})|², exactly.
+
+    What `filters.zero_phase` (forward-backward) does to a signal, without its edge transients,
+    which a series made by an inverse FFT (``band_limited_motion``) does not have.
+    """
+    n = motion.shape[0]
+    omega = 2.0 * math.pi * np.fft.rfftfreq(n, d=sample_time)
+    gain = np.abs(frequency_response(sos, omega, sample_time)) ** 2
+    spectrum = np.fft.rfft(motion, axis=0) * gain.reshape((-1,) + (1,) * (motion.ndim - 1))
+    filtered: FloatArray = np.fft.irfft(spectrum, n=n, axis=0)
+    return filtered
+
+
+def augment_window(u: FloatArray, y: FloatArray, targets: FloatArray, mask: NDArray[np.bool_],
+                   motion: FloatArray, motion_targets: FloatArray, guard: int,
+                   ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
+    """The window followed by its copy with ``motion`` added (new arrays, inputs untouched).
+
+    ``u`` (n, k), ``y`` and ``targets`` (n, ndof), ``mask`` (n,), ``motion`` (n, ndof) added to
+    y, ``motion_targets`` (n, ndof) added to the targets (the target filter's output for the
+    motion); ``guard`` ≥ 1 (the longest regressor + 1): targets masked at the start of the copy.
+    """
+    n = y.shape[0]
+    if motion.shape != y.shape or motion_targets.shape != y.shape or targets.shape[0] != n \
+            or u.shape[0] != n or mask.shape != (n,):
+        raise ValueError(f'augment_window needs u, y, targets, mask and motion of one length '
+                         f'with motion shaped like y {y.shape}; got u {u.shape}, targets '
+                         f'{targets.shape}, mask {mask.shape}, motion {motion.shape}')
+    if guard < 1:
+        raise ValueError(f'guard must be ≥ 1 sample, got {guard}')
+    copy_mask = mask.copy()
+    copy_mask[:guard] = False
+    return (np.concatenate([u, u]), np.concatenate([y, y + motion]),
+            np.concatenate([targets, targets + motion_targets]),
+            np.concatenate([mask, copy_mask]))

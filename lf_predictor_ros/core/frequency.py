@@ -256,8 +256,11 @@ def _fit_peak(omega: _FloatArray, psd: _FloatArray, in_band: NDArray[np.bool_],
         return float(np.sum(np.log(model) + band_psd / model))
 
     theta0 = np.array([start_freq, math.log(0.1), math.log(start_value), math.log(floor)])
-    result = optimize.minimize(negative_log_likelihood, theta0, method='Nelder-Mead',
-                               options={'xatol': 1e-5, 'fatol': 1e-9, 'maxiter': 2000})
+    # a vertex outside the band scores inf; scipy's convergence test then computes inf − inf
+    # (a RuntimeWarning on every such fit, harmless: the comparison is False and it iterates on)
+    with np.errstate(invalid='ignore'):
+        result = optimize.minimize(negative_log_likelihood, theta0, method='Nelder-Mead',
+                                   options={'xatol': 1e-5, 'fatol': 1e-9, 'maxiter': 2000})
     fitted = float(result.x[0])
     if not (math.isfinite(result.fun) and low < fitted < high):
         return start_freq

@@ -56,7 +56,7 @@ from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, input_values, ma
 from lf_predictor_ros.nodes.health import InputHealth
 from lf_predictor_ros.nodes.params import (
     declare_and_load,
-    field_specs,
+    parameter_table,
     validated_update,
 )
 from lf_predictor_ros.nodes.params import (
@@ -293,19 +293,6 @@ class ObserverNode(InputHealth, Node):
             self._count_error('diagnostics', error)
 
 
-def parameter_table() -> str:
-    """One line per ROS parameter: name, default and description with unit (for ``--help``)."""
-    lines = []
-    for spec in field_specs(ObserverConfig):
-        default = spec.default
-        if spec.container is not None:
-            default = [float(f'{v:.6g}') for v in default] if spec.element is float else list(
-                default)
-        flag = ' (read-only)' if spec.read_only else ''
-        lines.append(f'  {spec.field:<24} {default!r:<18} {spec.description}{flag}')
-    return '\n'.join(lines)
-
-
 def _parse_cli(argv: Sequence[str]) -> None:
     """Handle ``--help`` (exit 0, parameter table) and reject unknown non-ROS arguments."""
     parser = argparse.ArgumentParser(
@@ -316,7 +303,7 @@ def _parse_cli(argv: Sequence[str]) -> None:
                     'wave_peak_frequency; publishes lf_pose (stamped t) and /diagnostics.',
         epilog='ROS arguments: --ros-args -p method:=cascade --params-file config/observer.yaml'
                '\n\nParameters (name, default, description [unit]); a run-time change '
-               're-creates the estimator:\n' + parameter_table())
+               're-creates the estimator:\n' + parameter_table([ObserverConfig]))
     parser.parse_args(list(remove_ros_args(list(argv)))[1:])
 
 

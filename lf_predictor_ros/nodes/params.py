@@ -144,10 +144,10 @@ def _ros_default(spec: FieldSpec) -> Any:
     return list(spec.default) if spec.container is not None else spec.default
 
 
-def _descriptor(spec: FieldSpec, name: str) -> ParameterDescriptor:
+def _descriptor(spec: FieldSpec, name: str, note: str = '') -> ParameterDescriptor:
     return ParameterDescriptor(
         name=name,
-        description=spec.description,
+        description=spec.description + note,
         read_only=spec.read_only,
         dynamic_typing=True,  # converted and checked by convert_value
     )
@@ -168,20 +168,40 @@ def _with_defaults(specs: list[FieldSpec], defaults: Mapping[str, Any] | None) -
 
 def declare_and_load(
     node: Node, cls: type[ConfigT], prefix: str = '', defaults: Mapping[str, Any] | None = None,
+    note: Callable[[str], str] | None = None,
 ) -> ConfigT:
     """Declare every field of ``cls`` on ``node`` and return the validated instance.
 
     ``defaults`` (field name → value) replaces dataclass defaults, e.g. with values computed at
-    start-up. Overrides (``-p``, ``--params-file``, ``parameter_overrides``) are applied by ROS
+    start-up; ``note(field)`` is appended to a parameter's description (e.g. what a run-time
+    change does). Overrides (``-p``, ``--params-file``, ``parameter_overrides``) are applied by ROS
     at declaration. Raises ``ValueError`` with the dataclass's own message when the loaded values
     are invalid; the node should log it and exit non-zero.
     """
     values: dict[str, Any] = {}
     for spec in _with_defaults(field_specs(cls), defaults):
         name = _full_name(prefix, spec.field)
-        parameter = node.declare_parameter(name, _ros_default(spec), _descriptor(spec, name))
+        parameter = node.declare_parameter(
+            name, _ros_default(spec), _descriptor(spec, name, note(spec.field) if note else ''))
         values[spec.field] = convert_value(parameter.value, spec, name)
     return cls(**values)
+
+
+def parameter_table(classes: Sequence[type[Any]]) -> str:
+    """One line per ROS parameter of ``classes``: name, default, description [unit] (--help).
+
+    Float lists are shown with 6 significant digits (defaults computed from physics are long).
+    """
+    lines = []
+    for cls in classes:
+        for spec in field_specs(cls):
+            default = spec.default
+            if spec.container is not None:
+                default = [float(f'{v:.6g}') for v in default] if spec.element is float \
+                    else list(default)
+            flag = ' (read-only)' if spec.read_only else ''
+            lines.append(f'  {spec.field:<24} {default!r:<18} {spec.description}{flag}')
+    return '\n'.join(lines)
 
 
 def validated_update(

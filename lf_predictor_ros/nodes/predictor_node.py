@@ -48,7 +48,7 @@ warned about once per topic.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 import math
 import os
@@ -58,7 +58,7 @@ from typing import TYPE_CHECKING, Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
@@ -81,7 +81,7 @@ from lf_predictor_ros.nodes.diagnostics import (
     predictor_values,
 )
 from lf_predictor_ros.nodes.health import InputHealth
-from lf_predictor_ros.nodes.params import convert_value, field_specs, validated_update
+from lf_predictor_ros.nodes.params import declare_and_load, parameter_table, validated_update
 from lf_predictor_ros.nodes.params import param_meta as _meta
 from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
 from lf_predictor_ros.nodes.runner import spin_node
@@ -142,35 +142,6 @@ class PredictorNodeSettings:
                                average_poses=self.average_poses)
 
 
-def parameter_table(classes: Sequence[type[Any]]) -> str:
-    """One line per ROS parameter: name, default and description with unit (for ``--help``)."""
-    lines = []
-    for cls in classes:
-        for spec in field_specs(cls):
-            default = list(spec.default) if spec.container is not None else spec.default
-            flag = ' (read-only)' if spec.read_only else ''
-            lines.append(f'  {spec.field:<24} {default!r:<18} {spec.description}{flag}')
-    return '\n'.join(lines)
-
-
-def _declare(node: LifecycleNode, cls: type[Any],
-             note: Callable[[str], str] | None = None) -> Any:
-    """Declare one parameter per dataclass field (description + ``note``); return the instance.
-
-    Like ``nodes.params.declare_and_load``, with a per-field note on run-time changes appended
-    to the description. Raises ValueError when the loaded values break a rule.
-    """
-    values: dict[str, Any] = {}
-    for spec in field_specs(cls):
-        default = list(spec.default) if spec.container is not None else spec.default
-        descriptor = ParameterDescriptor(
-            name=spec.field, description=spec.description + (note(spec.field) if note else ''),
-            read_only=spec.read_only, dynamic_typing=True)
-        parameter = node.declare_parameter(spec.field, default, descriptor)
-        values[spec.field] = convert_value(parameter.value, spec, spec.field)
-    return cls(**values)
-
-
 def _change_note(name: str) -> str:
     return NOTE_STRUCTURE if name in STRUCTURE_FIELDS else NOTE_TUNING
 
@@ -185,8 +156,8 @@ class PredictorNode(InputHealth, LifecycleNode):
 
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__(NODE_NAME, **node_kwargs)
-        self._params: PredictorParams = _declare(self, PredictorParams, _change_note)
-        self._settings: PredictorNodeSettings = _declare(self, PredictorNodeSettings)
+        self._params = declare_and_load(self, PredictorParams, note=_change_note)
+        self._settings = declare_and_load(self, PredictorNodeSettings)
         self._settings.aligner_settings(self._params.sample_time)  # cross-check at start
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._aligner: InputAligner | None = None

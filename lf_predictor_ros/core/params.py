@@ -78,7 +78,7 @@ class PredictorParams:
     highpass_cutoff: float = field(
         default=0.2, metadata=_doc('high-pass cutoff ωHP before the PSD (§4.2.1)', 'rad/s'))
     notch_zeta: float = field(
-        default=0.5, metadata=_doc('notch width: relative damping of the notch poles', ''))
+        default=0.8, metadata=_doc('notch width: relative damping of the notch poles', ''))
     fallback_notch_zeta: float = field(
         default=0.1, metadata=_doc('notch width of the causal cascade fallback (narrower than '
                                    "the targets' notch: less phase lag in a DP loop)", ''))

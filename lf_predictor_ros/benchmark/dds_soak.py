@@ -14,10 +14,12 @@ reads them best effort, keep_last 5, so the connection is best effort). It subsc
 
 What is counted:
 - poses and thrusts sent, and how far the publisher fell behind its schedule (``max_lag_s``);
-- poses the node received. The node's diagnostics publish no received-pose counter (only
-  ``samples``, grid samples predicted, and ``dropped`` = invalid + out-of-order + outliers), and
-  with the default sample time of 1 s a lost 100 Hz pose changes no output. So every
-  ``--canary-every``-th pose is followed by a *canary*: an extra pose with the same stamp and a
+- poses the node received, exactly: its ``poses_accepted`` diagnostics key counts the valid
+  poses its aligner took, so ``1 − poses_accepted / poses_sent`` is the pose loss
+  (``pose_loss_exact``; out-of-order and outliers, none in this clean stream, would count as
+  lost). Before that key existed, and still for the split before / after the first training
+  (the diagnostics arrive once a second, the canaries give a running count): every
+  ``--canary-every``-th pose is followed by a *canary*, an extra pose with the same stamp and a
   NaN position. The node drops and counts it as ``invalid`` without touching its data, so
   ``invalid`` on ``/diagnostics`` = canaries the node's callback saw; the fraction missing
   estimates the node's pose loss (0 disables canaries);
@@ -156,6 +158,8 @@ class SoakResult:
     probe_first_gaps: list[list[int]] = field(default_factory=list)  # [pose index, missing]
     pose_loss_before_training: float = math.nan  # canary loss while no training had finished
     pose_loss_after_training: float = math.nan  # from the first finished training to the end
+    poses_accepted: int = -1  # diagnostics `poses_accepted` (valid poses the aligner took)
+    pose_loss_exact: float = math.nan  # 1 − poses_accepted / poses_sent
 
 
 def soak_inputs(minutes: float, rate: float, seed: int = SIM_SEED) -> SoakInputs:
@@ -459,6 +463,7 @@ def _result(config: SoakConfig, inputs: SoakInputs, sample_time: float, stamps: 
     span = float(inputs.times[-1] - inputs.times[0])  # [s simulated]
     invalid = _diag_int(values, 'invalid')
     dropped = _diag_int(values, 'dropped')
+    accepted = _diag_int(values, 'poses_accepted')
     samples = memory.samples_mb
     start_index = memory.start_index if memory.start_index is not None else 0
     rss_start, rss_end = samples[start_index], samples[-1]
@@ -484,7 +489,8 @@ def _result(config: SoakConfig, inputs: SoakInputs, sample_time: float, stamps: 
         rss_start_after_training=memory.start_index is not None,
         cpu_s_per_sim_hour=cpu / (span / 3600.0), cpu_share=cpu / wall,
         node_exit_code=exit_code, load_start=loads[0], load_end=loads[1],
-        rss_samples_mb=[round(value, 1) for value in samples])
+        rss_samples_mb=[round(value, 1) for value in samples], poses_accepted=accepted,
+        pose_loss_exact=1.0 - accepted / len(inputs.times) if accepted >= 0 else math.nan)
 
 
 def _with_loss_split(result: SoakResult, timeline: Sequence[tuple[int, int, int]]) -> SoakResult:
@@ -563,6 +569,8 @@ def format_table(result: SoakResult) -> str:
                 f'(achieved {r.achieved_speed:.1f}×, {r.wall_s:.1f} s wall, max publish lag '
                 f'{r.max_lag_s * 1e3:.0f} ms), load {r.load_start:.2f} → {r.load_end:.2f}'),
         ('poses / thrusts sent', f'{r.poses_sent} / {r.thrusts_sent}'),
+        ('node: poses accepted', f'{r.poses_accepted} of {r.poses_sent} (pose loss '
+                                 f'{_percent(r.pose_loss_exact)})'),
         ('node: canaries seen', f'{r.canaries_received} of {r.canaries_sent} (pose loss ≈ '
                                 f'{_percent(r.node_pose_loss)}: '
                                 f'{_percent(r.pose_loss_before_training)} before the first '

@@ -121,6 +121,10 @@ def test_short_soak_through_dds_delivers_and_accounts_for_everything() -> None:
     # The node saw (nearly) every pose: canaries it did not count are the only losses.
     assert result.canaries_received <= result.canaries_sent
     assert result.node_pose_loss <= MAX_SMOKE_POSE_LOSS, result
+    # The exact count agrees: every pose the node took was a real one, none twice.
+    assert 0 < result.poses_accepted <= result.poses_sent
+    assert result.pose_loss_exact == pytest.approx(1.0 - result.poses_accepted / 5990)
+    assert result.pose_loss_exact <= MAX_SMOKE_POSE_LOSS, result
     # The real stream is clean: nothing dropped as out-of-order or outlier, no gap, no staleness.
     assert result.node_dropped == 0 and result.node_gaps == 0 and result.node_stale_thrust == 0
     assert result.node_callback_errors == 0

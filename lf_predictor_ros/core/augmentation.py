@@ -6,15 +6,21 @@ the fit left there. Measured on the Fig. 4.1 steps: the filter learned in a 0.3 
 1.25 rad/s motion with gain 0.99, the one learned at 1.25 rad/s passed 0.3 rad/s with gain 1.14,
 so for the Δs after every change of sea state the predictor put the new waves into the LF pose.
 
-A DP engineer knows more than the window shows: motion anywhere in the wave band is wave-frequency
-motion, never LF motion (the premise of every wave filter, Fossen 2011 §11.3.4). This module turns
-that knowledge into data. It appends to the window a copy of itself with synthetic wave motion
-added to the measured positions: band-limited Gaussian motion spread evenly over
-[wave band low edge, Nyquist], with the RMS of the window's own wave motion. The forces and the LF
-targets of the copy are unchanged (waves move the vessel, not its LF pose or the thrust), so the
-fit is asked to give the same LF estimate with and without the extra waves: a stop band over the
-whole wave band, learned along with the data. The copy's first ``guard`` targets are masked (their
-regressors would reach back across the join into the real window).
+A DP engineer knows more than the window shows: the target filter (notch at ω0 + low-pass,
+thesis §4.2.2) says what the LF estimate of *any* motion is, not only of the motion in the window.
+This module turns that into data. It appends to the window a copy of itself with synthetic motion
+added to the measured positions: band-limited Gaussian motion with a flat spectrum over
+[ωLP, Nyquist] (above the target filter's low-pass cutoff, where the window of a narrow-band sea
+holds nothing) and an RMS of the window's own wave motion times ``wave_augmentation``; the copy's
+targets are the window's targets plus that motion's zero-phase target-filter output (≈ 0 there:
+`periodic_zero_phase`, exact for the periodic motion). The forces are unchanged (waves move the
+vessel, not the thrust). The fit is thus asked to reject, as the targets do, frequencies the sea
+has not shown yet: a stop band learned along with the data. The copy's first ``guard`` targets
+are masked (their regressors would reach back across the join into the real window).
+
+Putting the motion over the whole wave band instead (from 0.25 rad/s) fought the targets below
+ωLP: the candidate got worse on the real window and was rejected for up to a third of the
+retrainings (docs/BENCHMARKS.md, round 3).
 
 Pure functions of numpy arrays; the random motion comes from a seeded generator, so a retraining
 is reproducible.

@@ -168,6 +168,13 @@ def _relative_change(value: float, reference: float) -> float:
     return abs(value - reference) / reference if reference > 0.0 else math.inf
 
 
+def target_filter(params: PredictorParams, wave_peak_freq: float) -> FloatArray:
+    """The targets' notch at ω0 + low-pass at ω0 + offset (Algorithm 4.1 lines 25–26), as SOS."""
+    return design_wave_filter(wave_peak_freq, params.sample_time, notch_zeta=params.notch_zeta,
+                              notch_depth=params.notch_depth,
+                              lowpass_offset=params.lowpass_offset)
+
+
 def make_targets(params: PredictorParams, y: FloatArray, end_index: int,
                  wave_peak_freq: float, previous: TargetWindow | None) -> TargetWindow:
     """Algorithm 4.1 lines 24–35: zero-phase notch + low-pass and appending.
@@ -175,9 +182,7 @@ def make_targets(params: PredictorParams, y: FloatArray, end_index: int,
     The first targets (``previous`` None, or too old to append without a gap) come from filtering
     everything available up to N + ε samples, minus the last ε.
     """
-    sos = design_wave_filter(wave_peak_freq, params.sample_time, notch_zeta=params.notch_zeta,
-                             notch_depth=params.notch_depth,
-                             lowpass_offset=params.lowpass_offset)
+    sos = target_filter(params, wave_peak_freq)
     eps, beta = params.transient_samples, params.append_samples
     if previous is not None:
         shift = end_index - previous.end_index
@@ -258,10 +263,11 @@ def training_data(params: PredictorParams, snapshot: Snapshot, u: FloatArray, y:
                   ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
     """What the trainer fits: the window, plus its wave-invariance copy when enabled.
 
-    ``params.wave_augmentation`` > 0 appends the copy of `augmentation.augment_window` with
-    synthetic wave-band motion of ``wave_augmentation`` × the window's wave spread (its measured
-    WF RMS) per DOF, over [wave band low edge, Nyquist]. The generator is seeded by the
-    predictor seed, the segment and the sample index, so a replay trains on the same data.
+    ``params.wave_augmentation`` > 0 appends the copy of `augmentation.augment_window`: synthetic
+    motion over [ωLP, Nyquist] with ``wave_augmentation`` × the window's wave spread (its
+    measured WF RMS) per DOF added to y, and its zero-phase target-filter output added to the
+    targets. The generator is seeded by the predictor seed, the segment and the sample index, so
+    a replay trains on the same data.
     """
     if params.wave_augmentation == 0.0 or not np.all(np.isfinite(spread)):
         return u, y, targets, mask
@@ -269,11 +275,9 @@ def training_data(params: PredictorParams, snapshot: Snapshot, u: FloatArray, y:
     motion = band_limited_motion(len(y), y.shape[1], params.sample_time,
                                  (params.lowpass_cutoff(wave_peak_freq), params.nyquist_freq),
                                  params.wave_augmentation * spread, rng)
-    sos = design_wave_filter(wave_peak_freq, params.sample_time, notch_zeta=params.notch_zeta,
-                             notch_depth=params.notch_depth,
-                             lowpass_offset=params.lowpass_offset)
     return augment_window(u, y, targets, mask, motion,
-                          periodic_zero_phase(motion, sos, params.sample_time),
+                          periodic_zero_phase(motion, target_filter(params, wave_peak_freq),
+                                              params.sample_time),
                           params.max_lag + 1)
 
 

@@ -8,15 +8,14 @@ import numpy as np
 import pytest
 import torch
 
+from lf_predictor_ros.benchmark.sea_change import sine_gain
 from lf_predictor_ros.core.augmentation import (
     augment_window,
     band_limited_motion,
     periodic_zero_phase,
 )
 from lf_predictor_ros.core.filters import design_wave_filter, frequency_response
-from lf_predictor_ros.core.network import NumpyNnarmax
 from lf_predictor_ros.core.params import PredictorParams
-from lf_predictor_ros.core.regressors import build_regressors
 from lf_predictor_ros.core.retraining import (
     RetrainResult,
     Snapshot,
@@ -91,19 +90,6 @@ def excited_snapshot() -> Snapshot:
     record = simulate(load_scenario('onedof_excited'), 1, 1500.0)
     return Snapshot(u=np.array(record.thrust[:, :1]), y=np.array(record.measured_pose[:, :1]),
                     end_index=len(record.t) - 1, segment=1)
-
-
-def sine_gain(model: NumpyNnarmax, omega: float, n: int = 600) -> float:
-    """|ŷLF| / |y| of the network driven by a pure 0.3 m sinusoid at ω (no force)."""
-    t = np.arange(n, dtype=float)
-    y = 0.3 * np.sin(omega * t)[:, None]
-    x, first = build_regressors(np.zeros((n, 1)), y, y, model.spec)
-    out = model.forward(x)[:, 0]
-    tt = t[first:] + 1.0
-    half = slice(len(tt) // 2, None)
-    design = np.column_stack([np.sin(omega * tt[half]), np.cos(omega * tt[half])])
-    coef, *_ = np.linalg.lstsq(design, out[half], rcond=None)
-    return float(np.hypot(*coef) / 0.3)
 
 
 def retrained(wave_augmentation: float) -> tuple[RetrainResult, PredictorParams]:

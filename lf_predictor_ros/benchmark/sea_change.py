@@ -63,8 +63,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     overrides = ast.literal_eval(args.overrides)
     if not isinstance(overrides, dict):
         parser.error(f'{args.overrides!r} is not a dict literal')
-    if args.no_restart:
+    original = retraining.sea_state_changed
+    if args.no_restart:  # for this run only: the module is restored below
         retraining.sea_state_changed = lambda *_: False
+    try:
+        _report(args, overrides)
+    finally:
+        retraining.sea_state_changed = original
+    return 0
+
+
+def _report(args: argparse.Namespace, overrides: dict[str, object]) -> None:
+    """Run the predictor over the scenario and print the gains and the per-Δ table."""
     scenario = load_scenario(args.scenario)
     params = predictor_params(scenario, overrides)
     record = simulate(scenario, seed=args.seed, duration=args.duration)
@@ -90,7 +100,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f'{start:8.0f} {math.sqrt(float(np.mean(error[keep] ** 2))):9.3f} '
                   f'{omega_used[keep][-1]:8.3f} {data["omega"][keep][-1]:8.3f}')
     print(f'counters: {predictor.counters}')
-    return 0
+    predictor.close()
 
 
 if __name__ == '__main__':

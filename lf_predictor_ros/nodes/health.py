@@ -8,13 +8,18 @@ and `/diagnostics` can say what happened.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 from geometry_msgs.msg import PoseStamped, WrenchStamped
+import numpy as np
+from numpy.typing import NDArray
 from rclpy.impl.rcutils_logger import RcutilsLogger
 
 from lf_predictor_ros.core.alignment import AlignedSample, InputAligner
 from lf_predictor_ros.nodes.conversions import FRAME_BODY, msg_to_force, msg_to_pose, stamp_to_sec
+
+FloatArray = NDArray[np.float64]
+MsgT = TypeVar('MsgT', PoseStamped, WrenchStamped)
 
 
 class InputHealth:
@@ -57,13 +62,9 @@ class InputHealth:
     def _feed_thrust(self, msg: WrenchStamped, aligner: InputAligner) -> None:
         """Store an applied force in the aligner (zero-order hold); never raises."""
         try:
-            self._check_frame('thrust', msg.header.frame_id, FRAME_BODY)
-            try:
-                force = msg_to_force(msg)
-            except ValueError:
-                self._invalid_messages += 1
-                return
-            aligner.add_force(stamp_to_sec(msg.header.stamp), force)
+            force = self._converted('thrust', msg, FRAME_BODY, msg_to_force)
+            if force is not None:
+                aligner.add_force(stamp_to_sec(msg.header.stamp), force)
         except Exception as error:  # noqa: BLE001 - a callback must never kill the node
             self._count_error('thrust', error)
 
@@ -71,13 +72,19 @@ class InputHealth:
                    process: Callable[[AlignedSample], None]) -> None:
         """Align a measured pose and ``process`` every grid sample it completes; never raises."""
         try:
-            self._check_frame('measured_pose', msg.header.frame_id, frame_id)
-            try:
-                pose = msg_to_pose(msg)
-            except ValueError:
-                self._invalid_messages += 1
-                return
-            for sample in aligner.add_pose(stamp_to_sec(msg.header.stamp), pose):
-                process(sample)
+            pose = self._converted('measured_pose', msg, frame_id, msg_to_pose)
+            if pose is not None:
+                for sample in aligner.add_pose(stamp_to_sec(msg.header.stamp), pose):
+                    process(sample)
         except Exception as error:  # noqa: BLE001 - a callback must never kill the node
             self._count_error('measured_pose', error)
+
+    def _converted(self, topic: str, msg: MsgT, expected_frame: str,
+                   convert: Callable[[MsgT], FloatArray]) -> FloatArray | None:
+        """``convert(msg)`` after the frame check; None (counted invalid) if it cannot be read."""
+        self._check_frame(topic, msg.header.frame_id, expected_frame)
+        try:
+            return convert(msg)
+        except ValueError:
+            self._invalid_messages += 1
+            return None

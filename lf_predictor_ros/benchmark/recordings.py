@@ -1,0 +1,306 @@
+"""Fair recordings: the data every open-loop score is computed on, with where it came from.
+
+A recording is one simulated run of a scenario on the estimators' grid h, together with its
+`Provenance`: scenario, seed, duration, and **how the thrust was made**:
+
+| loop | thrust | scored? |
+|---|---|---|
+| ``open`` | the scenario's open-loop excitation (no controller) | yes |
+| ``estimator`` | the DP PID fed a causal estimator's output (``estimator`` names it) | yes |
+| ``truth_lf`` | the DP PID fed the true LF pose | **never** |
+
+Why: with the PID on the true LF pose the recorded thrust is a noise-free function of the truth,
+and any regression on it (the predictor's force regressors included) looks brilliant. Such a
+recording is refused twice before scoring: by its provenance (`check_scorable`) and by the
+data itself (`leak_check`: a linear map from the thrust alone, fitted in-sample by least squares
+on the truth, must stay clearly worse than the best estimator on every DOF).
+
+The grid arrays are those the predictor node builds (`InputAligner` with ``average_poses``): the
+measured pose is the mean of the sensor poses of each interval h, thrust, truth and ω0 those of
+the grid instant.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import signal
+
+from lf_predictor_ros.core.alignment import block_mean_poses, mean_pose
+from lf_predictor_ros.core.estimator import wrap_to_pi
+from sim_ros.simulation import Scenario, SimRecord, simulate, simulate_in_loop
+
+FloatArray = NDArray[np.float64]
+LOOPS = ('open', 'estimator', 'truth_lf')
+SCORABLE_LOOPS = ('open', 'estimator')
+# leak check: thrust-only regressors (lags of the body-frame thrust over LEAK_LAGS · h) and the
+# factor by which the thrust-only fit must stay worse than the best estimator on every DOF
+LEAK_LAGS = 10
+LEAK_TIME_CONSTANTS = (3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)  # [s]
+LEAK_FACTOR = 0.7
+ABORT_EXCURSION = 100.0  # [m] a recording loop that diverges this far is not a recording
+
+
+class LeakError(ValueError):
+    """A recording whose thrust encodes the truth (or whose origin is unknown) was to be scored."""
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """Where a recording came from; part of the data set, checked before any score."""
+
+    scenario: str
+    seed: int
+    duration: float  # [s] simulated
+    sample_time: float  # [s] grid h of the arrays
+    loop: str  # one of LOOPS
+    estimator: str | None = None  # the estimator in the recording loop (loop == 'estimator')
+
+    def __post_init__(self) -> None:
+        """Validate the loop kind and that an estimator loop names its estimator."""
+        if self.loop not in LOOPS:
+            raise ValueError(f'loop must be one of {LOOPS}, got {self.loop!r}')
+        if (self.loop == 'estimator') != (self.estimator is not None):
+            raise ValueError("an 'estimator' loop must name its estimator, other loops must not")
+
+    def label(self) -> str:
+        """Short text for tables: 'open loop' / 'loop on observer' / 'loop on truth (LEAKS)'."""
+        if self.loop == 'open':
+            return 'open loop'
+        if self.loop == 'estimator':
+            return f'loop on {self.estimator}'
+        return 'loop on the true LF pose (leaks)'
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return {'scenario': self.scenario, 'seed': self.seed, 'duration': self.duration,
+                'sample_time': self.sample_time, 'loop': self.loop, 'estimator': self.estimator}
+
+
+@dataclass(frozen=True)
+class Recording:
+    """Grid arrays of one run and their provenance (arrays (n,) or (n, 3), oldest first)."""
+
+    provenance: Provenance
+    t: FloatArray  # [s]
+    y: FloatArray  # measured pose, interval mean [m, m, rad]
+    u: FloatArray  # applied thrust, body frame [N, N, N·m]
+    truth: FloatArray  # true LF pose [m, m, rad]
+    omega: FloatArray  # true wave peak frequency ω0 [rad/s]
+
+    def data(self) -> dict[str, FloatArray]:
+        """The arrays as the dict the estimators' runners take (t, y, u, truth, omega)."""
+        return {'t': self.t, 'y': self.y, 'u': self.u, 'truth': self.truth, 'omega': self.omega}
+
+
+def decimate(record: SimRecord, stride: int) -> dict[str, FloatArray]:
+    """A simulator record on the grid h = stride · sensor period (module docstring)."""
+    if stride < 1:
+        raise ValueError(f'stride must be >= 1 sensor samples, got {stride}')
+    sl = slice(stride - 1, None, stride)
+    return {'t': record.t[sl], 'y': block_mean_poses(record.measured_pose, stride),
+            'u': record.thrust[sl], 'truth': record.truth_lf_pose[sl],
+            'omega': record.wave_peak_freq[sl]}
+
+
+def grid_stride(scenario: Scenario, sample_time: float) -> int:
+    """Sensor samples per grid interval; h must be a whole multiple of the sensor period."""
+    ratio = sample_time / scenario.sample_time
+    if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-9:
+        raise ValueError(f'grid h = {sample_time} s must be a whole multiple of the scenario '
+                         f'sensor period {scenario.sample_time} s')
+    return int(round(ratio))
+
+
+class GridInput:
+    """A loop's estimator fed as the predictor node feeds it: one call per grid interval h.
+
+    Called by `simulate_in_loop` at every sensor sample; every ``stride``-th call it passes
+    ``step(t, mean pose of the interval, thrust of the instant, true ω0)`` and returns its
+    output; in between it returns the last one (the PID holds it). Before the first estimate the
+    measurement itself is returned.
+    """
+
+    def __init__(self, step: Callable[[float, FloatArray, FloatArray, float], FloatArray],
+                 schedule: Callable[[float], float], stride: int) -> None:
+        """``step`` is the estimator (e.g. `StreamingEstimator.step`), ``schedule`` the true ω0."""
+        self.step = step
+        self.schedule = schedule
+        self.stride = stride
+        self._poses: list[FloatArray] = []
+        self._held: FloatArray | None = None
+
+    def __call__(self, t: float, pose: FloatArray, thrust: FloatArray) -> FloatArray:
+        """The estimate to hold after this sensor sample."""
+        self._poses.append(pose)
+        if len(self._poses) == self.stride:
+            mean = mean_pose(np.array(self._poses))
+            self._poses = []
+            self._held = self.step(t, mean, thrust, self.schedule(t))
+        return pose if self._held is None else self._held
+
+
+def record(scenario: Scenario, seed: int, duration: float | None, sample_time: float,
+           loop_estimator: str | None,
+           make_step: Callable[[str], Callable[[float, FloatArray, FloatArray, float], FloatArray]]
+           | None = None, *, truth_fed: bool = False) -> Recording:
+    """Simulate one recording of ``scenario`` on the grid ``sample_time`` (module docstring).
+
+    Scenarios without a controller are recorded open loop. With a controller, the loop is
+    closed on ``loop_estimator`` (built by ``make_step(name)``, fed every h like the node) and
+    the PID runs once per h, as in the DDS pipeline. ``truth_fed`` records the leaking kind
+    instead (PID on the true LF pose): only for demonstrating the leak check.
+    """
+    stride = grid_stride(scenario, sample_time)
+    total = scenario.duration if duration is None else float(duration)
+    if not scenario.controller.enabled:
+        provenance = Provenance(scenario.name, seed, total, sample_time, 'open')
+        raw = simulate(scenario, seed=seed, duration=total)
+    elif truth_fed:
+        provenance = Provenance(scenario.name, seed, total, sample_time, 'truth_lf')
+        raw = simulate(scenario, seed=seed, duration=total, controller=True, feedback='truth_lf')
+    else:
+        if loop_estimator is None or make_step is None:
+            raise ValueError(f'scenario {scenario.name!r} has a DP controller: name the causal '
+                             'estimator to close the recording loop on (e.g. observer)')
+        grid = GridInput(make_step(loop_estimator), scenario.waves.peak_freq, stride)
+        run = simulate_in_loop(scenario, seed, total, grid, scenario.sample_time,
+                               abort_excursion=ABORT_EXCURSION, pid_period=sample_time)
+        if run.aborted_at is not None:
+            raise ValueError(f'the recording loop of {scenario.name!r} seed {seed} on '
+                             f'{loop_estimator!r} diverged at t = {run.aborted_at:.0f} s: '
+                             'choose a stable loop estimator')
+        provenance = Provenance(scenario.name, seed, total, sample_time, 'estimator',
+                                loop_estimator)
+        raw = run.record
+    grid_data = decimate(raw, stride)
+    return Recording(provenance, **grid_data)
+
+
+def check_scorable(recording: Recording, scenario: str | None = None,
+                   seed: int | None = None) -> None:
+    """Raise `LeakError` unless the recording's provenance allows scoring (and matches)."""
+    prov = recording.provenance
+    if prov.loop not in SCORABLE_LOOPS:
+        raise LeakError(f'recording {prov.scenario!r} seed {prov.seed} was made with the DP loop '
+                        f'on the true LF pose: its thrust encodes the truth, so it is never '
+                        'scored; record it with the loop closed on a causal estimator')
+    if scenario is not None and prov.scenario != scenario:
+        raise LeakError(f'recording is of scenario {prov.scenario!r}, not {scenario!r}')
+    if seed is not None and prov.seed != seed:
+        raise LeakError(f'recording is of seed {prov.seed}, not {seed}')
+
+
+def _continuous(pose: FloatArray, ndof: int) -> FloatArray:
+    out = np.array(pose[:, :ndof], dtype=np.float64)
+    if ndof == 3:
+        out[:, 2] = np.unwrap(out[:, 2])
+    return out
+
+
+def thrust_features(u: FloatArray, sample_time: float, lags: int = LEAK_LAGS,
+                    time_constants: Sequence[float] = LEAK_TIME_CONSTANTS) -> FloatArray:
+    """Causal regressors of the thrust alone (n, ndof·(lags + len(time_constants))).
+
+    Per force channel: u[k], u[k−1], …, u[k−lags+1] and the outputs of first-order low-passes
+    1/(T s + 1) for each T in ``time_constants`` [s] (exact discretization, zero initial state).
+    Together they span the inverse of a PID (a band-pass with poles at the PID's zeros, seconds
+    to minutes) with few columns, so an in-sample fit cannot win by over-fitting noise.
+    """
+    n, channels = u.shape
+    blocks = []
+    padded = np.vstack([np.repeat(u[:1], lags - 1, axis=0), u]) if lags > 1 else u
+    for lag in range(lags):
+        blocks.append(padded[lags - 1 - lag:lags - 1 - lag + n])
+    for time_constant in time_constants:
+        alpha = math.exp(-sample_time / time_constant)
+        blocks.append(signal.lfilter([1.0 - alpha], [1.0, -alpha], u, axis=0))
+    return np.asarray(np.hstack(blocks), dtype=np.float64).reshape(n, -1)
+
+
+def thrust_only_rmse(u: FloatArray, truth: FloatArray, ndof: int, sample_time: float,
+                     begin: int = 0) -> FloatArray:
+    """RMSE per DOF of the best linear map from thrust alone to the true LF pose (in-sample).
+
+    Regressors: `thrust_features` of the ndof force channels and a constant; least squares per
+    DOF over the samples k ≥ begin. No position enters. If the thrust was computed from the truth
+    by a linear controller (PID), this map inverts the controller and comes close to the truth;
+    if it was computed from an estimate, it can at best reproduce that estimate.
+    """
+    if u.shape != truth.shape or u.ndim != 2 or u.shape[1] != 3:
+        raise ValueError(f'u and truth must both be (n, 3), got {u.shape} and {truth.shape}')
+    features = thrust_features(u[:, :ndof], sample_time)[begin:]
+    if features.shape[0] < 4 * features.shape[1]:
+        raise ValueError(f'the leak check needs >= {4 * features.shape[1]} samples after the '
+                         f'warm-up, got {features.shape[0]}: record longer')
+    scale = np.std(features, axis=0)
+    scale[scale == 0.0] = 1.0
+    design = np.hstack([features / scale, np.ones((features.shape[0], 1))])
+    target = _continuous(truth, ndof)[begin:]
+    coef, *_ = np.linalg.lstsq(design, target, rcond=None)
+    err = design @ coef - target
+    if ndof == 3:
+        err[:, 2] = wrap_to_pi(err[:, 2])
+    return np.asarray(np.sqrt(np.mean(err**2, axis=0)), dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class LeakReport:
+    """Thrust-only RMSE vs the best estimator's, per DOF."""
+
+    thrust_only_rmse: tuple[float, ...]
+    best_rmse: tuple[float, ...]
+    best_estimator: tuple[str, ...]
+    factor: float
+
+    @property
+    def ratios(self) -> tuple[float, ...]:
+        """Thrust-only RMSE / best estimator RMSE per DOF (a leak makes one ≲ 1)."""
+        return tuple(a / b if b > 0.0 else math.inf
+                     for a, b in zip(self.thrust_only_rmse, self.best_rmse, strict=True))
+
+    @property
+    def leaking(self) -> bool:
+        """True when the thrust alone comes within ``factor`` of the best estimator on a DOF."""
+        return any(r < self.factor for r in self.ratios)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return {'thrust_only_rmse': list(self.thrust_only_rmse), 'best_rmse': list(self.best_rmse),
+                'best_estimator': list(self.best_estimator), 'factor': self.factor,
+                'ratios': list(self.ratios), 'leaking': self.leaking}
+
+
+def leak_check(recording: Recording, estimator_rmse: dict[str, Sequence[float]], ndof: int,
+               begin: int, factor: float = LEAK_FACTOR) -> LeakReport:
+    """Compare the thrust-only fit with the best of ``estimator_rmse`` (name → RMSE per DOF)."""
+    if not estimator_rmse:
+        raise ValueError('the leak check needs the RMSE of at least one estimator')
+    only = thrust_only_rmse(recording.u, recording.truth, ndof,
+                            recording.provenance.sample_time, begin)
+    names = list(estimator_rmse)
+    table = np.array([list(estimator_rmse[n])[:ndof] for n in names], dtype=np.float64)
+    best = np.argmin(table, axis=0)
+    return LeakReport(tuple(float(v) for v in only),
+                      tuple(float(table[best[i], i]) for i in range(ndof)),
+                      tuple(names[int(best[i])] for i in range(ndof)), factor)
+
+
+def require_fair(recording: Recording, report: LeakReport) -> None:
+    """Raise `LeakError` if the provenance or the data say the thrust leaks the truth."""
+    check_scorable(recording)
+    if report.leaking:
+        ratios = ', '.join(f'{r:.2f}' for r in report.ratios)
+        raise LeakError(f'recording {recording.provenance.scenario!r} seed '
+                        f'{recording.provenance.seed} ({recording.provenance.label()}): a linear '
+                        f'map from the thrust alone reaches {ratios} × the best estimator '
+                        f'(< {report.factor}): the thrust encodes the truth; it is not scored')
+
+
+__all__ = ['LEAK_FACTOR', 'LEAK_LAGS', 'LOOPS', 'GridInput', 'LeakError', 'LeakReport',
+           'Provenance', 'Recording', 'check_scorable', 'decimate', 'grid_stride', 'leak_check',
+           'record', 'require_fair', 'thrust_only_rmse']

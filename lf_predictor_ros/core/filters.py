@@ -14,7 +14,9 @@ Continuous-time design (Fossen 2011, §11.3.2 "notch filtering"; thesis Fig. 4.8
 
   Second order rather than MSS's first order: it removes measurement noise above the wave band at
   40 dB/decade, stays maximally flat in the LF band (no ripple, < 0.01 dB below 0.05 rad/s) and
-  adds only two poles of phase lag for the causal baseline.
+  adds only two poles of phase lag for the causal baseline. Options for the tuned baselines
+  (`benchmark.baseline_tuning`): ``lowpass_order=1`` is MSS's first order ω_LP/(s + ω_LP) (half
+  the lag), ``lowpass_offset=None`` drops the low-pass (notch only: the least lag).
 
 The series h = h_lp · h_n is discretized with the bilinear (Tustin) transform pre-warped at ω0,
 s = K (z − 1)/(z + 1) with K = ω0 / tan(ω0 T/2), so the notch zeros land exactly on
@@ -34,6 +36,8 @@ FloatArray = NDArray[np.float64]
 DEFAULT_NOTCH_ZETA = 0.5  # ζ_p [-]: notch width; -3 dB band ≈ 2 ζ_p ω0 wide
 DEFAULT_NOTCH_DEPTH = 0.05  # ζ_z/ζ_p [-]: gain at ω0 (0.05 = -26 dB)
 DEFAULT_LOWPASS_OFFSET = 0.2  # [rad/s] ω_LP = ω0 + offset (thesis Fig. 4.8)
+DEFAULT_LOWPASS_ORDER = 2  # Butterworth order of the low-pass (1 or 2)
+LOWPASS_ORDERS = (1, 2)
 _BUTTERWORTH_DAMPING = 1.0 / np.sqrt(2.0)  # ζ of a 2nd-order Butterworth [-]
 
 
@@ -42,7 +46,8 @@ def _check_design(
     sample_time: float,
     notch_zeta: float,
     notch_depth: float,
-    lowpass_offset: float,
+    lowpass_offset: float | None,
+    lowpass_order: int = DEFAULT_LOWPASS_ORDER,
 ) -> None:
     """Raise ValueError naming the broken rule of a wave-filter design."""
     if not np.isfinite(sample_time) or sample_time <= 0.0:
@@ -60,10 +65,13 @@ def _check_design(
             f'notch_depth (gain at ω0, ζ_z/ζ_p) must be in [0, 1), got {notch_depth}: '
             'use e.g. 0.05 for -26 dB'
         )
-    if not np.isfinite(lowpass_offset) or lowpass_offset <= 0.0:
+    if lowpass_offset is not None and (not np.isfinite(lowpass_offset) or lowpass_offset <= 0.0):
         raise ValueError(
-            f'lowpass_offset must be > 0 rad/s (ω_LP = ω0 + offset), got {lowpass_offset}'
+            f'lowpass_offset must be > 0 rad/s (ω_LP = ω0 + offset) or None (no low-pass), got '
+            f'{lowpass_offset}'
         )
+    if lowpass_order not in LOWPASS_ORDERS:
+        raise ValueError(f'lowpass_order must be one of {LOWPASS_ORDERS}, got {lowpass_order}')
 
 
 def continuous_wave_filter(
@@ -71,18 +79,26 @@ def continuous_wave_filter(
     *,
     notch_zeta: float = DEFAULT_NOTCH_ZETA,
     notch_depth: float = DEFAULT_NOTCH_DEPTH,
-    lowpass_offset: float = DEFAULT_LOWPASS_OFFSET,
+    lowpass_offset: float | None = DEFAULT_LOWPASS_OFFSET,
+    lowpass_order: int = DEFAULT_LOWPASS_ORDER,
 ) -> tuple[FloatArray, FloatArray]:
-    """Return (b, a) of the continuous notch · Butterworth low-pass, highest power of s first."""
+    """Return (b, a) of the continuous notch · Butterworth low-pass, highest power of s first.
+
+    ``lowpass_offset=None``: the notch alone; ``lowpass_order=1``: a first-order low-pass.
+    """
     if not np.isfinite(wave_peak_freq) or wave_peak_freq <= 0.0:
         raise ValueError(f'wave_peak_freq must be > 0 rad/s, got {wave_peak_freq}')
     _check_design(wave_peak_freq, np.pi / (2.0 * wave_peak_freq), notch_zeta, notch_depth,
-                  lowpass_offset)  # any sample time with ω0 below Nyquist: checks the rest
+                  lowpass_offset, lowpass_order)  # any sample time with ω0 below Nyquist
     w0 = wave_peak_freq
     zeta_zero = notch_depth * notch_zeta
     notch_num = np.array([1.0, 2.0 * zeta_zero * w0, w0**2])
     notch_den = np.array([1.0, 2.0 * notch_zeta * w0, w0**2])
+    if lowpass_offset is None:
+        return notch_num, notch_den
     w_lp = w0 + lowpass_offset
+    if lowpass_order == 1:
+        return np.polymul(notch_num, [w_lp]), np.polymul(notch_den, [1.0, w_lp])
     lp_num = np.array([w_lp**2])
     lp_den = np.array([1.0, 2.0 * _BUTTERWORTH_DAMPING * w_lp, w_lp**2])
     return np.polymul(notch_num, lp_num), np.polymul(notch_den, lp_den)
@@ -94,7 +110,8 @@ def design_wave_filter(
     *,
     notch_zeta: float = DEFAULT_NOTCH_ZETA,
     notch_depth: float = DEFAULT_NOTCH_DEPTH,
-    lowpass_offset: float = DEFAULT_LOWPASS_OFFSET,
+    lowpass_offset: float | None = DEFAULT_LOWPASS_OFFSET,
+    lowpass_order: int = DEFAULT_LOWPASS_ORDER,
 ) -> FloatArray:
     """Design the discrete notch + low-pass wave filter as SOS (thesis Alg. 4.1 lines 25–26).
 
@@ -103,17 +120,21 @@ def design_wave_filter(
         sample_time: sample period T [s].
         notch_zeta: notch width ζ_p (relative damping of the notch poles) [-].
         notch_depth: gain of the notch at ω0, ζ_z/ζ_p, in [0, 1) [-].
-        lowpass_offset: ω_LP − ω0 [rad/s].
+        lowpass_offset: ω_LP − ω0 [rad/s]; None for no low-pass (the notch alone).
+        lowpass_order: 2 (Butterworth, the default) or 1 (ω_LP/(s + ω_LP)).
 
     Returns:
-        SOS array (2, 6): notch and low-pass, unity DC gain.
+        SOS array (2, 6): notch and low-pass, unity DC gain ((1, 6), the notch alone, with
+        ``lowpass_offset=None``; a first-order low-pass is padded to a second-order section).
     """
-    _check_design(wave_peak_freq, sample_time, notch_zeta, notch_depth, lowpass_offset)
+    _check_design(wave_peak_freq, sample_time, notch_zeta, notch_depth, lowpass_offset,
+                  lowpass_order)
     b, a = continuous_wave_filter(
         wave_peak_freq,
         notch_zeta=notch_zeta,
         notch_depth=notch_depth,
         lowpass_offset=lowpass_offset,
+        lowpass_order=lowpass_order,
     )
     zeros, poles, gain = signal.tf2zpk(b, a)
     # Tustin pre-warped at ω0: s = K (z-1)/(z+1), K = ω0/tan(ω0 T/2); scipy uses K = 2 fs.

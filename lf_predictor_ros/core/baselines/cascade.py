@@ -7,12 +7,15 @@ beat. Heading is unwrapped before filtering so a crossing of ±π is not seen as
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
 from lf_predictor_ros.core.estimator import EstimatorStatus, check_ndof, wrap_to_pi
 from lf_predictor_ros.core.filters import (
     DEFAULT_LOWPASS_OFFSET,
+    DEFAULT_LOWPASS_ORDER,
     DEFAULT_NOTCH_DEPTH,
     DEFAULT_NOTCH_ZETA,
     CausalFilter,
@@ -37,15 +40,20 @@ class CascadeFilter:
         *,
         notch_zeta: float = DEFAULT_NOTCH_ZETA,
         notch_depth: float = DEFAULT_NOTCH_DEPTH,
-        lowpass_offset: float = DEFAULT_LOWPASS_OFFSET,
+        lowpass_offset: float | None = DEFAULT_LOWPASS_OFFSET,
+        lowpass_order: int = DEFAULT_LOWPASS_ORDER,
     ) -> None:
-        """Design the filter for ω0 = wave_peak_freq [rad/s] at sample_time [s]."""
+        """Design the filter for ω0 = wave_peak_freq [rad/s] at sample_time [s].
+
+        ``lowpass_offset=None`` runs the notch alone; ``lowpass_order`` 1 or 2 (default).
+        """
         self.ndof = check_ndof(ndof)
         self.sample_time = float(sample_time)
-        self._design = {
+        self._design: dict[str, Any] = {
             'notch_zeta': notch_zeta,
             'notch_depth': notch_depth,
             'lowpass_offset': lowpass_offset,
+            'lowpass_order': lowpass_order,
         }
         self._wave_peak_freq = float(wave_peak_freq)
         sos = design_wave_filter(self._wave_peak_freq, self.sample_time, **self._design)

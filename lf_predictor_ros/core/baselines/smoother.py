@@ -7,12 +7,15 @@ error grows near both ends of the series (edge transients, thesis Fig. 4.9).
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lf_predictor_ros.core.estimator import EstimatorStatus, check_ndof, wrap_to_pi
 from lf_predictor_ros.core.filters import (
     DEFAULT_LOWPASS_OFFSET,
+    DEFAULT_LOWPASS_ORDER,
     DEFAULT_NOTCH_DEPTH,
     DEFAULT_NOTCH_ZETA,
     design_wave_filter,
@@ -31,11 +34,13 @@ def smooth_poses(
     *,
     notch_zeta: float = DEFAULT_NOTCH_ZETA,
     notch_depth: float = DEFAULT_NOTCH_DEPTH,
-    lowpass_offset: float = DEFAULT_LOWPASS_OFFSET,
+    lowpass_offset: float | None = DEFAULT_LOWPASS_OFFSET,
+    lowpass_order: int = DEFAULT_LOWPASS_ORDER,
 ) -> FloatArray:
     """Zero-phase wave filtering of a pose series (n, 3); heading unwrapped, result wrapped.
 
-    Components beyond ndof are 0. The input is not modified.
+    Components beyond ndof are 0. The input is not modified. ``lowpass_offset=None``: the notch
+    alone; ``lowpass_order``: 1 or 2 (`filters.design_wave_filter`).
     """
     check_ndof(ndof)
     series = np.asarray(pose, dtype=np.float64)
@@ -47,6 +52,7 @@ def smooth_poses(
         notch_zeta=notch_zeta,
         notch_depth=notch_depth,
         lowpass_offset=lowpass_offset,
+        lowpass_order=lowpass_order,
     )
     channels = series[:, :ndof].copy()
     if ndof == 3:
@@ -71,7 +77,7 @@ class ZeroPhaseSmoother:
         pose: ArrayLike,
         wave_peak_freq: float,
         ndof: int,
-        **filter_options: float,
+        **filter_options: Any,
     ) -> None:
         """Smooth pose (n, 3) sampled at times t (n,) [s] with the notch at ω0 [rad/s]."""
         times = np.asarray(t, dtype=np.float64)

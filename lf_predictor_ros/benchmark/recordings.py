@@ -37,11 +37,14 @@ from sim_ros.simulation import Scenario, SimRecord, simulate, simulate_in_loop
 FloatArray = NDArray[np.float64]
 LOOPS = ('open', 'estimator', 'truth_lf')
 SCORABLE_LOOPS = ('open', 'estimator')
-# leak check: thrust-only regressors (lags of the body-frame thrust over LEAK_LAGS · h) and the
-# factor by which the thrust-only fit must stay worse than the best estimator on every DOF
+# leak check: thrust-only regressors (LEAK_LAGS lags and first-order low-passes of the body-frame
+# thrust) and the share of the best causal estimator's RMSE the thrust-only fit must stay above on
+# every DOF. Measured on supply_closed_loop (seeds 2 and 5, 1200–3600 s): fed the truth, the fit
+# reaches 0.01–0.06 of the tuned observer's RMSE; on loops closed on the observer 0.63–1.13 (a
+# filter of the loop estimator's own history, fitted on the truth, can undo part of its lag).
 LEAK_LAGS = 10
 LEAK_TIME_CONSTANTS = (3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)  # [s]
-LEAK_FACTOR = 0.7
+LEAK_FACTOR = 0.35
 ABORT_EXCURSION = 100.0  # [m] a recording loop that diverges this far is not a recording
 
 
@@ -265,7 +268,7 @@ class LeakReport:
 
     @property
     def leaking(self) -> bool:
-        """True when the thrust alone comes within ``factor`` of the best estimator on a DOF."""
+        """True when the thrust alone beats ``factor`` × the best estimator's RMSE on a DOF."""
         return any(r < self.factor for r in self.ratios)
 
     def to_dict(self) -> dict[str, Any]:

@@ -20,6 +20,11 @@ Ground truth:
   (see the vessels module docstring); slowly varying drift is modelled by the drift bias.
   With **motion superposition** (Fossen 2011 §8.2.1) η = η_LF + η_w: the vessel is the LF
   motion and truth_lf_pose is η_LF itself. Without waves (or σ = 0) the two truths coincide.
+- `waves.model: rao` is motion superposition too, with η_w from motion RAOs over a JONSWAP
+  sea with cos-2s spreading (`physics.sea_spectrum`, `physics.rao`): η_w(t) is evaluated with
+  the *current LF heading* ψ_LF(t) (relative wave direction β = θ − ψ_LF, body motion rotated
+  by R(ψ_LF)), so turning the vessel changes which DOFs move. `wave_peak_freq` is the
+  spectral peak ω_p = 2π/T_p (at DP speed the encounter frequency equals ω).
 - `measured_pose` = total truth + sensor noise (+ outliers), heading wrapped; on a dropout the
   last valid measurement is repeated and `measured_valid` is False.
 """
@@ -40,6 +45,14 @@ from sim_ros.physics import schedule as sched
 from sim_ros.physics.environment import EnvironmentConfig, EnvironmentGenerator, MarkovBias
 from sim_ros.physics.integrate import RatesFn, rk4_step
 from sim_ros.physics.kinematics import FloatArray, earth_to_body, rotation, wrap_angle
+from sim_ros.physics.rao import RaoParams, motion_basis, motion_from_basis
+from sim_ros.physics.sea_spectrum import (
+    DEFAULT_FREQ_RANGE,
+    WaveComponents,
+    check_sea,
+    discretize_sea,
+    peak_frequency,
+)
 from sim_ros.physics.sensors import SensorConfig, check_sensor_rate, sensor_errors
 from sim_ros.physics.thrusters import ThrusterConfig, allocate, generalized_thrust
 from sim_ros.physics.vessels import (
@@ -64,15 +77,66 @@ Vec3 = tuple[float, float, float]
 
 
 # ---------------------------------------------------------------------------------- scenario
+SCENARIO_WAVE_MODELS = (*WAVE_MODELS, 'rao')
+RAO_KEYS = ('hs', 'tp', 'gamma', 'direction', 'spreading', 'components', 'frequency_range',
+            'rao')
+SHAPING_KEYS = ('damping', 'sigma', 'peak_freq', 'peak_freq_resolution')
+MAX_WAVE_COMPONENTS = 5000  # N·M; ~300 are plenty (cost ∝ components)
+
+
 @dataclass(frozen=True)
 class WaveConfig:
-    """First-order waves: model, λ, σ per DOF (north, east, yaw), ω0 schedule."""
+    """First-order waves: model, then its parameters.
 
-    model: str = 'none'  # 'force' | 'motion' | 'none'
+    'force' / 'motion' (shaping filters): λ, σ per DOF (north, east, yaw), ω0 schedule.
+    'rao' (motion RAOs over a JONSWAP sea): Hs [m], Tp [s], γ, mean direction the waves come
+    from [rad, clockwise from north], cos-2s spreading exponent s (None: long-crested),
+    components (N frequencies, M directions), frequency_range (ω_lo, ω_hi) / ω_p, RAO parameters.
+    For 'rao' the peak_freq schedule is derived: constant ω_p = 2π/Tp (reported per sample).
+    """
+
+    model: str = 'none'  # 'force' | 'motion' | 'rao' | 'none'
     damping: float = 0.1  # λ
     sigma: Vec3 = (0.0, 0.0, 0.0)  # force: N, N, N·m; motion: m, m, rad (per √rad/s)
     peak_freq: sched.PeakFreqSchedule = field(default_factory=lambda: sched.constant(0.8))
     peak_freq_resolution: float = 1e-3  # rad/s, ω0 rounding for the discretization cache
+    hs: float = 0.0  # m, significant wave height (rao)
+    tp: float = 10.0  # s, peak period (rao)
+    gamma: float = 3.3  # JONSWAP peak enhancement (rao)
+    direction: float = 0.0  # rad, mean direction the waves come from (rao)
+    spreading: float | None = None  # s of cos-2s (rao); None: long-crested
+    components: tuple[int, int] = (40, 1)  # frequencies × directions (rao)
+    frequency_range: tuple[float, float] = DEFAULT_FREQ_RANGE  # (ω_lo, ω_hi) / ω_p (rao)
+    rao: RaoParams = field(default_factory=RaoParams)
+
+    def __post_init__(self) -> None:
+        """For 'rao': validate the sea and derive peak_freq = constant ω_p."""
+        if self.model != 'rao':
+            return
+        n_freq, n_dir = self.components
+        if not (isinstance(n_freq, int) and isinstance(n_dir, int) and n_freq >= 1
+                and n_dir >= 1 and n_freq * n_dir <= MAX_WAVE_COMPONENTS):
+            raise ValueError(f'waves.components must be [frequencies, directions], integers '
+                             f'>= 1 with a product <= {MAX_WAVE_COMPONENTS} (e.g. [40, 9]), '
+                             f'got {self.components}')
+        if self.spreading is None and n_dir != 1:
+            raise ValueError('waves.spreading is null (long-crested): set components to '
+                             f'[{n_freq}, 1], or give a cos-2s exponent s > 0 (2–5 wind sea, '
+                             '10–25 swell)')
+        if self.spreading is not None and not (0.0 < self.spreading < 1000.0):
+            raise ValueError(f'waves.spreading s must be in (0, 1000) (2–5 wind sea, 10–25 '
+                             f'swell) or null for long-crested, got {self.spreading}')
+        if not math.isfinite(self.direction):
+            raise ValueError(f'waves.direction must be finite [rad], got {self.direction}')
+        lo, hi = self.frequency_range
+        if not (0.0 < lo < 1.0 < hi <= 10.0):
+            raise ValueError(f'waves.frequency_range (ω_lo/ω_p, ω_hi/ω_p) must satisfy 0 < lo '
+                             f'< 1 < hi <= 10 (default {DEFAULT_FREQ_RANGE}), got '
+                             f'{self.frequency_range}')
+        check_sea(self.hs, self.tp, self.gamma)  # Hs >= 0, Tp > 0, 1 <= γ <= 7
+        if not (1.0 <= self.tp <= 30.0):
+            raise ValueError(f'waves.tp must be a peak period in [1, 30] s, got {self.tp}')
+        object.__setattr__(self, 'peak_freq', sched.constant(peak_frequency(self.tp)))
 
 
 @dataclass(frozen=True)
@@ -86,18 +150,57 @@ class ExcitationConfig:
     table: tuple[tuple[float, ...], ...] = ()  # rows [t, τx, τy, τn], steps
 
 
+SetpointRow = tuple[float, float, float, float]
+
+
 @dataclass(frozen=True)
 class ControllerConfig:
-    """The scenario's DP controller (sim_ros.control.pid)."""
+    """The scenario's DP controller (sim_ros.control.pid).
+
+    `setpoint_schedule` rows [t s, north m, east m, yaw rad], times non-decreasing: from t on
+    the setpoint is that row (piecewise constant; before the first row: `setpoint`). The PID's
+    setpoint filter 1/(T_f s + 1) smooths the steps; heading steps are taken the short way round
+    (wrapped error), so keep them within ±180° (±90° is a large DP heading change).
+    """
 
     enabled: bool = False
     setpoint: Vec3 = (0.0, 0.0, 0.0)  # m, m, rad
+    setpoint_schedule: tuple[SetpointRow, ...] = ()
     bandwidth: Vec3 = (0.1, 0.1, 0.2)  # rad/s, ω_n
     zeta: float = 1.0
     setpoint_filter_time: float = 10.0  # s, T_f
     velocity_filter_time: float = 1.0  # s, T_v
     feedback: str = 'truth_lf'  # 'truth_lf' | 'measured'
     tau_max: Vec3 | None = None  # None: the actuator limit
+
+    def __post_init__(self) -> None:
+        """Validate the setpoint schedule: rows of 4 finite numbers, ordered times >= 0."""
+        rows = self.setpoint_schedule
+        if any(len(row) != 4 or not all(math.isfinite(v) for v in row) for row in rows):
+            raise ValueError('controller.setpoint_schedule is a list of [t_s, north_m, east_m, '
+                             'yaw_rad] rows of finite numbers')
+        times = [row[0] for row in rows]
+        if any(t < 0.0 for t in times) or any(b < a for a, b in zip(times, times[1:],
+                                                                     strict=False)):
+            raise ValueError(f'controller.setpoint_schedule times must be >= 0 and '
+                             f'non-decreasing, got {times}; sort the rows by time')
+
+    def setpoint_at(self, t: float) -> FloatArray:
+        """Setpoint (3,) [m, m, rad] at time t [s]: the last schedule row with time <= t."""
+        value: Sequence[float] = self.setpoint
+        for row in self.setpoint_schedule:
+            if row[0] > t:
+                break
+            value = row[1:]
+        return np.array(value, dtype=np.float64)
+
+    def setpoint_series(self, times: FloatArray) -> FloatArray:
+        """Setpoints (len(times), 3) at many times [s] (for metrics against the schedule)."""
+        t = np.asarray(times, dtype=np.float64).reshape(-1)
+        table = np.array([self.setpoint] + [row[1:] for row in self.setpoint_schedule],
+                         dtype=np.float64)
+        starts = np.array([row[0] for row in self.setpoint_schedule], dtype=np.float64)
+        return np.asarray(table[np.searchsorted(starts, t, side='right')], dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -132,8 +235,8 @@ class Scenario:
                              f'internal_step {self.internal_step} s')
         if not (self.duration > 0.0):
             raise ValueError(f'duration must be > 0 s, got {self.duration}')
-        if self.waves.model not in WAVE_MODELS:
-            raise ValueError(f'waves.model must be one of {WAVE_MODELS}, got '
+        if self.waves.model not in SCENARIO_WAVE_MODELS:
+            raise ValueError(f'waves.model must be one of {SCENARIO_WAVE_MODELS}, got '
                              f'{self.waves.model!r}')
         if self.waves.model != 'none' and not (0.0 < self.waves.damping < 1.0):
             raise ValueError(f'waves.damping λ must be in (0, 1), typical 0.1; got '
@@ -208,6 +311,73 @@ def _bias(data: Mapping[str, Any], where: str, ndim: int, default_t: float) -> M
     return MarkovBias(tuple(mean), tuple(std), float(data.get('time_constant', default_t)))
 
 
+def _rao_params(data: Any) -> RaoParams:
+    if not isinstance(data, Mapping):
+        raise ValueError('waves.rao is a mapping of RAO parameters, e.g. {length: 76.2, '
+                         'yaw_gain: 1.0}; see sim_ros.physics.rao.RaoParams')
+    _check_keys(data, [f.name for f in fields(RaoParams)], 'waves.rao')
+    values: dict[str, Any] = {}
+    for key, value in data.items():
+        if key == 'order':
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ValueError(f'waves.rao.order must be an integer (e.g. 2), got {value!r}')
+            values[key] = value
+        else:
+            values[key] = float(value)
+    return RaoParams(**values)
+
+
+def _pair(value: Any, key: str, kind: type) -> Any:
+    if not isinstance(value, Sequence) or isinstance(value, str) or len(value) != 2:
+        raise ValueError(f'{key} must be a list of 2 numbers')
+    if kind is int and not all(isinstance(v, int) and not isinstance(v, bool) for v in value):
+        raise ValueError(f'{key} must be 2 integers [frequencies, directions], got {value}')
+    return (kind(value[0]), kind(value[1]))
+
+
+def _wave_config(w: dict[str, Any]) -> WaveConfig:
+    """The waves section: shaping-filter keys for force/motion, sea + RAO keys for rao."""
+    _check_keys(w, [f.name for f in fields(WaveConfig)], 'waves')
+    model = str(w.get('model', 'none'))
+    if model == 'rao':
+        wrong = sorted(set(w) & set(SHAPING_KEYS))
+        if wrong:
+            raise ValueError(f'waves.model rao takes hs, tp, gamma, direction, spreading, '
+                             f'components, frequency_range, rao; {wrong} belong to the force/'
+                             'motion models (ω_p comes from tp)')
+        spreading = w.get('spreading')
+        return WaveConfig(
+            model=model, hs=float(w.get('hs', 0.0)), tp=float(w.get('tp', 10.0)),
+            gamma=float(w.get('gamma', 3.3)), direction=float(w.get('direction', 0.0)),
+            spreading=None if spreading is None else float(spreading),
+            components=_pair(w.get('components', [40, 1 if spreading is None else 8]),
+                             'waves.components', int),
+            frequency_range=_pair(w.get('frequency_range', list(DEFAULT_FREQ_RANGE)),
+                                  'waves.frequency_range', float),
+            rao=_rao_params(w.get('rao', {})))
+    wrong = sorted(set(w) & set(RAO_KEYS))
+    if wrong:
+        raise ValueError(f'{wrong} are keys of waves.model rao, not of {model!r}')
+    return WaveConfig(
+        model=model, damping=float(w.get('damping', 0.1)),
+        sigma=_vec3(w.get('sigma', 0.0), 'waves.sigma'),
+        peak_freq=_schedule(w.get('peak_freq', 0.8)),
+        peak_freq_resolution=float(w.get('peak_freq_resolution', 1e-3)))
+
+
+def _setpoint_schedule(data: Any) -> tuple[SetpointRow, ...]:
+    if not isinstance(data, Sequence) or isinstance(data, str):
+        raise ValueError('controller.setpoint_schedule is a list of [t_s, north_m, east_m, '
+                         'yaw_rad] rows')
+    rows: list[SetpointRow] = []
+    for row in data:
+        if not isinstance(row, Sequence) or isinstance(row, str) or len(row) != 4:
+            raise ValueError(f'controller.setpoint_schedule row {row!r} must be [t_s, north_m, '
+                             'east_m, yaw_rad]')
+        rows.append((float(row[0]), float(row[1]), float(row[2]), float(row[3])))
+    return tuple(rows)
+
+
 def scenario_from_dict(data: Mapping[str, Any], name: str = 'unnamed') -> Scenario:
     """Build and validate a Scenario from a parsed YAML mapping (SI units, radians)."""
     top = [f.name for f in fields(Scenario)]
@@ -229,13 +399,7 @@ def scenario_from_dict(data: Mapping[str, Any], name: str = 'unnamed') -> Scenar
     if data.get('actuator_limit') is not None:
         kwargs['actuator_limit'] = _vec3(data['actuator_limit'], 'actuator_limit')
     if 'waves' in data:
-        w = dict(data['waves'])
-        _check_keys(w, [f.name for f in fields(WaveConfig)], 'waves')
-        kwargs['waves'] = WaveConfig(
-            model=str(w.get('model', 'none')), damping=float(w.get('damping', 0.1)),
-            sigma=_vec3(w.get('sigma', 0.0), 'waves.sigma'),
-            peak_freq=_schedule(w.get('peak_freq', 0.8)),
-            peak_freq_resolution=float(w.get('peak_freq_resolution', 1e-3)))
+        kwargs['waves'] = _wave_config(dict(data['waves']))
     if 'environment' in data:
         e = dict(data['environment'])
         _check_keys(e, [f.name for f in fields(EnvironmentConfig)], 'environment')
@@ -266,6 +430,7 @@ def scenario_from_dict(data: Mapping[str, Any], name: str = 'unnamed') -> Scenar
             enabled=bool(c.get('enabled', False)),
             setpoint=_vec3(c.get('setpoint', 0.0), 'controller.setpoint'),
             bandwidth=_vec3(c.get('bandwidth', [0.1, 0.1, 0.2]), 'controller.bandwidth'),
+            setpoint_schedule=_setpoint_schedule(c.get('setpoint_schedule', [])),
             zeta=float(c.get('zeta', 1.0)),
             setpoint_filter_time=float(c.get('setpoint_filter_time', 10.0)),
             velocity_filter_time=float(c.get('velocity_filter_time', 1.0)),
@@ -362,7 +527,16 @@ class Simulator:
         sigma = np.asarray(waves.sigma) * mask
         self._wave_model = waves.model if np.any(sigma > 0) else 'none'
         self._waves: WaveGenerator | None = None
-        if self._wave_model != 'none':
+        self._sea: WaveComponents | None = None
+        if waves.model == 'rao':
+            self._wave_model = 'rao' if waves.hs > 0.0 else 'none'
+        if self._wave_model == 'rao':
+            self._sea = discretize_sea(waves.hs, waves.tp, waves.gamma, waves.direction,
+                                       waves.spreading, *waves.components, streams[0],
+                                       waves.frequency_range)
+            self._wave_basis0: list[float] = motion_basis(self._sea, waves.rao,
+                                                          np.zeros(1))[0].tolist()
+        elif self._wave_model != 'none':
             step = self._h if self._wave_model == 'force' else self.sample_time
             self._waves = WaveGenerator(self._wave_model, waves.damping, sigma, waves.peak_freq,
                                         step, streams[0], waves.peak_freq_resolution)
@@ -409,6 +583,10 @@ class Simulator:
     def true_model(self) -> LinearModel:
         """M and linear D (3×3); thesis vessels linearized at THESIS_OPERATING_SPEED."""
         return self.vessel.linearize()
+
+    def wave_components(self) -> WaveComponents | None:
+        """The discretized sea of `waves.model: rao` (None for the other models)."""
+        return self._sea
 
     def excitation(self, t: float) -> FloatArray:
         """The scenario's open-loop excitation τ_exc(t) (not added by `step`)."""
@@ -484,6 +662,9 @@ class Simulator:
         times = (self._k + 1 + np.arange(BLOCK, dtype=np.float64)) * self.sample_time
         self._peak = scn.waves.peak_freq.sample(times)
         self._wave_motion = np.zeros((BLOCK, 3))
+        if self._sea is not None:
+            self._wave_basis: list[list[float]] = motion_basis(self._sea, scn.waves.rao,
+                                                               times).tolist()
         if self._waves is not None and self._wave_model == 'motion':
             self._wave_motion, _ = self._waves.next_block(BLOCK)
         if self._waves is not None and self._wave_model == 'force':
@@ -523,6 +704,11 @@ class Simulator:
         elif self._wave_model == 'motion':
             wave = self._wave_initial if index is None else self._wave_motion[index]
             total = lf + wave
+            total[2] = wrap_angle(float(total[2]))
+        elif self._wave_model == 'rao':  # η_w with the current LF heading (motion superposition)
+            basis = self._wave_basis0 if index is None else self._wave_basis[index]
+            north, east, yaw = motion_from_basis(basis, state[2])
+            total = lf + np.array([north, east, yaw]) * self._mask
             total[2] = wrap_angle(float(total[2]))
         else:
             total = lf.copy()
@@ -637,7 +823,8 @@ def simulate(scenario: Scenario, seed: int | None = None, duration: float | None
 
     Closed loop with the scenario's PID (`controller` True; default from the scenario) fed by
     `feedback` ('truth_lf' or 'measured'; default from the scenario), or open loop with the
-    scenario's excitation. In closed loop the excitation is added to the PID command.
+    scenario's excitation. In closed loop the excitation is added to the PID command. The PID
+    setpoint follows `controller.setpoint_schedule` (`ControllerConfig.setpoint_at(t)`).
     """
     sim = Simulator(scenario, seed)
     use_pid = scenario.controller.enabled if controller is None else bool(controller)
@@ -650,9 +837,12 @@ def simulate(scenario: Scenario, seed: int | None = None, duration: float | None
     gains = controller_gains(scenario, sim.true_model())
     limit = scenario.controller.tau_max or sim.actuator_limit()
     setpoint = np.asarray(scenario.controller.setpoint)
+    scheduled = bool(scenario.controller.setpoint_schedule)
     state = PidState()
     for k in range(count):
         tau = sim.excitation(sim.t)
+        if scheduled:
+            setpoint = scenario.controller.setpoint_at(sim.t)
         if use_pid:
             pose = sim.sample.truth_lf_pose if source == 'truth_lf' else sim.sample.measured_pose
             tau_pid, state = pid_step(state, gains, pose, setpoint, sim.sample_time, limit)
@@ -706,11 +896,11 @@ def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | Non
     """Closed loop with the scenario's PID acting on the pose an estimator returns.
 
     The same loop as `simulate` (gains `controller_gains`, `pid_step` every sample_time, the
-    limit ``controller.tau_max`` or the actuator capacity, the scenario's setpoint, excitation
-    added to the command), except that the PID is fed ``estimate(t, measured_pose (3,),
-    applied_thrust (3,)) -> pose (3,)`` instead of a true or measured pose. The estimator is
-    called at t = period, 2·period, … with the sample of that instant (copies of
-    ``sample.measured_pose`` and ``sample.thrust``); between calls the PID holds the last
+    limit ``controller.tau_max`` or the actuator capacity, the scenario's setpoint or setpoint
+    schedule, excitation added to the command), except that the PID is fed ``estimate(t,
+    measured_pose (3,), applied_thrust (3,)) -> pose (3,)`` instead of a true or measured pose.
+    The estimator is called at t = period, 2·period, … with the sample of that instant (copies
+    of ``sample.measured_pose`` and ``sample.thrust``); between calls the PID holds the last
     estimate (zero-order hold), before the first call it uses the first measurement (t = 0). A
     non-finite estimate is not used: the last finite one is held and the event counted.
 
@@ -719,7 +909,8 @@ def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | Non
     dp_controller node answers each lf_pose once and the simulator holds the command.
 
     The run is deterministic for a seed and a deterministic estimator; it stops early when the
-    true LF pose leaves ``abort_excursion`` [m] from the setpoint (a diverged loop).
+    true LF pose leaves ``abort_excursion`` [m] from the setpoint (a diverged loop; with a
+    schedule, from the setpoint in force at that time).
     """
     stride = _call_period_samples(period, scenario.sample_time)
     pid_stride = _call_period_samples(scenario.sample_time if pid_period is None else pid_period,
@@ -734,6 +925,7 @@ def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | Non
     gains = controller_gains(scenario, sim.true_model())
     limit = scenario.controller.tau_max or sim.actuator_limit()
     setpoint = np.asarray(scenario.controller.setpoint, dtype=np.float64)
+    scheduled = bool(scenario.controller.setpoint_schedule)
     held = sim.sample.measured_pose.copy()
     state = PidState()
     calls: list[float] = []
@@ -743,6 +935,8 @@ def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | Non
     done = count
     tau_pid = np.zeros(3)
     for k in range(count):
+        if scheduled:
+            setpoint = scenario.controller.setpoint_at(sim.t)
         if k % pid_stride == 0:
             tau_pid, state = pid_step(state, gains, held, setpoint, pid_dt, limit)
         sample = sim.step(sim.excitation(sim.t) + tau_pid)

@@ -1,0 +1,451 @@
+"""Position-reference checks (DP class practice): frozen, jump, drift, dropout.
+
+A DP system does not take a position reference on trust: class rules (e.g. DNV-RU-SHIP Pt.6
+Ch.3, IMO MSC/Circ.645) expect each reference to be tested for a frozen signal, jumps and
+outliers, slow drift, and loss, and a failed reference to be flagged and kept out of the
+estimate. `ReferenceChecker` runs those tests on the measured pose stream before the aligner
+(so a rejected sample never enters the aligner, the predictor's buffers or a training):
+
+- **frozen** (every pose): the whole pose vector bit-identical for ≥ `frozen_time` s (and ≥ 3
+  samples) → rejected while identical, ERROR.
+- **no wave motion** (blocks of `motion_wave_periods` wave periods 2π/ω0): the detrended RMS
+  motion of every estimated DOF below `motion_ratio` × the median of the last clean blocks (wave
+  motion was seen before) → rejected until the motion returns, ERROR.
+- **jump** (every pose): innovation against a robust local prediction (least-squares line through
+  the last accepted poses) beyond `jump_gate` robust σ (MAD of the recent innovations) +
+  `jump_floor` → rejected, WARN. A step that persists `jump_confirm` s with consistent samples is
+  taken as the new level: ERROR, data restart (counted as `step`).
+- **drift** (every aligned sample): the exponential mean (time constant `drift_time_constant`) of
+  the innovation against the predictor's own prediction beyond `drift_limit` → latched: every
+  later pose is rejected until `reset()` (the operator re-selects the reference), ERROR.
+- **dropout** (the caller's clock): no pose for more than `dropout_timeout` s → ERROR while it
+  lasts, counted once per dropout (a stamp gap of that length in the stream is counted too).
+
+A detected frozen, no-motion, drift or step fault also asks the caller to restart the data
+segment (`Verdict.restart`): the samples that arrived during the detection delay are then dropped
+from the predictor's buffers, so no training window spans the fault (the network in service
+stays). Only the estimated DOFs (`ndof`: north for 1, north/east/yaw for 3) are tested, except
+the frozen test, which compares the whole vector (a stuck receiver repeats all of it).
+
+Limits of a single reference (documented, not hidden): a drift slower than the predictor can tell
+from vessel motion it does not explain (about `drift_limit` / lag; docs/RELIABILITY.md) passes;
+only a second, independent reference can expose it. The jump test needs 30 accepted innovations
+for its scale: until then only the aligner's speed limit guards against outliers.
+
+Conventions: times [s] (message stamps, or the caller's clock for the dropout watch), poses
+``[north m, east m, yaw rad]``; nothing here raises on data.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field, fields
+import math
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lf_predictor_ros.core.heading import wrap_angle
+
+FloatArray = NDArray[np.float64]
+Level = Literal['OK', 'WARN', 'ERROR']
+
+FAULTS = ('frozen', 'no_wave_motion', 'jump', 'step', 'drift', 'dropout')
+FIT_SAMPLES = 4  # accepted poses behind the local line prediction
+SCALE_SAMPLES = 300  # innovations behind the robust (MAD) scale of the jump gate
+MIN_SCALE_SAMPLES = 30  # innovations needed before the jump gate acts
+GATE_REFRESH = 10  # accepted innovations between two recomputations of the gate
+MAD_TO_SIGMA = 1.4826  # σ of a normal distribution per median absolute deviation
+MIN_FROZEN_SAMPLES = 3  # identical samples before `frozen_time` can declare a freeze
+MOTION_MEMORY = 10  # clean blocks behind the wave-motion reference
+MIN_MOTION_BLOCKS = 2  # clean blocks needed before the no-wave-motion test acts
+MIN_BLOCK_SAMPLES = 8  # samples a block needs to be judged
+EVENT_HOLD = 10.0  # [s of stamps] a jump or step stays in the status this long
+DEFAULT_WAVE_PERIOD = 2.0 * math.pi / math.sqrt(0.25 * 1.4)  # [s] before ω0 is known (10.6 s)
+
+
+def _doc(doc: str, unit: str = '') -> dict[str, str]:
+    """Field metadata read by the ROS parameter helper (description and unit)."""
+    return {'doc': doc, 'unit': unit}
+
+
+@dataclass(frozen=True)
+class ReferenceCheckSettings:
+    """Thresholds of the position-reference checks (see the module docstring); validated."""
+
+    reference_checks: bool = field(default=True, metadata=_doc(
+        'run the position-reference checks (frozen, no wave motion, jump, drift, dropout)'))
+    frozen_time: float = field(default=3.0, metadata=_doc(
+        'a pose repeated bit-identically this long is frozen', 's'))
+    motion_wave_periods: float = field(default=6.0, metadata=_doc(
+        'block length of the no-wave-motion test, in wave periods 2π/ω0', ''))
+    motion_ratio: float = field(default=0.1, metadata=_doc(
+        'no wave motion: block motion below this fraction of the clean blocks', ''))
+    jump_gate: float = field(default=6.0, metadata=_doc(
+        'jump gate: innovation against the local prediction in robust σ (plus jump_floor)', ''))
+    jump_floor: tuple[float, ...] = field(default=(0.5, 0.5, 0.02), metadata=_doc(
+        'jump gate floor per DOF (north, east, yaw)', 'm, m, rad'))
+    jump_confirm: float = field(default=2.0, metadata=_doc(
+        'a step that persists this long (consistent samples) is taken as the new level', 's'))
+    drift_time_constant: float = field(default=120.0, metadata=_doc(
+        'time constant of the mean innovation against the prediction (drift test)', 's'))
+    drift_limit: tuple[float, ...] = field(default=(0.5, 0.5, 0.03), metadata=_doc(
+        'drift limit on the mean innovation per DOF (north, east, yaw)', 'm, m, rad'))
+    dropout_timeout: float = field(default=3.0, metadata=_doc(
+        'no measured pose for longer than this is a dropout', 's'))
+
+    def __post_init__(self) -> None:
+        """Coerce numbers and check every rule; the message says what to change."""
+        if not isinstance(self.reference_checks, bool):
+            raise ValueError(f'reference_checks must be true or false, got '
+                             f'{self.reference_checks!r}')
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == 'reference_checks':
+                continue
+            if f.name in ('jump_floor', 'drift_limit'):
+                values = _three_positive(f.name, value)
+                object.__setattr__(self, f.name, values)
+                continue
+            number = _positive(f.name, value)
+            object.__setattr__(self, f.name, number)
+        if not self.motion_ratio < 1.0:
+            raise ValueError(f'motion_ratio must lie in (0, 1), got {self.motion_ratio}')
+        if self.motion_wave_periods < 2.0:
+            raise ValueError(f'motion_wave_periods must be ≥ 2 wave periods (a shorter block '
+                             f'cannot tell waves from noise), got {self.motion_wave_periods}')
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        """Names of all settings, in declaration order."""
+        return tuple(f.name for f in fields(cls))
+
+
+def _positive(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            not math.isfinite(float(value)) or not float(value) > 0.0:
+        raise ValueError(f'{name} must be a positive finite number, got {value!r}')
+    return float(value)
+
+
+def _three_positive(name: str, value: Any) -> tuple[float, ...]:
+    if isinstance(value, (str, bytes)) or not hasattr(value, '__len__') or len(value) != 3:
+        raise ValueError(f'{name} must be three positive numbers (north m, east m, yaw rad), '
+                         f'got {value!r}')
+    return tuple(_positive(name, v) for v in value)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """What to do with one pose or grid sample.
+
+    ``accepted``: pass it on (aligner / predictor). ``restart``: a fault was just detected whose
+    detection delay let faulty samples through; drop the buffered data (new segment) before
+    anything else. ``fault``: the test that rejected it (None when accepted).
+    """
+
+    accepted: bool
+    restart: bool = False
+    fault: str | None = None
+
+
+ACCEPT = Verdict(True)
+
+
+class ReferenceChecker:
+    """Stateful position-reference checks of one pose stream (see the module docstring)."""
+
+    def __init__(self, settings: ReferenceCheckSettings, ndof: int) -> None:
+        if ndof not in (1, 3):
+            raise ValueError(f'ndof must be 1 or 3, got {ndof!r}')
+        self.settings = settings
+        self.ndof = ndof
+        self.counters: dict[str, int] = {name: 0 for name in FAULTS}
+        self.rejected = 0  # poses rejected by any test
+        self._last_arrival: float | None = None
+        self._in_dropout = False
+        self.reset()
+
+    # ---- state ------------------------------------------------------------------------------
+
+    def reset(self) -> None:
+        """Clear every fault and learned statistic (counters are kept): a fresh reference."""
+        self._fit: deque[tuple[float, FloatArray]] = deque(maxlen=FIT_SAMPLES)
+        self._scale_buf: deque[FloatArray] = deque(maxlen=SCALE_SAMPLES)
+        self._gate_cache: FloatArray | None = None
+        self._since_gate = 0
+        self._pending: list[tuple[float, FloatArray]] = []  # consecutive jump rejections
+        self._same_since: float | None = None
+        self._same_count = 0
+        self._last_raw: FloatArray | None = None
+        self._frozen = False
+        self._block: list[tuple[float, FloatArray]] = []
+        self._motion_history: deque[FloatArray] = deque(maxlen=MOTION_MEMORY)
+        self._no_motion = False
+        self._drift_mean: FloatArray | None = None
+        self._drift_time = 0.0  # [s] integrated into the mean so far
+        self._drift_last_t: float | None = None
+        self._drift = False
+        self._events: dict[str, float] = {}  # fault → stamp of its last occurrence
+        self._last_t: float | None = None
+        self.last_reason = ''
+
+    @property
+    def faults(self) -> tuple[str, ...]:
+        """Faults active now (frozen, no_wave_motion, drift), in FAULTS order."""
+        active = {'frozen': self._frozen, 'no_wave_motion': self._no_motion,
+                  'drift': self._drift, 'dropout': self._in_dropout}
+        return tuple(name for name in FAULTS if active.get(name, False))
+
+    @property
+    def drift_mean(self) -> FloatArray | None:
+        """Current mean innovation against the prediction (ndof,), None before any."""
+        return None if self._drift_mean is None else self._drift_mean.copy()
+
+    # ---- sensor-rate checks -----------------------------------------------------------------
+
+    def check_pose(self, t: float, pose: FloatArray,
+                   wave_peak_freq: float | None = None) -> Verdict:
+        """Test one measured pose (finite, shape (3,)) stamped t; see the module docstring."""
+        if not self.settings.reference_checks:
+            return ACCEPT
+        pose = np.asarray(pose, dtype=np.float64)
+        if self._last_t is not None and t - self._last_t > self.settings.dropout_timeout:
+            self.counters['dropout'] += 1  # a gap in the stamps (seen after the fact)
+            self._block = []
+            self._fit.clear()
+            self._pending = []
+        self._last_t = t
+        if self._drift:
+            return self._reject('drift', 'drift latched: reference deselected until reset')
+        restart = self._check_frozen(t, pose)
+        if self._frozen:
+            return self._reject('frozen', f'pose identical for {t - (self._same_since or t):.1f}'
+                                ' s (frozen reference)', restart)
+        y = self._dofs(pose)
+        verdict = self._check_jump(t, y)
+        if verdict is not None and not verdict.accepted:
+            return verdict
+        step_restart = verdict is not None and verdict.restart
+        motion_restart = self._check_motion(t, y, wave_peak_freq)
+        if self._no_motion:
+            return self._reject('no_wave_motion', 'no wave motion over '
+                                f'{self.settings.motion_wave_periods:g} wave periods where '
+                                'waves were seen before (frozen or smoothed reference)',
+                                motion_restart)
+        return Verdict(True, restart=step_restart or motion_restart,
+                       fault='step' if step_restart else None)
+
+    def _dofs(self, pose: FloatArray) -> FloatArray:
+        return np.array(pose[:self.ndof], dtype=np.float64)
+
+    def _reject(self, fault: str, reason: str, restart: bool = False) -> Verdict:
+        self.rejected += 1
+        self.last_reason = f'{fault}: {reason}'
+        if self._last_t is not None:
+            self._events[fault] = self._last_t
+        return Verdict(False, restart=restart, fault=fault)
+
+    def _check_frozen(self, t: float, pose: FloatArray) -> bool:
+        """Update the identical-value run; True when a freeze is detected at this sample."""
+        if self._last_raw is not None and np.array_equal(pose, self._last_raw):
+            self._same_count += 1
+        else:
+            self._last_raw = pose.copy()
+            self._same_since, self._same_count = t, 1
+            self._frozen = False
+            return False
+        assert self._same_since is not None
+        if not self._frozen and self._same_count >= MIN_FROZEN_SAMPLES and \
+                t - self._same_since >= self.settings.frozen_time:
+            self._frozen = True
+            self.counters['frozen'] += 1
+            return True
+        return False
+
+    def _innovation(self, t: float, y: FloatArray) -> FloatArray | None:
+        """Innovation: y minus the line through the last accepted poses (None: too few)."""
+        if len(self._fit) < 2:
+            return None
+        times = np.array([s for s, _ in self._fit]) - t
+        values = np.array([v for _, v in self._fit])
+        ref = values[-1]
+        rel = values - ref
+        if self.ndof == 3:
+            rel[:, 2] = wrap_angle(rel[:, 2])
+        # least-squares line a + b·(s − t) through (times, rel); its value at t is a
+        t_mean, rel_mean = times.mean(), rel.mean(axis=0)
+        dt = times - t_mean
+        slope = dt @ (rel - rel_mean) / float(dt @ dt)
+        innovation = y - ref - (rel_mean - slope * t_mean)
+        if self.ndof == 3:
+            innovation[2] = wrap_angle(float(innovation[2]))
+        return np.asarray(innovation, dtype=np.float64)
+
+    def _gate(self) -> FloatArray | None:
+        """Jump gate per DOF; the MAD is refreshed every GATE_REFRESH innovations (cost)."""
+        if len(self._scale_buf) < MIN_SCALE_SAMPLES:
+            return None
+        if self._gate_cache is None or self._since_gate >= GATE_REFRESH:
+            scale = MAD_TO_SIGMA * np.median(np.array(self._scale_buf), axis=0)
+            floor = np.array(self.settings.jump_floor[:self.ndof])
+            self._gate_cache = np.asarray(self.settings.jump_gate * scale + floor,
+                                          dtype=np.float64)
+            self._since_gate = 0
+        return self._gate_cache
+
+    def _check_jump(self, t: float, y: FloatArray) -> Verdict | None:
+        """None: accepted and learned from; a Verdict otherwise (rejection or a new level)."""
+        innovation = self._innovation(t, y)
+        gate = self._gate()
+        if innovation is not None and gate is not None and np.any(np.abs(innovation) > gate):
+            self._pending.append((t, y))
+            if t - self._pending[0][0] >= self.settings.jump_confirm and \
+                    len(self._pending) >= MIN_FROZEN_SAMPLES and self._consistent(gate):
+                return self._new_level(t)
+            self.counters['jump'] += 1
+            size = float(np.max(np.abs(innovation) / gate))
+            return self._reject('jump', f'innovation {size:.1f} × the gate against the local '
+                                'prediction (outlier)')
+        self._pending = []
+        self._fit.append((t, y))
+        if innovation is not None:
+            self._scale_buf.append(np.abs(innovation))
+            self._since_gate += 1
+        return None
+
+    def _consistent(self, gate: FloatArray) -> bool:
+        """The pending (rejected) samples agree among themselves: a step, not a burst."""
+        values = np.array([v for _, v in self._pending])
+        spread = np.abs(values - np.median(values, axis=0))
+        if self.ndof == 3:
+            spread[:, 2] = np.abs(wrap_angle(values[:, 2] - float(np.median(values[:, 2]))))
+        return bool(np.all(spread <= gate))
+
+    def _new_level(self, t: float) -> Verdict:
+        """Accept a persistent step: re-seed the local prediction on the new samples."""
+        self.counters['step'] += 1
+        jump = float(np.max(np.abs(self._pending[-1][1][:2] - self._fit[-1][1][:2]))) \
+            if self._fit else math.nan
+        self.last_reason = (f'step: the reference stepped by {jump:.2f} m and stayed for '
+                            f'{self.settings.jump_confirm:g} s: taken as the new level, data '
+                            'restarted')
+        self._events['step'] = t
+        self._fit.clear()
+        for sample in self._pending[-FIT_SAMPLES:]:
+            self._fit.append(sample)
+        self._pending = []
+        self._block = []
+        return Verdict(True, restart=True, fault='step')
+
+    def _check_motion(self, t: float, y: FloatArray, wave_peak_freq: float | None) -> bool:
+        """Add to the current block; at its end judge it. True when no motion is detected now."""
+        self._block.append((t, y))
+        period = 2.0 * math.pi / wave_peak_freq if wave_peak_freq and wave_peak_freq > 0 \
+            else DEFAULT_WAVE_PERIOD
+        if t - self._block[0][0] < self.settings.motion_wave_periods * period or \
+                len(self._block) < MIN_BLOCK_SAMPLES:
+            return False
+        motion = _detrended_rms(self._block, self.ndof)
+        self._block = []
+        was = self._no_motion
+        if len(self._motion_history) >= MIN_MOTION_BLOCKS:
+            reference = np.median(np.array(self._motion_history), axis=0)
+            self._no_motion = bool(np.all(motion < self.settings.motion_ratio * reference))
+        if not self._no_motion and not self._frozen:
+            self._motion_history.append(motion)
+        if self._no_motion and not was:
+            self.counters['no_wave_motion'] += 1
+            return True
+        return False
+
+    # ---- grid-rate check against the predictor ---------------------------------------------
+
+    def check_sample(self, t: float, pose: FloatArray, predicted: FloatArray | None) -> Verdict:
+        """Drift test of one aligned sample against the prediction made for t (None: none).
+
+        On detection the drift latches: this and every later pose are rejected until `reset`.
+        """
+        if not self.settings.reference_checks or predicted is None:
+            return ACCEPT
+        if self._drift:
+            return self._reject('drift', 'drift latched: reference deselected until reset')
+        innovation = self._dofs(np.asarray(pose, dtype=np.float64)) - \
+            self._dofs(np.asarray(predicted, dtype=np.float64))
+        if self.ndof == 3:
+            innovation[2] = wrap_angle(float(innovation[2]))
+        dt = 0.0 if self._drift_last_t is None else max(0.0, t - self._drift_last_t)
+        self._drift_last_t = t
+        tau = self.settings.drift_time_constant
+        if self._drift_mean is None:
+            self._drift_mean = innovation
+        else:
+            self._drift_mean = self._drift_mean + min(1.0, dt / tau) * \
+                (innovation - self._drift_mean)
+        self._drift_time += dt
+        limit = np.array(self.settings.drift_limit[:self.ndof])
+        if self._drift_time >= tau and np.any(np.abs(self._drift_mean) > limit):
+            self._drift = True
+            self.counters['drift'] += 1
+            size = ', '.join(f'{v:.3g}' for v in self._drift_mean)
+            self._last_t = t if self._last_t is None else self._last_t
+            return self._reject('drift', f'mean innovation against the prediction [{size}] '
+                                f'over {tau:g} s beyond the limit '
+                                f'{list(self.settings.drift_limit[:self.ndof])} (slow drift)',
+                                restart=True)
+        return ACCEPT
+
+    # ---- dropout (caller's clock) -----------------------------------------------------------
+
+    def seen(self, now: float) -> None:
+        """A pose message arrived at ``now`` (the caller's clock): ends a dropout."""
+        self._last_arrival = now
+        self._in_dropout = False
+
+    def silent_for(self, now: float) -> float | None:
+        """Seconds since the last pose (caller's clock); flags and counts a dropout."""
+        if self._last_arrival is None or not self.settings.reference_checks:
+            return None
+        silence = now - self._last_arrival
+        if silence > self.settings.dropout_timeout and not self._in_dropout:
+            self._in_dropout = True
+            self.counters['dropout'] += 1
+        return silence
+
+    # ---- status -----------------------------------------------------------------------------
+
+    def status(self) -> tuple[Level, str]:
+        """Level and reason of the reference now (OK when nothing is wrong)."""
+        now = self._last_t
+        if self._in_dropout and self._last_arrival is not None:
+            return 'ERROR', (f'dropout: no measured pose for more than '
+                             f'{self.settings.dropout_timeout:g} s')
+        if self._drift or self._frozen or self._no_motion:
+            return 'ERROR', self.last_reason
+        recent = [name for name, stamp in self._events.items()
+                  if now is not None and now - stamp <= EVENT_HOLD]
+        if 'step' in recent:
+            return 'ERROR', self.last_reason
+        if 'jump' in recent:
+            return 'WARN', f'jump: {self.counters["jump"]} pose(s) rejected as outliers'
+        return 'OK', ''
+
+    def values(self) -> dict[str, int | str]:
+        """Diagnostic key values: ``ref_<fault>`` counters, rejections and active faults."""
+        out: dict[str, int | str] = {f'ref_{name}': count for name, count in
+                                     self.counters.items()}
+        out['ref_rejected'] = self.rejected
+        out['ref_faults'] = ' '.join(self.faults) or 'none'
+        return out
+
+
+def _detrended_rms(block: list[tuple[float, FloatArray]], ndof: int) -> FloatArray:
+    """Per-DOF RMS of a block after removing its least-squares line (heading unwrapped)."""
+    times = np.array([t for t, _ in block])
+    values = np.array([v for _, v in block])
+    if ndof == 3:
+        values[:, 2] = values[0, 2] + np.unwrap(values[:, 2] - values[0, 2])
+    design = np.column_stack([np.ones_like(times), times - times.mean()])
+    coef, *_ = np.linalg.lstsq(design, values, rcond=None)
+    residual = values - design @ coef
+    return np.asarray(np.sqrt(np.mean(residual ** 2, axis=0)), dtype=np.float64)

@@ -6,7 +6,8 @@ any sample rate; the ``*_samples`` properties convert them to sample counts with
 which is what the algorithm uses. Regressor orders (``nu``, ``ny``, ``nfb``) are in samples,
 frequencies in rad/s.
 
-Defaults target a supply-vessel DP at ``sample_time`` = 1 s (as the thesis likely used; a 10 Hz
+Defaults target a 3-DOF supply-vessel DP (``ndof`` = 3: north, east and heading estimated; 1 DOF
+only when asked for) at ``sample_time`` = 1 s (as the thesis likely used; a 10 Hz
 sensor is resampled by the caller): a retraining every 60 s on the last 1200 s, a 20 min
 frequency-estimation window (the sea state is stationary for 20 min to 3 h, thesis §3.3).
 Regressors: nu = 12 forces and ny = 24 measured positions (24 s, two to three wave periods), and
@@ -57,7 +58,9 @@ class PredictorParams:
     :attr:`wave_peak_prior` to read it as ``float | None``.
     """
 
-    ndof: int = field(default=1, metadata=_doc('degrees of freedom used: 1 (surge) or 3'))
+    ndof: int = field(default=3, metadata=_doc(
+        'degrees of freedom estimated: 3 (north, east, yaw) or 1 (north only; east and yaw are '
+        'the measurement passed through unfiltered)'))
     sample_time: float = field(default=1.0, metadata=_doc('predictor sample time h', 's'))
     nu: int = field(default=12, metadata=_doc('delayed control inputs n_u (thesis §4.4)',
                                              'samples'))

@@ -15,8 +15,11 @@ the latest ω0 estimate (or the prior), and `status().state` says 'warming_up' o
 Conventions: positions [m], heading [rad], forces [N, N, N·m] in the body frame. Internally the
 heading is unwrapped (continuous across ±π) and, for 3 DOF, forces are rotated to the earth frame
 with the measured heading (u = R(ψ)τ, Fossen 2011 §7.1: η̈ ≈ R(ψ)ν̇), so the network does not have
-to learn the rotation the thesis found hard (§5.3). Outputs have the heading wrapped to (−π, π];
-for 1 DOF only the north component is estimated and east/yaw are 0.
+to learn the rotation the thesis found hard (§5.3). Outputs have the heading wrapped to (−π, π].
+For 1 DOF only the north component is estimated; east and yaw of the output are the measured
+east and yaw of the same sample passed through unfiltered (never a made-up 0: on a 3-DOF vessel
+run with ``ndof`` 1 a zero heading would be up to 180° wrong; the node flags the pass-through in
+/diagnostics).
 
 Bad input: `update` raises ValueError for a non-finite or wrongly shaped pose/force and leaves its
 state unchanged (the node filters such samples before they get here). A training that raises is
@@ -183,7 +186,7 @@ class AdaptivePredictor:
             self._fb.append(prediction)
             self._fb_next = self._k + 1
         self._maybe_retrain(t)
-        return self._output(estimate)
+        return self._output(estimate, pose_arr)
 
     def reset(self) -> None:
         """Forget everything learned and collected (parameters stay); a running job is dropped."""
@@ -232,6 +235,17 @@ class AdaptivePredictor:
         self._segment += 1
         self._start_segment()
         self._fallback.reset()
+
+    def discard_running_job(self) -> None:
+        """Drop the result of a running training or ω0 job; the network in service stays.
+
+        For a data fault found after the fact (a frozen or drifting reference): the job's
+        snapshot may hold faulty samples, so its result must not be used. The worker stops at its
+        next epoch boundary; no new job starts until it has ended.
+        """
+        self._stop.set()
+        self._generation += 1
+        self._stop = threading.Event()
 
     def request_retrain(self) -> tuple[bool, str]:
         """Ask for a training at the next sample; (False, reason) when it cannot happen."""
@@ -363,11 +377,11 @@ class AdaptivePredictor:
         bound = GUARD_SPREADS * spread + GUARD_FLOOR[:self.ndof]
         return bool(np.all(np.abs(prediction - y) <= bound))
 
-    def _output(self, estimate: FloatArray) -> FloatArray:
-        out = np.zeros(3)
+    def _output(self, estimate: FloatArray, measured: FloatArray) -> FloatArray:
+        """Estimate as a pose; for 1 DOF east and yaw are the measurement, unfiltered."""
+        out = np.array(measured, dtype=np.float64)
         out[:self.ndof] = estimate
-        if self.ndof == 3:
-            out[2] = float(wrap_angle(out[2]))
+        out[2] = float(wrap_angle(out[2]))
         return out
 
     def _job_running(self) -> bool:

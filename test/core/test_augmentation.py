@@ -94,7 +94,7 @@ def excited_snapshot() -> Snapshot:
 
 def retrained(wave_augmentation: float) -> tuple[RetrainResult, PredictorParams]:
     torch.set_num_threads(1)
-    params = PredictorParams(wave_augmentation=wave_augmentation)
+    params = PredictorParams(ndof=1, wave_augmentation=wave_augmentation)
     return run_retraining(params, excited_snapshot(), None, None, None), params
 
 

@@ -35,7 +35,7 @@ pytestmark = pytest.mark.filterwarnings(
 FloatArray = NDArray[np.float64]
 # Small windows for fast tests; the regressor orders shrink with them (the defaults' 24 + 12
 # lags would leave fewer than 5 training rows per linear parameter in a 200 s window).
-SMALL = PredictorParams(sample_time=1.0, retrain_period=20.0, training_window=200.0,
+SMALL = PredictorParams(ndof=1, sample_time=1.0, retrain_period=20.0, training_window=200.0,
                         transient_length=10.0, filter_window=60.0, append_length=40.0,
                         estimation_window=480.0, max_epochs=5, nu=4, ny=12)
 FIRST_TRAINING = 120  # [samples] max(α + max_lag + 1, min(γ, 2α)) = 2α for max_lag < 60
@@ -660,7 +660,7 @@ from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
 # Adam has no convergence stop (the least-squares start lets LM converge in milliseconds), so
 # every training runs its full 10 s and one is surely running when the script ends
-params = PredictorParams(sample_time=1.0, retrain_period=20.0, training_window=200.0,
+params = PredictorParams(ndof=1, sample_time=1.0, retrain_period=20.0, training_window=200.0,
                          transient_length=10.0, filter_window=60.0, append_length=40.0,
                          estimation_window=600.0, max_epochs=1000000, max_train_seconds=10.0,
                          trainer='adam', nu=4, ny=12)
@@ -690,3 +690,41 @@ def test_interpreter_exit_while_training_is_clean() -> None:
     assert 'exiting while training' in result.stdout, result.stderr
     assert result.returncode == 0, result.stderr
     assert 'terminate called' not in result.stderr
+
+
+def test_default_is_3_dof_and_follows_a_vessel_heading_near_180_degrees() -> None:
+    """Defaults on the supply vessel rotated to ψ ≈ ±180°: heading within a few degrees, both
+    north and east estimated (the 1-DOF default published east = 0 and heading = 0 here)."""
+    assert PredictorParams().ndof == 3
+    record = simulate(load_scenario('threedof_open_loop'), 2, 300.0)
+    rotation = math.pi - 0.05  # [rad] the vessel heads 177°, its waves cross ±180°
+    c, s = math.cos(rotation), math.sin(rotation)
+    poses = record.measured_pose.copy()
+    poses[:, :2] = record.measured_pose[:, :2] @ np.array([[c, s], [-s, c]]) + [120.0, -40.0]
+    poses[:, 2] = np.remainder(record.measured_pose[:, 2] + rotation + math.pi,
+                               2 * math.pi) - math.pi
+    truth = record.truth_lf_pose.copy()
+    truth[:, :2] = record.truth_lf_pose[:, :2] @ np.array([[c, s], [-s, c]]) + [120.0, -40.0]
+    truth[:, 2] = record.truth_lf_pose[:, 2] + rotation
+    predictor = AdaptivePredictor(PredictorParams(), background=False)
+    h = PredictorParams().sample_time
+    stride = int(round(h / (record.t[1] - record.t[0])))
+    estimates, truths = [], []
+    for k in range(stride - 1, len(record.t), stride):
+        estimates.append(predictor.update(float(record.t[k]), poses[k], record.thrust[k]))
+        truths.append(truth[min(k + stride, len(record.t) - 1)])
+    est, tru = np.array(estimates[60:]), np.array(truths[60:])  # after the cascade's transient
+    heading_error = np.degrees(np.abs(np.remainder(est[:, 2] - tru[:, 2] + math.pi,
+                                                   2 * math.pi) - math.pi))
+    assert heading_error.max() < 5.0
+    assert np.all(np.abs(est[:, :2] - tru[:, :2]) < 3.0)
+    assert np.ptp(est[:, 1]) > 1.0 and np.ptp(tru[:, 1]) > 1.0  # east moves: estimated, not 0
+    assert np.all(np.isfinite(est))
+
+
+def test_one_dof_passes_the_measured_east_and_yaw_through_never_zero() -> None:
+    predictor = AdaptivePredictor(SMALL, background=False)
+    out = predictor.update(1.0, np.array([1.0, 2.0, 3.1]), np.zeros(3))
+    assert out[1] == 2.0 and out[2] == pytest.approx(3.1)
+    out = predictor.update(2.0, np.array([1.0, -5.0, -3.5]), np.zeros(3))
+    assert out[1] == -5.0 and out[2] == pytest.approx(-3.5 + 2 * math.pi)  # wrapped

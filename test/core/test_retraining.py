@@ -39,7 +39,7 @@ pytestmark = pytest.mark.filterwarnings(
 
 # Small Algorithm 4.1 windows at h = 1 s: Δ 20, N 200, ε 10, α 60, β 40 samples. γ = 480 samples
 # is the shortest window the spectral resolution rule accepts for the default wave band.
-SMALL = PredictorParams(sample_time=1.0, retrain_period=20.0, training_window=200.0,
+SMALL = PredictorParams(ndof=1, sample_time=1.0, retrain_period=20.0, training_window=200.0,
                         transient_length=10.0, filter_window=60.0, append_length=40.0,
                         estimation_window=480.0, max_epochs=5)
 DELTA, N_TRAIN, EPS, ALPHA, BETA = 20, 200, 10, 60, 40  # [samples] at h = 1 s
@@ -402,7 +402,7 @@ def test_a_new_sea_is_seen_on_the_short_window_and_restarts_the_training_window(
     The 20-min window still peaks at the old sea; the newest max(α, γ/4) = 300 s find the new
     one, and the training window restarts on those samples.
     """
-    params = PredictorParams()  # γ = 1200 s: the short window is 300 s
+    params = PredictorParams(ndof=1)  # γ = 1200 s: the short window is 300 s
     assert retraining.change_samples(params) == 300
     snapshot = omega_step_snapshot(400.0)
     long = retraining.estimate_frequency(params, snapshot.y, 1.25)
@@ -420,7 +420,7 @@ def test_a_new_sea_is_seen_on_the_short_window_and_restarts_the_training_window(
 
 def test_a_steady_sea_keeps_the_long_window_estimate() -> None:
     """Long before the step only the 1.25 rad/s sea is there: both windows agree."""
-    params = PredictorParams()
+    params = PredictorParams(ndof=1)
     snapshot = omega_step_snapshot(-600.0)  # 3000 s of the first sea
     long = retraining.estimate_frequency(params, snapshot.y, None)
     estimate = retraining.sea_state_estimate(params, snapshot.y, None)

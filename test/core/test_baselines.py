@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 
 import numpy as np
 from numpy.typing import NDArray
@@ -352,3 +353,21 @@ def test_observer_rotated_step_equals_general_step() -> None:
         b = general.update(0.1 * k, pose, force)
     np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-7)
     np.testing.assert_allclose(fast.velocity, general.velocity, rtol=0.0, atol=1e-9)
+
+
+def test_observer_heading_resolution_caches_few_transitions_and_stays_close() -> None:
+    """Rounded to 1e-3 rad (the gyro noise), a ±0.5° heading needs ≤ 19 exponentials."""
+    k4_general = K4 * np.array([1.0, 1.5, 1.0])  # non-isotropic: the general path
+    exact = PassiveObserver(3, 1.0, 0.8, M_SUPPLY, D_SUPPLY, k3=K3, k4=k4_general)
+    rounded = PassiveObserver(3, 1.0, 0.8, M_SUPPLY, D_SUPPLY, k3=K3, k4=k4_general,
+                              heading_resolution=1e-3)
+    rng = np.random.default_rng(6)
+    for k in range(600):
+        pose = np.array([rng.normal(), rng.normal(), 0.3 + math.radians(0.5) * rng.uniform(-1, 1)])
+        force = rng.normal(size=3) * np.array([1e4, 1e4, 1e6])
+        a = exact.update(float(k), pose, force)
+        b = rounded.update(float(k), pose, force)
+    assert len(rounded._transitions) <= 19 < len(exact._transitions)
+    assert np.all(np.abs(a - b) <= np.array([2e-3, 2e-3, 2e-5])), a - b
+    with pytest.raises(ValueError, match='heading_resolution'):
+        PassiveObserver(3, 1.0, 0.8, M_SUPPLY, D_SUPPLY, k3=K3, k4=K4, heading_resolution=-1.0)

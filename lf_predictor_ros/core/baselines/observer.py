@@ -30,6 +30,7 @@ measurement
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -40,6 +41,7 @@ from lf_predictor_ros.core.estimator import EstimatorStatus, check_ndof, wrap_to
 FloatArray = NDArray[np.float64]
 GRAVITY = 9.81  # [m/s²]
 _YAW = 2  # index of heading in a pose
+TRANSITION_CACHE = 4096  # cached (heading, step) transitions before the cache is cleared
 
 
 @dataclass(frozen=True)
@@ -242,8 +244,16 @@ class PassiveObserver:
         relative_damping: float = 1.0,
         cutoff_ratio: float = 1.2,
         bias_time: float = 1000.0,
+        heading_resolution: float = 0.0,
     ) -> None:
-        """Set up the observer; M [kg, kg·m²] and D [N·s/m, N·m·s] are the model it assumes."""
+        """Set up the observer; M [kg, kg·m²] and D [N·s/m, N·m·s] are the model it assumes.
+
+        ``heading_resolution`` [rad]: rounding of the heading in R(ψ) for the cached transition
+        matrices of a non-isotropic observer (0: exact; see `_transition`).
+        """
+        if not (math.isfinite(heading_resolution) and heading_resolution >= 0.0):
+            raise ValueError(f'heading_resolution must be >= 0 rad, got {heading_resolution}')
+        self.heading_resolution = float(heading_resolution)
         self.ndof = check_ndof(ndof)
         if not np.isfinite(sample_time) or sample_time <= 0.0:
             raise ValueError(f'sample_time must be > 0 s, got {sample_time}')
@@ -260,7 +270,7 @@ class PassiveObserver:
         self.gains = observer_gains(wave_peak_freq, **self._tuning)  # type: ignore[arg-type]
         self._state: FloatArray | None = None
         self._last_t: float | None = None
-        self._cache: tuple[float, float, FloatArray, FloatArray] | None = None
+        self._transitions: dict[tuple[float, float], tuple[FloatArray, FloatArray]] = {}
 
     @property
     def wave_peak_freq(self) -> float:
@@ -270,7 +280,7 @@ class PassiveObserver:
     def set_wave_peak_freq(self, wave_peak_freq: float) -> None:
         """Retune the wave model and K1, K2 to a new ω0 [rad/s]; the state is kept."""
         self.gains = observer_gains(wave_peak_freq, **self._tuning)  # type: ignore[arg-type]
-        self._cache = None
+        self._transitions = {}
 
     def system_matrix(self, heading: float = 0.0) -> FloatArray:
         """Continuous error-dynamics matrix A at a heading [rad]; eigenvalues are the poles."""
@@ -327,12 +337,24 @@ class PassiveObserver:
         return np.asarray(out.reshape(-1), dtype=np.float64)
 
     def _transition(self, heading: float, step: float) -> tuple[FloatArray, FloatArray]:
-        if self._cache is not None and self._cache[0] == heading and self._cache[1] == step:
-            return self._cache[2], self._cache[3]
-        a, b = system_matrices(self.gains, self._mass, self._damping, heading)
-        phi, gamma = _zoh(a, b, step)
-        self._cache = (heading, step, phi, gamma)
-        return phi, gamma
+        """ZOH matrices for R(heading) held over ``step``, cached per rounded heading.
+
+        A non-isotropic observer needs a matrix exponential per heading. With
+        ``heading_resolution`` > 0 the heading is rounded to it (e.g. 1e-3 rad, the gyro noise),
+        so a station-keeping run reuses a few hundred cached matrices instead of one exponential
+        per sample; 0 (default) is exact.
+        """
+        resolution = self.heading_resolution
+        held = heading if resolution == 0.0 else round(heading / resolution) * resolution
+        key = (held, step)
+        cached = self._transitions.get(key)
+        if cached is None:
+            if len(self._transitions) >= TRANSITION_CACHE:
+                self._transitions.clear()
+            a, b = system_matrices(self.gains, self._mass, self._damping, held)
+            cached = _zoh(a, b, step)
+            self._transitions[key] = cached
+        return cached
 
     def _initial_state(
         self, measured: FloatArray, force: FloatArray, heading: float

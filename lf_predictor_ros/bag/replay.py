@@ -10,7 +10,11 @@ order; thrust (WrenchStamped, default `/thrust`) goes to `InputAligner.add_force
 (the log time when a stamp is zero, i.e. unset). Every aligned sample goes to
 `AdaptivePredictor(params, background=False)`: trainings run inline at the retrain instant, so a
 replay with the same seed and parameters gives the same output bit for bit. A sample flagged
-`segment_start` (other than the first) calls `restart_segment()`, as the node does.
+`segment_start` (other than the first) calls `restart_segment()`, as the node does. The
+position-reference checks of the node (`core.reference_checks`) run on every pose before the
+aligner and on every aligned sample against the previous prediction, as in the node: a rejected
+pose is not replayed into the predictor, and a fault found after the fact restarts the data
+segment. Dropouts are judged on the pose stamps (a stamp gap longer than `dropout_timeout`).
 
 OUTPUT gets every input message (same bytes, log and publish times; same channel types, schema
 text, QoS metadata and type hash) plus, with the log time of the pose message that produced them:
@@ -23,8 +27,9 @@ is not copied (a warning says so); input `/diagnostics` are copied and ours adde
 
 `--params-file` is a ROS 2 parameters YAML as used by the predictor node (`/**:` and/or
 `predictor:` → `ros__parameters:`): PredictorParams fields, aligner settings (`max_gap`,
-`thrust_timeout`, `backward_jump`, `max_speed`, `max_abs_position`, `average_poses`), `frame_id`
-and `diagnostics_period` are used; the node-only keys `model_path`, `autostart` and `use_sim_time`
+`thrust_timeout`, `backward_jump`, `max_speed`, `max_abs_position`, `average_poses`), the
+position-reference check settings (`ReferenceCheckSettings`), `frame_id` and
+`diagnostics_period` are used; the node-only keys `model_path`, `autostart` and `use_sim_time`
 are ignored (use `--load-model`); any other key is refused. `--seed` overrides `seed`.
 
 When the truth topic (default `/truth/lf_pose`) is present, a metrics table compares, after
@@ -72,6 +77,7 @@ from lf_predictor_ros.core.estimator import EstimatorStatus, wrap_to_pi
 from lf_predictor_ros.core.evaluation import DEFAULT_WAVE_BAND, Metrics, format_table, score
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
+from lf_predictor_ros.core.reference_checks import ReferenceChecker, ReferenceCheckSettings
 from lf_predictor_ros.nodes.conversions import (
     FRAME_EARTH,
     NS_PER_S,
@@ -86,6 +92,7 @@ from lf_predictor_ros.nodes.diagnostics import (
     input_values,
     make_diagnostic_array,
     predictor_values,
+    worse,
 )
 from lf_predictor_ros.nodes.qos import publisher_qos
 
@@ -185,6 +192,7 @@ class ReplayConfig:
 
     params: PredictorParams
     aligner: AlignerSettings
+    checks: ReferenceCheckSettings = field(default_factory=ReferenceCheckSettings)
     frame_id: str = FRAME_EARTH
     diagnostics_period: float = DEFAULT_DIAGNOSTICS_PERIOD  # [s of bag time]
 
@@ -248,12 +256,15 @@ def load_config(params_file: str | None, seed: int | None = None) -> ReplayConfi
             values.update(_flatten(section))
     for key in NODE_KEYS_IGNORED:
         values.pop(key, None)
-    known = set(PredictorParams.field_names()) | set(ALIGNER_KEYS) | set(NODE_KEYS_USED)
+    check_keys = ReferenceCheckSettings.field_names()
+    known = set(PredictorParams.field_names()) | set(ALIGNER_KEYS) | set(NODE_KEYS_USED) | \
+        set(check_keys)
     unknown = sorted(set(values) - known)
     if unknown:
         raise UsageError(f'parameters file {params_file!r}: unknown key(s) {unknown}; valid '
                          f'keys are the PredictorParams fields, the aligner settings '
-                         f'{list(ALIGNER_KEYS)} and {list(NODE_KEYS_USED)}')
+                         f'{list(ALIGNER_KEYS)}, the reference checks {list(check_keys)} and '
+                         f'{list(NODE_KEYS_USED)}')
     if seed is not None:
         values['seed'] = seed
     predictor_values = {k: v for k, v in values.items() if k in PredictorParams.field_names()}
@@ -261,6 +272,9 @@ def load_config(params_file: str | None, seed: int | None = None) -> ReplayConfi
     try:
         params = PredictorParams.from_dict(predictor_values)
         aligner = AlignerSettings(sample_time=params.sample_time, **aligner_values)
+        check_values: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v
+                                        for k, v in values.items() if k in check_keys}
+        checks = ReferenceCheckSettings(**check_values)
         frame_id = str(values.get('frame_id', FRAME_EARTH))
         period = float(values.get('diagnostics_period', DEFAULT_DIAGNOSTICS_PERIOD))
     except (TypeError, ValueError) as err:
@@ -268,14 +282,15 @@ def load_config(params_file: str | None, seed: int | None = None) -> ReplayConfi
     if not (period > 0.0 and math.isfinite(period)):
         raise UsageError(f'parameters file {params_file!r}: diagnostics_period must be > 0 s, '
                          f'got {period}')
-    return ReplayConfig(params, aligner, frame_id, period)
+    return ReplayConfig(params, aligner, checks, frame_id, period)
 
 
 # --------------------------------------------------------------------------- diagnostics
 def predictor_diagnostics(status: EstimatorStatus, counters: Mapping[str, int],
                           aligner_counters: Mapping[str, int], stamp: Time, *,
                           samples: int, name: str = DIAGNOSTICS_NAME,
-                          extra: Mapping[str, DiagnosticValue] | None = None) -> DiagnosticArray:
+                          extra: Mapping[str, DiagnosticValue] | None = None,
+                          reference: tuple[str, str] | None = None) -> DiagnosticArray:
     """/diagnostics of the predictor with the predictor node's level, message and keys.
 
     Level by state: warming_up / trained → OK, fallback → WARN, error → ERROR; message
@@ -283,7 +298,8 @@ def predictor_diagnostics(status: EstimatorStatus, counters: Mapping[str, int],
     wave_peak_freq, last_loss, train_seconds, model_age, buffer_fill (nan when unknown),
     trainings, rejected_trainings, overruns, training_errors, guard_trips, segments, samples,
     dropped (= invalid + out_of_order + outliers), invalid, out_of_order, outliers, gaps, resets,
-    stale_thrust; then `extra`.
+    stale_thrust; then `extra`. ``reference`` (level, reason) of the position-reference checks
+    raises the level as in the node (the reason leads the message).
     """
     values: dict[str, DiagnosticValue] = {
         **predictor_values(status, counters),
@@ -291,8 +307,11 @@ def predictor_diagnostics(status: EstimatorStatus, counters: Mapping[str, int],
     }
     values.update(extra or {})
     level = _LEVEL_OF_STATE.get(status.state, 'WARN')
-    return make_diagnostic_array(name, level, f'{status.state}: {status.message}', values,
-                                 stamp=stamp)
+    message = f'{status.state}: {status.message}'
+    if reference is not None:
+        level, message = worse(level, message, reference[0],
+                               f'position reference {reference[1]}; {message}')
+    return make_diagnostic_array(name, level, message, values, stamp=stamp)
 
 
 # ------------------------------------------------------------------------------ progress
@@ -440,6 +459,8 @@ class _Replayer:
         self.h = config.params.sample_time
         self.aligner = InputAligner(config.aligner)
         self.predictor = AdaptivePredictor(config.params, background=False)
+        self.checker = ReferenceChecker(config.checks, config.params.ndof)
+        self.predicted: tuple[float, FloatArray] | None = None  # (valid at, estimate)
         self.next_diagnostics: float | None = None
         self.first_sample = True
         self.channels: dict[int, int] = {}
@@ -528,14 +549,35 @@ class _Replayer:
             pose: object = msg_to_pose(message)
         except ValueError:
             pose = np.full(3, np.nan)  # the aligner drops and counts it
-        for sample in self.aligner.add_pose(_stamp_seconds(message, log_time_ns), pose):
+        t = _stamp_seconds(message, log_time_ns)
+        if isinstance(pose, np.ndarray) and np.all(np.isfinite(pose)):
+            verdict = self.checker.check_pose(t, pose, self.predictor.wave_peak_freq)
+            if verdict.restart:
+                self._restart_data()
+            if not verdict.accepted:
+                return
+        for sample in self.aligner.add_pose(t, pose):
             self._sample(sample, log_time_ns)
+
+    def _restart_data(self) -> None:
+        """A reference fault found after the fact: the next sample starts a new segment."""
+        self.aligner.reset()
+        self.predicted = None
 
     def _sample(self, sample: AlignedSample, log_time_ns: int) -> None:
         if sample.segment_start and not self.first_sample:
             self.predictor.restart_segment()
+            self.predicted = None
         self.first_sample = False
+        expected = self.predicted[1] if self.predicted is not None and \
+            abs(self.predicted[0] - sample.t) < 1e-6 else None
+        verdict = self.checker.check_sample(sample.t, sample.pose, expected)
+        if not verdict.accepted:
+            if verdict.restart:
+                self._restart_data()
+            return
         estimate = self.predictor.update(sample.t, sample.pose, sample.force)
+        self.predicted = (sample.t + self.h, estimate)
         status = self.predictor.status()
         log = self.result.samples
         log.t.append(sample.t)
@@ -563,9 +605,13 @@ class _Replayer:
             'model_file': self.options.load_model or '',
             'partial': self.result.partial,
         }
+        extra.update(self.checker.values())
+        extra['ndof'] = self.config.params.ndof
+        extra['unfiltered_dofs'] = 'east yaw' if self.config.params.ndof == 1 else 'none'
         array = predictor_diagnostics(status, self.predictor.counters,
                                       self.aligner.counters.as_dict(), sec_to_stamp(t),
-                                      samples=self.result.estimates, extra=extra)
+                                      samples=self.result.estimates, extra=extra,
+                                      reference=self.checker.status())
         self._write(self._diagnostics_channel, log_time_ns, serialize(array))
 
 

@@ -25,6 +25,16 @@ _LEVELS: dict[str, bytes] = {
 }
 
 
+_RANK = {'OK': 0, 'WARN': 1, 'ERROR': 2, 'STALE': 3}
+
+
+def worse(level: str, message: str, other_level: str, other_message: str) -> tuple[str, str]:
+    """The more severe of two (level name, message) pairs; on a tie the first."""
+    if _RANK[other_level.upper()] > _RANK[level.upper()]:
+        return other_level, other_message
+    return level, message
+
+
 def level_byte(level: str | int | bytes) -> bytes:
     """Normalize a level given as a name ('OK', 'warn'), an int 0–3 or a byte to a byte."""
     if isinstance(level, str):

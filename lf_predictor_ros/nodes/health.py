@@ -69,12 +69,20 @@ class InputHealth:
             self._count_error('thrust', error)
 
     def _feed_pose(self, msg: PoseStamped, aligner: InputAligner, frame_id: str,
-                   process: Callable[[AlignedSample], None]) -> None:
-        """Align a measured pose and ``process`` every grid sample it completes; never raises."""
+                   process: Callable[[AlignedSample], None],
+                   accept: Callable[[float, FloatArray], bool] | None = None) -> None:
+        """Align a measured pose and ``process`` every grid sample it completes; never raises.
+
+        ``accept(t, pose)`` (the position-reference checks) sees every converted pose first; a
+        pose it refuses never reaches the aligner.
+        """
         try:
             pose = self._converted('measured_pose', msg, frame_id, msg_to_pose)
             if pose is not None:
-                for sample in aligner.add_pose(stamp_to_sec(msg.header.stamp), pose):
+                t = stamp_to_sec(msg.header.stamp)
+                if accept is not None and not accept(t, pose):
+                    return
+                for sample in aligner.add_pose(t, pose):
                     process(sample)
         except Exception as error:  # noqa: BLE001 - a callback must never kill the node
             self._count_error('measured_pose', error)

@@ -16,12 +16,32 @@ each accepted training (after a run-time change of the network structure the fil
 new shape). A file that does not fit the parameters or is corrupt is refused with an ERROR log,
 the node starts cold and does not save over the refused file.
 
+Position-reference checks (``core.reference_checks``, parameters ``reference_checks``,
+``frozen_time``, ``motion_*``, ``jump_*``, ``drift_*``, ``dropout_timeout``) run on every pose
+before the aligner: a frozen, jumping or drifting reference is rejected (it never enters the
+aligner, the predictor or a training), a fault found after the fact drops the buffered data (new
+segment, a running training discarded; the network in service stays), and a pose silence longer
+than ``dropout_timeout`` on the node clock is a dropout. A drift latches until
+``~/clear_reference_faults`` (or ``~/reset``).
+
+Default 3 DOF. With ``ndof`` 1 only north is estimated; east and yaw of ``lf_pose`` are the
+measured east and yaw passed through unfiltered (never a made-up 0): the node logs a WARN at
+configure, publishes ``unfiltered_dofs`` in the diagnostics, and the level is WARN once the
+passed-through DOFs move (a 3-DOF vessel run with ndof 1).
+
 ``/diagnostics`` (DiagnosticArray, every ``diagnostics_period`` of the node clock): level OK
 while warming up or trained, WARN in fallback, ERROR in error (or after a callback failed since
-the last report); key values: predictor status and counters, aligner counters, frames.
+the last report); the position-reference status raises it (WARN for a rejected outlier in the
+last 10 s, ERROR for frozen, no wave motion, a step, drift or dropout, with the reason as the
+message); key values: predictor status and counters, aligner counters, frames, ``ref_*``
+counters of each reference fault (``ref_frozen``, ``ref_no_wave_motion``, ``ref_jump``,
+``ref_step``, ``ref_drift``, ``ref_dropout``), ``ref_rejected``, ``ref_faults`` (active now),
+``pose_silence`` [s], ``ndof``, ``unfiltered_dofs``.
 
-Services: ``~/retrain`` (std_srvs/Trigger: ``request_retrain()``'s answer) and ``~/reset``
-(forget the network, data, ω0 and counters of trainings; state becomes warming_up).
+Services: ``~/retrain`` (std_srvs/Trigger: ``request_retrain()``'s answer), ``~/reset``
+(forget the network, data, ω0 and counters of trainings; state becomes warming_up; reference
+faults cleared) and ``~/clear_reference_faults`` (the operator re-selects the position reference:
+latched faults and the checks' statistics are cleared, the network stays).
 
 Lifecycle: parameters are declared and validated at construction (invalid → FATAL, exit 1);
 configure builds aligner, predictor, publishers, subscriptions, services and the diagnostics
@@ -36,6 +56,7 @@ Runtime parameter changes are validated (the reason of a rejection is returned) 
   starts cold. Collected data restarts in both cases (the next training needs a full window).
 - aligner settings (max_gap, thrust_timeout, backward_jump, max_speed, average_poses): a new
   aligner, a new data segment. ``frame_id``: immediately.
+- reference-check settings (and ``ndof``): new checks with fresh statistics (counters kept).
 - ``model_path``, ``diagnostics_period``, ``autostart``: read-only (set them at start).
 
 Never does an exception in a callback kill the node: it is caught, counted (``callback_errors``),
@@ -69,6 +90,7 @@ from std_srvs.srv import Trigger
 from lf_predictor_ros.core.alignment import AlignedSample, AlignerSettings, InputAligner
 from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.reference_checks import ReferenceChecker, ReferenceCheckSettings
 from lf_predictor_ros.nodes.conversions import (
     FRAME_EARTH,
     pose_to_msg,
@@ -79,8 +101,9 @@ from lf_predictor_ros.nodes.diagnostics import (
     input_values,
     make_diagnostic_array,
     predictor_values,
+    worse,
 )
-from lf_predictor_ros.nodes.health import InputHealth
+from lf_predictor_ros.nodes.health import FloatArray, InputHealth
 from lf_predictor_ros.nodes.params import declare_and_load, parameter_table, validated_update
 from lf_predictor_ros.nodes.params import param_meta as _meta
 from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
@@ -95,7 +118,6 @@ STRUCTURE_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 
 NOTE_STRUCTURE = ' (run-time change: re-creates the predictor cold, data restarts)'
 NOTE_TUNING = (' (run-time change: re-creates the predictor keeping the trained network, '
                'data restarts)')
-
 
 
 @dataclass(frozen=True)
@@ -158,10 +180,14 @@ class PredictorNode(InputHealth, LifecycleNode):
         super().__init__(NODE_NAME, **node_kwargs)
         self._params = declare_and_load(self, PredictorParams, note=_change_note)
         self._settings = declare_and_load(self, PredictorNodeSettings)
+        self._checks = declare_and_load(self, ReferenceCheckSettings)
         self._settings.aligner_settings(self._params.sample_time)  # cross-check at start
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._aligner: InputAligner | None = None
         self._predictor: AdaptivePredictor | None = None
+        self._checker: ReferenceChecker | None = None
+        self._predicted: tuple[float, FloatArray] | None = None  # (valid at, lf_pose) last out
+        self._passthrough_moving = False  # ndof 1 and the measured east/yaw are not all 0
         self._active = False
         self._subscriptions_in_use: list[Any] = []
         self._services_in_use: list[Any] = []
@@ -193,6 +219,16 @@ class PredictorNode(InputHealth, LifecycleNode):
         return self._settings
 
     @property
+    def checks(self) -> ReferenceCheckSettings:
+        """The position-reference check settings in use."""
+        return self._checks
+
+    @property
+    def checker(self) -> ReferenceChecker | None:
+        """The position-reference checks (None while unconfigured)."""
+        return self._checker
+
+    @property
     def predictor(self) -> AdaptivePredictor | None:
         """The predictor (None while unconfigured)."""
         return self._predictor
@@ -204,6 +240,7 @@ class PredictorNode(InputHealth, LifecycleNode):
         try:
             self._aligner = InputAligner(self._settings.aligner_settings(self._params.sample_time))
             self._predictor = self._new_predictor(self._params)
+            self._checker = ReferenceChecker(self._checks, self._params.ndof)
             self._load_model()
         except (ValueError, OSError) as error:
             self.get_logger().error(f'configure failed: {error}')
@@ -215,16 +252,26 @@ class PredictorNode(InputHealth, LifecycleNode):
         self._subscriptions_in_use = [
             self.create_subscription(WrenchStamped, 'thrust', self.on_thrust, sensor_qos()),
             self.create_subscription(PoseStamped, 'measured_pose', self.on_pose, sensor_qos())]
-        self._services_in_use = [self.create_service(Trigger, '~/retrain', self._on_retrain),
-                                 self.create_service(Trigger, '~/reset', self._on_reset)]
+        self._services_in_use = [
+            self.create_service(Trigger, '~/retrain', self._on_retrain),
+            self.create_service(Trigger, '~/reset', self._on_reset),
+            self.create_service(Trigger, '~/clear_reference_faults', self._on_clear_faults)]
         self._timer = self.create_timer(self._settings.diagnostics_period,
                                         self.publish_diagnostics)
         p = self._params
         self.get_logger().info(
             f'configured: {p.ndof}-DOF, sample time {p.sample_time} s, retrain every '
             f'{p.retrain_period} s on {p.training_window} s, trainer {p.trainer}; model '
-            f'{self._model_file}')
+            f'{self._model_file}; reference checks '
+            f'{"on" if self._checks.reference_checks else "OFF"}')
+        self._warn_passthrough()
         return super().on_configure(state)
+
+    def _warn_passthrough(self) -> None:
+        if self._params.ndof == 1:
+            self.get_logger().warning(
+                'ndof 1: only north is estimated; east and yaw of lf_pose are the measurement '
+                'passed through UNFILTERED (set ndof 3 for a 3-DOF vessel)')
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Enable the publishers and the data input."""
@@ -253,6 +300,8 @@ class PredictorNode(InputHealth, LifecycleNode):
             self._predictor.close()  # waits ≤ 5 s for the worker's next epoch boundary
         self._predictor = None
         self._aligner = None
+        self._checker = None
+        self._predicted = None
         for subscription in self._subscriptions_in_use:
             self.destroy_subscription(subscription)
         for service in self._services_in_use:
@@ -329,26 +378,40 @@ class PredictorNode(InputHealth, LifecycleNode):
         new_settings, reason = validated_update(self._settings, parameters)
         if new_settings is None:
             return SetParametersResult(successful=False, reason=reason)
+        new_checks, reason = validated_update(self._checks, parameters)
+        if new_checks is None:
+            return SetParametersResult(successful=False, reason=reason)
         try:
             aligner_settings = new_settings.aligner_settings(new_params.sample_time)
         except ValueError as error:
             return SetParametersResult(successful=False, reason=str(error))
         try:
-            self._apply(new_params, new_settings, aligner_settings)
+            self._apply(new_params, new_settings, aligner_settings, new_checks)
         except Exception as error:  # noqa: BLE001 - keep the node alive, report the reason
             self._count_error('parameter change', error)
             return SetParametersResult(successful=False, reason=f'could not apply: {error}')
         return SetParametersResult(successful=True, reason='')
 
     def _apply(self, params: PredictorParams, settings: PredictorNodeSettings,
-               aligner_settings: AlignerSettings) -> None:
+               aligner_settings: AlignerSettings, checks: ReferenceCheckSettings) -> None:
         configured = self._predictor is not None
         if configured and params != self._params:
             self._replace_predictor(params)
+            self._predicted = None
         if self._aligner is not None and aligner_settings != self._aligner.settings:
             self._aligner = InputAligner(aligner_settings)
             self.get_logger().info('aligner settings changed: new data segment')
-        self._params, self._settings = params, settings
+        old = self._checker
+        if old is not None and (checks != self._checks or params.ndof != self._params.ndof):
+            self._checker = ReferenceChecker(checks, params.ndof)
+            self._checker.counters = dict(old.counters)
+            self._checker.rejected = old.rejected
+            self.get_logger().info('reference checks changed: statistics restart')
+        if params.ndof != self._params.ndof:
+            self._passthrough_moving = False
+        self._params, self._settings, self._checks = params, settings, checks
+        if configured and params.ndof == 1:
+            self._warn_passthrough()
 
     # ---- data path -----------------------------------------------------------------------
 
@@ -360,14 +423,60 @@ class PredictorNode(InputHealth, LifecycleNode):
     def on_pose(self, msg: PoseStamped) -> None:
         """Align a measured pose; predict and publish for every completed grid sample."""
         if self._active and self._aligner is not None:
-            self._feed_pose(msg, self._aligner, self._settings.frame_id, self._process)
+            self._feed_pose(msg, self._aligner, self._settings.frame_id, self._process,
+                            accept=self._check_pose)
+
+    def _clock_seconds(self) -> float:
+        return float(self.get_clock().now().nanoseconds) / 1e9
+
+    def _check_pose(self, t: float, pose: FloatArray) -> bool:
+        """Position-reference checks of one pose (before the aligner); False: rejected."""
+        checker, predictor = self._checker, self._predictor
+        assert checker is not None and predictor is not None
+        checker.seen(self._clock_seconds())
+        verdict = checker.check_pose(t, pose, predictor.wave_peak_freq)
+        if verdict.restart:
+            self._restart_data()
+        if verdict.fault is not None:
+            self._log_fault(checker)
+        return verdict.accepted
+
+    def _log_fault(self, checker: ReferenceChecker) -> None:
+        level, reason = checker.status()
+        text = f'position reference: {reason or checker.last_reason}'
+        if level == 'ERROR':  # rclpy: one severity per call site
+            self.get_logger().error(text, throttle_duration_sec=5.0)
+        else:
+            self.get_logger().warning(text, throttle_duration_sec=5.0)
+
+    def _restart_data(self) -> None:
+        """A fault was found after the fact: drop the buffered data and a running training."""
+        assert self._aligner is not None and self._predictor is not None
+        self._aligner.reset()  # the next sample starts a new segment (predictor buffers cleared)
+        self._predictor.discard_running_job()
+        self._predicted = None
+
+    def _prediction_for(self, t: float) -> FloatArray | None:
+        if self._predicted is None or abs(self._predicted[0] - t) > 1e-6:
+            return None
+        return self._predicted[1]
 
     def _process(self, sample: AlignedSample) -> None:
-        predictor = self._predictor
-        assert predictor is not None
+        predictor, checker = self._predictor, self._checker
+        assert predictor is not None and checker is not None
         if sample.segment_start and self._samples_in_run > 0:
             predictor.restart_segment()
+            self._predicted = None
+        verdict = checker.check_sample(sample.t, sample.pose, self._prediction_for(sample.t))
+        if not verdict.accepted:
+            if verdict.restart:
+                self._restart_data()
+            self._log_fault(checker)
+            return
         lf_pose = predictor.update(sample.t, sample.pose, sample.force)
+        self._predicted = (sample.t + self._params.sample_time, lf_pose)
+        if self._params.ndof == 1 and (sample.pose[1] != 0.0 or sample.pose[2] != 0.0):
+            self._passthrough_moving = True
         self._samples += 1
         self._samples_in_run += 1
         stamp = sec_to_stamp(sample.t + self._params.sample_time)  # valid at t + h
@@ -396,6 +505,9 @@ class PredictorNode(InputHealth, LifecycleNode):
                 return response
             self._predictor.reset()
             self._aligner.reset()
+            if self._checker is not None:
+                self._checker.reset()
+            self._predicted = None
             self._samples_in_run = 0
             self._warm_start = False
             status = self._predictor.status()
@@ -408,15 +520,40 @@ class PredictorNode(InputHealth, LifecycleNode):
             response.success, response.message = False, f'reset failed: {error}'
         return response
 
+    def _on_clear_faults(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        try:
+            if self._checker is None:
+                response.success, response.message = False, 'predictor not configured'
+                return response
+            faults = ' '.join(self._checker.faults) or 'none'
+            self._checker.reset()
+            response.success = True
+            response.message = (f'reference faults cleared (were: {faults}); checks restart '
+                                'their statistics, the network stays')
+            self.get_logger().info(response.message)
+        except Exception as error:  # noqa: BLE001
+            self._count_error('~/clear_reference_faults', error)
+            response.success, response.message = False, f'clear failed: {error}'
+        return response
+
     # ---- diagnostics ---------------------------------------------------------------------
 
     def diagnostic_values(self) -> tuple[str, str, dict[str, DiagnosticValue]]:
         """(level, message, key values) of the current state, as published."""
-        predictor, aligner = self._predictor, self._aligner
-        if predictor is None or aligner is None:
+        predictor, aligner, checker = self._predictor, self._aligner, self._checker
+        if predictor is None or aligner is None or checker is None:
             return 'WARN', 'not configured', {}
         status = predictor.status()
         level, message = diagnostic_level(status), f'{status.state}: {status.message}'
+        silence = checker.silent_for(self._clock_seconds())
+        ref_level, ref_reason = checker.status()
+        level, message = worse(level, message, ref_level,
+                               f'position reference {ref_reason}; {message}')
+        unfiltered = 'east yaw' if self._params.ndof == 1 else 'none'
+        if self._passthrough_moving:
+            level, message = worse(level, message, 'WARN',
+                                   f'ndof 1: east and yaw are the measurement, unfiltered; '
+                                   f'{message}')
         if self._callback_errors > self._errors_reported:
             level, message = 'ERROR', f'callback error: {self._last_error}'
         values: dict[str, DiagnosticValue] = {
@@ -425,6 +562,10 @@ class PredictorNode(InputHealth, LifecycleNode):
             'unexpected_frame': self._unexpected_frame,
             'callback_errors': self._callback_errors,
             'last_error': self._last_error,
+            **checker.values(),
+            'pose_silence': math.nan if silence is None else silence,
+            'ndof': self._params.ndof,
+            'unfiltered_dofs': unfiltered,
             'warm_start': self._warm_start,
             'model_file': self._model_file,
             'active': self._active,
@@ -458,7 +599,8 @@ def _parse_cli(argv: Sequence[str]) -> None:
                'change of a predictor parameter re-creates the predictor (the trained network is '
                'kept unless ndof, nu, ny, nfb, hidden_units, hidden_layers or sample_time '
                'change); collected data restarts.\n'
-               + parameter_table([PredictorParams, PredictorNodeSettings]))
+               + parameter_table([PredictorParams, PredictorNodeSettings,
+                                  ReferenceCheckSettings]))
     parser.parse_args(list(remove_ros_args(list(argv)))[1:])
 
 

@@ -52,6 +52,7 @@ FIRST_NETWORK = 121.0  # [s] the first estimate from the trained network (next s
 PARAMS_YAML = """\
 /**:
   ros__parameters:
+    ndof: 1
     sample_time: 1.0
     retrain_period: 20.0
     training_window: 200.0

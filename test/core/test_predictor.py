@@ -693,8 +693,11 @@ def test_interpreter_exit_while_training_is_clean() -> None:
 
 
 def test_default_is_3_dof_and_follows_a_vessel_heading_near_180_degrees() -> None:
-    """Defaults on the supply vessel rotated to ψ ≈ ±180°: heading within a few degrees, both
-    north and east estimated (the 1-DOF default published east = 0 and heading = 0 here)."""
+    """Defaults on a 3-DOF vessel rotated to ψ ≈ ±180°: heading within a few degrees.
+
+    North and east are both estimated (the old 1-DOF default published east = 0 and heading =
+    0 here, up to 180° off).
+    """
     assert PredictorParams().ndof == 3
     record = simulate(load_scenario('threedof_open_loop'), 2, 300.0)
     rotation = math.pi - 0.05  # [rad] the vessel heads 177°, its waves cross ±180°

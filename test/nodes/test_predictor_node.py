@@ -29,6 +29,7 @@ import yaml
 from lf_predictor_ros.core.frequency import welch_resolution
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
+from lf_predictor_ros.core.reference_checks import ReferenceCheckSettings
 from lf_predictor_ros.core.retraining import first_training_samples
 from lf_predictor_ros.nodes import predictor_node
 from lf_predictor_ros.nodes.conversions import msg_to_pose, pose_to_msg, stamp_to_ns, wrench_to_msg
@@ -39,7 +40,8 @@ REPO = Path(__file__).resolve().parents[2]
 NS_PER_S = 1_000_000_000  # [ns/s]
 # Small windows so that the first training happens after 120 simulated seconds (sample 1 s); the
 # network structure is pinned so that tuning the defaults does not change these tests.
-SMALL: dict[str, Any] = {'sample_time': 1.0, 'nu': 4, 'ny': 12, 'nfb': 0, 'hidden_units': 6,
+SMALL: dict[str, Any] = {'ndof': 1, 'sample_time': 1.0, 'nu': 4, 'ny': 12, 'nfb': 0,
+         'hidden_units': 6,
          'retrain_period': 20.0, 'training_window': 200.0, 'transient_length': 10.0,
          'filter_window': 60.0, 'append_length': 40.0,
          'estimation_window': 600.0, 'max_epochs': 30, 'max_train_seconds': 10.0}
@@ -293,7 +295,10 @@ def test_params_file_is_honoured_and_shipped_yaml_holds_every_default(
         ros_context: Context, tmp_path: Path) -> None:
     shipped = yaml.safe_load((REPO / 'config' / 'predictor.yaml').read_text())
     listed = shipped['/**']['ros__parameters']
-    defaults = {**PredictorParams().to_dict(), **dataclasses.asdict(PredictorNodeSettings())}
+    checks = {k: list(v) if isinstance(v, tuple) else v
+              for k, v in dataclasses.asdict(ReferenceCheckSettings()).items()}
+    defaults = {**PredictorParams().to_dict(), **dataclasses.asdict(PredictorNodeSettings()),
+                **checks}
     assert listed == defaults
 
     params_file = tmp_path / 'params.yaml'
@@ -388,5 +393,41 @@ def test_lifecycle_unexpected_frame_and_callback_errors(
         node.trigger_configure()  # configurable again after cleanup
         assert node.predictor is not None and node.predictor.model is None
         assert len([sub for sub in node.subscriptions if sub.topic_name == '/measured_pose']) == 1
+    finally:
+        node.destroy_node()
+
+
+def test_reference_faults_are_flagged_counted_and_kept_out_of_the_predictor(
+        ros_context: Context, record: SimRecord) -> None:
+    """A spike and a frozen stretch: rejected before the aligner, counted, level raised."""
+    node = _make(ros_context)
+    try:
+        assert node.predictor is not None
+        fed: list[np.ndarray] = []
+        update = node.predictor.update
+
+        def spy(t: float, pose: np.ndarray, force: np.ndarray) -> np.ndarray:
+            fed.append(np.array(pose))
+            return update(t, pose, force)
+
+        node.predictor.update = spy  # type: ignore[method-assign]
+        poses = record.measured_pose.copy()
+        poses[100, 0] += 15.0  # a 15 m spike (under the aligner's 21 m speed limit at 1 Hz)
+        poses[140:150] = poses[139]  # frozen for 10 s
+        for k in range(160):
+            t = float(record.t[k])
+            node.on_thrust(wrench_to_msg(record.thrust[k], t))
+            node.on_pose(pose_to_msg(poses[k], t))
+        level, message, values = node.diagnostic_values()
+        assert values['ref_jump'] >= 1 and values['ref_frozen'] == 1
+        assert values['ref_rejected'] >= 1 + 10 - 3
+        assert not any(np.allclose(p, poses[100]) for p in fed)  # the spike never got in
+        # the freeze, found 3 s late, restarted the segment: none of it is left for a training
+        assert node.predictor.counters['segments'] >= 1
+        assert not any(row[0] == poses[139, 0] for row in node.predictor._y)
+        assert values['callback_errors'] == 0
+        assert all(np.all(np.isfinite(p)) for p in fed)
+        assert values['ndof'] == 1 and values['unfiltered_dofs'] == 'east yaw'
+        assert level == 'OK'  # the fault cleared; the 1-DOF vessel's east/yaw never move
     finally:
         node.destroy_node()

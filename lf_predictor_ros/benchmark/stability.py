@@ -149,8 +149,11 @@ def excursion_bounds(ideal_max_excursion: float, ideal_max_heading_error: float,
 
 
 def pose_offset(truth_lf_pose: FloatArray, setpoint: FloatArray, ndof: int) -> FloatArray:
-    """LF pose − setpoint on the first ndof columns, heading wrapped to (−π, π]."""
-    offset = truth_lf_pose[:, :ndof] - np.asarray(setpoint, dtype=np.float64)[:ndof]
+    """LF pose − setpoint on the first ndof columns, heading wrapped to (−π, π].
+
+    ``setpoint`` is one pose (3,) or one per sample (n, 3) (a setpoint schedule).
+    """
+    offset = truth_lf_pose[:, :ndof] - np.asarray(setpoint, dtype=np.float64)[..., :ndof]
     if ndof == 3:
         offset[:, _YAW] = np.angle(np.exp(1j * offset[:, _YAW]))
     return np.asarray(offset, dtype=np.float64)

@@ -1,45 +1,33 @@
-"""One benchmark case: simulate a scenario, run every estimator on the same data, score them.
+"""One benchmark case: a fair recording, every estimator on it, every causal one in its own loop.
 
-ROS-free (numpy, scipy, torch via the core). Every estimator sees the same measurements, resampled
-to the predictor's sample time h as the predictor node does it (`InputAligner`: the mean of the
-measured poses of each interval), and is scored against the simulator's LF ground truth after a
-warm-up (the first training plus two retraining periods):
+ROS-free (numpy, scipy, torch via the core). The modules of the benchmark keep the leak out by
+construction:
 
-| name | what |
-|---|---|
-| `adaptive` | the product: Algorithm 4.1, retrained every Δ (inline, deterministic) |
-| `frozen` | the same network trained once and then frozen (the thesis's static condition) |
-| `cascade` | causal notch + low-pass, retuned to the true ω0 |
-| `observer` | nonlinear passive observer with the true (linearized) model and the true ω0 |
-| `observer_mistuned` | the observer with M ×1.3, D ×0.7 and ω0 ×1.2 |
-| `smoother` | zero-phase notch + low-pass over the whole record at the true ω0 (non-causal) |
-| `raw` | the measurement itself |
+- `recordings`: the data and where it came from. A scenario with a DP controller is recorded with
+  the loop closed on a realistic causal estimator (``recording_loop``, the tuned passive
+  observer by default), never on the true LF pose; open-loop scenarios as they are.
+- `estimators`: the estimator table and its factory (tuned baselines from config/baselines).
+- `scoring`: open-loop and closed-loop metrics, the leak check verdict, statistics over seeds.
 
-The observer's bias gains follow anchors §4 with the supply vessel's reference length for every
-vessel: K4 = 0.1·diag(M)·g/L, K3 = 0.1·√(g/L)·K4 (L = 76.2 m). Every estimator is built by one
-factory (`make_estimator`) for both uses below.
+**Open loop**: every estimator over the grid arrays of the recording (h = the predictor's
+sample time, the interval mean of the measured poses), scored against the true LF pose after a
+warm-up (the first training plus two retraining periods). The recording's provenance is checked
+first, and the thrust-only leak check (`recordings.leak_check` against the best causal
+estimator) must pass, or the case raises `recordings.LeakError`.
 
-**Open loop** (every scenario): the estimators run on the recorded data of the scenario's own
-run (closed-loop scenarios: the PID on the true LF pose). Scores: `core.evaluation.score`.
+**Closed loop**: one run of `sim_ros.simulation.simulate_in_loop` per causal estimator, same seed
+(same waves, environment and sensor noise), the scenario's PID fed that estimator's output once
+per h (the predictor's output is its prediction for t + h, used at once; the baselines return
+their estimate at t). The loop `ideal` (PID on the true LF pose) only sets the stability bounds
+and is shown for reference. Scores: `core.evaluation.loop_metrics` after the open-loop warm-up,
+the estimate's own wave-band power, and `benchmark.stability`.
 
-**Closed loop** (scenarios with ``controller.enabled``): one run of
-`sim_ros.simulation.simulate_in_loop` per estimator, same seed (same waves, environment and sensor
-noise), the scenario's PID fed that estimator's output. The estimator is called every h with the
-mean measured pose of the interval and the applied thrust of that instant (the same decimated input
-as open loop) and the PID holds its output in between. The predictor's output is its prediction for
-t + h, used at once (it compensates the hold); the baselines return their estimate at t. The loop
-`ideal` is the PID on the true LF pose (the scenario's own run: the reference), `smoother`
-has no loop (it is non-causal: it needs the whole record before it outputs anything). Scores:
-`core.evaluation.loop_metrics` after the open-loop warm-up and the stability verdict of
-`benchmark.stability` (bounds relative to the ideal loop).
-
-**Adaptation** (scenarios whose ω0 schedule changes inside the scored record, e.g.
-``omega_schedule``): `benchmark.adaptation` on the open-loop errors of `adaptive` and `frozen`
-(north error for 1 DOF, horizontal error for 3 DOF), window Δ = params.retrain_period.
+**Adaptation** (scenarios whose ω0 schedule changes inside the scored record): `benchmark.
+adaptation` on the open-loop errors of `adaptive` and `frozen`, window Δ = retrain_period.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 import math
 import time
@@ -56,24 +44,45 @@ from lf_predictor_ros.benchmark.adaptation import (
     change_times,
     rolling_rmse,
 )
-from lf_predictor_ros.core.alignment import block_mean_poses, mean_pose
-from lf_predictor_ros.core.baselines.cascade import CascadeFilter
-from lf_predictor_ros.core.baselines.observer import PassiveObserver
+from lf_predictor_ros.benchmark.baseline_tuning import load_baseline_config, smoother_settings
+from lf_predictor_ros.benchmark.estimators import (
+    CAUSAL,
+    ESTIMATORS,
+    LIMITS,
+    LOOP_ESTIMATORS,
+    NON_CAUSAL,
+    PREDICTORS,
+    EstimatorSetup,
+    MeasurementPassThrough,
+    StreamingEstimator,
+    make_estimator,
+    predictor_params,
+    scenario_ndof,
+)
+from lf_predictor_ros.benchmark.linear_limit import linear_limit
+from lf_predictor_ros.benchmark.recordings import (
+    GridInput,
+    Recording,
+    check_scorable,
+    decimate,
+    grid_stride,
+    leak_check,
+    record,
+    require_fair,
+)
 from lf_predictor_ros.core.baselines.smoother import smooth_poses
-from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.evaluation import (
     DEFAULT_WAVE_BAND,
     DOF_NAMES,
     WELCH_SEGMENT,
     LoopRun,
     Metrics,
+    band_power,
     loop_metrics,
     score,
 )
 from lf_predictor_ros.core.params import PredictorParams
-from lf_predictor_ros.core.predictor import AdaptivePredictor
 from lf_predictor_ros.core.retraining import first_training_samples
-from sim_ros.physics.vessels import GRAVITY, SUPPLY_LENGTH, LinearModel
 from sim_ros.simulation import (
     Scenario,
     SimRecord,
@@ -84,12 +93,9 @@ from sim_ros.simulation import (
 )
 
 FloatArray = NDArray[np.float64]
-
-ESTIMATORS = ('adaptive', 'frozen', 'cascade', 'observer', 'observer_mistuned', 'smoother', 'raw')
-LOOP_ESTIMATORS = ('ideal', 'adaptive', 'frozen', 'cascade', 'observer', 'observer_mistuned',
-                   'raw')
-MISTUNE_MASS, MISTUNE_DAMPING, MISTUNE_FREQ = 1.3, 0.7, 1.2
-PREDICTORS = ('adaptive', 'frozen')  # outputs valid at t + h
+DEFAULT_RECORDING_LOOP = 'observer'
+LEAK_REFERENCE = 'oracle_kf'  # always in the leak check's set of causal estimators
+_decimate = decimate  # the name sea_change imports
 
 
 @dataclass(frozen=True)
@@ -127,6 +133,8 @@ class CaseResult:
     info: dict[str, Any]
     closed_loop: dict[str, dict[str, Any]] = field(default_factory=dict)
     adaptation: list[AdaptationEvent] | None = None
+    provenance: dict[str, Any] = field(default_factory=dict)  # recordings.Provenance.to_dict()
+    leak: dict[str, Any] = field(default_factory=dict)  # recordings.LeakReport.to_dict()
     loop_series: dict[str, LoopSeries] = field(default_factory=dict, repr=False, compare=False)
     adaptation_series: AdaptationSeries | None = field(default=None, repr=False, compare=False)
 
@@ -135,128 +143,16 @@ class CaseResult:
         out = {'scenario': self.scenario, 'seed': self.seed, 'ndof': self.ndof,
                'duration': self.duration, 'warmup': self.warmup,
                'metrics': {k: v.to_dict() for k, v in self.metrics.items()}, 'info': self.info,
-               'closed_loop': self.closed_loop}
+               'closed_loop': self.closed_loop, 'provenance': self.provenance,
+               'leak': self.leak}
         if self.adaptation is not None:
             out['adaptation'] = [event.to_dict() for event in self.adaptation]
         return out
 
 
-@dataclass(frozen=True)
-class EstimatorSetup:
-    """What the factory needs: DOFs, h, predictor parameters, the true model and ω0."""
-
-    ndof: int
-    sample_time: float
-    params: PredictorParams
-    model: LinearModel
-    wave_peak_freq: float  # [rad/s] initial tuning of the baselines (then retuned per sample)
-
-
-class MeasurementPassThrough:
-    """The `raw` estimator: returns the measured pose (an `LfEstimator`)."""
-
-    def __init__(self, ndof: int, sample_time: float) -> None:
-        """No state; ndof and sample_time only for the protocol."""
-        self.ndof = ndof
-        self.sample_time = sample_time
-
-    def update(self, t: float, pose: FloatArray, force: FloatArray) -> FloatArray:
-        """A copy of the measurement."""
-        return np.array(pose, dtype=np.float64)
-
-    def reset(self) -> None:
-        """Nothing to forget."""
-
-    def status(self) -> EstimatorStatus:
-        """Always running."""
-        return EstimatorStatus(state='ok', message='measurement passed through')
-
-
-class StreamingEstimator:
-    """An estimator fed one sample at a time; baselines are retuned when the true ω0 changes."""
-
-    def __init__(self, estimator: Any, retune: bool, freq_factor: float = 1.0) -> None:
-        """Wrap `estimator`; ``freq_factor`` scales the true ω0 (the mistuned observer)."""
-        self.estimator = estimator
-        self.retune = retune
-        self.freq_factor = freq_factor
-        self._omega = math.nan
-
-    def step(self, t: float, pose: FloatArray, force: FloatArray,
-             wave_peak_freq: float) -> FloatArray:
-        """Retune if ω0 changed, then `update`; returns the estimator's output."""
-        if self.retune and wave_peak_freq != self._omega:
-            self.estimator.set_wave_peak_freq(wave_peak_freq * self.freq_factor)
-            self._omega = wave_peak_freq
-        return np.asarray(self.estimator.update(t, pose, force), dtype=np.float64)
-
-
-def scenario_ndof(scenario: Scenario) -> int:
-    """1 for the thesis's 1-DOF vessel, 3 otherwise."""
-    return 1 if Simulator(scenario, 0).ndof == 1 else 3
-
-
-def predictor_params(scenario: Scenario, overrides: dict[str, Any] | None = None,
-                     ) -> PredictorParams:
-    """Default predictor parameters for a scenario (ndof, h = max(1 s, sensor period)).
-
-    ``overrides`` win, ``sample_time`` included (h must stay a multiple of the sensor period).
-    """
-    values: dict[str, Any] = {'ndof': scenario_ndof(scenario),
-                              'sample_time': max(1.0, scenario.sample_time)}
-    values.update(overrides or {})
-    params = PredictorParams(**values)
-    ratio = params.sample_time / scenario.sample_time
-    if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-9:
-        raise ValueError(f'predictor sample_time {params.sample_time} s must be a whole multiple '
-                         f"of the scenario's sensor period {scenario.sample_time} s: the "
-                         'benchmark decimates the measurements to it')
-    return params
-
-
-def _observer(setup: EstimatorSetup, mistuned: bool) -> PassiveObserver:
-    mass = setup.model.mass * (MISTUNE_MASS if mistuned else 1.0)
-    damping = setup.model.damping * (MISTUNE_DAMPING if mistuned else 1.0)
-    k4 = 0.1 * np.diag(mass) * GRAVITY / SUPPLY_LENGTH
-    k3 = 0.1 * math.sqrt(GRAVITY / SUPPLY_LENGTH) * k4
-    ndof = setup.ndof
-    m = mass[:ndof, :ndof] if ndof == 3 else float(mass[0, 0])
-    d = damping[:ndof, :ndof] if ndof == 3 else float(damping[0, 0])
-    omega0 = setup.wave_peak_freq * (MISTUNE_FREQ if mistuned else 1.0)
-    return PassiveObserver(ndof, setup.sample_time, omega0, m, d, k3=k3[:ndof], k4=k4[:ndof])
-
-
-def make_estimator(name: str, setup: EstimatorSetup) -> StreamingEstimator:
-    """A fresh causal estimator of the module table, ready to be streamed."""
-    if name in PREDICTORS:
-        predictor = AdaptivePredictor(setup.params, background=False,
-                                      max_trainings=1 if name == 'frozen' else None)
-        return StreamingEstimator(predictor, retune=False)
-    if name == 'cascade':
-        return StreamingEstimator(CascadeFilter(setup.ndof, setup.sample_time,
-                                                setup.wave_peak_freq), retune=True)
-    if name in ('observer', 'observer_mistuned'):
-        mistuned = name == 'observer_mistuned'
-        return StreamingEstimator(_observer(setup, mistuned), retune=True,
-                                  freq_factor=MISTUNE_FREQ if mistuned else 1.0)
-    if name == 'raw':
-        return StreamingEstimator(MeasurementPassThrough(setup.ndof, setup.sample_time), False)
-    if name == 'smoother':
-        raise ValueError("'smoother' is non-causal (zero-phase over the whole record): it has no "
-                         'streaming form; use smooth_poses on a recorded run')
-    raise ValueError(f'unknown estimator {name!r}; choose from {ESTIMATORS}')
-
-
-def _decimate(record: SimRecord, stride: int) -> dict[str, FloatArray]:
-    """The record on the grid h: every ``stride``-th sample.
-
-    The measured pose is averaged over the interval (`InputAligner`, ``average_poses`` on);
-    thrust, truth and ω0 are those of the grid instant.
-    """
-    sl = slice(stride - 1, None, stride)
-    return {'t': record.t[sl], 'y': block_mean_poses(record.measured_pose, stride),
-            'u': record.thrust[sl], 'truth': record.truth_lf_pose[sl],
-            'omega': record.wave_peak_freq[sl]}
+def _counters(stream: StreamingEstimator) -> dict[str, int] | None:
+    counters = getattr(stream.estimator, 'counters', None)
+    return dict(counters) if isinstance(counters, dict) else None
 
 
 def _run_streaming(stream: StreamingEstimator, data: dict[str, FloatArray]) -> FloatArray:
@@ -267,20 +163,22 @@ def _run_streaming(stream: StreamingEstimator, data: dict[str, FloatArray]) -> F
     return out
 
 
-def _counters(stream: StreamingEstimator) -> dict[str, int] | None:
-    counters = getattr(stream.estimator, 'counters', None)
-    return dict(counters) if isinstance(counters, dict) else None
-
-
 def run_open_loop(data: dict[str, FloatArray], setup: EstimatorSetup, names: Sequence[str],
-                  info: dict[str, Any]) -> dict[str, FloatArray]:
-    """Every estimator over the decimated record; outputs aligned to data['t'] (n, 3)."""
+                  info: dict[str, Any], begin: int = 0) -> dict[str, FloatArray]:
+    """Every estimator over the grid arrays; outputs aligned to data['t'] (n, 3).
+
+    ``begin``: first scored sample (the linear limit is fitted on the samples from there on).
+    """
     outputs: dict[str, FloatArray] = {}
     for name in names:
         start = time.monotonic()
-        if name == 'smoother':
+        if name in ('smoother_targets', 'smoother_tuned'):
+            settings = smoother_settings(setup.baselines, name, setup.params)
             outputs[name] = smooth_poses(data['y'], setup.sample_time, setup.wave_peak_freq,
-                                         setup.ndof)
+                                         setup.ndof, **settings)
+        elif name == 'linear_limit':
+            outputs[name] = linear_limit(data['y'], data['u'], data['truth'], setup.ndof,
+                                         setup.params.nu, setup.params.ny, begin)
         else:
             stream = make_estimator(name, setup)
             out = _run_streaming(stream, data)
@@ -317,34 +215,8 @@ class _LoopOutcome:
     record: SimRecord
     aborted: bool
     info: dict[str, Any]
-
-
-class _GridInput:
-    """A loop's estimator fed as the predictor node feeds it: one call per grid interval h.
-
-    Called by `simulate_in_loop` at every sensor sample; every ``stride``-th call it passes the
-    estimator the mean of the interval's measured poses (`InputAligner` with ``average_poses``
-    on: the anti-aliasing of the decimation, as `_decimate` does for the open loop) and the thrust
-    of that instant, and returns the estimate; in between it returns the last one (the PID holds
-    it).
-    """
-
-    def __init__(self, stream: StreamingEstimator, schedule: Callable[[float], float],
-                 stride: int) -> None:
-        self.stream = stream
-        self.schedule = schedule
-        self.stride = stride
-        self._poses: list[FloatArray] = []
-        self._held: FloatArray | None = None
-
-    def __call__(self, t: float, pose: FloatArray, thrust: FloatArray) -> FloatArray:
-        """The estimate to hold after this sensor sample."""
-        self._poses.append(pose)
-        if len(self._poses) == self.stride:
-            mean = mean_pose(np.array(self._poses))
-            self._poses = []
-            self._held = self.stream.step(t, mean, thrust, self.schedule(t))
-        return pose if self._held is None else self._held
+    estimate_t: FloatArray = field(default_factory=lambda: np.zeros(0))
+    estimates: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
 
 
 def _run_loop(name: str, scenario: Scenario, seed: int, duration: float | None,
@@ -352,8 +224,8 @@ def _run_loop(name: str, scenario: Scenario, seed: int, duration: float | None,
     if name == 'ideal':
         return _LoopOutcome(ideal, False, {})
     stream = make_estimator(name, setup)
-    grid_input = _GridInput(stream, scenario.waves.peak_freq,
-                            max(1, int(round(setup.sample_time / scenario.sample_time))))
+    grid_input = GridInput(stream.step, scenario.waves.peak_freq,
+                           grid_stride(scenario, setup.sample_time))
     # the PID runs once per estimate (h) and the thruster command is held, as `dp_controller`
     # does on each /lf_pose message in the DDS pipeline
     run = simulate_in_loop(scenario, seed, duration, grid_input, scenario.sample_time,
@@ -364,7 +236,21 @@ def _run_loop(name: str, scenario: Scenario, seed: int, duration: float | None,
     counters = _counters(stream)
     if counters is not None:
         info['counters'] = counters
-    return _LoopOutcome(run.record, run.aborted_at is not None, info)
+    return _LoopOutcome(run.record, run.aborted_at is not None, info, run.estimate_t,
+                        run.estimates)
+
+
+def _estimate_wave_power(outcome: _LoopOutcome, ndof: int, start: float,
+                         sample_time: float) -> dict[str, float]:
+    """Wave-band power of the estimate the PID was fed, per DOF (heading unwrapped)."""
+    keep = outcome.estimate_t >= start
+    est = outcome.estimates[keep, :ndof].copy()
+    if est.shape[0] < 16 or not np.all(np.isfinite(est)):
+        return {d: math.nan for d in DOF_NAMES[:ndof]}
+    if ndof == 3:
+        est[:, 2] = np.unwrap(est[:, 2])
+    return {DOF_NAMES[i]: band_power(est[:, i], sample_time, DEFAULT_WAVE_BAND)
+            for i in range(ndof)}
 
 
 def run_closed_loops(scenario: Scenario, seed: int, duration: float | None,
@@ -372,7 +258,6 @@ def run_closed_loops(scenario: Scenario, seed: int, duration: float | None,
                      start: float) -> tuple[dict[str, dict[str, Any]], dict[str, LoopSeries]]:
     """One closed loop per name (module docstring), scored over t ≥ start."""
     ndof = setup.ndof
-    setpoint = np.asarray(scenario.controller.setpoint, dtype=np.float64)
     stride = max(1, int(round(setup.sample_time / scenario.sample_time)))
     limit_source = Simulator(scenario, seed)
     limit = scenario.controller.tau_max or limit_source.actuator_limit()
@@ -386,12 +271,13 @@ def run_closed_loops(scenario: Scenario, seed: int, duration: float | None,
         outcome = _run_loop(name, scenario, seed, duration, setup, ideal)
         rec = outcome.record
         keep = rec.t >= start
-        offset = stability.pose_offset(rec.truth_lf_pose[keep], setpoint, ndof)
+        setpoint = scenario.controller.setpoint_series(rec.t)  # (n, 3): moves and turns
+        offset = stability.pose_offset(rec.truth_lf_pose[keep], setpoint[keep], ndof)
         if name == 'ideal':
             bounds = stability.excursion_bounds(*stability.max_offsets(offset, ndof))
             ideal_offset = offset
         loop = LoopRun(rec.t, rec.truth_lf_pose, rec.thrust)
-        metrics = (loop_metrics(loop, ndof, tuple(setpoint), DEFAULT_WAVE_BAND, start)
+        metrics = (loop_metrics(loop, ndof, setpoint, DEFAULT_WAVE_BAND, start)
                    if np.count_nonzero(keep) >= 3 else _nan_loop_metrics(ndof))
         # the ideal loop is the reference itself: what it shows is the forced response
         same_samples = ideal_offset.shape == offset.shape
@@ -401,6 +287,9 @@ def run_closed_loops(scenario: Scenario, seed: int, duration: float | None,
         metrics['stability'] = verdict.to_dict()
         metrics['saturated_fraction'] = stability.saturated_fraction(
             rec.thrust_command[keep], None if limit is None else np.asarray(limit), ndof)
+        if name != 'ideal':
+            metrics['estimate_wave_band_power'] = _estimate_wave_power(
+                outcome, ndof, start, setup.sample_time)
         metrics.update(outcome.info)
         metrics['seconds'] = round(time.monotonic() - begin, 3)
         if name in names:
@@ -408,7 +297,7 @@ def run_closed_loops(scenario: Scenario, seed: int, duration: float | None,
             omega, psd = _thrust_spectrum(rec.thrust[keep], scenario.sample_time, ndof)
             sl = slice(stride - 1, None, stride)
             series[name] = LoopSeries(
-                rec.t[sl], stability.pose_offset(rec.truth_lf_pose[sl], setpoint, ndof),
+                rec.t[sl], stability.pose_offset(rec.truth_lf_pose[sl], setpoint[sl], ndof),
                 omega, psd)
     return results, series
 
@@ -442,30 +331,73 @@ def score_adaptation(scenario: Scenario, data: dict[str, FloatArray],
     return events, series
 
 
+def make_setup(scenario: Scenario, seed: int, params: PredictorParams,
+               wave_peak_freq: float | None = None) -> EstimatorSetup:
+    """The estimator setup of a case: true model, ω0, the scenario's tuned baselines."""
+    omega = float(scenario.waves.peak_freq(0.0)) if wave_peak_freq is None else wave_peak_freq
+    return EstimatorSetup(params.ndof, params.sample_time, params,
+                          Simulator(scenario, seed).true_model(), omega, scenario,
+                          load_baseline_config(scenario.name))
+
+
+def make_recording(scenario: Scenario, seed: int, duration: float | None, setup: EstimatorSetup,
+                   recording_loop: str = DEFAULT_RECORDING_LOOP) -> Recording:
+    """The fair recording of a case (`recordings.record` with the loop on ``recording_loop``)."""
+    if recording_loop not in CAUSAL:
+        raise ValueError(f'the recording loop needs a causal estimator, one of {CAUSAL}; got '
+                         f'{recording_loop!r}')
+    return record(scenario, seed, duration, setup.sample_time, recording_loop,
+                  lambda name: make_estimator(name, setup).step)
+
+
+def scored_start(params: PredictorParams, samples: int) -> int:
+    """First scored grid sample: the first training plus two retraining periods."""
+    return min(first_training_samples(params) + 2 * params.retrain_samples, samples // 2)
+
+
 def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
              params_overrides: dict[str, Any] | None = None,
              estimators: Sequence[str] = ESTIMATORS,
-             loop_estimators: Sequence[str] | None = None) -> CaseResult:
-    """Simulate ``scenario_name`` with ``seed`` and score the estimators (module docstring).
+             loop_estimators: Sequence[str] | None = None,
+             recording_loop: str = DEFAULT_RECORDING_LOOP,
+             recording: Recording | None = None) -> CaseResult:
+    """Record ``scenario_name`` with ``seed`` fairly and score the estimators (module docstring).
 
     ``loop_estimators``: closed loops to run (None: `LOOP_ESTIMATORS` when the scenario has its
-    controller enabled, else none; () for none).
+    controller enabled, else none; () for none). ``recording``: score this one instead of
+    recording anew (its provenance must match and pass; a truth-fed one raises `LeakError`).
     """
+    unknown = [n for n in estimators if n not in ESTIMATORS]
+    if unknown:
+        raise ValueError(f'unknown estimator(s) {unknown}; choose from {ESTIMATORS}')
     scenario = load_scenario(scenario_name)
     params = predictor_params(scenario, params_overrides)
-    record = simulate(scenario, seed=seed, duration=duration)
-    stride = max(1, int(round(params.sample_time / scenario.sample_time)))
-    data = _decimate(record, stride)
-    setup = EstimatorSetup(params.ndof, params.sample_time, params,
-                           Simulator(scenario, seed).true_model(),
-                           float(np.median(data['omega'])))
+    setup = make_setup(scenario, seed, params)
+    if recording is None:
+        recording = make_recording(scenario, seed, duration, setup, recording_loop)
+    check_scorable(recording, scenario.name, seed)
+    data = recording.data()
+    setup = make_setup(scenario, seed, params, float(np.median(data['omega'])))
     info: dict[str, Any] = {'sample_time': setup.sample_time, 'params': params.to_dict()}
-    outputs = run_open_loop(data, setup, estimators, info)
-    warmup_samples = first_training_samples(params) + 2 * params.retrain_samples
-    begin = min(warmup_samples, len(data['t']) // 2)
+    begin = scored_start(params, len(data['t']))
+    outputs = run_open_loop(data, setup, estimators, info, begin)
     truth = data['truth'][begin:]
     metrics = {name: score(data['t'][begin:], out[begin:], truth, params.ndof)
                for name, out in outputs.items()}
+    causal = {name: m.rmse for name, m in metrics.items() if name in CAUSAL}
+    if recording.provenance.loop == 'open':  # exogenous thrust: the motion is its response
+        causal = {}
+    # the leak check compares the thrust-only fit with the best causal estimator there is: the
+    # oracle (a fair thrust cannot carry more than the measurements and the true model give) and
+    # the recording loop's estimator (the thrust carries its output), scored here if not asked
+    for reference in (LEAK_REFERENCE, recording.provenance.estimator):
+        if recording.provenance.loop != 'open' and reference is not None and \
+                reference not in causal:
+            check = run_open_loop(data, setup, (reference,), {}, begin)[reference]
+            causal[reference] = score(data['t'][begin:], check[begin:], truth, params.ndof).rmse
+    leak = leak_check(recording, causal, params.ndof, begin) if causal else None
+    if leak is not None:
+        require_fair(recording, leak)
     warmup = float(data['t'][begin])
     loops = (LOOP_ESTIMATORS if scenario.controller.enabled else ()) \
         if loop_estimators is None else tuple(loop_estimators)
@@ -475,21 +407,23 @@ def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
         unknown = [n for n in loops if n not in LOOP_ESTIMATORS]
         if unknown:
             raise ValueError(f'no closed loop for {unknown}; loops: {LOOP_ESTIMATORS} (the '
-                             'smoother is non-causal and cannot be in a loop)')
-        ideal = record if scenario.controller.feedback == 'truth_lf' and \
-            scenario.controller.enabled else simulate(scenario, seed=seed, duration=duration,
-                                                      controller=True, feedback='truth_lf')
+                             'smoothers and the linear limit are non-causal: no loop)')
+        ideal = simulate(scenario, seed=seed, duration=duration, controller=True,
+                         feedback='truth_lf')
         closed, series = run_closed_loops(scenario, seed, duration, setup, loops, ideal, warmup)
     adaptation = score_adaptation(scenario, data, outputs, params, begin)
     return CaseResult(scenario=scenario_name, seed=seed, ndof=params.ndof,
                       duration=float(data['t'][-1]), warmup=warmup, metrics=metrics, info=info,
                       closed_loop=closed,
                       adaptation=None if adaptation is None else adaptation[0],
+                      provenance=recording.provenance.to_dict(),
+                      leak={} if leak is None else leak.to_dict(),
                       loop_series=series,
                       adaptation_series=None if adaptation is None else adaptation[1])
 
 
-__all__ = ['ESTIMATORS', 'LOOP_ESTIMATORS', 'AdaptationSeries', 'CaseResult', 'EstimatorSetup',
-           'LoopSeries', 'MeasurementPassThrough', 'StreamingEstimator', 'make_estimator',
-           'predictor_params', 'run_case', 'run_closed_loops', 'run_open_loop',
-           'scenario_ndof', 'score_adaptation']
+__all__ = ['CAUSAL', 'DEFAULT_RECORDING_LOOP', 'ESTIMATORS', 'LIMITS', 'LOOP_ESTIMATORS',
+           'NON_CAUSAL', 'AdaptationSeries', 'CaseResult', 'EstimatorSetup', 'LoopSeries',
+           'MeasurementPassThrough', 'StreamingEstimator', 'make_estimator', 'make_recording',
+           'make_setup', 'predictor_params', 'run_case', 'run_closed_loops', 'run_open_loop',
+           'scenario_ndof', 'score_adaptation', 'scored_start']

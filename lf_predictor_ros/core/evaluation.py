@@ -217,7 +217,7 @@ class LoopRun:
     thrust: FloatArray
 
 
-def loop_metrics(loop: LoopRun, ndof: int, setpoint: Sequence[float],
+def loop_metrics(loop: LoopRun, ndof: int, setpoint: Sequence[float] | FloatArray,
                  wave_band: tuple[float, float], start: float) -> dict[str, Any]:
     """Station-keeping and thrust metrics of one loop over t ≥ start (module docstring)."""
     keep = loop.t >= start
@@ -225,7 +225,13 @@ def loop_metrics(loop: LoopRun, ndof: int, setpoint: Sequence[float],
     if t.size < 3:
         raise ValueError(f'a closed loop needs >= 3 samples after the warm-up ({start} s) to be '
                          f'scored, got {t.size}: run longer or shorten the warm-up')
-    offset = pose - np.asarray(setpoint, dtype=np.float64)
+    target = np.asarray(setpoint, dtype=np.float64)
+    if target.ndim == 2:  # one setpoint per sample of the loop (a setpoint schedule)
+        if target.shape != loop.truth_lf_pose.shape:
+            raise ValueError(f'a per-sample setpoint must have the shape of the poses '
+                             f'{loop.truth_lf_pose.shape}, got {target.shape}')
+        target = target[keep]
+    offset = pose - target
     horizontal = np.hypot(offset[:, 0], offset[:, 1]) if ndof == 3 else np.abs(offset[:, 0])
     sample_time = float(np.median(np.diff(t)))
     out: dict[str, Any] = {

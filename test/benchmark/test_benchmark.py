@@ -1,4 +1,4 @@
-"""The benchmark suite: smoke run, closed loops per estimator, results page and its targets."""
+"""The benchmark suite: fair recordings, every estimator, closed loops first, the results page."""
 from __future__ import annotations
 
 import json
@@ -10,73 +10,109 @@ import pytest
 
 from lf_predictor_ros.benchmark.adaptation import AdaptationEvent
 from lf_predictor_ros.benchmark.benchmark import main, render, write_figures
+from lf_predictor_ros.benchmark.recordings import LeakError, record
 from lf_predictor_ros.benchmark.suite import (
+    CAUSAL,
     ESTIMATORS,
     LOOP_ESTIMATORS,
     AdaptationSeries,
     CaseResult,
-    EstimatorSetup,
     LoopSeries,
     make_estimator,
+    make_setup,
     predictor_params,
     run_case,
     score_adaptation,
 )
 from lf_predictor_ros.core.alignment import mean_pose
 from lf_predictor_ros.core.evaluation import DEFAULT_WAVE_BAND, LoopRun, Metrics, loop_metrics
-from sim_ros.simulation import Simulator, load_scenario, simulate, simulate_in_loop
+from sim_ros.simulation import load_scenario, simulate, simulate_in_loop
 
 
 @pytest.mark.slow
 def test_fast_suite_writes_results_page_json_and_figures(tmp_path: Path) -> None:
-    """--fast on onedof_feedback (600 s, every estimator open and closed loop): ~10 s."""
+    """--fast on onedof_feedback (600 s, every estimator open and closed loop), in process."""
     page, raw = tmp_path / 'RESULTS.md', tmp_path / 'results.json'
-    assert main(['--fast', '--scenarios', 'onedof_feedback', '-o', str(page), '--json',
-                 str(raw)]) == 0
+    assert main(['--fast', '--scenarios', 'onedof_feedback', '--scheduler', 'none', '-o',
+                 str(page), '--json', str(raw)]) == 0
     text = page.read_text()
-    assert '### onedof_feedback' in text and 'adaptive / cascade ≤ 0.5' in text
-    assert '#### closed loop' in text and 'not part of this table' not in text
-    for row in ('adaptive loop stable (bounded, no limit cycle) in every seed',
-                'thrust wave-band power adaptive / raw ≤ 0.10 per DOF',
-                'position RMSE adaptive / observer ≤ 1.2'):
-        assert row in text
+    assert text.index('#### closed loop (primary)') < text.index('#### open loop')
+    assert 'Recording: DP loop closed on observer' in text
+    for row in ('| adaptive loop stable in every seed |',
+                '| thrust wave-band power adaptive / raw loop ≤ 0.03 per DOF |',
+                '| position RMSE adaptive / oracle_kf loop ≤ 1.1 |',
+                '| adaptive / oracle_kf ≤ 2 |', '| *oracle_kf* (limit) |',
+                '| *linear_limit* (limit) |'):
+        assert row in text, row
     assert '![onedof_feedback](results/onedof_feedback_closed_loop.png)' in text
     assert (tmp_path / 'results' / 'onedof_feedback_closed_loop.png').stat().st_size > 10_000
     (case,) = json.loads(raw.read_text())['cases']
     assert set(case['metrics']) == set(ESTIMATORS)
     assert set(case['closed_loop']) == set(LOOP_ESTIMATORS)
+    assert case['provenance']['loop'] == 'estimator' and not case['leak']['leaking']
     for metrics in case['metrics'].values():
         assert np.isfinite(metrics['north']['rmse'])
     # The learned filter trained and is far better than no filter at all (open loop).
     assert case['info']['adaptive_counters']['trainings'] >= 2
     raw_rmse = case['metrics']['raw']['north']['rmse']
     assert case['metrics']['adaptive']['north']['rmse'] < 0.6 * raw_rmse
+    # the limits: the true-model filter and the in-sample linear fit beat the raw measurement
+    for limit in ('oracle_kf', 'linear_limit'):
+        assert case['metrics'][limit]['north']['rmse'] < 0.5 * raw_rmse
     loops = case['closed_loop']
     assert loops['adaptive']['counters']['trainings'] >= 2
     assert loops['frozen']['counters']['trainings'] == 1
     assert loops['ideal']['stability']['stable'] and loops['raw']['stability']['stable']
     # the raw measurement puts the waves into the thrust; the wave filters keep them out
     raw_power = loops['raw']['thrust_wave_band_power']['north']
-    for name in ('adaptive', 'cascade', 'observer'):
+    for name in ('adaptive', 'cascade', 'observer', 'oracle_kf'):
         assert loops[name]['thrust_wave_band_power']['north'] < 0.1 * raw_power
+        assert loops[name]['estimate_wave_band_power']['north'] < \
+            0.1 * loops['raw']['estimate_wave_band_power']['north']
     assert loops['ideal']['position_rmse'] < loops['raw']['position_rmse']
 
 
-def test_unknown_scenario_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
+def test_unknown_scenario_and_tuning_seeds_are_usage_errors(
+        capsys: pytest.CaptureFixture[str]) -> None:
     assert main(['--scenarios', 'no_such_scenario']) == 2
     assert 'unknown scenario' in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(['--first-seed', '2', '--seeds', '3'])
+    assert 'overlap the tuning seeds' in capsys.readouterr().err
 
 
-def test_smoother_beats_raw_and_frozen_stops_training() -> None:
-    case = run_case('onedof_feedback', 3, duration=600.0,
-                    estimators=('frozen', 'smoother', 'raw'), loop_estimators=())
+def test_a_truth_fed_recording_is_refused_before_any_score() -> None:
+    scn = load_scenario('supply_closed_loop')
+    leaking = record(scn, 11, 600.0, 1.0, None, truth_fed=True)
+    with pytest.raises(LeakError, match='true LF pose'):
+        run_case('supply_closed_loop', 11, duration=600.0, estimators=('raw',),
+                 loop_estimators=(), recording=leaking)
+    with pytest.raises(LeakError, match='seed'):
+        run_case('supply_closed_loop', 12, duration=600.0, estimators=('raw',),
+                 loop_estimators=(), recording=record(scn, 11, 600.0, 1.0, 'raw',
+                                                      lambda name: _raw_step))
+
+
+def _raw_step(t: float, y: np.ndarray, u: np.ndarray, w: float) -> np.ndarray:
+    return np.array(y, dtype=np.float64)
+
+
+def test_smoothers_and_limit_beat_raw_and_frozen_stops_training() -> None:
+    case = run_case('onedof_feedback', 13, duration=900.0,
+                    estimators=('frozen', 'smoother_targets', 'smoother_tuned', 'linear_limit',
+                                'raw'), loop_estimators=())
     assert case.info['frozen_counters']['trainings'] == 1
-    assert case.metrics['smoother'].rmse[0] < 0.5 * case.metrics['raw'].rmse[0]
+    for name in ('smoother_targets', 'smoother_tuned', 'linear_limit'):
+        assert case.metrics[name].rmse[0] < 0.5 * case.metrics['raw'].rmse[0], name
     assert case.closed_loop == {} and case.adaptation is None
+    assert case.provenance == {'scenario': 'onedof_feedback', 'seed': 13, 'duration': 900.0,
+                               'sample_time': 1.0, 'loop': 'estimator', 'estimator': 'observer'}
+    # the oracle and the recording loop's observer join the leak check even when not scored
+    assert case.leak['best_estimator'] == ['oracle_kf'] and 'oracle_kf' not in case.metrics
 
 
 def test_closed_loops_share_the_seed_and_match_the_simulator() -> None:
-    """Supply vessel, 400 s: ideal = the scenario's own run; raw = PID on the held measurement.
+    """Supply vessel, 400 s: ideal = the PID on the truth; raw = PID on the held measurement.
 
     The measurement is the mean of each 1 s interval's ten 10 Hz poses (the aligner's).
 
@@ -88,9 +124,10 @@ def test_closed_loops_share_the_seed_and_match_the_simulator() -> None:
                     loop_estimators=('ideal', 'raw', 'cascade'))
     assert set(case.closed_loop) == {'ideal', 'raw', 'cascade'}
     scn = load_scenario('supply_closed_loop')
-    ideal = simulate(scn, seed=2, duration=duration)
+    ideal = simulate(scn, seed=2, duration=duration, controller=True, feedback='truth_lf')
     expected = loop_metrics(LoopRun(ideal.t, ideal.truth_lf_pose, ideal.thrust), 3,
-                            scn.controller.setpoint, DEFAULT_WAVE_BAND, case.warmup)
+                            scn.controller.setpoint_series(ideal.t), DEFAULT_WAVE_BAND,
+                            case.warmup)
     for key in ('position_rmse', 'max_excursion', 'heading_rmse'):
         assert case.closed_loop['ideal'][key] == expected[key]
     poses: list[np.ndarray] = []
@@ -105,7 +142,8 @@ def test_closed_loops_share_the_seed_and_match_the_simulator() -> None:
     assert scn.sample_time == pytest.approx(0.1)
     run = simulate_in_loop(scn, 2, duration, interval_mean, 0.1, pid_period=1.0)
     raw = loop_metrics(LoopRun(run.record.t, run.record.truth_lf_pose, run.record.thrust), 3,
-                       scn.controller.setpoint, DEFAULT_WAVE_BAND, case.warmup)
+                       scn.controller.setpoint_series(run.record.t), DEFAULT_WAVE_BAND,
+                       case.warmup)
     assert case.closed_loop['raw']['position_rmse'] == raw['position_rmse']
     noise_ideal = ideal.measured_pose - ideal.truth_pose
     noise_raw = run.record.measured_pose - run.record.truth_pose
@@ -123,17 +161,18 @@ def test_closed_loops_share_the_seed_and_match_the_simulator() -> None:
     assert series.thrust_psd.shape[1] == 3
 
 
-def test_the_smoother_cannot_be_in_a_loop() -> None:
+def test_non_causal_estimators_cannot_be_in_a_loop() -> None:
     scn = load_scenario('onedof_feedback')
-    params = predictor_params(scn)
-    setup = EstimatorSetup(1, 1.0, params, Simulator(scn, 0).true_model(), 0.8)
+    setup = make_setup(scn, 0, predictor_params(scn))
+    for name in ('smoother_targets', 'smoother_tuned', 'linear_limit'):
+        with pytest.raises(ValueError, match='non-causal'):
+            make_estimator(name, setup)
     with pytest.raises(ValueError, match='non-causal'):
-        make_estimator('smoother', setup)
-    with pytest.raises(ValueError, match='smoother is non-causal'):
-        run_case('onedof_feedback', 1, duration=60.0, estimators=('raw',),
-                 loop_estimators=('ideal', 'smoother'))
+        run_case('onedof_feedback', 11, duration=60.0, estimators=('raw',),
+                 loop_estimators=('ideal', 'smoother_tuned'))
     with pytest.raises(ValueError, match='unknown estimator'):
         make_estimator('kalman', setup)
+    assert set(CAUSAL) < set(ESTIMATORS)
 
 
 def _metrics(rmse: float) -> Metrics:
@@ -143,30 +182,42 @@ def _metrics(rmse: float) -> Metrics:
 def _loop(rmse: float, power: float, stable: bool = True) -> dict[str, object]:
     return {'position_rmse': rmse, 'max_excursion': 2 * rmse,
             'thrust_wave_band_power': {'north': power}, 'thrust_total_variation': {'north': 1.0},
+            'estimate_wave_band_power': {'north': power / 100.0},
             'stability': {'stable': stable, 'reason': 'ok' if stable else 'limit cycle'}}
 
 
 def _case(seed: int, adaptive_power: float, adaptive_stable: bool = True) -> CaseResult:
     loops = {'ideal': _loop(0.5, 1.0), 'adaptive': _loop(1.1, adaptive_power, adaptive_stable),
-             'observer': _loop(1.0, 5.0), 'raw': _loop(2.0, 100.0)}
+             'observer': _loop(1.0, 5.0), 'oracle_kf': _loop(1.0, 2.0), 'raw': _loop(2.0, 100.0)}
     return CaseResult('onedof_feedback', seed, 1, 600.0, 300.0,
-                      {'adaptive': _metrics(0.2), 'observer': _metrics(0.2)},
-                      {'params': {'retrain_period': 60.0}}, closed_loop=loops)
+                      {'adaptive': _metrics(0.2), 'observer': _metrics(0.2 * seed),
+                       'oracle_kf': _metrics(0.1)},
+                      {'params': {'retrain_period': 60.0}}, closed_loop=loops,
+                      provenance={'loop': 'estimator', 'estimator': 'observer'},
+                      leak={'ratios': [0.9 + seed / 100], 'factor': 0.35})
 
 
 def test_closed_loop_targets_on_the_page() -> None:
-    """Means over seeds: power ratio (8 + 12)/2 / 100 = 0.10 (met), RMSE ratio 1.1 (met)."""
-    page = render([_case(2, 8.0), _case(3, 12.0)], set(), 'benchmark test', 1.0)
-    assert '| adaptive loop stable (bounded, no limit cycle) in every seed | 2/2 seeds | met |' \
-        in page
-    assert '| thrust wave-band power adaptive / raw ≤ 0.10 per DOF | north 0.100 | met |' in page
-    assert '| position RMSE adaptive / observer ≤ 1.2 | 1.10 | met |' in page
-    assert '| position RMSE adaptive / ideal (info) | 2.20 | |' in page
-    assert '| ideal | 0.5 | – | 1 | 1 | 1 | yes |' in page
-    worse = render([_case(2, 8.0), _case(3, 14.0, adaptive_stable=False)], set(), 'b', 1.0)
-    assert '| 1/2 seeds | MISSED |' in worse
-    assert 'north 0.110 | MISSED |' in worse
-    assert 'NO (seed 3: limit cycle)' in worse
+    """Per-seed ratios: thrust (2 + 4)/2 % of raw → 3 % (met); RMSE 1.1 × observer (MISSED).
+
+    Two seeds: the 95 % half width is t(0.975, 1) · s/√2 = 12.71 · 0.01414 / 1.414 = 0.127.
+    """
+    page = render([_case(2, 2.0), _case(3, 4.0)], 'benchmark test', 1.0, 'here')
+    assert '| adaptive loop stable in every seed | 2/2 | met |' in page
+    assert ('| thrust wave-band power adaptive / raw loop ≤ 0.03 per DOF | north 0.03 '
+            '[-0.0971, 0.157] | met |') in page
+    assert '| position RMSE adaptive / observer loop ≤ 1 | 1.1 [1.1, 1.1] | MISSED |' in page
+    assert '| position RMSE adaptive / oracle_kf loop ≤ 1.1 | 1.1 [1.1, 1.1] | met |' in page
+    assert '| ideal | 0.5 [0.5, 0.5] | – | 1 | 1 % [1 %, 1 %] | 1 | – | 2/2 |' in page
+    assert 'Recording: DP loop closed on observer' in page
+    assert 'lowest over the seeds north 0.92 — passed.' in page
+    # open loop: adaptive / observer per seed 0.5 and 0.333 → mean 0.417 (≤ 0.8, met)
+    assert '| adaptive / observer ≤ 0.8 | 0.417 [-0.642, 1.48] | met |' in page
+    assert '| adaptive / oracle_kf ≤ 2 | 2 [2, 2] | met |' in page
+    worse = render([_case(2, 2.0), _case(3, 8.0, adaptive_stable=False)], 'b', 1.0, 'here')
+    assert '| 1/2 | MISSED |' in worse
+    assert 'north 0.05 [-0.331, 0.431] | MISSED |' in worse, worse
+    assert '1/2 (seed 3: limit cycle)' in worse
 
 
 def test_adaptation_targets_on_the_page_and_figures(tmp_path: Path) -> None:
@@ -178,16 +229,16 @@ def test_adaptation_targets_on_the_page_and_figures(tmp_path: Path) -> None:
                               np.full(t.size, 0.8), (3600.0, 10800.0), 60.0)
     loop = LoopSeries(t[:50], np.zeros((50, 1)), np.linspace(0.0, 3.0, 20),
                       np.ones((20, 1)))
-    case = CaseResult('omega_schedule', 2, 1, 20000.0, 480.0, {'adaptive': _metrics(1.0)},
+    case = CaseResult('omega_schedule', 12, 1, 20000.0, 480.0, {'adaptive': _metrics(1.0)},
                       {'params': {'retrain_period': 60.0}}, adaptation=events,
                       adaptation_series=series, loop_series={'ideal': loop})
-    links = write_figures([case], set(), tmp_path / 'RESULTS.md')
+    links = write_figures([case], tmp_path / 'RESULTS.md')
     assert links == {'omega_schedule': ['results/omega_schedule_closed_loop.png',
                                         'results/omega_schedule_adaptation.png']}
     assert (tmp_path / 'results' / 'omega_schedule_adaptation.png').stat().st_size > 10_000
-    page = render([case], set(), 'b', 1.0, links)
-    assert '| 2 | 3600 | 1.25 → 0.30 | 0.1 | 0.11 | 0.5 | 60 | 4.55 |' in page
-    assert '| 2 | 10800 | 0.30 → 0.56 | 0.5 | 0.9 | 2 | inf | 2.22 |' in page  # ω0(20000 s)
+    page = render([case], 'b', 1.0, 'here', links)
+    assert '| 12 | 3600 | 1.25 → 0.30 | 0.1 | 0.11 | 0.5 | 60 | 4.55 |' in page
+    assert '| 12 | 10800 | 0.30 → 0.56 | 0.5 | 0.9 | 2 | inf | 2.22 |' in page  # ω0(20000 s)
     assert 'within 2Δ = 120 s after every change | 1/2 changes | MISSED |' in page
     assert '| frozen ≥ 3× adaptive RMSE over the 2Δ after every change | min 2.22 | MISSED |' \
         in page

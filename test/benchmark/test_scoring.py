@@ -9,7 +9,7 @@ from lf_predictor_ros.benchmark.scoring import fmt_number, interval, ratios, ver
 
 
 def test_interval_of_known_values() -> None:
-    """n = 4, mean 2.5, s = 1.291: half width t(0.975, 3) · s / 2 = 3.18245 · 0.645497 = 2.05426."""
+    """Four values, mean 2.5, s = 1.291: half width t(0.975, 3) · s/2 = 2.05426."""
     iv = interval([1.0, 2.0, 3.0, 4.0])
     assert iv.mean == pytest.approx(2.5)
     assert iv.high - iv.mean == pytest.approx(2.05426, abs=1e-5)

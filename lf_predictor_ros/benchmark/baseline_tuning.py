@@ -83,6 +83,7 @@ import math
 import os
 from pathlib import Path
 import sys
+import textwrap
 import time
 from typing import Any
 
@@ -143,7 +144,7 @@ RECORDING_OBSERVER: Point = {'k3_scale': 10.0, 'k4_scale': 10.0, 'cutoff_ratio':
 LOWPASS_OPTIONS: tuple[tuple[float | None, int], ...] = (
     (None, 2), (0.1, 1), (0.3, 1), (1.0, 1), (0.1, 2), (0.3, 2), (1.0, 2))
 CASCADE_GRID: dict[str, Sequence[Any]] = {
-    'notch_zeta': (0.05, 0.1, 0.2, 0.35, 0.5, 0.8),
+    'notch_zeta': (0.05, 0.1, 0.2, 0.35, 0.5, 0.8, 1.2),
     'notch_depth': (0.0, 0.02, 0.05, 0.1, 0.2, 0.4),
     'lowpass': LOWPASS_OPTIONS,
 }
@@ -231,12 +232,14 @@ def _plain(value: Any) -> Any:
 
 def write_baseline_config(path: str | os.PathLike[str], config: Mapping[str, Any],
                           header: Iterable[str] = ()) -> Path:
-    """Write ``config`` as YAML with ``header`` lines as a leading comment; returns the path."""
+    """Write ``config`` as YAML, ``header`` lines (wrapped at 99) as a leading comment."""
     import yaml
 
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    lines = [f'# {line}'.rstrip() for line in header]
+    lines = [f'# {part}'.rstrip() for line in header
+             for part in textwrap.wrap(line, 97, subsequent_indent='    ', break_on_hyphens=False,
+                                       drop_whitespace=True) or ['']]
     body = yaml.safe_dump(_plain(dict(config)), sort_keys=False, width=99,
                           default_flow_style=None, allow_unicode=True)
     target.write_text('\n'.join([*lines, body]) if lines else body, encoding='utf-8')
@@ -830,6 +833,7 @@ def tune_scenario(name: str, seeds: Sequence[int], duration: float | None, comma
                       f'{s.position_rmse:.4g} m'
                       + (f', heading rmse {s.heading_rmse:.4g} rad' if ndof == 3 else '')
                       + f', thrust wave-band power / raw loop {s.thrust_ratio:.4g}'
+                      + ('' if s.stable else f' ({"; ".join(s.reasons)})')
                       for s in loop_scores]
         loop_eval = cascade(loop_safe)
     else:

@@ -139,14 +139,22 @@ def _pct(value: float) -> str:
 
 
 # ------------------------------------------------------------------------------ tables
+def _reference_text(scenario: str) -> str:
+    if load_scenario(scenario).controller.setpoint_schedule:
+        return ("the ideal loop's LF track (setpoint moves and turns; the ideal loop's own "
+                'error is 0 by definition)')
+    return 'setpoint'
+
+
 def _closed_loop_table(cases: list[CaseResult]) -> list[str]:
     ndof = cases[0].ndof
     dofs = DOF_NAMES[:ndof]
     loops = [name for name in LOOP_ESTIMATORS if _has_loop(cases, name)]
     raw_power = {d: _loop_values(cases, 'raw', 'thrust_wave_band_power', d) for d in dofs}
     lines = ['#### closed loop (primary)', '',
-             f'The PID fed by each causal estimator, one estimate per h; true LF pose vs setpoint '
-             f'and applied thrust after the warm-up ({cases[0].warmup:.0f} s). Mean [95 % '
+             f'The PID fed by each causal estimator, one estimate per h; true LF pose vs '
+             f'{_reference_text(cases[0].scenario)} and applied thrust after the warm-up '
+             f'({cases[0].warmup:.0f} s). Mean [95 % '
              'interval] over the seeds; max excursion: the worst seed. Thrust wave-band power '
              "per DOF as a share of the raw-measurement loop's (same seed); estimate wave "
              'band: the wave-band power of the estimate fed to the PID [m², m², rad²].', '',

@@ -317,6 +317,6 @@ def require_fair(recording: Recording, report: LeakReport) -> None:
                         f'(< {report.factor}): the thrust encodes the truth; it is not scored')
 
 
-__all__ = ['LEAK_FACTOR', 'LEAK_LAGS', 'LEAK_MIN_SAMPLES_PER_COLUMN', 'LOOPS', 'GridInput', 'LeakError', 'LeakReport',
-           'Provenance', 'Recording', 'check_scorable', 'decimate', 'grid_stride', 'leak_check',
+__all__ = ['LEAK_FACTOR', 'LEAK_LAGS', 'LEAK_MIN_SAMPLES_PER_COLUMN', 'LOOPS', 'GridInput',
+           'LeakError', 'LeakReport', 'Provenance', 'Recording', 'check_scorable', 'decimate', 'grid_stride', 'leak_check',
            'record', 'require_fair', 'thrust_only_rmse']

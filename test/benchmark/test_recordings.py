@@ -8,6 +8,7 @@ import pytest
 
 from lf_predictor_ros.benchmark.estimators import StreamingEstimator
 from lf_predictor_ros.benchmark.recordings import (
+    LEAK_LAGS,
     LeakError,
     Provenance,
     Recording,
@@ -97,7 +98,8 @@ def test_thrust_only_fit_recovers_a_thrust_linear_truth() -> None:
     """Truth = a first-order low-pass (T = 30 s) of the thrust: inside the features' span."""
     rng = np.random.default_rng(3)
     u = rng.standard_normal((2000, 3)) * [1e4, 1e4, 1e5]
-    truth = 1e-4 * thrust_features(u, 1.0)[:, [10 * 3 + 2 * 3]].repeat(3, axis=1)
+    column = LEAK_LAGS * 3 + 2 * 3  # the T = 30 s low-pass of the first channel
+    truth = 1e-4 * thrust_features(u, 1.0)[:, [column]].repeat(3, axis=1)
     truth[:, 2] *= 1e-3
     rmse = thrust_only_rmse(u, truth, 3, 1.0, begin=100)
     assert np.all(rmse < 1e-8 * np.std(truth, axis=0) + 1e-12)

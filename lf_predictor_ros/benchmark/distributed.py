@@ -87,6 +87,14 @@ class ProgressBar:
         return line
 
 
+def _simulated_seconds(spec: CaseSpec) -> float:
+    if spec.duration is not None:
+        return spec.duration
+    from sim_ros.simulation import load_scenario
+
+    return load_scenario(spec.scenario).duration
+
+
 def _clock(seconds: float) -> str:
     minutes, sec = divmod(int(round(seconds)), 60)
     return f'{minutes}m{sec:02d}s'
@@ -121,7 +129,10 @@ def run_cases(specs: Sequence[CaseSpec], scheduler: str | None = None,
     else:
         client = Client(scheduler)
     try:
-        futures = [client.submit(task, spec, key=spec.key, pure=False) for spec in specs]
+        # the longest cases first (higher priority), so no long case starts last and runs alone
+        futures = [client.submit(task, spec, key=spec.key, pure=False,
+                                 priority=int(_simulated_seconds(spec)))
+                   for spec in specs]
         by_key = {f.key: (i, spec) for i, (f, spec) in enumerate(zip(futures, specs,
                                                                        strict=True))}
         results: list[CaseResult | None] = [None] * len(specs)

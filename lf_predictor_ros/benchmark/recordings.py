@@ -318,5 +318,5 @@ def require_fair(recording: Recording, report: LeakReport) -> None:
 
 
 __all__ = ['LEAK_FACTOR', 'LEAK_LAGS', 'LEAK_MIN_SAMPLES_PER_COLUMN', 'LOOPS', 'GridInput',
-           'LeakError', 'LeakReport', 'Provenance', 'Recording', 'check_scorable', 'decimate', 'grid_stride', 'leak_check',
-           'record', 'require_fair', 'thrust_only_rmse']
+           'LeakError', 'LeakReport', 'Provenance', 'Recording', 'check_scorable', 'decimate',
+           'grid_stride', 'leak_check', 'record', 'require_fair', 'thrust_only_rmse']

@@ -24,6 +24,7 @@ from typing import Any, TextIO
 from lf_predictor_ros.benchmark.suite import CaseResult, run_case
 
 IN_PROCESS = 'none'
+BLAS_THREAD_VARIABLES = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS')
 
 
 @dataclass(frozen=True)
@@ -122,6 +123,10 @@ def run_cases(specs: Sequence[CaseSpec], scheduler: str | None = None,
 
     cluster = None
     if scheduler is None:
+        # one BLAS thread per worker process: one worker per core already fills the machine,
+        # and threaded BLAS on a loaded core made small-matrix filters ~10× slower
+        for name in BLAS_THREAD_VARIABLES:
+            os.environ.setdefault(name, '1')
         count = workers or os.cpu_count() or 1
         cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
                                dashboard_address=None, silence_logs=40)

@@ -43,6 +43,7 @@ _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'tra
 _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed')
 _STR_FIELDS = ('trainer', 'training_mode')
 _BOOL_FIELDS = ('linear_init',)
+_TUPLE_FIELDS = ('wave_band', 'max_output_rate')
 
 
 def _doc(doc: str, unit: str = '') -> dict[str, str]:
@@ -118,6 +119,16 @@ class PredictorParams:
     seed: int = field(default=0, metadata=_doc('seed of the network initialization'))
     initial_wave_peak_freq: float = field(
         default=0.0, metadata=_doc('prior ω0 before the first estimate; 0 = none', 'rad/s'))
+    switch_blend_time: float = field(
+        default=0.0, metadata=_doc('bumpless transfer: when the output changes source (cascade '
+                                   'fallback ↔ network, old → new network) it moves from the '
+                                   "old source's value to the new one's over this time, "
+                                   'smoothly, both running; 0 = off (the output switches at '
+                                   'once)', 's'))
+    max_output_rate: tuple[float, ...] = field(
+        default=(0.0, 0.0, 0.0), metadata=_doc(
+            'largest rate of change of the published estimate (north, east, yaw); set it above '
+            'the fastest LF motion; 0 = no limit on that DOF', 'm/s, m/s, rad/s'))
 
     def __post_init__(self) -> None:
         """Coerce numbers to their field types and check every rule (raises ValueError)."""
@@ -141,7 +152,8 @@ class PredictorParams:
     def to_dict(self) -> dict[str, Any]:
         """Plain dict (wave_band as a list) that ``from_dict`` turns back into an equal object."""
         values = asdict(self)
-        values['wave_band'] = list(self.wave_band)
+        for name in _TUPLE_FIELDS:
+            values[name] = list(getattr(self, name))
         return values
 
     def replace(self, **changes: Any) -> PredictorParams:
@@ -224,7 +236,7 @@ class PredictorParams:
             if not isinstance(value, bool):
                 raise ValueError(f'{name} must be true or false, got {value!r}')
         for f in fields(self):
-            if f.name in (*_INT_FIELDS, *_STR_FIELDS, *_BOOL_FIELDS, 'wave_band'):
+            if f.name in (*_INT_FIELDS, *_STR_FIELDS, *_BOOL_FIELDS, *_TUPLE_FIELDS):
                 continue
             object.__setattr__(self, f.name, _finite_float(f.name, getattr(self, f.name)))
         band = self.wave_band
@@ -232,6 +244,12 @@ class PredictorParams:
             raise ValueError(f'wave_band must be two numbers (low, high) in rad/s, got {band!r}')
         object.__setattr__(self, 'wave_band',
                            tuple(_finite_float('wave_band', edge) for edge in band))
+        rates = self.max_output_rate
+        if isinstance(rates, (str, bytes)) or not hasattr(rates, '__len__') or len(rates) != 3:
+            raise ValueError(f'max_output_rate must be three numbers [north m/s, east m/s, yaw '
+                             f'rad/s] (0 = no limit), got {rates!r}')
+        object.__setattr__(self, 'max_output_rate',
+                           tuple(_finite_float('max_output_rate', rate) for rate in rates))
 
     def _check_positive(self) -> None:
         for name in ('sample_time', *_WINDOW_FIELDS, 'highpass_cutoff', 'notch_zeta',
@@ -241,10 +259,13 @@ class PredictorParams:
                 raise ValueError(f'positivity rule: {name} must be > 0, got '
                                  f'{getattr(self, name)!r}: give a positive value')
         for name in ('weight_decay', 'derivative_weight', 'initial_wave_peak_freq',
-                     'wave_augmentation'):
+                     'wave_augmentation', 'switch_blend_time'):
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')
+        if any(rate < 0.0 for rate in self.max_output_rate):
+            raise ValueError(f'positivity rule: max_output_rate must be ≥ 0 in every DOF (0 = no '
+                             f'limit), got {list(self.max_output_rate)!r}')
         for name in ('nu', 'ny', 'nfb'):
             if getattr(self, name) < 0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0 (number of delays), got '

@@ -21,6 +21,17 @@ east and yaw of the same sample passed through unfiltered (never a made-up 0: on
 run with ``ndof`` 1 a zero heading would be up to 180° wrong; the node flags the pass-through in
 /diagnostics).
 
+Bumpless transfer (off by default, issue 13): with ``switch_blend_time`` T > 0, when the source
+of the output changes (cascade → network, network → cascade, old → new network, a checkpoint
+loaded) the published estimate moves from the old source's value to the new one's with a smooth
+ramp (w = 3s² − 2s³, s = elapsed / T, no step in value or rate), both sources running. An old
+network that can no longer predict (implausible, not finite, a new data segment) is replaced by
+the last published output held as an offset that fades out over T; a switch back to the old
+source during a blend reverses it. ``max_output_rate`` (per DOF, 0 = no limit) then bounds how
+fast the published estimate moves. Both act on the published output only: the regressors,
+feedback history and trainings see exactly what they see with both off, and with both off the
+output is bit-identical to the plain switch.
+
 Bad input: `update` raises ValueError for a non-finite or wrongly shaped pose/force and leaves its
 state unchanged (the node filters such samples before they get here). A training that raises is
 caught on the worker; the network in service stays, and the status reports the error.
@@ -71,6 +82,29 @@ GUARD_SPREADS = 6.0
 GUARD_FLOOR = np.array([0.5, 0.5, 0.02])  # [m, m, rad]
 
 FloatArray = NDArray[np.float64]
+
+
+class _Transfer:
+    """A running bumpless transfer: the old source, blended out from ``start`` [s].
+
+    ``offset`` not None: the old value is the new source's value plus this held offset (an old
+    source that cannot run any more); otherwise ``source`` is the old source, a network or None
+    for the cascade.
+    """
+
+    __slots__ = ('offset', 'source', 'start')
+
+    def __init__(self, source: NumpyNnarmax | None, offset: FloatArray | None,
+                 start: float) -> None:
+        self.source = source
+        self.offset = offset
+        self.start = start
+
+
+def _smoothstep(phase: float) -> float:
+    """Ramp 0 → 1 over phase 0 → 1 with zero slope at both ends (3s² − 2s³)."""
+    s = min(max(phase, 0.0), 1.0)
+    return s * s * (3.0 - 2.0 * s)
 
 
 _LIVE_PREDICTORS: weakref.WeakSet[AdaptivePredictor] = weakref.WeakSet()
@@ -147,6 +181,9 @@ class AdaptivePredictor:
         self._fb_next: int = -1
         self._wave_spread: FloatArray | None = None
         self._guard_trips = 0
+        self._smoothing = params.switch_blend_time > 0.0 or any(
+            rate > 0.0 for rate in params.max_output_rate[:params.ndof])
+        self._clear_output_state()
         self._start_segment()
         if background:
             warm_up()  # import torch's lazy modules now, not on the first training
@@ -169,6 +206,7 @@ class AdaptivePredictor:
         lf_now = self._fallback.update(t, pose_arr, force_arr)
         if self._fb_next != self._k:  # no network prediction exists for this sample
             self._fb.append(self._position(lf_now, update_heading=False))
+        model = self._model
         prediction = self._predict()
         if prediction is not None and not self._plausible(prediction, y):
             self._guard_trips += 1
@@ -185,6 +223,9 @@ class AdaptivePredictor:
             estimate = prediction
             self._fb.append(prediction)
             self._fb_next = self._k + 1
+        if self._smoothing:  # output only: the buffers above are not touched
+            estimate = self._bumpless(t, estimate, model if prediction is not None else None,
+                                      self._position(lf_now, update_heading=False))
         self._maybe_retrain(t)
         return self._output(estimate, pose_arr)
 
@@ -203,6 +244,7 @@ class AdaptivePredictor:
         self._wave_spread = None
         self._message = 'reset: collecting data'
         self._fallback.set_wave_peak_freq(self._fallback_freq())
+        self._clear_output_state()
         self.restart_segment()
 
     def status(self) -> EstimatorStatus:
@@ -230,7 +272,9 @@ class AdaptivePredictor:
         """Start a new data segment (after a gap or a time jump): the trained network stays.
 
         Regressors and training windows never span the restart: buffers, targets and feedback
-        are cleared; predictions resume once max(nu, ny, nfb) new samples have arrived.
+        are cleared; predictions resume once max(nu, ny, nfb) new samples have arrived. With
+        ``switch_blend_time`` T > 0 the output fades from the last published one if the next
+        sample comes less than T later (else it starts afresh).
         """
         self._segment += 1
         self._start_segment()
@@ -289,6 +333,11 @@ class AdaptivePredictor:
                 'overruns': self._overruns, 'training_errors': self._errors,
                 'guard_trips': self._guard_trips,
                 'segments': self._segment}
+
+    @property
+    def source_switches(self) -> int:
+        """Changes of the output's source seen with bumpless transfer on (0 when off)."""
+        return self._switches
 
     @property
     def targets(self) -> TargetWindow | None:
@@ -358,17 +407,26 @@ class AdaptivePredictor:
         return np.array([c * force[0] - s * force[1], s * force[0] + c * force[1], force[2]])
 
     def _predict(self) -> FloatArray | None:
-        model, p = self._model, self.params
-        if model is None or len(self._y) < p.max_lag or len(self._fb) < p.nfb:
+        model = self._model
+        if model is None:
             return None
-        u_hist = _newest(self._u, max(p.nu, 1))  # only the rows the regressors need:
-        y_hist = _newest(self._y, max(p.ny, 1))  # the buffers hold up to N + ε samples
-        fb_hist = _newest(self._fb, max(p.nfb, 1))
-        prediction = predict_step(model, u_hist, y_hist, fb_hist)
+        prediction = self._predict_with(model)
+        if prediction is None:
+            return None
         if not np.all(np.isfinite(prediction)):
             self._message = 'network output not finite: cascade fallback'
             return None
         return np.asarray(prediction, dtype=np.float64)
+
+    def _predict_with(self, model: NumpyNnarmax) -> FloatArray | None:
+        """The raw prediction of ``model`` from the buffers; None while they are too short."""
+        p = self.params
+        if len(self._y) < p.max_lag or len(self._fb) < p.nfb:
+            return None
+        u_hist = _newest(self._u, max(p.nu, 1))  # only the rows the regressors need:
+        y_hist = _newest(self._y, max(p.ny, 1))  # the buffers hold up to N + ε samples
+        fb_hist = _newest(self._fb, max(p.nfb, 1))
+        return predict_step(model, u_hist, y_hist, fb_hist)
 
     def _plausible(self, prediction: FloatArray, y: FloatArray) -> bool:
         spread = self._wave_spread
@@ -376,6 +434,120 @@ class AdaptivePredictor:
             return True
         bound = GUARD_SPREADS * spread + GUARD_FLOOR[:self.ndof]
         return bool(np.all(np.abs(prediction - y) <= bound))
+
+    # ---- bumpless transfer and rate limit (output only; off with the defaults) ---------------
+
+    def _clear_output_state(self) -> None:
+        self._last_source: NumpyNnarmax | None = None
+        self._source_known = False  # no output yet: the first one is no switch
+        self._transfer: _Transfer | None = None
+        self._last_out: FloatArray | None = None  # last published estimate (position coords)
+        self._last_t: float | None = None
+        self._last_cascade: tuple[int, FloatArray] | None = None  # (segment, cascade value)
+        self._switches = 0
+
+    def _bumpless(self, t: float, value: FloatArray, source: NumpyNnarmax | None,
+                  cascade: FloatArray) -> FloatArray:
+        """The published estimate: ``value`` of ``source`` blended and rate limited."""
+        blend_time = self.params.switch_blend_time
+        last_t = self._last_t
+        continuous = last_t is not None and 0.0 < t - last_t < blend_time
+        out = value
+        if blend_time > 0.0:
+            if not continuous:
+                self._transfer = None  # first sample, a time jump or a gap of ≥ T: no blend
+            elif self._source_known and source is not self._last_source:
+                self._switches += 1
+                self._begin_transfer(t, value, source, cascade)
+            self._last_source, self._source_known = source, True
+            out = self._blended(t, value, cascade)
+        out = self._rate_limited(t, out)
+        self._last_out, self._last_t = out.copy(), t
+        self._last_cascade = (self._segment, cascade)
+        return out
+
+    def _begin_transfer(self, t: float, value: FloatArray, source: NumpyNnarmax | None,
+                        cascade: FloatArray) -> None:
+        """Start blending from what the output was about to be to ``source``."""
+        previous, running = self._last_source, self._transfer
+        previous_value = self._source_value(previous, cascade)
+        if running is None and previous_value is not None:
+            self._transfer = _Transfer(previous, None, t)  # the old source keeps running
+            return
+        if running is not None and previous_value is not None:
+            phase = (t - running.start) / self.params.switch_blend_time
+            if running.offset is None and running.source is source and phase < 1.0:
+                # back to the old source of the blend: run the same ramp in reverse
+                start = t - (1.0 - phase) * self.params.switch_blend_time
+                self._transfer = _Transfer(previous, None, start)
+                return
+            old = self._old_value(running, previous_value, cascade)
+            if old is not None:
+                reference = old + _smoothstep(phase) * self._difference(previous_value, old)
+                self._transfer = _Transfer(None, self._difference(reference, value), t)
+                return
+        # the old source cannot run (implausible, not finite, new segment): fade from the last
+        # published output, held as an offset to the new source (to the cascade's value at that
+        # output when the cascade takes over in the same segment: the output keeps its motion)
+        assert self._last_out is not None  # a switch needs an earlier output
+        reference = value
+        if source is None and self._last_cascade is not None and \
+                self._last_cascade[0] == self._segment:
+            reference = self._last_cascade[1]
+        self._transfer = _Transfer(None, self._difference(self._last_out, reference), t)
+
+    def _blended(self, t: float, value: FloatArray, cascade: FloatArray) -> FloatArray:
+        transfer = self._transfer
+        if transfer is None:
+            return value
+        phase = (t - transfer.start) / self.params.switch_blend_time
+        if phase >= 1.0:
+            self._transfer = None
+            return value
+        old = self._old_value(transfer, value, cascade)
+        if old is None:  # the old network stopped predicting: fade from the last output
+            assert self._last_out is not None
+            transfer = self._transfer = _Transfer(None, self._difference(self._last_out, value),
+                                                  t)
+            return value + transfer.offset  # type: ignore[operator]
+        blended: FloatArray = old + _smoothstep(phase) * self._difference(value, old)
+        return blended
+
+    def _old_value(self, transfer: _Transfer, new_value: FloatArray,
+                   cascade: FloatArray) -> FloatArray | None:
+        """The old source's value now (None if it cannot run any more)."""
+        if transfer.offset is not None:
+            held: FloatArray = new_value + transfer.offset
+            return held
+        return self._source_value(transfer.source, cascade)
+
+    def _source_value(self, source: NumpyNnarmax | None,
+                      cascade: FloatArray) -> FloatArray | None:
+        """A source's value now: the cascade, or a network if it predicts plausibly."""
+        if source is None:
+            return cascade
+        prediction = self._predict_with(source)
+        if prediction is None or not np.all(np.isfinite(prediction)) or \
+                not self._plausible(prediction, self._y[-1]):
+            return None
+        return np.asarray(prediction, dtype=np.float64)
+
+    def _rate_limited(self, t: float, value: FloatArray) -> FloatArray:
+        """``value`` moved from the last output by at most max_output_rate × elapsed time."""
+        rates = np.array(self.params.max_output_rate[:self.ndof])
+        last, last_t = self._last_out, self._last_t
+        if not np.any(rates > 0.0) or last is None or last_t is None or not t > last_t:
+            return value
+        bound = np.where(rates > 0.0, rates * (t - last_t), np.inf)
+        limited: FloatArray = last + np.clip(self._difference(value, last), -bound, bound)
+        return limited
+
+    def _difference(self, a: FloatArray, b: FloatArray) -> FloatArray:
+        """The difference a − b of two positions, heading wrapped to (−π, π]."""
+        difference = np.asarray(a - b, dtype=np.float64)
+        if self.ndof == 3:
+            difference[2] = wrap_angle(float(difference[2]))
+        return difference
 
     def _output(self, estimate: FloatArray, measured: FloatArray) -> FloatArray:
         """Estimate as a pose; for 1 DOF east and yaw are the measurement, unfiltered."""

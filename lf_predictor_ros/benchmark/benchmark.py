@@ -32,6 +32,7 @@ from typing import Any
 
 from lf_predictor_ros.benchmark import stability
 from lf_predictor_ros.benchmark.adaptation import FROZEN_RATIO, RECOVERY_WINDOWS, TOLERANCE
+from lf_predictor_ros.benchmark.baseline_tuning import TUNING_SEEDS
 from lf_predictor_ros.benchmark.distributed import IN_PROCESS, CaseSpec, run_cases
 from lf_predictor_ros.benchmark.scoring import fmt_number, interval, ratios, verdict
 from lf_predictor_ros.benchmark.suite import (
@@ -59,7 +60,6 @@ SUITE: dict[str, float | None] = {
 }
 FAST_SUITE: dict[str, float | None] = {'onedof_feedback': 600.0, 'supply_closed_loop': 600.0}
 FAST_OVERRIDES = {'max_epochs': 15}  # smoke run only: fewer epochs per training
-TUNING_SEEDS = (1, 2)
 FIRST_HELD_OUT_SEED = 11
 HELD_OUT_SEEDS = 10
 # method issue targets (held-out seeds, every DOF, shipped defaults)

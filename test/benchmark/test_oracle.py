@@ -2,11 +2,17 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
 
-from lf_predictor_ros.benchmark.oracle import make_oracle, oracle_model
+from lf_predictor_ros.benchmark.oracle import (
+    RAO_WAVE_DAMPING,
+    make_oracle,
+    oracle_model,
+    rao_wave_sigma,
+)
 from lf_predictor_ros.core.alignment import block_mean_poses
 from lf_predictor_ros.core.baselines.observer import PassiveObserver
 from sim_ros.physics.vessels import GRAVITY, SUPPLY_LENGTH
@@ -68,9 +74,24 @@ def test_onedof_reference_open_loop_beats_raw_and_observer() -> None:
 def test_unsupported_wave_model_raises() -> None:
     scenario = load_scenario('onedof_reference')
     waves = dataclasses.replace(scenario.waves)
-    object.__setattr__(waves, 'model', 'rao')  # bypass the simulator's own validation
+    object.__setattr__(waves, 'model', 'tabulated')  # bypass the simulator's own validation
+    broken = dataclasses.replace(scenario)
+    object.__setattr__(broken, 'waves', waves)
     with pytest.raises(ValueError, match='oracle'):
-        oracle_model(dataclasses.replace(scenario, waves=waves), 1.0)
+        oracle_model(broken, 1.0)
+
+
+def test_rao_sea_gets_the_fitted_second_order_wave_model() -> None:
+    """σ² λ ω_p equals the sea's earth-frame WF variance averaged over the scheduled headings."""
+    scenario = load_scenario('rao_supply')
+    sigma = rao_wave_sigma(scenario)
+    model = oracle_model(scenario, 1.0)
+    assert model.wave_model == 'motion' and model.wave_sigma == pytest.approx(sigma)
+    omega_p = float(scenario.waves.peak_freq(0.0))
+    variance = np.array(sigma) ** 2 * RAO_WAVE_DAMPING * omega_p
+    # WF std 0.41 / 0.31 m and ≈ 0.8° over the run (the scenario header's measurement)
+    assert np.sqrt(variance[:2]) == pytest.approx([0.41, 0.31], rel=0.35)
+    assert math.degrees(math.sqrt(variance[2])) == pytest.approx(0.8, rel=0.5)
 
 
 def test_sample_time_must_be_a_multiple_of_the_sensor_period() -> None:

@@ -134,12 +134,13 @@ def run_cases(specs: Sequence[CaseSpec], scheduler: str | None = None,
     else:
         client = Client(scheduler)
     try:
-        # the longest cases first (higher priority), so no long case starts last and runs alone
-        futures = [client.submit(task, spec, key=spec.key, pure=False,
-                                 priority=int(_simulated_seconds(spec)))
-                   for spec in specs]
-        by_key = {f.key: (i, spec) for i, (f, spec) in enumerate(zip(futures, specs,
-                                                                       strict=True))}
+        # the longest cases first (submitted first, higher priority), so that no long case
+        # starts last and runs alone at the end
+        seconds = [_simulated_seconds(spec) for spec in specs]
+        order = sorted(range(len(specs)), key=lambda i: -seconds[i])
+        futures = [client.submit(task, specs[i], key=specs[i].key, pure=False,
+                                 priority=int(seconds[i])) for i in order]
+        by_key = {f.key: (i, specs[i]) for i, f in zip(order, futures, strict=True)}
         results: list[CaseResult | None] = [None] * len(specs)
         for future in as_completed(futures):
             index, spec = by_key[future.key]

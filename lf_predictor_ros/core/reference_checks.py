@@ -90,6 +90,9 @@ class ReferenceCheckSettings:
         'jump gate: innovation against the local prediction in robust σ (plus jump_floor)', ''))
     jump_floor: tuple[float, ...] = field(default=(0.5, 0.5, 0.02), metadata=_doc(
         'jump gate floor per DOF (north, east, yaw)', 'm, m, rad'))
+    jump_rate: tuple[float, ...] = field(default=(1.0, 1.0, 0.02), metadata=_doc(
+        'jump gate growth per second since the last accepted pose beyond the usual spacing '
+        '(the wave motion a stale local prediction misses)', 'm/s, m/s, rad/s'))
     jump_confirm: float = field(default=2.0, metadata=_doc(
         'a step that persists this long (consistent samples) is taken as the new level', 's'))
     drift_time_constant: float = field(default=120.0, metadata=_doc(
@@ -108,7 +111,7 @@ class ReferenceCheckSettings:
             value = getattr(self, f.name)
             if f.name == 'reference_checks':
                 continue
-            if f.name in ('jump_floor', 'drift_limit'):
+            if f.name in ('jump_floor', 'jump_rate', 'drift_limit'):
                 values = _three_positive(f.name, value)
                 object.__setattr__(self, f.name, values)
                 continue
@@ -299,10 +302,28 @@ class ReferenceChecker:
             self._since_gate = 0
         return self._gate_cache
 
+    def _stale_allowance(self, t: float) -> FloatArray:
+        """Gate widening for a stale local prediction (jump_rate × excess time since acceptance).
+
+        The excess time is the time since the last accepted pose beyond the usual pose spacing.
+        After a rejection the line is not updated, so without this a run of rejections during
+        fast wave motion feeds itself until the 'step' test restarts the data (seen in the DDS
+        demo: two false 1 m steps in 1800 s); a real outlier of metres stays far outside.
+        """
+        rate = np.array(self.settings.jump_rate[:self.ndof])
+        if len(self._fit) < 2:
+            return np.zeros(self.ndof)
+        times = np.array([s for s, _ in self._fit])
+        spacing = float(np.median(np.diff(times)))
+        excess = max(0.0, t - float(times[-1]) - spacing)
+        return np.asarray(rate * excess, dtype=np.float64)
+
     def _check_jump(self, t: float, y: FloatArray) -> Verdict | None:
         """None: accepted and learned from; a Verdict otherwise (rejection or a new level)."""
         innovation = self._innovation(t, y)
         gate = self._gate()
+        if gate is not None:
+            gate = gate + self._stale_allowance(t)
         if innovation is not None and gate is not None and np.any(np.abs(innovation) > gate):
             self._pending.append((t, y))
             if t - self._pending[0][0] >= self.settings.jump_confirm and \

@@ -165,3 +165,26 @@ def test_checks_can_be_switched_off() -> None:
     for k in range(100):
         assert checker.check_pose(float(k), np.ones(3)).accepted  # frozen, but not checked
     assert checker.check_sample(1.0, np.ones(3), np.ones(3) * 100).accepted
+
+
+def test_lost_poses_do_not_turn_wave_motion_into_steps() -> None:
+    """60 losses of 0.5–1.5 s (best-effort DDS under load): the stale local line must not reject.
+
+    Without the gate growth (jump_rate ≈ 0) the same stream gives false jumps and 'steps' that
+    restart the data (seen in the DDS demo: two false 1 m steps in 1800 s).
+    """
+    record = supply(1800.0)
+    rng = np.random.default_rng(0)
+    keep = record.measured_valid == 1
+    for start in rng.choice(len(record.t) - 20, 60, replace=False):
+        keep[start:start + rng.integers(5, 15)] = False
+    counts = {}
+    for label, rate in (('stale', (1e-9, 1e-9, 1e-9)), ('default', None)):
+        settings = ReferenceCheckSettings() if rate is None else \
+            ReferenceCheckSettings(jump_rate=rate)
+        checker = ReferenceChecker(settings, 3)
+        for k in np.flatnonzero(keep):
+            checker.check_pose(float(record.t[k]), record.measured_pose[k], OMEGA0)
+        counts[label] = dict(checker.counters)
+    assert counts['default']['jump'] == 0 and counts['default']['step'] == 0, counts
+    assert counts['stale']['jump'] > 10, counts  # the failure the gate growth removes

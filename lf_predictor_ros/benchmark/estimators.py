@@ -23,7 +23,7 @@ estimates its own.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 import math
 from typing import Any
 
@@ -114,6 +114,10 @@ def predictor_params(scenario: Scenario, overrides: Mapping[str, Any] | None = N
     values: dict[str, Any] = {'ndof': scenario_ndof(scenario),
                               'sample_time': max(1.0, scenario.sample_time)}
     values.update(overrides or {})
+    unknown = sorted(set(values) - {f.name for f in fields(PredictorParams)})
+    if unknown:
+        raise ValueError(f'unknown predictor parameter(s) {unknown}: overrides take '
+                         'PredictorParams fields (docs: README, "Predictor parameters")')
     params = PredictorParams(**values)
     ratio = params.sample_time / scenario.sample_time
     if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-9:

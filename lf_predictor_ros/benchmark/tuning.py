@@ -42,8 +42,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         cells = []
         for name in args.scenarios:
             start = time.monotonic()
-            case = run_case(name, TUNING_SEED, duration=args.duration,
-                            params_overrides=overrides, estimators=('adaptive',))
+            try:
+                case = run_case(name, TUNING_SEED, duration=args.duration,
+                                params_overrides=overrides, estimators=('adaptive',))
+            except ValueError as error:
+                parser.error(f'{overrides}: {error}')
             rmse = np.round(case.metrics['adaptive'].rmse, 4).tolist()
             cells.append(f'{name}: {rmse} ({time.monotonic() - start:.0f} s)')
         print(overrides, ' | '.join(cells), flush=True)

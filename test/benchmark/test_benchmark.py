@@ -276,3 +276,8 @@ def test_predictor_params_overrides_win_and_the_sample_time_must_fit_the_sensor(
         predictor_params(supply, {'sample_time': 0.25 + 0.01})
     with pytest.raises(ValueError, match='whole multiple'):
         predictor_params(load_scenario('onedof_excited'), {'sample_time': 0.5})  # 1 Hz sensor
+
+
+def test_unknown_predictor_override_is_a_clear_error() -> None:
+    with pytest.raises(ValueError, match=r"unknown predictor parameter\(s\) \['average_poses'\]"):
+        predictor_params(load_scenario('onedof_reference'), {'average_poses': False})

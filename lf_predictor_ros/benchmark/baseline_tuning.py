@@ -184,8 +184,18 @@ def default_config(params: PredictorParams | None = None) -> dict[str, Any]:
 
 
 def config_path(scenario: str, directory: str | os.PathLike[str] | None = None) -> Path:
-    """``<directory or config/baselines>/<scenario>.yaml``."""
-    return Path(CONFIG_DIR if directory is None else directory) / f'{scenario}.yaml'
+    """``<directory>/<scenario>.yaml``, by default found like the scenarios.
+
+    Without a directory: config/baselines of the source tree, else of the installed package
+    (share/lf_predictor_ros/config/baselines).
+    """
+    if directory is not None:
+        return Path(directory) / f'{scenario}.yaml'
+    from sim_ros.simulation import scenario_search_dirs
+
+    candidates = [CONFIG_DIR / f'{scenario}.yaml'] + [
+        d.parent / 'baselines' / f'{scenario}.yaml' for d in scenario_search_dirs()]
+    return next((c for c in candidates if c.is_file()), candidates[0])
 
 
 def load_baseline_config(scenario: str,

@@ -243,6 +243,13 @@ def _leak_line(cases: list[CaseResult]) -> str:
             + ' — passed.')
 
 
+def _untuned_note(cases: list[CaseResult]) -> str:
+    if any(c.info.get('baselines') == 'untuned defaults' for c in cases):
+        return (' **The classical baselines here run UNTUNED defaults** (no '
+                'config/baselines file for this scenario: run baseline_tuning).')
+    return ''
+
+
 def _open_loop_table(name: str, cases: list[CaseResult]) -> list[str]:
     ndof = cases[0].ndof
     dofs = DOF_NAMES[:ndof]
@@ -252,7 +259,7 @@ def _open_loop_table(name: str, cases: list[CaseResult]) -> list[str]:
              + _provenance_line(cases) + ' ' + _leak_line(cases) + ' RMSE of the LF estimate '
              'vs the true LF pose [m, m, rad], mean [95 % interval]; *limit* rows know the true '
              'model (oracle_kf) or are fitted on the truth (linear_limit); smoothers are '
-             'non-causal.' + (RAO_ORACLE_NOTE if rao else ''), '',
+             'non-causal.' + (RAO_ORACLE_NOTE if rao else '') + _untuned_note(cases), '',
              '| estimator | ' + ' | '.join(dofs) + ' |', '|---|' + '---|' * ndof]
     for est in ESTIMATORS:
         if not any(est in c.metrics for c in cases):

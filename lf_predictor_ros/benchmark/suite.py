@@ -395,7 +395,10 @@ def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
     check_scorable(recording, scenario.name, seed)
     data = recording.data()
     setup = make_setup(scenario, seed, params, float(np.median(data['omega'])))
-    info: dict[str, Any] = {'sample_time': setup.sample_time, 'params': params.to_dict()}
+    tuning = setup.baselines.get('tuning') or {}
+    info: dict[str, Any] = {'sample_time': setup.sample_time, 'params': params.to_dict(),
+                            'baselines': 'untuned defaults' if tuning.get('source') == 'defaults'
+                            else 'config/baselines'}
     begin = scored_start(params, len(data['t']))
     outputs = run_open_loop(data, setup, estimators, info, begin)
     truth = data['truth'][begin:]

@@ -281,3 +281,10 @@ def test_predictor_params_overrides_win_and_the_sample_time_must_fit_the_sensor(
 def test_unknown_predictor_override_is_a_clear_error() -> None:
     with pytest.raises(ValueError, match=r"unknown predictor parameter\(s\) \['average_poses'\]"):
         predictor_params(load_scenario('onedof_reference'), {'average_poses': False})
+
+
+def test_untuned_baselines_are_said_on_the_page() -> None:
+    case = _case(2, 2.0)
+    assert 'UNTUNED' not in render([case], 'b', 1.0, 'here')
+    case.info['baselines'] = 'untuned defaults'
+    assert 'The classical baselines here run UNTUNED defaults' in render([case], 'b', 1.0, 'here')

@@ -51,6 +51,9 @@ def _doc(doc: str, unit: str = '') -> dict[str, str]:
     return {'doc': doc, 'unit': unit}
 
 
+field_doc = _doc  # the same metadata for the other settings dataclasses (reference checks)
+
+
 @dataclass(frozen=True)
 class PredictorParams:
     """Parameters of Algorithm 4.1 (thesis §4.5); windows in seconds, see the module docstring.

@@ -51,6 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lf_predictor_ros.core.heading import wrap_angle
+from lf_predictor_ros.core.params import field_doc
 
 FloatArray = NDArray[np.float64]
 Level = Literal['OK', 'WARN', 'ERROR']
@@ -69,37 +70,32 @@ EVENT_HOLD = 10.0  # [s of stamps] a jump or step stays in the status this long
 DEFAULT_WAVE_PERIOD = 2.0 * math.pi / math.sqrt(0.25 * 1.4)  # [s] before ω0 is known (10.6 s)
 
 
-def _doc(doc: str, unit: str = '') -> dict[str, str]:
-    """Field metadata read by the ROS parameter helper (description and unit)."""
-    return {'doc': doc, 'unit': unit}
-
-
 @dataclass(frozen=True)
 class ReferenceCheckSettings:
     """Thresholds of the position-reference checks (see the module docstring); validated."""
 
-    reference_checks: bool = field(default=True, metadata=_doc(
+    reference_checks: bool = field(default=True, metadata=field_doc(
         'run the position-reference checks (frozen, no wave motion, jump, drift, dropout)'))
-    frozen_time: float = field(default=3.0, metadata=_doc(
+    frozen_time: float = field(default=3.0, metadata=field_doc(
         'a pose repeated bit-identically this long is frozen', 's'))
-    motion_wave_periods: float = field(default=6.0, metadata=_doc(
+    motion_wave_periods: float = field(default=6.0, metadata=field_doc(
         'block length of the no-wave-motion test, in wave periods 2π/ω0', ''))
-    motion_ratio: float = field(default=0.1, metadata=_doc(
+    motion_ratio: float = field(default=0.1, metadata=field_doc(
         'no wave motion: block motion below this fraction of the clean blocks', ''))
-    jump_gate: float = field(default=6.0, metadata=_doc(
+    jump_gate: float = field(default=6.0, metadata=field_doc(
         'jump gate: innovation against the local prediction in robust σ (plus jump_floor)', ''))
-    jump_floor: tuple[float, ...] = field(default=(0.5, 0.5, 0.02), metadata=_doc(
+    jump_floor: tuple[float, ...] = field(default=(0.5, 0.5, 0.02), metadata=field_doc(
         'jump gate floor per DOF (north, east, yaw)', 'm, m, rad'))
-    jump_rate: tuple[float, ...] = field(default=(1.0, 1.0, 0.02), metadata=_doc(
+    jump_rate: tuple[float, ...] = field(default=(1.0, 1.0, 0.02), metadata=field_doc(
         'jump gate growth per second since the last accepted pose beyond the usual spacing '
         '(the wave motion a stale local prediction misses)', 'm/s, m/s, rad/s'))
-    jump_confirm: float = field(default=2.0, metadata=_doc(
+    jump_confirm: float = field(default=2.0, metadata=field_doc(
         'a step that persists this long (consistent samples) is taken as the new level', 's'))
-    drift_time_constant: float = field(default=120.0, metadata=_doc(
+    drift_time_constant: float = field(default=120.0, metadata=field_doc(
         'time constant of the mean innovation against the prediction (drift test)', 's'))
-    drift_limit: tuple[float, ...] = field(default=(0.5, 0.5, 0.03), metadata=_doc(
+    drift_limit: tuple[float, ...] = field(default=(0.5, 0.5, 0.03), metadata=field_doc(
         'drift limit on the mean innovation per DOF (north, east, yaw)', 'm, m, rad'))
-    dropout_timeout: float = field(default=3.0, metadata=_doc(
+    dropout_timeout: float = field(default=3.0, metadata=field_doc(
         'no measured pose for longer than this is a dropout', 's'))
 
     def __post_init__(self) -> None:

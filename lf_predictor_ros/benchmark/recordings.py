@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
+from lf_predictor_ros.benchmark.stability import ABORT_EXCURSION
 from lf_predictor_ros.core.alignment import block_mean_poses, mean_pose
 from lf_predictor_ros.core.estimator import wrap_to_pi
 from sim_ros.simulation import Scenario, SimRecord, simulate, simulate_in_loop
@@ -52,7 +53,6 @@ LEAK_FACTOR = 0.35
 # samples per fitted coefficient below which an in-sample fit flatters itself (the RMSE of a
 # least-squares fit shrinks by about √(1 − p/n)): shorter scored records skip the data test
 LEAK_MIN_SAMPLES_PER_COLUMN = 20
-ABORT_EXCURSION = 100.0  # [m] a recording loop that diverges this far is not a recording
 
 
 class LeakError(ValueError):

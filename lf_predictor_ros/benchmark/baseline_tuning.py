@@ -91,8 +91,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
-from lf_predictor_ros.benchmark import stability
-from lf_predictor_ros.benchmark.recordings import GridInput, check_scorable, grid_stride, record
+from lf_predictor_ros.benchmark import recordings, stability
+from lf_predictor_ros.benchmark.recordings import check_scorable, grid_stride, record
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.baselines.observer import PassiveObserver
 from lf_predictor_ros.core.baselines.smoother import smooth_poses
@@ -113,7 +113,6 @@ from sim_ros.simulation import (
     Simulator,
     available_scenarios,
     load_scenario,
-    simulate_in_loop,
 )
 
 FloatArray = NDArray[np.float64]
@@ -641,23 +640,13 @@ class _Loop:
     aborted: bool
 
 
-def _setpoints(scenario: Scenario, t: FloatArray) -> FloatArray:
-    series = getattr(scenario.controller, 'setpoint_series', None)
-    if callable(series):
-        return np.asarray(series(t), dtype=np.float64)
-    return np.tile(np.asarray(scenario.controller.setpoint, dtype=np.float64), (t.size, 1))
-
-
 def run_loop(case: TuningCase, seed: int,
              step: Callable[[float, FloatArray, FloatArray, float], FloatArray]) -> _Loop:
     """The scenario's PID once per h on ``step``'s output (the benchmark's closed loop)."""
     scenario = case.scenario
-    grid = GridInput(step, scenario.waves.peak_freq, case.stride)
-    run = simulate_in_loop(scenario, seed, case.duration, grid, scenario.sample_time,
-                           abort_excursion=stability.ABORT_EXCURSION,
-                           pid_period=case.sample_time)
+    run = recordings.run_loop(scenario, seed, case.duration, case.sample_time, step)
     rec = run.record
-    offset = rec.truth_lf_pose - _setpoints(scenario, rec.t)
+    offset = rec.truth_lf_pose - scenario.controller.setpoint_series(rec.t)
     offset[:, 2] = np.angle(np.exp(1j * offset[:, 2]))
     return _Loop(rec.t, offset[:, :case.ndof], rec.thrust, run.aborted_at is not None)
 

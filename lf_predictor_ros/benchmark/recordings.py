@@ -26,7 +26,7 @@ the grid instant.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 from typing import Any
 
@@ -37,7 +37,7 @@ from scipy import signal
 from lf_predictor_ros.benchmark.stability import ABORT_EXCURSION
 from lf_predictor_ros.core.alignment import block_mean_poses, mean_pose
 from lf_predictor_ros.core.estimator import wrap_to_pi
-from sim_ros.simulation import Scenario, SimRecord, simulate, simulate_in_loop
+from sim_ros.simulation import ClosedLoopRun, Scenario, SimRecord, simulate, simulate_in_loop
 
 FloatArray = NDArray[np.float64]
 LOOPS = ('open', 'estimator', 'truth_lf')
@@ -101,6 +101,8 @@ class Recording:
     u: FloatArray  # applied thrust, body frame [N, N, N·m]
     truth: FloatArray  # true LF pose [m, m, rad]
     omega: FloatArray  # true wave peak frequency ω0 [rad/s]
+    # the full-rate run of an 'estimator' recording: it *is* that estimator's closed loop
+    loop_run: ClosedLoopRun | None = field(default=None, repr=False, compare=False)
 
     def data(self) -> dict[str, FloatArray]:
         """The arrays as the dict the estimators' runners take (t, y, u, truth, omega)."""
@@ -154,6 +156,18 @@ class GridInput:
         return pose if self._held is None else self._held
 
 
+def run_loop(scenario: Scenario, seed: int, duration: float | None, sample_time: float,
+             step: Callable[[float, FloatArray, FloatArray, float], FloatArray]) -> ClosedLoopRun:
+    """The scenario's DP loop closed on ``step`` (an estimator) fed one grid sample per h.
+
+    The PID runs once per estimate and its command is held, as `dp_controller` does on each
+    /lf_pose message in the DDS pipeline; the run stops at `stability.ABORT_EXCURSION`.
+    """
+    grid = GridInput(step, scenario.waves.peak_freq, grid_stride(scenario, sample_time))
+    return simulate_in_loop(scenario, seed, duration, grid, scenario.sample_time,
+                            abort_excursion=ABORT_EXCURSION, pid_period=sample_time)
+
+
 def record(scenario: Scenario, seed: int, duration: float | None, sample_time: float,
            loop_estimator: str | None,
            make_step: Callable[[str], Callable[[float, FloatArray, FloatArray, float], FloatArray]]
@@ -177,18 +191,21 @@ def record(scenario: Scenario, seed: int, duration: float | None, sample_time: f
         if loop_estimator is None or make_step is None:
             raise ValueError(f'scenario {scenario.name!r} has a DP controller: name the causal '
                              'estimator to close the recording loop on (e.g. observer)')
-        grid = GridInput(make_step(loop_estimator), scenario.waves.peak_freq, stride)
-        run = simulate_in_loop(scenario, seed, total, grid, scenario.sample_time,
-                               abort_excursion=ABORT_EXCURSION, pid_period=sample_time)
+        run = run_loop(scenario, seed, total, sample_time, make_step(loop_estimator))
         if run.aborted_at is not None:
             raise ValueError(f'the recording loop of {scenario.name!r} seed {seed} on '
                              f'{loop_estimator!r} diverged at t = {run.aborted_at:.0f} s: '
                              'choose a stable loop estimator')
         provenance = Provenance(scenario.name, seed, total, sample_time, 'estimator',
                                 loop_estimator)
-        raw = run.record
-    grid_data = decimate(raw, stride)
-    return Recording(provenance, **grid_data)
+        return _recording(provenance, decimate(run.record, stride), run)
+    return _recording(provenance, decimate(raw, stride))
+
+
+def _recording(provenance: Provenance, grid: dict[str, FloatArray],
+               run: ClosedLoopRun | None = None) -> Recording:
+    return Recording(provenance, grid['t'], grid['y'], grid['u'], grid['truth'], grid['omega'],
+                     run)
 
 
 def check_scorable(recording: Recording, scenario: str | None = None,
@@ -319,4 +336,4 @@ def require_fair(recording: Recording, report: LeakReport) -> None:
 
 __all__ = ['LEAK_FACTOR', 'LEAK_LAGS', 'LEAK_MIN_SAMPLES_PER_COLUMN', 'LOOPS', 'GridInput',
            'LeakError', 'LeakReport', 'Provenance', 'Recording', 'check_scorable', 'decimate',
-           'grid_stride', 'leak_check', 'record', 'require_fair', 'thrust_only_rmse']
+           'grid_stride', 'leak_check', 'record', 'require_fair', 'run_loop', 'thrust_only_rmse']

@@ -27,7 +27,7 @@ adaptation` on the open-loop errors of `adaptive` and `frozen`, window Δ = retr
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 import math
 import time
@@ -61,14 +61,13 @@ from lf_predictor_ros.benchmark.estimators import (
 )
 from lf_predictor_ros.benchmark.linear_limit import linear_limit
 from lf_predictor_ros.benchmark.recordings import (
-    GridInput,
     Recording,
     check_scorable,
     decimate,
-    grid_stride,
     leak_check,
     record,
     require_fair,
+    run_loop,
 )
 from lf_predictor_ros.core.baselines.smoother import smooth_poses
 from lf_predictor_ros.core.evaluation import (
@@ -84,12 +83,12 @@ from lf_predictor_ros.core.evaluation import (
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.retraining import first_training_samples
 from sim_ros.simulation import (
+    ClosedLoopRun,
     Scenario,
     SimRecord,
     Simulator,
     load_scenario,
     simulate,
-    simulate_in_loop,
 )
 
 FloatArray = NDArray[np.float64]
@@ -220,20 +219,20 @@ class _LoopOutcome:
 
 
 def _run_loop(name: str, scenario: Scenario, seed: int, duration: float | None,
-              setup: EstimatorSetup, ideal: SimRecord) -> _LoopOutcome:
+              setup: EstimatorSetup, ideal: SimRecord,
+              recorded: ClosedLoopRun | None = None) -> _LoopOutcome:
+    """One loop; ``recorded``: this estimator's loop already run by the fair recording."""
     if name == 'ideal':
         return _LoopOutcome(ideal, False, {})
-    stream = make_estimator(name, setup)
-    grid_input = GridInput(stream.step, scenario.waves.peak_freq,
-                           grid_stride(scenario, setup.sample_time))
-    # the PID runs once per estimate (h) and the thruster command is held, as `dp_controller`
-    # does on each /lf_pose message in the DDS pipeline
-    run = simulate_in_loop(scenario, seed, duration, grid_input, scenario.sample_time,
-                           abort_excursion=stability.ABORT_EXCURSION,
-                           pid_period=setup.sample_time)
+    counters = None
+    if recorded is None:
+        stream = make_estimator(name, setup)
+        run = run_loop(scenario, seed, duration, setup.sample_time, stream.step)
+        counters = _counters(stream)
+    else:
+        run = recorded
     info: dict[str, Any] = {'nonfinite_estimates': run.nonfinite_estimates,
                             'aborted_at': run.aborted_at}
-    counters = _counters(stream)
     if counters is not None:
         info['counters'] = counters
     return _LoopOutcome(run.record, run.aborted_at is not None, info, run.estimate_t,
@@ -272,8 +271,12 @@ def _loop_reference(scenario: Scenario, rec: SimRecord, ideal: SimRecord) -> Flo
 
 def run_closed_loops(scenario: Scenario, seed: int, duration: float | None,
                      setup: EstimatorSetup, names: Sequence[str], ideal: SimRecord,
-                     start: float) -> tuple[dict[str, dict[str, Any]], dict[str, LoopSeries]]:
-    """One closed loop per name (module docstring), scored over t ≥ start."""
+                     start: float, recorded: Mapping[str, ClosedLoopRun] | None = None,
+                     ) -> tuple[dict[str, dict[str, Any]], dict[str, LoopSeries]]:
+    """One closed loop per name (module docstring), scored over t ≥ start.
+
+    ``recorded``: loops already run (the fair recording's), reused instead of run again.
+    """
     ndof = setup.ndof
     stride = max(1, int(round(setup.sample_time / scenario.sample_time)))
     limit_source = Simulator(scenario, seed)
@@ -285,7 +288,8 @@ def run_closed_loops(scenario: Scenario, seed: int, duration: float | None,
     ideal_offset = np.empty((0, ndof))
     for name in order:
         begin = time.monotonic()
-        outcome = _run_loop(name, scenario, seed, duration, setup, ideal)
+        outcome = _run_loop(name, scenario, seed, duration, setup, ideal,
+                            (recorded or {}).get(name))
         rec = outcome.record
         keep = rec.t >= start
         setpoint = _loop_reference(scenario, rec, ideal)
@@ -430,7 +434,12 @@ def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
                              'smoothers and the linear limit are non-causal: no loop)')
         ideal = simulate(scenario, seed=seed, duration=duration, controller=True,
                          feedback='truth_lf')
-        closed, series = run_closed_loops(scenario, seed, duration, setup, loops, ideal, warmup)
+        # the recording loop is that estimator's closed loop (same seed, loop and estimator);
+        # a predictor's is run again for its training counters
+        reuse = {} if recording.loop_run is None or recording.provenance.estimator in \
+            PREDICTORS else {str(recording.provenance.estimator): recording.loop_run}
+        closed, series = run_closed_loops(scenario, seed, duration, setup, loops, ideal, warmup,
+                                          reuse)
     adaptation = score_adaptation(scenario, data, outputs, params, begin)
     return CaseResult(scenario=scenario_name, seed=seed, ndof=params.ndof,
                       duration=float(data['t'][-1]), warmup=warmup, metrics=metrics, info=info,

@@ -28,7 +28,7 @@ adaptation` on the open-loop errors of `adaptive` and `frozen`, window Δ = retr
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 import time
 from typing import Any
@@ -61,6 +61,7 @@ from lf_predictor_ros.benchmark.estimators import (
 )
 from lf_predictor_ros.benchmark.linear_limit import linear_limit
 from lf_predictor_ros.benchmark.recordings import (
+    LeakReport,
     Recording,
     check_scorable,
     decimate,
@@ -352,6 +353,26 @@ def score_adaptation(scenario: Scenario, data: dict[str, FloatArray],
     return events, series
 
 
+def _leak_report(recording: Recording, metrics: Mapping[str, Metrics], setup: EstimatorSetup,
+                 begin: int) -> LeakReport | None:
+    """The thrust-only leak check of a feedback-loop recording (None: open loop, no feedback).
+
+    Compared with the best causal estimator there is: the oracle (a fair thrust cannot carry more
+    than the measurements and the true model give) and the recording loop's estimator (the thrust
+    carries its output) are always in the set, scored here if the case did not ask for them.
+    """
+    if recording.provenance.loop == 'open':  # exogenous thrust: the motion is its response
+        return None
+    data = recording.data()
+    causal = {name: m.rmse for name, m in metrics.items() if name in CAUSAL}
+    for reference in (LEAK_REFERENCE, recording.provenance.estimator):
+        if reference is not None and reference not in causal:
+            out = run_open_loop(data, setup, (reference,), {}, begin)[reference]
+            causal[reference] = score(data['t'][begin:], out[begin:], data['truth'][begin:],
+                                      setup.ndof).rmse
+    return leak_check(recording, causal, setup.ndof, begin)
+
+
 def make_setup(scenario: Scenario, seed: int, params: PredictorParams,
                wave_peak_freq: float | None = None) -> EstimatorSetup:
     """The estimator setup of a case: true model, ω0, the scenario's tuned baselines."""
@@ -398,7 +419,8 @@ def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
         recording = make_recording(scenario, seed, duration, setup, recording_loop)
     check_scorable(recording, scenario.name, seed)
     data = recording.data()
-    setup = make_setup(scenario, seed, params, float(np.median(data['omega'])))
+    # the smoothers use one ω0 for the whole record: the median of the true ω0
+    setup = replace(setup, wave_peak_freq=float(np.median(data['omega'])))
     tuning = setup.baselines.get('tuning') or {}
     info: dict[str, Any] = {'sample_time': setup.sample_time, 'params': params.to_dict(),
                             'baselines': 'untuned defaults' if tuning.get('source') == 'defaults'
@@ -408,18 +430,7 @@ def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
     truth = data['truth'][begin:]
     metrics = {name: score(data['t'][begin:], out[begin:], truth, params.ndof)
                for name, out in outputs.items()}
-    causal = {name: m.rmse for name, m in metrics.items() if name in CAUSAL}
-    if recording.provenance.loop == 'open':  # exogenous thrust: the motion is its response
-        causal = {}
-    # the leak check compares the thrust-only fit with the best causal estimator there is: the
-    # oracle (a fair thrust cannot carry more than the measurements and the true model give) and
-    # the recording loop's estimator (the thrust carries its output), scored here if not asked
-    for reference in (LEAK_REFERENCE, recording.provenance.estimator):
-        if recording.provenance.loop != 'open' and reference is not None and \
-                reference not in causal:
-            check = run_open_loop(data, setup, (reference,), {}, begin)[reference]
-            causal[reference] = score(data['t'][begin:], check[begin:], truth, params.ndof).rmse
-    leak = leak_check(recording, causal, params.ndof, begin) if causal else None
+    leak = _leak_report(recording, metrics, setup, begin)
     if leak is not None:
         require_fair(recording, leak)
     warmup = float(data['t'][begin])

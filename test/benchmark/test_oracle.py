@@ -14,8 +14,10 @@ from lf_predictor_ros.benchmark.oracle import (
     rao_wave_sigma,
 )
 from lf_predictor_ros.core.alignment import block_mean_poses
+from lf_predictor_ros.core.baselines.kalman import unit_wave_filter
 from lf_predictor_ros.core.baselines.observer import PassiveObserver
 from sim_ros.physics.vessels import GRAVITY, SUPPLY_LENGTH
+from sim_ros.physics.waves import make_filter
 from sim_ros.simulation import load_scenario, simulate
 
 WARMUP = 200.0  # s, scored after
@@ -97,3 +99,16 @@ def test_rao_sea_gets_the_fitted_second_order_wave_model() -> None:
 def test_sample_time_must_be_a_multiple_of_the_sensor_period() -> None:
     with pytest.raises(ValueError, match='whole multiple'):
         oracle_model(load_scenario('supply_closed_loop'), 0.25)
+
+
+@pytest.mark.parametrize('model', ['force', 'motion'])
+@pytest.mark.parametrize(('peak_freq', 'damping'), [(0.3, 0.1), (0.8, 0.05), (1.25, 0.3)])
+def test_the_oracle_wave_filter_is_the_simulator_s(model: str, peak_freq: float,
+                                                   damping: float) -> None:
+    """core/baselines/kalman.py keeps its own copy (the core must not import sim_ros): same."""
+    a, g, c, c_int = unit_wave_filter(model, peak_freq, damping)
+    sim = make_filter(model, peak_freq, damping, 1.0)
+    np.testing.assert_array_equal(a, sim.a)
+    np.testing.assert_array_equal(g, sim.g)
+    np.testing.assert_array_equal(c, sim.c.reshape(-1))
+    np.testing.assert_array_equal(c_int, sim.c_integrals)

@@ -20,7 +20,8 @@ import sys
 import numpy as np
 from numpy.typing import NDArray
 
-from lf_predictor_ros.benchmark.suite import _decimate, predictor_params
+from lf_predictor_ros.benchmark.estimators import predictor_params
+from lf_predictor_ros.benchmark.recordings import decimate, grid_stride
 from lf_predictor_ros.core import retraining
 from lf_predictor_ros.core.network import NumpyNnarmax
 from lf_predictor_ros.core.predictor import AdaptivePredictor
@@ -78,7 +79,7 @@ def _report(args: argparse.Namespace, overrides: dict[str, object]) -> None:
     scenario = load_scenario(args.scenario)
     params = predictor_params(scenario, overrides)
     record = simulate(scenario, seed=args.seed, duration=args.duration)
-    data = _decimate(record, max(1, int(round(params.sample_time / scenario.sample_time))))
+    data = decimate(record, grid_stride(scenario, params.sample_time))
     predictor = AdaptivePredictor(params, background=False)
     t = data['t']
     estimate = np.empty((len(t), 3))

@@ -64,7 +64,6 @@ from lf_predictor_ros.benchmark.recordings import (
     LeakReport,
     Recording,
     check_scorable,
-    decimate,
     leak_check,
     record,
     require_fair,
@@ -95,7 +94,6 @@ from sim_ros.simulation import (
 FloatArray = NDArray[np.float64]
 DEFAULT_RECORDING_LOOP = 'observer'
 LEAK_REFERENCE = 'oracle_kf'  # always in the leak check's set of causal estimators
-_decimate = decimate  # the name sea_change imports
 
 
 @dataclass(frozen=True)

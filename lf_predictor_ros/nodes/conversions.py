@@ -1,7 +1,8 @@
 """Conversions between the package's numpy conventions and ROS 2 messages.
 
 A pose is ``[north m, east m, yaw rad]`` in ``map_ned``; a generalized force is
-``[surge N, sway N, yaw N·m]`` in ``base_link_fsd`` (docs/ARCHITECTURE.md). Heading ψ is the
+``[surge N, sway N, yaw N·m]`` in ``base_link_fsd`` (docs/ARCHITECTURE.md); a body velocity
+(twist) is ``[surge u m/s, sway v m/s, yaw rate r rad/s]`` in ``base_link_fsd``. Heading ψ is the
 rotation about the down axis, so the quaternion is ``w = cos(ψ/2), z = sin(ψ/2)``
 (interfaces.md "Frames and units"; Fossen 2011 §2.2.2, unit quaternions).
 
@@ -17,7 +18,8 @@ from fractions import Fraction
 import math
 
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PoseStamped, WrenchStamped
+from geometry_msgs.msg import Pose, PoseStamped, Twist, WrenchStamped
+from nav_msgs.msg import Odometry
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -27,6 +29,14 @@ FRAME_BODY = 'base_link_fsd'
 NS_PER_S = 1_000_000_000  # [ns/s]
 MAX_STAMP_SEC = 2**31 - 1  # [s] builtin_interfaces/Time.sec is int32
 
+# nav_msgs/Odometry covariances are 6×6 row-major over (x, y, z, roll, pitch, yaw) (REP 103
+# order; for the twist: linear x, y, z, angular x, y, z). A 3-DOF estimate fills rows/columns
+# ODOM_DOF_INDEX = (x, y, yaw); the DOFs it does not estimate (z, roll, pitch) get the variance
+# UNESTIMATED_VARIANCE on the diagonal (and 0 off it): a variance so large (a standard deviation
+# of 1000 m, rad, m/s or rad/s) that a consumer fusing the message gives these DOFs no weight, and
+# none is mistaken for a measured zero.
+ODOM_DOF_INDEX = (0, 1, 5)
+UNESTIMATED_VARIANCE = 1e6  # [m², rad² or (m/s)², (rad/s)²]
 
 
 def _vector3(values: ArrayLike, what: str) -> NDArray[np.float64]:
@@ -87,17 +97,10 @@ def pose_to_msg(pose: ArrayLike, stamp: float | Time, frame_id: str = FRAME_EART
 
     ``stamp`` is seconds (float) or a ``builtin_interfaces/Time`` (copied exactly).
     """
-    north, east, yaw = _vector3(pose, 'pose')
     msg = PoseStamped()
     msg.header.stamp = _as_stamp(stamp)
     msg.header.frame_id = frame_id
-    msg.pose.position.x = float(north)
-    msg.pose.position.y = float(east)
-    msg.pose.position.z = 0.0
-    msg.pose.orientation.w = math.cos(0.5 * yaw)
-    msg.pose.orientation.x = 0.0
-    msg.pose.orientation.y = 0.0
-    msg.pose.orientation.z = math.sin(0.5 * yaw)
+    _fill_pose(msg.pose, _vector3(pose, 'pose'))
     return msg
 
 
@@ -116,12 +119,29 @@ def quaternion_to_yaw(w: float, x: float, y: float, z: float) -> float:
     return math.pi if yaw <= -math.pi else yaw
 
 
+def _fill_pose(target: Pose, pose: NDArray[np.float64]) -> None:
+    """Write ``[north, east, yaw]`` into a ``geometry_msgs/Pose`` (z = 0, yaw quaternion)."""
+    north, east, yaw = pose
+    target.position.x = float(north)
+    target.position.y = float(east)
+    target.position.z = 0.0
+    target.orientation.w = math.cos(0.5 * yaw)
+    target.orientation.x = 0.0
+    target.orientation.y = 0.0
+    target.orientation.z = math.sin(0.5 * yaw)
+
+
+def _pose_of(source: Pose) -> NDArray[np.float64]:
+    """``geometry_msgs/Pose`` → ``[north, east, yaw]`` with yaw in (−π, π]."""
+    q = source.orientation
+    yaw = quaternion_to_yaw(q.w, q.x, q.y, q.z)
+    pose = np.array([source.position.x, source.position.y, yaw], dtype=np.float64)
+    return _vector3(pose, 'pose')
+
+
 def msg_to_pose(msg: PoseStamped) -> NDArray[np.float64]:
     """``PoseStamped`` → pose ``[north, east, yaw]`` with yaw in (−π, π]."""
-    q = msg.pose.orientation
-    yaw = quaternion_to_yaw(q.w, q.x, q.y, q.z)
-    pose = np.array([msg.pose.position.x, msg.pose.position.y, yaw], dtype=np.float64)
-    return _vector3(pose, 'pose')
+    return _pose_of(msg.pose)
 
 
 def wrench_to_msg(
@@ -146,3 +166,107 @@ def msg_to_force(msg: WrenchStamped) -> NDArray[np.float64]:
     wrench = msg.wrench
     force = np.array([wrench.force.x, wrench.force.y, wrench.torque.z], dtype=np.float64)
     return _vector3(force, 'force')
+
+
+def _covariance3(values: ArrayLike, what: str) -> NDArray[np.float64]:
+    """Return ``values`` as a finite (3, 3) float array with a non-negative diagonal."""
+    array = np.asarray(values, dtype=np.float64)
+    if array.shape != (3, 3):
+        raise ValueError(
+            f'{what} must have shape (3, 3) over (x, y, yaw) or (u, v, r), got shape '
+            f'{array.shape}; pass the 3-DOF block, the 6×6 message layout is built here')
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f'{what} must be finite, got {array.tolist()}; publish a large '
+                         f'variance (e.g. {UNESTIMATED_VARIANCE:g}) for a DOF you cannot trust')
+    if np.any(np.diag(array) < 0.0):
+        raise ValueError(f'{what} must have variances >= 0 on its diagonal, got '
+                         f'{np.diag(array).tolist()}; check the sign of the covariance')
+    return array
+
+
+def covariance3_to_6(covariance: ArrayLike, what: str = 'covariance') -> list[float]:
+    """3×3 covariance over (x, y, yaw) → 36 row-major values over (x, y, z, roll, pitch, yaw).
+
+    The 3×3 goes to rows/columns `ODOM_DOF_INDEX` = (0, 1, 5); z, roll and pitch get
+    `UNESTIMATED_VARIANCE` on the diagonal, every other entry is 0.
+    """
+    block = _covariance3(covariance, what)
+    full = np.diag([0.0, 0.0, UNESTIMATED_VARIANCE, UNESTIMATED_VARIANCE,
+                    UNESTIMATED_VARIANCE, 0.0])
+    full[np.ix_(ODOM_DOF_INDEX, ODOM_DOF_INDEX)] = block
+    return [float(v) for v in full.reshape(-1)]
+
+
+def covariance6_to_3(values: ArrayLike, what: str = 'covariance') -> NDArray[np.float64]:
+    """36 row-major values over (x, y, z, roll, pitch, yaw) → the (x, y, yaw) 3×3 block."""
+    array = np.asarray(values, dtype=np.float64)
+    if array.shape != (36,):
+        raise ValueError(f'{what} must hold 36 values (6×6 row-major), got shape '
+                         f'{array.shape}')
+    block = array.reshape(6, 6)[np.ix_(ODOM_DOF_INDEX, ODOM_DOF_INDEX)]
+    return _covariance3(block, what).copy()
+
+
+def odometry_to_msg(
+    stamp_sec: float | Time, pose: ArrayLike, pose_cov: ArrayLike, twist: ArrayLike,
+    twist_cov: ArrayLike, frame_id: str = FRAME_EARTH, child_frame_id: str = FRAME_BODY,
+) -> Odometry:
+    """3-DOF estimate → ``nav_msgs/Odometry`` (the ``lf_odom`` layout, interfaces.md).
+
+    ``stamp_sec``: seconds (float) or a ``builtin_interfaces/Time`` (copied exactly). ``pose``
+    ``[north m, east m, yaw rad]`` in ``frame_id`` → position x, y (z = 0) and the yaw quaternion
+    (w = cos ψ/2, z = sin ψ/2); ``twist`` ``[u m/s, v m/s, r rad/s]`` in ``child_frame_id`` →
+    twist.linear.x, linear.y, angular.z (the rest 0). ``pose_cov`` and ``twist_cov`` (3, 3) go to
+    rows/columns (0, 1, 5) of the 6×6 covariances (`covariance3_to_6`). Raises ValueError on a
+    wrong shape, a non-finite value or a negative variance.
+    """
+    pose_array = _vector3(pose, 'pose')
+    twist_array = _vector3(twist, 'twist')
+    msg = Odometry()
+    msg.header.stamp = _as_stamp(stamp_sec)
+    msg.header.frame_id = frame_id
+    msg.child_frame_id = child_frame_id
+    _fill_pose(msg.pose.pose, pose_array)
+    msg.pose.covariance = covariance3_to_6(pose_cov, 'pose_cov')
+    msg.twist.twist.linear.x = float(twist_array[0])
+    msg.twist.twist.linear.y = float(twist_array[1])
+    msg.twist.twist.linear.z = 0.0
+    msg.twist.twist.angular.x = 0.0
+    msg.twist.twist.angular.y = 0.0
+    msg.twist.twist.angular.z = float(twist_array[2])
+    msg.twist.covariance = covariance3_to_6(twist_cov, 'twist_cov')
+    return msg
+
+
+def _twist_of(source: Twist) -> NDArray[np.float64]:
+    """``geometry_msgs/Twist`` → ``[u, v, r]`` (linear.x, linear.y, angular.z)."""
+    twist = np.array([source.linear.x, source.linear.y, source.angular.z], dtype=np.float64)
+    return _vector3(twist, 'twist')
+
+
+def odometry_pose_from_msg(msg: Odometry) -> NDArray[np.float64]:
+    """The pose ``[north, east, yaw]`` of an ``Odometry`` (yaw in (−π, π]); ValueError if bad."""
+    return _pose_of(msg.pose.pose)
+
+
+def odometry_twist_from_msg(msg: Odometry) -> NDArray[np.float64]:
+    """The body twist ``[u, v, r]`` of an ``Odometry``; ValueError if not finite.
+
+    The frame is not checked here: the caller compares ``msg.child_frame_id`` with the body
+    frame it expects.
+    """
+    return _twist_of(msg.twist.twist)
+
+
+def odometry_from_msg(msg: Odometry) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                               NDArray[np.float64], NDArray[np.float64]]:
+    """``nav_msgs/Odometry`` → (pose (3,), pose_cov (3, 3), twist (3,), twist_cov (3, 3)).
+
+    The inverse of `odometry_to_msg`: yaw from the quaternion in (−π, π], the covariances' (x, y,
+    yaw) blocks (rows/columns 0, 1, 5). Raises ValueError on a non-finite value, a zero
+    quaternion or a negative variance. Frame ids are not checked (see `odometry_twist_from_msg`).
+    """
+    return (odometry_pose_from_msg(msg),
+            covariance6_to_3(msg.pose.covariance, 'pose covariance'),
+            odometry_twist_from_msg(msg),
+            covariance6_to_3(msg.twist.covariance, 'twist covariance'))

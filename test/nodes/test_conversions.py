@@ -162,3 +162,105 @@ def test_diagnostic_array_formats_values() -> None:
         diagnostics.level_byte('fatal')
     with pytest.raises(ValueError, match='level'):
         diagnostics.level_byte(4)
+
+
+# ------------------------------------------------------------------------------ nav_msgs/Odometry
+POSE_COV = np.array([[0.25, 0.01, 0.002], [0.01, 0.36, -0.003], [0.002, -0.003, 1e-4]])
+TWIST_COV = np.array([[4e-4, 1e-5, 0.0], [1e-5, 9e-4, 2e-6], [0.0, 2e-6, 1e-6]])
+
+
+def test_odometry_round_trip_is_exact() -> None:
+    pose = np.array([1234.5, -67.25, 0.75])
+    twist = np.array([0.125, -0.5, 0.0025])
+    msg = cv.odometry_to_msg(Time(sec=42, nanosec=5), pose, POSE_COV, twist, TWIST_COV)
+    assert (msg.header.frame_id, msg.child_frame_id) == ('map_ned', 'base_link_fsd')
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (42, 5)
+    back_pose, back_pose_cov, back_twist, back_twist_cov = cv.odometry_from_msg(msg)
+    assert back_pose[:2].tolist() == [1234.5, -67.25]
+    assert back_pose[2] == pytest.approx(0.75, abs=1e-15)
+    np.testing.assert_array_equal(back_twist, twist)
+    np.testing.assert_array_equal(back_pose_cov, POSE_COV)
+    np.testing.assert_array_equal(back_twist_cov, TWIST_COV)
+    # twist components: linear x/y and angular z, the rest exactly 0
+    t = msg.twist.twist
+    assert (t.linear.x, t.linear.y, t.angular.z) == (0.125, -0.5, 0.0025)
+    assert t.linear.z == t.angular.x == t.angular.y == 0.0
+    assert msg.pose.pose.position.z == 0.0
+    custom = cv.odometry_to_msg(3.5, pose, POSE_COV, twist, TWIST_COV, frame_id='odom',
+                                child_frame_id='base_link')
+    assert (custom.header.frame_id, custom.child_frame_id) == ('odom', 'base_link')
+    assert (custom.header.stamp.sec, custom.header.stamp.nanosec) == (3, 500_000_000)
+
+
+def test_odometry_covariance_index_placement() -> None:
+    """3×3 over (x, y, yaw) → rows/cols 0, 1, 5 of the 6×6; z, roll, pitch: 1e6 on the diagonal."""
+    pose_cov = np.arange(1.0, 10.0).reshape(3, 3)  # diagonal 1, 5, 9 >= 0
+    msg = cv.odometry_to_msg(0.0, [0.0, 0.0, 0.0], pose_cov, [0.0, 0.0, 0.0], 2.0 * pose_cov)
+    for covariance, scale in ((msg.pose.covariance, 1.0), (msg.twist.covariance, 2.0)):
+        full = np.asarray(covariance).reshape(6, 6)
+        expected = np.zeros((6, 6))
+        for i, row in enumerate((0, 1, 5)):
+            for j, col in enumerate((0, 1, 5)):
+                expected[row, col] = scale * (3 * i + j + 1)
+        expected[2, 2] = expected[3, 3] = expected[4, 4] = 1e6
+        np.testing.assert_array_equal(full, expected)
+    # row-major: flat index 6·row + col; (yaw, x) is index 30, (x, yaw) index 5
+    assert msg.pose.covariance[5] == 3.0 and msg.pose.covariance[30] == 7.0
+    assert msg.pose.covariance[35] == 9.0 and msg.pose.covariance[14] == cv.UNESTIMATED_VARIANCE
+
+
+@pytest.mark.parametrize('yaw', [math.pi, -math.pi, math.pi - 1e-12, -math.pi + 1e-12])
+def test_odometry_quaternion_of_plus_minus_180_degrees(yaw: float) -> None:
+    msg = cv.odometry_to_msg(0.0, [0.0, 0.0, yaw], POSE_COV, [0.0, 0.0, 0.0], TWIST_COV)
+    q = msg.pose.pose.orientation
+    # ψ = ±π: w = cos(±π/2) ≈ 6e-17, z = sin(±π/2) = ±1 (q and −q are the same rotation)
+    assert (q.x, q.y) == (0.0, 0.0)
+    assert abs(q.w) < 1e-11 and abs(q.z) == pytest.approx(1.0, abs=1e-15)
+    assert math.copysign(1.0, q.z) == math.copysign(1.0, yaw)
+    back = cv.odometry_from_msg(msg)[0][2]
+    assert -math.pi < back <= math.pi
+    assert abs(math.remainder(back - yaw, 2 * math.pi)) < 1e-11
+    if abs(yaw) == math.pi:
+        assert back == math.pi  # −π comes back as +π: the range is (−π, π]
+
+
+def test_odometry_bad_shapes_and_values_are_rejected() -> None:
+    good = (0.0, [0.0, 0.0, 0.0], POSE_COV, [0.0, 0.0, 0.0], TWIST_COV)
+    with pytest.raises(ValueError, match=r'pose must have shape \(3,\)'):
+        cv.odometry_to_msg(0.0, [0.0, 0.0], POSE_COV, [0.0, 0.0, 0.0], TWIST_COV)
+    with pytest.raises(ValueError, match=r'twist must have shape \(3,\)'):
+        cv.odometry_to_msg(0.0, [0.0, 0.0, 0.0], POSE_COV, np.zeros(6), TWIST_COV)
+    with pytest.raises(ValueError, match=r'pose_cov must have shape \(3, 3\)'):
+        cv.odometry_to_msg(0.0, [0.0, 0.0, 0.0], np.eye(6), [0.0, 0.0, 0.0], TWIST_COV)
+    with pytest.raises(ValueError, match=r'twist_cov must have shape \(3, 3\)'):
+        cv.odometry_to_msg(0.0, [0.0, 0.0, 0.0], POSE_COV, [0.0, 0.0, 0.0], np.ones(9))
+    with pytest.raises(ValueError, match='twist must be finite'):
+        cv.odometry_to_msg(0.0, [0.0, 0.0, 0.0], POSE_COV, [math.nan, 0.0, 0.0], TWIST_COV)
+    with pytest.raises(ValueError, match='pose_cov must be finite'):
+        cv.odometry_to_msg(0.0, [0.0, 0.0, 0.0], np.full((3, 3), math.inf), [0.0, 0.0, 0.0],
+                           TWIST_COV)
+    with pytest.raises(ValueError, match='variances >= 0'):
+        cv.odometry_to_msg(0.0, [0.0, 0.0, 0.0], -np.eye(3), [0.0, 0.0, 0.0], TWIST_COV)
+    msg = cv.odometry_to_msg(*good)
+    msg.twist.twist.angular.z = math.nan
+    with pytest.raises(ValueError, match='twist must be finite'):
+        cv.odometry_from_msg(msg)
+    msg = cv.odometry_to_msg(*good)
+    msg.pose.covariance[35] = math.nan
+    with pytest.raises(ValueError, match='pose covariance must be finite'):
+        cv.odometry_from_msg(msg)
+    msg = cv.odometry_to_msg(*good)
+    msg.pose.pose.orientation.w = 0.0
+    msg.pose.pose.orientation.z = 0.0
+    with pytest.raises(ValueError, match='non-zero'):
+        cv.odometry_from_msg(msg)
+
+
+def test_odometry_inputs_are_not_modified() -> None:
+    pose, twist = np.array([1.0, 2.0, 4.0]), np.array([0.1, 0.2, 0.3])
+    pose_cov, twist_cov = POSE_COV.copy(), TWIST_COV.copy()
+    cv.odometry_to_msg(0.0, pose, pose_cov, twist, twist_cov)
+    np.testing.assert_array_equal(pose, [1.0, 2.0, 4.0])
+    np.testing.assert_array_equal(twist, [0.1, 0.2, 0.3])
+    np.testing.assert_array_equal(pose_cov, POSE_COV)
+    np.testing.assert_array_equal(twist_cov, TWIST_COV)

@@ -5,8 +5,12 @@
 - η_d is the setpoint through the reference filter 1/(T_f s + 1), T_f = 10 s, discretized
   exactly (α = 1 − e^{−h/T_f}); it starts at the first pose it is given, so a setpoint step
   is approached smoothly.
-- The law only receives poses: ν is estimated as R(ψ)ᵀ η̇ with η̇ a finite difference of the
-  pose (heading difference wrapped) through a first-order low-pass of time constant T_v.
+- ν is estimated as R(ψ)ᵀ η̇ with η̇ a finite difference of the pose (heading difference
+  wrapped) through a first-order low-pass of time constant T_v, unless the caller passes a
+  measured body velocity ``velocity_body`` = [u, v, r] (e.g. an estimator's ``lf_odom`` twist):
+  then the D term is −Kd ν with that ν. The finite-difference filter runs on the poses in both
+  cases, so the state is the same and a later step without ``velocity_body`` falls back to a
+  warm estimate.
 - Gains from the bandwidth ω_n and relative damping ζ per DOF (MSS): Kp = M ω_n²,
   Kd = 2ζ ω_n M − D (D the linear(ized) damping, 0 in MSS; the closed loop is then
   M s² + (D + Kd) s + Kp), Ki = (ω_n/10) Kp.
@@ -90,15 +94,28 @@ class PidState:
 
 
 def pid_step(state: PidState, gains: PidGains, pose: FloatArray, setpoint: FloatArray,
-             dt: float, tau_max: float | Sequence[float] | FloatArray | None = None
+             dt: float, tau_max: float | Sequence[float] | FloatArray | None = None,
+             velocity_body: Sequence[float] | FloatArray | None = None,
              ) -> tuple[FloatArray, PidState]:
-    """One control period: (τ (3,) body [N, N, N·m], new state); inputs are not modified."""
+    """One control period: (τ (3,) body [N, N, N·m], new state); inputs are not modified.
+
+    ``velocity_body`` (3,) [u m/s, v m/s, r rad/s], body frame: the measured or estimated
+    velocity for the D term (−Kd ν); None: ν from the filtered finite difference of the poses.
+    The new state does not depend on it (module docstring).
+    """
     if not (dt > 0.0):
         raise ValueError(f'PID dt must be > 0 s, got {dt}')
     pose = np.asarray(pose, dtype=np.float64)
     setpoint = np.asarray(setpoint, dtype=np.float64)
     if pose.shape != (3,) or setpoint.shape != (3,) or not np.all(np.isfinite(pose)):
         raise ValueError('PID pose and setpoint must be finite (3,) arrays [north, east, yaw]')
+    measured_nu = None
+    if velocity_body is not None:
+        measured_nu = np.array(velocity_body, dtype=np.float64)
+        if measured_nu.shape != (3,) or not np.all(np.isfinite(measured_nu)):
+            raise ValueError(f'PID velocity_body must be a finite (3,) array [u m/s, v m/s, '
+                             f'r rad/s] in the body frame, got {velocity_body!r}; pass None to '
+                             'use the finite difference of the poses')
     if not state.initialized:
         state = PidState(True, pose.copy(), np.zeros(3), pose.copy(), np.zeros(3))
     # reference filter 1/(T_f s + 1), exact discretization, heading on the circle
@@ -113,7 +130,7 @@ def pid_step(state: PidState, gains: PidGains, pose: FloatArray, setpoint: Float
     alpha_vel = 1.0 - math.exp(-dt / gains.velocity_filter_time)
     velocity = state.velocity_earth + alpha_vel * (step / dt - state.velocity_earth)
     heading = float(pose[2])
-    nu = earth_to_body(heading, velocity)
+    nu = earth_to_body(heading, velocity) if measured_nu is None else measured_nu
     # PID law
     error = pose - eta_d
     error[2] = wrap_angle(float(error[2]))

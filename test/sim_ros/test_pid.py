@@ -66,6 +66,55 @@ def test_derivative_term_from_filtered_finite_difference() -> None:
     np.testing.assert_allclose(tau, [0.0, 20.0 * 0.5, 0.0], atol=1e-6)
 
 
+def test_measured_body_velocity_replaces_the_finite_difference_in_the_d_term() -> None:
+    """Kp = Ki = 0, poses moving north at 0.5 m/s: with ν given, τ = −Kd ν exactly.
+
+    The finite difference would give ν = (0.5, 0, 0) (ψ = 0); the measured ν = (0.2, −0.1, 0.01)
+    wins, every step, and the state (filter, integral, last pose) is the one without it.
+    """
+    gains = PidGains(np.zeros(3), np.zeros(3), np.array([10.0, 20.0, 30.0]))
+    nu = np.array([0.2, -0.1, 0.01])
+    nu_before = nu.copy()
+    with_nu, without = PidState(), PidState()
+    for k in range(50):
+        pose = np.array([0.05 * k, 0.0, 0.0])
+        tau, with_nu = pid_step(with_nu, gains, pose, pose, 0.1, velocity_body=nu)
+        np.testing.assert_array_equal(tau, [-2.0, 2.0, -0.3])  # −Kd ν, to the last bit
+        tau_fd, without = pid_step(without, gains, pose, pose, 0.1)
+        for name in ('setpoint_filtered', 'integral', 'last_pose', 'velocity_earth'):
+            np.testing.assert_array_equal(getattr(with_nu, name), getattr(without, name))
+    np.testing.assert_allclose(tau_fd, [-10.0 * 0.5, 0.0, 0.0], rtol=1e-2)  # FD ≈ 0.5 m/s
+    np.testing.assert_array_equal(nu, nu_before)  # input not modified
+
+
+def test_measured_velocity_with_full_pid_adds_exactly_the_d_term_difference() -> None:
+    """Full gains, heading 120°, off the setpoint: τ(ν) − τ(None) = −Kd (ν − ν_fd).
+
+    First step: the finite-difference velocity is 0 (state starts at the pose), so
+    τ(ν) = τ(None) − Kd ν; passing None is bit for bit the call without the argument.
+    """
+    gains = gains_from_bandwidth([6.7644e6, 1.1341e7, 4.4524e9], [0.1, 0.1, 0.2], 1.0)
+    pose = np.array([3.0, -2.0, 2.0 * math.pi / 3])
+    setpoint = np.array([0.0, 1.0, 0.5])
+    nu = np.array([0.3, -0.2, 0.004])
+    plain, state_plain = pid_step(PidState(), gains, pose, setpoint, 0.1)
+    none, state_none = pid_step(PidState(), gains, pose, setpoint, 0.1, None, None)
+    np.testing.assert_array_equal(plain, none)
+    measured, state_measured = pid_step(PidState(), gains, pose, setpoint, 0.1,
+                                        velocity_body=nu)
+    np.testing.assert_allclose(measured - plain, -gains.kd * nu, rtol=1e-12)
+    for name in ('setpoint_filtered', 'integral', 'last_pose', 'velocity_earth'):
+        np.testing.assert_array_equal(getattr(state_measured, name), getattr(state_plain, name))
+        np.testing.assert_array_equal(getattr(state_none, name), getattr(state_plain, name))
+
+
+@pytest.mark.parametrize('velocity', [[0.1, 0.2], [0.0, math.nan, 0.0], [[0.0, 0.0, 0.0]]])
+def test_bad_measured_velocity_is_rejected(velocity: list[float]) -> None:
+    gains = gains_from_bandwidth([1e6] * 3, 0.1)
+    with pytest.raises(ValueError, match=r'velocity_body must be a finite \(3,\) array'):
+        pid_step(PidState(), gains, np.zeros(3), np.zeros(3), 0.1, velocity_body=velocity)
+
+
 def test_anti_windup_stops_integration_when_saturated() -> None:
     """A large error saturates τ at τ_max; the integral must not grow."""
     gains = gains_from_bandwidth([1e6] * 3, 0.1)

@@ -854,6 +854,8 @@ def simulate(scenario: Scenario, seed: int | None = None, duration: float | None
 
 # ------------------------------------------------------------------- closed loop on an estimate
 PoseEstimator = Callable[[float, FloatArray, FloatArray], FloatArray]
+# the estimator's body-frame LF velocity [u m/s, v m/s, r rad/s] for its last estimate, or None
+VelocityEstimate = Callable[[], FloatArray | Sequence[float] | None]
 
 
 @dataclass(frozen=True)
@@ -864,7 +866,9 @@ class ClosedLoopRun:
     returned (non-finite values kept as returned; the PID held the last finite one instead, and
     ``nonfinite_estimates`` counts them). ``aborted_at`` is the time [s] the run was stopped
     because the true LF pose left ``abort_excursion`` (None: ran to the end), in which case the
-    record holds the samples up to and including that time.
+    record holds the samples up to and including that time. ``missing_velocities`` counts the
+    finite estimates for which the ``velocity`` hook gave None or a non-finite value (0 without
+    the hook).
     """
 
     record: SimRecord
@@ -872,6 +876,7 @@ class ClosedLoopRun:
     estimates: FloatArray
     nonfinite_estimates: int
     aborted_at: float | None
+    missing_velocities: int = 0
 
 
 def _call_period_samples(period: float, sample_time: float) -> int:
@@ -892,7 +897,8 @@ def _excursion(lf_pose: FloatArray, setpoint: FloatArray, ndof: int) -> float:
 def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | None,
                      estimate: PoseEstimator, period: float, *,
                      abort_excursion: float | None = None,
-                     pid_period: float | None = None) -> ClosedLoopRun:
+                     pid_period: float | None = None,
+                     velocity: VelocityEstimate | None = None) -> ClosedLoopRun:
     """Closed loop with the scenario's PID acting on the pose an estimator returns.
 
     The same loop as `simulate` (gains `controller_gains`, `pid_step` every sample_time, the
@@ -907,6 +913,14 @@ def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | Non
     ``pid_period`` [s] (default sample_time): how often the PID runs (dt = pid_period), its
     command held in between. ``pid_period = period`` is the DDS pipeline, where the
     dp_controller node answers each lf_pose once and the simulator holds the command.
+
+    ``velocity`` (default None: the PID's D term uses its finite difference of the held poses,
+    bit for bit the loop without the hook): a function of no arguments called right after each
+    estimator call that returned a finite pose, returning the estimator's body-frame LF velocity
+    [u, v, r] for that estimate, or None. It is held with the pose and passed to `pid_step` as
+    ``velocity_body`` (the D term −Kd ν, as the dp_controller node with ``velocity_source:
+    odometry`` does with lf_odom's twist). None or a non-finite value: the PID uses the finite
+    difference until the next valid velocity (counted in ``missing_velocities``).
 
     The run is deterministic for a seed and a deterministic estimator; it stops early when the
     true LF pose leaves ``abort_excursion`` [m] from the setpoint (a diverged loop; with a
@@ -927,10 +941,12 @@ def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | Non
     setpoint = np.asarray(scenario.controller.setpoint, dtype=np.float64)
     scheduled = bool(scenario.controller.setpoint_schedule)
     held = sim.sample.measured_pose.copy()
+    held_velocity: FloatArray | None = None
     state = PidState()
     calls: list[float] = []
     returned: list[FloatArray] = []
     nonfinite = 0
+    missing_velocities = 0
     aborted_at: float | None = None
     done = count
     tau_pid = np.zeros(3)
@@ -938,7 +954,8 @@ def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | Non
         if scheduled:
             setpoint = scenario.controller.setpoint_at(sim.t)
         if k % pid_stride == 0:
-            tau_pid, state = pid_step(state, gains, held, setpoint, pid_dt, limit)
+            tau_pid, state = pid_step(state, gains, held, setpoint, pid_dt, limit,
+                                      held_velocity)
         sample = sim.step(sim.excitation(sim.t) + tau_pid)
         buffer.store(k, sample)
         if (k + 1) % stride == 0:
@@ -951,6 +968,10 @@ def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | Non
             returned.append(value)
             if np.all(np.isfinite(value)):
                 held = value.copy()
+                if velocity is not None:
+                    held_velocity = _velocity_of(velocity())
+                    if held_velocity is None:
+                        missing_velocities += 1
             else:
                 nonfinite += 1
         if abort_excursion is not None and not (
@@ -960,10 +981,21 @@ def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | Non
     record = buffer.record(done)
     estimates = np.array(returned, dtype=np.float64).reshape(-1, 3)
     return ClosedLoopRun(record, np.array(calls, dtype=np.float64), estimates, nonfinite,
-                         aborted_at)
+                         aborted_at, missing_velocities)
+
+
+def _velocity_of(value: FloatArray | Sequence[float] | None) -> FloatArray | None:
+    """A copy of a velocity hook's value as a finite (3,) array, or None (use the difference)."""
+    if value is None:
+        return None
+    array = np.array(value, dtype=np.float64)
+    if array.shape != (3,):
+        raise ValueError(f'the velocity hook must return a (3,) body velocity [u, v, r] or '
+                         f'None, got shape {array.shape}')
+    return array if bool(np.all(np.isfinite(array))) else None
 
 
 __all__ = ['ClosedLoopRun', 'ControllerConfig', 'ExcitationConfig', 'PoseEstimator', 'Scenario',
-           'SimRecord', 'SimSample', 'Simulator', 'WaveConfig', 'available_scenarios',
-           'controller_gains', 'load_scenario', 'scenario_from_dict', 'simulate',
-           'simulate_in_loop']
+           'SimRecord', 'SimSample', 'Simulator', 'VelocityEstimate', 'WaveConfig',
+           'available_scenarios', 'controller_gains', 'load_scenario', 'scenario_from_dict',
+           'simulate', 'simulate_in_loop']

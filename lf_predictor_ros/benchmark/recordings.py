@@ -37,7 +37,14 @@ from scipy import signal
 from lf_predictor_ros.benchmark.stability import ABORT_EXCURSION
 from lf_predictor_ros.core.alignment import block_mean_poses, mean_pose
 from lf_predictor_ros.core.estimator import wrap_to_pi
-from sim_ros.simulation import ClosedLoopRun, Scenario, SimRecord, simulate, simulate_in_loop
+from sim_ros.simulation import (
+    ClosedLoopRun,
+    Scenario,
+    SimRecord,
+    VelocityEstimate,
+    simulate,
+    simulate_in_loop,
+)
 
 FloatArray = NDArray[np.float64]
 LOOPS = ('open', 'estimator', 'truth_lf')
@@ -157,15 +164,23 @@ class GridInput:
 
 
 def run_loop(scenario: Scenario, seed: int, duration: float | None, sample_time: float,
-             step: Callable[[float, FloatArray, FloatArray, float], FloatArray]) -> ClosedLoopRun:
+             step: Callable[[float, FloatArray, FloatArray, float], FloatArray], *,
+             velocity: VelocityEstimate | None = None) -> ClosedLoopRun:
     """The scenario's DP loop closed on ``step`` (an estimator) fed one grid sample per h.
 
     The PID runs once per estimate and its command is held, as `dp_controller` does on each
     /lf_pose message in the DDS pipeline; the run stops at `stability.ABORT_EXCURSION`.
+    ``velocity`` (default None: D term from the PID's finite difference, unchanged results): the
+    estimator's body-frame LF velocity [u, v, r] for its latest output, or None when it has none
+    (e.g. ``lambda: stream.estimator.velocity``); the PID takes its D term from it, as
+    `dp_controller` with ``velocity_source: odometry`` does from /lf_odom
+    (`simulate_in_loop`'s ``velocity``; it is read after every sensor sample, so it must return
+    the value of the last ``step``).
     """
     grid = GridInput(step, scenario.waves.peak_freq, grid_stride(scenario, sample_time))
     return simulate_in_loop(scenario, seed, duration, grid, scenario.sample_time,
-                            abort_excursion=ABORT_EXCURSION, pid_period=sample_time)
+                            abort_excursion=ABORT_EXCURSION, pid_period=sample_time,
+                            velocity=velocity)
 
 
 def record(scenario: Scenario, seed: int, duration: float | None, sample_time: float,

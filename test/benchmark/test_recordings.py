@@ -17,13 +17,15 @@ from lf_predictor_ros.benchmark.recordings import (
     leak_check,
     record,
     require_fair,
+    run_loop,
     thrust_features,
     thrust_only_rmse,
 )
 from lf_predictor_ros.core.baselines.observer import PassiveObserver
 from lf_predictor_ros.core.evaluation import score
+from sim_ros.control.pid import PidState, pid_step
 from sim_ros.physics.vessels import GRAVITY, SUPPLY_LENGTH
-from sim_ros.simulation import Simulator, load_scenario, simulate
+from sim_ros.simulation import Simulator, controller_gains, load_scenario, simulate
 
 DURATION = 1200.0  # [s]
 BEGIN = 300  # first scored grid sample
@@ -122,3 +124,40 @@ def test_decimate_averages_the_poses_of_each_interval() -> None:
     assert np.array_equal(grid['u'][0], rec.thrust[9])
     with pytest.raises(ValueError, match='stride'):
         decimate(rec, 0)
+
+
+def test_run_loop_passes_the_estimators_velocity_to_the_pid() -> None:
+    """run_loop on the observer, with and without its ν̂ as the PID's D term.
+
+    Without the hook (or with ``velocity=None``) the run is bit for bit the default one. With
+    ``velocity=lambda: observer.velocity`` every PID step (once per h = 1 s, dt = 1 s) is
+    `pid_step` on the held estimate with ``velocity_body`` = the ν̂ read after that estimate:
+    the commands are replayed exactly.
+    """
+    scenario = load_scenario('supply_closed_loop')
+    default = run_loop(scenario, 5, 60.0, 1.0, _observer().step)
+    off = run_loop(scenario, 5, 60.0, 1.0, _observer().step, velocity=None)
+    for name in ('t', 'measured_pose', 'truth_lf_pose', 'thrust', 'thrust_command'):
+        np.testing.assert_array_equal(getattr(default.record, name), getattr(off.record, name))
+    stream = _observer()
+    seen: list[np.ndarray] = []
+
+    def velocity() -> np.ndarray:
+        seen.append(np.array(stream.estimator.velocity))
+        return seen[-1]
+
+    run = run_loop(scenario, 5, 60.0, 1.0, stream.step, velocity=velocity)
+    assert run.missing_velocities == 0 and run.aborted_at is None
+    assert len(seen) == run.estimates.shape[0] == 600  # one read per sensor sample
+    sim = Simulator(scenario, 5)
+    gains = controller_gains(scenario, sim.true_model())
+    limit = scenario.controller.tau_max or sim.actuator_limit()
+    held, held_nu = sim.sample.measured_pose.copy(), None
+    state = PidState()
+    commands = run.record.thrust_command
+    for k in range(0, 600, 10):
+        if k > 0:
+            held, held_nu = run.estimates[k - 1], seen[k - 1]
+        tau, state = pid_step(state, gains, held, np.zeros(3), 1.0, limit, held_nu)
+        np.testing.assert_array_equal(commands[k:k + 10], np.repeat(tau[None], 10, axis=0))
+    assert np.max(np.abs(commands - default.record.thrust_command)) > 1e3  # [N] the D term moved

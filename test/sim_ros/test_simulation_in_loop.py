@@ -198,3 +198,59 @@ def test_pid_once_per_estimate_holds_the_command() -> None:
     assert not np.array_equal(rec.thrust_command,
                               simulate_in_loop(scn, 5, 30.0, _measurement, 1.0).record
                               .thrust_command)
+
+
+def test_velocity_hook_off_or_empty_is_bit_identical() -> None:
+    """A hook that never has a velocity (None) runs exactly the loop without the hook."""
+    scn = load_scenario('supply_closed_loop')
+    calls: list[float] = []
+
+    def no_velocity() -> None:
+        calls.append(1.0)
+
+    plain = simulate_in_loop(scn, 5, 30.0, _measurement, 1.0, pid_period=1.0)
+    hooked = simulate_in_loop(scn, 5, 30.0, _measurement, 1.0, pid_period=1.0,
+                              velocity=no_velocity)
+    off = simulate_in_loop(scn, 5, 30.0, _measurement, 1.0, pid_period=1.0, velocity=None)
+    _assert_same(plain.record, hooked.record)
+    _assert_same(plain.record, off.record)
+    np.testing.assert_array_equal(plain.estimates, hooked.estimates)
+    assert len(calls) == 30 and hooked.missing_velocities == 30  # one per finite estimate
+    assert plain.missing_velocities == off.missing_velocities == 0
+
+
+def test_velocity_hook_sets_the_d_term_to_minus_kd_nu() -> None:
+    """Estimate = setpoint = start, no waves: P = I = 0 and the difference is 0, so τ = −Kd ν.
+
+    The estimator is called at 1, 2, … s; the PID runs every 0.1 s on the held estimate and
+    velocity: 0 before the first call (no velocity yet: finite difference of a constant = 0),
+    −Kd ν after; every third velocity is NaN (not used: τ = 0 until the next valid one).
+    """
+    base = load_scenario('supply_closed_loop')
+    scn = replace(base, waves=WaveConfig(), initial_pose=(0.0, 0.0, 0.0))
+    setpoint = np.asarray(scn.controller.setpoint, dtype=np.float64)
+    np.testing.assert_array_equal(setpoint, 0.0)
+    nu = np.array([0.02, -0.01, 0.0005])  # [m/s, m/s, rad/s]
+    count = [0]
+
+    def velocity() -> FloatArray:
+        count[0] += 1
+        return np.full(3, math.nan) if count[0] % 3 == 0 else nu
+
+    run = simulate_in_loop(scn, 4, 30.0, lambda t, y, u: setpoint.copy(), 1.0,
+                           velocity=velocity)
+    gains = controller_gains(scn, Simulator(scn, 4).true_model())
+    expected = np.zeros((300, 3))
+    for call in range(1, 31):  # call c at t = c s: held for PID steps 10c .. 10c + 9
+        if call % 3 != 0:
+            expected[10 * call:10 * call + 10] = -gains.kd * nu
+    limit = Simulator(scn, 4).actuator_limit()
+    assert np.all(np.abs(gains.kd * nu) < limit)  # no saturation
+    np.testing.assert_array_equal(run.record.thrust_command, expected)
+    assert run.missing_velocities == 10
+
+
+def test_velocity_hook_shape_is_checked() -> None:
+    with pytest.raises(ValueError, match=r'\(3,\) body velocity'):
+        simulate_in_loop(load_scenario('onedof_feedback'), 1, 10.0, _measurement, 1.0,
+                         velocity=lambda: np.zeros(2))

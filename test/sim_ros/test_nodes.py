@@ -14,6 +14,7 @@ from typing import Any
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
+from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
 from rclpy.executors import SingleThreadedExecutor
@@ -22,13 +23,19 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 
-from lf_predictor_ros.nodes.conversions import msg_to_force, msg_to_pose, pose_to_msg, stamp_to_ns
+from lf_predictor_ros.nodes.conversions import (
+    msg_to_force,
+    msg_to_pose,
+    odometry_to_msg,
+    pose_to_msg,
+    stamp_to_ns,
+)
 from sim_ros.control.pid import PidState, gains_from_bandwidth, pid_step
 from sim_ros.nodes import dp_controller_node, simulator_node
-from sim_ros.nodes.dp_controller_node import DpControllerNode
+from sim_ros.nodes.dp_controller_node import DpControllerConfig, DpControllerNode
 from sim_ros.nodes.simulator_node import SimulatorNode
 from sim_ros.physics.vessels import SUPPLY_M
-from sim_ros.simulation import load_scenario, simulate
+from sim_ros.simulation import ControllerConfig, load_scenario, simulate
 
 REPO = Path(__file__).resolve().parents[2]
 SAMPLE_NS = 100_000_000  # [ns] supply_closed_loop sample time 0.1 s
@@ -221,6 +228,120 @@ def test_dp_controller_rejects_invalid_runtime_gains(ros_context: object) -> Non
             2 * 0.7 * 0.1 * ctl.config.mass_diag[0] - ctl.config.damping_diag[0])
     finally:
         ctl.destroy_node()
+
+
+def _ns_stamp(ns: int) -> Time:
+    return Time(sec=ns // 10**9, nanosec=ns % 10**9)
+
+
+@pytest.mark.dds
+def test_dp_controller_takes_the_d_term_from_the_odometry_twist(
+        ros_context: object, executor: SingleThreadedExecutor) -> None:
+    """velocity_source odometry: pose and twist from lf_odom over DDS; τ = −Kd ν exactly.
+
+    The pose is the setpoint and constant, so the reference filter stays on it (P = I = 0) and
+    the finite difference is 0: each command is −Kd ν with the twist in use, or 0 when the node
+    falls back to the finite difference. Kd = 2ζω_n M (scenario '': no damping subtracted).
+    Messages (stamps in s): 1.0 ν1; 1.1 child_frame_id 'base_link' (twist ignored, ν1 held,
+    0.1 s old); 1.2 NaN twist (ν1 held, 0.2 s); 1.3 ν2; 2.0 NaN twist, ν2 is 0.7 s old >
+    velocity_timeout 0.5 s: finite difference, WARN in /diagnostics.
+    """
+    setpoint = [5.0, -3.0, 2.0]
+    ctl = DpControllerNode(context=ros_context, parameter_overrides=[
+        Parameter('scenario', value=''), Parameter('setpoint', value=setpoint),
+        Parameter('velocity_source', value='odometry'),
+        Parameter('velocity_timeout', value=0.5)])
+    probe_node = Node('probe', context=ros_context)
+    probe = Probe(probe_node, {'thrust_command': WrenchStamped, '/diagnostics': DiagnosticArray})
+    odom_pub = probe_node.create_publisher(Odometry, 'lf_odom', _probe_qos())
+    pose_pub = probe_node.create_publisher(PoseStamped, 'lf_pose', _probe_qos())
+    executor.add_node(ctl)
+    executor.add_node(probe_node)
+    _spin_for(executor, 0.5)
+    assert odom_pub.get_subscription_count() == 1 and pose_pub.get_subscription_count() == 0
+    nu1, nu2 = np.array([0.3, -0.2, 0.01]), np.array([-0.1, 0.05, -0.002])
+    nan = np.full(3, math.nan)
+    sent = [(1_000_000_000, nu1, 'base_link_fsd'), (1_100_000_000, np.ones(3), 'base_link'),
+            (1_200_000_000, nan, 'base_link_fsd'), (1_300_000_000, nu2, 'base_link_fsd'),
+            (2_000_000_000, nan, 'base_link_fsd')]
+    for ns, twist, child in sent:
+        msg = odometry_to_msg(_ns_stamp(ns), setpoint, np.eye(3), np.zeros(3), np.eye(3),
+                              child_frame_id=child)
+        msg.twist.twist.linear.x, msg.twist.twist.linear.y = float(twist[0]), float(twist[1])
+        msg.twist.twist.angular.z = float(twist[2])
+        odom_pub.publish(msg)
+        _spin_for(executor, 0.1)
+    _spin_for(executor, 1.5)  # at least one diagnostics report after the last message
+    commands = probe.messages['thrust_command']
+    assert [_stamp_of(m) for m in commands] == [ns for ns, _, _ in sent]
+    kd = gains_from_bandwidth(np.diag(SUPPLY_M), [0.1, 0.1, 0.2], 1.0, [0.0, 0.0, 0.0]).kd
+    expected = [-kd * nu1, -kd * nu1, -kd * nu1, -kd * nu2, np.zeros(3)]
+    np.testing.assert_array_equal([msg_to_force(m) for m in commands], expected)
+    assert ctl.counters == {'poses': 5, 'non_increasing_stamps': 0, 'invalid_poses': 0,
+                            'restarts': 0}
+    assert ctl.velocity_counters == {'twists_used': 2, 'twists_wrong_frame': 1,
+                                     'twists_nonfinite': 2, 'difference_steps': 1}
+    status = probe.messages['/diagnostics'][-1].status[0]
+    values = {kv.key: kv.value for kv in status.values}
+    assert status.level == b'\x01'
+    assert status.message == 'D term from the finite difference: no fresh lf_odom twist'
+    assert (values['velocity_source'], values['d_term']) == ('odometry', 'difference')
+    assert float(values['twist_age']) == pytest.approx(0.7, abs=1e-12)
+    assert (values['twists_used'], values['difference_steps']) == ('2', '1')
+
+
+@pytest.mark.dds
+def test_dp_controller_follows_the_setpoint_schedule(ros_context: object) -> None:
+    """setpoint_schedule [t, n, e, ψ] rows: the setpoint at pose stamp t is setpoint_at(t).
+
+    Rows: from 0.25 s north 5 m, from 0.35 s east −2 m, yaw 0.5 rad. The commands of poses at
+    0.1 … 0.5 s equal pid_step fed ControllerConfig.setpoint_at(stamp), as `simulate` does.
+    """
+    schedule = [0.25, 5.0, 0.0, 0.0, 0.35, 0.0, -2.0, 0.5]
+    ctl = DpControllerNode(context=ros_context, parameter_overrides=[
+        Parameter('scenario', value=''), Parameter('setpoint', value=[1.0, 0.0, 0.0]),
+        Parameter('setpoint_schedule', value=schedule)])
+    try:
+        reference = ControllerConfig(setpoint=(1.0, 0.0, 0.0), setpoint_schedule=(
+            (0.25, 5.0, 0.0, 0.0), (0.35, 0.0, -2.0, 0.5)))
+        gains = gains_from_bandwidth(np.diag(SUPPLY_M), [0.1, 0.1, 0.2], 1.0, [0.0, 0.0, 0.0])
+        state = PidState()
+        pose = np.array([0.5, 0.25, 0.1])
+        used = []
+        for k in range(1, 6):
+            msg = pose_to_msg(pose, _ns_stamp(k * 100_000_000))
+            ctl._on_pose(msg)
+            setpoint = reference.setpoint_at(k * 0.1)
+            used.append(setpoint)
+            tau, state = pid_step(state, gains, msg_to_pose(msg), setpoint, 0.1)
+            np.testing.assert_array_equal(ctl._last_tau, tau)
+        assert [s.tolist() for s in used] == [[1.0, 0.0, 0.0]] * 2 + [[5.0, 0.0, 0.0]] + [
+            [0.0, -2.0, 0.5]] * 2
+        result = ctl.set_parameters([Parameter('setpoint_schedule', value=[1.0, 2.0, 3.0])])[0]
+        assert not result.successful and 'flat rows of 4 numbers' in result.reason
+        result = ctl.set_parameters([Parameter('velocity_source', value='odometry')])[0]
+        assert not result.successful  # read-only: chosen at start-up
+    finally:
+        ctl.destroy_node()
+
+
+def test_dp_controller_config_checks_velocity_source_and_schedule() -> None:
+    assert DpControllerConfig().velocity_source == 'difference'
+    assert DpControllerConfig().odom_topic == 'lf_odom'
+    with pytest.raises(ValueError, match="velocity_source must be one of .*'twist'"):
+        DpControllerConfig(velocity_source='twist')
+    with pytest.raises(ValueError, match='velocity_timeout must be a finite number > 0'):
+        DpControllerConfig(velocity_timeout=0.0)
+    with pytest.raises(ValueError, match='non-decreasing'):
+        DpControllerConfig(setpoint_schedule=[10.0, 0.0, 0.0, 0.0, 5.0, 1.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match='finite numbers'):
+        DpControllerConfig(setpoint_schedule=[10.0, math.nan, 0.0, 0.0])
+    # the scenario's schedule is the node's default (rao_swell: 5 rows)
+    defaults = dp_controller_node.scenario_defaults('rao_swell')
+    rows = load_scenario('rao_swell').controller.setpoint_schedule
+    assert len(rows) == 5
+    assert defaults['setpoint_schedule'] == [v for row in rows for v in row]
+    assert dp_controller_node.scenario_defaults('supply_closed_loop')['setpoint_schedule'] == []
 
 
 def test_help_exits_zero_without_starting_ros(capsys: pytest.CaptureFixture[str]) -> None:

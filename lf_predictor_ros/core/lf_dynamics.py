@@ -1,0 +1,376 @@
+"""Vessel memory: the LF dynamics learned from the predictor's own zero-phase targets.
+
+The learned filter (thesis Alg. 4.1) maps measurements to an LF pose but holds no model of how
+the vessel moves. Dead reckoning through a position-reference dropout and a velocity for the DP
+controller's D term need one. This module learns it from the same data the network learns from:
+the zero-phase filtered targets η_T (thesis §4.2.2, an LF pose series of the past) and the
+applied thrust τ, with the low-speed DP model of Fossen (2011) §7.3 / eq. 7.8 in the body frame
+
+    η̇ = R(ψ) ν,          ν̇ = F ν + G τ + B β(ψ),          β(ψ) = [1, cos ψ, sin ψ]
+
+where F ≈ −M⁻¹D, G ≈ M⁻¹ and B β(ψ) ≈ M⁻¹ R(ψ)ᵀ b is the slowly varying environment force
+(wind, current, mean wave drift) fixed in the earth frame, hence its cos ψ / sin ψ terms in the
+body frame. The coefficients are fitted per DOF by ridge least squares on ν and ν̇ obtained by
+differentiating the smooth targets (``fit_lf_dynamics``). Nothing about the hull is assumed.
+
+Whether the thrust can be trusted is decided by the data (issue 13, hypothesis 1): a
+dead-reckoning test on the newest part of the window that the fit did not see compares three
+dead reckoners — the learned model, constant velocity and holding the pose — and keeps the one
+that drifts least (``learn_vessel_memory``). In a DP loop without excitation the learned model can
+lose to constant velocity, and then it is not used. The same test measures the drift variance as
+a function of the dead-reckoning time, which is the covariance growth published while dead
+reckoning.
+
+Conventions: 1 DOF = surge only (η = north, ν = u, no heading basis); 3 DOF = [north m, east m,
+heading rad] with the heading unwrapped, ν = [u m/s, v m/s, r rad/s], τ = [X N, Y N, N N·m] in
+``base_link_fsd``. All functions are pure: inputs are never modified.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+DeadReckoner = Literal['model', 'constant_velocity', 'hold']
+DEAD_RECKONERS: tuple[DeadReckoner, ...] = ('model', 'constant_velocity', 'hold')
+
+# Relative ridge penalty of the least-squares fit (on standardized regressors) [-].
+RIDGE = 1e-3
+# A fitted F with an eigenvalue whose real part exceeds this is not a DP vessel (it would double
+# its velocity in < 200 s without thrust): the fit is refused [1/s].
+MAX_GROWTH_RATE = 1.0 / 200.0
+# Spacing of the dead-reckoning test starts in the validation part of the window [s].
+TEST_START_SPACING = 20.0
+# Fraction of the window (its newest part) kept out of the fit for the dead-reckoning test [-].
+VALIDATION_FRACTION = 1.0 / 3.0
+# Fewer starts than this: the drift statistics are not trusted and no choice is made.
+MIN_TEST_STARTS = 4
+
+
+def rotation(heading: float) -> FloatArray:
+    """R(ψ) of Fossen (2011) eq. 7.5, planar part: body → earth for [north, east]."""
+    c, s = math.cos(heading), math.sin(heading)
+    return np.array([[c, -s], [s, c]])
+
+
+def heading_basis(heading: float | FloatArray, ndof: int) -> FloatArray:
+    """β(ψ) = [1, cos ψ, sin ψ] for 3 DOF, [1] for 1 DOF (shape (..., nb))."""
+    psi = np.asarray(heading, dtype=np.float64)
+    if ndof == 1:
+        return np.ones(psi.shape + (1,))
+    return np.stack([np.ones_like(psi), np.cos(psi), np.sin(psi)], axis=-1)
+
+
+def earth_to_body_rates(eta: FloatArray, eta_dot: FloatArray, ndof: int) -> FloatArray:
+    """ν = R(ψ)ᵀ η̇ row by row (the yaw rate is ψ̇); 1 DOF: ν = η̇."""
+    if ndof == 1:
+        return np.array(eta_dot, dtype=np.float64)
+    c, s = np.cos(eta[:, 2]), np.sin(eta[:, 2])
+    return np.stack([c * eta_dot[:, 0] + s * eta_dot[:, 1],
+                     -s * eta_dot[:, 0] + c * eta_dot[:, 1], eta_dot[:, 2]], axis=1)
+
+
+def body_velocity(targets: ArrayLike, sample_time: float) -> FloatArray:
+    """LF body velocity ν of an LF pose series (central differences, then rotated)."""
+    eta = _as_2d(targets, 'targets')
+    if eta.shape[0] < 3:
+        raise ValueError(f'need at least 3 LF poses to differentiate, got {eta.shape[0]}')
+    return earth_to_body_rates(eta, np.gradient(eta, sample_time, axis=0), eta.shape[1])
+
+
+@dataclass(frozen=True)
+class LfDynamics:
+    """ν̇ = F ν + G τ + B β(ψ), one row per DOF (see the module docstring).
+
+    Attributes:
+        damping: F, shape (n, n) [1/s] (≈ −M⁻¹D).
+        input_gain: G, shape (n, n) [1/kg, 1/(kg·m²)] (≈ M⁻¹).
+        bias: B, shape (n, nb) [m/s², rad/s²] (environment force over mass, earth-fixed).
+        residual_std: std of the fit residual of ν̇ per DOF [m/s², rad/s²].
+    """
+
+    damping: FloatArray
+    input_gain: FloatArray
+    bias: FloatArray
+    residual_std: FloatArray
+
+    def __post_init__(self) -> None:
+        """Check shapes and finiteness (read-only copies are stored)."""
+        n = np.asarray(self.damping).shape[0]
+        shapes = {'damping': (n, n), 'input_gain': (n, n), 'bias': (n, 1 if n == 1 else 3),
+                  'residual_std': (n,)}
+        for name, shape in shapes.items():
+            value = np.array(getattr(self, name), dtype=np.float64)
+            if value.shape != shape or not np.all(np.isfinite(value)):
+                raise ValueError(f'LfDynamics.{name} must be a finite array of shape {shape}, '
+                                 f'got shape {value.shape}')
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    @property
+    def ndof(self) -> int:
+        """Degrees of freedom (1 or 3)."""
+        return int(self.damping.shape[0])
+
+    def acceleration(self, nu: FloatArray, force: FloatArray, heading: float) -> FloatArray:
+        """ν̇ for body velocity ν (n,), body force τ (n,) and heading ψ [rad]."""
+        basis = heading_basis(heading, self.ndof)
+        return self.damping @ nu + self.input_gain @ force + self.bias @ basis
+
+    def growth_rate(self) -> float:
+        """Largest real part of the eigenvalues of F [1/s] (< 0: a damped vessel)."""
+        return float(np.max(np.linalg.eigvals(self.damping).real))
+
+
+def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
+                    ridge: float = RIDGE) -> LfDynamics:
+    """Least-squares fit of ν̇ = F ν + G τ + B β(ψ) on an LF pose series and its body forces.
+
+    Args:
+        targets: LF poses, shape (m, n) (n = 1 or 3, heading unwrapped), uniform sample time.
+        forces: body-frame forces applied at the same instants, shape (m, n).
+        sample_time: h [s].
+        ridge: relative ridge penalty on standardized regressors.
+
+    Raises:
+        ValueError: bad shapes, too few samples, non-finite data, or a fit that is not a damped
+            vessel (growth rate above ``MAX_GROWTH_RATE``): collect more (excited) data.
+    """
+    eta = _as_2d(targets, 'targets')
+    tau = _as_2d(forces, 'forces')
+    n = eta.shape[1]
+    if n not in (1, 3) or tau.shape != eta.shape:
+        raise ValueError(f'targets and forces must both have shape (m, 1) or (m, 3), got '
+                         f'{eta.shape} and {tau.shape}')
+    _check_sample_time(sample_time)
+    nu = body_velocity(eta, sample_time)
+    nu_dot = np.gradient(nu, sample_time, axis=0)
+    basis = heading_basis(eta[:, 2] if n == 3 else np.zeros(eta.shape[0]), n)
+    phi = np.hstack([nu, tau, basis])
+    if phi.shape[0] < 5 * phi.shape[1]:
+        raise ValueError(f'{phi.shape[0]} samples are too few to fit {phi.shape[1]} '
+                         'coefficients per DOF: use a longer window')
+    coef, residual_std = _ridge(phi, nu_dot, ridge)
+    model = LfDynamics(damping=coef[:, :n], input_gain=coef[:, n:2 * n], bias=coef[:, 2 * n:],
+                       residual_std=residual_std)
+    if model.growth_rate() > MAX_GROWTH_RATE:
+        raise ValueError(f'the fitted LF dynamics grow at {model.growth_rate():.3g} 1/s (> '
+                         f'{MAX_GROWTH_RATE:.3g}): not a damped vessel, not used')
+    return model
+
+
+def dead_reckon_step(model: LfDynamics | None, reckoner: DeadReckoner, eta: FloatArray,
+                     nu: FloatArray, force: FloatArray, sample_time: float) -> tuple[
+                         FloatArray, FloatArray]:
+    """One dead-reckoning step of h (semi-implicit Euler); returns new (η, ν), inputs untouched.
+
+    'model': ν⁺ = ν + h ν̇(ν, τ, ψ), η⁺ = η + h R(ψ) ν⁺; 'constant_velocity': ν⁺ = ν;
+    'hold': ν⁺ = 0 (η stays). Works on a single state (n,) or a batch (k, n).
+    """
+    eta_a, nu_a = np.asarray(eta, dtype=np.float64), np.asarray(nu, dtype=np.float64)
+    if reckoner == 'hold':
+        return eta_a.copy(), np.zeros_like(nu_a)
+    if reckoner == 'model':
+        if model is None:
+            raise ValueError("dead reckoner 'model' needs a fitted LfDynamics")
+        nu_a = nu_a + sample_time * _batch_acceleration(model, eta_a, nu_a,
+                                                        np.asarray(force, dtype=np.float64))
+    else:
+        nu_a = nu_a.copy()
+    return eta_a + sample_time * _body_to_earth(eta_a, nu_a), nu_a
+
+
+@dataclass(frozen=True)
+class DriftCurve:
+    """Mean-square dead-reckoning drift per DOF against dead-reckoning time.
+
+    Attributes:
+        horizons: dead-reckoning times [s], increasing, shape (H,).
+        mean_square: mean-square pose error at each horizon, shape (H, n) [m², rad²].
+        velocity_mean_square: mean-square body-velocity error at each horizon, shape (H, n)
+            [m²/s², rad²/s²].
+        starts: number of test starts the statistics come from.
+    """
+
+    horizons: FloatArray
+    mean_square: FloatArray
+    velocity_mean_square: FloatArray
+    starts: int
+
+    def variance(self, elapsed: float) -> FloatArray:
+        """Pose drift variance per DOF after ``elapsed`` seconds.
+
+        Linear interpolation from 0; beyond the longest horizon it grows with the square of the
+        time, as for a velocity error.
+        """
+        return _interpolate(self.horizons, self.mean_square, elapsed, 2.0)
+
+    def velocity_variance(self, elapsed: float) -> FloatArray:
+        """Velocity drift variance per DOF after ``elapsed`` seconds.
+
+        Beyond the longest horizon it grows linearly with the time, as for a random walk.
+        """
+        return _interpolate(self.horizons, self.velocity_mean_square, elapsed, 1.0)
+
+    def rms_at(self, elapsed: float) -> FloatArray:
+        """RMS drift per DOF after ``elapsed`` seconds."""
+        return np.sqrt(self.variance(elapsed))
+
+
+@dataclass(frozen=True)
+class VesselMemory:
+    """What was learned from one target window: the model, the chosen dead reckoner, its drift.
+
+    Attributes:
+        model: the fitted LF dynamics (None if the fit was refused).
+        reckoner: the dead reckoner that drifted least on the validation part of the window.
+        drift: that reckoner's drift curve (validation part).
+        drift_by_reckoner: RMS drift per DOF at the longest tested horizon, per reckoner.
+        message: why a reckoner was chosen or the model refused.
+        accel_std: std of the LF acceleration ν̇ of the targets per DOF [m/s², rad/s²] (the
+            process noise of a constant-velocity model).
+    """
+
+    model: LfDynamics | None
+    reckoner: DeadReckoner
+    drift: DriftCurve
+    drift_by_reckoner: dict[str, FloatArray]
+    message: str
+    accel_std: FloatArray
+
+
+def drift_test(model: LfDynamics | None, reckoner: DeadReckoner, targets: ArrayLike,
+               forces: ArrayLike, sample_time: float, horizon: float,
+               start_spacing: float = TEST_START_SPACING) -> DriftCurve:
+    """Dead-reckon from the LF state at starts spaced ``start_spacing`` apart; measure drift.
+
+    Each test starts from the target pose and its differentiated body velocity and integrates
+    ``dead_reckon_step`` with the recorded forces for ``horizon`` seconds (or as far as the series
+    allows); the error against the targets at every step gives the mean-square drift.
+    """
+    eta_t = _as_2d(targets, 'targets')
+    tau = _as_2d(forces, 'forces')
+    _check_sample_time(sample_time)
+    steps = int(round(horizon / sample_time))
+    spacing = max(1, int(round(start_spacing / sample_time)))
+    m = eta_t.shape[0]
+    steps = min(steps, m - 2)
+    starts = np.arange(1, m - steps, spacing)
+    n = eta_t.shape[1]
+    if steps < 1 or starts.size == 0:
+        return DriftCurve(np.zeros(0), np.zeros((0, n)), np.zeros((0, n)), 0)
+    nu_t = body_velocity(eta_t, sample_time)
+    eta, nu = eta_t[starts].copy(), nu_t[starts].copy()
+    mean_square = np.empty((steps, n))
+    velocity_mean_square = np.empty((steps, n))
+    for j in range(steps):
+        eta, nu = dead_reckon_step(model, reckoner, eta, nu, tau[starts + j], sample_time)
+        mean_square[j] = np.mean((eta - eta_t[starts + j + 1]) ** 2, axis=0)
+        velocity_mean_square[j] = np.mean((nu - nu_t[starts + j + 1]) ** 2, axis=0)
+    horizons = sample_time * np.arange(1, steps + 1, dtype=np.float64)
+    return DriftCurve(horizons, mean_square, velocity_mean_square, int(starts.size))
+
+
+def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: float,
+                        horizon: float) -> VesselMemory:
+    """Fit the LF dynamics on the older part of a window; pick the dead reckoner on the newest.
+
+    The fit uses the oldest 1 − ``VALIDATION_FRACTION`` of the window; each dead reckoner is
+    tested on the rest (``drift_test`` over ``horizon`` seconds, capped by the data); the one with
+    the smallest drift summed over DOFs (each DOF normalized by the hold reckoner's drift) wins.
+    The returned model is refitted on the whole window. Ties and too few test starts keep
+    'constant_velocity', the reckoner that needs no model.
+    """
+    eta_t = _as_2d(targets, 'targets')
+    tau = _as_2d(forces, 'forces')
+    split = int(round(eta_t.shape[0] * (1.0 - VALIDATION_FRACTION)))
+    model: LfDynamics | None = None
+    message = ''
+    try:
+        model = fit_lf_dynamics(eta_t[:split], tau[:split], sample_time)
+    except ValueError as exc:
+        message = f'LF dynamics not fitted: {exc}'
+    test_horizon = min(horizon, (eta_t.shape[0] - split) * sample_time / 2.0)
+    curves = {name: drift_test(model, name, eta_t[split:], tau[split:], sample_time,
+                               test_horizon)
+              for name in DEAD_RECKONERS if name != 'model' or model is not None}
+    rms: dict[str, FloatArray] = {name: np.sqrt(curve.mean_square[-1]) if curve.starts else
+           np.full(eta_t.shape[1], np.inf) for name, curve in curves.items()}
+    chosen: DeadReckoner = 'constant_velocity'
+    if curves['constant_velocity'].starts >= MIN_TEST_STARTS:
+        scale = np.maximum(rms['hold'], 1e-9)
+        score = {name: float(np.sum(value / scale)) for name, value in rms.items()}
+        best: DeadReckoner = min(curves, key=lambda name: score[name])
+        if score[best] < score['constant_velocity']:
+            chosen = best
+        message = message or (f"dead reckoner '{chosen}' drifts least on the newest "
+                              f'{test_horizon:.0f} s tests')
+    else:
+        message = message or 'too few dead-reckoning tests: constant velocity kept'
+    if model is not None:
+        try:
+            model = fit_lf_dynamics(eta_t, tau, sample_time)
+        except ValueError as exc:
+            model, message = None, f'LF dynamics not refitted: {exc}'
+            chosen = 'constant_velocity' if chosen == 'model' else chosen
+    accel = np.gradient(body_velocity(eta_t, sample_time), sample_time, axis=0)
+    return VesselMemory(model, chosen, curves[chosen], rms, message, np.std(accel, axis=0))
+
+
+def _interpolate(horizons: FloatArray, table: FloatArray, elapsed: float,
+                 power: float) -> FloatArray:
+    if elapsed <= 0.0 or horizons.size == 0:
+        return np.zeros(table.shape[1])
+    last = float(horizons[-1])
+    if elapsed > last:
+        return np.asarray(table[-1] * (elapsed / last) ** power, dtype=np.float64)
+    grid = np.concatenate([[0.0], horizons])
+    padded = np.vstack([np.zeros((1, table.shape[1])), table])
+    return np.array([np.interp(elapsed, grid, padded[:, j]) for j in range(padded.shape[1])])
+
+
+def _batch_acceleration(model: LfDynamics, eta: FloatArray, nu: FloatArray,
+                        force: FloatArray) -> FloatArray:
+    heading = eta[..., 2] if model.ndof == 3 else np.zeros(eta.shape[:-1])
+    basis = heading_basis(heading, model.ndof)
+    return nu @ model.damping.T + force @ model.input_gain.T + basis @ model.bias.T
+
+
+def _body_to_earth(eta: FloatArray, nu: FloatArray) -> FloatArray:
+    if eta.shape[-1] == 1:
+        return nu
+    c, s = np.cos(eta[..., 2]), np.sin(eta[..., 2])
+    return np.stack([c * nu[..., 0] - s * nu[..., 1], s * nu[..., 0] + c * nu[..., 1],
+                     nu[..., 2]], axis=-1)
+
+
+def _ridge(phi: FloatArray, y: FloatArray, ridge: float) -> tuple[FloatArray, FloatArray]:
+    """Per-output ridge least squares on standardized columns; returns (coef, residual std)."""
+    scale = np.std(phi, axis=0)
+    scale = np.where(scale > 0.0, scale, 1.0)
+    z = phi / scale
+    gram = z.T @ z
+    penalty = ridge * np.trace(gram) / gram.shape[0] * np.eye(gram.shape[0])
+    coef_z = np.linalg.solve(gram + penalty, z.T @ y)
+    coef = (coef_z / scale[:, None]).T
+    residual = y - phi @ coef.T
+    return coef, np.std(residual, axis=0)
+
+
+def _as_2d(values: ArrayLike, name: str) -> FloatArray:
+    array = np.array(values, dtype=np.float64)
+    if array.ndim == 1:
+        array = array[:, None]
+    if array.ndim != 2 or not np.all(np.isfinite(array)):
+        raise ValueError(f'{name} must be a finite (m,) or (m, n) array, got shape {array.shape}')
+    return array
+
+
+def _check_sample_time(sample_time: float) -> None:
+    if not (math.isfinite(sample_time) and sample_time > 0.0):
+        raise ValueError(f'sample_time must be a positive finite number of seconds, '
+                         f'got {sample_time}')

@@ -1,0 +1,170 @@
+"""The LF state estimator: the adaptive predictor + its vessel memory + LF odometry.
+
+``LfStateEstimator`` is what nodes, replay and the benchmark run when they need more than the
+LF pose (issue 14): every ``update`` feeds the ``AdaptivePredictor`` (thesis Alg. 4.1) and hands
+its LF pose to ``LfOdometry`` (velocity, covariances, dead reckoning). Whenever a retraining has
+produced new zero-phase targets, the vessel memory is learned from them and the applied thrust
+(``core.lf_dynamics.learn_vessel_memory``) and the covariances are recalibrated against them.
+With ``background`` the vessel memory is learned on a worker thread (the update path only picks
+up a finished result, it never waits), as the network's training is.
+
+``coast(t, force)`` is the dead-reckoning step for a time with thrust but no accepted pose.
+"""
+from __future__ import annotations
+
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lf_predictor_ros.core.estimator import EstimatorStatus
+from lf_predictor_ros.core.lf_dynamics import VesselMemory, learn_vessel_memory
+from lf_predictor_ros.core.odometry import (
+    EstimateSource,
+    LfOdometry,
+    OdometryEstimate,
+    OdometryParams,
+)
+from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.predictor import AdaptivePredictor
+from lf_predictor_ros.core.targets import TargetWindow
+
+FloatArray = NDArray[np.float64]
+
+
+class LfStateEstimator:
+    """Adaptive predictor + vessel memory + odometry (see the module docstring)."""
+
+    def __init__(self, params: PredictorParams, odometry: OdometryParams | None = None, *,
+                 background: bool = True, predictor: AdaptivePredictor | None = None,
+                 checkpoint_path: str | None = None) -> None:
+        """Create; ``predictor`` may be given (e.g. a warm-started one), else a new one."""
+        self.params = params
+        self.ndof = params.ndof
+        self.sample_time = params.sample_time
+        self.background = background
+        self.predictor = predictor or AdaptivePredictor(
+            params, background=background, checkpoint_path=checkpoint_path)
+        self.odometry = LfOdometry(params.ndof, params.sample_time, odometry)
+        self._capacity = params.training_samples + params.transient_samples + params.max_lag + \
+            params.retrain_samples * 2
+        self._executor: ThreadPoolExecutor | None = None
+        self._job: Future[tuple[FloatArray, FloatArray, VesselMemory | None]] | None = None
+        self._memory_error: str | None = None
+        self._restart_buffers()
+
+    def update(self, t: float, pose: FloatArray, force: FloatArray) -> tuple[
+            FloatArray, OdometryEstimate | None]:
+        """One sample: (LF pose valid at t + h, odometry for t + h) (see AdaptivePredictor)."""
+        lf_pose = self.predictor.update(t, pose, force)
+        self._times.append(t)
+        self._forces.append(np.array(force[:self.ndof], dtype=np.float64))
+        self._count += 1
+        self._collect()
+        self._maybe_learn()
+        source: EstimateSource = 'network' if self.predictor.status().state == 'trained' \
+            else 'fallback'
+        odom = self.odometry.track(t + self.sample_time, lf_pose, force, source)
+        return lf_pose, odom
+
+    def coast(self, t: float, force: FloatArray) -> OdometryEstimate | None:
+        """Thrust at t without an accepted pose: dead reckoning (None when lost or never fixed)."""
+        self._collect()
+        return self.odometry.coast(t, force)
+
+    def restart_segment(self) -> None:
+        """A new data segment for the predictor.
+
+        The odometry keeps its state for dead reckoning across the gap (and its calibration
+        and vessel memory).
+        """
+        self.predictor.restart_segment()
+        self._restart_buffers()
+
+    def reset(self) -> None:
+        """Forget everything (predictor, odometry, memory)."""
+        self.predictor.reset()
+        self.odometry.reset()
+        self._job = None
+        self._restart_buffers()
+
+    def status(self) -> EstimatorStatus:
+        """The predictor's status."""
+        return self.predictor.status()
+
+    def close(self) -> None:
+        """Stop the workers."""
+        self.predictor.close()
+        if self._executor is not None:
+            self._executor.shutdown(wait=False, cancel_futures=True)
+            self._executor = None
+
+    @property
+    def memory(self) -> VesselMemory | None:
+        """The vessel memory in use."""
+        return self.odometry.memory
+
+    @property
+    def memory_error(self) -> str | None:
+        """Why the last vessel-memory job failed (None if it did not)."""
+        return self._memory_error
+
+    # ---- internals -------------------------------------------------------------------------
+
+    def _restart_buffers(self) -> None:
+        self._times: deque[float] = deque(maxlen=self._capacity)
+        self._forces: deque[FloatArray] = deque(maxlen=self._capacity)
+        self._count = 0  # samples in this segment (= predictor's index + 1)
+        self._seen_targets: TargetWindow | None = None
+        self._job = None
+
+    def _maybe_learn(self) -> None:
+        targets = self.predictor.targets
+        if targets is None or targets is self._seen_targets or self._job is not None:
+            return
+        self._seen_targets = targets
+        first = self._count - len(self._times)  # segment index of the oldest buffered sample
+        idx = targets.indices() - first
+        keep = (idx >= 0) & (idx < len(self._times))
+        if np.count_nonzero(keep) < 3:
+            return
+        times = np.array(self._times)[idx[keep]]
+        values = np.array(targets.values, dtype=np.float64).reshape(len(targets), -1)[keep]
+        forces = np.array(self._forces)[idx[keep]]
+        # the newest ε targets are still filter transients (targets.training_mask): left out
+        usable = max(3, values.shape[0] - self.params.transient_samples)
+        times, values, forces = times[:usable], values[:usable], forces[:usable]
+        horizon = self.odometry.params.dead_reckoning_timeout
+        if self.background:
+            if self._executor is None:
+                self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
+            self._job = self._executor.submit(_learn, times, values, forces,
+                                              self.sample_time, horizon)
+        else:
+            self._apply(_learn(times, values, forces, self.sample_time, horizon))
+
+    def _collect(self) -> None:
+        job = self._job
+        if job is None or not job.done():
+            return
+        self._job = None
+        try:
+            self._apply(job.result())
+        except Exception as exc:  # noqa: BLE001 - reported in the diagnostics, never raised
+            self._memory_error = f'{type(exc).__name__}: {exc}'
+
+    def _apply(self, result: tuple[FloatArray, FloatArray, VesselMemory | None]) -> None:
+        times, values, memory = result
+        self.odometry.learn(times, values, memory)
+        self._memory_error = None
+
+
+def _learn(times: FloatArray, values: FloatArray, forces: FloatArray, sample_time: float,
+           horizon: float) -> tuple[FloatArray, FloatArray, VesselMemory | None]:
+    """Worker job: the vessel memory of one target window (None if it cannot be learned)."""
+    try:
+        memory: VesselMemory | None = learn_vessel_memory(values, forces, sample_time, horizon)
+    except ValueError:
+        memory = None
+    return times, values, memory

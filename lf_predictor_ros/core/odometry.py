@@ -1,0 +1,585 @@
+"""LF odometry: velocity, honest covariances and dead reckoning around the LF pose estimate.
+
+What a DP stack needs besides the LF pose (issue 14): the LF velocity for the D term, how far to
+trust both, and an estimate that survives a position-reference dropout. ``LfOdometry`` consumes
+the LF pose the predictor publishes (any source: network or cascade fallback) and the applied
+thrust, and gives an ``OdometryEstimate``:
+
+- **pose**: the predictor's LF pose itself while tracking (``lf_odom`` and ``lf_pose`` agree);
+- **twist**: the body-frame LF velocity ν = [u, v, r] of a Kalman filter on state [η, ν] whose
+  measurement is the LF pose and whose process model is the learned vessel memory
+  (``core.lf_dynamics``) when the data chose it, else constant velocity;
+- **covariances, calibrated empirically**: every retraining brings new zero-phase targets (an LF
+  pose series of the past, thesis §4.2.2). The pose and twist actually published are compared
+  with them (twist: with the targets' differentiated body velocity), separately for samples
+  from the network and from the fallback; the mean of e eᵀ, times ``pose_cov_scale`` /
+  ``twist_cov_scale`` (calibrated on simulations against the truth: the targets are not the
+  truth), is the published covariance. Before the first targets, ``prior_pose_std`` and the
+  Kalman filter's velocity covariance stand in and ``calibrated`` is False;
+- **dead reckoning**: when poses stop or are rejected while thrust keeps coming (``coast``), the
+  state is integrated with the dead reckoner the vessel memory chose (learned model, constant
+  velocity or hold) and the applied thrust. The pose continues from the last published pose (no
+  step); its covariance is the last tracking covariance + the drift variance measured by the
+  vessel memory's own dead-reckoning tests at the elapsed time + the velocity uncertainty
+  propagated (elapsed² · R Σ_ν Rᵀ). After ``dead_reckoning_timeout`` nothing is published (mode
+  'lost'): no guesses;
+- **reacquisition gated by plausibility**: a fix whose squared Mahalanobis distance to the
+  dead-reckoned pose is within ``reacquire_gate`` is accepted at once; a fix far from it is
+  accepted only after ``reacquire_time`` seconds of consecutive fixes (the position reference
+  checks upstream reject inconsistent ones), meanwhile dead reckoning (or silence) continues.
+
+Conventions: poses [north m, east m, heading rad] (heading wrapped in outputs, unwrapped inside),
+forces and twists in ``base_link_fsd``. For ``ndof`` 1 only north/surge are estimated; the other
+pose entries are passed through from the input and their variances are ``UNESTIMATED_VARIANCE``.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+import math
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from lf_predictor_ros.core.heading import wrap_angle
+from lf_predictor_ros.core.lf_dynamics import (
+    DeadReckoner,
+    VesselMemory,
+    body_velocity,
+    dead_reckon_step,
+    heading_basis,
+)
+from lf_predictor_ros.core.params import field_doc
+
+FloatArray = NDArray[np.float64]
+OdometryMode = Literal['tracking', 'dead_reckoning', 'lost']
+EstimateSource = Literal['network', 'fallback']
+SOURCES: tuple[EstimateSource, ...] = ('network', 'fallback')
+
+# Variance published for a pose/twist entry that is not estimated (ndof 1: east, yaw) [m², rad²].
+UNESTIMATED_VARIANCE = 1e6
+# Correlation time assumed for the unmodelled LF acceleration in the Kalman process noise [s].
+ACCELERATION_CORRELATION_TIME = 1.0
+# Published samples kept for the covariance calibration (at most this many) [-].
+HISTORY_SAMPLES = 20000
+CHI2_3DOF_999 = 16.27  # χ²(3) 99.9 % quantile [-]
+
+
+@dataclass(frozen=True)
+class OdometryParams:
+    """Settings of the LF odometry (see the module docstring)."""
+
+    dead_reckoning_timeout: float = field(default=120.0, metadata=field_doc(
+        'longest dead reckoning through a pose dropout; afterwards lf_odom/lf_pose stop', 's'))
+    pose_cov_scale: float = field(default=1.0, metadata=field_doc(
+        'published pose covariance = this × mean (estimate − target)² (calibrated against the '
+        'truth on tuning seeds, docs/BENCHMARKS.md)', ''))
+    twist_cov_scale: float = field(default=1.0, metadata=field_doc(
+        'published twist covariance = this × mean (twist − target velocity)²', ''))
+    prior_pose_std: tuple[float, ...] = field(default=(0.5, 0.5, 0.01), metadata=field_doc(
+        'pose error std assumed before the first targets (north, east, yaw)', 'm, m, rad'))
+    prior_accel_std: tuple[float, ...] = field(default=(0.005, 0.005, 5e-5), metadata=field_doc(
+        'LF acceleration std of the constant-velocity Kalman model (before a vessel model)',
+        'm/s², m/s², rad/s²'))
+    reacquire_gate: float = field(default=CHI2_3DOF_999, metadata=field_doc(
+        'a fix within this squared Mahalanobis distance of the dead-reckoned pose is accepted '
+        'at once', ''))
+    reacquire_time: float = field(default=10.0, metadata=field_doc(
+        'a fix outside the gate is accepted after this long of consecutive fixes', 's'))
+    reacquire_blend_time: float = field(default=30.0, metadata=field_doc(
+        'after reacquisition the published pose moves from the dead-reckoned pose to the '
+        'estimate over this time (no step); 0 = jump at once', 's'))
+    min_calibration_samples: int = field(default=60, metadata=field_doc(
+        'fewest matched samples of one source for its own covariance (else all sources)', ''))
+
+    def __post_init__(self) -> None:
+        """Check every rule; the message says what to change."""
+        for name in ('dead_reckoning_timeout', 'pose_cov_scale', 'twist_cov_scale',
+                     'reacquire_gate'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f'{name} must be a positive finite number, got {value}')
+        for name in ('reacquire_time', 'reacquire_blend_time'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f'{name} must be a finite number >= 0 s, got {value}')
+        for name in ('prior_pose_std', 'prior_accel_std'):
+            value = tuple(getattr(self, name))
+            if len(value) != 3 or not all(math.isfinite(v) and v > 0.0 for v in value):
+                raise ValueError(f'{name} must be 3 positive numbers (north, east, yaw), '
+                                 f'got {value}')
+            object.__setattr__(self, name, tuple(float(v) for v in value))
+        if self.min_calibration_samples < 1:
+            raise ValueError('min_calibration_samples must be >= 1, got '
+                             f'{self.min_calibration_samples}')
+
+
+@dataclass(frozen=True)
+class OdometryEstimate:
+    """One LF odometry output (pose and twist with covariances; see the module docstring).
+
+    Attributes:
+        stamp: time the estimate is valid for [s].
+        pose: [north m, east m, heading rad], heading wrapped to (−π, π].
+        pose_cov: 3×3 covariance of pose [m², m·rad, rad²].
+        twist: body velocity [u m/s, v m/s, r rad/s].
+        twist_cov: 3×3 covariance of twist.
+        mode: 'tracking' or 'dead_reckoning' ('lost' is never published).
+        dead_reckoning_time: time since the last accepted fix [s] (0 while tracking).
+        calibrated: the covariances come from a target comparison (False: priors).
+        reckoner: the dead reckoner in use (vessel memory's choice).
+    """
+
+    stamp: float
+    pose: FloatArray
+    pose_cov: FloatArray
+    twist: FloatArray
+    twist_cov: FloatArray
+    mode: OdometryMode
+    dead_reckoning_time: float
+    calibrated: bool
+    reckoner: DeadReckoner
+
+
+@dataclass(frozen=True)
+class _Published:
+    stamp: float
+    pose: FloatArray  # unwrapped, ndof entries
+    twist: FloatArray
+    source: EstimateSource
+
+
+class LfOdometry:
+    """LF velocity, calibrated covariances and dead reckoning (see the module docstring)."""
+
+    def __init__(self, ndof: int, sample_time: float, params: OdometryParams | None = None
+                 ) -> None:
+        """Create for ``ndof`` (1 or 3) at the predictor's sample time h [s]."""
+        if ndof not in (1, 3):
+            raise ValueError(f'ndof must be 1 or 3, got {ndof}')
+        if not (math.isfinite(sample_time) and sample_time > 0.0):
+            raise ValueError(f'sample_time must be positive, got {sample_time}')
+        self.ndof = ndof
+        self.sample_time = sample_time
+        self.params = params or OdometryParams()
+        self.reset()
+
+    # ---- public ---------------------------------------------------------------------------
+
+    def reset(self) -> None:
+        """Forget the state, the calibration and the vessel memory."""
+        n = self.ndof
+        self._memory: VesselMemory | None = None
+        self._pose_cov: dict[str, FloatArray] = {}
+        self._twist_cov: dict[str, FloatArray] = {}
+        self._history: deque[_Published] = deque(maxlen=HISTORY_SAMPLES)
+        self._x: FloatArray | None = None
+        self._p = np.zeros((2 * n, 2 * n))
+        self._t: float | None = None
+        self._mode: OdometryMode = 'tracking'
+        self._last_fix: float | None = None
+        self._last_output: OdometryEstimate | None = None
+        self._dr_anchor: FloatArray | None = None  # (published pose, state pose) at DR start
+        self._dr_eta0: FloatArray | None = None
+        self._pending_since: float | None = None
+        self._blend: tuple[float, FloatArray] | None = None  # (start time, DR pose − fix)
+        self.counters = {'dead_reckoning_episodes': 0, 'lost': 0, 'reacquired': 0,
+                         'reacquired_outside_gate': 0, 'fixes_held_back': 0, 'calibrations': 0,
+                         'memory_updates': 0}
+
+    @property
+    def mode(self) -> OdometryMode:
+        """'tracking', 'dead_reckoning' or 'lost'."""
+        return self._mode
+
+    @property
+    def memory(self) -> VesselMemory | None:
+        """The vessel memory learned from the newest targets (None before the first)."""
+        return self._memory
+
+    @property
+    def calibrated(self) -> bool:
+        """True once the covariances come from a target comparison."""
+        return bool(self._pose_cov)
+
+    def dead_reckoning_time(self, t: float) -> float:
+        """Seconds since the last accepted fix (0 if tracking or never fixed)."""
+        if self._mode == 'tracking' or self._last_fix is None:
+            return 0.0
+        return max(0.0, t - self._last_fix)
+
+    def track(self, t: float, lf_pose: ArrayLike, force: ArrayLike,
+              source: EstimateSource = 'network') -> OdometryEstimate | None:
+        """A new LF pose (valid at t) with the thrust applied; returns the estimate for t.
+
+        While dead reckoning, a fix is first checked for plausibility (module docstring); a fix
+        held back returns the dead-reckoned estimate (or None once lost).
+        """
+        pose = _vector(lf_pose, 3, 'lf_pose')
+        tau = _vector(force, 3, 'force')
+        if not math.isfinite(t):
+            raise ValueError(f'stamp must be finite, got {t}')
+        if source not in SOURCES:
+            raise ValueError(f'source must be one of {SOURCES}, got {source!r}')
+        if self._t is not None and t <= self._t - 0.5 * self.sample_time:
+            raise ValueError(f'stamp {t} is older than the last one {self._t}: restart() first')
+        z = self._measurement(pose)
+        if self._x is None:
+            self._initialize(t, z)
+        elif self._mode != 'tracking':
+            if not self._accept_fix(t, z, tau):
+                self.counters['fixes_held_back'] += 1
+                return self.coast(t, force)
+            self._start_blend(t, pose)
+        else:
+            self._predict_to(t, tau)
+            self._correct(z)
+        self._mode = 'tracking'
+        self._last_fix = t
+        self._pending_since = None
+        x = self._require_state()
+        twist = x[self.ndof:].copy()
+        self._history.append(_Published(t, z.copy(), twist, source))
+        published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
+                                            self._pose_covariance(source))
+        out = OdometryEstimate(
+            stamp=t, pose=published, pose_cov=pose_cov, twist=self._full(twist),
+            twist_cov=self._twist_covariance(source), mode='tracking', dead_reckoning_time=0.0,
+            calibrated=self.calibrated, reckoner=self._reckoner())
+        out.pose[2] = wrap_angle(float(out.pose[2]))
+        self._last_output = out
+        return out
+
+    def coast(self, t: float, force: ArrayLike) -> OdometryEstimate | None:
+        """No (accepted) pose at t, thrust still applied: the dead-reckoned estimate, or None.
+
+        None before the first fix and once ``dead_reckoning_timeout`` has passed since the last
+        accepted fix (mode 'lost').
+        """
+        tau = _vector(force, 3, 'force')
+        if not math.isfinite(t):
+            raise ValueError(f'stamp must be finite, got {t}')
+        if self._x is None or self._last_fix is None or self._last_output is None:
+            return None
+        if self._t is not None and t <= self._t:
+            return self._last_output if self._mode == 'dead_reckoning' else None
+        if self._mode == 'tracking':
+            self._mode = 'dead_reckoning'
+            self.counters['dead_reckoning_episodes'] += 1
+            self._dr_anchor = self._last_output.pose.copy()
+            self._dr_eta0 = self._require_state()[:self.ndof].copy()
+            self._dr_cov0 = (self._last_output.pose_cov.copy(), self._last_output.twist_cov.copy())
+        elapsed = t - self._last_fix
+        if elapsed > self.params.dead_reckoning_timeout:
+            if self._mode != 'lost':
+                self.counters['lost'] += 1
+            self._mode = 'lost'
+            self._dead_reckon_to(t, tau)
+            return None
+        self._dead_reckon_to(t, tau)
+        out = self._dead_reckoned(t, elapsed)
+        self._last_output = out
+        return out
+
+    def restart(self) -> None:
+        """A new data segment (time jump, bag loop): keep the calibration and the memory."""
+        memory, pose_cov, twist_cov = self._memory, self._pose_cov, self._twist_cov
+        counters = self.counters
+        self.reset()
+        self._memory, self._pose_cov, self._twist_cov = memory, pose_cov, twist_cov
+        self.counters = counters
+
+    def learn(self, times: ArrayLike, targets: ArrayLike, memory: VesselMemory | None) -> None:
+        """New zero-phase targets (times [s] (m,), LF poses (m, ndof)) → calibrate covariances.
+
+        ``memory`` is the vessel memory learned from the same window (``learn_vessel_memory``);
+        None keeps the previous one.
+        """
+        stamps = np.asarray(times, dtype=np.float64)
+        values = np.array(targets, dtype=np.float64).reshape(stamps.shape[0], -1)
+        if values.shape[1] != self.ndof or values.shape[0] < 3 or \
+                not np.all(np.isfinite(values)) or not np.all(np.isfinite(stamps)):
+            raise ValueError(f'targets must be finite with shape (m >= 3, {self.ndof}), got '
+                             f'{values.shape}')
+        if memory is not None:
+            self._memory = memory
+            self.counters['memory_updates'] += 1
+        self._calibrate(stamps, values)
+
+    # ---- Kalman filter -------------------------------------------------------------------
+
+    def _initialize(self, t: float, z: FloatArray) -> None:
+        n = self.ndof
+        self._x = np.concatenate([z, np.zeros(n)])
+        r = self._measurement_cov()
+        q_vel = np.array(self.params.prior_accel_std[:n]) ** 2 * ACCELERATION_CORRELATION_TIME
+        self._p = np.block([[r, np.zeros((n, n))],
+                            [np.zeros((n, n)), np.diag(q_vel * 100.0)]])
+        self._t = t
+
+    def _predict_to(self, t: float, tau: FloatArray) -> None:
+        x = self._require_state()
+        t_last = self._t if self._t is not None else t
+        steps = max(1, int(round((t - t_last) / self.sample_time)))
+        h = (t - t_last) / steps if t > t_last else 0.0
+        n = self.ndof
+        for _ in range(steps):
+            a, b = self._transition(x, tau[:n], h)
+            x = a @ x + b
+            self._p = a @ self._p @ a.T + self._process_noise(h)
+        self._x, self._t = x, t
+
+    def _correct(self, z: FloatArray) -> None:
+        x = self._require_state()
+        n = self.ndof
+        innovation = z - x[:n]
+        if n == 3:
+            innovation[2] = wrap_angle(float(innovation[2]))
+        s = self._p[:n, :n] + self._measurement_cov()
+        gain = np.linalg.solve(s, self._p[:n, :]).T
+        self._x = x + gain @ innovation
+        self._p = self._p - gain @ self._p[:n, :]
+        self._p = 0.5 * (self._p + self._p.T)
+
+    def _transition(self, x: FloatArray, tau: FloatArray, h: float) -> tuple[
+            FloatArray, FloatArray]:
+        n = self.ndof
+        rot = _rotation_block(float(x[2]) if n == 3 else 0.0, n)
+        memory = self._memory
+        damping = np.zeros((n, n))
+        drive = np.zeros(n)
+        if memory is not None and memory.reckoner == 'model' and memory.model is not None:
+            model = memory.model
+            damping = model.damping
+            heading = float(x[2]) if n == 3 else 0.0
+            drive = model.input_gain @ tau + model.bias @ heading_basis(heading, n)
+        a = np.block([[np.eye(n), h * rot], [np.zeros((n, n)), np.eye(n) + h * damping]])
+        b = np.concatenate([np.zeros(n), h * drive])
+        return a, b
+
+    def _process_noise(self, h: float) -> FloatArray:
+        n = self.ndof
+        memory = self._memory
+        if memory is not None and memory.reckoner == 'model' and memory.model is not None:
+            accel_var = memory.model.residual_std ** 2 + 1e-12
+        elif memory is not None:
+            accel_var = memory.accel_std ** 2 + 1e-12
+        else:
+            accel_var = np.array(self.params.prior_accel_std[:n]) ** 2
+        q = np.zeros((2 * n, 2 * n))
+        q[n:, n:] = np.diag(accel_var * ACCELERATION_CORRELATION_TIME * h)
+        return q
+
+    def _measurement_cov(self) -> FloatArray:
+        if 'all' in self._pose_cov:
+            return self._pose_cov['all'] + 1e-12 * np.eye(self.ndof)
+        return np.diag(np.array(self.params.prior_pose_std[:self.ndof]) ** 2)
+
+    # ---- dead reckoning --------------------------------------------------------------------
+
+    def _reckoner(self) -> DeadReckoner:
+        return self._memory.reckoner if self._memory is not None else 'constant_velocity'
+
+    def _dead_reckon_to(self, t: float, tau: FloatArray) -> None:
+        x = self._require_state()
+        t_last = self._t if self._t is not None else t
+        steps = max(1, int(round((t - t_last) / self.sample_time)))
+        h = (t - t_last) / steps
+        n = self.ndof
+        memory = self._memory
+        model = memory.model if memory is not None else None
+        eta, nu = x[:n], x[n:]
+        for _ in range(steps):
+            a, _b = self._transition(x, tau[:n], h)
+            self._p = a @ self._p @ a.T + self._process_noise(h)
+            eta, nu = dead_reckon_step(model, self._reckoner(), eta, nu, tau[:n], h)
+        self._x, self._t = np.concatenate([eta, nu]), t
+
+    def _dead_reckoned(self, t: float, elapsed: float) -> OdometryEstimate:
+        n = self.ndof
+        x = self._require_state()
+        anchor = self._dr_anchor if self._dr_anchor is not None else np.zeros(3)
+        eta0 = self._dr_eta0 if self._dr_eta0 is not None else x[:n]
+        pose = anchor.copy()
+        pose[:n] = anchor[:n] + (x[:n] - eta0)
+        if n == 3:
+            pose[2] = wrap_angle(float(pose[2]))
+        pose_cov0, twist_cov0 = self._dr_cov0
+        pose_cov = pose_cov0.copy()
+        twist_cov = twist_cov0.copy()
+        memory = self._memory
+        reckoner = self._reckoner()
+        if memory is not None and memory.drift.starts > 0:
+            pose_cov[:n, :n] += np.diag(memory.drift.variance(elapsed))
+            twist_cov[:n, :n] += np.diag(memory.drift.velocity_variance(elapsed))
+            if reckoner != 'hold':
+                rot = _rotation_block(float(x[2]) if n == 3 else 0.0, n)
+                pose_cov[:n, :n] += elapsed ** 2 * rot @ twist_cov0[:n, :n] @ rot.T
+        else:  # no vessel memory yet: the constant-velocity Kalman propagation
+            pose_cov[:n, :n] = np.maximum(pose_cov[:n, :n], self._p[:n, :n])
+            twist_cov[:n, :n] = np.maximum(twist_cov[:n, :n], self._p[n:, n:])
+        twist = self._full(x[n:])
+        return OdometryEstimate(stamp=t, pose=pose, pose_cov=pose_cov, twist=twist,
+                                twist_cov=twist_cov, mode='dead_reckoning',
+                                dead_reckoning_time=elapsed, calibrated=self.calibrated,
+                                reckoner=reckoner)
+
+    def _start_blend(self, t: float, pose: FloatArray) -> None:
+        """Reacquired: remember how far the dead-reckoned pose is from the new estimate."""
+        last = self._last_output
+        if last is None or self.params.reacquire_blend_time <= 0.0 or last.mode == 'tracking':
+            self._blend = None
+            return
+        offset = last.pose - pose[:3]
+        offset[2] = wrap_angle(float(offset[2]))
+        offset[self.ndof:] = 0.0
+        self._blend = (t, offset)
+
+    def _blended(self, t: float, pose: FloatArray, cov: FloatArray) -> tuple[
+            FloatArray, FloatArray]:
+        """Pose + the fading reacquisition offset (smoothstep weight).
+
+        The offset's square is added to the variance while it lasts.
+        """
+        if self._blend is None:
+            return pose, cov
+        start, offset = self._blend
+        phase = (t - start) / self.params.reacquire_blend_time
+        if phase >= 1.0:
+            self._blend = None
+            return pose, cov
+        weight = 1.0 - (3.0 * phase ** 2 - 2.0 * phase ** 3) if phase > 0.0 else 1.0
+        shifted = weight * offset
+        return pose + shifted, cov + np.diag(shifted ** 2)
+
+    def _accept_fix(self, t: float, z: FloatArray, tau: FloatArray) -> bool:
+        n = self.ndof
+        self.coast(t, tau)  # bring the dead-reckoned state to t
+        x = self._require_state()
+        innovation = z - x[:n]
+        if n == 3:
+            innovation[2] = wrap_angle(float(innovation[2]))
+        out = self._last_output
+        cov = (out.pose_cov[:n, :n] if out is not None and self._mode == 'dead_reckoning'
+               else self._p[:n, :n]) + self._measurement_cov()
+        distance = float(innovation @ np.linalg.solve(cov, innovation))
+        if self._pending_since is None:
+            self._pending_since = t
+        inside = distance <= self.params.reacquire_gate
+        consistent = t - self._pending_since >= self.params.reacquire_time
+        if not (inside or consistent):
+            return False
+        self.counters['reacquired'] += 1
+        if not inside:
+            self.counters['reacquired_outside_gate'] += 1
+        # restart the filter at the fix, keeping the dead-reckoned velocity and its uncertainty
+        p_vel = self._p[n:, n:].copy()
+        self._x = np.concatenate([z, x[n:]])
+        self._p = np.block([[self._measurement_cov(), np.zeros((n, n))],
+                            [np.zeros((n, n)), p_vel]])
+        self._t = t
+        return True
+
+    # ---- covariance calibration ------------------------------------------------------------
+
+    def _calibrate(self, stamps: FloatArray, targets: FloatArray) -> None:
+        if not self._history:
+            return
+        n = self.ndof
+        velocity = body_velocity(targets, self.sample_time)
+        pub_t = np.array([p.stamp for p in self._history])
+        index = np.round((pub_t - stamps[0]) / self.sample_time).astype(np.int64)
+        ok = (index >= 1) & (index < stamps.shape[0] - 1)
+        ok &= np.abs(stamps[np.clip(index, 0, stamps.shape[0] - 1)] - pub_t) < \
+            0.5 * self.sample_time
+        if not np.any(ok):
+            return
+        rows = [p for p, good in zip(self._history, ok, strict=True) if good]
+        idx = index[ok]
+        pose_err = np.array([p.pose for p in rows]) - targets[idx]
+        if n == 3:
+            pose_err[:, 2] = wrap_angle(pose_err[:, 2])
+        twist_err = np.array([p.twist for p in rows]) - velocity[idx]
+        sources = np.array([p.source for p in rows])
+        pose_cov: dict[str, FloatArray] = {'all': _second_moment(pose_err)}
+        twist_cov: dict[str, FloatArray] = {'all': _second_moment(twist_err)}
+        for source in SOURCES:
+            mask = sources == source
+            if np.count_nonzero(mask) >= self.params.min_calibration_samples:
+                pose_cov[source] = _second_moment(pose_err[mask])
+                twist_cov[source] = _second_moment(twist_err[mask])
+        self._pose_cov, self._twist_cov = pose_cov, twist_cov
+        self.counters['calibrations'] += 1
+
+    def _pose_covariance(self, source: EstimateSource) -> FloatArray:
+        n = self.ndof
+        if self._pose_cov:
+            inner = self.params.pose_cov_scale * self._pose_cov.get(source, self._pose_cov['all'])
+        else:
+            inner = np.diag(np.array(self.params.prior_pose_std[:n]) ** 2)
+        return self._embed(inner)
+
+    def _twist_covariance(self, source: EstimateSource) -> FloatArray:
+        n = self.ndof
+        if self._twist_cov:
+            inner = self.params.twist_cov_scale * self._twist_cov.get(
+                source, self._twist_cov['all'])
+        else:
+            inner = self._p[n:, n:].copy()
+        return self._embed(inner)
+
+    # ---- helpers ---------------------------------------------------------------------------
+
+    def _embed(self, inner: FloatArray) -> FloatArray:
+        full = np.diag(np.full(3, UNESTIMATED_VARIANCE))
+        n = self.ndof
+        full[:n, :n] = inner
+        return full
+
+    def _full(self, values: FloatArray) -> FloatArray:
+        full = np.zeros(3)
+        full[:self.ndof] = values
+        return full
+
+    def _measurement(self, pose: FloatArray) -> FloatArray:
+        """The LF pose as a state measurement: ndof entries, heading unwrapped near the state."""
+        z = np.array(pose[:self.ndof], dtype=np.float64)
+        if self.ndof == 3 and self._x is not None:
+            z[2] = float(self._x[2]) + wrap_angle(float(z[2] - self._x[2]))
+        return z
+
+    def _require_state(self) -> FloatArray:
+        if self._x is None:
+            raise RuntimeError('LfOdometry has no state yet: call track() first')
+        return self._x
+
+
+def normalized_error_squared(error: ArrayLike, covariance: ArrayLike) -> FloatArray:
+    """NEES eᵀ P⁻¹ e of each row: error (m, n), covariance (m, n, n) → (m,)."""
+    e = np.asarray(error, dtype=np.float64)
+    p = np.asarray(covariance, dtype=np.float64)
+    if e.ndim != 2 or p.shape != (e.shape[0], e.shape[1], e.shape[1]):
+        raise ValueError(f'error must be (m, n) and covariance (m, n, n), got {e.shape} and '
+                         f'{p.shape}')
+    return np.asarray(np.einsum('ij,ij->i', e, np.linalg.solve(p, e[..., None])[..., 0]),
+                      dtype=np.float64)
+
+
+def _second_moment(errors: FloatArray) -> FloatArray:
+    """Mean of e eᵀ (bias included: a biased estimate must not look confident)."""
+    return np.asarray(errors.T @ errors / errors.shape[0], dtype=np.float64)
+
+
+def _rotation_block(heading: float, ndof: int) -> FloatArray:
+    if ndof == 1:
+        return np.eye(1)
+    c, s = math.cos(heading), math.sin(heading)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _vector(values: ArrayLike, size: int, name: str) -> FloatArray:
+    array = np.asarray(values, dtype=np.float64)
+    if array.shape != (size,) or not np.all(np.isfinite(array)):
+        raise ValueError(f'{name} must be a finite array of shape ({size},), got {array!r}')
+    return array

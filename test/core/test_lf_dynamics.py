@@ -1,0 +1,142 @@
+"""Vessel memory (core.lf_dynamics): fit against a known mass–damper, drift tests, choice."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lf_predictor_ros.core.lf_dynamics import (
+    DriftCurve,
+    LfDynamics,
+    body_velocity,
+    dead_reckon_step,
+    drift_test,
+    fit_lf_dynamics,
+    learn_vessel_memory,
+)
+
+H = 1.0  # s
+MASS = np.array([5e6, 6e6, 4e9])  # kg, kg, kg·m²
+DAMPING = np.array([5e4, 1e5, 1e8])  # N·s/m, N·s/m, N·m·s
+ENV_FORCE = np.array([2e4, -1e4])  # N, earth frame (north, east)
+
+
+def _vessel_run(seed: int, samples: int = 1800, thrust_scale: float = 3e5) -> tuple[
+        np.ndarray, np.ndarray]:
+    """M ν̇ + D ν = τ + R(ψ)ᵀ b (Fossen 2011 eq. 7.8, no Coriolis at DP speed), Euler at h."""
+    rng = np.random.default_rng(seed)
+    eta, nu, tau = np.zeros(3), np.zeros(3), np.zeros(3)
+    poses, forces = [], []
+    for _ in range(samples):
+        tau = tau + 0.02 * (rng.normal(size=3) * thrust_scale * np.array([1, 1, 100]) - tau)
+        c, s = math.cos(eta[2]), math.sin(eta[2])
+        env_body = np.array([c * ENV_FORCE[0] + s * ENV_FORCE[1],
+                             -s * ENV_FORCE[0] + c * ENV_FORCE[1], 0.0])
+        nu_dot = (tau - DAMPING * nu + env_body) / MASS
+        poses.append(eta.copy())
+        forces.append(tau.copy())
+        nu = nu + H * nu_dot
+        eta = eta + H * np.array([c * nu[0] - s * nu[1], s * nu[0] + c * nu[1], nu[2]])
+    return np.array(poses), np.array(forces)
+
+
+def test_fit_recovers_mass_damping_and_earth_fixed_force() -> None:
+    poses, forces = _vessel_run(0)
+    model = fit_lf_dynamics(poses, forces, H)
+    np.testing.assert_allclose(np.diag(model.damping), -DAMPING / MASS, rtol=0.05)
+    np.testing.assert_allclose(np.diag(model.input_gain), 1.0 / MASS, rtol=0.05)
+    # u̇ bias = (b_N cos ψ + b_E sin ψ)/m: basis [1, cos, sin] coefficients
+    np.testing.assert_allclose(model.bias[0, 1:], ENV_FORCE / MASS[0], rtol=0.05, atol=1e-5)
+    assert model.growth_rate() < 0.0
+
+
+def test_fit_refuses_bad_input_with_a_message() -> None:
+    poses, forces = _vessel_run(1, samples=200)
+    with pytest.raises(ValueError, match='shape'):
+        fit_lf_dynamics(poses, forces[:, :1], H)
+    with pytest.raises(ValueError, match='too few'):
+        fit_lf_dynamics(poses[:20], forces[:20], H)
+    bad = poses.copy()
+    bad[5, 0] = np.nan
+    with pytest.raises(ValueError, match='finite'):
+        fit_lf_dynamics(bad, forces, H)
+    with pytest.raises(ValueError, match='sample_time'):
+        fit_lf_dynamics(poses, forces, 0.0)
+
+
+def test_learned_model_wins_on_an_excited_vessel_and_drifts_little() -> None:
+    poses, forces = _vessel_run(2)
+    memory = learn_vessel_memory(poses, forces, H, horizon=120.0)
+    assert memory.reckoner == 'model'
+    model_drift = memory.drift_by_reckoner['model']
+    assert np.all(model_drift < 0.2 * memory.drift_by_reckoner['constant_velocity'])
+    assert memory.drift.starts >= 4
+    # the measured drift grows with the dead-reckoning time
+    assert np.all(memory.drift.variance(120.0) >= memory.drift.variance(30.0))
+
+
+def test_thrust_that_does_not_move_the_vessel_is_not_trusted() -> None:
+    """Forces unrelated to the motion (e.g. wrong channel): the model must not be chosen."""
+    poses, _ = _vessel_run(3)
+    rng = np.random.default_rng(7)
+    unrelated = rng.normal(size=poses.shape) * 1e5
+    memory = learn_vessel_memory(poses, unrelated, H, horizon=120.0)
+    assert memory.reckoner != 'model'
+    assert np.sum(memory.drift_by_reckoner['model']) > np.sum(
+        memory.drift_by_reckoner[memory.reckoner])
+
+
+def test_dead_reckon_step_is_pure_and_exact_for_constant_velocity() -> None:
+    eta = np.array([1.0, 2.0, math.pi / 2])
+    nu = np.array([1.0, 0.0, 0.0])
+    eta_copy, nu_copy = eta.copy(), nu.copy()
+    new_eta, new_nu = dead_reckon_step(None, 'constant_velocity', eta, nu, np.zeros(3), 2.0)
+    np.testing.assert_array_equal(eta, eta_copy)
+    np.testing.assert_array_equal(nu, nu_copy)
+    np.testing.assert_allclose(new_eta, [1.0, 4.0, math.pi / 2], atol=1e-12)  # heading east
+    np.testing.assert_array_equal(new_nu, nu)
+    held, zero = dead_reckon_step(None, 'hold', eta, nu, np.zeros(3), 2.0)
+    np.testing.assert_array_equal(held, eta)
+    np.testing.assert_array_equal(zero, np.zeros(3))
+    with pytest.raises(ValueError, match='LfDynamics'):
+        dead_reckon_step(None, 'model', eta, nu, np.zeros(3), 1.0)
+
+
+def test_model_step_matches_first_order_surge_analytically() -> None:
+    """1 DOF u̇ = −u/T + τ/m: after k steps u = u0 (1 − h/T)^k for τ = 0."""
+    model = LfDynamics(damping=np.array([[-0.1]]), input_gain=np.array([[1e-6]]),
+                       bias=np.zeros((1, 1)), residual_std=np.zeros(1))
+    eta, nu = np.zeros(1), np.array([1.0])
+    for _ in range(10):
+        eta, nu = dead_reckon_step(model, 'model', eta, nu, np.zeros(1), 1.0)
+    assert nu[0] == pytest.approx(0.9 ** 10)
+    assert eta[0] == pytest.approx(sum(0.9 ** k for k in range(1, 11)))
+
+
+def test_drift_curve_interpolates_and_extrapolates() -> None:
+    curve = DriftCurve(np.array([10.0, 20.0]), np.array([[1.0], [4.0]]),
+                       np.array([[0.1], [0.2]]), starts=5)
+    assert curve.variance(0.0)[0] == 0.0
+    assert curve.variance(5.0)[0] == pytest.approx(0.5)
+    assert curve.variance(15.0)[0] == pytest.approx(2.5)
+    assert curve.variance(40.0)[0] == pytest.approx(16.0)  # quadratic growth beyond
+    assert curve.velocity_variance(40.0)[0] == pytest.approx(0.4)  # linear growth beyond
+
+
+def test_drift_test_of_hold_on_uniform_motion_is_exact() -> None:
+    """Hold on a vessel moving at 0.5 m/s north: the drift after τ is 0.5 τ exactly."""
+    t = np.arange(600.0)
+    poses = np.column_stack([0.5 * t, np.zeros_like(t)])[:, :1]
+    curve = drift_test(None, 'hold', poses, np.zeros_like(poses), 1.0, horizon=60.0)
+    np.testing.assert_allclose(np.sqrt(curve.mean_square[:, 0]), 0.5 * curve.horizons)
+    cv = drift_test(None, 'constant_velocity', poses, np.zeros_like(poses), 1.0, horizon=60.0)
+    np.testing.assert_allclose(cv.mean_square, 0.0, atol=1e-20)
+
+
+def test_body_velocity_rotates_into_the_body_frame() -> None:
+    t = np.arange(10.0)
+    heading_east = np.full_like(t, math.pi / 2)
+    poses = np.column_stack([np.zeros_like(t), 2.0 * t, heading_east])  # moving east, bow east
+    np.testing.assert_allclose(body_velocity(poses, 1.0), np.tile([2.0, 0.0, 0.0], (10, 1)),
+                               atol=1e-12)

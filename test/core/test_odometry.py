@@ -1,0 +1,173 @@
+"""LF odometry (core.odometry): velocity, calibrated covariance, dead reckoning, reacquisition."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lf_predictor_ros.core.lf_dynamics import DriftCurve, VesselMemory
+from lf_predictor_ros.core.odometry import (
+    UNESTIMATED_VARIANCE,
+    LfOdometry,
+    OdometryParams,
+    normalized_error_squared,
+)
+
+H = 1.0
+
+
+def _hold_memory(drift_std_at_60: float = 1.0) -> VesselMemory:
+    horizons = np.arange(1.0, 61.0)
+    ms = np.tile((drift_std_at_60 * horizons / 60.0) ** 2, (3, 1)).T
+    return VesselMemory(None, 'hold', DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test',
+                        np.full(3, 1e-3))
+
+
+def _track_line(odo: LfOdometry, speed: float, heading: float, seconds: int,
+                rng: np.random.Generator | None = None, noise: float = 0.0) -> None:
+    for k in range(seconds):
+        t = float(k)
+        pose = np.array([speed * t * math.cos(heading), speed * t * math.sin(heading), heading])
+        if rng is not None:
+            pose[:2] += noise * rng.normal(size=2)
+        odo.track(t, pose, np.zeros(3))
+
+
+def test_twist_is_the_body_velocity_of_a_straight_line() -> None:
+    """Constant 0.5 m/s along a heading of 135°: twist → [0.5, 0, 0] in the body frame."""
+    odo = LfOdometry(3, H)
+    _track_line(odo, 0.5, math.radians(135.0), 600)
+    out = odo.track(600.0, [0.5 * 600 * math.cos(math.radians(135)),
+                            0.5 * 600 * math.sin(math.radians(135)), math.radians(135)],
+                    np.zeros(3))
+    assert out is not None
+    np.testing.assert_allclose(out.twist, [0.5, 0.0, 0.0], atol=2e-3)
+    assert out.mode == 'tracking' and not out.calibrated
+
+
+def test_covariance_is_calibrated_from_target_comparison() -> None:
+    """Published poses with a known ±0.2 m north error against the targets.
+
+    The covariance is the error's second moment times the scale.
+    """
+    odo = LfOdometry(3, H, OdometryParams(pose_cov_scale=2.0))
+    times = np.arange(300.0)
+    truth = np.column_stack([np.zeros(300), np.zeros(300), np.zeros(300)])
+    rng = np.random.default_rng(0)
+    err = 0.2 * rng.choice([-1.0, 1.0], size=300)
+    for k in range(300):
+        odo.track(times[k], truth[k] + [err[k], 0.0, 0.0], np.zeros(3))
+    odo.learn(times, truth, None)
+    out = odo.track(300.0, [0.0, 0.0, 0.0], np.zeros(3), 'fallback')
+    assert out is not None and out.calibrated
+    assert out.pose_cov[0, 0] == pytest.approx(2.0 * 0.04, rel=0.02)
+    assert out.pose_cov[1, 1] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_one_dof_marks_the_other_entries_unestimated() -> None:
+    odo = LfOdometry(1, H)
+    out = odo.track(0.0, [1.0, 7.0, 3.0], np.zeros(3))
+    assert out is not None
+    np.testing.assert_array_equal(out.pose, [1.0, 7.0, 3.0])
+    assert out.pose_cov[1, 1] == UNESTIMATED_VARIANCE == out.twist_cov[2, 2]
+    assert out.twist[1] == 0.0 and out.twist[2] == 0.0
+
+
+def test_dead_reckoning_grows_covariance_then_stops_at_the_timeout() -> None:
+    odo = LfOdometry(3, H, OdometryParams(dead_reckoning_timeout=60.0))
+    _track_line(odo, 0.0, 0.0, 100)
+    odo._memory = _hold_memory()  # noqa: SLF001 - a known drift curve
+    last = odo.track(100.0, [0.0, 0.0, 0.0], np.zeros(3))
+    assert last is not None
+    variances = []
+    for k in range(1, 61):
+        out = odo.coast(100.0 + k, np.zeros(3))
+        assert out is not None and out.mode == 'dead_reckoning'
+        assert out.dead_reckoning_time == pytest.approx(k)
+        variances.append(out.pose_cov[0, 0])
+        np.testing.assert_allclose(out.pose, last.pose)  # hold
+    assert np.all(np.diff(variances) > 0.0)
+    assert variances[-1] == pytest.approx(last.pose_cov[0, 0] + 1.0, rel=1e-6)
+    assert odo.coast(161.0, np.zeros(3)) is None
+    assert odo.mode == 'lost' and odo.counters['lost'] == 1
+
+
+def test_constant_velocity_dead_reckoning_continues_the_motion_without_a_step() -> None:
+    odo = LfOdometry(3, H)
+    _track_line(odo, 0.3, 0.0, 400)
+    last = odo.track(400.0, [120.0, 0.0, 0.0], np.zeros(3))
+    assert last is not None
+    out = odo.coast(430.0, np.zeros(3))
+    assert out is not None
+    assert out.pose[0] == pytest.approx(120.0 + 0.3 * 30.0, abs=0.05)
+    assert out.mode == 'dead_reckoning' and out.reckoner == 'constant_velocity'
+
+
+def test_reacquisition_inside_the_gate_is_immediate_and_outside_waits() -> None:
+    params = OdometryParams(reacquire_time=10.0, reacquire_blend_time=0.0)
+    odo = LfOdometry(3, H, params)
+    _track_line(odo, 0.0, 0.0, 100)
+    odo._memory = _hold_memory(0.5)  # noqa: SLF001
+    for k in range(100, 130):
+        odo.coast(float(k), np.zeros(3))
+    near = odo.track(130.0, [0.1, 0.0, 0.0], np.zeros(3))
+    assert near is not None and near.mode == 'tracking'
+    assert odo.counters['reacquired'] == 1
+    for k in range(131, 160):
+        odo.coast(float(k), np.zeros(3))
+    held = [odo.track(160.0 + k, [50.0, 0.0, 0.0], np.zeros(3)) for k in range(10)]
+    assert all(h is not None and h.mode == 'dead_reckoning' for h in held)
+    accepted = odo.track(170.0, [50.0, 0.0, 0.0], np.zeros(3))
+    assert accepted is not None and accepted.mode == 'tracking'
+    assert accepted.pose[0] == pytest.approx(50.0)
+    assert odo.counters['reacquired_outside_gate'] == 1
+    assert odo.counters['fixes_held_back'] == 10
+
+
+def test_reacquisition_blend_has_no_step() -> None:
+    odo = LfOdometry(3, H, OdometryParams(reacquire_blend_time=20.0, reacquire_time=0.0))
+    _track_line(odo, 0.0, 0.0, 100)
+    odo._memory = _hold_memory()  # noqa: SLF001
+    for k in range(100, 120):
+        odo.coast(float(k), np.zeros(3))
+    outputs = [odo.track(120.0 + k, [2.0, 0.0, 0.0], np.zeros(3)) for k in range(25)]
+    north = np.array([o.pose[0] for o in outputs if o is not None])
+    assert north[0] == pytest.approx(0.0, abs=1e-9)  # starts at the dead-reckoned pose
+    assert north[-1] == pytest.approx(2.0)
+    assert np.max(np.abs(np.diff(north))) < 2.0 * 1.5 / 20.0 + 1e-9  # smoothstep slope ≤ 1.5
+
+
+def test_heading_wraps_across_pi_in_outputs_and_innovations() -> None:
+    odo = LfOdometry(3, H)
+    for k in range(50):
+        heading = math.pi - 0.01 + 0.0004 * k  # crosses +π
+        out = odo.track(float(k), [0.0, 0.0, math.atan2(math.sin(heading), math.cos(heading))],
+                        np.zeros(3))
+        assert out is not None and -math.pi < out.pose[2] <= math.pi
+    assert out.twist[2] == pytest.approx(0.0004, abs=2e-4)
+
+
+def test_bad_input_is_refused_with_a_message() -> None:
+    odo = LfOdometry(3, H)
+    with pytest.raises(ValueError, match='lf_pose'):
+        odo.track(0.0, [np.nan, 0.0, 0.0], np.zeros(3))
+    with pytest.raises(ValueError, match='force'):
+        odo.track(0.0, np.zeros(3), np.zeros(2))
+    odo.track(5.0, np.zeros(3), np.zeros(3))
+    with pytest.raises(ValueError, match='older'):
+        odo.track(1.0, np.zeros(3), np.zeros(3))
+    with pytest.raises(ValueError, match='dead_reckoning_timeout'):
+        OdometryParams(dead_reckoning_timeout=0.0)
+    with pytest.raises(ValueError, match='prior_pose_std'):
+        OdometryParams(prior_pose_std=(1.0, 1.0))
+    assert odo.coast(6.0, np.zeros(3)) is not None
+    assert LfOdometry(3, H).coast(0.0, np.zeros(3)) is None  # never fixed: nothing to publish
+
+
+def test_nees_of_a_known_covariance() -> None:
+    errors = np.array([[1.0, 0.0], [0.0, 2.0]])
+    covs = np.array([np.eye(2), np.diag([1.0, 4.0])])
+    np.testing.assert_allclose(normalized_error_squared(errors, covs), [1.0, 1.0])
+    with pytest.raises(ValueError, match='covariance'):
+        normalized_error_squared(errors, np.eye(2))

@@ -23,6 +23,14 @@ positions is not, and fails as soon as the vessel leaves the positions of its tr
 With ``relative`` the network sees y(t−i) − y(t) and fb(t−i) − y(t) and predicts
 ŷLF(t + 1) − y(t); y(t) is added back to the output. Forces are unchanged.
 
+Body frame (``NnarmaxSpec.body_frame``, 3 DOF, relative only; issue 13 hypothesis 3): the relative
+row is further rotated into the body frame of the row's newest heading ψ(t) (every (north, east)
+pair of every lag block by R(ψ(t))ᵀ, see ``regressors``), the network predicts the step as a
+body-frame offset and R(ψ(t)) turns it back to north/east. The function is then rotation
+invariant: turning the whole run (positions about any point, headings by the same angle) turns
+the prediction the same way, for any weights. The standardization statistics are those of the
+body-frame quantities (forces R(ψ(t))ᵀu(t), body-frame relative positions).
+
 Heading: the network works on unwrapped heading (a continuous signal); the caller unwraps the
 measured yaw before building regressors and wraps the predicted yaw to (−π, π] afterwards.
 
@@ -51,6 +59,7 @@ from lf_predictor_ros.core.regressors import (
     first_index,
     n_regressors,
     regressor_vector,
+    rotate_blocks,
 )
 
 FloatArray = NDArray[np.float64]
@@ -64,6 +73,7 @@ __all__ = [
     'build_regressors',
     'load_checkpoint',
     'predict_step',
+    'rotate_blocks_torch',
     'save_checkpoint',
 ]
 
@@ -87,7 +97,9 @@ class NnarmaxSpec:
     measured positions and LF feedback values; ``hidden_units`` per hidden layer;
     ``hidden_layers`` ≥ 1 (the thesis uses one); ``linear_bypass``: add a linear input→output
     path (see module docstring); ``relative``: position regressors and the output are taken
-    relative to the newest measured position y(t) (translation invariance, see module docstring).
+    relative to the newest measured position y(t) (translation invariance, see module docstring);
+    ``body_frame``: with ``relative`` and 3 DOF, regressors and output step in the body frame of
+    the newest heading (rotation invariance, see module docstring).
     """
 
     n_outputs: int
@@ -99,6 +111,7 @@ class NnarmaxSpec:
     hidden_layers: int = 1
     linear_bypass: bool = True
     relative: bool = False
+    body_frame: bool = False
 
     def __post_init__(self) -> None:
         """Validate the spec; raise ValueError naming the broken rule."""
@@ -127,6 +140,12 @@ class NnarmaxSpec:
             raise ValueError(
                 f'NnarmaxSpec.linear_bypass must be a bool, got {self.linear_bypass!r}'
             )
+        if not isinstance(self.body_frame, bool):
+            raise ValueError(f'NnarmaxSpec.body_frame must be a bool, got {self.body_frame!r}')
+        if self.body_frame and not (self.relative and self.n_outputs == 3
+                                    and self.n_inputs_u == 3):
+            raise ValueError('NnarmaxSpec.body_frame needs relative = True and 3 outputs and 3 '
+                             'force channels (north, east, yaw): set them or body_frame False')
 
     @property
     def n_regressors(self) -> int:
@@ -139,8 +158,14 @@ class NnarmaxSpec:
         return first_index(self)
 
     def to_dict(self) -> dict[str, int | bool]:
-        """Plain dict (for checkpoints and logs)."""
-        return dict(asdict(self))
+        """Plain dict (for checkpoints and logs); ``body_frame`` only when True.
+
+        An earth-frame spec writes the same dict (and checkpoint) as before the field existed.
+        """
+        values: dict[str, int | bool] = dict(asdict(self))
+        if not self.body_frame:
+            del values['body_frame']
+        return values
 
     @classmethod
     def from_dict(cls, values: Mapping[str, Any]) -> NnarmaxSpec:
@@ -157,14 +182,20 @@ class NnarmaxSpec:
             raise ValueError(f'incomplete NnarmaxSpec {dict(values)}: {exc}') from exc
 
 
-def relative_spread(y: FloatArray, ny: int) -> FloatArray:
+def relative_spread(y: FloatArray, ny: int, body_frame: bool = False) -> FloatArray:
     """RMS of y(t − i) − y(t) over i = 1 … max(1, ny − 1) and all t, per channel.
 
     The scale of a relative network's position regressors and of its output ŷLF(t + 1) − y(t).
+    With ``body_frame`` (3 channels) each difference is first rotated by R(ψ(t))ᵀ, ψ = y[:, 2].
     """
     lags = range(1, min(max(1, ny - 1), y.shape[0] - 1) + 1)
     if not lags:
         return np.asarray(y.std(axis=0), dtype=np.float64)
+    if body_frame:
+        cos, sin = np.cos(y[:, 2]), np.sin(y[:, 2])
+        squares = [np.mean(rotate_blocks(y[:-lag] - y[lag:], cos[lag:], -sin[lag:]) ** 2,
+                           axis=0) for lag in lags]
+        return np.asarray(np.sqrt(np.mean(squares, axis=0)), dtype=np.float64)
     squares = [np.mean((y[:-lag] - y[lag:]) ** 2, axis=0) for lag in lags]
     return np.asarray(np.sqrt(np.mean(squares, axis=0)), dtype=np.float64)
 
@@ -240,7 +271,12 @@ class NnarmaxNet(torch.nn.Module):
         if self.spec.relative:
             offset = _position_offset(self.spec)
             ref = x[:, offset:offset + self.spec.n_outputs]
-            return ref + self._forward_absolute(x - _relative_shift(self.spec, ref))
+            relative = x - _relative_shift(self.spec, ref)
+            if self.spec.body_frame:
+                cos, sin = torch.cos(ref[:, 2]), torch.sin(ref[:, 2])
+                body = self._forward_absolute(rotate_blocks_torch(relative, cos, -sin))
+                return ref + rotate_blocks_torch(body, cos, sin)
+            return ref + self._forward_absolute(relative)
         return self._forward_absolute(x)
 
     def _forward_absolute(self, x: torch.Tensor) -> torch.Tensor:
@@ -270,16 +306,22 @@ class NnarmaxNet(torch.nn.Module):
             return
         with torch.no_grad():
             ref = torch.zeros_like(target)
+            step = target
             if self.spec.relative:
                 offset = _position_offset(self.spec)
                 ref = x[:, offset:offset + self.spec.n_outputs]
                 x = x - _relative_shift(self.spec, ref)
+                step = target - ref
+                if self.spec.body_frame:
+                    cos, sin = torch.cos(ref[:, 2]), torch.sin(ref[:, 2])
+                    x = rotate_blocks_torch(x, cos, -sin)
+                    step = rotate_blocks_torch(step, cos, -sin)
             x_mean, x_std = self.regressor_standardization()
             x_s = ((x - x_mean) / x_std)[keep]
             hidden = x_s
             for layer in self.hidden_layers():
                 hidden = torch.tanh(layer(hidden))
-            wanted = (target[keep] - ref[keep] - self.y_mean) / self.y_std
+            wanted = (step[keep] - self.y_mean) / self.y_std
             residual = wanted - (hidden @ self.output.weight.T)
             design = torch.cat((x_s, torch.ones(x_s.shape[0], 1, dtype=x_s.dtype)), dim=1)
             penalty = ridge * design.shape[0] * torch.eye(design.shape[1], dtype=x_s.dtype)
@@ -309,6 +351,9 @@ class NnarmaxNet(torch.nn.Module):
         spec = self.spec
         if spec.nfb == 0:
             return self.forward(x_static)
+        if spec.body_frame:
+            raise ValueError('NnarmaxNet.free_run has no body-frame recursion: train a '
+                             'body_frame network with LF feedback series-parallel')
         n_static = x_static.shape[1]
         ref_s: torch.Tensor | None = None
         if spec.relative:
@@ -357,6 +402,8 @@ class NnarmaxNet(torch.nn.Module):
             raise ValueError(
                 'set_standardization got NaN/inf in u or y: drop invalid samples first'
             )
+        if self.spec.body_frame:  # the network sees forces R(ψ(t))ᵀu(t)
+            u_series = rotate_blocks(u_series, np.cos(y_series[:, 2]), -np.sin(y_series[:, 2]))
         u_mean = u_series.mean(axis=0)
         y_mean = y_series.mean(axis=0)
         u_std = _safe_std(u_series.std(axis=0), u_mean)
@@ -367,7 +414,8 @@ class NnarmaxNet(torch.nn.Module):
             # spread: over a 10-min window a drifting vessel spreads tens of metres, which would
             # squeeze every relative regressor and output into a sliver of the tanh range.
             y_mean = np.zeros_like(y_mean)
-            y_std = _safe_std(relative_spread(y_series, self.spec.ny), y_mean)
+            y_std = _safe_std(relative_spread(y_series, self.spec.ny, self.spec.body_frame),
+                              y_mean)
         new = {
             'u_mean': torch.from_numpy(u_mean),
             'u_std': torch.from_numpy(u_std),
@@ -519,6 +567,16 @@ def _relative_shift(spec: NnarmaxSpec, ref: torch.Tensor) -> torch.Tensor:
     return torch.cat((zeros, ref.repeat(1, spec.ny + spec.nfb)), dim=1)
 
 
+def rotate_blocks_torch(values: torch.Tensor, cos: torch.Tensor,
+                        sin: torch.Tensor) -> torch.Tensor:
+    """``regressors.rotate_blocks`` in torch (differentiable, vmap-safe): rows (rows, 3·k)."""
+    blocks = values.reshape(values.shape[0], -1, 3)
+    c, s = cos[:, None], sin[:, None]
+    north, east = blocks[..., 0], blocks[..., 1]
+    rotated = torch.stack((c * north - s * east, s * north + c * east, blocks[..., 2]), dim=-1)
+    return rotated.reshape(values.shape)
+
+
 def _frozen(array: torch.Tensor) -> FloatArray:
     """Detached float64 numpy copy marked read-only."""
     copy = np.array(array.detach().cpu().numpy(), dtype=np.float64, copy=True)
@@ -571,6 +629,11 @@ class NumpyNnarmax:
             shift = np.concatenate(
                 (np.zeros(x.shape[:-1] + (spec.nu * spec.n_inputs_u,)),
                  np.tile(ref, spec.ny + spec.nfb)), axis=-1)
+            if spec.body_frame:
+                cos, sin = np.cos(ref[..., 2]), np.sin(ref[..., 2])
+                body = self._forward_absolute(rotate_blocks(x - shift, cos, -sin))
+                turned: FloatArray = ref + rotate_blocks(body, cos, sin)
+                return turned
             result: FloatArray = ref + self._forward_absolute(x - shift)
             return result
         return self._forward_absolute(x)

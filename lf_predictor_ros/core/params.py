@@ -32,6 +32,7 @@ from lf_predictor_ros.core.frequency import welch_resolution
 
 TRAINERS = ('lm', 'lbfgs', 'adam')
 TRAINING_MODES = ('series_parallel', 'parallel')
+REGRESSOR_FRAMES = ('earth', 'body')
 NDOF_VALUES = (1, 3)
 # γ rule: the Welch bin must be at most this fraction of the wave band width, so the band holds
 # at least 20 bins and the peak refinement has several bins per peak.
@@ -41,7 +42,7 @@ MIN_TRAINING_EXAMPLES = 20
 _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'transient_length',
                   'filter_window', 'append_length')
 _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed')
-_STR_FIELDS = ('trainer', 'training_mode')
+_STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame')
 _BOOL_FIELDS = ('linear_init',)
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate')
 
@@ -70,6 +71,12 @@ class PredictorParams:
                                              'samples'))
     ny: int = field(default=24, metadata=_doc('delayed measured positions n_y', 'samples'))
     nfb: int = field(default=0, metadata=_doc('delayed LF-estimate feedbacks n_fb', 'samples'))
+    regressor_frame: str = field(
+        default='earth', metadata=_doc(
+            'frame of the regressors and of the predicted step: earth (north/east offsets from '
+            'the newest position, forces rotated to north/east) or body (the same rotated into '
+            'the body frame of the newest heading of each row: rotation invariant; ndof 3 only; '
+            'issue 13, hypothesis 3)'))
     estimation_window: float = field(
         default=1200.0, metadata=_doc('frequency-estimation window γ (eq. 4.3)', 's'))
     retrain_period: float = field(
@@ -300,11 +307,26 @@ class PredictorParams:
         if self.training_mode not in TRAINING_MODES:
             raise ValueError(f'training mode rule: training_mode must be one of '
                              f'{TRAINING_MODES}, got {self.training_mode!r}')
+        self._check_regressor_frame()
         if self.max_train_seconds > self.retrain_period:
             raise ValueError(
                 f'training time rule: max_train_seconds = {self.max_train_seconds} s exceeds '
                 f'retrain_period Δ = {self.retrain_period} s: one training must end before the '
                 'next is due; lower max_train_seconds or raise retrain_period')
+
+    def _check_regressor_frame(self) -> None:
+        if self.regressor_frame not in REGRESSOR_FRAMES:
+            raise ValueError(f'regressor frame rule: regressor_frame must be one of '
+                             f'{REGRESSOR_FRAMES}, got {self.regressor_frame!r}: use earth (the '
+                             'default) or body')
+        if self.regressor_frame == 'body' and self.ndof != 3:
+            raise ValueError(f'regressor frame rule: regressor_frame body rotates north/east '
+                             f'into the body frame and needs ndof 3, got ndof {self.ndof}: set '
+                             'ndof 3 or regressor_frame earth')
+        if self.regressor_frame == 'body' and self.training_mode == 'parallel' and self.nfb > 0:
+            raise ValueError('regressor frame rule: regressor_frame body has no parallel (free '
+                             'run) training with LF feedback: set training_mode '
+                             'series_parallel, nfb 0 or regressor_frame earth')
 
     def _check_frequencies(self) -> None:
         low, high = self.wave_band

@@ -15,7 +15,10 @@ the latest ω0 estimate (or the prior), and `status().state` says 'warming_up' o
 Conventions: positions [m], heading [rad], forces [N, N, N·m] in the body frame. Internally the
 heading is unwrapped (continuous across ±π) and, for 3 DOF, forces are rotated to the earth frame
 with the measured heading (u = R(ψ)τ, Fossen 2011 §7.1: η̈ ≈ R(ψ)ν̇), so the network does not have
-to learn the rotation the thesis found hard (§5.3). Outputs have the heading wrapped to (−π, π].
+to learn the rotation the thesis found hard (§5.3). With ``regressor_frame`` 'body' the network
+turns every regressor row (and its predicted step) into the body frame of the row's newest
+heading (``core.regressors``), so these earth-frame buffers serve both frames unchanged. Outputs
+have the heading wrapped to (−π, π].
 For 1 DOF only the north component is estimated; east and yaw of the output are the measured
 east and yaw of the same sample passed through unfiltered (never a made-up 0: on a 3-DOF vessel
 run with ``ndof`` 1 a zero heading would be up to 180° wrong; the node flags the pass-through in

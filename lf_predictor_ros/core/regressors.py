@@ -19,6 +19,16 @@ Arrays are time series with the oldest sample first and shape (n, channels). A r
 t ≥ first_index = max(nu, ny, nfb) − 1, the first sample with a full history. Heading channels must
 be unwrapped by the caller: the regressors are plain numbers and a ±π jump would look like a
 2π step of the vessel.
+
+Body frame (``PredictorParams.regressor_frame`` 'body', issue 13 hypothesis 3): a relative
+network (``network.NnarmaxSpec.relative``) sees y(t−i) − y(t), fb(t−i) − y(t) and forces u
+rotated to north/east with each sample's heading, u(t−i) = R(ψ(t−i))τ(t−i). With
+``body_frame`` it also rotates the (north, east) pair of every lag block by R(ψ(t))ᵀ, ψ(t) the
+newest measured heading of the row: positions become offsets in the body frame of the newest
+heading and forces R(ψ(t))ᵀR(ψ(t−i))τ(t−i), the body-frame forces turned by the relative
+heading. The heading channel stays relative yaw. The network's output (the step ŷLF(t + 1) −
+y(t)) is in the same body frame and is turned back with R(ψ(t)). `rotate_blocks` is that
+rotation (numpy; ``network`` has the torch twin).
 """
 from __future__ import annotations
 
@@ -158,3 +168,25 @@ def regressor_vector(
             _newest_first(fb_hist, lags.nfb, lags.n_outputs, 'fb_hist'),
         )
     )
+
+
+def rotate_blocks(values: ArrayLike, cos: ArrayLike, sin: ArrayLike) -> FloatArray:
+    """Rotate the (north, east) pair of every 3-channel block of each row by R(angle).
+
+    ``values`` (rows, 3·blocks) or (3·blocks,): blocks of (north, east, yaw) (or (X, Y, N))
+    channels, e.g. a 3-DOF regressor row; ``cos``, ``sin`` (rows,) or scalars: of the angle of
+    each row. North' = c·north − s·east, east' = s·north + c·east; the third channel of each
+    block is unchanged. R(ψ)ᵀ (into the body frame of heading ψ) is ``rotate_blocks(v, cos ψ,
+    −sin ψ)``. Returns a new array.
+    """
+    array = np.asarray(values, dtype=np.float64)
+    if array.shape[-1] % 3:
+        raise ValueError(f'rotate_blocks needs rows of 3-channel blocks, got width '
+                         f'{array.shape[-1]}: the body frame needs ndof 3')
+    blocks = array.reshape(array.shape[:-1] + (array.shape[-1] // 3, 3))
+    c = np.asarray(cos, dtype=np.float64)[..., np.newaxis]
+    s = np.asarray(sin, dtype=np.float64)[..., np.newaxis]
+    north, east = blocks[..., 0], blocks[..., 1]
+    rotated = np.stack((c * north - s * east, s * north + c * east, blocks[..., 2]), axis=-1)
+    result: FloatArray = rotated.reshape(array.shape)
+    return result

@@ -35,7 +35,13 @@ from lf_predictor_ros.core.frequency import FrequencyEstimate, estimate_wave_pea
 from lf_predictor_ros.core.network import NnarmaxNet, NnarmaxSpec, NumpyNnarmax
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.targets import TargetWindow, training_mask
-from lf_predictor_ros.core.training import TrainSettings, evaluate_loss, loss_scale, train
+from lf_predictor_ros.core.training import (
+    TrainSettings,
+    evaluate_loss,
+    loss_frame_errors,
+    loss_scale,
+    train,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -88,7 +94,8 @@ def network_spec(params: PredictorParams) -> NnarmaxSpec:
     """The network shape the parameters ask for (one output and one force per DOF)."""
     return NnarmaxSpec(n_outputs=params.ndof, n_inputs_u=params.ndof, nu=params.nu,
                        ny=params.ny, nfb=params.nfb, hidden_units=params.hidden_units,
-                       hidden_layers=params.hidden_layers, relative=True)
+                       hidden_layers=params.hidden_layers, relative=True,
+                       body_frame=params.regressor_frame == 'body')
 
 
 def train_settings(params: PredictorParams) -> TrainSettings:
@@ -306,8 +313,9 @@ def cascade_loss(params: PredictorParams, y: FloatArray, targets: FloatArray,
     keep[:params.transient_samples + 1] = False
     if keep.sum() < 2:
         return math.inf
-    error = out[:-1][keep[1:]] - targets[1:][keep[1:]]
-    scale = loss_scale(network_spec(params), y[:-1], targets[1:], mask[1:])
+    spec = network_spec(params)
+    error = loss_frame_errors(spec, y[:-1][keep[1:]], out[:-1][keep[1:]] - targets[1:][keep[1:]])
+    scale = loss_scale(spec, y[:-1], targets[1:], mask[1:])
     return float(np.mean((error / scale) ** 2))
 
 

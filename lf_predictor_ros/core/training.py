@@ -16,7 +16,10 @@ Objective (thesis eq. 2.6 and 2.8 with a = 1, b = ``weight_decay``, plus our der
 s is the per-channel scale of what the network predicts (``loss_scale``: the std of the kept
 targets, or for a relative network the RMS of yT(t+1) − y(t)) and s_Δ the RMS of the targets' first
 differences, so the loss is dimensionless, treats metres and radians alike and is comparable
-between candidate networks on the same window. The derivative term answers the thesis's closed-loop
+between candidate networks on the same window. For a body-frame network (``spec.body_frame``) the
+errors, steps and differences are taken in the body frame of the row's newest heading ψ(t) (north
+and east rotated by R(ψ(t))ᵀ) before scaling, so s is per surge/sway and the loss is rotation
+invariant like the network. The derivative term answers the thesis's closed-loop
 failure (§5.4.2: the prediction's derivative had the wrong sign, so a PID's D-term steered with the
 waves). Samples with ``mask`` False (the last ε, thesis Algorithm 4.1 line 38) contribute no error.
 
@@ -59,8 +62,13 @@ from numpy.typing import ArrayLike, NDArray
 import torch
 from torch.func import functional_call, jacrev, vmap
 
-from lf_predictor_ros.core.network import NnarmaxNet, NnarmaxSpec
-from lf_predictor_ros.core.regressors import as_series, build_regressors, n_static_regressors
+from lf_predictor_ros.core.network import NnarmaxNet, NnarmaxSpec, rotate_blocks_torch
+from lf_predictor_ros.core.regressors import (
+    as_series,
+    build_regressors,
+    n_static_regressors,
+    rotate_blocks,
+)
 
 FloatArray = NDArray[np.float64]
 Algorithm = Literal['lm', 'lbfgs', 'adam']
@@ -177,6 +185,8 @@ class _Window:
     scale: torch.Tensor  # (n_out,) loss normalization (``loss_scale``)
     diff_scale: torch.Tensor  # (n_out,) RMS of kept target differences
     first: int
+    # body-frame networks: (cos ψ(t), sin ψ(t)) of each target row's newest heading, (rows − 1,)
+    body: tuple[torch.Tensor, torch.Tensor] | None = None
 
 
 class _WindowPredictor(torch.nn.Module):
@@ -215,6 +225,27 @@ def _y_series(spec: NnarmaxSpec, y: ArrayLike, n: int) -> FloatArray:
     return series
 
 
+def loss_frame_errors(spec: NnarmaxSpec, y_now: ArrayLike, errors: ArrayLike) -> FloatArray:
+    """Errors (rows, n_out) in the frame of the loss.
+
+    Unchanged, or for a body-frame network rotated into the body frame of each row's newest
+    heading ψ(t) = ``y_now[:, 2]``.
+    """
+    values = np.asarray(errors, dtype=np.float64)
+    if not spec.body_frame:
+        return values
+    heading = as_series(y_now, spec.n_outputs, 'y')[:, 2]
+    return rotate_blocks(values, np.cos(heading), -np.sin(heading))
+
+
+def _in_loss_frame(values: torch.Tensor, body: tuple[torch.Tensor, torch.Tensor] | None,
+                   ) -> torch.Tensor:
+    """``loss_frame_errors`` on tensors: the body rotation of a window's rows (or none)."""
+    if body is None:
+        return values
+    return rotate_blocks_torch(values, body[0], -body[1])
+
+
 def loss_scale(spec: NnarmaxSpec, y_now: ArrayLike, target_next: ArrayLike,
                keep: ArrayLike) -> FloatArray:
     """Per-channel normalization of the training loss, shape (n_outputs,).
@@ -225,12 +256,14 @@ def loss_scale(spec: NnarmaxSpec, y_now: ArrayLike, target_next: ArrayLike,
     measure how far the vessel drifted in the window (tens of metres), make a 0.2 m error look
     like 1e-4 and let the weight penalty (eq. 2.8) dominate the fit.
     ``y_now`` (rows, n_out) is y(t) and ``target_next`` (rows, n_out) yT(t + 1) for the same rows.
+    Body-frame networks: the steps in the body frame of ψ(t) (``loss_frame_errors``).
     """
     kept = np.asarray(keep, dtype=bool)
     target = as_series(target_next, spec.n_outputs, 'targets')[kept]
     if not spec.relative:
         return _channel_scale(target.std(axis=0))
-    step = target - as_series(y_now, spec.n_outputs, 'y')[kept]
+    now = as_series(y_now, spec.n_outputs, 'y')[kept]
+    step = loss_frame_errors(spec, now, target - now)
     return _channel_scale(np.sqrt(np.mean(step ** 2, axis=0)))
 
 
@@ -256,9 +289,13 @@ def _prepare_window(
     keep_pair = keep[1:] & keep[:-1]
     if keep.sum() < 2:
         raise ValueError('mask keeps fewer than 2 training targets: the window is all transient')
-    scale = loss_scale(spec, _y_series(spec, y, n)[first : n - 1], target, keep)
-    diffs = np.diff(target, axis=0)[keep_pair]
+    y_now = _y_series(spec, y, n)[first : n - 1]
+    scale = loss_scale(spec, y_now, target, keep)
+    diffs = loss_frame_errors(spec, y_now[1:], np.diff(target, axis=0))[keep_pair]
     diff_rms = np.sqrt(np.mean(diffs**2, axis=0)) if diffs.size else np.ones(spec.n_outputs)
+    body = None
+    if spec.body_frame:
+        body = (torch.from_numpy(np.cos(y_now[:, 2])), torch.from_numpy(np.sin(y_now[:, 2])))
     return _Window(
         x_series=torch.from_numpy(x_series),
         fb_init=torch.from_numpy(target_series[first - spec.nfb + 1 : first + 1].copy()),
@@ -268,12 +305,14 @@ def _prepare_window(
         scale=torch.from_numpy(scale),
         diff_scale=torch.from_numpy(_channel_scale(diff_rms)),
         first=first,
+        body=body,
     )
 
 
 def _mse_residuals(prediction: torch.Tensor, window: _Window) -> torch.Tensor:
     """Normalized errors of the kept samples, scaled so that their squared sum is the MSE."""
-    error = ((prediction[:-1] - window.target) / window.scale)[window.keep]
+    difference = _in_loss_frame(prediction[:-1] - window.target, window.body)
+    error = (difference / window.scale)[window.keep]
     return error.reshape(-1) / math.sqrt(error.numel())
 
 
@@ -283,6 +322,8 @@ def _derivative_residuals(
     """Errors of the first differences, scaled so their squared sum is d · MSE_Δ."""
     fitted = prediction[:-1]
     error = ((fitted[1:] - fitted[:-1]) - (window.target[1:] - window.target[:-1]))
+    if window.body is not None:  # in the frame of the later row, like ``diff_scale``
+        error = _in_loss_frame(error, (window.body[0][1:], window.body[1][1:]))
     error = (error / window.diff_scale)[window.keep_pair]
     if error.numel() == 0:
         return error.reshape(-1)

@@ -18,6 +18,10 @@ reliable keep_last 10; all data times are message stamps.
 (published by a predictor node) and uses ``default_wave_peak_freq`` until the first message; a
 change above ``RETUNE_TOLERANCE`` retunes the filter (state kept).
 
+``ndof`` 3 (default) estimates north, east and heading; with ``ndof`` 1 only north is estimated
+and the east and heading of ``lf_pose`` are the measured ones passed through unfiltered (never a
+made-up 0), as in the predictor node.
+
 Runtime parameter changes are validated (the reason of a rejection is returned); an accepted
 change re-creates the estimator and the aligner (its state restarts from the next pose).
 Exceptions in callbacks are caught, counted (``callback_errors``) and reported in diagnostics.
@@ -256,7 +260,10 @@ class ObserverNode(InputHealth, Node):
     def _process(self, sample: AlignedSample) -> None:
         if sample.segment_start:
             self._estimator.reset()  # never filter across a gap or a time jump
-        lf_pose = self._estimator.update(sample.t, sample.pose, sample.force)
+        lf_pose = np.array(self._estimator.update(sample.t, sample.pose, sample.force),
+                           dtype=np.float64)
+        if self._config.ndof == 1:  # east and yaw are not estimated: pass the measurement
+            lf_pose[1:] = sample.pose[1:]  # through, never a made-up 0 (as the predictor does)
         self._samples += 1
         self._lf_pub.publish(pose_to_msg(lf_pose, sec_to_stamp(sample.t), self._config.frame_id))
 

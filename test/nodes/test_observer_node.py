@@ -22,6 +22,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64
 import yaml
 
+from lf_predictor_ros.core.alignment import AlignedSample
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.baselines.observer import PassiveObserver
 from lf_predictor_ros.nodes import observer_node
@@ -140,6 +141,23 @@ def test_wave_peak_frequency_follows_the_topic_unless_fixed(ros_context: Context
     finally:
         node.destroy_node()
         fixed.destroy_node()
+
+
+def test_one_dof_passes_measured_east_and_yaw_through(ros_context: Context) -> None:
+    """With ndof 1 only north is estimated; east and yaw are the measurement, never 0."""
+    node = _make(ros_context, ndof=1, method='cascade', wave_peak_freq=WAVE_PEAK_FREQ)
+    published: list[PoseStamped] = []
+    node._lf_pub.publish = published.append  # type: ignore[method-assign]  # noqa: SLF001
+    try:
+        pose = np.array([3.0, -7.5, 3.1])  # a vessel heading 178°
+        for k in range(5):
+            node._process(AlignedSample(0.5 * (k + 1), pose, np.zeros(3), False,  # noqa: SLF001
+                                        k == 0))
+        out = msg_to_pose(published[-1])
+        assert out[1] == pytest.approx(-7.5) and out[2] == pytest.approx(3.1)
+        assert abs(out[0] - 3.0) < 1.0  # north filtered (starting at the first measurement)
+    finally:
+        node.destroy_node()
 
 
 def test_parameters_are_validated_at_start_and_at_run_time(ros_context: Context) -> None:

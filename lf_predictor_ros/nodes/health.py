@@ -59,14 +59,21 @@ class InputHealth:
         self.get_logger().error(f'callback failed ({self._last_error})',
                                 throttle_duration_sec=5.0)
 
-    def _feed_thrust(self, msg: WrenchStamped, aligner: InputAligner) -> None:
-        """Store an applied force in the aligner (zero-order hold); never raises."""
+    def _feed_thrust(self, msg: WrenchStamped,
+                     aligner: InputAligner) -> tuple[float, FloatArray] | None:
+        """Store an applied force in the aligner (zero-order hold); never raises.
+
+        Returns (stamp [s], force) when the aligner took it (finite, in order), else None.
+        """
         try:
             force = self._converted('thrust', msg, FRAME_BODY, msg_to_force)
             if force is not None:
-                aligner.add_force(stamp_to_sec(msg.header.stamp), force)
+                t = stamp_to_sec(msg.header.stamp)
+                if aligner.add_force(t, force):
+                    return t, force
         except Exception as error:  # noqa: BLE001 - a callback must never kill the node
             self._count_error('thrust', error)
+        return None
 
     def _feed_pose(self, msg: PoseStamped, aligner: InputAligner, frame_id: str,
                    process: Callable[[AlignedSample], None],

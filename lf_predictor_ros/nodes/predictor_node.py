@@ -5,10 +5,27 @@ A ``rclpy`` lifecycle node and a thin adapter: message → numpy → ``core`` �
 Data path (all times are message stamps, so the node works with ``use_sim_time`` and bags):
 ``thrust`` (WrenchStamped, sensor-data QoS) → ``InputAligner.add_force``; ``measured_pose``
 (PoseStamped, sensor-data QoS) → ``InputAligner.add_pose`` → for each aligned grid sample
-``AdaptivePredictor.update`` → ``lf_pose`` (PoseStamped, ``header.stamp`` = sample time +
-``sample_time``, the instant the prediction is valid for, frame ``frame_id``) and
-``wave_peak_frequency`` (Float64 [rad/s], once ω0 is known). A sample that starts a new data
-segment (gap, time jump, reset) restarts the predictor's segment; the trained network stays.
+``LfStateEstimator.update`` (the ``AdaptivePredictor`` + vessel memory + LF odometry,
+``core.lf_state``) → ``lf_pose`` (PoseStamped, ``header.stamp`` = sample time + ``sample_time``,
+the instant the prediction is valid for, frame ``frame_id``), ``lf_odom`` (nav_msgs/Odometry,
+same stamp and pose, ``header.frame_id`` = ``frame_id``, ``child_frame_id`` ``base_link_fsd``:
+body-frame LF twist, calibrated covariances; ``nodes.conversions.odometry_to_msg``) and
+``wave_peak_frequency`` (Float64 [rad/s], once ω0 is known). While tracking ``lf_pose`` is the
+predictor's LF pose bit for bit. A sample that starts a new data segment (gap, time jump, reset)
+restarts the predictor's segment; the trained network stays, and so does the odometry's state.
+
+Dead reckoning (``nodes.lf_odom.OdomDriver``): when no sample has gone to the predictor for more
+than ``dead_reckoning_after`` (0 = 2 × sample_time) of thrust stamps (poses silent, or rejected
+by the position-reference checks) while thrust keeps coming, ``LfStateEstimator.coast`` runs at
+the thrust stamp (at most once per sample_time) and its estimate is published on ``lf_pose`` and
+``lf_odom`` with a pose covariance growing with the elapsed time (state ``dead_reckoning``, WARN).
+After ``dead_reckoning_timeout`` without an accepted fix nothing is published (state ``lost``,
+ERROR) rather than a guess. The first samples after the dropout go through ``update``: the
+odometry gates them for plausibility and blends from the dead-reckoned pose
+(``reacquire_blend_time``), so ``lf_pose`` does not step. ``OdometryParams`` fields are node
+parameters (``dead_reckoning_timeout``, ``pose_cov_scale``, ``twist_cov_scale``,
+``prior_pose_std``, ``prior_accel_std``, ``reacquire_gate``, ``reacquire_time``,
+``reacquire_blend_time``, ``min_calibration_samples``).
 
 Training runs on the core's worker thread; no callback ever waits for it. With ``model_path``
 set, the node loads that checkpoint at configure time (warm start) and the worker saves after
@@ -36,12 +53,20 @@ last 10 s, ERROR for frozen, no wave motion, a step, drift or dropout, with the 
 message); key values: predictor status and counters, aligner counters, frames, ``ref_*``
 counters of each reference fault (``ref_frozen``, ``ref_no_wave_motion``, ``ref_jump``,
 ``ref_step``, ``ref_drift``, ``ref_dropout``), ``ref_rejected``, ``ref_faults`` (active now),
-``pose_silence`` [s], ``ndof``, ``unfiltered_dofs``.
+``pose_silence`` [s], ``ndof``, ``unfiltered_dofs``. The odometry: ``odom_mode`` (tracking,
+dead_reckoning, lost), ``dead_reckoning_time`` [s], ``reckoner`` (model, constant_velocity,
+hold), ``odom_calibrated``, ``vessel_memory``, ``vessel_memory_error``, the ``odom_*`` counters
+(dead_reckoning_episodes, lost, reacquired, reacquired_outside_gate, fixes_held_back,
+calibrations, memory_updates, late_samples, time_jumps, coasts). While dead reckoning the level
+is WARN with the elapsed time and the reckoner leading the message (the reference fault that
+caused it follows); once lost it is ERROR ``lost: no accepted position reference for > T s: not
+publishing``.
 
 Services: ``~/retrain`` (std_srvs/Trigger: ``request_retrain()``'s answer), ``~/reset``
-(forget the network, data, ω0 and counters of trainings; state becomes warming_up; reference
-faults cleared) and ``~/clear_reference_faults`` (the operator re-selects the position reference:
-latched faults and the checks' statistics are cleared, the network stays).
+(forget the network, data, ω0, counters of trainings and the odometry; state becomes
+warming_up; reference faults cleared) and ``~/clear_reference_faults`` (the operator re-selects
+the position reference: latched faults and the checks' statistics are cleared, the network
+stays).
 
 Lifecycle: parameters are declared and validated at construction (invalid → FATAL, exit 1);
 configure builds aligner, predictor, publishers, subscriptions, services and the diagnostics
@@ -57,6 +82,9 @@ Runtime parameter changes are validated (the reason of a rejection is returned) 
 - aligner settings (max_gap, thrust_timeout, backward_jump, max_speed, average_poses): a new
   aligner, a new data segment. ``frame_id``: immediately.
 - reference-check settings (and ``ndof``): new checks with fresh statistics (counters kept).
+- odometry settings (``OdometryParams``) and ``dead_reckoning_after``: from the next sample on.
+  A re-created predictor keeps the odometry (dead reckoning, calibration, vessel memory) unless
+  ``ndof`` or ``sample_time`` changed.
 - ``model_path``, ``diagnostics_period``, ``autostart``: read-only (set them at start).
 
 Never does an exception in a callback kill the node: it is caught, counted (``callback_errors``),
@@ -79,6 +107,7 @@ from typing import TYPE_CHECKING, Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
+from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
@@ -89,10 +118,13 @@ from std_srvs.srv import Trigger
 
 from lf_predictor_ros.core.alignment import AlignedSample, AlignerSettings, InputAligner
 from lf_predictor_ros.core.estimator import EstimatorStatus
+from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.reference_checks import ReferenceChecker, ReferenceCheckSettings
 from lf_predictor_ros.nodes.conversions import (
+    FRAME_BODY,
     FRAME_EARTH,
+    odometry_to_msg,
     pose_to_msg,
     sec_to_stamp,
 )
@@ -104,12 +136,14 @@ from lf_predictor_ros.nodes.diagnostics import (
     worse,
 )
 from lf_predictor_ros.nodes.health import FloatArray, InputHealth
+from lf_predictor_ros.nodes.lf_odom import OdomDriver, dead_reckoning_silence
 from lf_predictor_ros.nodes.params import declare_and_load, parameter_table, validated_update
 from lf_predictor_ros.nodes.params import param_meta as _meta
 from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
 from lf_predictor_ros.nodes.runner import spin_node
 
 if TYPE_CHECKING:  # torch is imported on configure, so --help and bad parameters answer fast
+    from lf_predictor_ros.core.lf_state import LfStateEstimator
     from lf_predictor_ros.core.predictor import AdaptivePredictor
 
 NODE_NAME = 'predictor'
@@ -140,6 +174,10 @@ class PredictorNodeSettings:
     average_poses: bool = field(default=True, metadata=_meta(
         'grid sample = mean of the poses received in its interval (anti-aliasing of a sensor '
         'faster than sample_time); false: the pose interpolated at the grid instant'))
+    dead_reckoning_after: float = field(default=0.0, metadata=_meta(
+        'pose silence (thrust stamp minus the last accepted sample) after which lf_pose and '
+        'lf_odom are dead-reckoned on thrust; 0 = 2 × sample_time; must exceed the delay of '
+        'the pose stream behind the thrust stream', 's'))
     diagnostics_period: float = field(default=1.0, metadata=_meta(
         '/diagnostics period on the node clock', 's', read_only=True))
     autostart: bool = field(default=True, metadata=_meta(
@@ -155,9 +193,16 @@ class PredictorNodeSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'{name} must be a positive finite number, got {value}')
+        if not (math.isfinite(self.dead_reckoning_after) and self.dead_reckoning_after >= 0.0):
+            raise ValueError('dead_reckoning_after must be a finite number >= 0 s (0 = 2 × '
+                             f'sample_time), got {self.dead_reckoning_after}')
 
     def aligner_settings(self, sample_time: float) -> AlignerSettings:
-        """Aligner rules at the predictor's sample time (ValueError if they do not fit)."""
+        """Aligner rules at the predictor's sample time (ValueError if they do not fit).
+
+        Also checks ``dead_reckoning_after`` against the sample time.
+        """
+        dead_reckoning_silence(self.dead_reckoning_after, sample_time)
         return AlignerSettings(sample_time=sample_time, max_gap=self.max_gap,
                                thrust_timeout=self.thrust_timeout,
                                backward_jump=self.backward_jump, max_speed=self.max_speed,
@@ -181,10 +226,12 @@ class PredictorNode(InputHealth, LifecycleNode):
         self._params = declare_and_load(self, PredictorParams, note=_change_note)
         self._settings = declare_and_load(self, PredictorNodeSettings)
         self._checks = declare_and_load(self, ReferenceCheckSettings)
+        self._odom_params = declare_and_load(self, OdometryParams)
         self._settings.aligner_settings(self._params.sample_time)  # cross-check at start
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._aligner: InputAligner | None = None
         self._predictor: AdaptivePredictor | None = None
+        self._odom: OdomDriver | None = None  # the LfStateEstimator around the predictor
         self._checker: ReferenceChecker | None = None
         self._predicted: tuple[float, FloatArray] | None = None  # (valid at, lf_pose) last out
         self._passthrough_moving = False  # ndof 1 and the measured east/yaw are not all 0
@@ -193,6 +240,7 @@ class PredictorNode(InputHealth, LifecycleNode):
         self._services_in_use: list[Any] = []
         self._timer: Any = None
         self._lf_pub: Any = None
+        self._odom_pub: Any = None
         self._freq_pub: Any = None
         self._diag_pub: Any = None
         self._samples = 0  # aligned samples processed in total
@@ -233,6 +281,16 @@ class PredictorNode(InputHealth, LifecycleNode):
         """The predictor (None while unconfigured)."""
         return self._predictor
 
+    @property
+    def odometry_params(self) -> OdometryParams:
+        """The LF odometry settings in use."""
+        return self._odom_params
+
+    @property
+    def state(self) -> LfStateEstimator | None:
+        """The LF state estimator around the predictor (None while unconfigured)."""
+        return self._odom.state if self._odom is not None else None
+
     # ---- lifecycle -----------------------------------------------------------------------
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -242,11 +300,17 @@ class PredictorNode(InputHealth, LifecycleNode):
             self._predictor = self._new_predictor(self._params)
             self._checker = ReferenceChecker(self._checks, self._params.ndof)
             self._load_model()
+            self._odom = OdomDriver(
+                self._new_state(self._params, self._predictor),
+                dead_reckoning_silence(self._settings.dead_reckoning_after,
+                                       self._params.sample_time),
+                self._settings.backward_jump)
         except (ValueError, OSError) as error:
             self.get_logger().error(f'configure failed: {error}')
             return TransitionCallbackReturn.FAILURE
         qos = publisher_qos()
         self._lf_pub = self.create_lifecycle_publisher(PoseStamped, 'lf_pose', qos)
+        self._odom_pub = self.create_lifecycle_publisher(Odometry, 'lf_odom', qos)
         self._freq_pub = self.create_lifecycle_publisher(Float64, 'wave_peak_frequency', qos)
         self._diag_pub = self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics', qos)
         self._subscriptions_in_use = [
@@ -296,9 +360,12 @@ class PredictorNode(InputHealth, LifecycleNode):
 
     def _release(self) -> None:
         self._active = False
-        if self._predictor is not None:
-            self._predictor.close()  # waits ≤ 5 s for the worker's next epoch boundary
+        if self._odom is not None:
+            self._odom.state.close()  # the predictor's: waits ≤ 5 s for the next epoch boundary
+        elif self._predictor is not None:
+            self._predictor.close()
         self._predictor = None
+        self._odom = None
         self._aligner = None
         self._checker = None
         self._predicted = None
@@ -309,14 +376,16 @@ class PredictorNode(InputHealth, LifecycleNode):
         if self._timer is not None:
             self.destroy_timer(self._timer)
         self._subscriptions_in_use, self._services_in_use, self._timer = [], [], None
-        for publisher in (self._lf_pub, self._freq_pub, self._diag_pub):
+        for publisher in (self._lf_pub, self._odom_pub, self._freq_pub, self._diag_pub):
             if publisher is not None:
                 self.destroy_lifecycle_publisher(publisher)
-        self._lf_pub = self._freq_pub = self._diag_pub = None
+        self._lf_pub = self._odom_pub = self._freq_pub = self._diag_pub = None
 
     def destroy_node(self) -> None:
         """Stop a running training before the node goes."""
-        if self._predictor is not None:
+        if self._odom is not None:
+            self._odom.state.close()
+        elif self._predictor is not None:
             self._predictor.close()
         super().destroy_node()
 
@@ -327,6 +396,12 @@ class PredictorNode(InputHealth, LifecycleNode):
 
         self._samples_in_run = 0
         return AdaptivePredictor(params, background=True, checkpoint_path=self._save_path)
+
+    def _new_state(self, params: PredictorParams,
+                   predictor: AdaptivePredictor) -> LfStateEstimator:
+        from lf_predictor_ros.core.lf_state import LfStateEstimator  # torch: loaded on first use
+
+        return LfStateEstimator(params, self._odom_params, background=True, predictor=predictor)
 
     def _load_model(self) -> None:
         """Warm start from ``model_path`` when it exists; refuse a file that does not fit."""
@@ -366,6 +441,15 @@ class PredictorNode(InputHealth, LifecycleNode):
         if old is not None:
             old.reset()  # drops a running training without waiting for it
         self._predictor = new
+        state = self._new_state(params, new)
+        driver = self._odom
+        if driver is not None:
+            odometry = driver.state.odometry
+            if odometry.ndof == params.ndof and odometry.sample_time == params.sample_time:
+                state.odometry = odometry  # dead reckoning, calibration and memory carry over
+            else:
+                driver.reset()  # a new odometry: a new timeline
+            driver.state = state
         how = 'trained network kept' if keep else 'starting cold'
         self.get_logger().info(f'parameters changed: predictor re-created ({how}); data restarts')
 
@@ -381,12 +465,16 @@ class PredictorNode(InputHealth, LifecycleNode):
         new_checks, reason = validated_update(self._checks, parameters)
         if new_checks is None:
             return SetParametersResult(successful=False, reason=reason)
+        new_odom, reason = validated_update(self._odom_params, parameters)
+        if new_odom is None:
+            return SetParametersResult(successful=False, reason=reason)
         try:
             aligner_settings = new_settings.aligner_settings(new_params.sample_time)
         except ValueError as error:
             return SetParametersResult(successful=False, reason=str(error))
         try:
             self._apply(new_params, new_settings, aligner_settings, new_checks)
+            self._apply_odometry(new_odom)
         except Exception as error:  # noqa: BLE001 - keep the node alive, report the reason
             self._count_error('parameter change', error)
             return SetParametersResult(successful=False, reason=f'could not apply: {error}')
@@ -410,15 +498,35 @@ class PredictorNode(InputHealth, LifecycleNode):
         if params.ndof != self._params.ndof:
             self._passthrough_moving = False
         self._params, self._settings, self._checks = params, settings, checks
+        if self._odom is not None:
+            self._odom.dead_reckoning_after = dead_reckoning_silence(
+                settings.dead_reckoning_after, params.sample_time)
+            self._odom.backward_jump = settings.backward_jump
         if configured and params.ndof == 1:
             self._warn_passthrough()
+
+    def _apply_odometry(self, odometry: OdometryParams) -> None:
+        """New odometry settings: used from the next sample on (state kept)."""
+        if odometry == self._odom_params:
+            return
+        self._odom_params = odometry
+        if self._odom is not None:
+            self._odom.state.odometry.params = odometry
+            self.get_logger().info('odometry settings changed: used from the next sample on')
 
     # ---- data path -----------------------------------------------------------------------
 
     def on_thrust(self, msg: WrenchStamped) -> None:
-        """Store an applied force (zero-order hold in the aligner)."""
+        """Store an applied force (zero-order hold in the aligner); dead-reckon when due."""
         if self._active and self._aligner is not None:
-            self._feed_thrust(msg, self._aligner)
+            accepted = self._feed_thrust(msg, self._aligner)
+            if accepted is not None and self._odom is not None:
+                try:
+                    estimate = self._odom.thrust(*accepted)
+                    if estimate is not None:
+                        self._publish(estimate)
+                except Exception as error:  # noqa: BLE001 - a callback must never kill the node
+                    self._count_error('dead reckoning', error)
 
     def on_pose(self, msg: PoseStamped) -> None:
         """Align a measured pose; predict and publish for every completed grid sample."""
@@ -462,10 +570,10 @@ class PredictorNode(InputHealth, LifecycleNode):
         return self._predicted[1]
 
     def _process(self, sample: AlignedSample) -> None:
-        predictor, checker = self._predictor, self._checker
-        assert predictor is not None and checker is not None
+        predictor, checker, driver = self._predictor, self._checker, self._odom
+        assert predictor is not None and checker is not None and driver is not None
         if sample.segment_start and self._samples_in_run > 0:
-            predictor.restart_segment()
+            driver.state.restart_segment()  # the odometry keeps its state across it
             self._predicted = None
         verdict = checker.check_sample(sample.t, sample.pose, self._prediction_for(sample.t))
         if not verdict.accepted:
@@ -473,17 +581,29 @@ class PredictorNode(InputHealth, LifecycleNode):
                 self._restart_data()
             self._log_fault(checker)
             return
-        lf_pose = predictor.update(sample.t, sample.pose, sample.force)
-        self._predicted = (sample.t + self._params.sample_time, lf_pose)
+        lf_pose, estimate = driver.update(sample.t, sample.pose, sample.force,
+                                          sample.segment_start)
+        self._predicted = None if lf_pose is None else \
+            (sample.t + self._params.sample_time, lf_pose)
         if self._params.ndof == 1 and (sample.pose[1] != 0.0 or sample.pose[2] != 0.0):
             self._passthrough_moving = True
         self._samples += 1
         self._samples_in_run += 1
-        stamp = sec_to_stamp(sample.t + self._params.sample_time)  # valid at t + h
-        self._lf_pub.publish(pose_to_msg(lf_pose, stamp, self._settings.frame_id))
+        if estimate is not None:  # None: lost (fix held back) or late
+            self._publish(estimate)  # stamp t + h, pose = lf_pose while tracking
         wave_peak_freq = predictor.wave_peak_freq
         if wave_peak_freq is not None:
             self._freq_pub.publish(Float64(data=float(wave_peak_freq)))
+
+    def _publish(self, estimate: OdometryEstimate) -> None:
+        """One estimate on lf_pose and lf_odom (same stamp, same pose)."""
+        stamp = sec_to_stamp(estimate.stamp)
+        frame = self._settings.frame_id
+        pose_msg = pose_to_msg(estimate.pose, stamp, frame)
+        odom_msg = odometry_to_msg(stamp, estimate.pose, estimate.pose_cov, estimate.twist,
+                                   estimate.twist_cov, frame, FRAME_BODY)
+        self._lf_pub.publish(pose_msg)
+        self._odom_pub.publish(odom_msg)
 
     # ---- services ------------------------------------------------------------------------
 
@@ -503,7 +623,11 @@ class PredictorNode(InputHealth, LifecycleNode):
             if self._predictor is None or self._aligner is None:
                 response.success, response.message = False, 'predictor not configured'
                 return response
-            self._predictor.reset()
+            if self._odom is not None:
+                self._odom.state.reset()  # predictor, odometry and vessel memory
+                self._odom.reset()
+            else:
+                self._predictor.reset()
             self._aligner.reset()
             if self._checker is not None:
                 self._checker.reset()
@@ -512,8 +636,8 @@ class PredictorNode(InputHealth, LifecycleNode):
             self._warm_start = False
             status = self._predictor.status()
             response.success = True
-            response.message = (f'predictor reset: state {status.state}, network, data and ω0 '
-                                'forgotten')
+            response.message = (f'predictor reset: state {status.state}, network, data, ω0 '
+                                'and the odometry forgotten')
             self.get_logger().info(response.message)
         except Exception as error:  # noqa: BLE001
             self._count_error('~/reset', error)
@@ -541,14 +665,23 @@ class PredictorNode(InputHealth, LifecycleNode):
     def diagnostic_values(self) -> tuple[str, str, dict[str, DiagnosticValue]]:
         """(level, message, key values) of the current state, as published."""
         predictor, aligner, checker = self._predictor, self._aligner, self._checker
-        if predictor is None or aligner is None or checker is None:
+        driver = self._odom
+        if predictor is None or aligner is None or checker is None or driver is None:
             return 'WARN', 'not configured', {}
         status = predictor.status()
         level, message = diagnostic_level(status), f'{status.state}: {status.message}'
         silence = checker.silent_for(self._clock_seconds())
         ref_level, ref_reason = checker.status()
-        level, message = worse(level, message, ref_level,
-                               f'position reference {ref_reason}; {message}')
+        odom_level, odom_message = driver.status()
+        if odom_level != 'OK':
+            # dead reckoning bridges the reference fault (WARN); lost is ERROR
+            if ref_level != 'OK':
+                odom_message = f'{odom_message}; position reference {ref_reason}'
+            level = worse(level, message, odom_level, odom_message)[0]
+            message = f'{odom_message}; {message}'
+        else:
+            level, message = worse(level, message, ref_level,
+                                   f'position reference {ref_reason}; {message}')
         unfiltered = 'east yaw' if self._params.ndof == 1 else 'none'
         if self._passthrough_moving:
             level, message = worse(level, message, 'WARN',
@@ -564,6 +697,7 @@ class PredictorNode(InputHealth, LifecycleNode):
             'last_error': self._last_error,
             **checker.values(),
             'pose_silence': math.nan if silence is None else silence,
+            **driver.values(),
             'ndof': self._params.ndof,
             'unfiltered_dofs': unfiltered,
             'warm_start': self._warm_start,
@@ -592,15 +726,15 @@ def _parse_cli(argv: Sequence[str]) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description='Learned LF pose predictor (lifecycle node). Subscribes measured_pose '
                     '(PoseStamped) and thrust (WrenchStamped); publishes lf_pose (stamped t + '
-                    'sample_time), wave_peak_frequency, /diagnostics; services ~/retrain, '
-                    '~/reset.',
+                    'sample_time), lf_odom (nav_msgs/Odometry), wave_peak_frequency, '
+                    '/diagnostics; services ~/retrain, ~/reset.',
         epilog='ROS arguments: --ros-args -p NAME:=VALUE --params-file config/predictor.yaml '
                '-r __ns:=/vessel\n\nParameters (name, default, description [unit]). A run-time '
                'change of a predictor parameter re-creates the predictor (the trained network is '
                'kept unless ndof, nu, ny, nfb, hidden_units, hidden_layers or sample_time '
                'change); collected data restarts.\n'
                + parameter_table([PredictorParams, PredictorNodeSettings,
-                                  ReferenceCheckSettings]))
+                                  ReferenceCheckSettings, OdometryParams]))
     parser.parse_args(list(remove_ros_args(list(argv)))[1:])
 
 

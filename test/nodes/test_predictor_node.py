@@ -27,6 +27,7 @@ import torch
 import yaml
 
 from lf_predictor_ros.core.frequency import welch_resolution
+from lf_predictor_ros.core.odometry import OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
 from lf_predictor_ros.core.reference_checks import ReferenceCheckSettings
@@ -297,8 +298,10 @@ def test_params_file_is_honoured_and_shipped_yaml_holds_every_default(
     listed = shipped['/**']['ros__parameters']
     checks = {k: list(v) if isinstance(v, tuple) else v
               for k, v in dataclasses.asdict(ReferenceCheckSettings()).items()}
+    odometry = {k: list(v) if isinstance(v, tuple) else v
+                for k, v in dataclasses.asdict(OdometryParams()).items()}
     defaults = {**PredictorParams().to_dict(), **dataclasses.asdict(PredictorNodeSettings()),
-                **checks}
+                **checks, **odometry}
     assert listed == defaults
 
     params_file = tmp_path / 'params.yaml'

@@ -148,7 +148,8 @@ class SimulatorConfig:
         "scenario override: initial pose [north m, east m, yaw rad]; [] = the scenario's",
         read_only=True))
     wave_peak_freq: float = field(default=0.0, metadata=_doc(
-        "scenario override: constant wave peak frequency ω0; 0 = the scenario's schedule",
+        "scenario override: constant wave peak frequency ω0 (a RAO sea: Tp = 2π/ω0); 0 = the "
+        "scenario's schedule",
         'rad/s', read_only=True))
     tick_period: float = field(default=0.01, metadata=_doc(
         'wall period of the stepping timer', 's', read_only=True))
@@ -195,7 +196,11 @@ class SimulatorConfig:
         if self.initial_pose:
             north, east, yaw = self.initial_pose
             scenario = replace(scenario, initial_pose=(north, east, yaw))
-        if self.wave_peak_freq > 0.0:
+        if self.wave_peak_freq > 0.0 and scenario.waves.model == 'rao':
+            # the JONSWAP sea is set by its peak period: Tp = 2π/ω0 (ω0 is derived from it)
+            waves = replace(scenario.waves, tp=2.0 * math.pi / self.wave_peak_freq)
+            scenario = replace(scenario, waves=waves)
+        elif self.wave_peak_freq > 0.0:
             waves = replace(scenario.waves, peak_freq=constant(self.wave_peak_freq))
             scenario = replace(scenario, waves=waves)
         return scenario

@@ -434,3 +434,14 @@ def test_closed_loop_over_dds_holds_supply_vessel_and_is_deterministic(
           f'{horizontal.max():.2f} m, max |yaw| {np.abs(lf[:, 2]).max():.4f} rad, '
           f'offline mismatch {worst:.1e}')
     assert os.environ['ROS_DOMAIN_ID'] == dds_env['ROS_DOMAIN_ID']
+
+
+def test_simulator_wave_peak_freq_override_reaches_a_rao_sea() -> None:
+    """The override sets Tp = 2π/ω0 of a JONSWAP/RAO sea (it was ignored: ω0 is derived)."""
+    config = simulator_node.SimulatorConfig(scenario='rao_supply', wave_peak_freq=0.9)
+    scenario = config.scenario_with_overrides()
+    assert scenario.waves.model == 'rao'
+    assert scenario.waves.tp == pytest.approx(2.0 * math.pi / 0.9)
+    assert scenario.waves.peak_freq(0.0) == pytest.approx(0.9)
+    shaped = simulator_node.SimulatorConfig(scenario='supply_closed_loop', wave_peak_freq=0.9)
+    assert shaped.scenario_with_overrides().waves.peak_freq(123.0) == pytest.approx(0.9)

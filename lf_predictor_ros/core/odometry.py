@@ -50,9 +50,19 @@ from lf_predictor_ros.core.lf_dynamics import (
     dead_reckon_step,
     heading_basis,
 )
-from lf_predictor_ros.core.params import field_doc
 
 FloatArray = NDArray[np.float64]
+
+
+def field_doc(doc: str, unit: str = '') -> dict[str, str]:
+    """Field metadata read by the ROS parameter helper (as ``core.params.field_doc``).
+
+    Not imported from there: message conversions import this module and must stay free of
+    scipy's import time.
+    """
+    return {'doc': doc, 'unit': unit}
+
+
 OdometryMode = Literal['tracking', 'dead_reckoning', 'lost']
 EstimateSource = Literal['network', 'fallback']
 SOURCES: tuple[EstimateSource, ...] = ('network', 'fallback')

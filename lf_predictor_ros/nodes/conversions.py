@@ -23,6 +23,8 @@ from nav_msgs.msg import Odometry
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lf_predictor_ros.core.odometry import UNESTIMATED_VARIANCE  # one value for core and messages
+
 FRAME_EARTH = 'map_ned'
 FRAME_BODY = 'base_link_fsd'
 
@@ -36,7 +38,6 @@ MAX_STAMP_SEC = 2**31 - 1  # [s] builtin_interfaces/Time.sec is int32
 # of 1000 m, rad, m/s or rad/s) that a consumer fusing the message gives these DOFs no weight, and
 # none is mistaken for a measured zero.
 ODOM_DOF_INDEX = (0, 1, 5)
-UNESTIMATED_VARIANCE = 1e6  # [m², rad² or (m/s)², (rad/s)²]
 
 
 def _vector3(values: ArrayLike, what: str) -> NDArray[np.float64]:

@@ -1,0 +1,637 @@
+r"""LF odometry benchmark (issue 14): covariance consistency, twist, dead reckoning, D-term loop.
+
+Per scenario and seed, on the fair recording (`suite.make_recording`: open-loop scenarios as
+they are, DP scenarios with the loop closed on the tuned observer), the recorded measurements
+and thrust are replayed open loop into `LfStateEstimator` (``background=False``, deterministic)
+and scored against the true LF pose. The estimate of update k is valid at t[k] + h, so it is
+compared with truth[k + 1]; the true twist is ``body_velocity`` of the true LF pose (heading
+unwrapped, central differences).
+
+1. **Covariance consistency** (run without dropouts, scored after ``suite.scored_start``: the
+   first training plus 2Δ). Per DOF the normalized error x = e / σ (σ² the published variance)
+   and jointly NEES/n = eᵀ P⁻¹ e / n, for the pose and the twist. The test and its bounds: the
+   time average of x² of a consistent estimator is 1. The errors are strongly autocorrelated,
+   so the average has N_eff = N / (2 τ_int) independent samples, τ_int = 1/2 + Σ_k ρ(k) the
+   integrated autocorrelation time of x in samples (Sokal's automatic window: the smallest
+   window M ≥ ``TAU_WINDOW_C`` · τ_int(M)), and a consistent run lies in
+   [χ²₀.₀₂₅(N_eff) / N_eff, χ²₀.₉₇₅(N_eff) / N_eff] with 95 % probability. Joint: the same
+   with N_eff = Σ over DOFs (the DOFs treated as independent). Reported over held-out runs: the
+   fraction of runs inside their interval and the mean over runs with its Student-t 95 %
+   interval. Note: for Gaussian x the variance of the mean of x² involves Σρ², not Σρ; with
+   ρ of x (as stated here) the bounds are up to √2 wider than that Gaussian value for slowly
+   decorrelating errors, so they are on the lenient side; ``inside_rho2`` reports the fraction
+   with N_eff from ρ² as well.
+2. **Twist accuracy** (same run): RMSE per DOF of the published twist against the true LF body
+   velocity, next to the zero estimate (RMS of the true velocity) and the PID's own velocity:
+   the filtered finite difference (T_v = ``VELOCITY_FILTER_TIME`` = 1 s, one step per h, earth
+   frame rotated to the body, as `sim_ros.control.pid.pid_step`) of the published LF pose.
+3. **Dead-reckoning drift** (second run, same recording): pose dropouts (``default_dropouts``:
+   three non-overlapping 130 s dropouts after the first training). In a dropout every grid
+   sample calls ``coast(t, thrust)``; when poses return, ``restart_segment()`` and ``update``.
+   Drift = |estimate − true LF| per DOF at ``DRIFT_TIMES`` (30 / 60 / 120 s) after the last
+   fix, and whether the 95 % covariance ellipse (eᵀ P⁻¹ e ≤ χ²₀.₉₅(n)) contains the truth, next
+   to the oracle Kalman filter predicting only (its ``update`` with a NaN pose propagates
+   without a measurement update) through the same dropouts and to holding the last published
+   pose.
+4. **Closed loop with the D term from lf_odom**: `recordings.run_loop` with the predictor in
+   the loop, once with the PID's own finite-difference D term (the suite's ``adaptive`` loop) and
+   once with ``velocity`` = the twist of `LfStateEstimator`; metrics as the suite computes them
+   (`suite.run_closed_loops`, scored after the same warm-up): position RMSE, heading RMSE and
+   thrust wave-band power.
+
+Usage (2 Dask workers; ``--scheduler none`` runs in this process)::
+
+    python -m lf_predictor_ros.benchmark.odometry_bench run --seeds 1 2 --no-loops \\
+        --pose-cov-scale 1 --twist-cov-scale 1 -o /tmp/odo_tuning.json
+    python -m lf_predictor_ros.benchmark.odometry_bench calibrate /tmp/odo_tuning.json
+    python -m lf_predictor_ros.benchmark.odometry_bench run --seeds 11 12 ... -o held_out.json
+    python -m lf_predictor_ros.benchmark.odometry_bench report held_out.json
+"""
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+import json
+import math
+import os
+import sys
+import time
+from typing import Any, cast
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from lf_predictor_ros.benchmark.estimators import make_estimator, predictor_params
+from lf_predictor_ros.benchmark.recordings import run_loop
+from lf_predictor_ros.benchmark.scoring import fmt_number, interval
+from lf_predictor_ros.benchmark.suite import (
+    make_recording,
+    make_setup,
+    run_closed_loops,
+    scored_start,
+)
+from lf_predictor_ros.core.heading import wrap_angle
+from lf_predictor_ros.core.lf_dynamics import body_velocity
+from lf_predictor_ros.core.lf_state import LfStateEstimator
+from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
+from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.retraining import first_training_samples
+from sim_ros.control.pid import VELOCITY_FILTER_TIME
+from sim_ros.simulation import load_scenario, simulate
+
+FloatArray = NDArray[np.float64]
+DOFS = ('north', 'east', 'yaw')
+TWIST_DOFS = ('u', 'v', 'r')
+DEFAULT_SCENARIOS = ('supply_closed_loop', 'rao_supply', 'onedof_feedback',
+                     'threedof_open_loop')
+DEFAULT_DURATION = 1800.0  # s, as the suite (benchmark.SUITE)
+DROPOUT_LENGTH = 130.0  # s
+DROPOUT_COUNT = 3
+DRIFT_TIMES = (30.0, 60.0, 120.0)  # s after the last fix
+TAU_WINDOW_C = 5.0  # Sokal's automatic window constant
+CONFIDENCE = 0.95
+LOOP_FD = 'adaptive'  # the predictor loop with the PID's finite-difference D term
+LOOP_ODOM = 'adaptive_odom_d'  # the same with the D term from the odometry twist
+
+
+# ---------------------------------------------------------------- statistics
+
+def integrated_autocorrelation_time(x: FloatArray, square: bool = False) -> float:
+    """τ_int = 1/2 + Σ ρ(k) in samples (Sokal's automatic window; ρ² summed if ``square``)."""
+    data = np.asarray(x, dtype=np.float64)
+    n = data.size
+    if n < 4:
+        return math.nan
+    centred = data - data.mean()
+    size = 1 << (2 * n - 1).bit_length()
+    spectrum = np.fft.rfft(centred, size)
+    acov = np.fft.irfft(spectrum * np.conj(spectrum), size)[:n]
+    if acov[0] <= 0.0:
+        return 0.5
+    rho = acov / acov[0]
+    if square:
+        rho = rho**2
+    tau = 0.5 + np.cumsum(rho[1:])
+    windows = np.arange(1, n)
+    ok = windows >= TAU_WINDOW_C * tau
+    m = int(np.argmax(ok)) if np.any(ok) else n - 2
+    return float(max(tau[m], 0.5))
+
+
+def chi2_mean_bounds(n_eff: float) -> tuple[float, float]:
+    """95 % interval of the mean of n_eff independent χ²(1) samples."""
+    if not (n_eff > 0.0 and math.isfinite(n_eff)):
+        return math.nan, math.nan
+    low = float(stats.chi2.ppf(0.5 - CONFIDENCE / 2.0, n_eff)) / n_eff
+    high = float(stats.chi2.ppf(0.5 + CONFIDENCE / 2.0, n_eff)) / n_eff
+    return low, high
+
+
+def consistency(error: FloatArray, cov: FloatArray) -> dict[str, Any]:
+    """NEES test of one run (module docstring): error (m, n), covariance (m, n, n)."""
+    n = error.shape[1]
+    samples = error.shape[0]
+    per_dof: list[dict[str, Any]] = []
+    n_eff_sum = 0.0
+    n_eff2_sum = 0.0
+    for j in range(n):
+        x = error[:, j] / np.sqrt(cov[:, j, j])
+        tau = integrated_autocorrelation_time(x)
+        tau2 = integrated_autocorrelation_time(x, square=True)
+        n_eff, n_eff2 = samples / (2.0 * tau), samples / (2.0 * tau2)
+        n_eff_sum += n_eff
+        n_eff2_sum += n_eff2
+        mean = float(np.mean(x**2))
+        low, high = chi2_mean_bounds(n_eff)
+        low2, high2 = chi2_mean_bounds(n_eff2)
+        per_dof.append({'mean_nees': mean, 'tau_int': tau, 'n_eff': n_eff, 'low': low,
+                        'high': high, 'inside': bool(low <= mean <= high),
+                        'inside_rho2': bool(low2 <= mean <= high2)})
+    joint = np.einsum('ij,ij->i', error, np.linalg.solve(cov, error[..., None])[..., 0]) / n
+    mean = float(np.mean(joint))
+    low, high = chi2_mean_bounds(n_eff_sum)
+    low2, high2 = chi2_mean_bounds(n_eff2_sum)
+    return {'dof': per_dof, 'joint': {'mean_nees': mean, 'n_eff': n_eff_sum, 'low': low,
+                                      'high': high, 'inside': bool(low <= mean <= high),
+                                      'inside_rho2': bool(low2 <= mean <= high2)}}
+
+
+def pid_velocity(poses: FloatArray, sample_time: float, ndof: int) -> FloatArray:
+    """The PID's velocity from a pose series (module docstring, `pid_step`) → body (m, ndof)."""
+    alpha = 1.0 - math.exp(-sample_time / VELOCITY_FILTER_TIME)
+    earth = np.zeros(3)
+    out = np.zeros((poses.shape[0], ndof))
+    last = poses[0].copy()
+    for k in range(poses.shape[0]):
+        step = poses[k] - last
+        step[2] = wrap_angle(float(step[2]))
+        earth = earth + alpha * (step / sample_time - earth)
+        last = poses[k]
+        c, s = math.cos(float(poses[k, 2])), math.sin(float(poses[k, 2]))
+        body = np.array([c * earth[0] + s * earth[1], -s * earth[0] + c * earth[1], earth[2]])
+        out[k] = body[:ndof]
+    return out
+
+
+# ---------------------------------------------------------------- one case
+
+def default_dropouts(params: PredictorParams, duration: float,
+                     count: int = DROPOUT_COUNT, length: float = DROPOUT_LENGTH,
+                     ) -> tuple[tuple[float, float], ...]:
+    """``count`` dropouts of ``length`` s, evenly spread after the scored start (≥ first training).
+
+    Raises ValueError when they do not fit with at least 60 s of tracking between them.
+    """
+    begin = scored_start(params, 10**9) * params.sample_time + 20.0
+    spacing = (duration - begin) / count
+    if spacing < length + 60.0:
+        raise ValueError(f'{count} dropouts of {length:.0f} s do not fit after the first training '
+                         f'({begin:.0f} s) in {duration:.0f} s: lengthen the run')
+    return tuple((float(round(begin + i * spacing)), length) for i in range(count))
+
+
+def _wrap_error(estimate: FloatArray, truth: FloatArray, ndof: int) -> FloatArray:
+    err = np.asarray(estimate[..., :ndof] - truth[..., :ndof], dtype=np.float64)
+    if ndof == 3:
+        err[..., 2] = (err[..., 2] + math.pi) % (2.0 * math.pi) - math.pi
+    return err
+
+
+def _true_twist(truth: FloatArray, sample_time: float, ndof: int) -> FloatArray:
+    eta = truth[:, :ndof].copy()
+    if ndof == 3:
+        eta[:, 2] = np.unwrap(eta[:, 2])
+    return body_velocity(eta, sample_time)
+
+
+def _tracking_run(params: PredictorParams, odometry: OdometryParams,
+                  data: dict[str, FloatArray], begin: int) -> dict[str, Any]:
+    """Items 1 and 2 of the module docstring."""
+    n, h = params.ndof, params.sample_time
+    est = LfStateEstimator(params, odometry, background=False)
+    outs: list[OdometryEstimate | None] = []
+    try:
+        for k in range(len(data['t'])):
+            outs.append(est.update(float(data['t'][k]), data['y'][k], data['u'][k])[1])
+        reckoner = None if est.memory is None else est.memory.reckoner
+    finally:
+        est.close()
+    truth = data['truth']
+    keep = [k for k in range(max(begin - 1, 0), len(outs) - 1) if outs[k] is not None]
+    odoms = [cast(OdometryEstimate, outs[k]) for k in keep]
+    idx = np.array(keep) + 1  # estimate of update k is valid at t[k + 1]
+    pose = np.array([o.pose for o in odoms])
+    pose_cov = np.array([o.pose_cov[:n, :n] for o in odoms])
+    twist = np.array([o.twist[:n] for o in odoms])
+    twist_cov = np.array([o.twist_cov[:n, :n] for o in odoms])
+    true_twist = _true_twist(truth, h, n)[idx]
+    pose_err = _wrap_error(pose, truth[idx], n)
+    twist_err = twist - true_twist
+    # PID's finite difference of the published pose, over the whole run (filter warmed up)
+    all_pose = np.array([o.pose if o is not None else np.full(3, np.nan) for o in outs[:-1]])
+    valid = np.all(np.isfinite(all_pose), axis=1)
+    first = int(np.argmax(valid))
+    fd = np.full((all_pose.shape[0], n), np.nan)
+    fd[first:] = pid_velocity(all_pose[first:], h, n)
+    fd_err = fd[np.array(keep)] - true_twist
+
+    def rms(values: FloatArray) -> list[float]:
+        return [float(v) for v in np.sqrt(np.nanmean(values**2, axis=0))]
+
+    return {'samples': len(keep), 'calibrated_fraction': float(np.mean([o.calibrated
+                                                                          for o in odoms])),
+            'reckoner': reckoner,
+            'pose': consistency(pose_err, pose_cov), 'twist': consistency(twist_err, twist_cov),
+            'pose_rmse': rms(pose_err), 'pose_std_published': rms(
+                np.sqrt(np.diagonal(pose_cov, axis1=1, axis2=2))),
+            'twist_rmse': rms(twist_err), 'twist_zero_rmse': rms(true_twist),
+            'twist_pid_fd_rmse': rms(fd_err),
+            'twist_std_published': rms(np.sqrt(np.diagonal(twist_cov, axis1=1, axis2=2)))}
+
+
+def _dropout_run(params: PredictorParams, odometry: OdometryParams,
+                 data: dict[str, FloatArray], dropouts: Sequence[tuple[float, float]],
+                 setup: Any) -> dict[str, Any]:
+    """Item 3 of the module docstring."""
+    n = params.ndof
+    t, y, u, truth, omega = data['t'], data['y'], data['u'], data['truth'], data['omega']
+    est = LfStateEstimator(params, odometry, background=False)
+    oracle = make_estimator('oracle_kf', setup)
+    chi2_95 = float(stats.chi2.ppf(CONFIDENCE, n))
+    nan_pose = np.full(3, np.nan)
+    records: list[dict[str, Any]] = []
+    current: dict[str, Any] | None = None
+    last_out: OdometryEstimate | None = None
+    in_dropout_prev = False
+    try:
+        for k in range(len(t)):
+            tk = float(t[k])
+            drop = next(((a, length) for a, length in dropouts if a <= tk < a + length), None)
+            if drop is None:
+                if in_dropout_prev:
+                    est.restart_segment()
+                    current = None
+                _, out = est.update(tk, y[k], u[k])
+                if out is not None:
+                    last_out = out
+                oracle.step(tk, y[k], u[k], float(omega[k]))
+                in_dropout_prev = False
+                continue
+            oracle_pose = oracle.step(tk, nan_pose, u[k], float(omega[k]))
+            oracle_std = np.asarray(oracle.estimator.lf_std, dtype=np.float64)[:n]
+            if current is None:
+                held = None if last_out is None else last_out.pose.copy()
+                current = {'start': drop[0], 'length': drop[1], 'held': held, 'times': {}}
+                records.append(current)
+            in_dropout_prev = True
+            odom = est.coast(tk, u[k])
+            for when in DRIFT_TIMES:
+                if abs(tk - drop[0] - when) > 0.5 * params.sample_time or \
+                        str(when) in current['times']:
+                    continue
+                row: dict[str, Any] = {'published': odom is not None}
+                if odom is not None:
+                    err = _wrap_error(odom.pose, truth[k], n)
+                    cov = odom.pose_cov[:n, :n]
+                    row['error'] = [float(v) for v in np.abs(err)]
+                    row['std'] = [float(v) for v in np.sqrt(np.diag(cov))]
+                    row['inside_ellipse'] = bool(err @ np.linalg.solve(cov, err) <= chi2_95)
+                    row['mode'] = odom.mode
+                    row['elapsed'] = float(odom.dead_reckoning_time)
+                oerr = np.abs(_wrap_error(oracle_pose, truth[k], n))
+                row['oracle_error'] = [float(v) for v in oerr]
+                row['oracle_inside_95'] = [bool(e <= 1.96 * s) for e, s in
+                                           zip(oerr, oracle_std, strict=True)]
+                if current['held'] is not None:
+                    row['hold_error'] = [float(v) for v in
+                                         np.abs(_wrap_error(current['held'], truth[k], n))]
+                current['times'][str(when)] = row
+        reckoner = None if est.memory is None else est.memory.reckoner
+        counters = dict(est.odometry.counters)
+    finally:
+        est.close()
+    for rec in records:
+        rec.pop('held')
+    return {'dropouts': records, 'reckoner_at_end': reckoner, 'counters': counters}
+
+
+def _loop_runs(scenario_name: str, seed: int, duration: float, params: PredictorParams,
+               odometry: OdometryParams, setup: Any, warmup: float) -> dict[str, Any]:
+    """Item 4 of the module docstring."""
+    scenario = load_scenario(scenario_name)
+    h = params.sample_time
+    fd_stream = make_estimator(LOOP_FD, setup)
+    fd_run = run_loop(scenario, seed, duration, h, fd_stream.step)
+    est = LfStateEstimator(params, odometry, background=False)
+    latest: list[FloatArray | None] = [None]
+
+    def step(t: float, pose: FloatArray, force: FloatArray, omega: float) -> FloatArray:
+        lf_pose, out = est.update(t, pose, force)
+        twist = None if out is None else np.asarray(out.twist, dtype=np.float64)
+        latest[0] = twist if twist is not None and np.all(np.isfinite(twist)) else None
+        return np.asarray(lf_pose, dtype=np.float64)
+
+    try:
+        odom_run = run_loop(scenario, seed, duration, h, step, velocity=lambda: latest[0])
+    finally:
+        est.close()
+    ideal = simulate(scenario, seed=seed, duration=duration, controller=True,
+                     feedback='truth_lf')
+    results, _ = run_closed_loops(scenario, seed, duration, setup, (LOOP_FD, LOOP_ODOM), ideal,
+                                  warmup, {LOOP_FD: fd_run, LOOP_ODOM: odom_run})
+    keys = ('position_rmse', 'heading_rmse', 'max_excursion', 'thrust_wave_band_power',
+            'aborted_at')
+    out: dict[str, Any] = {}
+    for name, metrics in results.items():
+        out[name] = {key: metrics.get(key) for key in keys}
+        verdict = metrics.get('stability', {})
+        out[name]['stable'] = verdict.get('stable')
+        out[name]['stability_reason'] = verdict.get('reason')
+    return out
+
+
+def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DEFAULT_DURATION,
+                      *, odometry: OdometryParams | None = None,
+                      params_overrides: dict[str, Any] | None = None,
+                      dropouts: Sequence[tuple[float, float]] | None = None,
+                      loops: bool = True, dead_reckoning: bool = True) -> dict[str, Any]:
+    """Every measurement of the module docstring on one (scenario, seed); JSON-ready."""
+    begin_time = time.monotonic()
+    scenario = load_scenario(scenario_name)
+    params = predictor_params(scenario, params_overrides)
+    odometry = odometry or OdometryParams()
+    setup = make_setup(scenario, seed, params)
+    recording = make_recording(scenario, seed, duration, setup)
+    data = recording.data()
+    setup = replace(setup, wave_peak_freq=float(np.median(data['omega'])))
+    total = float(data['t'][-1])
+    begin = scored_start(params, len(data['t']))
+    if dropouts is None:
+        dropouts = default_dropouts(params, total)
+    first = first_training_samples(params) * params.sample_time
+    if any(a < first for a, _ in dropouts):
+        raise ValueError(f'dropouts must start after the first training ({first:.0f} s)')
+    out: dict[str, Any] = {'scenario': scenario_name, 'seed': seed, 'ndof': params.ndof,
+                           'duration': total, 'warmup': float(data['t'][begin]),
+                           'pose_cov_scale': odometry.pose_cov_scale,
+                           'twist_cov_scale': odometry.twist_cov_scale,
+                           'dead_reckoning_timeout': odometry.dead_reckoning_timeout,
+                           'recording': recording.provenance.to_dict()}
+    out['tracking'] = _tracking_run(params, odometry, data, begin)
+    if dead_reckoning:
+        out['dead_reckoning'] = _dropout_run(params, odometry, data, dropouts, setup)
+    if loops and scenario.controller.enabled:
+        out['closed_loop'] = _loop_runs(scenario_name, seed, total, params, odometry, setup,
+                                        float(data['t'][begin]))
+    out['seconds'] = round(time.monotonic() - begin_time, 1)
+    return out
+
+
+@dataclass(frozen=True)
+class OdometrySpec:
+    """One case (picklable)."""
+
+    scenario: str
+    seed: int
+    duration: float | None = DEFAULT_DURATION
+    pose_cov_scale: float | None = None  # None: the OdometryParams default
+    twist_cov_scale: float | None = None
+    loops: bool = True
+    dead_reckoning: bool = True
+    params_overrides: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def key(self) -> str:
+        """Unique, readable task key."""
+        return f'odometry-{self.scenario}-seed{self.seed}-{abs(hash(self)) % 10**8:08d}'
+
+    def __hash__(self) -> int:
+        """Hash of the printable fields."""
+        return hash((self.scenario, self.seed, self.duration, self.pose_cov_scale,
+                     self.twist_cov_scale, self.loops, self.dead_reckoning,
+                     tuple(sorted(self.params_overrides.items()))))
+
+
+def run_spec(spec: OdometrySpec) -> dict[str, Any]:
+    """One case, deterministic wherever it runs (torch on one thread)."""
+    import torch
+
+    torch.set_num_threads(1)
+    values: dict[str, float] = {}
+    if spec.pose_cov_scale is not None:
+        values['pose_cov_scale'] = spec.pose_cov_scale
+    if spec.twist_cov_scale is not None:
+        values['twist_cov_scale'] = spec.twist_cov_scale
+    return run_odometry_case(spec.scenario, spec.seed, spec.duration,
+                             odometry=OdometryParams(**values),  # type: ignore[arg-type]
+                             params_overrides=dict(spec.params_overrides) or None,
+                             loops=spec.loops, dead_reckoning=spec.dead_reckoning)
+
+
+def run_specs(specs: Sequence[OdometrySpec], scheduler: str | None = None,
+              workers: int | None = 2, progress: bool = True) -> list[dict[str, Any]]:
+    """Every spec on Dask (``benchmark.distributed.run_cases``); results in spec order."""
+    from lf_predictor_ros.benchmark import distributed
+    from lf_predictor_ros.benchmark.suite import CaseResult
+
+    task = cast(Callable[[distributed.CaseSpec], CaseResult], run_spec)
+    cases = cast(Sequence[distributed.CaseSpec], specs)
+    results = distributed.run_cases(cases, scheduler, workers, progress, task=task)
+    return cast(list[dict[str, Any]], results)
+
+
+# ---------------------------------------------------------------- summaries
+
+def calibrate(cases: Sequence[dict[str, Any]]) -> dict[str, float]:
+    """Scales making the mean NEES 1: the old scale × geometric mean of the runs' per-DOF NEES."""
+    out: dict[str, float] = {}
+    for kind in ('pose', 'twist'):
+        logs = [math.log(dof['mean_nees']) + math.log(case[f'{kind}_cov_scale'])
+                for case in cases for dof in case['tracking'][kind]['dof']]
+        out[f'{kind}_cov_scale'] = math.exp(float(np.mean(logs)))
+    return out
+
+
+def _by_scenario(cases: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for case in cases:
+        groups.setdefault(case['scenario'], []).append(case)
+    return groups
+
+
+def _fmt(value: float) -> str:
+    return fmt_number(value)
+
+
+def nees_table(cases: Sequence[dict[str, Any]]) -> str:
+    """Markdown: mean NEES [95 % interval over runs], fraction of runs inside their bounds."""
+    lines = ['| scenario | runs | quantity | DOF | mean NEES [95 % CI over runs] | runs inside '
+             'bounds (ρ) | runs inside (ρ²) | median bounds |',
+             '|---|---|---|---|---|---|---|---|']
+    for scenario, group in _by_scenario(cases).items():
+        n = group[0]['ndof']
+        for kind in ('pose', 'twist'):
+            names = (DOFS if kind == 'pose' else TWIST_DOFS)[:n]
+            for j, name in enumerate([*names, 'joint']):
+                rows = [c['tracking'][kind]['dof'][j] if name != 'joint'
+                        else c['tracking'][kind]['joint'] for c in group]
+                inside = sum(r['inside'] for r in rows)
+                inside2 = sum(r['inside_rho2'] for r in rows)
+                low = float(np.median([r['low'] for r in rows]))
+                high = float(np.median([r['high'] for r in rows]))
+                cell = interval([r['mean_nees'] for r in rows]).cell(_fmt)
+                lines.append(f'| {scenario} | {len(group)} | {kind} | {name} | {cell} | '
+                             f'{inside}/{len(group)} | {inside2}/{len(group)} | '
+                             f'[{_fmt(low)}, {_fmt(high)}] |')
+    return '\n'.join(lines)
+
+
+def twist_table(cases: Sequence[dict[str, Any]]) -> str:
+    """Markdown: twist RMSE of lf_odom, the zero estimate and the PID finite difference."""
+    lines = ['| scenario | runs | DOF | lf_odom twist RMSE | zero estimate (RMS true) | '
+             'PID finite difference (T_v = 1 s) | lf_odom / zero |',
+             '|---|---|---|---|---|---|---|']
+    for scenario, group in _by_scenario(cases).items():
+        n = group[0]['ndof']
+        for j, name in enumerate(TWIST_DOFS[:n]):
+            odo = [c['tracking']['twist_rmse'][j] for c in group]
+            zero = [c['tracking']['twist_zero_rmse'][j] for c in group]
+            fd = [c['tracking']['twist_pid_fd_rmse'][j] for c in group]
+            ratio = [a / b for a, b in zip(odo, zero, strict=True)]
+            lines.append(f'| {scenario} | {len(group)} | {name} | {interval(odo).cell(_fmt)} | '
+                         f'{interval(zero).cell(_fmt)} | {interval(fd).cell(_fmt)} | '
+                         f'{interval(ratio).cell(_fmt)} |')
+    return '\n'.join(lines)
+
+
+def drift_table(cases: Sequence[dict[str, Any]]) -> str:
+    """Markdown: drift at 30/60/120 s per DOF, lf_odom vs oracle (predict only) vs hold."""
+    lines = ['| scenario | DOF | after | lf_odom drift | in 95 % ellipse | published | oracle '
+             'KF predict-only drift | oracle in 95 % | hold last drift |',
+             '|---|---|---|---|---|---|---|---|---|']
+    for scenario, group in _by_scenario(cases).items():
+        n = group[0]['ndof']
+        for j, name in enumerate(DOFS[:n]):
+            for when in DRIFT_TIMES:
+                key = str(when)
+                rows = [(c['seed'], d['times'][key]) for c in group
+                        if 'dead_reckoning' in c
+                        for d in c['dead_reckoning']['dropouts'] if key in d['times']]
+                if not rows:
+                    continue
+                # per seed: mean over its dropouts, then the interval over seeds
+                seeds = sorted({s for s, _ in rows})
+
+                def per_seed(field_name: str, rows: list[tuple[int, dict[str, Any]]] = rows,
+                             seeds: list[int] = seeds, j: int = j) -> list[float]:
+                    vals = []
+                    for s in seeds:
+                        got = [r[field_name][j] for ss, r in rows if ss == s and field_name in r]
+                        vals.append(float(np.mean(got)) if got else math.nan)
+                    return vals
+
+                published = sum(r['published'] for _, r in rows)
+                inside = sum(r.get('inside_ellipse', False) for _, r in rows)
+                oracle_in = sum(r['oracle_inside_95'][j] for _, r in rows)
+                drift = interval(per_seed('error')).cell(_fmt)
+                oracle = interval(per_seed('oracle_error')).cell(_fmt)
+                hold = interval(per_seed('hold_error')).cell(_fmt)
+                lines.append(f'| {scenario} | {name} | {when:.0f} s | {drift} | '
+                             f'{inside}/{published} | {published}/{len(rows)} | {oracle} | '
+                             f'{oracle_in}/{len(rows)} | {hold} |')
+    return '\n'.join(lines)
+
+
+def loop_table(cases: Sequence[dict[str, Any]]) -> str:
+    """Markdown: the predictor loop with the finite-difference vs the lf_odom D term."""
+    lines = ['| scenario | runs | D term | position RMSE [m] | heading RMSE [rad] | thrust '
+             'wave-band power (per DOF) | odom / FD position RMSE | stable runs |',
+             '|---|---|---|---|---|---|---|---|']
+    for scenario, group in _by_scenario(cases).items():
+        group = [c for c in group if 'closed_loop' in c]
+        if not group:
+            continue
+        n = group[0]['ndof']
+        for loop, label in ((LOOP_FD, 'finite difference'), (LOOP_ODOM, 'lf_odom twist')):
+            pos = [c['closed_loop'][loop]['position_rmse'] for c in group]
+            head = [c['closed_loop'][loop].get('heading_rmse') or math.nan for c in group]
+            power = []
+            for dof in ('north', 'east', 'yaw')[:n]:
+                values = [c['closed_loop'][loop]['thrust_wave_band_power'][dof] for c in group]
+                power.append(interval(values).cell(_fmt))
+            ratio = [c['closed_loop'][loop]['position_rmse']
+                     / c['closed_loop'][LOOP_FD]['position_rmse'] for c in group]
+            stable = sum(c['closed_loop'][loop]['stable'] is True for c in group)
+            lines.append(f'| {scenario} | {len(group)} | {label} | {interval(pos).cell(_fmt)} | '
+                         f'{interval(head).cell(_fmt) if n == 3 else "–"} | '
+                         f'{" / ".join(power)} | {interval(ratio).cell(_fmt)} | '
+                         f'{stable}/{len(group)} |')
+    return '\n'.join(lines)
+
+
+def report(cases: Sequence[dict[str, Any]]) -> str:
+    """Every table."""
+    seconds = sum(c.get('seconds', 0.0) for c in cases)
+    return '\n\n'.join([
+        f'{len(cases)} runs, seeds {sorted({c["seed"] for c in cases})}, pose_cov_scale '
+        f'{cases[0]["pose_cov_scale"]:.4g}, twist_cov_scale {cases[0]["twist_cov_scale"]:.4g}, '
+        f'{seconds / 60:.1f} worker-min',
+        '**Covariance consistency (NEES)**', nees_table(cases), '**Twist accuracy**',
+        twist_table(cases), '**Dead-reckoning drift**', drift_table(cases),
+        '**Closed loop, D term**', loop_table(cases)])
+
+
+# ---------------------------------------------------------------- CLI
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point (module docstring)."""
+    parser = argparse.ArgumentParser(prog='odometry_bench', description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest='command', required=True)
+    run = sub.add_parser('run', help='run cases, write JSON')
+    run.add_argument('--scenarios', nargs='*', default=list(DEFAULT_SCENARIOS))
+    run.add_argument('--seeds', nargs='*', type=int, default=[1, 2])
+    run.add_argument('--duration', type=float, default=DEFAULT_DURATION, help='simulated s')
+    run.add_argument('--pose-cov-scale', type=float, default=None)
+    run.add_argument('--twist-cov-scale', type=float, default=None)
+    run.add_argument('--no-loops', action='store_true', help='skip the closed loops (item 4)')
+    run.add_argument('--loop-seeds', nargs='*', type=int, default=None,
+                     help='run the closed loops only for these seeds (default: every seed)')
+    run.add_argument('--no-dead-reckoning', action='store_true',
+                     help='skip the dropout run (item 3)')
+    run.add_argument('--scheduler', default=None, help="Dask address, or 'none' (in process)")
+    run.add_argument('--workers', type=int, default=2)
+    run.add_argument('-o', '--output', required=True, help='JSON file')
+    cal = sub.add_parser('calibrate', help='covariance scales from tuning-seed JSON')
+    cal.add_argument('files', nargs='+')
+    rep = sub.add_parser('report', help='markdown tables from JSON')
+    rep.add_argument('files', nargs='+')
+    args = parser.parse_args(argv)
+    if args.command == 'run':
+        for name in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
+            os.environ.setdefault(name, '1')
+        loop_seeds = set(args.seeds if args.loop_seeds is None else args.loop_seeds)
+        specs = [OdometrySpec(s, seed, args.duration, args.pose_cov_scale, args.twist_cov_scale,
+                              not args.no_loops and seed in loop_seeds,
+                              not args.no_dead_reckoning)
+                 for s in args.scenarios for seed in args.seeds]
+        results = run_specs(specs, args.scheduler, args.workers)
+        with open(args.output, 'w', encoding='utf-8') as stream:
+            json.dump(results, stream, indent=1)
+        print(report(results))
+        return 0
+    cases: list[dict[str, Any]] = []
+    for name in args.files:
+        with open(name, encoding='utf-8') as stream:
+            cases.extend(json.load(stream))
+    if args.command == 'calibrate':
+        print(json.dumps(calibrate(cases)))
+    else:
+        print(report(cases))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

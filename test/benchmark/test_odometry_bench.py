@@ -1,0 +1,95 @@
+"""The odometry benchmark (issue 14): statistics and a fast smoke run on a short scenario."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from lf_predictor_ros.benchmark.odometry_bench import (
+    DRIFT_TIMES,
+    LOOP_FD,
+    LOOP_ODOM,
+    calibrate,
+    chi2_mean_bounds,
+    consistency,
+    default_dropouts,
+    integrated_autocorrelation_time,
+    pid_velocity,
+    report,
+    run_odometry_case,
+)
+from lf_predictor_ros.core.odometry import OdometryParams
+from lf_predictor_ros.core.params import PredictorParams
+
+
+def test_autocorrelation_time_white_and_ar1() -> None:
+    rng = np.random.default_rng(0)
+    assert abs(integrated_autocorrelation_time(rng.standard_normal(20000)) - 0.5) < 0.1
+    a = 0.9
+    x = np.zeros(50000)
+    noise = rng.standard_normal(x.size)
+    for k in range(1, x.size):
+        x[k] = a * x[k - 1] + noise[k]
+    expected = (1 + a) / (2 * (1 - a))  # 9.5 samples
+    assert abs(integrated_autocorrelation_time(x) - expected) < 0.15 * expected
+
+
+def test_consistent_errors_pass_and_scaled_ones_fail() -> None:
+    rng = np.random.default_rng(1)
+    samples = 4000
+    std = np.array([0.1, 0.2, 0.01])
+    error = rng.standard_normal((samples, 3)) * std
+    cov = np.repeat(np.diag(std**2)[None], samples, axis=0)
+    ok = consistency(error, cov)
+    assert all(d['inside'] for d in ok['dof']) and ok['joint']['inside']
+    bad = consistency(error, cov / 4.0)  # covariance 4× too small: NEES ≈ 4
+    assert not any(d['inside'] for d in bad['dof'])
+    assert abs(bad['joint']['mean_nees'] - 4.0) < 0.4
+    low, high = chi2_mean_bounds(100.0)
+    assert low < 1.0 < high and math.isclose(high - low, 0.56, abs_tol=0.05)
+
+
+def test_calibrate_is_geometric_mean_times_scale() -> None:
+    def case(pose: list[float], twist: list[float], scale: float) -> dict[str, object]:
+        return {'pose_cov_scale': scale, 'twist_cov_scale': 1.0,
+                'tracking': {'pose': {'dof': [{'mean_nees': v} for v in pose]},
+                             'twist': {'dof': [{'mean_nees': v} for v in twist]}}}
+
+    out = calibrate([case([2.0, 8.0], [1.0], 2.0), case([4.0], [4.0], 2.0)])  # type: ignore
+    assert math.isclose(out['pose_cov_scale'], 8.0)
+    assert math.isclose(out['twist_cov_scale'], 2.0)
+
+
+def test_pid_velocity_of_a_ramp() -> None:
+    t = np.arange(200.0)
+    poses = np.column_stack([0.1 * t, 0.0 * t, np.full(t.size, math.pi / 2)])
+    v = pid_velocity(poses, 1.0, 3)
+    assert np.allclose(v[-1], [0.0, -0.1, 0.0], atol=1e-9)  # heading east: north = −sway
+
+
+def test_default_dropouts_after_first_training() -> None:
+    params = PredictorParams(ndof=3)
+    drops = default_dropouts(params, 1800.0)
+    assert len(drops) == 3 and drops[0][0] >= 480.0
+    assert all(a + length + 60.0 <= b for (a, length), (b, _) in zip(drops[:-1], drops[1:], strict=True))
+
+
+def test_smoke_short_onedof_run() -> None:
+    case = run_odometry_case('onedof_feedback', 1, 800.0, odometry=OdometryParams(),
+                             params_overrides={'max_epochs': 15}, dropouts=((560.0, 130.0),))
+    tracking = case['tracking']
+    assert tracking['samples'] > 250
+    assert math.isfinite(tracking['pose']['joint']['mean_nees'])
+    assert math.isfinite(tracking['twist']['joint']['mean_nees'])
+    assert all(math.isfinite(v) for v in tracking['twist_rmse'] + tracking['twist_pid_fd_rmse'])
+    (drop,) = case['dead_reckoning']['dropouts']
+    assert set(drop['times']) == {str(w) for w in DRIFT_TIMES}
+    for when in DRIFT_TIMES:
+        row = drop['times'][str(when)]
+        assert row['published'] and row['mode'] == 'dead_reckoning'
+        assert math.isfinite(row['error'][0]) and math.isfinite(row['oracle_error'][0])
+    assert case['dead_reckoning']['counters']['lost'] == 1  # 130 s > the 120 s timeout
+    loops = case['closed_loop']
+    assert math.isfinite(loops[LOOP_FD]['position_rmse'])
+    assert math.isfinite(loops[LOOP_ODOM]['position_rmse'])
+    assert 'Dead-reckoning drift' in report([case])

@@ -71,7 +71,8 @@ def test_default_dropouts_after_first_training() -> None:
     params = PredictorParams(ndof=3)
     drops = default_dropouts(params, 1800.0)
     assert len(drops) == 3 and drops[0][0] >= 480.0
-    assert all(a + length + 60.0 <= b for (a, length), (b, _) in zip(drops[:-1], drops[1:], strict=True))
+    pairs = zip(drops[:-1], drops[1:], strict=True)
+    assert all(a + length + 60.0 <= b for (a, length), (b, _) in pairs)
 
 
 def test_smoke_short_onedof_run() -> None:

@@ -76,8 +76,8 @@ def test_default_dropouts_after_first_training() -> None:
 
 
 def test_smoke_short_onedof_run() -> None:
-    case = run_odometry_case('onedof_feedback', 1, 800.0, odometry=OdometryParams(),
-                             params_overrides={'max_epochs': 15}, dropouts=((560.0, 130.0),))
+    case = run_odometry_case('onedof_feedback', 1, 780.0, odometry=OdometryParams(),
+                             params_overrides={'max_epochs': 8}, dropouts=((540.0, 130.0),))
     tracking = case['tracking']
     assert tracking['samples'] > 250
     assert math.isfinite(tracking['pose']['joint']['mean_nees'])

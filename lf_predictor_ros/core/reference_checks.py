@@ -168,6 +168,7 @@ class ReferenceChecker:
         self.rejected = 0  # poses rejected by any test
         self._last_arrival: float | None = None
         self._in_dropout = False
+        self._dropout_counted = False
         self.reset()
 
     # ---- state ------------------------------------------------------------------------------
@@ -215,10 +216,12 @@ class ReferenceChecker:
             return ACCEPT
         pose = np.asarray(pose, dtype=np.float64)
         if self._last_t is not None and t - self._last_t > self.settings.dropout_timeout:
-            self.counters['dropout'] += 1  # a gap in the stamps (seen after the fact)
+            if not self._dropout_counted:  # a gap in the stamps the clock watch did not see
+                self.counters['dropout'] += 1
             self._block = []
             self._fit.clear()
             self._pending = []
+        self._dropout_counted = False
         self._last_t = t
         if self._drift:
             return self._reject('drift', 'drift latched: reference deselected until reset')
@@ -431,6 +434,7 @@ class ReferenceChecker:
         silence = now - self._last_arrival
         if silence > self.settings.dropout_timeout and not self._in_dropout:
             self._in_dropout = True
+            self._dropout_counted = True  # the stamp gap of the next pose is the same dropout
             self.counters['dropout'] += 1
         return silence
 

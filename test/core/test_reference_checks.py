@@ -158,6 +158,16 @@ def test_dropout_is_flagged_on_the_callers_clock_and_counted_once() -> None:
     checker.check_pose(0.0, np.array([1.0, 0.0, 0.0]))
     checker.check_pose(10.0, np.array([1.1, 0.0, 0.0]))
     assert checker.counters['dropout'] == 2
+    # one dropout seen both ways (the clock watch while it lasts, then the stamp gap of the
+    # first pose after it) is one dropout
+    checker.seen(200.0)
+    checker.silent_for(204.0)
+    assert checker.counters['dropout'] == 3
+    checker.seen(204.5)
+    checker.check_pose(14.5, np.array([1.1, 0.0, 0.0]))  # stamp gap 4.5 s > 3 s
+    assert checker.counters['dropout'] == 3
+    checker.check_pose(20.0, np.array([1.1, 0.0, 0.0]))  # a later gap is a new dropout
+    assert checker.counters['dropout'] == 4
 
 
 def test_checks_can_be_switched_off() -> None:

@@ -354,11 +354,6 @@ def test_dropout_flagged_on_the_node_clock_and_output_finite(
 
 
 @pytest.mark.dds
-@pytest.mark.xfail(strict=True, reason=(
-    'one pose dropout is counted twice in ref_dropout: once by the node-clock watch '
-    '(ReferenceChecker.silent_for) and again by the stamp-gap test in check_pose when the poses '
-    'resume with a gap > dropout_timeout (core/reference_checks.py says "counted once per '
-    'dropout")'))
 def test_one_dropout_is_counted_once(
         ros_context: Context, executor: SingleThreadedExecutor, record: SimRecord) -> None:
     run = _dropout(ros_context, executor, record)

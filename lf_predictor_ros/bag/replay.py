@@ -1,15 +1,19 @@
 """`replay`: run the adaptive LF predictor over a recorded bag, offline and deterministically.
 
     replay INPUT -o OUTPUT.mcap [--params-file FILE] [--pose-topic T] [--thrust-topic T]
-           [--lf-topic T] [--truth-topic T] [--seed N] [--metrics FILE.json]
+           [--lf-topic T] [--odom-topic T] [--truth-topic T] [--seed N] [--metrics FILE.json]
            [--load-model CKPT] [--save-model CKPT] [--no-progress] [--force]
 
 INPUT is an `.mcap` file or a rosbag2 directory (`BagReader`). Messages are taken in log-time
 order; thrust (WrenchStamped, default `/thrust`) goes to `InputAligner.add_force` and pose
 (PoseStamped, default `/measured_pose`) to `InputAligner.add_pose`, both at their header stamps
 (the log time when a stamp is zero, i.e. unset). Every aligned sample goes to
-`AdaptivePredictor(params, background=False)`: trainings run inline at the retrain instant, so a
-replay with the same seed and parameters gives the same output bit for bit. A sample flagged
+`LfStateEstimator(params, odometry, background=False)` (the `AdaptivePredictor` + vessel memory +
+LF odometry, as in the node): trainings and vessel-memory fits run inline, so a replay with the
+same seed and parameters gives the same output bit for bit. Dead reckoning follows the node
+(`nodes.lf_odom.OdomDriver`): a thrust stamped more than `dead_reckoning_after` after the last
+sample that reached the predictor is dead-reckoned (at most once per sample time) and written
+like any estimate, until `dead_reckoning_timeout`. A sample flagged
 `segment_start` (other than the first) calls `restart_segment()`, as the node does. The
 position-reference checks of the node (`core.reference_checks`) run on every pose before the
 aligner and on every aligned sample against the previous prediction, as in the node: a rejected
@@ -18,7 +22,10 @@ segment. Dropouts are judged on the pose stamps (a stamp gap longer than `dropou
 
 OUTPUT gets every input message (same bytes, log and publish times; same channel types, schema
 text, QoS metadata and type hash) plus, with the log time of the pose message that produced them:
-- the estimate on `--lf-topic` (PoseStamped, header.stamp = sample time + sample_time);
+- the estimate on `--lf-topic` (PoseStamped, header.stamp = sample time + sample_time) and on
+  `--odom-topic` (nav_msgs/Odometry, default `/lf_odom`, same stamp and pose, twist in
+  `base_link_fsd`), with the log time of the message that produced it (pose, or thrust while
+  dead reckoning); the metrics score the predictor's own LF pose of every sample;
 - `/wave_peak_frequency` (Float64) with every estimate once ω0 is known;
 - `/diagnostics` (DiagnosticArray) every `diagnostics_period` (1 s) of bag time, with the keys of
   the predictor node (`predictor_diagnostics`).
@@ -28,9 +35,10 @@ is not copied (a warning says so); input `/diagnostics` are copied and ours adde
 `--params-file` is a ROS 2 parameters YAML as used by the predictor node (`/**:` and/or
 `predictor:` → `ros__parameters:`): PredictorParams fields, aligner settings (`max_gap`,
 `thrust_timeout`, `backward_jump`, `max_speed`, `max_abs_position`, `average_poses`), the
-position-reference check settings (`ReferenceCheckSettings`), `frame_id` and
-`diagnostics_period` are used; the node-only keys `model_path`, `autostart` and `use_sim_time`
-are ignored (use `--load-model`); any other key is refused. `--seed` overrides `seed`.
+position-reference check settings (`ReferenceCheckSettings`), the odometry settings
+(`OdometryParams`), `frame_id`, `dead_reckoning_after` and `diagnostics_period` are used; the
+node-only keys `model_path`, `autostart` and `use_sim_time` are ignored (use `--load-model`);
+any other key is refused. `--seed` overrides `seed`.
 
 When the truth topic (default `/truth/lf_pose`) is present, a metrics table compares, after
 warm-up (from the first sample whose estimate came from a trained network; from the start if none
@@ -75,14 +83,18 @@ from lf_predictor_ros.core.alignment import AlignedSample, AlignerSettings, Inpu
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.estimator import EstimatorStatus, wrap_to_pi
 from lf_predictor_ros.core.evaluation import DEFAULT_WAVE_BAND, Metrics, format_table, score
+from lf_predictor_ros.core.lf_state import LfStateEstimator
+from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
 from lf_predictor_ros.core.reference_checks import ReferenceChecker, ReferenceCheckSettings
 from lf_predictor_ros.nodes.conversions import (
+    FRAME_BODY,
     FRAME_EARTH,
     NS_PER_S,
     msg_to_force,
     msg_to_pose,
+    odometry_to_msg,
     pose_to_msg,
     sec_to_stamp,
     stamp_to_ns,
@@ -90,10 +102,12 @@ from lf_predictor_ros.nodes.conversions import (
 from lf_predictor_ros.nodes.diagnostics import (
     DiagnosticValue,
     input_values,
+    level_byte,
     make_diagnostic_array,
     predictor_values,
     worse,
 )
+from lf_predictor_ros.nodes.lf_odom import OdomDriver, dead_reckoning_silence
 from lf_predictor_ros.nodes.qos import publisher_qos
 
 FloatArray = NDArray[np.float64]
@@ -104,6 +118,7 @@ EXIT_USAGE = 2  # the command line or the parameters file is the problem
 
 POSE_TYPE = 'geometry_msgs/msg/PoseStamped'
 WRENCH_TYPE = 'geometry_msgs/msg/WrenchStamped'
+ODOMETRY_TYPE = 'nav_msgs/msg/Odometry'
 FLOAT_TYPE = 'std_msgs/msg/Float64'
 DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
 WAVE_TOPIC = '/wave_peak_frequency'
@@ -114,8 +129,10 @@ PROGRESS_PERIOD = 0.2  # [s wall] between two progress-bar redraws
 PROGRESS_WIDTH = 30  # [characters] of the bar itself
 
 ALIGNER_KEYS = tuple(f.name for f in fields(AlignerSettings) if f.name != 'sample_time')
-NODE_KEYS_USED = ('frame_id', 'diagnostics_period')
+NODE_KEYS_USED = ('frame_id', 'diagnostics_period', 'dead_reckoning_after')
+ODOMETRY_KEYS = tuple(f.name for f in fields(OdometryParams))
 NODE_KEYS_IGNORED = ('model_path', 'autostart', 'use_sim_time')
+_LEVEL_NAMES = ('OK', 'WARN', 'ERROR', 'STALE')
 _LEVEL_OF_STATE = {'warming_up': 'OK', 'trained': 'OK', 'ok': 'OK', 'fallback': 'WARN',
                    'error': 'ERROR'}
 
@@ -135,6 +152,7 @@ class ReplayOptions:
     pose_topic: str = '/measured_pose'
     thrust_topic: str = '/thrust'
     lf_topic: str = '/lf_pose'
+    odom_topic: str = '/lf_odom'
     truth_topic: str = '/truth/lf_pose'
     seed: int | None = None
     metrics: str | None = None
@@ -160,6 +178,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help='applied thrust topic (default /thrust)')
     parser.add_argument('--lf-topic', default='/lf_pose', metavar='T',
                         help='output LF estimate topic (default /lf_pose)')
+    parser.add_argument('--odom-topic', default='/lf_odom', metavar='T',
+                        help='output LF odometry topic, nav_msgs/Odometry (default /lf_odom)')
     parser.add_argument('--truth-topic', default='/truth/lf_pose', metavar='T',
                         help='true LF pose topic for metrics (default /truth/lf_pose)')
     parser.add_argument('--seed', type=int, metavar='N',
@@ -179,7 +199,8 @@ def parse_args(argv: Sequence[str] | None) -> ReplayOptions:
     ns = build_parser().parse_args(list(argv) if argv is not None else sys.argv[1:])
     return ReplayOptions(input=ns.input, output=ns.output, params_file=ns.params_file,
                          pose_topic=ns.pose_topic, thrust_topic=ns.thrust_topic,
-                         lf_topic=ns.lf_topic, truth_topic=ns.truth_topic, seed=ns.seed,
+                         lf_topic=ns.lf_topic, odom_topic=ns.odom_topic,
+                         truth_topic=ns.truth_topic, seed=ns.seed,
                          metrics=ns.metrics, load_model=ns.load_model,
                          save_model=ns.save_model, progress=not ns.no_progress,
                          force=ns.force)
@@ -195,6 +216,8 @@ class ReplayConfig:
     checks: ReferenceCheckSettings = field(default_factory=ReferenceCheckSettings)
     frame_id: str = FRAME_EARTH
     diagnostics_period: float = DEFAULT_DIAGNOSTICS_PERIOD  # [s of bag time]
+    odometry: OdometryParams = field(default_factory=OdometryParams)
+    dead_reckoning_after: float = 0.0  # [s] 0 = 2 × sample_time
 
 
 def _node_sections(document: Any, path: str) -> list[Mapping[str, Any]]:
@@ -258,13 +281,13 @@ def load_config(params_file: str | None, seed: int | None = None) -> ReplayConfi
         values.pop(key, None)
     check_keys = ReferenceCheckSettings.field_names()
     known = set(PredictorParams.field_names()) | set(ALIGNER_KEYS) | set(NODE_KEYS_USED) | \
-        set(check_keys)
+        set(check_keys) | set(ODOMETRY_KEYS)
     unknown = sorted(set(values) - known)
     if unknown:
         raise UsageError(f'parameters file {params_file!r}: unknown key(s) {unknown}; valid '
                          f'keys are the PredictorParams fields, the aligner settings '
-                         f'{list(ALIGNER_KEYS)}, the reference checks {list(check_keys)} and '
-                         f'{list(NODE_KEYS_USED)}')
+                         f'{list(ALIGNER_KEYS)}, the reference checks {list(check_keys)}, the '
+                         f'odometry settings {list(ODOMETRY_KEYS)} and {list(NODE_KEYS_USED)}')
     if seed is not None:
         values['seed'] = seed
     predictor_values = {k: v for k, v in values.items() if k in PredictorParams.field_names()}
@@ -277,12 +300,18 @@ def load_config(params_file: str | None, seed: int | None = None) -> ReplayConfi
         checks = ReferenceCheckSettings(**check_values)
         frame_id = str(values.get('frame_id', FRAME_EARTH))
         period = float(values.get('diagnostics_period', DEFAULT_DIAGNOSTICS_PERIOD))
+        odometry_values: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v
+                                           for k, v in values.items() if k in ODOMETRY_KEYS}
+        odometry = OdometryParams(**odometry_values)
+        dead_reckoning_after = float(values.get('dead_reckoning_after', 0.0))
+        dead_reckoning_silence(dead_reckoning_after, params.sample_time)
     except (TypeError, ValueError) as err:
         raise UsageError(f'parameters file {params_file!r}: {err}') from None
     if not (period > 0.0 and math.isfinite(period)):
         raise UsageError(f'parameters file {params_file!r}: diagnostics_period must be > 0 s, '
                          f'got {period}')
-    return ReplayConfig(params, aligner, checks, frame_id, period)
+    return ReplayConfig(params, aligner, checks, frame_id, period, odometry,
+                        dead_reckoning_after)
 
 
 # --------------------------------------------------------------------------- diagnostics
@@ -459,6 +488,11 @@ class _Replayer:
         self.h = config.params.sample_time
         self.aligner = InputAligner(config.aligner)
         self.predictor = AdaptivePredictor(config.params, background=False)
+        self.odom = OdomDriver(
+            LfStateEstimator(config.params, config.odometry, background=False,
+                             predictor=self.predictor),
+            dead_reckoning_silence(config.dead_reckoning_after, config.params.sample_time),
+            config.aligner.backward_jump)
         self.checker = ReferenceChecker(config.checks, config.params.ndof)
         self.predicted: tuple[float, FloatArray] | None = None  # (valid at, estimate)
         self.next_diagnostics: float | None = None
@@ -466,8 +500,9 @@ class _Replayer:
         self.channels: dict[int, int] = {}
         qos = offered_qos_yaml([publisher_qos()])
         self.lf_channel = writer.add_topic(options.lf_topic, POSE_TYPE, qos)
+        self.odom_channel = writer.add_topic(options.odom_topic, ODOMETRY_TYPE, qos)
         self.wave_channel = writer.add_topic(WAVE_TOPIC, FLOAT_TYPE, qos)
-        self.replaced = {options.lf_topic, WAVE_TOPIC}
+        self.replaced = {options.lf_topic, options.odom_topic, WAVE_TOPIC}
         self._copy_channels(qos)
 
     def _copy_channels(self, qos: str) -> None:
@@ -532,7 +567,13 @@ class _Replayer:
             force: object = msg_to_force(message)
         except ValueError:
             force = np.full(3, np.nan)  # the aligner drops and counts it
-        self.aligner.add_force(_stamp_seconds(message, log_time_ns), force)
+        t = _stamp_seconds(message, log_time_ns)
+        if self.aligner.add_force(t, force) and isinstance(force, np.ndarray):
+            estimate = self.odom.thrust(t, force)
+            if estimate is not None:
+                self._write_estimate(estimate, log_time_ns)
+            if self.odom.state.odometry.mode != 'tracking':
+                self._maybe_diagnostics(t, log_time_ns)
 
     def _truth(self, data: bytes, log_time_ns: int) -> None:
         message = self._decode(data, POSE_TYPE, self.options.truth_topic)
@@ -566,7 +607,7 @@ class _Replayer:
 
     def _sample(self, sample: AlignedSample, log_time_ns: int) -> None:
         if sample.segment_start and not self.first_sample:
-            self.predictor.restart_segment()
+            self.odom.state.restart_segment()  # the odometry keeps its state across it
             self.predicted = None
         self.first_sample = False
         expected = self.predicted[1] if self.predicted is not None and \
@@ -576,7 +617,12 @@ class _Replayer:
             if verdict.restart:
                 self._restart_data()
             return
-        estimate = self.predictor.update(sample.t, sample.pose, sample.force)
+        lf_pose, odometry = self.odom.update(sample.t, sample.pose, sample.force,
+                                             sample.segment_start)
+        if lf_pose is None:  # older than an estimate already dead-reckoned: not written
+            self.predicted = None
+            return
+        estimate = lf_pose
         self.predicted = (sample.t + self.h, estimate)
         status = self.predictor.status()
         log = self.result.samples
@@ -587,17 +633,31 @@ class _Replayer:
         log.segment_start.append(sample.segment_start)
         log.network.append(status.state == 'trained')
         self.result.estimates += 1
-        lf_msg = pose_to_msg(estimate, sample.t + self.h, self.config.frame_id)
-        self._write(self.lf_channel, log_time_ns, serialize(lf_msg))
+        if odometry is not None:  # None: lost, the fix held back
+            self._write_estimate(odometry, log_time_ns)
         freq = self.predictor.wave_peak_freq
         if freq is not None:
             self._write(self.wave_channel, log_time_ns, serialize(Float64(data=float(freq))))
-        if self.next_diagnostics is None or sample.t >= self.next_diagnostics - 1e-9:
-            self._diagnostics(sample.t, log_time_ns, status)
+        self._maybe_diagnostics(sample.t, log_time_ns)
+
+    def _maybe_diagnostics(self, t: float, log_time_ns: int) -> None:
+        """Diagnostics every diagnostics_period of bag time (samples; thrust when not tracking)."""
+        if self.next_diagnostics is None or t >= self.next_diagnostics - 1e-9:
+            self._diagnostics(t, log_time_ns, self.predictor.status())
             period = self.config.diagnostics_period
-            base = sample.t if self.next_diagnostics is None else self.next_diagnostics
-            steps = max(1, math.floor((sample.t - base) / period + 1e-9) + 1)
+            base = t if self.next_diagnostics is None else self.next_diagnostics
+            steps = max(1, math.floor((t - base) / period + 1e-9) + 1)
             self.next_diagnostics = base + steps * period
+
+    def _write_estimate(self, estimate: OdometryEstimate, log_time_ns: int) -> None:
+        """One estimate on the lf and odom topics (same stamp and pose)."""
+        stamp = sec_to_stamp(estimate.stamp)
+        frame = self.config.frame_id
+        lf_msg = pose_to_msg(estimate.pose, stamp, frame)
+        odom_msg = odometry_to_msg(stamp, estimate.pose, estimate.pose_cov, estimate.twist,
+                                   estimate.twist_cov, frame, FRAME_BODY)
+        self._write(self.lf_channel, log_time_ns, serialize(lf_msg))
+        self._write(self.odom_channel, log_time_ns, serialize(odom_msg))
 
     def _diagnostics(self, t: float, log_time_ns: int, status: EstimatorStatus) -> None:
         extra: dict[str, DiagnosticValue] = {
@@ -608,10 +668,22 @@ class _Replayer:
         extra.update(self.checker.values())
         extra['ndof'] = self.config.params.ndof
         extra['unfiltered_dofs'] = 'east yaw' if self.config.params.ndof == 1 else 'none'
+        extra.update(self.odom.values())
+        reference: tuple[str, str] | None = self.checker.status()
+        odom_level, odom_message = self.odom.status()
+        if odom_level != 'OK':  # as the node: dead reckoning (WARN) or lost (ERROR) leads
+            if reference is not None and reference[0] != 'OK':
+                odom_message = f'{odom_message}; position reference {reference[1]}'
+            reference = None
         array = predictor_diagnostics(status, self.predictor.counters,
                                       self.aligner.counters.as_dict(), sec_to_stamp(t),
                                       samples=self.result.estimates, extra=extra,
-                                      reference=self.checker.status())
+                                      reference=reference)
+        if odom_level != 'OK':
+            diagnostic = array.status[0]
+            level = worse(_LEVEL_NAMES[diagnostic.level[0]], '', odom_level, '')[0]
+            diagnostic.level = level_byte(level)
+            diagnostic.message = f'{odom_message}; {diagnostic.message}'
         self._write(self._diagnostics_channel, log_time_ns, serialize(array))
 
 
@@ -649,7 +721,7 @@ def replay(options: ReplayOptions, config: ReplayConfig,
                     replayer.run(progress)
                 finally:
                     progress.finish()
-                    replayer.predictor.close()
+                    replayer.odom.state.close()
         except BaseException:
             output.unlink(missing_ok=True)
             raise
@@ -788,7 +860,8 @@ def metrics_document(result: ReplayResult, options: ReplayOptions,
         'seed': config.params.seed,
         'params': config.params.to_dict(),
         'topics': {'pose': options.pose_topic, 'thrust': options.thrust_topic,
-                   'lf': options.lf_topic, 'truth': options.truth_topic},
+                   'lf': options.lf_topic, 'odom': options.odom_topic,
+                   'truth': options.truth_topic},
         'messages_in': result.messages_in,
         'messages_out': result.messages_out,
         'estimates': result.estimates,

@@ -30,14 +30,21 @@ import torch
 from lf_predictor_ros.bag import replay as replay_mod
 from lf_predictor_ros.bag.mcap_reader import BagReader
 from lf_predictor_ros.bag.mcap_writer import BagWriter, qos_profile_dict, qos_profiles_yaml
+from lf_predictor_ros.bag.msgdefs import full_definition
 from lf_predictor_ros.bag.ros_codec import deserialize, serialize
 from lf_predictor_ros.bag.series import read_diagnostics, read_series
 from lf_predictor_ros.bag.sim_bag import write_record
 from lf_predictor_ros.core.alignment import InputAligner
 from lf_predictor_ros.core.evaluation import run_estimator
+from lf_predictor_ros.core.odometry import UNESTIMATED_VARIANCE
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
-from lf_predictor_ros.nodes.conversions import pose_to_msg, wrench_to_msg
+from lf_predictor_ros.nodes.conversions import (
+    msg_to_pose,
+    odometry_from_msg,
+    pose_to_msg,
+    wrench_to_msg,
+)
 from sim_ros.simulation import SimRecord, load_scenario, simulate
 
 pytestmark = pytest.mark.filterwarnings('ignore::DeprecationWarning:lark.*')
@@ -155,8 +162,8 @@ def test_output_holds_the_input_unchanged_plus_the_estimates(
         input_bag: Path, first_run: dict[str, Any]) -> None:
     with BagReader(input_bag) as src, BagReader(first_run['output']) as dst:
         src_infos, dst_infos = src.topic_infos(), dst.topic_infos()
-        assert set(dst_infos) == set(src_infos) | {'/lf_pose', '/wave_peak_frequency',
-                                                   '/diagnostics'}
+        assert set(dst_infos) == set(src_infos) | {'/lf_pose', '/lf_odom',
+                                                   '/wave_peak_frequency', '/diagnostics'}
         for topic, info in src_infos.items():
             copy = dst_infos[topic]
             assert (copy.type_name, copy.offered_qos_profiles, copy.definition,
@@ -164,6 +171,8 @@ def test_output_holds_the_input_unchanged_plus_the_estimates(
                                             info.definition, info.message_count)
         assert 'best_effort' in dst_infos['/measured_pose'].offered_qos_profiles
         assert dst_infos['/lf_pose'].type_name == POSE
+        assert dst_infos['/lf_odom'].type_name == 'nav_msgs/msg/Odometry'
+        assert dst_infos['/lf_odom'].definition == full_definition('nav_msgs/msg/Odometry')
         assert dst_infos['/wave_peak_frequency'].type_name == 'std_msgs/msg/Float64'
         assert dst_infos['/diagnostics'].type_name == 'diagnostic_msgs/msg/DiagnosticArray'
         original = [(c.topic, m.log_time, m.publish_time, m.data) for c, m in src.records()]
@@ -183,6 +192,25 @@ def test_estimates_are_stamped_one_sample_ahead_at_the_pose_log_time(
                   for m in reader.messages(['/lf_pose'])}
     assert frames == {'map_ned'}
     assert np.all(lf.values[:, 1:] == 0.0)  # 1 DOF: east and yaw are 0
+
+
+def test_lf_odom_has_the_stamp_and_pose_of_every_lf_pose(first_run: dict[str, Any]) -> None:
+    with BagReader(first_run['output']) as reader:
+        lf = [deserialize(m.data, POSE) for m in reader.messages(['/lf_pose'])]
+        odom = [deserialize(m.data, 'nav_msgs/msg/Odometry')
+                for m in reader.messages(['/lf_odom'])]
+        odom_log = [m.log_time_ns for m in reader.messages(['/lf_odom'])]
+        lf_log = [m.log_time_ns for m in reader.messages(['/lf_pose'])]
+    assert len(odom) == len(lf) > 100 and odom_log == lf_log
+    for pose_msg, odom_msg in zip(lf, odom, strict=True):
+        assert odom_msg.header.stamp == pose_msg.header.stamp
+        assert (odom_msg.header.frame_id, odom_msg.child_frame_id) == ('map_ned',
+                                                                       'base_link_fsd')
+        pose, pose_cov, twist, twist_cov = odometry_from_msg(odom_msg)  # finite, or raises
+        np.testing.assert_array_equal(pose, msg_to_pose(pose_msg))
+        # 1 DOF: only north and surge are estimated
+        assert pose_cov[1, 1] == pose_cov[2, 2] == UNESTIMATED_VARIANCE
+        assert twist[1] == twist[2] == 0.0 and 0.0 < pose_cov[0, 0] < 1.0
 
 
 def test_replay_equals_aligner_and_predictor_run_on_the_arrays(
@@ -250,9 +278,9 @@ def test_metrics_table_is_printed_and_matches_an_independent_computation(
     assert document['partial'] is False and document['seed'] == 3
     assert document['evaluation_start'] == FIRST_NETWORK
     assert document['messages_in'] == 3 * 300
-    # + 300 lf_pose, 300 diagnostics, and ω0 once known: the early estimate (from half the
-    # first-training data on, retried every Δ) comes before the first training
-    omega_count = document['messages_out'] - (3 * 300 + 300 + 300)
+    # + 300 lf_pose, 300 lf_odom, 300 diagnostics, and ω0 once known: the early estimate (from
+    # half the first-training data on, retried every Δ) comes before the first training
+    omega_count = document['messages_out'] - (3 * 300 + 300 + 300 + 300)
     assert int(np.sum(record.t >= FIRST_TRAINING)) < omega_count
     assert omega_count <= int(np.sum(record.t >= FIRST_TRAINING // 2))
     # The raw measurement's RMSE on the common stamps t in [121, 300] s, from the arrays.
@@ -510,7 +538,11 @@ def test_progress_bar_draws_on_a_terminal_only() -> None:
 
 def test_a_pose_gap_restarts_the_segment(work: Path, record: SimRecord,
                                          params_file: Path) -> None:
-    """No pose for 10 s (> max_gap 5 s): the aligner restarts, the predictor gets a new segment."""
+    """No pose for 10 s (> max_gap 5 s): the aligner restarts, the predictor gets a new segment.
+
+    Thrust goes on: from 2 s (dead_reckoning_after = 2 × sample_time) after the last sample
+    the estimate is dead-reckoned at the thrust stamps, one per second, until the poses return.
+    """
     bag = work / 'gap.mcap'
     with BagWriter(bag) as writer:
         pose_ch = writer.add_topic('/measured_pose', POSE)
@@ -523,9 +555,14 @@ def test_a_pose_gap_restarts_the_segment(work: Path, record: SimRecord,
     output = work / 'gap_out.mcap'
     assert run_replay(bag, '-o', output, '--params-file', params_file)[0] == 0
     lf = _lf(output)
-    np.testing.assert_allclose(lf.stamp, np.r_[2.0:22.0, 32.0:62.0], atol=1e-9)
-    last = read_diagnostics(output)[-1][2]
+    np.testing.assert_allclose(lf.stamp, np.r_[2.0:22.0, 23.0:62.0], atol=1e-9)
+    records = read_diagnostics(output)
+    during = [v for t, _, v in records if 23.0 <= t <= 30.0]
+    assert during and {v['odom_mode'] for v in during} == {'dead_reckoning'}
+    last = records[-1][2]
     assert (last['gaps'], last['segments'], last['samples']) == ('1', '1', '50')
+    assert (last['odom_mode'], last['odom_dead_reckoning_episodes'],
+            last['odom_reacquired'], last['odom_coasts']) == ('tracking', '1', '1', '9')
 
 
 def test_pose_rows_store_rows_compactly_and_round_trip() -> None:

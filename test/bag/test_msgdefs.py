@@ -49,7 +49,8 @@ def test_pose_stamped_layout_matches_rosbag2_depth_first_sorted_order() -> None:
 def test_rosbags_parses_the_text_into_the_jazzy_field_definitions() -> None:
     store = get_typestore(Stores.ROS2_JAZZY)
     for type_name in ('geometry_msgs/msg/PoseStamped', 'geometry_msgs/msg/WrenchStamped',
-                      'diagnostic_msgs/msg/DiagnosticArray', 'rosgraph_msgs/msg/Clock'):
+                      'diagnostic_msgs/msg/DiagnosticArray', 'rosgraph_msgs/msg/Clock',
+                      'nav_msgs/msg/Odometry'):
         parsed = get_types_from_msg(full_definition(type_name), type_name)
         assert type_name in parsed
         for name, definition in parsed.items():

@@ -24,6 +24,7 @@ from lf_predictor_ros.bag.mcap_writer import (
 )
 from lf_predictor_ros.bag.msgdefs import full_definition
 from lf_predictor_ros.bag.ros_codec import deserialize, serialize
+from lf_predictor_ros.nodes.conversions import odometry_to_msg
 
 pytestmark = pytest.mark.filterwarnings('ignore::DeprecationWarning:lark.*')
 
@@ -33,6 +34,7 @@ TOPICS = {
     '/wave_peak_frequency': 'std_msgs/msg/Float64',
     '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
     '/clock': 'rosgraph_msgs/msg/Clock',
+    '/lf_odom': 'nav_msgs/msg/Odometry',
 }
 SAMPLE_NS = 100_000_000  # [ns] 10 Hz
 
@@ -52,8 +54,12 @@ def _messages(seed: int, n: int) -> list[tuple[str, int, Any]]:
         wrench.header.frame_id = 'base_link_fsd'
         wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.torque.z = rng.normal(
             0.0, 1e5, 3)
+        odom = odometry_to_msg(
+            pose.header.stamp, [pose.pose.position.x, pose.pose.position.y, 0.1 * i],
+            np.diag(rng.uniform(0.01, 1.0, 3)), rng.normal(0.0, 0.5, 3),
+            np.diag(rng.uniform(1e-4, 1e-2, 3)))
         out += [('/measured_pose', t_ns, pose), ('/thrust', t_ns + 1, wrench),
-                ('/clock', t_ns, Clock(clock=pose.header.stamp))]
+                ('/clock', t_ns, Clock(clock=pose.header.stamp)), ('/lf_odom', t_ns + 4, odom)]
         if i % 3 == 0:
             frequency = Float64(data=float(rng.uniform(0.3, 1.2)))
             out.append(('/wave_peak_frequency', t_ns + 2, frequency))
@@ -125,6 +131,14 @@ def test_rosbags_reads_our_file_field_by_field(tmp_path: Path) -> None:
                 assert theirs.wrench.torque.z == ours.wrench.torque.z
             elif topic == '/wave_peak_frequency':
                 assert theirs.data == ours.data
+            elif topic == '/lf_odom':
+                assert (theirs.header.frame_id, theirs.child_frame_id) == (
+                    ours.header.frame_id, ours.child_frame_id)
+                assert theirs.pose.pose.position.x == ours.pose.pose.position.x
+                assert theirs.pose.pose.orientation.z == ours.pose.pose.orientation.z
+                assert list(theirs.pose.covariance) == list(ours.pose.covariance)
+                assert theirs.twist.twist.angular.z == ours.twist.twist.angular.z
+                assert list(theirs.twist.covariance) == list(ours.twist.covariance)
             elif topic == '/clock':
                 assert (theirs.clock.sec, theirs.clock.nanosec) == (ours.clock.sec,
                                                                     ours.clock.nanosec)
@@ -153,6 +167,11 @@ def test_file_carries_rosbag2_metadata_summary_and_schemas(tmp_path: Path) -> No
     assert pose_schema.encoding == 'ros2msg'
     assert pose_schema.data.decode() == full_definition('geometry_msgs/msg/PoseStamped')
     assert 'MSG: std_msgs/Header' in pose_schema.data.decode()
+    odom_schema = schemas['nav_msgs/msg/Odometry'].data.decode()
+    assert odom_schema == full_definition('nav_msgs/msg/Odometry')
+    for dependency in ('geometry_msgs/PoseWithCovariance', 'geometry_msgs/TwistWithCovariance',
+                       'geometry_msgs/Quaternion', 'std_msgs/Header'):
+        assert f'MSG: {dependency}' in odom_schema
     for channel in summary.channels.values():
         assert channel.message_encoding == 'cdr'
         assert yaml.safe_load(channel.metadata['offered_qos_profiles'])[0]['depth'] == 10

@@ -356,7 +356,8 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                       *, odometry: OdometryParams | None = None,
                       params_overrides: dict[str, Any] | None = None,
                       dropouts: Sequence[tuple[float, float]] | None = None,
-                      loops: bool = True, dead_reckoning: bool = True) -> dict[str, Any]:
+                      loops: bool = True, dead_reckoning: bool = True,
+                      tracking: bool = True) -> dict[str, Any]:
     """Every measurement of the module docstring on one (scenario, seed); JSON-ready."""
     begin_time = time.monotonic()
     scenario = load_scenario(scenario_name)
@@ -379,7 +380,8 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                            'twist_cov_scale': odometry.twist_cov_scale,
                            'dead_reckoning_timeout': odometry.dead_reckoning_timeout,
                            'recording': recording.provenance.to_dict()}
-    out['tracking'] = _tracking_run(params, odometry, data, begin)
+    if tracking:
+        out['tracking'] = _tracking_run(params, odometry, data, begin)
     if dead_reckoning:
         out['dead_reckoning'] = _dropout_run(params, odometry, data, dropouts, setup)
     if loops and scenario.controller.enabled:
@@ -400,6 +402,7 @@ class OdometrySpec:
     twist_cov_scale: float | None = None
     loops: bool = True
     dead_reckoning: bool = True
+    tracking: bool = True
     params_overrides: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -410,7 +413,7 @@ class OdometrySpec:
     def __hash__(self) -> int:
         """Hash of the printable fields."""
         return hash((self.scenario, self.seed, self.duration, self.pose_cov_scale,
-                     self.twist_cov_scale, self.loops, self.dead_reckoning,
+                     self.twist_cov_scale, self.loops, self.dead_reckoning, self.tracking,
                      tuple(sorted(self.params_overrides.items()))))
 
 
@@ -427,7 +430,8 @@ def run_spec(spec: OdometrySpec) -> dict[str, Any]:
     return run_odometry_case(spec.scenario, spec.seed, spec.duration,
                              odometry=OdometryParams(**values),  # type: ignore[arg-type]
                              params_overrides=dict(spec.params_overrides) or None,
-                             loops=spec.loops, dead_reckoning=spec.dead_reckoning)
+                             loops=spec.loops, dead_reckoning=spec.dead_reckoning,
+                             tracking=spec.tracking)
 
 
 def run_specs(specs: Sequence[OdometrySpec], scheduler: str | None = None,
@@ -449,15 +453,19 @@ def calibrate(cases: Sequence[dict[str, Any]]) -> dict[str, float]:
     out: dict[str, float] = {}
     for kind in ('pose', 'twist'):
         logs = [math.log(dof['mean_nees']) + math.log(case[f'{kind}_cov_scale'])
-                for case in cases for dof in case['tracking'][kind]['dof']]
+                for case in cases if 'tracking' in case
+                for dof in case['tracking'][kind]['dof']]
         out[f'{kind}_cov_scale'] = math.exp(float(np.mean(logs)))
     return out
 
 
-def _by_scenario(cases: Sequence[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
+def _by_scenario(cases: Sequence[dict[str, Any]], key: str | None = None,
+                 ) -> dict[str, list[dict[str, Any]]]:
+    """Cases by scenario (those with ``key`` only, if given)."""
     groups: dict[str, list[dict[str, Any]]] = {}
     for case in cases:
-        groups.setdefault(case['scenario'], []).append(case)
+        if key is None or key in case:
+            groups.setdefault(case['scenario'], []).append(case)
     return groups
 
 
@@ -470,7 +478,7 @@ def nees_table(cases: Sequence[dict[str, Any]]) -> str:
     lines = ['| scenario | runs | quantity | DOF | mean NEES [95 % CI over runs] | runs inside '
              'bounds (ρ) | runs inside (ρ²) | median bounds |',
              '|---|---|---|---|---|---|---|---|']
-    for scenario, group in _by_scenario(cases).items():
+    for scenario, group in _by_scenario(cases, 'tracking').items():
         n = group[0]['ndof']
         for kind in ('pose', 'twist'):
             names = (DOFS if kind == 'pose' else TWIST_DOFS)[:n]
@@ -493,7 +501,7 @@ def twist_table(cases: Sequence[dict[str, Any]]) -> str:
     lines = ['| scenario | runs | DOF | lf_odom twist RMSE | zero estimate (RMS true) | '
              'PID finite difference (T_v = 1 s) | lf_odom / zero |',
              '|---|---|---|---|---|---|---|']
-    for scenario, group in _by_scenario(cases).items():
+    for scenario, group in _by_scenario(cases, 'tracking').items():
         n = group[0]['ndof']
         for j, name in enumerate(TWIST_DOFS[:n]):
             odo = [c['tracking']['twist_rmse'][j] for c in group]
@@ -511,7 +519,7 @@ def drift_table(cases: Sequence[dict[str, Any]]) -> str:
     lines = ['| scenario | DOF | after | lf_odom drift | in 95 % ellipse | published | oracle '
              'KF predict-only drift | oracle in 95 % | hold last drift |',
              '|---|---|---|---|---|---|---|---|---|']
-    for scenario, group in _by_scenario(cases).items():
+    for scenario, group in _by_scenario(cases, 'dead_reckoning').items():
         n = group[0]['ndof']
         for j, name in enumerate(DOFS[:n]):
             for when in DRIFT_TIMES:
@@ -549,10 +557,7 @@ def loop_table(cases: Sequence[dict[str, Any]]) -> str:
     lines = ['| scenario | runs | D term | position RMSE [m] | heading RMSE [rad] | thrust '
              'wave-band power (per DOF) | odom / FD position RMSE | stable runs |',
              '|---|---|---|---|---|---|---|---|']
-    for scenario, group in _by_scenario(cases).items():
-        group = [c for c in group if 'closed_loop' in c]
-        if not group:
-            continue
+    for scenario, group in _by_scenario(cases, 'closed_loop').items():
         n = group[0]['ndof']
         for loop, label in ((LOOP_FD, 'finite difference'), (LOOP_ODOM, 'lf_odom twist')):
             pos = [c['closed_loop'][loop]['position_rmse'] for c in group]
@@ -599,6 +604,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     run.add_argument('--no-loops', action='store_true', help='skip the closed loops (item 4)')
     run.add_argument('--loop-seeds', nargs='*', type=int, default=None,
                      help='run the closed loops only for these seeds (default: every seed)')
+    run.add_argument('--no-tracking', action='store_true',
+                     help='skip the run without dropouts (items 1 and 2)')
     run.add_argument('--no-dead-reckoning', action='store_true',
                      help='skip the dropout run (item 3)')
     run.add_argument('--scheduler', default=None, help="Dask address, or 'none' (in process)")
@@ -615,7 +622,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         loop_seeds = set(args.seeds if args.loop_seeds is None else args.loop_seeds)
         specs = [OdometrySpec(s, seed, args.duration, args.pose_cov_scale, args.twist_cov_scale,
                               not args.no_loops and seed in loop_seeds,
-                              not args.no_dead_reckoning)
+                              not args.no_dead_reckoning, not args.no_tracking)
                  for s in args.scenarios for seed in args.seeds]
         results = run_specs(specs, args.scheduler, args.workers)
         with open(args.output, 'w', encoding='utf-8') as stream:

@@ -27,7 +27,7 @@ heading rad] with the heading unwrapped, ν = [u m/s, v m/s, r rad/s], τ = [X N
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 from typing import Literal
 
@@ -49,6 +49,10 @@ TEST_START_SPACING = 20.0
 VALIDATION_FRACTION = 1.0 / 3.0
 # Fewer starts than this: the drift statistics are not trusted and no choice is made.
 MIN_TEST_STARTS = 4
+# A force beyond this multiple of the largest one in the learned window is not believed by the
+# dead reckoner (clipped): the model was never fitted there, and a corrupt thrust message must
+# not fling the dead-reckoned pose away [-].
+FORCE_MARGIN = 2.0
 
 
 def rotation(heading: float) -> FloatArray:
@@ -233,6 +237,8 @@ class VesselMemory:
         message: why a reckoner was chosen or the model refused.
         accel_std: std of the LF acceleration ν̇ of the targets per DOF [m/s², rad/s²] (the
             process noise of a constant-velocity model).
+        force_limit: largest force per DOF the model is used with (``FORCE_MARGIN`` × the
+            largest in the window; inf if the window had none) [N, N, N·m].
     """
 
     model: LfDynamics | None
@@ -241,6 +247,12 @@ class VesselMemory:
     drift_by_reckoner: dict[str, FloatArray]
     message: str
     accel_std: FloatArray
+    force_limit: FloatArray = field(default_factory=lambda: np.full(3, np.inf))
+
+    def plausible_force(self, force: FloatArray) -> FloatArray:
+        """The force clipped to ±``force_limit`` per DOF (a new array)."""
+        limit = self.force_limit[:force.shape[-1]]
+        return np.clip(force, -limit, limit)
 
 
 def drift_test(model: LfDynamics | None, reckoner: DeadReckoner, targets: ArrayLike,
@@ -318,7 +330,10 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
             model, message = None, f'LF dynamics not refitted: {exc}'
             chosen = 'constant_velocity' if chosen == 'model' else chosen
     accel = np.gradient(body_velocity(eta_t, sample_time), sample_time, axis=0)
-    return VesselMemory(model, chosen, curves[chosen], rms, message, np.std(accel, axis=0))
+    largest = np.max(np.abs(tau), axis=0)
+    force_limit = np.where(largest > 0.0, FORCE_MARGIN * largest, np.inf)
+    return VesselMemory(model, chosen, curves[chosen], rms, message, np.std(accel, axis=0),
+                        force_limit)
 
 
 def _interpolate(horizons: FloatArray, table: FloatArray, elapsed: float,

@@ -56,13 +56,19 @@ class LfStateEstimator:
 
     def update(self, t: float, pose: FloatArray, force: FloatArray) -> tuple[
             FloatArray, OdometryEstimate | None]:
-        """One sample: (LF pose valid at t + h, odometry for t + h) (see AdaptivePredictor)."""
+        """One sample: (LF pose valid at t + h, odometry for t + h) (see AdaptivePredictor).
+
+        The odometry is None when t + h is older than an estimate already given (poses arriving
+        late after dead reckoning has moved on): the predictor still learns from the sample.
+        """
         lf_pose = self.predictor.update(t, pose, force)
         self._times.append(t)
         self._forces.append(np.array(force[:self.ndof], dtype=np.float64))
         self._count += 1
         self._collect()
         self._maybe_learn()
+        if self.odometry.is_late(t + self.sample_time):
+            return lf_pose, None  # older than an estimate already dead-reckoned
         source: EstimateSource = 'network' if self.predictor.status().state == 'trained' \
             else 'fallback'
         odom = self.odometry.track(t + self.sample_time, lf_pose, force, source)

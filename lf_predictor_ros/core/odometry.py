@@ -198,7 +198,8 @@ class LfOdometry:
         self._blend: tuple[float, FloatArray] | None = None  # (start time, DR pose − fix)
         self.counters = {'dead_reckoning_episodes': 0, 'lost': 0, 'reacquired': 0,
                          'reacquired_outside_gate': 0, 'fixes_held_back': 0, 'calibrations': 0,
-                         'memory_updates': 0}
+                         'memory_updates': 0, 'numeric_failures': 0,
+                         'implausible_thrust': 0}
 
     @property
     def mode(self) -> OdometryMode:
@@ -214,6 +215,10 @@ class LfOdometry:
     def calibrated(self) -> bool:
         """True once the covariances come from a target comparison."""
         return bool(self._pose_cov)
+
+    def is_late(self, t: float) -> bool:
+        """True if an estimate for t would be older than one already given (``track`` refuses)."""
+        return self._t is not None and t <= self._t - 0.5 * self.sample_time
 
     def dead_reckoning_time(self, t: float) -> float:
         """Seconds since the last accepted fix (0 if tracking or never fixed)."""
@@ -234,7 +239,7 @@ class LfOdometry:
             raise ValueError(f'stamp must be finite, got {t}')
         if source not in SOURCES:
             raise ValueError(f'source must be one of {SOURCES}, got {source!r}')
-        if self._t is not None and t <= self._t - 0.5 * self.sample_time:
+        if self.is_late(t):
             raise ValueError(f'stamp {t} is older than the last one {self._t}: restart() first')
         z = self._measurement(pose)
         if self._x is None:
@@ -330,16 +335,31 @@ class LfOdometry:
                             [np.zeros((n, n)), np.diag(q_vel * 100.0)]])
         self._t = t
 
+    def _plausible(self, tau: FloatArray) -> FloatArray:
+        """The thrust clipped to what the vessel memory has seen (counted when clipped)."""
+        if self._memory is None:
+            return tau
+        clipped = self._memory.plausible_force(tau)
+        if not np.array_equal(clipped, tau):
+            self.counters['implausible_thrust'] += 1
+        return clipped
+
     def _predict_to(self, t: float, tau: FloatArray) -> None:
+        tau = self._plausible(tau)
         x = self._require_state()
         t_last = self._t if self._t is not None else t
         steps = max(1, int(round((t - t_last) / self.sample_time)))
         h = (t - t_last) / steps if t > t_last else 0.0
         n = self.ndof
-        for _ in range(steps):
-            a, b = self._transition(x, tau[:n], h)
-            x = a @ x + b
-            self._p = a @ self._p @ a.T + self._process_noise(h)
+        start, p_start = x, self._p
+        with np.errstate(over='ignore', invalid='ignore'):  # checked below
+            for _ in range(steps):
+                a, b = self._transition(x, tau[:n], h)
+                x = a @ x + b
+                self._p = a @ self._p @ a.T + self._process_noise(h)
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(self._p))):
+            self.counters['numeric_failures'] += 1  # absurd thrust: predict without it
+            x, self._p = start, p_start + self._process_noise(t - t_last)
         self._x, self._t = x, t
 
     def _correct(self, z: FloatArray) -> None:
@@ -394,6 +414,7 @@ class LfOdometry:
         return self._memory.reckoner if self._memory is not None else 'constant_velocity'
 
     def _dead_reckon_to(self, t: float, tau: FloatArray) -> None:
+        tau = self._plausible(tau)
         x = self._require_state()
         t_last = self._t if self._t is not None else t
         steps = max(1, int(round((t - t_last) / self.sample_time)))
@@ -402,10 +423,15 @@ class LfOdometry:
         memory = self._memory
         model = memory.model if memory is not None else None
         eta, nu = x[:n], x[n:]
-        for _ in range(steps):
-            a, _b = self._transition(x, tau[:n], h)
-            self._p = a @ self._p @ a.T + self._process_noise(h)
-            eta, nu = dead_reckon_step(model, self._reckoner(), eta, nu, tau[:n], h)
+        with np.errstate(over='ignore', invalid='ignore'):  # checked below
+            for _ in range(steps):
+                a, _b = self._transition(x, tau[:n], h)
+                self._p = a @ self._p @ a.T + self._process_noise(h)
+                eta, nu = dead_reckon_step(model, self._reckoner(), eta, nu, tau[:n], h)
+        if not (np.all(np.isfinite(eta)) and np.all(np.isfinite(nu))):
+            # an absurd (finite) thrust overflowed the model: hold the last finite pose
+            self.counters['numeric_failures'] += 1
+            eta, nu = x[:n], np.zeros(n)
         self._x, self._t = np.concatenate([eta, nu]), t
 
     def _dead_reckoned(self, t: float, elapsed: float) -> OdometryEstimate:

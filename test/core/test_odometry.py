@@ -171,3 +171,37 @@ def test_nees_of_a_known_covariance() -> None:
     np.testing.assert_allclose(normalized_error_squared(errors, covs), [1.0, 1.0])
     with pytest.raises(ValueError, match='covariance'):
         normalized_error_squared(errors, np.eye(2))
+
+
+def test_absurd_thrust_never_makes_the_state_non_finite() -> None:
+    """A finite but absurd force (1e308 N) through a learned model: counted, state stays finite."""
+    from lf_predictor_ros.core.lf_dynamics import LfDynamics
+
+    odo = LfOdometry(3, H)
+    _track_line(odo, 0.0, 0.0, 50)
+    model = LfDynamics(damping=-0.01 * np.eye(3), input_gain=1e-6 * np.eye(3),
+                       bias=np.zeros((3, 3)), residual_std=np.full(3, 1e-4))
+    memory = _hold_memory()
+    odo._memory = VesselMemory(model, 'model', memory.drift, {}, 'test',  # noqa: SLF001
+                               memory.accel_std, np.array([2e5, 2e5, 2e7]))
+    absurd = np.array([1e308, -1e308, 1e308])
+    out = odo.track(50.0, np.zeros(3), absurd)
+    assert out is not None and np.all(np.isfinite(out.twist))
+    for k in range(51, 60):
+        out = odo.coast(float(k), absurd)
+        assert out is not None and np.all(np.isfinite(out.pose))
+        assert np.all(np.isfinite(out.pose_cov))
+    # clipped to the force limit: at most 1e-6 · 2e5 = 0.2 m/s² for 10 s
+    assert abs(out.twist[0]) <= 2.0 + 1e-9 and abs(out.pose[0]) <= 20.0
+    assert odo.counters['implausible_thrust'] == 10
+    # with no limit the model overflows: the state falls back to the last finite pose
+    odo._memory = VesselMemory(model, 'model', memory.drift, {}, 'test',  # noqa: SLF001
+                               memory.accel_std)
+    huge_gain = LfDynamics(damping=-0.01 * np.eye(3), input_gain=1e300 * np.eye(3),
+                           bias=np.zeros((3, 3)), residual_std=np.full(3, 1e-4))
+    odo._memory = VesselMemory(huge_gain, 'model', memory.drift, {}, 'test',  # noqa: SLF001
+                               memory.accel_std)
+    out = odo.coast(61.0, absurd)
+    assert out is not None and np.all(np.isfinite(out.pose))
+    assert odo.counters['numeric_failures'] == 1
+    assert odo.is_late(50.0) and not odo.is_late(70.0)

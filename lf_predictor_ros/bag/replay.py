@@ -595,6 +595,8 @@ class _Replayer:
             verdict = self.checker.check_pose(t, pose, self.predictor.wave_peak_freq)
             if verdict.restart:
                 self._restart_data()
+            elif verdict.gap:
+                self.aligner.reset()  # a dropout is never bridged (as the node)
             if not verdict.accepted:
                 return
         for sample in self.aligner.add_pose(t, pose):

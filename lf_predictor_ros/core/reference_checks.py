@@ -43,7 +43,7 @@ Conventions: times [s] (message stamps, or the caller's clock for the dropout wa
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 import math
 from typing import Any, Literal
 
@@ -145,12 +145,15 @@ class Verdict:
 
     ``accepted``: pass it on (aligner / predictor). ``restart``: a fault was just detected whose
     detection delay let faulty samples through; drop the buffered data (new segment) before
-    anything else. ``fault``: the test that rejected it (None when accepted).
+    anything else. ``fault``: the test that rejected it (None when accepted). ``gap``: a stamp
+    gap longer than ``dropout_timeout`` (a dropout) precedes this pose: the caller must not
+    bridge it by interpolation (start a new data segment), so no made-up sample enters training.
     """
 
     accepted: bool
     restart: bool = False
     fault: str | None = None
+    gap: bool = False
 
 
 ACCEPT = Verdict(True)
@@ -215,7 +218,8 @@ class ReferenceChecker:
         if not self.settings.reference_checks:
             return ACCEPT
         pose = np.asarray(pose, dtype=np.float64)
-        if self._last_t is not None and t - self._last_t > self.settings.dropout_timeout:
+        gap = self._last_t is not None and t - self._last_t > self.settings.dropout_timeout
+        if gap:
             if not self._dropout_counted:  # a gap in the stamps the clock watch did not see
                 self.counters['dropout'] += 1
             self._block = []
@@ -223,6 +227,11 @@ class ReferenceChecker:
             self._pending = []
         self._dropout_counted = False
         self._last_t = t
+        verdict = self._check_pose_tests(t, pose, wave_peak_freq)
+        return replace(verdict, gap=True) if gap else verdict
+
+    def _check_pose_tests(self, t: float, pose: FloatArray,
+                          wave_peak_freq: float | None) -> Verdict:
         if self._drift:
             return self._reject('drift', 'drift latched: reference deselected until reset')
         restart = self._check_frozen(t, pose)

@@ -38,7 +38,8 @@ Position-reference checks (``core.reference_checks``, parameters ``reference_che
 before the aligner: a frozen, jumping or drifting reference is rejected (it never enters the
 aligner, the predictor or a training), a fault found after the fact drops the buffered data (new
 segment, a running training discarded; the network in service stays), and a pose silence longer
-than ``dropout_timeout`` on the node clock is a dropout. A drift latches until
+than ``dropout_timeout`` on the node clock is a dropout (counted once; the first pose after
+it starts a new data segment: a dropout is never bridged by interpolation). A drift latches until
 ``~/clear_reference_faults`` (or ``~/reset``).
 
 Default 3 DOF. With ``ndof`` 1 only north is estimated; east and yaw of ``lf_pose`` are the
@@ -76,9 +77,10 @@ activates at start, so ``ros2 run lf_predictor_ros predictor`` just works.
 
 Runtime parameter changes are validated (the reason of a rejection is returned) and applied as:
 - ``PredictorParams`` fields: the predictor is re-created with the new values (logged). When
-  neither the network structure (ndof, nu, ny, nfb, hidden_units, hidden_layers) nor
-  sample_time changes, the trained network and ω0 are carried over (warm start); otherwise it
-  starts cold. Collected data restarts in both cases (the next training needs a full window).
+  neither the network structure (ndof, nu, ny, nfb, hidden_units, hidden_layers,
+  regressor_frame) nor sample_time changes, the trained network and ω0 are carried over (warm
+  start); otherwise it starts cold. Collected data restarts in both cases (the next training
+  needs a full window).
 - aligner settings (max_gap, thrust_timeout, backward_jump, max_speed, average_poses): a new
   aligner, a new data segment. ``frame_id``: immediately.
 - reference-check settings (and ``ndof``): new checks with fresh statistics (counters kept).
@@ -148,7 +150,8 @@ if TYPE_CHECKING:  # torch is imported on configure, so --help and bad parameter
 
 NODE_NAME = 'predictor'
 # PredictorParams fields that change the network (or its time base): a change starts cold.
-STRUCTURE_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'sample_time')
+STRUCTURE_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'sample_time',
+                    'regressor_frame')
 NOTE_STRUCTURE = ' (run-time change: re-creates the predictor cold, data restarts)'
 NOTE_TUNING = (' (run-time change: re-creates the predictor keeping the trained network, '
                'data restarts)')
@@ -545,6 +548,8 @@ class PredictorNode(InputHealth, LifecycleNode):
         verdict = checker.check_pose(t, pose, predictor.wave_peak_freq)
         if verdict.restart:
             self._restart_data()
+        elif verdict.gap and self._aligner is not None:
+            self._aligner.reset()  # a dropout is never bridged: no made-up sample is trained on
         if verdict.fault is not None:
             self._log_fault(checker)
         return verdict.accepted

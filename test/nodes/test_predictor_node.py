@@ -434,3 +434,18 @@ def test_reference_faults_are_flagged_counted_and_kept_out_of_the_predictor(
         assert level == 'OK'  # the fault cleared; the 1-DOF vessel's east/yaw never move
     finally:
         node.destroy_node()
+
+
+def test_every_field_that_changes_the_network_restarts_cold() -> None:
+    """A field whose change alters the network spec must be a STRUCTURE_FIELDS entry.
+
+    Otherwise a run-time change would try to carry over a network that no longer fits, and fail.
+    """
+    from lf_predictor_ros.core.retraining import network_spec
+
+    base = PredictorParams()
+    changes = {'ndof': 1, 'nu': 3, 'ny': 5, 'nfb': 1, 'hidden_units': 3, 'hidden_layers': 2,
+               'regressor_frame': 'body'}
+    for name, value in changes.items():
+        assert network_spec(base.replace(**{name: value})) != network_spec(base), name
+        assert name in predictor_node.STRUCTURE_FIELDS, name

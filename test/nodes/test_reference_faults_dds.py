@@ -362,10 +362,6 @@ def test_one_dropout_is_counted_once(
 
 
 @pytest.mark.dds
-@pytest.mark.xfail(strict=True, reason=(
-    'samples interpolated by the aligner across a pose dropout (gap > dropout_timeout 3 s but '
-    '< max_gap 5 s) are fed to the predictor, so made-up wave motion enters the training '
-    'buffers although the node flagged and counted the dropout'))
 def test_no_sample_made_up_across_a_dropout_enters_training(
         ros_context: Context, executor: SingleThreadedExecutor, record: SimRecord) -> None:
     run = _dropout(ros_context, executor, record)

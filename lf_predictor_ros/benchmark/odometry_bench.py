@@ -555,7 +555,7 @@ def drift_table(cases: Sequence[dict[str, Any]]) -> str:
 def loop_table(cases: Sequence[dict[str, Any]]) -> str:
     """Markdown: the predictor loop with the finite-difference vs the lf_odom D term."""
     lines = ['| scenario | runs | D term | position RMSE [m] | heading RMSE [rad] | thrust '
-             'wave-band power (per DOF) | odom / FD position RMSE | stable runs |',
+             'wave-band power / FD loop (per DOF) | position RMSE / FD loop | stable runs |',
              '|---|---|---|---|---|---|---|---|']
     for scenario, group in _by_scenario(cases, 'closed_loop').items():
         n = group[0]['ndof']
@@ -564,7 +564,9 @@ def loop_table(cases: Sequence[dict[str, Any]]) -> str:
             head = [c['closed_loop'][loop].get('heading_rmse') or math.nan for c in group]
             power = []
             for dof in ('north', 'east', 'yaw')[:n]:
-                values = [c['closed_loop'][loop]['thrust_wave_band_power'][dof] for c in group]
+                values = [c['closed_loop'][loop]['thrust_wave_band_power'][dof]
+                          / c['closed_loop'][LOOP_FD]['thrust_wave_band_power'][dof]
+                          for c in group]
                 power.append(interval(values).cell(_fmt))
             ratio = [c['closed_loop'][loop]['position_rmse']
                      / c['closed_loop'][LOOP_FD]['position_rmse'] for c in group]

@@ -1,0 +1,329 @@
+"""Issue 14 "Done when": a DP controller on lf_odom (pose and twist) through a pose dropout.
+
+Closed loop over DDS, all nodes in this process on one executor: the simulator (supply vessel in
+DP, 1 Hz output, lockstep through the predictor as the demo runs it: ``lockstep_period`` =
+``lockstep_lead`` = h = 1 s), a relay on the position reference, the predictor (default 3 DOF,
+windows shortened so that several trainings, vessel-memory updates and calibrations happen
+before the dropout) and dp_controller with ``velocity_source: odometry`` (pose for P and I and
+twist for D, both from ``lf_odom``; ``lf_pose`` is not read). The relay drops the 30 poses stamped
+in [DROP_START, DROP_END) while the simulator keeps publishing thrust: the predictor must dead
+reckon on thrust and keep lf_odom coming, the controller must keep using its twist and the
+vessel must stay near the setpoint.
+
+Determinism: the relay waits for every running training and vessel-memory job before it forwards
+a pose (the executor is single-threaded, so the simulator waits too), as the other DDS tests
+wait. During the dropout the dead-reckoned lf_odom is stamped with the thrust stamp t_k (not
+t_k + h), so the controller's answer does not release the lockstep wait (stamped ≥ t_k + lead):
+each of those samples ends with a lockstep timeout and the simulator steps on with the answer it
+holds (that answer, computed from the estimate of t_k). ``lockstep_timeout`` is short for that.
+
+Bound on the excursion (horizontal distance of the true LF pose from the setpoint). Held on the
+truth, the PD part keeps the vessel within 3.8 m of the setpoint against the worst environmental
+forces of this scenario (test_nodes.py, closed-loop test); the controller here holds the
+*estimate* on the setpoint, so the truth is off by the estimate's error on top; the stated
+bound is 3.8 m throughout. Measured (seed 3): 9.0 m before, 16.9 m during and 91.6 m after the
+dropout: the loop runs away on the constant-velocity dead reckoning (xfail, with the evidence).
+"""
+# rclpy's Node, executor and lifecycle methods are untyped in Jazzy.
+# mypy: disable-error-code="no-untyped-call"
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Iterator
+import dataclasses
+import math
+from pathlib import Path
+import time
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from nav_msgs.msg import Odometry
+import numpy as np
+import pytest
+from rclpy import init
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.utilities import try_shutdown
+import torch
+import yaml
+
+from lf_predictor_ros.nodes.conversions import msg_to_pose, odometry_from_msg, stamp_to_ns
+from lf_predictor_ros.nodes.predictor_node import PredictorNode
+from sim_ros.nodes.dp_controller_node import DpControllerNode
+from sim_ros.nodes.simulator_node import SimulatorNode
+from sim_ros.simulation import REPO_ROOT
+
+NS_PER_S = 1_000_000_000  # [ns/s]
+SEED = 3
+DURATION = 270.0  # [s sim]
+DROP_START, DROP_END = 200.0, 230.0  # [s) poses stamped here never reach the predictor
+EXCURSION_BOUND = 3.8  # [m] horizontal, true LF pose from the setpoint (module docstring)
+WINDOWS: dict[str, Any] = {'retrain_period': 20.0, 'training_window': 200.0,
+                           'transient_length': 10.0, 'filter_window': 60.0,
+                           'append_length': 40.0, 'estimation_window': 600.0,
+                           'max_train_seconds': 10.0}
+WALL_LIMIT = 60.0  # [s wall] of the closed loop
+
+torch.set_num_threads(1)
+
+
+def _scenario_path(directory: Path) -> Path:
+    """supply_closed_loop at 1 Hz output (h of the predictor), no random sensor dropouts."""
+    source = REPO_ROOT / 'config' / 'scenarios' / 'supply_closed_loop.yaml'
+    scenario = yaml.safe_load(source.read_text())
+    scenario['sample_time'] = 1.0
+    scenario['sensors']['dropout_probability'] = 0.0
+    path = directory / 'supply_1hz.yaml'
+    path.write_text(yaml.safe_dump(scenario))
+    return path
+
+
+class Relay:
+    """raw_pose → measured_pose, dropping [DROP_START, DROP_END); waits for the jobs."""
+
+    def __init__(self, node: Node, predictor: PredictorNode) -> None:
+        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        self.predictor = predictor
+        self.forwarded: list[float] = []
+        self.dropped: list[float] = []
+        self.publisher = node.create_publisher(PoseStamped, 'measured_pose', qos)
+        self.subscription = node.create_subscription(PoseStamped, 'raw_pose', self.on_pose, qos)
+
+    def on_pose(self, msg: PoseStamped) -> None:
+        t = stamp_to_ns(msg.header.stamp) / NS_PER_S
+        if DROP_START <= t < DROP_END:
+            self.dropped.append(t)
+            return
+        state = self.predictor.state
+        predictor = self.predictor.predictor
+        assert state is not None and predictor is not None
+        assert predictor.wait_for_training(timeout=60.0), 'a training did not end in 60 s'
+        job = state._job  # the vessel-memory job
+        if job is not None:
+            job.result(timeout=60.0)
+        self.publisher.publish(msg)
+        self.forwarded.append(t)
+
+
+@dataclasses.dataclass(frozen=True)
+class Loop:
+    """What one closed-loop run left behind."""
+
+    wall: float
+    finished: bool
+    dropped: list[float]
+    forwarded: list[float]
+    odom: list[Odometry]
+    stamps: Any  # lf_odom stamps [s]
+    mode_at: dict[float, str]  # odometry mode when each lf_odom arrived
+    reports: list[Any]  # predictor DiagnosticStatus
+    values: list[dict[str, str]]  # their key values
+    controller_reports: list[dict[str, str]]
+    counters: dict[str, int]
+    velocity: dict[str, int]
+    commands: list[float]  # thrust_command stamps [s]
+    thrust: list[WrenchStamped]
+    truth: dict[float, Any]  # true LF pose by stamp
+    lockstep_timeouts: int
+
+
+@pytest.fixture(scope='module')
+def loop(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Loop]:
+    """Run the closed loop once (own context) and keep everything."""
+    scenario_path = _scenario_path(tmp_path_factory.mktemp('dropout'))
+    context = Context()
+    init(context=context)
+    executor = SingleThreadedExecutor(context=context)
+    try:
+        predictor = PredictorNode(context=context, parameter_overrides=[
+            Parameter(name, value=value) for name, value in
+            {**WINDOWS, 'diagnostics_period': 0.1}.items()])
+        controller = DpControllerNode(context=context, parameter_overrides=[
+            Parameter('scenario', value=str(scenario_path)),
+            Parameter('velocity_source', value='odometry')])
+        assert list(controller.config.setpoint) == [0.0, 0.0, 0.0]
+        assert controller.config.odom_topic == 'lf_odom'
+        probe = Node('dropout_probe', context=context)
+        relay = Relay(probe, predictor)
+        qos = QoSProfile(depth=10_000, reliability=ReliabilityPolicy.RELIABLE)
+        received: dict[str, list[Any]] = defaultdict(list)
+        modes: list[tuple[float, str]] = []
+
+        def on_odom(msg: Odometry) -> None:
+            received['lf_odom'].append(msg)
+            state = predictor.state
+            assert state is not None
+            modes.append((stamp_to_ns(msg.header.stamp) / NS_PER_S, state.odometry.mode))
+
+        probe.create_subscription(Odometry, 'lf_odom', on_odom, qos)
+        for topic, kind in (('truth/lf_pose', PoseStamped), ('thrust', WrenchStamped),
+                            ('thrust_command', WrenchStamped),
+                            ('/diagnostics', DiagnosticArray)):
+            probe.create_subscription(kind, topic, received[topic].append, qos)
+        for node in (predictor, controller, probe):
+            executor.add_node(node)
+        simulator = SimulatorNode(context=context, cli_args=[
+            '--ros-args', '-r', 'measured_pose:=raw_pose'], parameter_overrides=[
+            Parameter('scenario', value=str(scenario_path)), Parameter('seed', value=SEED),
+            Parameter('speed_factor', value=0.0), Parameter('lockstep', value=True),
+            Parameter('lockstep_period', value=1.0), Parameter('lockstep_lead', value=1.0),
+            Parameter('lockstep_timeout', value=0.25), Parameter('command_timeout', value=3.0),
+            Parameter('duration', value=DURATION)])
+        executor.add_node(simulator)
+        start = time.monotonic()
+        executor.spin_until_future_complete(simulator.done, timeout_sec=WALL_LIMIT + 30.0)
+        wall = time.monotonic() - start
+        end = time.monotonic() + 0.5
+        while time.monotonic() < end:  # drain the last messages and diagnostics
+            executor.spin_once(timeout_sec=0.02)
+        reports = [m.status[0] for m in received['/diagnostics']
+                   if m.status[0].name == 'predictor: lf predictor']
+        odom = list(received['lf_odom'])
+        yield Loop(
+            wall=wall, finished=simulator.done.done(), dropped=list(relay.dropped),
+            forwarded=list(relay.forwarded), odom=odom,
+            stamps=np.array([stamp_to_ns(m.header.stamp) / NS_PER_S for m in odom]),
+            mode_at=dict(modes), reports=reports,
+            values=[{kv.key: kv.value for kv in r.values} for r in reports],
+            controller_reports=[{kv.key: kv.value for kv in m.status[0].values}
+                                for m in received['/diagnostics']
+                                if m.status[0].name == 'dp_controller: pid'],
+            counters=dict(controller.counters), velocity=dict(controller.velocity_counters),
+            commands=[stamp_to_ns(m.header.stamp) / NS_PER_S
+                      for m in received['thrust_command']],
+            thrust=list(received['thrust']),
+            truth={stamp_to_ns(m.header.stamp) / NS_PER_S: msg_to_pose(m)
+                   for m in received['truth/lf_pose']},
+            lockstep_timeouts=simulator.lockstep_timeouts)
+    finally:
+        for node_ in list(executor.get_nodes()):
+            executor.remove_node(node_)
+            node_.destroy_node()
+        executor.shutdown()
+        try_shutdown(context=context)
+
+
+@pytest.mark.dds
+def test_dp_controller_on_lf_odom_holds_the_vessel_through_a_30_s_pose_dropout(
+        loop: Loop) -> None:
+    assert loop.finished, f'the simulator did not finish within {loop.wall:.0f} s'
+    print(f'closed loop through the dropout: {loop.wall:.1f} s wall for {DURATION:.0f} s sim')
+    assert loop.wall < WALL_LIMIT
+
+    # the relay really dropped 30 s of poses, and nothing else
+    assert loop.dropped == [float(t) for t in range(int(DROP_START), int(DROP_END))]
+    assert loop.forwarded[0] == 0.0 and loop.forwarded[-1] == DURATION
+    assert len(loop.forwarded) == DURATION + 1 - 30
+
+    # lf_odom throughout: at least one estimate every 2 s, dead reckoning in the dropout with a
+    # growing covariance, finite, in the body frame
+    stamps, mode_at = loop.stamps, loop.mode_at
+    assert np.all(np.diff(stamps) > 0.0)
+    assert np.max(np.diff(stamps)) <= 2.0 + 1e-9, 'a gap in lf_odom'
+    assert stamps[0] == 1.0 and stamps[-1] >= DURATION
+    inside = [t for t in stamps if DROP_START + 2.0 <= t < DROP_END]
+    assert inside == [float(t) for t in range(int(DROP_START) + 2, int(DROP_END))]
+    assert all(mode_at[t] == 'dead_reckoning' for t in inside), [mode_at[t] for t in inside]
+    assert all(mode_at[t] == 'tracking' for t in stamps if t <= DROP_START)
+    decoded = [odometry_from_msg(m) for m in loop.odom]  # raises on a non-finite value
+    assert {m.child_frame_id for m in loop.odom} == {'base_link_fsd'}
+    assert {m.header.frame_id for m in loop.odom} == {'map_ned'}
+    pose_var = {t: float(np.trace(d[1][:2, :2])) for t, d in zip(stamps, decoded, strict=True)}
+    variances = [pose_var[t] for t in inside]
+    assert all(b >= a for a, b in zip(variances, variances[1:], strict=False))
+    assert variances[-1] > 2.0 * variances[0], (variances[0], variances[-1])
+
+    # diagnostics: dead_reckoning (WARN) during the dropout, trained and calibrated before it
+    reckoning = [(r, v) for r, v in zip(loop.reports, loop.values, strict=True)
+                 if v['odom_mode'] == 'dead_reckoning']
+    assert reckoning and all(r.level[0] == 1 for r, _ in reckoning)
+    assert reckoning[0][0].message.startswith('dead_reckoning for ')
+    first = reckoning[0][1]
+    assert first['odom_calibrated'] == 'true' and first['vessel_memory'] == 'true'
+    assert int(first['trainings']) >= 3 and int(first['odom_calibrations']) >= 3
+    assert max(float(v['dead_reckoning_time']) for _, v in reckoning) >= 27.0
+    final = loop.values[-1]
+    assert int(final['callback_errors']) == 0 and int(final['odom_lost']) == 0
+
+    # the controller: every step took pose and twist from lf_odom, never the finite difference
+    assert loop.counters['poses'] == len(loop.odom), (loop.counters, len(loop.odom))
+    assert loop.counters['restarts'] == 0 and loop.counters['invalid_poses'] == 0
+    assert loop.velocity['twists_used'] == len(loop.odom), loop.velocity
+    assert loop.velocity['difference_steps'] == 0, loop.velocity
+    assert loop.velocity['twists_wrong_frame'] == 0 and loop.velocity['twists_nonfinite'] == 0
+    assert loop.commands == list(stamps)  # one command per lf_odom, with its stamp
+    assert loop.controller_reports
+    assert {v['d_term'] for v in loop.controller_reports[1:]} == {'odometry'}
+    assert {v['velocity_source'] for v in loop.controller_reports} == {'odometry'}
+
+    # thrust kept coming: the simulator stepped through the dropout on the held answers; each
+    # dead-reckoned answer (stamped t_k) released the lockstep only by its timeout
+    thrust_t = [stamp_to_ns(m.header.stamp) / NS_PER_S for m in loop.thrust]
+    assert thrust_t == [float(t) for t in range(int(DURATION) + 1)]
+    dead_reckoned = sum(1 for t in stamps if mode_at[t] == 'dead_reckoning')
+    # (+ the samples answered by nobody: the 2 s before dead reckoning starts, per episode,
+    # and an occasional wait longer than the timeout under load)
+    assert dead_reckoned <= loop.lockstep_timeouts <= dead_reckoned + 10, \
+        (loop.lockstep_timeouts, dead_reckoned)
+
+    # the thrust really held against the environment (the current alone: 90 m in 180 s)
+    assert np.abs(np.array([[m.wrench.force.x, m.wrench.force.y]
+                            for m in loop.thrust])).max() > 1e4
+
+
+@pytest.mark.dds
+@pytest.mark.xfail(strict=True, reason=(
+    'BUG (closed loop on dead reckoning): measured excursion of the true LF pose from the '
+    'setpoint 9.0 m before, 16.9 m during and 91.6 m after the dropout (bound 3.8 m). The '
+    'vessel memory chose the constant_velocity reckoner; the dead-reckoned twist stays frozen '
+    'at (-0.175, 0.167, 0) and the pose runs on at that rate whatever the thrust, so the PID '
+    'pushes the vessel the other way: true LF (10.6, -17.2) m vs lf_odom (-5.2, 6.0) m at '
+    't = 229 (28 m error after 30 s), still running away (62, -132) m at t = 270 (another run: '
+    '(62, -57) m; the runaway part depends on lockstep timeouts, i.e. load). Before the '
+    'dropout the loop on lf_odom already wanders 6-9 m (t = 100: truth (6.8, 4.3) m).'))
+def test_vessel_stays_near_the_setpoint_through_the_dropout(loop: Loop) -> None:
+    thrust_t = [stamp_to_ns(m.header.stamp) / NS_PER_S for m in loop.thrust]
+    assert sorted(loop.truth) == thrust_t
+    times = np.array(sorted(loop.truth))
+    lf = np.array([loop.truth[t] for t in times])
+    excursion = np.hypot(lf[:, 0], lf[:, 1])
+
+    def worst(a: float, b: float) -> float:
+        return float(excursion[(times >= a) & (times < b)].max())
+
+    before, during, after = (worst(0.0, DROP_START), worst(DROP_START, DROP_END),
+                             worst(DROP_END, DURATION + 1.0))
+    stamps = loop.stamps
+    last = odometry_from_msg(loop.odom[int(np.searchsorted(stamps, DROP_END - 1.0))])
+    drift = math.hypot(*(last[0][:2] - loop.truth[DROP_END - 1.0][:2]))
+    print(f'excursion before {before:.2f} m, during {during:.2f} m, after {after:.2f} m; '
+          f'dead-reckoning error at the end of the dropout {drift:.2f} m; lockstep timeouts '
+          f'{loop.lockstep_timeouts}')
+    assert max(before, during, after) < EXCURSION_BOUND, (before, during, after)
+    assert np.abs(lf[:, 2]).max() < 0.02  # yaw [rad] (truth-fed loop: < 0.01)
+
+
+@pytest.mark.dds
+@pytest.mark.xfail(strict=True, reason=(
+    'BUG (core.reference_checks.ReferenceChecker.check_sample): the drift test latches on a '
+    'healthy reference right after the dropout. Measured: drift mean (north, east) '
+    '(0.106, -0.180) m before it; the first checked sample after it (t = 231) has innovation '
+    '(0.235, -2.021) m against the first prediction of the restarted segment and enters the '
+    'exponential mean with weight dt / tau = (231 - 199) / 120 = 0.27 (dt is the stamp gap '
+    'across the dropout), so the mean jumps to -0.669 m east > 0.5 m: drift latched, every '
+    'later pose rejected (ref_rejected 40), the odometry dead reckons again from t = 233 to the '
+    'end (2 episodes, 39 s and rising) instead of tracking. The 2 m innovation comes from the '
+    'vessel running away at ~2.5 m/s (see the excursion test).'))
+def test_tracking_resumes_after_the_dropout(loop: Loop) -> None:
+    after = [t for t in loop.stamps if t >= DROP_END + 3.0]
+    modes = [loop.mode_at[t] for t in after]
+    final = loop.values[-1]
+    assert final['ref_faults'] == 'none' and int(final['ref_drift']) == 0, final['ref_faults']
+    assert modes and set(modes) == {'tracking'}, modes
+    assert final['odom_mode'] == 'tracking'
+    assert int(final['odom_dead_reckoning_episodes']) == 1
+    assert int(final['odom_reacquired']) == 1

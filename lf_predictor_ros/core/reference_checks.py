@@ -193,6 +193,7 @@ class ReferenceChecker:
         self._drift_mean: FloatArray | None = None
         self._drift_time = 0.0  # [s] integrated into the mean so far
         self._drift_last_t: float | None = None
+        self._drift_step = 0.0  # [s] spacing of the last ordinary checked sample
         self._drift = False
         self._events: dict[str, float] = {}  # fault → stamp of its last occurrence
         self._last_t: float | None = None
@@ -409,6 +410,11 @@ class ReferenceChecker:
         if self.ndof == 3:
             innovation[2] = wrap_angle(float(innovation[2]))
         dt = 0.0 if self._drift_last_t is None else max(0.0, t - self._drift_last_t)
+        if dt > self.settings.dropout_timeout:
+            # across a dropout the first sample counts as one ordinary sample, not as the whole
+            # gap (it would weigh one innovation, made right after a restart, as the mean)
+            dt = self._drift_step
+        self._drift_step = dt
         self._drift_last_t = t
         tau = self.settings.drift_time_constant
         if self._drift_mean is None:

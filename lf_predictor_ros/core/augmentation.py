@@ -22,6 +22,16 @@ Putting the motion over the whole wave band instead (from 0.25 rad/s) fought the
 ωLP: the candidate got worse on the real window and was rejected for up to a third of the
 retrainings (docs/BENCHMARKS.md, round 3).
 
+**LF-motion augmentation** (issue 13). In station keeping the window holds almost no LF motion,
+so nothing in it fixes how the learned filter responds to a moving vessel: a setpoint move or a
+turn shows up as a lag of the estimate (measured on rao_supply: 1.1 m during a 15 m move, 0.055
+rad in a 45° turn, against 0.07 m / 0.002 rad while holding position; docs/BENCHMARKS.md). A
+second copy of the window gets band-limited motion over ``LF_MOTION_BAND`` (below the DP control
+bandwidth, where a DP vessel's own LF motion lives) added to the positions *and* to the targets
+(through the target filter: ≈ 1 there), with a given RMS velocity per DOF: the fit is asked to
+pass LF motion without lag, as the targets do. The forces are unchanged (the synthetic motion
+plays the role of an unmeasured slow force such as current).
+
 Pure functions of numpy arrays; the random motion comes from a seeded generator, so a retraining
 is reproducible.
 """
@@ -35,6 +45,10 @@ from numpy.typing import NDArray
 from lf_predictor_ros.core.filters import frequency_response
 
 FloatArray = NDArray[np.float64]
+
+# Band of the synthetic LF motion [rad/s]: up to the usual DP control bandwidth ω_n ≈ 0.1 rad/s
+# (Fossen 2011 §12.2; the supply vessel's PID here: 0.1/0.1/0.2 rad/s, setpoint filter 10 s).
+LF_MOTION_BAND = (0.0, 0.1)
 
 
 def band_limited_motion(n_samples: int, channels: int, sample_time: float,
@@ -67,6 +81,23 @@ def band_limited_motion(n_samples: int, channels: int, sample_time: float,
     result: FloatArray = motion * np.where(level > 0.0, rms / np.where(level > 0.0, level, 1.0),
                                            0.0)
     return result
+
+
+def lf_motion(n_samples: int, sample_time: float, rms_velocity: FloatArray,
+              rng: np.random.Generator) -> FloatArray:
+    """Band-limited LF motion (n_samples, len(rms_velocity)) over ``LF_MOTION_BAND``.
+
+    Its finite-difference velocity has exactly ``rms_velocity`` RMS per channel (0: no motion).
+    """
+    speeds = np.asarray(rms_velocity, dtype=np.float64)
+    if speeds.ndim != 1 or not np.all(np.isfinite(speeds)) or np.any(speeds < 0.0):
+        raise ValueError(f'rms_velocity must be finite and ≥ 0 per channel, got {speeds}')
+    unit = band_limited_motion(n_samples, speeds.size, sample_time, LF_MOTION_BAND,
+                               np.ones(speeds.size), rng)
+    velocity = np.sqrt(np.mean((np.diff(unit, axis=0) / sample_time) ** 2, axis=0))
+    scaled: FloatArray = unit * np.where(velocity > 0.0, speeds / np.where(
+        velocity > 0.0, velocity, 1.0), 0.0)
+    return scaled
 
 
 def periodic_zero_phase(motion: FloatArray, sos: FloatArray, sample_time: float) -> FloatArray:

@@ -534,6 +534,25 @@ class _Recursion:
         return outputs
 
 
+def without_force_inputs(state: Mapping[str, torch.Tensor], spec: NnarmaxSpec,
+                         ) -> dict[str, torch.Tensor]:
+    """A copy of a network state whose force regressors have no effect at all.
+
+    The weights of the first hidden layer and of the linear bypass on the ``nu · n_inputs_u``
+    force columns are set to 0 and the force standardization to (0, 1): the network then gives
+    the same output for any thrust (used after training on zeroed forces, whose weights got no
+    gradient and would otherwise keep their random initial values).
+    """
+    columns = spec.nu * spec.n_inputs_u
+    new = {name: value.clone() for name, value in state.items()}
+    for name in ('hidden.0.weight', 'bypass.weight'):
+        if name in new:
+            new[name][:, :columns] = 0.0
+    new['u_mean'] = torch.zeros_like(new['u_mean'])
+    new['u_std'] = torch.ones_like(new['u_std'])
+    return new
+
+
 def _detached(tensor: torch.Tensor) -> FloatArray:
     """float64 numpy view of a tensor without gradient tracking."""
     array: FloatArray = tensor.detach().cpu().numpy()

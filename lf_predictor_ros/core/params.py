@@ -43,8 +43,8 @@ _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'tra
                   'filter_window', 'append_length')
 _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame')
-_BOOL_FIELDS = ('linear_init',)
-_TUPLE_FIELDS = ('wave_band', 'max_output_rate')
+_BOOL_FIELDS = ('linear_init', 'thrust_validation')
+_TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
 def _doc(doc: str, unit: str = '') -> dict[str, str]:
@@ -124,6 +124,18 @@ class PredictorParams:
         default=0.0, metadata=_doc('RMS of the synthetic wave-band motion in the wave-invariance '
                                    'copy of the training window, relative to the measured wave '
                                    'motion; 0 = no copy (core/augmentation.py)', ''))
+    thrust_validation: bool = field(
+        default=False, metadata=_doc(
+            'each retraining first tests on its window whether the thrust predicts the LF '
+            'motion (an LF model fitted with the thrust must dead-reckon the newest third better '
+            'than one fitted without it, core/lf_dynamics.py); if not, the network is trained '
+            'without the thrust regressors (their weights 0)'))
+    lf_augmentation: tuple[float, ...] = field(
+        default=(0.0, 0.0, 0.0), metadata=_doc(
+            'RMS velocity of the synthetic LF motion (below the DP bandwidth) added to the '
+            'positions and the targets of a copy of the training window, so the filter follows '
+            'LF motion (setpoint moves, turns) station keeping never showed it; 0 = no copy '
+            '(core/augmentation.py)', 'm/s, m/s, rad/s'))
     training_mode: str = field(
         default='series_parallel', metadata=_doc('series_parallel or parallel (BPTT)'))
     seed: int = field(default=0, metadata=_doc('seed of the network initialization'))
@@ -260,6 +272,13 @@ class PredictorParams:
                              f'rad/s] (0 = no limit), got {rates!r}')
         object.__setattr__(self, 'max_output_rate',
                            tuple(_finite_float('max_output_rate', rate) for rate in rates))
+        speeds = self.lf_augmentation
+        if isinstance(speeds, (str, bytes)) or not hasattr(speeds, '__len__') or \
+                len(speeds) != 3:
+            raise ValueError(f'lf_augmentation must be three numbers [north m/s, east m/s, yaw '
+                             f'rad/s] (0 = off), got {speeds!r}')
+        object.__setattr__(self, 'lf_augmentation',
+                           tuple(_finite_float('lf_augmentation', speed) for speed in speeds))
 
     def _check_positive(self) -> None:
         for name in ('sample_time', *_WINDOW_FIELDS, 'highpass_cutoff', 'notch_zeta',
@@ -273,6 +292,9 @@ class PredictorParams:
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')
+        if any(speed < 0.0 for speed in self.lf_augmentation):
+            raise ValueError(f'positivity rule: lf_augmentation must be ≥ 0 in every DOF (0 = '
+                             f'off), got {list(self.lf_augmentation)!r}')
         if any(rate < 0.0 for rate in self.max_output_rate):
             raise ValueError(f'positivity rule: max_output_rate must be ≥ 0 in every DOF (0 = no '
                              f'limit), got {list(self.max_output_rate)!r}')

@@ -184,6 +184,7 @@ class AdaptivePredictor:
         self._fb_next: int = -1
         self._wave_spread: FloatArray | None = None
         self._guard_trips = 0
+        self._no_thrust = 0  # accepted trainings whose thrust test failed (thrust_validation)
         self._smoothing = params.switch_blend_time > 0.0 or any(
             rate > 0.0 for rate in params.max_output_rate[:params.ndof])
         self._clear_output_state()
@@ -335,7 +336,7 @@ class AdaptivePredictor:
         return {'trainings': self._trainings, 'rejected_trainings': self._rejected,
                 'overruns': self._overruns, 'training_errors': self._errors,
                 'guard_trips': self._guard_trips,
-                'segments': self._segment}
+                'segments': self._segment, 'trainings_without_thrust': self._no_thrust}
 
     @property
     def source_switches(self) -> int:
@@ -665,6 +666,7 @@ class AdaptivePredictor:
         self._fallback.set_wave_peak_freq(result.frequency.wave_peak_freq)
         if result.accepted and result.model is not None:
             self._model, self._state_dict = result.model, result.state_dict
+            self._no_thrust += 0 if result.thrust_used else 1
             self._wave_spread = result.wave_spread
             self._model_time = t
             self._trainings += 1

@@ -27,12 +27,19 @@ import torch
 from lf_predictor_ros.core.augmentation import (
     augment_window,
     band_limited_motion,
+    lf_motion,
     periodic_zero_phase,
 )
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.filters import design_wave_filter, zero_phase
 from lf_predictor_ros.core.frequency import FrequencyEstimate, estimate_wave_peak_freq
-from lf_predictor_ros.core.network import NnarmaxNet, NnarmaxSpec, NumpyNnarmax
+from lf_predictor_ros.core.lf_dynamics import thrust_improves_dead_reckoning
+from lf_predictor_ros.core.network import (
+    NnarmaxNet,
+    NnarmaxSpec,
+    NumpyNnarmax,
+    without_force_inputs,
+)
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.targets import TargetWindow, training_mask
 from lf_predictor_ros.core.training import (
@@ -88,6 +95,34 @@ class RetrainResult:
     wave_spread: FloatArray | None = None
     baseline_loss: float | None = None
     retire_incumbent: bool = False
+    thrust_used: bool = True  # False: thrust_validation found no thrust information
+
+
+# Dead-reckoning horizon of the thrust test of ``thrust_validation`` [s] (the dead-reckoning
+# timeout of the odometry: the horizon over which a DP stack relies on the thrust model).
+THRUST_TEST_HORIZON = 120.0
+
+
+def thrust_predicts_motion(params: PredictorParams, u: FloatArray, targets: FloatArray,
+                           mask: NDArray[np.bool_]) -> bool:
+    """Does the thrust of this window predict its LF motion? (``thrust_validation``)
+
+    `lf_dynamics.thrust_improves_dead_reckoning`: the LF model ν̇ = Fν + Gτ + Bβ(ψ) fitted on
+    the older two thirds of the window's targets with the thrust must dead-reckon the newest
+    third better than the same model fitted without it. ``u`` holds the predictor's force
+    channels (earth frame for 3 DOF: turned back to the body with the targets' heading).
+    """
+    keep = np.flatnonzero(mask)
+    if keep.size < 3:
+        return True
+    end = int(keep[-1]) + 1
+    eta = targets[:end]
+    forces = np.array(u[:end], dtype=np.float64)
+    if params.ndof == 3:
+        c, s = np.cos(eta[:, 2]), np.sin(eta[:, 2])
+        forces = np.stack([c * forces[:, 0] + s * forces[:, 1],
+                           -s * forces[:, 0] + c * forces[:, 1], forces[:, 2]], axis=1)
+    return thrust_improves_dead_reckoning(eta, forces, params.sample_time, THRUST_TEST_HORIZON)
 
 
 def network_spec(params: PredictorParams) -> NnarmaxSpec:
@@ -238,11 +273,17 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
     else:
         net = NnarmaxNet.from_state(spec, incumbent)
     settings = train_settings(params)
-    result = train(net, *training_data(params, snapshot, u, y, t_values, mask, spread,
+    thrust_used = not params.thrust_validation or params.nu == 0 or \
+        thrust_predicts_motion(params, u, t_values, mask)
+    u_fit = u if thrust_used else np.zeros_like(u)
+    result = train(net, *training_data(params, snapshot, u_fit, y, t_values, mask, spread,
                                        frequency.wave_peak_freq),
                    settings, stop_event=stop_event)
-    loss = result.loss if params.wave_augmentation == 0.0 else \
-        evaluate_loss(result.state_dict, spec, u, y, t_values, mask, settings.mode)
+    if not thrust_used:
+        result = replace(result, state_dict=without_force_inputs(result.state_dict, spec))
+    augmented = params.wave_augmentation > 0.0 or any(v > 0.0 for v in params.lf_augmentation)
+    loss = evaluate_loss(result.state_dict, spec, u, y, t_values, mask, settings.mode) \
+        if augmented else result.loss
     incumbent_loss = None
     if incumbent is not None:
         incumbent_loss = evaluate_loss(incumbent, spec, u, y, t_values, mask, settings.mode)
@@ -261,31 +302,49 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
                          loss=loss, incumbent_loss=incumbent_loss, accepted=accepted,
                          reason=reason, seconds=time.monotonic() - start, epochs=result.epochs,
                          wave_spread=spread, baseline_loss=baseline,
-                         retire_incumbent=retire)
+                         retire_incumbent=retire, thrust_used=thrust_used)
 
 
 def training_data(params: PredictorParams, snapshot: Snapshot, u: FloatArray, y: FloatArray,
                   targets: FloatArray, mask: NDArray[np.bool_], spread: FloatArray,
                   wave_peak_freq: float,
                   ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
-    """What the trainer fits: the window, plus its wave-invariance copy when enabled.
+    """What the trainer fits: the window, plus its augmentation copies when enabled.
 
     ``params.wave_augmentation`` > 0 appends the copy of `augmentation.augment_window`: synthetic
     motion over [ωLP, Nyquist] with ``wave_augmentation`` × the window's wave spread (its
     measured WF RMS) per DOF added to y, and its zero-phase target-filter output added to the
-    targets. The generator is seeded by the predictor seed, the segment and the sample index, so
-    a replay trains on the same data.
+    targets. ``params.lf_augmentation`` > 0 (any DOF) appends a copy with LF motion
+    (`augmentation.lf_motion`, that RMS velocity per DOF) added to y and, through the target
+    filter, to the targets. The generator is seeded by the predictor seed, the segment and the
+    sample index, so a replay trains on the same data.
     """
-    if params.wave_augmentation == 0.0 or not np.all(np.isfinite(spread)):
-        return u, y, targets, mask
     rng = np.random.default_rng([params.seed, snapshot.segment, snapshot.end_index])
-    motion = band_limited_motion(len(y), y.shape[1], params.sample_time,
-                                 (params.lowpass_cutoff(wave_peak_freq), params.nyquist_freq),
-                                 params.wave_augmentation * spread, rng)
-    return augment_window(u, y, targets, mask, motion,
-                          periodic_zero_phase(motion, target_filter(params, wave_peak_freq),
-                                              params.sample_time),
-                          params.max_lag + 1)
+    sos = target_filter(params, wave_peak_freq)
+    guard = params.max_lag + 1
+    parts = [(u, y, targets, mask)]
+    if params.wave_augmentation > 0.0 and np.all(np.isfinite(spread)):
+        motion = band_limited_motion(len(y), y.shape[1], params.sample_time,
+                                     (params.lowpass_cutoff(wave_peak_freq),
+                                      params.nyquist_freq),
+                                     params.wave_augmentation * spread, rng)
+        parts.append(_copy(augment_window(u, y, targets, mask, motion, periodic_zero_phase(
+            motion, sos, params.sample_time), guard), len(y)))
+    speeds = np.array(params.lf_augmentation[:y.shape[1]])
+    if np.any(speeds > 0.0):
+        motion = lf_motion(len(y), params.sample_time, speeds, rng)
+        parts.append(_copy(augment_window(u, y, targets, mask, motion, periodic_zero_phase(
+            motion, sos, params.sample_time), guard), len(y)))
+    if len(parts) == 1:
+        return u, y, targets, mask
+    return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
+            np.concatenate([p[2] for p in parts]), np.concatenate([p[3] for p in parts]))
+
+
+def _copy(window: tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]], n: int,
+          ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
+    """The appended copy of an `augment_window` result (its second half)."""
+    return window[0][n:], window[1][n:], window[2][n:], window[3][n:]
 
 
 def cascade_loss(params: PredictorParams, y: FloatArray, targets: FloatArray,

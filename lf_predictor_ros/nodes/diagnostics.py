@@ -119,6 +119,7 @@ def predictor_values(status: EstimatorStatus,
         'training_errors': int(counters.get('training_errors', 0)),
         'guard_trips': int(counters.get('guard_trips', 0)),
         'segments': int(counters.get('segments', 0)),
+        'trainings_without_thrust': int(counters.get('trainings_without_thrust', 0)),
     }
 
 

@@ -19,8 +19,8 @@ unwrapped, central differences).
    fraction of runs inside their interval and the mean over runs with its Student-t 95 %
    interval. Note: for Gaussian x the variance of the mean of x² involves Σρ², not Σρ; with
    ρ of x (as stated here) the bounds are up to √2 wider than that Gaussian value for slowly
-   decorrelating errors, so they are on the lenient side; ``inside_rho2`` reports the fraction
-   with N_eff from ρ² as well.
+   decaying positive correlation (narrower where ρ oscillates); ``inside_rho2`` reports the
+   verdict with N_eff from ρ² as well.
 2. **Twist accuracy** (same run): RMSE per DOF of the published twist against the true LF body
    velocity, next to the zero estimate (RMS of the true velocity) and the PID's own velocity:
    the filtered finite difference (T_v = ``VELOCITY_FILTER_TIME`` = 1 s, one step per h, earth

@@ -94,6 +94,11 @@ class OdometryParams:
     prior_accel_std: tuple[float, ...] = field(default=(0.005, 0.005, 5e-5), metadata=field_doc(
         'LF acceleration std of the constant-velocity Kalman model (before a vessel model)',
         'm/s², m/s², rad/s²'))
+    twist_bandwidth: float = field(default=0.5, metadata=field_doc(
+        'bandwidth ω of the twist Kalman filter: velocity process noise q = r ω⁴ per DOF (r the '
+        'pose error variance), a 2nd-order velocity estimate with ω_n = ω, ζ = 0.71; keep it '
+        'well above the DP control bandwidth (a slow twist delays the D term); 0 = process '
+        'noise from the LF acceleration of the targets', 'rad/s'))
     reacquire_gate: float = field(default=CHI2_3DOF_999, metadata=field_doc(
         'a fix within this squared Mahalanobis distance of the dead-reckoned pose is accepted '
         'at once', ''))
@@ -112,7 +117,7 @@ class OdometryParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'{name} must be a positive finite number, got {value}')
-        for name in ('reacquire_time', 'reacquire_blend_time'):
+        for name in ('reacquire_time', 'reacquire_blend_time', 'twist_bandwidth'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f'{name} must be a finite number >= 0 s, got {value}')
@@ -393,6 +398,12 @@ class LfOdometry:
     def _process_noise(self, h: float) -> FloatArray:
         n = self.ndof
         memory = self._memory
+        bandwidth = self.params.twist_bandwidth
+        if bandwidth > 0.0:  # steady-state KF of a double integrator: ω_n = (q / r)^(1/4)
+            accel_var = np.diag(self._measurement_cov()) * bandwidth ** 4
+            q = np.zeros((2 * n, 2 * n))
+            q[n:, n:] = np.diag(accel_var * h)
+            return q
         if memory is not None and memory.reckoner == 'model' and memory.model is not None:
             accel_var = memory.model.residual_std ** 2 + 1e-12
         elif memory is not None:

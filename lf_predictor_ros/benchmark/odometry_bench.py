@@ -378,6 +378,7 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                            'duration': total, 'warmup': float(data['t'][begin]),
                            'pose_cov_scale': odometry.pose_cov_scale,
                            'twist_cov_scale': odometry.twist_cov_scale,
+                           'twist_bandwidth': odometry.twist_bandwidth,
                            'dead_reckoning_timeout': odometry.dead_reckoning_timeout,
                            'recording': recording.provenance.to_dict()}
     if tracking:
@@ -400,6 +401,7 @@ class OdometrySpec:
     duration: float | None = DEFAULT_DURATION
     pose_cov_scale: float | None = None  # None: the OdometryParams default
     twist_cov_scale: float | None = None
+    twist_bandwidth: float | None = None
     loops: bool = True
     dead_reckoning: bool = True
     tracking: bool = True
@@ -413,7 +415,8 @@ class OdometrySpec:
     def __hash__(self) -> int:
         """Hash of the printable fields."""
         return hash((self.scenario, self.seed, self.duration, self.pose_cov_scale,
-                     self.twist_cov_scale, self.loops, self.dead_reckoning, self.tracking,
+                     self.twist_cov_scale, self.twist_bandwidth, self.loops,
+                     self.dead_reckoning, self.tracking,
                      tuple(sorted(self.params_overrides.items()))))
 
 
@@ -427,6 +430,8 @@ def run_spec(spec: OdometrySpec) -> dict[str, Any]:
         values['pose_cov_scale'] = spec.pose_cov_scale
     if spec.twist_cov_scale is not None:
         values['twist_cov_scale'] = spec.twist_cov_scale
+    if spec.twist_bandwidth is not None:
+        values['twist_bandwidth'] = spec.twist_bandwidth
     return run_odometry_case(spec.scenario, spec.seed, spec.duration,
                              odometry=OdometryParams(**values),  # type: ignore[arg-type]
                              params_overrides=dict(spec.params_overrides) or None,
@@ -461,11 +466,18 @@ def calibrate(cases: Sequence[dict[str, Any]]) -> dict[str, float]:
 
 def _by_scenario(cases: Sequence[dict[str, Any]], key: str | None = None,
                  ) -> dict[str, list[dict[str, Any]]]:
-    """Cases by scenario (those with ``key`` only, if given)."""
+    """Cases by scenario (those with ``key`` only, if given).
+
+    Cases of several ``twist_bandwidth`` values are grouped per scenario and bandwidth.
+    """
+    several = len({case.get('twist_bandwidth') for case in cases}) > 1
     groups: dict[str, list[dict[str, Any]]] = {}
     for case in cases:
         if key is None or key in case:
-            groups.setdefault(case['scenario'], []).append(case)
+            label = case['scenario']
+            if several:
+                label += f' (twist_bandwidth {case.get("twist_bandwidth")})'
+            groups.setdefault(label, []).append(case)
     return groups
 
 
@@ -603,6 +615,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     run.add_argument('--duration', type=float, default=DEFAULT_DURATION, help='simulated s')
     run.add_argument('--pose-cov-scale', type=float, default=None)
     run.add_argument('--twist-cov-scale', type=float, default=None)
+    run.add_argument('--twist-bandwidth', nargs='+', type=float, default=[None],
+                     help='twist Kalman filter bandwidth(s) [rad/s] (default: the '
+                     'OdometryParams default); several: every case once per value')
     run.add_argument('--no-loops', action='store_true', help='skip the closed loops (item 4)')
     run.add_argument('--loop-seeds', nargs='*', type=int, default=None,
                      help='run the closed loops only for these seeds (default: every seed)')
@@ -623,8 +638,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             os.environ.setdefault(name, '1')
         loop_seeds = set(args.seeds if args.loop_seeds is None else args.loop_seeds)
         specs = [OdometrySpec(s, seed, args.duration, args.pose_cov_scale, args.twist_cov_scale,
-                              not args.no_loops and seed in loop_seeds,
+                              bandwidth, not args.no_loops and seed in loop_seeds,
                               not args.no_dead_reckoning, not args.no_tracking)
+                 for bandwidth in args.twist_bandwidth
                  for s in args.scenarios for seed in args.seeds]
         results = run_specs(specs, args.scheduler, args.workers)
         with open(args.output, 'w', encoding='utf-8') as stream:

@@ -86,7 +86,7 @@ class OdometryParams:
         'published pose covariance = this × mean (estimate − target)² (calibrated against the '
         'truth on tuning seeds 1–2 of four vessels so that the mean NEES is 1, the geometric '
         'mean of the per-DOF mean NEES; docs/BENCHMARKS.md, issue 14)', ''))
-    twist_cov_scale: float = field(default=0.795, metadata=field_doc(
+    twist_cov_scale: float = field(default=0.58, metadata=field_doc(
         'published twist covariance = this × mean (twist − target velocity)² (calibrated as '
         'pose_cov_scale)', ''))
     prior_pose_std: tuple[float, ...] = field(default=(0.5, 0.5, 0.01), metadata=field_doc(
@@ -94,11 +94,12 @@ class OdometryParams:
     prior_accel_std: tuple[float, ...] = field(default=(0.005, 0.005, 5e-5), metadata=field_doc(
         'LF acceleration std of the constant-velocity Kalman model (before a vessel model)',
         'm/s², m/s², rad/s²'))
-    twist_bandwidth: float = field(default=0.5, metadata=field_doc(
+    twist_bandwidth: float = field(default=1.0, metadata=field_doc(
         'bandwidth ω of the twist Kalman filter: velocity process noise q = r ω⁴ per DOF (r the '
         'pose error variance), a 2nd-order velocity estimate with ω_n = ω, ζ = 0.71; keep it '
-        'well above the DP control bandwidth (a slow twist delays the D term); 0 = process '
-        'noise from the LF acceleration of the targets', 'rad/s'))
+        'well above the DP control bandwidth (a slow twist delays the D term; 1.0 chosen from '
+        '0.3 / 0.5 / 1.0 by the D-term loops on tuning seeds 1–2, docs/BENCHMARKS.md); 0 = '
+        'process noise from the LF acceleration of the targets', 'rad/s'))
     reacquire_gate: float = field(default=CHI2_3DOF_999, metadata=field_doc(
         'a fix within this squared Mahalanobis distance of the dead-reckoned pose is accepted '
         'at once', ''))

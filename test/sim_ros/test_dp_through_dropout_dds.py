@@ -21,8 +21,9 @@ Bound on the excursion (horizontal distance of the true LF pose from the setpoin
 truth, the PD part keeps the vessel within 3.8 m of the setpoint against the worst environmental
 forces of this scenario (test_nodes.py, closed-loop test); the controller here holds the
 *estimate* on the setpoint, so the truth is off by the estimate's error on top; the stated
-bound is 3.8 m throughout. Measured (seed 3): 9.0 m before, 16.9 m during and 91.6 m after the
-dropout: the loop runs away on the constant-velocity dead reckoning (xfail, with the evidence).
+bound is 3.8 m throughout. Measured (seed 3, twist_bandwidth 1.0): 1.7-4.1 m before, 15.7-19.4 m
+during and 42-46 m after the dropout: the loop runs away on the dead reckoning (xfail, with the
+evidence; 3.9 / 2.4 / 7.0 m at twist_bandwidth 0.5).
 """
 # rclpy's Node, executor and lifecycle methods are untyped in Jazzy.
 # mypy: disable-error-code="no-untyped-call"
@@ -277,14 +278,12 @@ def test_dp_controller_on_lf_odom_holds_the_vessel_through_a_30_s_pose_dropout(
 
 @pytest.mark.dds
 @pytest.mark.xfail(strict=True, reason=(
-    'BUG (closed loop on dead reckoning): measured excursion of the true LF pose from the '
-    'setpoint 9.0 m before, 16.9 m during and 91.6 m after the dropout (bound 3.8 m). The '
-    'vessel memory chose the constant_velocity reckoner; the dead-reckoned twist stays frozen '
-    'at (-0.175, 0.167, 0) and the pose runs on at that rate whatever the thrust, so the PID '
-    'pushes the vessel the other way: true LF (10.6, -17.2) m vs lf_odom (-5.2, 6.0) m at '
-    't = 229 (28 m error after 30 s), still running away (62, -132) m at t = 270 (another run: '
-    '(62, -57) m; the runaway part depends on lockstep timeouts, i.e. load). Before the '
-    'dropout the loop on lf_odom already wanders 6-9 m (t = 100: truth (6.8, 4.3) m).'))
+    'BUG (closed loop on dead reckoning): measured at twist_bandwidth 1.0 (035eb44, 3 runs) '
+    'excursion of the true LF pose from the setpoint 1.7-4.1 m before, 15.7-19.4 m during '
+    'and 42-46 m after the dropout (bound 3.8 m); dead-reckoning error at the end of the '
+    'dropout 21-26 m: the loop runs away on the dead-reckoned lf_odom. At twist_bandwidth 0.5 '
+    '(b9ea25d, 1 run): 3.9 / 2.4 / 7.0 m, error 2.8 m. Before f42d74e: 9.0 / 16.9 / 91.6 m '
+    '(constant_velocity reckoner with a frozen twist). Mechanism at 1.0 not re-analysed.'))
 def test_vessel_stays_near_the_setpoint_through_the_dropout(loop: Loop) -> None:
     thrust_t = [stamp_to_ns(m.header.stamp) / NS_PER_S for m in loop.thrust]
     assert sorted(loop.truth) == thrust_t
@@ -309,15 +308,11 @@ def test_vessel_stays_near_the_setpoint_through_the_dropout(loop: Loop) -> None:
 
 @pytest.mark.dds
 @pytest.mark.xfail(strict=True, reason=(
-    'BUG (core.reference_checks.ReferenceChecker.check_sample): the drift test latches on a '
-    'healthy reference right after the dropout. Measured: drift mean (north, east) '
-    '(0.106, -0.180) m before it; the first checked sample after it (t = 231) has innovation '
-    '(0.235, -2.021) m against the first prediction of the restarted segment and enters the '
-    'exponential mean with weight dt / tau = (231 - 199) / 120 = 0.27 (dt is the stamp gap '
-    'across the dropout), so the mean jumps to -0.669 m east > 0.5 m: drift latched, every '
-    'later pose rejected (ref_rejected 40), the odometry dead reckons again from t = 233 to the '
-    'end (2 episodes, 39 s and rising) instead of tracking. The 2 m innovation comes from the '
-    'vessel running away at ~2.5 m/s (see the excursion test).'))
+    'measured at twist_bandwidth 1.0 (035eb44): final ref_faults "drift": the drift test '
+    'latches after the dropout and tracking does not resume. The latch of the old code (the '
+    'first sample after the gap weighed the whole gap) was fixed in 87a2b3d; here the vessel '
+    'really runs away during dead reckoning (excursion test: 42-46 m after the dropout). At '
+    'twist_bandwidth 0.5 (b9ea25d) this test passed (strict XPASS).'))
 def test_tracking_resumes_after_the_dropout(loop: Loop) -> None:
     after = [t for t in loop.stamps if t >= DROP_END + 3.0]
     modes = [loop.mode_at[t] for t in after]

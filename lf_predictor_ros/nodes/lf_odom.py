@@ -8,9 +8,12 @@ ROS-free glue shared by the predictor node and ``replay`` so both publish the sa
   ``lf_pose`` and ``lf_odom``. While tracking its pose is the predictor's LF pose, bit for bit.
 - **dead reckoning**: a thrust message stamped more than ``dead_reckoning_after`` after the last
   sample that went to ``update`` (poses silent, or rejected by the checks) calls
-  ``LfStateEstimator.coast`` at the thrust stamp, at most once per ``sample_time``. Its estimate
-  is published the same way. ``coast`` returns None once ``dead_reckoning_timeout`` has passed
-  (mode 'lost'): nothing is published.
+  ``LfStateEstimator.coast`` for the thrust stamp + ``sample_time`` (the thrust held over the
+  next sample; the stamp rule of every estimate: the time it is valid for, so a lockstep
+  simulator is answered as while tracking), at most once per ``sample_time``. Its estimate is
+  published the same way. The first tracked estimate after a dropout may repeat the stamp of
+  the last dead-reckoned one (same instant, from the pose): it supersedes it. ``coast`` returns
+  None once ``dead_reckoning_timeout`` has passed (mode 'lost'): nothing is published.
 - **reacquisition**: the first samples after the dropout go through ``update`` like any other,
   so the odometry's plausibility gate and reacquire blend apply (a new data segment restarts the
   predictor's segment; the odometry keeps its state across it).
@@ -116,12 +119,13 @@ class OdomDriver:
         if self._last_coast_t is not None and \
                 t < self._last_coast_t + self.sample_time - STAMP_EPS:
             return None
-        if self._odom_stamp is not None and t <= self._odom_stamp:
+        stamp = t + self.sample_time  # valid for t + h, like every tracked estimate
+        if self._odom_stamp is not None and stamp <= self._odom_stamp:
             return None
         self._last_coast_t = t
         self.counters['coasts'] += 1
-        estimate = self.state.coast(t, force)
-        self._odom_stamp = t
+        estimate = self.state.coast(stamp, force)
+        self._odom_stamp = stamp
         return estimate
 
     # ---- diagnostics ---------------------------------------------------------------------

@@ -16,8 +16,9 @@ restarts the predictor's segment; the trained network stays, and so does the odo
 
 Dead reckoning (``nodes.lf_odom.OdomDriver``): when no sample has gone to the predictor for more
 than ``dead_reckoning_after`` (0 = 2 × sample_time) of thrust stamps (poses silent, or rejected
-by the position-reference checks) while thrust keeps coming, ``LfStateEstimator.coast`` runs at
-the thrust stamp (at most once per sample_time) and its estimate is published on ``lf_pose`` and
+by the position-reference checks) while thrust keeps coming, ``LfStateEstimator.coast`` runs for
+the thrust stamp + sample_time (at most once per sample_time; the stamp rule of every estimate)
+and its estimate is published on ``lf_pose`` and
 ``lf_odom`` with a pose covariance growing with the elapsed time (state ``dead_reckoning``, WARN).
 After ``dead_reckoning_timeout`` without an accepted fix nothing is published (state ``lost``,
 ERROR) rather than a guess. The first samples after the dropout go through ``update``: the

@@ -541,7 +541,8 @@ def test_a_pose_gap_restarts_the_segment(work: Path, record: SimRecord,
     """No pose for 10 s (> max_gap 5 s): the aligner restarts, the predictor gets a new segment.
 
     Thrust goes on: from 2 s (dead_reckoning_after = 2 × sample_time) after the last sample
-    the estimate is dead-reckoned at the thrust stamps, one per second, until the poses return.
+    the estimate is dead-reckoned for each thrust stamp + 1 s (the time it is valid for), one per
+    second, until the poses return.
     """
     bag = work / 'gap.mcap'
     with BagWriter(bag) as writer:
@@ -555,9 +556,11 @@ def test_a_pose_gap_restarts_the_segment(work: Path, record: SimRecord,
     output = work / 'gap_out.mcap'
     assert run_replay(bag, '-o', output, '--params-file', params_file)[0] == 0
     lf = _lf(output)
-    np.testing.assert_allclose(lf.stamp, np.r_[2.0:22.0, 23.0:62.0], atol=1e-9)
+    # the first tracked estimate (pose of 31 s, valid at 32 s) repeats the stamp of the last
+    # dead-reckoned one (thrust of 31 s) and supersedes it
+    np.testing.assert_allclose(lf.stamp, np.r_[2.0:22.0, 24.0:33.0, 32.0:62.0], atol=1e-9)
     records = read_diagnostics(output)
-    during = [v for t, _, v in records if 23.0 <= t <= 30.0]
+    during = [v for t, _, v in records if 24.0 <= t <= 31.0]
     assert during and {v['odom_mode'] for v in during} == {'dead_reckoning'}
     last = records[-1][2]
     # the reference checks see the dropout (counted once) and the aligner restarts before it

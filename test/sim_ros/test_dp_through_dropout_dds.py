@@ -278,7 +278,8 @@ def test_dp_controller_on_lf_odom_holds_the_vessel_through_a_30_s_pose_dropout(
 
 @pytest.mark.dds
 @pytest.mark.xfail(strict=True, reason=(
-    'BUG (closed loop on dead reckoning): measured at twist_bandwidth 1.0 (035eb44, 3 runs) '
+    'BUG (closed loop on dead reckoning): measured at twist_bandwidth 1.0 (035eb44 3 runs, '
+    '2bd8fb9 1 run) '
     'excursion of the true LF pose from the setpoint 1.7-4.1 m before, 15.7-19.4 m during '
     'and 42-46 m after the dropout (bound 3.8 m); dead-reckoning error at the end of the '
     'dropout 21-26 m: the loop runs away on the dead-reckoned lf_odom. At twist_bandwidth 0.5 '

@@ -8,7 +8,8 @@ thrust, and gives an ``OdometryEstimate``:
 - **pose**: the predictor's LF pose itself while tracking (``lf_odom`` and ``lf_pose`` agree);
 - **twist**: the body-frame LF velocity ν = [u, v, r] of a Kalman filter on state [η, ν] whose
   measurement is the LF pose and whose process model is the learned vessel memory
-  (``core.lf_dynamics``) when the data chose it, else constant velocity;
+  (``core.lf_dynamics``) when the data chose it, else constant velocity; its bandwidth is
+  ``twist_bandwidth`` (a D term needs a timely velocity more than a smooth one);
 - **covariances, calibrated empirically**: every retraining brings new zero-phase targets (an LF
   pose series of the past, thesis §4.2.2). The pose and twist actually published are compared
   with them (twist: with the targets' differentiated body velocity), separately for samples
@@ -18,8 +19,10 @@ thrust, and gives an ``OdometryEstimate``:
   Kalman filter's velocity covariance stand in and ``calibrated`` is False;
 - **dead reckoning**: when poses stop or are rejected while thrust keeps coming (``coast``), the
   state is integrated with the dead reckoner the vessel memory chose (learned model, constant
-  velocity or hold) and the applied thrust. The pose continues from the last published pose (no
-  step); its covariance is the last tracking covariance + the drift variance measured by the
+  velocity or hold) and the applied thrust, starting from the twist low-passed over
+  ``dead_reckoning_velocity_time`` (a DP loop acts against the velocity it is shown, so a frozen
+  wave-band twist would push the vessel away). The pose continues from the last published pose
+  (no step); its covariance is the last tracking covariance + the drift variance measured by the
   vessel memory's own dead-reckoning tests at the elapsed time + the velocity uncertainty
   propagated (elapsed² · R Σ_ν Rᵀ). After ``dead_reckoning_timeout`` nothing is published (mode
   'lost'): no guesses;
@@ -100,6 +103,10 @@ class OdometryParams:
         'well above the DP control bandwidth (a slow twist delays the D term; 1.0 chosen from '
         '0.3 / 0.5 / 1.0 by the D-term loops on tuning seeds 1–2, docs/BENCHMARKS.md); 0 = '
         'process noise from the LF acceleration of the targets', 'rad/s'))
+    dead_reckoning_velocity_time: float = field(default=30.0, metadata=field_doc(
+        'dead reckoning starts from the twist averaged over this time (first-order low-pass), '
+        'not from the last twist: a DP loop acts against any velocity it sees, so a frozen '
+        'wave-band twist would drive the vessel away while the poses are missing', 's'))
     reacquire_gate: float = field(default=CHI2_3DOF_999, metadata=field_doc(
         'a fix within this squared Mahalanobis distance of the dead-reckoned pose is accepted '
         'at once', ''))
@@ -118,6 +125,10 @@ class OdometryParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'{name} must be a positive finite number, got {value}')
+        if not (math.isfinite(self.dead_reckoning_velocity_time) and
+                self.dead_reckoning_velocity_time > 0.0):
+            raise ValueError('dead_reckoning_velocity_time must be a positive number of seconds, '
+                             f'got {self.dead_reckoning_velocity_time}')
         for name in ('reacquire_time', 'reacquire_blend_time', 'twist_bandwidth'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
@@ -202,6 +213,7 @@ class LfOdometry:
         self._dr_eta0: FloatArray | None = None
         self._pending_since: float | None = None
         self._blend: tuple[float, FloatArray] | None = None  # (start time, DR pose − fix)
+        self._slow_twist: FloatArray | None = None  # low-passed twist, start of dead reckoning
         self.counters = {'dead_reckoning_episodes': 0, 'lost': 0, 'reacquired': 0,
                          'reacquired_outside_gate': 0, 'fixes_held_back': 0, 'calibrations': 0,
                          'memory_updates': 0, 'numeric_failures': 0,
@@ -264,6 +276,9 @@ class LfOdometry:
         x = self._require_state()
         twist = x[self.ndof:].copy()
         self._history.append(_Published(t, z.copy(), twist, source))
+        alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
+        self._slow_twist = twist.copy() if self._slow_twist is None else \
+            self._slow_twist + alpha * (twist - self._slow_twist)
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
                                             self._pose_covariance(source))
         out = OdometryEstimate(
@@ -293,6 +308,8 @@ class LfOdometry:
             self._dr_anchor = self._last_output.pose.copy()
             self._dr_eta0 = self._require_state()[:self.ndof].copy()
             self._dr_cov0 = (self._last_output.pose_cov.copy(), self._last_output.twist_cov.copy())
+            if self._slow_twist is not None and self._x is not None:
+                self._x = np.concatenate([self._x[:self.ndof], self._slow_twist])
         elapsed = t - self._last_fix
         if elapsed > self.params.dead_reckoning_timeout:
             if self._mode != 'lost':

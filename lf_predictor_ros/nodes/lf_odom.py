@@ -6,22 +6,22 @@ ROS-free glue shared by the predictor node and ``replay`` so both publish the sa
 - **tracking**: every aligned sample that passed the position-reference checks goes to
   ``LfStateEstimator.update``; its ``OdometryEstimate`` (stamp t + sample_time) is published on
   ``lf_pose`` and ``lf_odom``. While tracking its pose is the predictor's LF pose, bit for bit.
-- **dead reckoning**: a thrust message stamped more than ``dead_reckoning_after`` after the last
+- **dead reckoning**: a thrust message stamped ``dead_reckoning_after`` or more after the last
   sample that went to ``update`` (poses silent, or rejected by the checks) calls
   ``LfStateEstimator.coast`` for the thrust stamp + ``sample_time`` (the thrust held over the
   next sample; the stamp rule of every estimate: the time it is valid for, so a lockstep
   simulator is answered as while tracking), at most once per ``sample_time``. Its estimate is
-  published the same way. The first tracked estimate after a dropout may repeat the stamp of
-  the last dead-reckoned one (same instant, from the pose): it supersedes it. ``coast`` returns
-  None once ``dead_reckoning_timeout`` has passed (mode 'lost'): nothing is published.
+  published the same way. ``coast`` returns None once ``dead_reckoning_timeout`` has passed
+  (mode 'lost'): nothing is published.
 - **reacquisition**: the first samples after the dropout go through ``update`` like any other,
   so the odometry's plausibility gate and reacquire blend apply (a new data segment restarts the
   predictor's segment; the odometry keeps its state across it).
-- **time order**: a sample whose stamp is older than an estimate already dead-reckoned (poses
-  delivered late in a burst after the silence) still feeds the predictor and its buffers but is
-  not published (``late_samples``); a new segment that starts ``backward_jump`` or more before
-  the last estimate (simulator reset, bag loop) restarts the odometry's timeline
-  (``odom_time_jumps``; calibration and vessel memory kept).
+- **time order**: a sample whose estimate would not be newer than one already published (the
+  dead-reckoned estimate for the same instant, or poses delivered late in a burst after the
+  silence) still feeds the predictor, its buffers and the odometry but is not published
+  (``late_samples``): published stamps always increase; a new segment that starts
+  ``backward_jump`` or more before the last estimate (simulator reset, bag loop) restarts the
+  odometry's timeline (``odom_time_jumps``; calibration and vessel memory kept).
 
 Nothing here raises on data: the caller catches what ``LfStateEstimator`` raises.
 """
@@ -88,7 +88,9 @@ class OdomDriver:
         """
         h = self.sample_time
         stamp = t + h
-        late = self._odom_stamp is not None and stamp <= self._odom_stamp - 0.5 * h
+        # not newer than an estimate already published (dead-reckoned for the same instant, or
+        # later): the state takes the sample, nothing is published, stamps stay increasing
+        late = self._odom_stamp is not None and stamp <= self._odom_stamp + STAMP_EPS
         if late and segment_start and stamp < (self._odom_stamp or 0.0) - self.backward_jump:
             self.state.odometry.restart()  # time went backwards: a new timeline
             self.counters['time_jumps'] += 1
@@ -114,7 +116,8 @@ class OdomDriver:
             return None
         if self._last_thrust_t is None or t > self._last_thrust_t:
             self._last_thrust_t = t
-        if self._last_sample_t is None or t - self._last_sample_t <= self.dead_reckoning_after:
+        if self._last_sample_t is None or \
+                t - self._last_sample_t < self.dead_reckoning_after - STAMP_EPS:
             return None
         if self._last_coast_t is not None and \
                 t < self._last_coast_t + self.sample_time - STAMP_EPS:

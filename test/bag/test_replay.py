@@ -540,9 +540,9 @@ def test_a_pose_gap_restarts_the_segment(work: Path, record: SimRecord,
                                          params_file: Path) -> None:
     """No pose for 10 s (> max_gap 5 s): the aligner restarts, the predictor gets a new segment.
 
-    Thrust goes on: from 2 s (dead_reckoning_after = 2 × sample_time) after the last sample
-    the estimate is dead-reckoned for each thrust stamp + 1 s (the time it is valid for), one per
-    second, until the poses return.
+    Thrust goes on: from 2 s (dead_reckoning_after = 2 × sample_time) after the last sample (20 s)
+    the estimate is dead-reckoned for each thrust stamp + 1 s (the time it is valid for: 23 s
+    on), one per second, until the poses return.
     """
     bag = work / 'gap.mcap'
     with BagWriter(bag) as writer:
@@ -556,19 +556,21 @@ def test_a_pose_gap_restarts_the_segment(work: Path, record: SimRecord,
     output = work / 'gap_out.mcap'
     assert run_replay(bag, '-o', output, '--params-file', params_file)[0] == 0
     lf = _lf(output)
-    # the first tracked estimate (pose of 31 s, valid at 32 s) repeats the stamp of the last
-    # dead-reckoned one (thrust of 31 s) and supersedes it
-    np.testing.assert_allclose(lf.stamp, np.r_[2.0:22.0, 24.0:33.0, 32.0:62.0], atol=1e-9)
+    # the pose of 31 s (valid at 32 s) is not published: the thrust of 31 s was dead-reckoned to
+    # 32 s already (stamps always increase); it is taken by the predictor and the odometry
+    np.testing.assert_allclose(lf.stamp, np.r_[2.0:22.0, 23.0:62.0], atol=1e-9)
     records = read_diagnostics(output)
-    during = [v for t, _, v in records if 24.0 <= t <= 31.0]
+    during = [v for t, _, v in records if 23.0 <= t <= 31.0]
     assert during and {v['odom_mode'] for v in during} == {'dead_reckoning'}
     last = records[-1][2]
     # the reference checks see the dropout (counted once) and the aligner restarts before it
     # could bridge it: a new segment, the aligner's own gap counter stays 0
+    # samples = estimates published from pose samples: 50 grid samples, the one of 31 s not
+    # published (its instant was dead-reckoned already)
     assert (last['ref_dropout'], last['gaps'], last['segments'], last['samples']) == (
-        '1', '0', '1', '50')
+        '1', '0', '1', '49')
     assert (last['odom_mode'], last['odom_dead_reckoning_episodes'],
-            last['odom_reacquired'], last['odom_coasts']) == ('tracking', '1', '1', '9')
+            last['odom_reacquired'], last['odom_coasts']) == ('tracking', '1', '1', '10')
 
 
 def test_pose_rows_store_rows_compactly_and_round_trip() -> None:

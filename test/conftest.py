@@ -43,6 +43,19 @@ def ros_context() -> Iterator[object]:
 
 
 @pytest.fixture
+def executor(ros_context: object) -> Iterator[object]:
+    """A SingleThreadedExecutor on ``ros_context``; its nodes are destroyed afterwards."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    ex = SingleThreadedExecutor(context=ros_context)
+    yield ex
+    for node in list(ex.get_nodes()):
+        ex.remove_node(node)
+        node.destroy_node()
+    ex.shutdown()
+
+
+@pytest.fixture
 def dds_env() -> dict[str, str]:
     """Environment for child processes: same isolated domain as this test process."""
     env = dict(os.environ)

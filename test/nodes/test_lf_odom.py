@@ -10,7 +10,7 @@ covariance calibration are tested in test/core).
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 import math
 import time
 from typing import Any
@@ -50,16 +50,6 @@ torch.set_num_threads(1)
 def record() -> SimRecord:
     """Supply vessel, closed loop, seed 3, 10 Hz (decimated when fed)."""
     return simulate(load_scenario('supply_closed_loop'), seed=3, duration=DURATION)
-
-
-@pytest.fixture
-def executor(ros_context: Context) -> Iterator[SingleThreadedExecutor]:
-    ex = SingleThreadedExecutor(context=ros_context)
-    yield ex
-    for node in list(ex.get_nodes()):
-        ex.remove_node(node)
-        node.destroy_node()
-    ex.shutdown()
 
 
 class Probe:

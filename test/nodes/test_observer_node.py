@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Iterator
 import dataclasses
 from pathlib import Path
 import time
@@ -44,16 +43,6 @@ def _poses() -> tuple[np.ndarray, np.ndarray]:
     t = SAMPLE_TIME * np.arange(1, N_SAMPLES + 1)
     poses = LF_POSE + WAVE_AMPLITUDE * np.sin(WAVE_PEAK_FREQ * t[:, None] + WAVE_PHASE)
     return t, poses
-
-
-@pytest.fixture
-def executor(ros_context: Context) -> Iterator[SingleThreadedExecutor]:
-    ex = SingleThreadedExecutor(context=ros_context)
-    yield ex
-    for node in list(ex.get_nodes()):
-        ex.remove_node(node)
-        node.destroy_node()
-    ex.shutdown()
 
 
 def _make(ros_context: Context, **values: Any) -> ObserverNode:

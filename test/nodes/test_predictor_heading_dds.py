@@ -16,7 +16,7 @@ finish (in real time a training has a whole retrain period), so the run is repro
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 import dataclasses
 import functools
 import math
@@ -99,16 +99,6 @@ def stream() -> Stream:
     truth[:, 2] = record.truth_lf_pose[:, 2] + HEADING
     return Stream(t=record.t.copy(), measured=measured, truth_lf=truth,
                   thrust=record.thrust.copy())
-
-
-@pytest.fixture
-def executor(ros_context: Context) -> Iterator[SingleThreadedExecutor]:
-    ex = SingleThreadedExecutor(context=ros_context)
-    yield ex
-    for node in list(ex.get_nodes()):
-        ex.remove_node(node)
-        node.destroy_node()
-    ex.shutdown()
 
 
 def _spin_until(executor: SingleThreadedExecutor, done: Callable[[], bool], what: str) -> None:

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Iterator
 import dataclasses
 from pathlib import Path
 import subprocess
@@ -65,16 +64,6 @@ def record() -> SimRecord:
     on the hard PRBS-excited case (docs/RESULTS.md).
     """
     return simulate(load_scenario('onedof_feedback'), seed=4, duration=180.0)
-
-
-@pytest.fixture
-def executor(ros_context: Context) -> Iterator[SingleThreadedExecutor]:
-    ex = SingleThreadedExecutor(context=ros_context)
-    yield ex
-    for node in list(ex.get_nodes()):
-        ex.remove_node(node)
-        node.destroy_node()
-    ex.shutdown()
 
 
 def _overrides(**extra: Any) -> list[Parameter]:

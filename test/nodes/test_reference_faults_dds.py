@@ -19,7 +19,7 @@ reference fault following it; that is what is asserted for frozen, drift and dro
 # mypy: disable-error-code="no-untyped-call"
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 import dataclasses
 import functools
 import time
@@ -148,16 +148,6 @@ class Harness:
 
     def rejected_stamps(self) -> list[float]:
         return [t for t, accepted in self.checked if not accepted]
-
-
-@pytest.fixture
-def executor(ros_context: Context) -> Iterator[SingleThreadedExecutor]:
-    ex = SingleThreadedExecutor(context=ros_context)
-    yield ex
-    for node in list(ex.get_nodes()):
-        ex.remove_node(node)
-        node.destroy_node()
-    ex.shutdown()
 
 
 def _fed_at(harness: Harness, t: float) -> list[FloatArray]:

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Iterator
 import math
 import os
 from pathlib import Path
@@ -78,16 +77,6 @@ def _spin_for(executor: SingleThreadedExecutor, seconds: float) -> None:
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         executor.spin_once(timeout_sec=0.02)
-
-
-@pytest.fixture
-def executor(ros_context: object) -> Iterator[SingleThreadedExecutor]:
-    ex = SingleThreadedExecutor(context=ros_context)
-    yield ex
-    for node in list(ex.get_nodes()):
-        ex.remove_node(node)
-        node.destroy_node()
-    ex.shutdown()
 
 
 def _stamp_of(msg: Any) -> int:

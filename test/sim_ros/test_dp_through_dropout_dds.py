@@ -12,18 +12,17 @@ vessel must stay near the setpoint.
 
 Determinism: the relay waits for every running training and vessel-memory job before it forwards
 a pose (the executor is single-threaded, so the simulator waits too), as the other DDS tests
-wait. During the dropout the dead-reckoned lf_odom is stamped with the thrust stamp t_k (not
-t_k + h), so the controller's answer does not release the lockstep wait (stamped ≥ t_k + lead):
-each of those samples ends with a lockstep timeout and the simulator steps on with the answer it
-holds (that answer, computed from the estimate of t_k). ``lockstep_timeout`` is short for that.
+wait. During the dropout the dead-reckoned lf_odom is stamped t_k + h like every estimate, so
+the controller's answer releases the lockstep wait as while tracking (before 2bd8fb9 it was
+stamped t_k and every dead-reckoned sample ended with a lockstep timeout).
 
 Bound on the excursion (horizontal distance of the true LF pose from the setpoint). Held on the
 truth, the PD part keeps the vessel within 3.8 m of the setpoint against the worst environmental
 forces of this scenario (test_nodes.py, closed-loop test); the controller here holds the
 *estimate* on the setpoint, so the truth is off by the estimate's error on top; the stated
-bound is 3.8 m throughout. Measured (seed 3, twist_bandwidth 1.0): 1.7-4.1 m before, 15.7-19.4 m
-during and 42-46 m after the dropout: the loop runs away on the dead reckoning (xfail, with the
-evidence; 3.9 / 2.4 / 7.0 m at twist_bandwidth 0.5).
+bound is 3.8 m throughout. Measured (seed 3, twist_bandwidth 1.0, dead reckoning from the 30 s
+low-passed twist): 1.7 m before, 6.6 m during and 13.2 m after the dropout: the loop drifts away
+on the dead reckoning (xfail, with the evidence and the earlier numbers).
 """
 # rclpy's Node, executor and lifecycle methods are untyped in Jazzy.
 # mypy: disable-error-code="no-untyped-call"
@@ -61,6 +60,7 @@ from sim_ros.simulation import REPO_ROOT
 NS_PER_S = 1_000_000_000  # [ns/s]
 SEED = 3
 DURATION = 270.0  # [s sim]
+SPEED_FACTOR = 30.0  # [s sim / s wall]
 DROP_START, DROP_END = 200.0, 230.0  # [s) poses stamped here never reach the predictor
 EXCURSION_BOUND = 3.8  # [m] horizontal, true LF pose from the setpoint (module docstring)
 WINDOWS: dict[str, Any] = {'retrain_period': 20.0, 'training_window': 200.0,
@@ -170,7 +170,9 @@ def loop(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Loop]:
         simulator = SimulatorNode(context=context, cli_args=[
             '--ros-args', '-r', 'measured_pose:=raw_pose'], parameter_overrides=[
             Parameter('scenario', value=str(scenario_path)), Parameter('seed', value=SEED),
-            Parameter('speed_factor', value=0.0), Parameter('lockstep', value=True),
+            # paced (30 × real time) so that diagnostics reports (every 0.1 s of wall time)
+            # fall inside the 30 s of simulated dropout, which take < 0.1 s unpaced
+            Parameter('speed_factor', value=SPEED_FACTOR), Parameter('lockstep', value=True),
             Parameter('lockstep_period', value=1.0), Parameter('lockstep_lead', value=1.0),
             Parameter('lockstep_timeout', value=0.25), Parameter('command_timeout', value=3.0),
             Parameter('duration', value=DURATION)])

@@ -69,8 +69,7 @@ class LfStateEstimator:
         self._maybe_learn()
         if self.odometry.is_late(t + self.sample_time):
             return lf_pose, None  # older than an estimate already dead-reckoned
-        source: EstimateSource = 'network' if self.predictor.status().state == 'trained' \
-            else 'fallback'
+        source: EstimateSource = 'network' if self.predictor.using_network else 'fallback'
         odom = self.odometry.track(t + self.sample_time, lf_pose, force, source)
         return lf_pose, odom
 

@@ -285,7 +285,7 @@ class LfOdometry:
             stamp=t, pose=published, pose_cov=pose_cov, twist=self._full(twist),
             twist_cov=self._twist_covariance(source), mode='tracking', dead_reckoning_time=0.0,
             calibrated=self.calibrated, reckoner=self._reckoner())
-        out.pose[2] = wrap_angle(float(out.pose[2]))
+        out.pose[2] = _wrap(float(out.pose[2]))
         self._last_output = out
         return out
 
@@ -380,7 +380,7 @@ class LfOdometry:
                 a, b = self._transition(x, tau[:n], h)
                 x = a @ x + b
                 self._p = a @ self._p @ a.T + self._process_noise(h)
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(self._p))):
+        if not _finite(x, self._p):
             self.counters['numeric_failures'] += 1  # absurd thrust: predict without it
             x, self._p = start, p_start + self._process_noise(t - t_last)
         self._x, self._t = x, t
@@ -390,7 +390,7 @@ class LfOdometry:
         n = self.ndof
         innovation = z - x[:n]
         if n == 3:
-            innovation[2] = wrap_angle(float(innovation[2]))
+            innovation[2] = _wrap(float(innovation[2]))
         s = self._p[:n, :n] + self._measurement_cov()
         gain = np.linalg.solve(s, self._p[:n, :]).T
         self._x = x + gain @ innovation
@@ -409,8 +409,11 @@ class LfOdometry:
             damping = model.damping
             heading = float(x[2]) if n == 3 else 0.0
             drive = model.input_gain @ tau + model.bias @ heading_basis(heading, n)
-        a = np.block([[np.eye(n), h * rot], [np.zeros((n, n)), np.eye(n) + h * damping]])
-        b = np.concatenate([np.zeros(n), h * drive])
+        a = np.eye(2 * n)
+        a[:n, n:] = h * rot
+        a[n:, n:] += h * damping
+        b = np.zeros(2 * n)
+        b[n:] = h * drive
         return a, b
 
     def _process_noise(self, h: float) -> FloatArray:
@@ -457,7 +460,7 @@ class LfOdometry:
                 a, _b = self._transition(x, tau[:n], h)
                 self._p = a @ self._p @ a.T + self._process_noise(h)
                 eta, nu = dead_reckon_step(model, self._reckoner(), eta, nu, tau[:n], h)
-        if not (np.all(np.isfinite(eta)) and np.all(np.isfinite(nu))):
+        if not _finite(eta, nu):
             # an absurd (finite) thrust overflowed the model: hold the last finite pose
             self.counters['numeric_failures'] += 1
             eta, nu = x[:n], np.zeros(n)
@@ -471,7 +474,7 @@ class LfOdometry:
         pose = anchor.copy()
         pose[:n] = anchor[:n] + (x[:n] - eta0)
         if n == 3:
-            pose[2] = wrap_angle(float(pose[2]))
+            pose[2] = _wrap(float(pose[2]))
         pose_cov0, twist_cov0 = self._dr_cov0
         pose_cov = pose_cov0.copy()
         twist_cov = twist_cov0.copy()
@@ -499,7 +502,7 @@ class LfOdometry:
             self._blend = None
             return
         offset = last.pose - pose[:3]
-        offset[2] = wrap_angle(float(offset[2]))
+        offset[2] = _wrap(float(offset[2]))
         offset[self.ndof:] = 0.0
         self._blend = (t, offset)
 
@@ -526,7 +529,7 @@ class LfOdometry:
         x = self._require_state()
         innovation = z - x[:n]
         if n == 3:
-            innovation[2] = wrap_angle(float(innovation[2]))
+            innovation[2] = _wrap(float(innovation[2]))
         out = self._last_output
         cov = (out.pose_cov[:n, :n] if out is not None and self._mode == 'dead_reckoning'
                else self._p[:n, :n]) + self._measurement_cov()
@@ -613,7 +616,7 @@ class LfOdometry:
         """The LF pose as a state measurement: ndof entries, heading unwrapped near the state."""
         z = np.array(pose[:self.ndof], dtype=np.float64)
         if self.ndof == 3 and self._x is not None:
-            z[2] = float(self._x[2]) + wrap_angle(float(z[2] - self._x[2]))
+            z[2] = float(self._x[2]) + _wrap(float(z[2] - self._x[2]))
         return z
 
     def _require_state(self) -> FloatArray:
@@ -633,6 +636,21 @@ def normalized_error_squared(error: ArrayLike, covariance: ArrayLike) -> FloatAr
                       dtype=np.float64)
 
 
+def _finite(*arrays: FloatArray) -> bool:
+    """All entries finite.
+
+    The sum of the entries times 0 is 0, NaN for a NaN or ±inf entry, and cannot overflow;
+    cheaper on the per-sample path than np.all(np.isfinite(...)).
+    """
+    return all(float(np.sum(np.asarray(a) * 0.0)) == 0.0 for a in arrays)
+
+
+def _wrap(angle: float) -> float:
+    """``wrap_angle`` for one float without numpy (the per-sample path): (−π, π]."""
+    wrapped = math.remainder(angle, 2.0 * math.pi)
+    return math.pi if wrapped == -math.pi else wrapped
+
+
 def _second_moment(errors: FloatArray) -> FloatArray:
     """Mean of e eᵀ (bias included: a biased estimate must not look confident)."""
     return np.asarray(errors.T @ errors / errors.shape[0], dtype=np.float64)
@@ -647,6 +665,6 @@ def _rotation_block(heading: float, ndof: int) -> FloatArray:
 
 def _vector(values: ArrayLike, size: int, name: str) -> FloatArray:
     array = np.asarray(values, dtype=np.float64)
-    if array.shape != (size,) or not np.all(np.isfinite(array)):
+    if array.shape != (size,) or not _finite(array):
         raise ValueError(f'{name} must be a finite array of shape ({size},), got {array!r}')
     return array

@@ -319,6 +319,11 @@ class AdaptivePredictor:
         self.wait_for_training(timeout=5.0)
 
     @property
+    def using_network(self) -> bool:
+        """True when the last output came from the network (``status().state == 'trained'``)."""
+        return self._model is not None and self._used_network
+
+    @property
     def wave_peak_freq(self) -> float | None:
         """Latest ω0 estimate [rad/s] (or the prior), None before the first estimate."""
         if isinstance(self._frequency, FrequencyEstimate):

@@ -23,10 +23,9 @@ and its estimate is published on ``lf_pose`` and
 After ``dead_reckoning_timeout`` without an accepted fix nothing is published (state ``lost``,
 ERROR) rather than a guess. The first samples after the dropout go through ``update``: the
 odometry gates them for plausibility and blends from the dead-reckoned pose
-(``reacquire_blend_time``), so ``lf_pose`` does not step. ``OdometryParams`` fields are node
-parameters (``dead_reckoning_timeout``, ``pose_cov_scale``, ``twist_cov_scale``,
-``prior_pose_std``, ``prior_accel_std``, ``reacquire_gate``, ``reacquire_time``,
-``reacquire_blend_time``, ``min_calibration_samples``).
+(``reacquire_blend_time``), so ``lf_pose`` does not step. Every ``OdometryParams`` field is a
+node parameter (``core/odometry.py``, ``config/predictor.yaml``: the dead-reckoning timeout and
+start velocity, the covariance scales and priors, the twist bandwidth, the reacquisition gate).
 
 Training runs on the core's worker thread; no callback ever waits for it. With ``model_path``
 set, the node loads that checkpoint at configure time (warm start) and the worker saves after

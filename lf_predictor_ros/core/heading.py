@@ -30,6 +30,9 @@ def wrap_angle(angle: NDArray[np.floating]) -> _FloatArray: ...
 
 def wrap_angle(angle: float | NDArray[np.floating]) -> float | _FloatArray:
     """Wrap angle(s) [rad] to (−π, π]; π and −π both map to π. Vectorized, NaN stays NaN."""
+    if isinstance(angle, (float, int)):  # one number: the same arithmetic without numpy's
+        wrapped_one = math.pi - (math.pi - angle) % TWO_PI  # overhead (per-sample paths)
+        return wrapped_one + TWO_PI if wrapped_one <= -math.pi else wrapped_one
     values = np.asarray(angle, dtype=np.float64)
     wrapped = math.pi - np.mod(math.pi - values, TWO_PI)
     # np.mod may round a tiny negative argument up to exactly 2π, which would give −π.

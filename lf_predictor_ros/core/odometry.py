@@ -285,7 +285,7 @@ class LfOdometry:
             stamp=t, pose=published, pose_cov=pose_cov, twist=self._full(twist),
             twist_cov=self._twist_covariance(source), mode='tracking', dead_reckoning_time=0.0,
             calibrated=self.calibrated, reckoner=self._reckoner())
-        out.pose[2] = _wrap(float(out.pose[2]))
+        out.pose[2] = wrap_angle(float(out.pose[2]))
         self._last_output = out
         return out
 
@@ -390,7 +390,7 @@ class LfOdometry:
         n = self.ndof
         innovation = z - x[:n]
         if n == 3:
-            innovation[2] = _wrap(float(innovation[2]))
+            innovation[2] = wrap_angle(float(innovation[2]))
         s = self._p[:n, :n] + self._measurement_cov()
         gain = np.linalg.solve(s, self._p[:n, :]).T
         self._x = x + gain @ innovation
@@ -474,7 +474,7 @@ class LfOdometry:
         pose = anchor.copy()
         pose[:n] = anchor[:n] + (x[:n] - eta0)
         if n == 3:
-            pose[2] = _wrap(float(pose[2]))
+            pose[2] = wrap_angle(float(pose[2]))
         pose_cov0, twist_cov0 = self._dr_cov0
         pose_cov = pose_cov0.copy()
         twist_cov = twist_cov0.copy()
@@ -502,7 +502,7 @@ class LfOdometry:
             self._blend = None
             return
         offset = last.pose - pose[:3]
-        offset[2] = _wrap(float(offset[2]))
+        offset[2] = wrap_angle(float(offset[2]))
         offset[self.ndof:] = 0.0
         self._blend = (t, offset)
 
@@ -529,7 +529,7 @@ class LfOdometry:
         x = self._require_state()
         innovation = z - x[:n]
         if n == 3:
-            innovation[2] = _wrap(float(innovation[2]))
+            innovation[2] = wrap_angle(float(innovation[2]))
         out = self._last_output
         cov = (out.pose_cov[:n, :n] if out is not None and self._mode == 'dead_reckoning'
                else self._p[:n, :n]) + self._measurement_cov()
@@ -616,7 +616,7 @@ class LfOdometry:
         """The LF pose as a state measurement: ndof entries, heading unwrapped near the state."""
         z = np.array(pose[:self.ndof], dtype=np.float64)
         if self.ndof == 3 and self._x is not None:
-            z[2] = float(self._x[2]) + _wrap(float(z[2] - self._x[2]))
+            z[2] = float(self._x[2]) + wrap_angle(float(z[2] - self._x[2]))
         return z
 
     def _require_state(self) -> FloatArray:
@@ -643,12 +643,6 @@ def _finite(*arrays: FloatArray) -> bool:
     cheaper on the per-sample path than np.all(np.isfinite(...)).
     """
     return all(float(np.sum(np.asarray(a) * 0.0)) == 0.0 for a in arrays)
-
-
-def _wrap(angle: float) -> float:
-    """``wrap_angle`` for one float without numpy (the per-sample path): (−π, π]."""
-    wrapped = math.remainder(angle, 2.0 * math.pi)
-    return math.pi if wrapped == -math.pi else wrapped
 
 
 def _second_moment(errors: FloatArray) -> FloatArray:

@@ -45,6 +45,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lf_predictor_ros.core.field_meta import field_doc
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_dynamics import (
     DeadReckoner,
@@ -55,17 +56,6 @@ from lf_predictor_ros.core.lf_dynamics import (
 )
 
 FloatArray = NDArray[np.float64]
-
-
-def field_doc(doc: str, unit: str = '') -> dict[str, str]:
-    """Field metadata read by the ROS parameter helper (as ``core.params.field_doc``).
-
-    Not imported from there: message conversions import this module and must stay free of
-    scipy's import time.
-    """
-    return {'doc': doc, 'unit': unit}
-
-
 OdometryMode = Literal['tracking', 'dead_reckoning', 'lost']
 EstimateSource = Literal['network', 'fallback']
 SOURCES: tuple[EstimateSource, ...] = ('network', 'fallback')

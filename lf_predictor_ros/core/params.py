@@ -28,6 +28,7 @@ import math
 import numbers
 from typing import Any
 
+from lf_predictor_ros.core.field_meta import field_doc
 from lf_predictor_ros.core.frequency import welch_resolution
 
 TRAINERS = ('lm', 'lbfgs', 'adam')
@@ -47,12 +48,7 @@ _BOOL_FIELDS = ('linear_init', 'thrust_validation')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
-def _doc(doc: str, unit: str = '') -> dict[str, str]:
-    """Field metadata read by the ROS parameter helper (description and unit)."""
-    return {'doc': doc, 'unit': unit}
-
-
-field_doc = _doc  # the same metadata for the other settings dataclasses (reference checks)
+_doc = field_doc  # (core.field_meta; kept short here, where every field uses it)
 
 
 @dataclass(frozen=True)

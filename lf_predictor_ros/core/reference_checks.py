@@ -50,8 +50,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from lf_predictor_ros.core.field_meta import field_doc
 from lf_predictor_ros.core.heading import wrap_angle
-from lf_predictor_ros.core.params import field_doc
 
 FloatArray = NDArray[np.float64]
 Level = Literal['OK', 'WARN', 'ERROR']

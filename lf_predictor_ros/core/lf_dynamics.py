@@ -59,12 +59,6 @@ FORCE_MARGIN = 2.0
 THRUST_MIN_GAIN = 0.1
 
 
-def rotation(heading: float) -> FloatArray:
-    """R(ψ) of Fossen (2011) eq. 7.5, planar part: body → earth for [north, east]."""
-    c, s = math.cos(heading), math.sin(heading)
-    return np.array([[c, -s], [s, c]])
-
-
 def heading_basis(heading: float | FloatArray, ndof: int) -> FloatArray:
     """β(ψ) = [1, cos ψ, sin ψ] for 3 DOF, [1] for 1 DOF (shape (..., nb))."""
     psi = np.asarray(heading, dtype=np.float64)
@@ -73,8 +67,11 @@ def heading_basis(heading: float | FloatArray, ndof: int) -> FloatArray:
     return np.stack([np.ones_like(psi), np.cos(psi), np.sin(psi)], axis=-1)
 
 
-def earth_to_body_rates(eta: FloatArray, eta_dot: FloatArray, ndof: int) -> FloatArray:
-    """ν = R(ψ)ᵀ η̇ row by row (the yaw rate is ψ̇); 1 DOF: ν = η̇."""
+def earth_to_body(eta: FloatArray, eta_dot: FloatArray, ndof: int) -> FloatArray:
+    """R(ψ)ᵀ v row by row for earth-frame [north, east, yaw] rows v, ψ from the poses ``eta``.
+
+    For rates ν = R(ψ)ᵀ η̇ (the yaw rate is ψ̇); forces turn the same way. 1 DOF: v unchanged.
+    """
     if ndof == 1:
         return np.array(eta_dot, dtype=np.float64)
     c, s = np.cos(eta[:, 2]), np.sin(eta[:, 2])
@@ -87,7 +84,7 @@ def body_velocity(targets: ArrayLike, sample_time: float) -> FloatArray:
     eta = _as_2d(targets, 'targets')
     if eta.shape[0] < 3:
         raise ValueError(f'need at least 3 LF poses to differentiate, got {eta.shape[0]}')
-    return earth_to_body_rates(eta, np.gradient(eta, sample_time, axis=0), eta.shape[1])
+    return earth_to_body(eta, np.gradient(eta, sample_time, axis=0), eta.shape[1])
 
 
 @dataclass(frozen=True)
@@ -303,14 +300,13 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     """
     eta_t = _as_2d(targets, 'targets')
     tau = _as_2d(forces, 'forces')
-    split = int(round(eta_t.shape[0] * (1.0 - VALIDATION_FRACTION)))
+    split, test_horizon = _held_out_split(eta_t.shape[0], sample_time, horizon)
     model: LfDynamics | None = None
     message = ''
     try:
         model = fit_lf_dynamics(eta_t[:split], tau[:split], sample_time)
     except ValueError as exc:
         message = f'LF dynamics not fitted: {exc}'
-    test_horizon = min(horizon, (eta_t.shape[0] - split) * sample_time / 2.0)
     curves = {name: drift_test(model, name, eta_t[split:], tau[split:], sample_time,
                                test_horizon)
               for name in DEAD_RECKONERS if name != 'model' or model is not None}
@@ -353,8 +349,7 @@ def thrust_improves_dead_reckoning(targets: ArrayLike, forces: ArrayLike, sample
     """
     eta_t = _as_2d(targets, 'targets')
     tau = _as_2d(forces, 'forces')
-    split = int(round(eta_t.shape[0] * (1.0 - VALIDATION_FRACTION)))
-    test_horizon = min(horizon, (eta_t.shape[0] - split) * sample_time / 2.0)
+    split, test_horizon = _held_out_split(eta_t.shape[0], sample_time, horizon)
     try:
         with_thrust = fit_lf_dynamics(eta_t[:split], tau[:split], sample_time)
         without = fit_lf_dynamics(eta_t[:split], np.zeros_like(tau[:split]), sample_time)
@@ -371,6 +366,16 @@ def thrust_improves_dead_reckoning(targets: ArrayLike, forces: ArrayLike, sample
                            test_horizon)
         drift[name] = float(np.sum(np.sqrt(curve.mean_square[-1]) / scale))
     return drift['with'] < (1.0 - THRUST_MIN_GAIN) * drift['without']
+
+
+def _held_out_split(samples: int, sample_time: float, horizon: float) -> tuple[int, float]:
+    """(first sample of the held-out newest part of a window, drift-test horizon [s]).
+
+    The held-out part is the newest ``VALIDATION_FRACTION``; the horizon is ``horizon`` capped
+    at half of it.
+    """
+    split = int(round(samples * (1.0 - VALIDATION_FRACTION)))
+    return split, min(horizon, (samples - split) * sample_time / 2.0)
 
 
 def _interpolate(horizons: FloatArray, table: FloatArray, elapsed: float,

@@ -33,7 +33,10 @@ from lf_predictor_ros.core.augmentation import (
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.filters import design_wave_filter, zero_phase
 from lf_predictor_ros.core.frequency import FrequencyEstimate, estimate_wave_peak_freq
-from lf_predictor_ros.core.lf_dynamics import thrust_improves_dead_reckoning
+from lf_predictor_ros.core.lf_dynamics import (
+    earth_to_body,
+    thrust_improves_dead_reckoning,
+)
 from lf_predictor_ros.core.network import (
     NnarmaxNet,
     NnarmaxSpec,
@@ -117,11 +120,7 @@ def thrust_predicts_motion(params: PredictorParams, u: FloatArray, targets: Floa
         return True
     end = int(keep[-1]) + 1
     eta = targets[:end]
-    forces = np.array(u[:end], dtype=np.float64)
-    if params.ndof == 3:
-        c, s = np.cos(eta[:, 2]), np.sin(eta[:, 2])
-        forces = np.stack([c * forces[:, 0] + s * forces[:, 1],
-                           -s * forces[:, 0] + c * forces[:, 1], forces[:, 2]], axis=1)
+    forces = earth_to_body(eta, np.asarray(u[:end], dtype=np.float64), params.ndof)
     return thrust_improves_dead_reckoning(eta, forces, params.sample_time, THRUST_TEST_HORIZON)
 
 

@@ -97,16 +97,10 @@ class OdomDriver:
             self._odom_stamp = self._last_coast_t = None
             late = False
         self._last_sample_t = t
+        lf_pose, estimate = self.state.update(t, pose, force)  # it learns from a late one too
         if late:
-            # The odometry refuses a stamp older than its dead-reckoned one; the predictor and
-            # the state's buffers have taken the sample when it does (LfStateEstimator.update).
             self.counters['late_samples'] += 1
-            try:
-                self.state.update(t, pose, force)
-            except ValueError:
-                pass
             return None, None
-        lf_pose, estimate = self.state.update(t, pose, force)
         self._odom_stamp = stamp if self._odom_stamp is None else max(self._odom_stamp, stamp)
         return lf_pose, estimate
 

@@ -78,7 +78,8 @@ from lf_predictor_ros.core.lf_state import LfStateEstimator
 from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.retraining import first_training_samples
-from sim_ros.control.pid import VELOCITY_FILTER_TIME
+from sim_ros.control.pid import PidGains, PidState, pid_step
+from sim_ros.physics.kinematics import earth_to_body
 from sim_ros.simulation import load_scenario, simulate
 
 FloatArray = NDArray[np.float64]
@@ -159,23 +160,19 @@ def consistency(error: FloatArray, cov: FloatArray) -> dict[str, Any]:
 
 
 def pid_velocity(poses: FloatArray, sample_time: float, ndof: int) -> FloatArray:
-    """The PID's velocity from a pose series (module docstring, `pid_step`) → body (m, ndof)."""
-    alpha = 1.0 - math.exp(-sample_time / VELOCITY_FILTER_TIME)
-    earth = np.zeros(3)
+    """The PID's velocity from a pose series (module docstring, `pid_step`) → body (m, ndof).
+
+    `pid_step` itself is run over the poses (its gains do not touch the velocity filter) and
+    its filtered finite difference turned into the body frame, as its D term uses it.
+    """
+    gains = PidGains(np.zeros(3), np.zeros(3), np.zeros(3))
+    state = PidState()
     out = np.zeros((poses.shape[0], ndof))
-    last = poses[0].copy()
     for k in range(poses.shape[0]):
-        step = poses[k] - last
-        step[2] = wrap_angle(float(step[2]))
-        earth = earth + alpha * (step / sample_time - earth)
-        last = poses[k]
-        c, s = math.cos(float(poses[k, 2])), math.sin(float(poses[k, 2]))
-        body = np.array([c * earth[0] + s * earth[1], -s * earth[0] + c * earth[1], earth[2]])
-        out[k] = body[:ndof]
+        _, state = pid_step(state, gains, poses[k], poses[k], sample_time)
+        out[k] = earth_to_body(float(poses[k, 2]), state.velocity_earth)[:ndof]
     return out
 
-
-# ---------------------------------------------------------------- one case
 
 def default_dropouts(params: PredictorParams, duration: float,
                      count: int = DROPOUT_COUNT, length: float = DROPOUT_LENGTH,
@@ -195,7 +192,7 @@ def default_dropouts(params: PredictorParams, duration: float,
 def _wrap_error(estimate: FloatArray, truth: FloatArray, ndof: int) -> FloatArray:
     err = np.asarray(estimate[..., :ndof] - truth[..., :ndof], dtype=np.float64)
     if ndof == 3:
-        err[..., 2] = (err[..., 2] + math.pi) % (2.0 * math.pi) - math.pi
+        err[..., 2] = wrap_angle(err[..., 2])
     return err
 
 

@@ -5,8 +5,9 @@ LF pose (issue 14): every ``update`` feeds the ``AdaptivePredictor`` (thesis Alg
 its LF pose to ``LfOdometry`` (velocity, covariances, dead reckoning). Whenever a retraining has
 produced new zero-phase targets, the vessel memory is learned from them and the applied thrust
 (``core.lf_dynamics.learn_vessel_memory``) and the covariances are recalibrated against them.
-With ``background`` the vessel memory is learned on a worker thread (the update path only picks
-up a finished result, it never waits), as the network's training is.
+With ``background`` the vessel memory and the calibration run on a worker thread (the update
+path only hands over copies and picks up a finished result, it never waits), as the network's
+training does.
 
 ``coast(t, force)`` is the dead-reckoning step for a time with thrust but no accepted pose.
 """
@@ -21,10 +22,13 @@ from numpy.typing import NDArray
 from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.lf_dynamics import VesselMemory, learn_vessel_memory
 from lf_predictor_ros.core.odometry import (
+    Covariances,
     EstimateSource,
     LfOdometry,
     OdometryEstimate,
     OdometryParams,
+    Published,
+    calibrate,
 )
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
@@ -50,7 +54,7 @@ class LfStateEstimator:
         self._capacity = params.training_samples + params.transient_samples + params.max_lag + \
             params.retrain_samples * 2
         self._executor: ThreadPoolExecutor | None = None
-        self._job: Future[tuple[FloatArray, FloatArray, VesselMemory | None]] | None = None
+        self._job: Future[tuple[VesselMemory | None, Covariances | None]] | None = None
         self._memory_error: str | None = None
         self._restart_buffers()
 
@@ -140,14 +144,15 @@ class LfStateEstimator:
         # the newest ε targets are still filter transients (targets.training_mask): left out
         usable = max(3, values.shape[0] - self.params.transient_samples)
         times, values, forces = times[:usable], values[:usable], forces[:usable]
-        horizon = self.odometry.params.dead_reckoning_timeout
+        odometry = self.odometry
+        args = (times, values, forces, odometry.published(), self.sample_time, self.ndof,
+                odometry.params.dead_reckoning_timeout, odometry.params.min_calibration_samples)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
-            self._job = self._executor.submit(_learn, times, values, forces,
-                                              self.sample_time, horizon)
+            self._job = self._executor.submit(_learn, *args)
         else:
-            self._apply(_learn(times, values, forces, self.sample_time, horizon))
+            self._apply(_learn(*args))
 
     def _collect(self) -> None:
         job = self._job
@@ -159,17 +164,21 @@ class LfStateEstimator:
         except Exception as exc:  # noqa: BLE001 - reported in the diagnostics, never raised
             self._memory_error = f'{type(exc).__name__}: {exc}'
 
-    def _apply(self, result: tuple[FloatArray, FloatArray, VesselMemory | None]) -> None:
-        times, values, memory = result
-        self.odometry.learn(times, values, memory)
+    def _apply(self, result: tuple[VesselMemory | None, Covariances | None]) -> None:
+        self.odometry.apply_learned(*result)
         self._memory_error = None
 
 
-def _learn(times: FloatArray, values: FloatArray, forces: FloatArray, sample_time: float,
-           horizon: float) -> tuple[FloatArray, FloatArray, VesselMemory | None]:
-    """Worker job: the vessel memory of one target window (None if it cannot be learned)."""
+def _learn(times: FloatArray, values: FloatArray, forces: FloatArray,
+           published: list[Published], sample_time: float, ndof: int, horizon: float,
+           min_samples: int) -> tuple[VesselMemory | None, Covariances | None]:
+    """Worker job: the vessel memory of one target window and the calibrated covariances.
+
+    The memory is None if it cannot be learned; the covariances compare the published estimates
+    with the window (`odometry.calibrate`).
+    """
     try:
         memory: VesselMemory | None = learn_vessel_memory(values, forces, sample_time, horizon)
     except ValueError:
         memory = None
-    return times, values, memory
+    return memory, calibrate(published, times, values, ndof, sample_time, min_samples)

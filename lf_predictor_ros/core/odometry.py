@@ -38,6 +38,7 @@ pose entries are passed through from the input and their variances are ``UNESTIM
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 import math
 from typing import Literal
@@ -58,6 +59,8 @@ from lf_predictor_ros.core.lf_dynamics import (
 FloatArray = NDArray[np.float64]
 OdometryMode = Literal['tracking', 'dead_reckoning', 'lost']
 EstimateSource = Literal['network', 'fallback']
+# (pose, twist) covariances per source ('network', 'fallback', 'all'), ndof × ndof
+Covariances = tuple[dict[str, NDArray[np.float64]], dict[str, NDArray[np.float64]]]
 SOURCES: tuple[EstimateSource, ...] = ('network', 'fallback')
 
 # Variance published for a pose/twist entry that is not estimated (ndof 1: east, yaw) [m², rad²].
@@ -162,7 +165,9 @@ class OdometryEstimate:
 
 
 @dataclass(frozen=True)
-class _Published:
+class Published:
+    """One published estimate as the calibration sees it (pose unwrapped, ndof entries)."""
+
     stamp: float
     pose: FloatArray  # unwrapped, ndof entries
     twist: FloatArray
@@ -192,7 +197,7 @@ class LfOdometry:
         self._memory: VesselMemory | None = None
         self._pose_cov: dict[str, FloatArray] = {}
         self._twist_cov: dict[str, FloatArray] = {}
-        self._history: deque[_Published] = deque(maxlen=HISTORY_SAMPLES)
+        self._history: deque[Published] = deque(maxlen=HISTORY_SAMPLES)
         self._x: FloatArray | None = None
         self._p = np.zeros((2 * n, 2 * n))
         self._t: float | None = None
@@ -265,7 +270,7 @@ class LfOdometry:
         self._pending_since = None
         x = self._require_state()
         twist = x[self.ndof:].copy()
-        self._history.append(_Published(t, z.copy(), twist, source))
+        self._history.append(Published(t, z.copy(), twist, source))
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
         self._slow_twist = twist.copy() if self._slow_twist is None else \
             self._slow_twist + alpha * (twist - self._slow_twist)
@@ -324,18 +329,25 @@ class LfOdometry:
         """New zero-phase targets (times [s] (m,), LF poses (m, ndof)) → calibrate covariances.
 
         ``memory`` is the vessel memory learned from the same window (``learn_vessel_memory``);
-        None keeps the previous one.
+        None keeps the previous one. The same as ``apply_learned(memory, calibrate(...))`` on
+        this odometry's published history (``LfStateEstimator`` runs `calibrate` on a worker).
         """
-        stamps = np.asarray(times, dtype=np.float64)
-        values = np.array(targets, dtype=np.float64).reshape(stamps.shape[0], -1)
-        if values.shape[1] != self.ndof or values.shape[0] < 3 or \
-                not np.all(np.isfinite(values)) or not np.all(np.isfinite(stamps)):
-            raise ValueError(f'targets must be finite with shape (m >= 3, {self.ndof}), got '
-                             f'{values.shape}')
+        self.apply_learned(memory, calibrate(self.published(), times, targets, self.ndof,
+                                             self.sample_time,
+                                             self.params.min_calibration_samples))
+
+    def published(self) -> list[Published]:
+        """A copy of the published history the covariances are calibrated on (oldest first)."""
+        return list(self._history)
+
+    def apply_learned(self, memory: VesselMemory | None, covariances: Covariances | None) -> None:
+        """Put a vessel memory and a calibration in use (None: keep the previous one)."""
         if memory is not None:
             self._memory = memory
             self.counters['memory_updates'] += 1
-        self._calibrate(stamps, values)
+        if covariances is not None:
+            self._pose_cov, self._twist_cov = covariances
+            self.counters['calibrations'] += 1
 
     # ---- Kalman filter -------------------------------------------------------------------
 
@@ -543,35 +555,6 @@ class LfOdometry:
 
     # ---- covariance calibration ------------------------------------------------------------
 
-    def _calibrate(self, stamps: FloatArray, targets: FloatArray) -> None:
-        if not self._history:
-            return
-        n = self.ndof
-        velocity = body_velocity(targets, self.sample_time)
-        pub_t = np.array([p.stamp for p in self._history])
-        index = np.round((pub_t - stamps[0]) / self.sample_time).astype(np.int64)
-        ok = (index >= 1) & (index < stamps.shape[0] - 1)
-        ok &= np.abs(stamps[np.clip(index, 0, stamps.shape[0] - 1)] - pub_t) < \
-            0.5 * self.sample_time
-        if not np.any(ok):
-            return
-        rows = [p for p, good in zip(self._history, ok, strict=True) if good]
-        idx = index[ok]
-        pose_err = np.array([p.pose for p in rows]) - targets[idx]
-        if n == 3:
-            pose_err[:, 2] = wrap_angle(pose_err[:, 2])
-        twist_err = np.array([p.twist for p in rows]) - velocity[idx]
-        sources = np.array([p.source for p in rows])
-        pose_cov: dict[str, FloatArray] = {'all': _second_moment(pose_err)}
-        twist_cov: dict[str, FloatArray] = {'all': _second_moment(twist_err)}
-        for source in SOURCES:
-            mask = sources == source
-            if np.count_nonzero(mask) >= self.params.min_calibration_samples:
-                pose_cov[source] = _second_moment(pose_err[mask])
-                twist_cov[source] = _second_moment(twist_err[mask])
-        self._pose_cov, self._twist_cov = pose_cov, twist_cov
-        self.counters['calibrations'] += 1
-
     def _pose_covariance(self, source: EstimateSource) -> FloatArray:
         n = self.ndof
         if self._pose_cov:
@@ -613,6 +596,46 @@ class LfOdometry:
         if self._x is None:
             raise RuntimeError('LfOdometry has no state yet: call track() first')
         return self._x
+
+
+def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike, ndof: int,
+              sample_time: float, min_samples: int) -> Covariances | None:
+    """Covariances of the published pose and twist against the targets (module docstring).
+
+    Every published estimate whose stamp is a target instant (not the first or last) is
+    compared with the target and with the targets' differentiated body velocity; the second
+    moments (bias included) per source ('network', 'fallback': only with ``min_samples``
+    matches) and over all. None when nothing matches. Pure: runs on a worker.
+    """
+    stamps = np.asarray(times, dtype=np.float64)
+    values = np.array(targets, dtype=np.float64).reshape(stamps.shape[0], -1)
+    if values.shape[1] != ndof or values.shape[0] < 3 or not _finite(values, stamps):
+        raise ValueError(f'targets must be finite with shape (m >= 3, {ndof}), got '
+                         f'{values.shape}')
+    if not history:
+        return None
+    velocity = body_velocity(values, sample_time)
+    pub_t = np.array([p.stamp for p in history])
+    index = np.round((pub_t - stamps[0]) / sample_time).astype(np.int64)
+    ok = (index >= 1) & (index < stamps.shape[0] - 1)
+    ok &= np.abs(stamps[np.clip(index, 0, stamps.shape[0] - 1)] - pub_t) < 0.5 * sample_time
+    if not np.any(ok):
+        return None
+    rows = [p for p, good in zip(history, ok, strict=True) if good]
+    idx = index[ok]
+    pose_err = np.array([p.pose for p in rows]) - values[idx]
+    if ndof == 3:
+        pose_err[:, 2] = wrap_angle(pose_err[:, 2])
+    twist_err = np.array([p.twist for p in rows]) - velocity[idx]
+    sources = np.array([p.source for p in rows])
+    pose_cov: dict[str, FloatArray] = {'all': _second_moment(pose_err)}
+    twist_cov: dict[str, FloatArray] = {'all': _second_moment(twist_err)}
+    for source in SOURCES:
+        mask = sources == source
+        if np.count_nonzero(mask) >= min_samples:
+            pose_cov[source] = _second_moment(pose_err[mask])
+            twist_cov[source] = _second_moment(twist_err[mask])
+    return pose_cov, twist_cov
 
 
 def normalized_error_squared(error: ArrayLike, covariance: ArrayLike) -> FloatArray:

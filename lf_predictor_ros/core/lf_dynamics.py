@@ -406,8 +406,15 @@ def _body_to_earth(eta: FloatArray, nu: FloatArray) -> FloatArray:
 
 
 def _ridge(phi: FloatArray, y: FloatArray, ridge: float) -> tuple[FloatArray, FloatArray]:
-    """Per-output ridge least squares on standardized columns; returns (coef, residual std)."""
-    scale = np.std(phi, axis=0)
+    """Per-output ridge least squares on RMS-scaled columns; returns (coef, residual std).
+
+    Each column is divided by its root mean square, so every scaled column has unit mean
+    square and the penalty ``ridge`` · tr(ZᵀZ) / p is ``ridge`` · m whatever the units. (Dividing
+    by the standard deviation instead, without centring, blew up a nearly constant column such
+    as cos ψ at a steady heading to ~1e5 and let the penalty shrink every other coefficient to
+    zero: the fitted M⁻¹ came out 1e-7 of the truth.)
+    """
+    scale = np.sqrt(np.mean(phi**2, axis=0))
     scale = np.where(scale > 0.0, scale, 1.0)
     z = phi / scale
     gram = z.T @ z

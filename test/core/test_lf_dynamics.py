@@ -22,14 +22,18 @@ DAMPING = np.array([5e4, 1e5, 1e8])  # N·s/m, N·s/m, N·m·s
 ENV_FORCE = np.array([2e4, -1e4])  # N, earth frame (north, east)
 
 
-def _vessel_run(seed: int, samples: int = 1800, thrust_scale: float = 3e5) -> tuple[
-        np.ndarray, np.ndarray]:
-    """M ν̇ + D ν = τ + R(ψ)ᵀ b (Fossen 2011 eq. 7.8, no Coriolis at DP speed), Euler at h."""
+def _vessel_run(seed: int, samples: int = 1800, thrust_scale: float = 3e5,
+                yaw_scale: float = 100.0, heading: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """M ν̇ + D ν = τ + R(ψ)ᵀ b (Fossen 2011 eq. 7.8, no Coriolis at DP speed), Euler at h.
+
+    The yaw moment is ``yaw_scale`` [m] times the force scale; the run starts at ``heading``.
+    """
     rng = np.random.default_rng(seed)
-    eta, nu, tau = np.zeros(3), np.zeros(3), np.zeros(3)
+    eta, nu, tau = np.array([0.0, 0.0, heading]), np.zeros(3), np.zeros(3)
     poses, forces = [], []
     for _ in range(samples):
-        tau = tau + 0.02 * (rng.normal(size=3) * thrust_scale * np.array([1, 1, 100]) - tau)
+        tau = tau + 0.02 * (rng.normal(size=3) * thrust_scale * np.array([1, 1, yaw_scale])
+                            - tau)
         c, s = math.cos(eta[2]), math.sin(eta[2])
         env_body = np.array([c * ENV_FORCE[0] + s * ENV_FORCE[1],
                              -s * ENV_FORCE[0] + c * ENV_FORCE[1], 0.0])
@@ -49,6 +53,25 @@ def test_fit_recovers_mass_damping_and_earth_fixed_force() -> None:
     # u̇ bias = (b_N cos ψ + b_E sin ψ)/m: basis [1, cos, sin] coefficients
     np.testing.assert_allclose(model.bias[0, 1:], ENV_FORCE / MASS[0], rtol=0.05, atol=1e-5)
     assert model.growth_rate() < 0.0
+
+
+def test_fit_recovers_mass_and_damping_at_a_steady_heading() -> None:
+    """DP station keeping: the heading hardly moves, so cos ψ is nearly constant.
+
+    A nearly constant regressor must not dominate the ridge penalty (before the fix the columns
+    were divided by their standard deviation without centring: cos ψ became ~1e5 and the fitted
+    M⁻¹ came out ~1e-7 of the truth on the supply vessel).
+    """
+    poses, forces = _vessel_run(4, yaw_scale=0.1, heading=0.3)
+    assert np.ptp(poses[:, 2]) < 0.02  # rad: a steady heading indeed
+    model = fit_lf_dynamics(poses, forces, H)
+    np.testing.assert_allclose(np.diag(model.input_gain)[:2], 1.0 / MASS[:2], rtol=0.05)
+    np.testing.assert_allclose(np.diag(model.damping)[:2], -DAMPING[:2] / MASS[:2], rtol=0.1)
+    # the earth-fixed force at that heading (the basis terms are collinear there: only their
+    # sum at ψ is identified): u̇ bias = (b_N cos ψ + b_E sin ψ)/m
+    c, s = math.cos(0.3), math.sin(0.3)
+    expected = (c * ENV_FORCE[0] + s * ENV_FORCE[1]) / MASS[0]
+    assert model.bias[0] @ np.array([1.0, c, s]) == pytest.approx(expected, rel=0.1)
 
 
 def test_fit_refuses_bad_input_with_a_message() -> None:

@@ -371,3 +371,32 @@ def test_observer_heading_resolution_caches_few_transitions_and_stays_close() ->
     assert np.all(np.abs(a - b) <= np.array([2e-3, 2e-3, 2e-5])), a - b
     with pytest.raises(ValueError, match='heading_resolution'):
         PassiveObserver(3, 1.0, 0.8, M_SUPPLY, D_SUPPLY, k3=K3, k4=K4, heading_resolution=-1.0)
+
+
+def test_observer_coast_follows_the_model_alone() -> None:
+    """Dead reckoning: a surge force step Δτ moves η̂ as M u̇ + D u = Δτ alone (the supply
+    vessel's surge is decoupled): x(t) = Δτ/D (t − T (1 − e^{−t/T})), T = M/D. Two coasts from
+    the same equilibrium, with τ and τ + Δτ, differ by exactly that response (linear observer,
+    bias frozen but for its decay, which is equal in both)."""
+    pose = np.array([10.0, -4.0, 0.0])
+    force = np.array([2.0e4, 1.0e4, 3.0e5])
+    step = np.array([5.0e4, 0.0, 0.0])  # [N] surge
+    runs = []
+    for extra in (np.zeros(3), step):
+        observer = PassiveObserver(3, 0.1, 0.8, M_SUPPLY, D_SUPPLY, k3=K3, k4=K4)
+        for k in range(600):
+            observer.update(0.1 * k, pose, force)
+        runs.append(np.array([observer.coast(60.0 + 0.1 * k, force + extra)
+                              for k in range(600)]))
+    moved = runs[1] - runs[0]
+    t = 0.1 * np.arange(1, 601)
+    mass, damping = M_SUPPLY[0, 0], D_SUPPLY[0, 0]
+    lag = mass / damping  # [s] surge time constant (≈ 88 s)
+    expected = step[0] / damping * (t - lag * (1.0 - np.exp(-t / lag)))
+    np.testing.assert_allclose(moved[:, 0], expected, rtol=0.03, atol=1e-3)
+    # no yaw from a surge force; east only through the small equilibrium heading (ψ̂ ≈ 2e-3 rad
+    # under the yaw moment): |Δeast| = |Δnorth| tan ψ̂
+    assert np.max(np.abs(moved[:, 2])) < 1e-9
+    assert np.max(np.abs(moved[:, 1])) < 0.005 * np.max(np.abs(moved[:, 0]))
+    with pytest.raises(ValueError, match='give it a pose first'):
+        PassiveObserver(3, 0.1, 0.8, M_SUPPLY, D_SUPPLY, k3=K3, k4=K4).coast(0.0, force)

@@ -174,12 +174,14 @@ def _vessel_matrix(value: ArrayLike, ndof: int, name: str) -> FloatArray:
 
 
 def system_matrices(
-    gains: ObserverGains, mass: FloatArray, damping: FloatArray, heading: float
+    gains: ObserverGains, mass: FloatArray, damping: FloatArray, heading: float,
+    innovation: bool = True,
 ) -> tuple[FloatArray, FloatArray]:
     """Continuous (A, B) of the observer for a held heading; x = [ξ1, ξ2, η, b, ν], u = [y, τ].
 
     The homogeneous part A is also the estimation-error dynamics (Fossen & Strand 1999, eq. 22),
-    so its eigenvalues are the observer poles.
+    so its eigenvalues are the observer poles. ``innovation=False``: the model alone (every
+    gain K1–K4 zero, y has no effect), for dead reckoning.
     """
     n = mass.shape[0]
     rot = _rotation(heading, n)
@@ -206,7 +208,7 @@ def system_matrices(
     a[nu, nu] = -m_inv @ damping
     a[nu, bias] = m_inv @ rot.T
     b = np.zeros((5 * n, 2 * n))
-    for row, gain in zip(blk, gain_blocks, strict=True):
+    for row, gain in zip(blk, gain_blocks if innovation else [], strict=innovation):
         a[row, eta] -= gain
         a[row, xi2] -= gain
         b[row, :n] = gain
@@ -317,26 +319,26 @@ class PassiveObserver:
                    g.k4, g.bias_time)
         return all(bool(np.isclose(v[0], v[1], rtol=1e-12, atol=0.0)) for v in vectors)
 
-    def _step(self, state: FloatArray, inputs: FloatArray, heading: float, step: float) -> (
-        FloatArray
-    ):
+    def _step(self, state: FloatArray, inputs: FloatArray, heading: float, step: float,
+              innovation: bool = True) -> FloatArray:
         """Exact ZOH step; in rotated coordinates when the observer is rotation invariant."""
         n = self.ndof
         if n == 1 or not self._isotropic():
-            phi, gamma = self._transition(heading, step)
+            phi, gamma = self._transition(heading, step, innovation)
             return np.asarray(phi @ state + gamma @ inputs, dtype=np.float64)
         rot = _rotation(heading, n)
         blocks = state.reshape(5, n)
         rotated = blocks @ rot  # each block b → Rᵀ b (row-vector form)
         u_rot = np.concatenate([inputs[:n] @ rot, inputs[n:]])
         rotated[4] = blocks[4]  # ν̂ is already body-fixed
-        phi, gamma = self._transition(0.0, step)
+        phi, gamma = self._transition(0.0, step, innovation)
         new = (phi @ rotated.reshape(-1) + gamma @ u_rot).reshape(5, n)
         out = new @ rot.T  # back to earth frame: b → R b
         out[4] = new[4]
         return np.asarray(out.reshape(-1), dtype=np.float64)
 
-    def _transition(self, heading: float, step: float) -> tuple[FloatArray, FloatArray]:
+    def _transition(self, heading: float, step: float,
+                    innovation: bool = True) -> tuple[FloatArray, FloatArray]:
         """ZOH matrices for R(heading) held over ``step``, cached per rounded heading.
 
         A non-isotropic observer needs a matrix exponential per heading. With
@@ -346,12 +348,12 @@ class PassiveObserver:
         """
         resolution = self.heading_resolution
         held = heading if resolution == 0.0 else round(heading / resolution) * resolution
-        key = (held, step)
+        key = (held, step, innovation)
         cached = self._transitions.get(key)
         if cached is None:
             if len(self._transitions) >= TRANSITION_CACHE:
                 self._transitions.clear()
-            a, b = system_matrices(self.gains, self._mass, self._damping, held)
+            a, b = system_matrices(self.gains, self._mass, self._damping, held, innovation)
             cached = _zoh(a, b, step)
             self._transitions[key] = cached
         return cached
@@ -385,6 +387,28 @@ class PassiveObserver:
             predicted = self._state[2 * n + _YAW] + self._state[n + _YAW]
             measured[_YAW] = predicted + float(wrap_to_pi(measured[_YAW] - predicted))
         self._state = self._step(self._state, np.concatenate([measured, tau]), heading, step)
+        self._last_t = float(t)
+        return self.estimate()
+
+    def coast(self, t: float, force: FloatArray) -> FloatArray:
+        """Dead reckoning (no pose at t, thrust τ still applied): the model alone; returns η̂.
+
+        The classical observer's dead reckoning: the measurement is replaced by the observer's
+        own output η̂ + C_w ξ̂ throughout (every gain K1–K4 zero: the model alone, exact ZOH
+        step): η̂ integrates ν̂, ν̂ follows M ν̂̇ = −D ν̂ + Rᵀ b̂ + τ, the bias b̂ only decays
+        (−T⁻¹ b̂). Raises ValueError before the first pose or on a non-finite force.
+        """
+        n = self.ndof
+        tau = np.array(force, dtype=np.float64)[:n]
+        if self._state is None or self._last_t is None:
+            raise ValueError('the observer has no state to dead reckon from: give it a pose first')
+        if not np.all(np.isfinite(tau)):
+            raise ValueError('force must be finite to dead reckon')
+        elapsed = float(t) - self._last_t
+        step = round((elapsed if elapsed > 0.0 else self.sample_time) / 1e-9) * 1e-9
+        heading = float(self._state[2 * n + _YAW]) if n == 3 else 0.0
+        self._state = self._step(self._state, np.concatenate([np.zeros(n), tau]), heading,
+                                 step, innovation=False)
         self._last_t = float(t)
         return self.estimate()
 

@@ -374,10 +374,12 @@ def test_observer_heading_resolution_caches_few_transitions_and_stays_close() ->
 
 
 def test_observer_coast_follows_the_model_alone() -> None:
-    """Dead reckoning: a surge force step Δτ moves η̂ as M u̇ + D u = Δτ alone (the supply
-    vessel's surge is decoupled): x(t) = Δτ/D (t − T (1 − e^{−t/T})), T = M/D. Two coasts from
-    the same equilibrium, with τ and τ + Δτ, differ by exactly that response (linear observer,
-    bias frozen but for its decay, which is equal in both)."""
+    """Dead reckoning: a surge force step Δτ moves η̂ as M u̇ + D u = Δτ alone.
+
+    The supply vessel's surge is decoupled: x(t) = Δτ/D (t − T (1 − e^{−t/T})), T = M/D. Two
+    coasts from the same equilibrium, with τ and τ + Δτ, differ by exactly that response
+    (linear observer, bias frozen but for its decay, which is equal in both).
+    """
     pose = np.array([10.0, -4.0, 0.0])
     force = np.array([2.0e4, 1.0e4, 3.0e5])
     step = np.array([5.0e4, 0.0, 0.0])  # [N] surge

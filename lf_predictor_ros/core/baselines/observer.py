@@ -272,7 +272,7 @@ class PassiveObserver:
         self.gains = observer_gains(wave_peak_freq, **self._tuning)  # type: ignore[arg-type]
         self._state: FloatArray | None = None
         self._last_t: float | None = None
-        self._transitions: dict[tuple[float, float], tuple[FloatArray, FloatArray]] = {}
+        self._transitions: dict[tuple[float, float, bool], tuple[FloatArray, FloatArray]] = {}
 
     @property
     def wave_peak_freq(self) -> float:

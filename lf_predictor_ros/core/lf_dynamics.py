@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 DeadReckoner = Literal['model', 'constant_velocity', 'hold']
+ModelStructure = Literal['diagonal', 'full']
 DEAD_RECKONERS: tuple[DeadReckoner, ...] = ('model', 'constant_velocity', 'hold')
 
 # Relative ridge penalty of the least-squares fit (on standardized regressors) [-].
@@ -43,6 +44,9 @@ RIDGE = 1e-3
 # A fitted F with an eigenvalue whose real part exceeds this is not a DP vessel (it would double
 # its velocity in < 200 s without thrust): the fit is refused [1/s].
 MAX_GROWTH_RATE = 1.0 / 200.0
+# Least damping rate of a diagonal fit, 1/(time constant): LF time constants of DP vessels are
+# 10–200 s (supply vessel 88 / 44 / 11.5 s, Fossen 2011 §7.3); 1000 s is far beyond [1/s].
+MIN_DAMPING_RATE = 1.0 / 1000.0
 # Spacing of the dead-reckoning test starts in the validation part of the window [s].
 TEST_START_SPACING = 20.0
 # Fraction of the window (its newest part) kept out of the fit for the dead-reckoning test [-].
@@ -132,18 +136,27 @@ class LfDynamics:
 
 
 def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
-                    ridge: float = RIDGE) -> LfDynamics:
+                    ridge: float = RIDGE, structure: ModelStructure = 'diagonal') -> LfDynamics:
     """Least-squares fit of ν̇ = F ν + G τ + B β(ψ) on an LF pose series and its body forces.
+
+    ``structure`` 'diagonal' (default): F and G diagonal, each DOF fitted on its own velocity
+    and force (+ the environment basis); 'full': every DOF on all of them. Data from a DP loop
+    are closed-loop data: the thrust is computed from the vessel's own motion, and the full fit
+    spreads that correlation over the cross terms. On supply_closed_loop tuning seed 1 (targets
+    of 1200 s windows) the full fit came out unstable (growth 0.16 1/s) in the loop, the
+    diagonal one damped with M⁻¹ within 0.4–0.95 of the truth (docs/BENCHMARKS.md, issue 14).
 
     Args:
         targets: LF poses, shape (m, n) (n = 1 or 3, heading unwrapped), uniform sample time.
         forces: body-frame forces applied at the same instants, shape (m, n).
         sample_time: h [s].
-        ridge: relative ridge penalty on standardized regressors.
+        ridge: relative ridge penalty on RMS-scaled regressors.
+        structure: 'diagonal' or 'full'.
 
     Raises:
         ValueError: bad shapes, too few samples, non-finite data, or a fit that is not a damped
-            vessel (growth rate above ``MAX_GROWTH_RATE``): collect more (excited) data.
+            vessel (growth rate above ``MAX_GROWTH_RATE``, or a thrust that does not push the
+            vessel its way, G_ii ≤ 0): collect more (excited) data.
     """
     eta = _as_2d(targets, 'targets')
     tau = _as_2d(forces, 'forces')
@@ -155,16 +168,37 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
     nu = body_velocity(eta, sample_time)
     nu_dot = np.gradient(nu, sample_time, axis=0)
     basis = heading_basis(eta[:, 2] if n == 3 else np.zeros(eta.shape[0]), n)
+    if structure not in ('diagonal', 'full'):
+        raise ValueError(f"structure must be 'diagonal' or 'full', got {structure!r}")
     phi = np.hstack([nu, tau, basis])
     if phi.shape[0] < 5 * phi.shape[1]:
         raise ValueError(f'{phi.shape[0]} samples are too few to fit {phi.shape[1]} '
                          'coefficients per DOF: use a longer window')
-    coef, residual_std = _ridge(phi, nu_dot, ridge)
+    if structure == 'full':
+        coef, residual_std = _ridge(phi, nu_dot, ridge)
+    else:
+        coef = np.zeros((n, phi.shape[1]))
+        residual_std = np.zeros(n)
+        for i in range(n):
+            columns = [i, n + i, *range(2 * n, phi.shape[1])]
+            own, residual_std[i:i + 1] = _ridge(phi[:, columns], nu_dot[:, i:i + 1], ridge)
+            if own[0, 0] > -MIN_DAMPING_RATE:
+                # no vessel is undamped: closed-loop data (τ ≈ −K_d ν) let a larger G pass for
+                # a negative damping; the damping is set to the least and G, B refitted
+                own[0, 0] = -MIN_DAMPING_RATE
+                rest, residual_std[i:i + 1] = _ridge(
+                    phi[:, columns[1:]], nu_dot[:, i:i + 1] + MIN_DAMPING_RATE * nu[:, i:i + 1],
+                    ridge)
+                own[0, 1:] = rest[0]
+            coef[i, columns] = own[0]
     model = LfDynamics(damping=coef[:, :n], input_gain=coef[:, n:2 * n], bias=coef[:, 2 * n:],
                        residual_std=residual_std)
     if model.growth_rate() > MAX_GROWTH_RATE:
         raise ValueError(f'the fitted LF dynamics grow at {model.growth_rate():.3g} 1/s (> '
                          f'{MAX_GROWTH_RATE:.3g}): not a damped vessel, not used')
+    if np.any((np.diag(model.input_gain) <= 0.0) & (np.std(tau, axis=0) > 0.0)):
+        raise ValueError(f'the fitted thrust gain {np.diag(model.input_gain)} has an entry <= 0 '
+                         '(the thrust would push the vessel the other way): not used')
     return model
 
 
@@ -240,6 +274,7 @@ class VesselMemory:
             process noise of a constant-velocity model).
         force_limit: largest force per DOF the model is used with (``FORCE_MARGIN`` × the
             largest in the window; inf if the window had none) [N, N, N·m].
+        drift_curves: the drift curve of every tested reckoner (``curve``).
     """
 
     model: LfDynamics | None
@@ -249,6 +284,11 @@ class VesselMemory:
     message: str
     accel_std: FloatArray
     force_limit: FloatArray = field(default_factory=lambda: np.full(3, np.inf))
+    drift_curves: dict[DeadReckoner, DriftCurve] = field(default_factory=dict)
+
+    def curve(self, reckoner: DeadReckoner) -> DriftCurve:
+        """The drift curve of ``reckoner`` (the chosen one's if it was not tested)."""
+        return self.drift_curves.get(reckoner, self.drift)
 
     def plausible_force(self, force: FloatArray) -> FloatArray:
         """The force clipped to ±``force_limit`` per DOF (a new array)."""
@@ -296,7 +336,10 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     tested on the rest (``drift_test`` over ``horizon`` seconds, capped by the data); the one with
     the smallest drift summed over DOFs (each DOF normalized by the hold reckoner's drift) wins.
     The returned model is refitted on the whole window. Ties and too few test starts keep
-    'constant_velocity', the reckoner that needs no model.
+    'hold': in a DP loop the controller acts on the dead-reckoned pose, and a velocity that is
+    extrapolated without the thrust that would stop it is acted against (on tuning seeds 1–2 of
+    the closed loops through 60 s dropouts, constant velocity turned the supply vessels by up to
+    2.1 rad where hold kept 0.95 rad; docs/BENCHMARKS.md, issue 14).
     """
     eta_t = _as_2d(targets, 'targets')
     tau = _as_2d(forces, 'forces')
@@ -312,28 +355,28 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
               for name in DEAD_RECKONERS if name != 'model' or model is not None}
     rms: dict[str, FloatArray] = {name: np.sqrt(curve.mean_square[-1]) if curve.starts else
            np.full(eta_t.shape[1], np.inf) for name, curve in curves.items()}
-    chosen: DeadReckoner = 'constant_velocity'
-    if curves['constant_velocity'].starts >= MIN_TEST_STARTS:
+    chosen: DeadReckoner = 'hold'
+    if curves['hold'].starts >= MIN_TEST_STARTS:
         scale = np.maximum(rms['hold'], 1e-9)
         score = {name: float(np.sum(value / scale)) for name, value in rms.items()}
         best: DeadReckoner = min(curves, key=lambda name: score[name])
-        if score[best] < score['constant_velocity']:
+        if score[best] < score['hold']:
             chosen = best
         message = message or (f"dead reckoner '{chosen}' drifts least on the newest "
                               f'{test_horizon:.0f} s tests')
     else:
-        message = message or 'too few dead-reckoning tests: constant velocity kept'
+        message = message or 'too few dead-reckoning tests: hold kept'
     if model is not None:
         try:
             model = fit_lf_dynamics(eta_t, tau, sample_time)
         except ValueError as exc:
             model, message = None, f'LF dynamics not refitted: {exc}'
-            chosen = 'constant_velocity' if chosen == 'model' else chosen
+            chosen = 'hold' if chosen == 'model' else chosen
     accel = np.gradient(body_velocity(eta_t, sample_time), sample_time, axis=0)
     largest = np.max(np.abs(tau), axis=0)
     force_limit = np.where(largest > 0.0, FORCE_MARGIN * largest, np.inf)
     return VesselMemory(model, chosen, curves[chosen], rms, message, np.std(accel, axis=0),
-                        force_limit)
+                        force_limit, dict(curves))
 
 
 def thrust_improves_dead_reckoning(targets: ArrayLike, forces: ArrayLike, sample_time: float,
@@ -344,17 +387,21 @@ def thrust_improves_dead_reckoning(targets: ArrayLike, forces: ArrayLike, sample
     older two thirds of the window, one with the forces and one with the forces set to 0
     (damping and environment terms only), and both dead-reckon the newest third
     (``drift_test``). True if the model with thrust drifts at least ``THRUST_MIN_GAIN`` less,
-    summed over DOFs (each normalized by the hold reckoner's drift). A fit that fails, or too
-    few tests, gives True: the thesis's structure is kept when the data cannot tell.
+    summed over DOFs (each normalized by the hold reckoner's drift). A fit with thrust that is
+    refused where the one without is not (e.g. a thrust gain <= 0) gives False; any other failed
+    fit, or too few tests, gives True: the thesis's structure is kept when the data cannot tell.
     """
     eta_t = _as_2d(targets, 'targets')
     tau = _as_2d(forces, 'forces')
     split, test_horizon = _held_out_split(eta_t.shape[0], sample_time, horizon)
     try:
-        with_thrust = fit_lf_dynamics(eta_t[:split], tau[:split], sample_time)
         without = fit_lf_dynamics(eta_t[:split], np.zeros_like(tau[:split]), sample_time)
     except ValueError:
         return True
+    try:
+        with_thrust = fit_lf_dynamics(eta_t[:split], tau[:split], sample_time)
+    except ValueError:
+        return False
     hold = drift_test(None, 'hold', eta_t[split:], tau[split:], sample_time, test_horizon)
     if hold.starts < MIN_TEST_STARTS:
         return True

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lf_predictor_ros.core.estimator import EstimatorStatus
+from lf_predictor_ros.core.filters import zero_phase
 from lf_predictor_ros.core.lf_dynamics import VesselMemory, learn_vessel_memory
 from lf_predictor_ros.core.odometry import (
     Covariances,
@@ -32,6 +33,7 @@ from lf_predictor_ros.core.odometry import (
 )
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
+from lf_predictor_ros.core.retraining import target_filter
 from lf_predictor_ros.core.targets import TargetWindow
 
 FloatArray = NDArray[np.float64]
@@ -140,13 +142,15 @@ class LfStateEstimator:
             return
         times = np.array(self._times)[idx[keep]]
         values = np.array(targets.values, dtype=np.float64).reshape(len(targets), -1)[keep]
-        forces = np.array(self._forces)[idx[keep]]
         # the newest ε targets are still filter transients (targets.training_mask): left out
         usable = max(3, values.shape[0] - self.params.transient_samples)
-        times, values, forces = times[:usable], values[:usable], forces[:usable]
+        times, values, rows = times[:usable], values[:usable], idx[keep][:usable]
+        freq = self.predictor.wave_peak_freq
+        sos = None if freq is None else target_filter(self.params, freq)
         odometry = self.odometry
-        args = (times, values, forces, odometry.published(), self.sample_time, self.ndof,
-                odometry.params.dead_reckoning_timeout, odometry.params.min_calibration_samples)
+        args = (times, values, np.array(self._forces), rows, sos, odometry.published(),
+                self.sample_time, self.ndof, odometry.params.dead_reckoning_timeout,
+                odometry.params.min_calibration_samples)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -169,14 +173,23 @@ class LfStateEstimator:
         self._memory_error = None
 
 
-def _learn(times: FloatArray, values: FloatArray, forces: FloatArray,
-           published: list[Published], sample_time: float, ndof: int, horizon: float,
-           min_samples: int) -> tuple[VesselMemory | None, Covariances | None]:
+def _learn(times: FloatArray, values: FloatArray, all_forces: FloatArray, rows: NDArray[np.int64],
+           sos: FloatArray | None, published: list[Published], sample_time: float, ndof: int,
+           horizon: float, min_samples: int) -> tuple[VesselMemory | None, Covariances | None]:
     """Worker job: the vessel memory of one target window and the calibrated covariances.
 
+    ``all_forces``: the buffered thrust, ``rows``: its rows at the targets' instants, ``sos``:
+    the targets' zero-phase filter (None: no ω0 yet). The thrust is filtered with the same
+    filter as the poses were before the fit: the model ν̇ = F ν + G τ + B β is linear, so it
+    holds between the filtered signals too, while the wave-band thrust a DP loop makes from its
+    estimate's wave leakage (std up to 10× the LF thrust in the predictor's own loop) would be
+    an error in the regressor and bias the thrust gain G towards 0 (errors in variables).
     The memory is None if it cannot be learned; the covariances compare the published estimates
     with the window (`odometry.calibrate`).
     """
+    forces = all_forces if sos is None or all_forces.shape[0] < 2 else zero_phase(all_forces,
+                                                                                  sos)
+    forces = forces[rows]
     try:
         memory: VesselMemory | None = learn_vessel_memory(values, forces, sample_time, horizon)
     except ValueError:

@@ -106,8 +106,11 @@ def test_thrust_that_does_not_move_the_vessel_is_not_trusted() -> None:
     unrelated = rng.normal(size=poses.shape) * 1e5
     memory = learn_vessel_memory(poses, unrelated, H, horizon=120.0)
     assert memory.reckoner != 'model'
-    assert np.sum(memory.drift_by_reckoner['model']) > np.sum(
-        memory.drift_by_reckoner[memory.reckoner])
+    if memory.model is None:  # refused by the fit itself (a thrust gain <= 0)
+        assert 'not used' in memory.message
+    else:  # or fitted and then beaten in the drift test
+        assert np.sum(memory.drift_by_reckoner['model']) > np.sum(
+            memory.drift_by_reckoner[memory.reckoner])
 
 
 def test_dead_reckon_step_is_pure_and_exact_for_constant_velocity() -> None:

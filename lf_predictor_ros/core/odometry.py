@@ -41,7 +41,7 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 import math
-from typing import Literal
+from typing import Literal, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -49,6 +49,7 @@ from numpy.typing import ArrayLike, NDArray
 from lf_predictor_ros.core.field_meta import field_doc
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_dynamics import (
+    DEAD_RECKONERS,
     DeadReckoner,
     VesselMemory,
     body_velocity,
@@ -100,6 +101,10 @@ class OdometryParams:
         'dead reckoning starts from the twist averaged over this time (first-order low-pass), '
         'not from the last twist: a DP loop acts against any velocity it sees, so a frozen '
         'wave-band twist would drive the vessel away while the poses are missing', 's'))
+    dead_reckoner: str = field(default='auto', metadata=field_doc(
+        "dead reckoner through a pose dropout: 'auto' (the vessel memory's choice by the "
+        "open-loop drift test), 'model' (the learned LF model driven by the thrust; the "
+        "memory's choice while no model is fitted), 'constant_velocity' or 'hold'", ''))
     reacquire_gate: float = field(default=CHI2_3DOF_999, metadata=field_doc(
         'a fix within this squared Mahalanobis distance of the dead-reckoned pose is accepted '
         'at once', ''))
@@ -132,6 +137,9 @@ class OdometryParams:
                 raise ValueError(f'{name} must be 3 positive numbers (north, east, yaw), '
                                  f'got {value}')
             object.__setattr__(self, name, tuple(float(v) for v in value))
+        if self.dead_reckoner not in ('auto', *DEAD_RECKONERS):
+            raise ValueError(f"dead_reckoner must be 'auto' or one of {DEAD_RECKONERS}, got "
+                             f'{self.dead_reckoner!r}')
         if self.min_calibration_samples < 1:
             raise ValueError('min_calibration_samples must be >= 1, got '
                              f'{self.min_calibration_samples}')
@@ -445,7 +453,13 @@ class LfOdometry:
     # ---- dead reckoning --------------------------------------------------------------------
 
     def _reckoner(self) -> DeadReckoner:
-        return self._memory.reckoner if self._memory is not None else 'constant_velocity'
+        memory = self._memory
+        if memory is None:
+            return 'constant_velocity'
+        choice = self.params.dead_reckoner
+        if choice == 'auto' or (choice == 'model' and memory.model is None):
+            return memory.reckoner
+        return cast(DeadReckoner, choice)
 
     def _dead_reckon_to(self, t: float, tau: FloatArray) -> None:
         tau = self._plausible(tau)
@@ -482,9 +496,10 @@ class LfOdometry:
         twist_cov = twist_cov0.copy()
         memory = self._memory
         reckoner = self._reckoner()
-        if memory is not None and memory.drift.starts > 0:
-            pose_cov[:n, :n] += np.diag(memory.drift.variance(elapsed))
-            twist_cov[:n, :n] += np.diag(memory.drift.velocity_variance(elapsed))
+        if memory is not None and memory.curve(reckoner).starts > 0:
+            drift = memory.curve(reckoner)
+            pose_cov[:n, :n] += np.diag(drift.variance(elapsed))
+            twist_cov[:n, :n] += np.diag(drift.velocity_variance(elapsed))
             if reckoner != 'hold':
                 rot = _rotation_block(float(x[2]) if n == 3 else 0.0, n)
                 pose_cov[:n, :n] += elapsed ** 2 * rot @ twist_cov0[:n, :n] @ rot.T

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from lf_predictor_ros.core.lf_dynamics import DriftCurve, VesselMemory
+from lf_predictor_ros.core.lf_dynamics import DriftCurve, LfDynamics, VesselMemory
 from lf_predictor_ros.core.odometry import (
     UNESTIMATED_VARIANCE,
     LfOdometry,
@@ -102,6 +102,53 @@ def test_constant_velocity_dead_reckoning_continues_the_motion_without_a_step() 
     assert out is not None
     assert out.pose[0] == pytest.approx(120.0 + 0.3 * 30.0, abs=0.05)
     assert out.mode == 'dead_reckoning' and out.reckoner == 'constant_velocity'
+
+
+def test_forced_model_dead_reckoner_follows_the_thrust() -> None:
+    """dead_reckoner 'model' uses the learned model even where the drift test chose 'hold'.
+
+    Surge model u̇ = −u/T + τ/m (T = 100 s, m = 1e6 kg), at rest, 1e4 N: semi-implicit Euler
+    at h = 1 s gives u_k = (1 − (1 − h/T)^k) τ T/m and x_k = h Σ u_j; the covariance grows with
+    the model's own drift curve (4 × the hold curve here), not the chosen reckoner's.
+    """
+    horizons = np.arange(1.0, 61.0)
+    hold_ms = np.tile((horizons / 60.0) ** 2, (3, 1)).T
+    model = LfDynamics(np.diag([-0.01, -0.01, -0.01]), np.diag([1e-6, 1e-6, 1e-9]),
+                       np.zeros((3, 3)), np.full(3, 1e-4))
+    curves = {'hold': DriftCurve(horizons, hold_ms, 1e-4 * hold_ms, 10),
+              'model': DriftCurve(horizons, 4.0 * hold_ms, 1e-4 * hold_ms, 10)}
+    memory = VesselMemory(model, 'hold', curves['hold'], {}, 'test', np.full(3, 1e-3),
+                          drift_curves=curves)  # type: ignore[arg-type]
+    force = np.array([1e4, 0.0, 0.0])
+    outs = {}
+    for choice in ('auto', 'model'):
+        odo = LfOdometry(3, H, OdometryParams(dead_reckoner=choice))
+        _track_line(odo, 0.0, 0.0, 100)
+        odo._memory = memory  # noqa: SLF001 - a known vessel memory
+        last = odo.track(100.0, [0.0, 0.0, 0.0], np.zeros(3))
+        assert last is not None
+        for k in range(1, 61):
+            out = odo.coast(100.0 + k, force)
+            assert out is not None
+        outs[choice] = (out, last)
+    held, last = outs['auto']
+    assert held.reckoner == 'hold' and held.pose[0] == pytest.approx(last.pose[0])
+    reckoned, last = outs['model']
+    assert reckoned.reckoner == 'model'
+    u = (1.0 - 0.99 ** np.arange(1, 61)) * 1e4 * 100.0 / 1e6
+    assert reckoned.pose[0] - last.pose[0] == pytest.approx(u.sum(), rel=0.02)
+    assert reckoned.twist[0] == pytest.approx(u[-1], rel=0.02)
+    # + the start-velocity uncertainty carried over 60 s (not for 'hold'), heading 0
+    expected = 4.0 + 60.0**2 * last.twist_cov[1, 1]
+    assert reckoned.pose_cov[1, 1] - last.pose_cov[1, 1] == pytest.approx(expected, rel=1e-6)
+    # without a fitted model 'model' falls back to the memory's choice
+    odo = LfOdometry(3, H, OdometryParams(dead_reckoner='model'))
+    _track_line(odo, 0.0, 0.0, 10)
+    odo._memory = _hold_memory()  # noqa: SLF001
+    out = odo.coast(11.0, force)
+    assert out is not None and out.reckoner == 'hold'
+    with pytest.raises(ValueError, match='dead_reckoner'):
+        OdometryParams(dead_reckoner='kalman')
 
 
 def test_reacquisition_inside_the_gate_is_immediate_and_outside_waits() -> None:

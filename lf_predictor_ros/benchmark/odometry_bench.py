@@ -38,6 +38,15 @@ unwrapped, central differences).
    once with ``velocity`` = the twist of `LfStateEstimator`; metrics as the suite computes them
    (`suite.run_closed_loops`, scored after the same warm-up): position RMSE, heading RMSE and
    thrust wave-band power.
+5. **Closed loop through pose dropouts** (``--dropout-loops``): the same DP loop with pose
+   dropouts (``default_dropouts`` with ``DROPOUT_LOOP_LENGTH``: within the dead-reckoning
+   timeout), for the predictor with pose and D term from lf_odom (`LfStateEstimator`: ``coast``
+   in a dropout, ``restart_segment`` after it; 'lost' gives no estimate and the PID holds its
+   last one) and for the tuned passive observer (the classical answer: its model alone,
+   ``PassiveObserver.coast``). Per dropout: the largest horizontal distance [m] and heading
+   difference [rad] of the loop's true LF pose from the ideal loop's (PID on the true LF pose,
+   same seed) during the dropout and in the ``AFTER_DROPOUT`` s after it, next to the same
+   windows of the same estimator's loop without dropouts (items 4 and the observer loop).
 
 Usage (2 Dask workers; ``--scheduler none`` runs in this process)::
 
@@ -62,11 +71,14 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
+import yaml
 
 from lf_predictor_ros.benchmark.estimators import make_estimator, predictor_params
 from lf_predictor_ros.benchmark.recordings import run_loop
 from lf_predictor_ros.benchmark.scoring import fmt_number, interval
+from lf_predictor_ros.benchmark.stability import pose_offset
 from lf_predictor_ros.benchmark.suite import (
+    _loop_reference,
     make_recording,
     make_setup,
     run_closed_loops,
@@ -80,7 +92,7 @@ from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.retraining import first_training_samples
 from sim_ros.control.pid import PidGains, PidState, pid_step
 from sim_ros.physics.kinematics import earth_to_body
-from sim_ros.simulation import load_scenario, simulate
+from sim_ros.simulation import ClosedLoopRun, Scenario, SimRecord, load_scenario, simulate
 
 FloatArray = NDArray[np.float64]
 DOFS = ('north', 'east', 'yaw')
@@ -95,6 +107,9 @@ TAU_WINDOW_C = 5.0  # Sokal's automatic window constant
 CONFIDENCE = 0.95
 LOOP_FD = 'adaptive'  # the predictor loop with the PID's finite-difference D term
 LOOP_ODOM = 'adaptive_odom_d'  # the same with the D term from the odometry twist
+LOOP_OBSERVER = 'observer'  # the tuned passive observer (PID finite-difference D term)
+DROPOUT_LOOP_LENGTH = 60.0  # [s] dropouts of item 5 (within the 120 s timeout)
+AFTER_DROPOUT = 120.0  # [s] scored after each dropout of item 5
 
 
 # ---------------------------------------------------------------- statistics
@@ -314,26 +329,117 @@ def _dropout_run(params: PredictorParams, odometry: OdometryParams,
     return {'dropouts': records, 'reckoner_at_end': reckoner, 'counters': counters}
 
 
-def _loop_runs(scenario_name: str, seed: int, duration: float, params: PredictorParams,
-               odometry: OdometryParams, setup: Any, warmup: float) -> dict[str, Any]:
-    """Item 4 of the module docstring."""
-    scenario = load_scenario(scenario_name)
-    h = params.sample_time
-    fd_stream = make_estimator(LOOP_FD, setup)
-    fd_run = run_loop(scenario, seed, duration, h, fd_stream.step)
+def _in_dropout(t: float, dropouts: Sequence[tuple[float, float]]) -> bool:
+    return any(a <= t < a + length for a, length in dropouts)
+
+
+def _odometry_loop(scenario: Scenario, seed: int, duration: float, params: PredictorParams,
+                   odometry: OdometryParams,
+                   dropouts: Sequence[tuple[float, float]] = ()) -> ClosedLoopRun:
+    """The predictor loop with the D term from the odometry twist (items 4 and 5).
+
+    Without dropouts the PID takes the predictor's LF pose (= lf_odom's pose while tracking
+    without a reacquisition blend). With dropouts it takes lf_odom's pose, as `dp_controller`
+    with ``velocity_source: odometry``: dead-reckoned in a dropout (``coast``), blended after
+    it; NaN when 'lost' (the PID holds its last estimate).
+    """
     est = LfStateEstimator(params, odometry, background=False)
     latest: list[FloatArray | None] = [None]
+    dropped = [False]
 
     def step(t: float, pose: FloatArray, force: FloatArray, omega: float) -> FloatArray:
-        lf_pose, out = est.update(t, pose, force)
+        if _in_dropout(t, dropouts):
+            dropped[0] = True
+            out = est.coast(t, force)
+            lf_pose = np.full(3, np.nan) if out is None else out.pose
+        else:
+            if dropped[0]:
+                est.restart_segment()
+                dropped[0] = False
+            lf_pose, out = est.update(t, pose, force)
+            if dropouts and out is not None:
+                lf_pose = out.pose
         twist = None if out is None else np.asarray(out.twist, dtype=np.float64)
         latest[0] = twist if twist is not None and np.all(np.isfinite(twist)) else None
         return np.asarray(lf_pose, dtype=np.float64)
 
     try:
-        odom_run = run_loop(scenario, seed, duration, h, step, velocity=lambda: latest[0])
+        return run_loop(scenario, seed, duration, params.sample_time, step,
+                        velocity=lambda: latest[0])
     finally:
         est.close()
+
+
+def _observer_loop(scenario: Scenario, seed: int, duration: float, setup: Any,
+                   dropouts: Sequence[tuple[float, float]]) -> ClosedLoopRun:
+    """The tuned passive observer's loop; in a dropout its model alone (``coast``)."""
+    stream = make_estimator(LOOP_OBSERVER, setup)
+
+    def step(t: float, pose: FloatArray, force: FloatArray, omega: float) -> FloatArray:
+        if _in_dropout(t, dropouts):
+            return np.asarray(stream.estimator.coast(t, force), dtype=np.float64)
+        return stream.step(t, pose, force, omega)
+
+    return run_loop(scenario, seed, duration, setup.sample_time, step)
+
+
+def dropout_deviation(run: ClosedLoopRun, reference: FloatArray, ndof: int,
+                      dropouts: Sequence[tuple[float, float]],
+                      after: float = AFTER_DROPOUT) -> list[dict[str, Any]]:
+    """Item 5: per dropout, the largest distance of the true LF pose from ``reference``.
+
+    ``reference``: per sample of ``run.record`` (n, 3). Returns per dropout the horizontal
+    distance [m] and (3 DOF) the heading difference [rad] maxima during [a, a + L) and
+    [a + L, a + L + after); NaN for a window the run did not reach (aborted).
+    """
+    rec = run.record
+    offset = pose_offset(rec.truth_lf_pose, reference[:rec.t.size], ndof)
+    distance = np.hypot(offset[:, 0], offset[:, 1]) if ndof == 3 else np.abs(offset[:, 0])
+    out = []
+    for start, length in dropouts:
+        row: dict[str, Any] = {'start': start, 'length': length}
+        for label, (a, b) in (('during', (start, start + length)),
+                              ('after', (start + length, start + length + after))):
+            keep = (rec.t >= a) & (rec.t < b)
+            reached = bool(rec.t.size) and float(rec.t[-1]) >= b - 1.0
+            row[label] = float(distance[keep].max()) if reached and keep.any() else math.nan
+            if ndof == 3:
+                row[f'{label}_heading'] = (float(np.abs(offset[keep, 2]).max())
+                                           if reached and keep.any() else math.nan)
+        out.append(row)
+    return out
+
+
+def _dropout_loops(scenario: Scenario, seed: int, duration: float, params: PredictorParams,
+                   odometry: OdometryParams, setup: Any, ideal: SimRecord,
+                   odom_run: ClosedLoopRun) -> dict[str, Any]:
+    """Item 5 of the module docstring (``odom_run``: item 4's loop without dropouts)."""
+    dropouts = default_dropouts(params, duration, length=DROPOUT_LOOP_LENGTH)
+    runs = {'lf_odom': (_odometry_loop(scenario, seed, duration, params, odometry, dropouts),
+                        odom_run),
+            'observer': (_observer_loop(scenario, seed, duration, setup, dropouts),
+                         _observer_loop(scenario, seed, duration, setup, ()))}
+    out: dict[str, Any] = {'dropouts': [list(d) for d in dropouts]}
+    for name, (with_dropouts, without) in runs.items():
+        out[name] = {'with_dropouts': dropout_deviation(
+                         with_dropouts, _loop_reference(scenario, with_dropouts.record, ideal),
+                         params.ndof, dropouts),
+                     'without': dropout_deviation(
+                         without, _loop_reference(scenario, without.record, ideal),
+                         params.ndof, dropouts),
+                     'aborted_at': with_dropouts.aborted_at}
+    return out
+
+
+def _loop_runs(scenario_name: str, seed: int, duration: float, params: PredictorParams,
+               odometry: OdometryParams, setup: Any, warmup: float,
+               dropout_loops: bool = False) -> dict[str, Any]:
+    """Items 4 and (``dropout_loops``) 5 of the module docstring."""
+    scenario = load_scenario(scenario_name)
+    h = params.sample_time
+    fd_stream = make_estimator(LOOP_FD, setup)
+    fd_run = run_loop(scenario, seed, duration, h, fd_stream.step)
+    odom_run = _odometry_loop(scenario, seed, duration, params, odometry)
     ideal = simulate(scenario, seed=seed, duration=duration, controller=True,
                      feedback='truth_lf')
     results, _ = run_closed_loops(scenario, seed, duration, setup, (LOOP_FD, LOOP_ODOM), ideal,
@@ -346,6 +452,9 @@ def _loop_runs(scenario_name: str, seed: int, duration: float, params: Predictor
         verdict = metrics.get('stability', {})
         out[name]['stable'] = verdict.get('stable')
         out[name]['stability_reason'] = verdict.get('reason')
+    if dropout_loops:
+        out['dropout_loops'] = _dropout_loops(scenario, seed, duration, params, odometry, setup,
+                                              ideal, odom_run)
     return out
 
 
@@ -354,7 +463,7 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                       params_overrides: dict[str, Any] | None = None,
                       dropouts: Sequence[tuple[float, float]] | None = None,
                       loops: bool = True, dead_reckoning: bool = True,
-                      tracking: bool = True) -> dict[str, Any]:
+                      tracking: bool = True, dropout_loops: bool = False) -> dict[str, Any]:
     """Every measurement of the module docstring on one (scenario, seed); JSON-ready."""
     begin_time = time.monotonic()
     scenario = load_scenario(scenario_name)
@@ -384,7 +493,7 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
         out['dead_reckoning'] = _dropout_run(params, odometry, data, dropouts, setup)
     if loops and scenario.controller.enabled:
         out['closed_loop'] = _loop_runs(scenario_name, seed, total, params, odometry, setup,
-                                        float(data['t'][begin]))
+                                        float(data['t'][begin]), dropout_loops)
     out['seconds'] = round(time.monotonic() - begin_time, 1)
     return out
 
@@ -403,6 +512,8 @@ class OdometrySpec:
     dead_reckoning: bool = True
     tracking: bool = True
     params_overrides: dict[str, Any] = field(default_factory=dict)
+    dropout_loops: bool = False
+    odometry_overrides: dict[str, Any] = field(default_factory=dict)
 
     @property
     def key(self) -> str:
@@ -414,7 +525,8 @@ class OdometrySpec:
         return hash((self.scenario, self.seed, self.duration, self.pose_cov_scale,
                      self.twist_cov_scale, self.twist_bandwidth, self.loops,
                      self.dead_reckoning, self.tracking,
-                     tuple(sorted(self.params_overrides.items()))))
+                     tuple(sorted(self.params_overrides.items())), self.dropout_loops,
+                     tuple(sorted(self.odometry_overrides.items()))))
 
 
 def run_spec(spec: OdometrySpec) -> dict[str, Any]:
@@ -422,7 +534,7 @@ def run_spec(spec: OdometrySpec) -> dict[str, Any]:
     import torch
 
     torch.set_num_threads(1)
-    values: dict[str, float] = {}
+    values: dict[str, Any] = dict(spec.odometry_overrides)
     if spec.pose_cov_scale is not None:
         values['pose_cov_scale'] = spec.pose_cov_scale
     if spec.twist_cov_scale is not None:
@@ -430,10 +542,10 @@ def run_spec(spec: OdometrySpec) -> dict[str, Any]:
     if spec.twist_bandwidth is not None:
         values['twist_bandwidth'] = spec.twist_bandwidth
     return run_odometry_case(spec.scenario, spec.seed, spec.duration,
-                             odometry=OdometryParams(**values),  # type: ignore[arg-type]
+                             odometry=OdometryParams(**values),
                              params_overrides=dict(spec.params_overrides) or None,
                              loops=spec.loops, dead_reckoning=spec.dead_reckoning,
-                             tracking=spec.tracking)
+                             tracking=spec.tracking, dropout_loops=spec.dropout_loops)
 
 
 def run_specs(specs: Sequence[OdometrySpec], scheduler: str | None = None,
@@ -587,6 +699,38 @@ def loop_table(cases: Sequence[dict[str, Any]]) -> str:
     return '\n'.join(lines)
 
 
+def dropout_loop_table(cases: Sequence[dict[str, Any]]) -> str:
+    """Markdown: item 5, worst distance from the reference during and after the dropouts."""
+    lines = ['| scenario | runs | estimator | dropouts | worst during [m] (without dropout) | '
+             'worst in the 120 s after [m] (without) | heading during / after [rad] | '
+             'aborted |', '|---|---|---|---|---|---|---|---|']
+    for scenario, group in _by_scenario(cases, 'closed_loop').items():
+        rows = [c['closed_loop']['dropout_loops'] for c in group
+                if 'dropout_loops' in c['closed_loop']]
+        if not rows:
+            continue
+        n = group[0]['ndof']
+        for name in ('lf_odom', 'observer'):
+            def worst(key: str, part: str, rows_: Sequence[dict[str, Any]] = rows,
+                      name_: str = name) -> list[float]:
+                return [float(np.max([d[key] for d in r[name_][part]])) for r in rows_]
+
+            def cell(values: list[float]) -> str:
+                if not all(math.isfinite(v) for v in values):
+                    return 'n/a'
+                return interval(values).cell(_fmt)
+
+            heading = (f"{cell(worst('during_heading', 'with_dropouts'))} / "
+                       f"{cell(worst('after_heading', 'with_dropouts'))}" if n == 3 else '–')
+            aborted = sum(r[name]['aborted_at'] is not None for r in rows)
+            lines.append(
+                f"| {scenario} | {len(rows)} | {name} | {len(rows[0]['dropouts'])} × "
+                f"{rows[0]['dropouts'][0][1]:.0f} s | {cell(worst('during', 'with_dropouts'))} "
+                f"({cell(worst('during', 'without'))}) | {cell(worst('after', 'with_dropouts'))} "
+                f"({cell(worst('after', 'without'))}) | {heading} | {aborted}/{len(rows)} |")
+    return '\n'.join(lines)
+
+
 def report(cases: Sequence[dict[str, Any]]) -> str:
     """Every table."""
     seconds = sum(c.get('seconds', 0.0) for c in cases)
@@ -596,10 +740,27 @@ def report(cases: Sequence[dict[str, Any]]) -> str:
         f'{seconds / 60:.1f} worker-min',
         '**Covariance consistency (NEES)**', nees_table(cases), '**Twist accuracy**',
         twist_table(cases), '**Dead-reckoning drift**', drift_table(cases),
-        '**Closed loop, D term**', loop_table(cases)])
+        '**Closed loop, D term**', loop_table(cases),
+        '**Closed loop through pose dropouts**', dropout_loop_table(cases)])
 
 
 # ---------------------------------------------------------------- CLI
+
+def _odometry_overrides(items: Sequence[str]) -> dict[str, Any] | None:
+    """FIELD=VALUE strings → a dict that makes a valid OdometryParams, or None."""
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, text = item.partition('=')
+        if not sep:
+            return None
+        value = yaml.safe_load(text)
+        out[name] = tuple(value) if isinstance(value, list) else value
+    try:
+        OdometryParams(**out)
+    except (TypeError, ValueError):
+        return None
+    return out
+
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point (module docstring)."""
@@ -622,6 +783,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                      help='skip the run without dropouts (items 1 and 2)')
     run.add_argument('--no-dead-reckoning', action='store_true',
                      help='skip the dropout run (item 3)')
+    run.add_argument('--dropout-loops', action='store_true',
+                     help='also the closed loops through pose dropouts (item 5; with the loops)')
+    run.add_argument('--odometry', nargs='*', default=[], metavar='FIELD=VALUE',
+                     help='OdometryParams overrides, e.g. dead_reckoner=model (YAML values)')
     run.add_argument('--scheduler', default=None, help="Dask address, or 'none' (in process)")
     run.add_argument('--workers', type=int, default=2)
     run.add_argument('-o', '--output', required=True, help='JSON file')
@@ -634,9 +799,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         for name in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
             os.environ.setdefault(name, '1')
         loop_seeds = set(args.seeds if args.loop_seeds is None else args.loop_seeds)
+        overrides = _odometry_overrides(args.odometry)
+        if overrides is None:
+            parser.error(f'--odometry takes FIELD=VALUE with FIELD an OdometryParams field and '
+                         f'a valid value, got {args.odometry}')
         specs = [OdometrySpec(s, seed, args.duration, args.pose_cov_scale, args.twist_cov_scale,
                               bandwidth, not args.no_loops and seed in loop_seeds,
-                              not args.no_dead_reckoning, not args.no_tracking)
+                              not args.no_dead_reckoning, not args.no_tracking,
+                              dropout_loops=args.dropout_loops,
+                              odometry_overrides=overrides)
                  for bandwidth in args.twist_bandwidth
                  for s in args.scenarios for seed in args.seeds]
         results = run_specs(specs, args.scheduler, args.workers)

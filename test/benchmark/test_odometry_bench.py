@@ -4,15 +4,18 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from lf_predictor_ros.benchmark.odometry_bench import (
     DRIFT_TIMES,
     LOOP_FD,
     LOOP_ODOM,
+    _odometry_overrides,
     calibrate,
     chi2_mean_bounds,
     consistency,
     default_dropouts,
+    dropout_deviation,
     integrated_autocorrelation_time,
     pid_velocity,
     report,
@@ -20,6 +23,7 @@ from lf_predictor_ros.benchmark.odometry_bench import (
 )
 from lf_predictor_ros.core.odometry import OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
+from sim_ros.simulation import ClosedLoopRun, SimRecord
 
 
 def test_autocorrelation_time_white_and_ar1() -> None:
@@ -94,3 +98,40 @@ def test_smoke_short_onedof_run() -> None:
     assert math.isfinite(loops[LOOP_FD]['position_rmse'])
     assert math.isfinite(loops[LOOP_ODOM]['position_rmse'])
     assert 'Dead-reckoning drift' in report([case])
+
+
+def _run_on(t: np.ndarray, truth: np.ndarray) -> ClosedLoopRun:
+    zeros = np.zeros_like(truth)
+    record = SimRecord(t, zeros, np.ones(t.size), truth, truth, zeros, zeros, np.ones(t.size))
+    return ClosedLoopRun(record, t, truth, 0, None, 0)
+
+
+def test_dropout_deviation_is_the_worst_distance_per_window() -> None:
+    """A vessel moving east at 0.1 m/s from t = 100 s, turning at 1e-3 rad/s: known maxima."""
+    t = np.arange(0.0, 400.0, 0.5)
+    truth = np.zeros((t.size, 3))
+    moving = t >= 100.0
+    truth[moving, 1] = 0.1 * (t[moving] - 100.0)
+    truth[moving, 2] = 1e-3 * (t[moving] - 100.0)
+    reference = np.zeros((t.size, 3))
+    (row,) = dropout_deviation(_run_on(t, truth), reference, 3, [(100.0, 60.0)], after=120.0)
+    assert row['during'] == pytest.approx(0.1 * 59.5)  # last sample before 160 s
+    assert row['after'] == pytest.approx(0.1 * 179.5)
+    assert row['during_heading'] == pytest.approx(1e-3 * 59.5)
+    # a run that stopped (aborted) before the end of a window: NaN, not a short maximum
+    short = _run_on(t[t < 200.0], truth[t < 200.0])
+    (cut,) = dropout_deviation(short, reference, 3, [(100.0, 60.0)], after=120.0)
+    assert cut['during'] == pytest.approx(0.1 * 59.5) and math.isnan(cut['after'])
+    # one DOF: the north offset only
+    north = np.zeros((t.size, 3))
+    north[:, 0] = -np.where(moving, 0.2, 0.0)
+    (one,) = dropout_deviation(_run_on(t, north), reference, 1, [(100.0, 60.0)])
+    assert one['during'] == pytest.approx(0.2) and 'during_heading' not in one
+
+
+def test_odometry_overrides_are_validated() -> None:
+    assert _odometry_overrides(['dead_reckoner=hold', 'prior_pose_std=[1, 1, 0.1]']) == {
+        'dead_reckoner': 'hold', 'prior_pose_std': (1, 1, 0.1)}
+    assert _odometry_overrides(['dead_reckoner=kalman']) is None  # invalid value
+    assert _odometry_overrides(['no_such_field=1']) is None
+    assert _odometry_overrides(['dead_reckoner']) is None  # no '='

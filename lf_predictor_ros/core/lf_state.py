@@ -146,7 +146,8 @@ class LfStateEstimator:
         times, values, forces = times[:usable], values[:usable], forces[:usable]
         odometry = self.odometry
         args = (times, values, forces, odometry.published(), self.sample_time, self.ndof,
-                odometry.params.dead_reckoning_timeout, odometry.params.min_calibration_samples)
+                odometry.params.dead_reckoning_timeout, odometry.params.min_calibration_samples,
+                odometry.params.pose_lag_prior)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -171,7 +172,7 @@ class LfStateEstimator:
 
 def _learn(times: FloatArray, values: FloatArray, forces: FloatArray,
            published: list[Published], sample_time: float, ndof: int, horizon: float,
-           min_samples: int) -> tuple[VesselMemory | None, Covariances | None]:
+           min_samples: int, lag_prior: float) -> tuple[VesselMemory | None, Covariances | None]:
     """Worker job: the vessel memory of one target window and the calibrated covariances.
 
     The memory is None if it cannot be learned; the covariances compare the published estimates
@@ -181,4 +182,5 @@ def _learn(times: FloatArray, values: FloatArray, forces: FloatArray,
         memory: VesselMemory | None = learn_vessel_memory(values, forces, sample_time, horizon)
     except ValueError:
         memory = None
-    return memory, calibrate(published, times, values, ndof, sample_time, min_samples)
+    return memory, calibrate(published, times, values, ndof, sample_time, min_samples,
+                             lag_prior)

@@ -16,15 +16,16 @@ thrust, and gives an ``OdometryEstimate``:
   separately for samples from the network and from the fallback. Pose: the error of each DOF i
   is a holding part plus a lag part proportional to the LF rate w_i the odometry publishes (N/E:
   the earth-frame velocity R(ψ)[u, v], yaw: r), E[e_i²] = σ²_hold,i + T_i² w_i²; σ²_hold,i and
-  T_i² are fitted by least squares of e_i² on w_i² over the window (``fit_pose_error``: T_i² ≥
+  T_i² are fitted by least squares of e_i² on w_i² over the window (``fit_error_model``: T_i² ≥
   0, shrunk towards ``pose_lag_prior`` by the evidence the window has, σ²_hold,i ≥
   ``HOLD_FLOOR_FRACTION`` of the mean e_i²). The published pose covariance is
   ``pose_cov_scale`` · (Σ_hold + ``pose_lag_scale`` · diag(T_i² w_i²)) with w the current
   twist (Σ_hold: the correlation of the mean e eᵀ with the σ²_hold diagonal; O(n²) per sample).
-  Twist: the mean of e eᵀ times ``twist_cov_scale``. The scales are calibrated on simulations
-  against the truth (the targets are not the truth). Before the first targets,
-  ``prior_pose_std`` and the Kalman filter's velocity covariance stand in and ``calibrated`` is
-  False;
+  Twist: the same model with the twist's change per second, low-passed over
+  ``twist_accel_time``, as regressor (no prior), times ``twist_cov_scale``. The scales are
+  calibrated on simulations against the truth (the targets are not the truth). Before the
+  first targets, ``prior_pose_std`` and the Kalman filter's velocity covariance stand in and
+  ``calibrated`` is False;
 - **dead reckoning**: when poses stop or are rejected while thrust keeps coming (``coast``), the
   state is integrated with the dead reckoner the vessel memory chose (learned model, constant
   velocity or hold) and the applied thrust, starting from the twist low-passed over
@@ -67,8 +68,8 @@ from lf_predictor_ros.core.lf_dynamics import (
 FloatArray = NDArray[np.float64]
 OdometryMode = Literal['tracking', 'dead_reckoning', 'lost']
 EstimateSource = Literal['network', 'fallback']
-# (pose error model, twist covariance ndof × ndof) per source ('network', 'fallback', 'all')
-Covariances = tuple[dict[str, 'PoseErrorModel'], dict[str, NDArray[np.float64]]]
+# (pose error model, twist error model) per source ('network', 'fallback', 'all')
+Covariances = tuple[dict[str, 'ErrorModel'], dict[str, 'ErrorModel']]
 SOURCES: tuple[EstimateSource, ...] = ('network', 'fallback')
 
 # Variance published for a pose/twist entry that is not estimated (ndof 1: east, yaw) [m², rad²].
@@ -103,8 +104,13 @@ class OdometryParams:
         '(prior of the least-squares fit, with a standard deviation of T² equal to T²; '
         '0 = no prior)', 's'))
     twist_cov_scale: float = field(default=0.58, metadata=field_doc(
-        'published twist covariance = this × mean (twist − target velocity)² (calibrated as '
-        'pose_cov_scale)', ''))
+        'published twist covariance = this × (holding part + K² a²) of the twist error model '
+        'fitted against the target velocity (a: the twist change, twist_accel_time; '
+        'calibrated as pose_cov_scale)', ''))
+    twist_accel_time: float = field(default=10.0, metadata=field_doc(
+        'the twist error model grows with the change of the published twist per second, '
+        'low-passed over this time (chosen from 2 / 5 / 10 / 20 s on tuning seeds 1–2, '
+        'docs/BENCHMARKS.md "State-dependent covariance")', 's'))
     prior_pose_std: tuple[float, ...] = field(default=(0.5, 0.5, 0.01), metadata=field_doc(
         'pose error std assumed before the first targets (north, east, yaw)', 'm, m, rad'))
     prior_accel_std: tuple[float, ...] = field(default=(0.005, 0.005, 5e-5), metadata=field_doc(
@@ -134,7 +140,7 @@ class OdometryParams:
     def __post_init__(self) -> None:
         """Check every rule; the message says what to change."""
         for name in ('dead_reckoning_timeout', 'pose_cov_scale', 'twist_cov_scale',
-                     'reacquire_gate'):
+                     'twist_accel_time', 'reacquire_gate'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'{name} must be a positive finite number, got {value}')
@@ -191,24 +197,27 @@ class OdometryEstimate:
 
 
 @dataclass(frozen=True)
-class PoseErrorModel:
-    """Pose error of one source against the targets (see the module docstring).
+class ErrorModel:
+    """Pose or twist error of one source against the targets (see the module docstring).
+
+    E[e eᵀ] = hold + diag(gain ∘ w²) for the regressor w: for the pose the LF rates of
+    `lag_rates`, for the twist the low-passed change of the twist ``twist_accel_time``.
 
     Attributes:
-        moment: mean e eᵀ over the window, ndof × ndof [m², m·rad, rad²] (the Kalman filter's
-            measurement covariance).
+        moment: mean e eᵀ over the window, ndof × ndof (pose [m², m·rad, rad²]: the Kalman
+            filter's measurement covariance; twist [m²/s², m·rad/s², rad²/s²]).
         hold: holding part Σ_hold, ndof × ndof (the correlation of ``moment``, diagonal σ²_hold).
-        lag_gain: T_i² per DOF [s²]: variance added per squared LF rate w_i² (N/E: earth-frame
-            velocity [m/s], yaw: rate [rad/s]).
+        gain: T_i² per DOF [s²]: variance added per squared regressor w_i² (pose: N/E
+            earth-frame velocity [m/s], yaw rate [rad/s]; twist: acceleration [m/s², rad/s²]).
     """
 
     moment: FloatArray
     hold: FloatArray
-    lag_gain: FloatArray
+    gain: FloatArray
 
     def covariance(self, rates: FloatArray, lag_scale: float) -> FloatArray:
-        """Σ_hold + lag_scale · diag(T_i² w_i²) for the LF rates w (ndof,)."""
-        return self.hold + np.diag(lag_scale * self.lag_gain * rates ** 2)
+        """Σ_hold + lag_scale · diag(T_i² w_i²) for the regressor w (ndof,)."""
+        return self.hold + np.diag(lag_scale * self.gain * rates ** 2)
 
 
 @dataclass(frozen=True)
@@ -219,6 +228,7 @@ class Published:
     pose: FloatArray  # unwrapped, ndof entries
     twist: FloatArray
     source: EstimateSource
+    accel: FloatArray  # the twist's low-passed change per second (twist error model regressor)
 
 
 class LfOdometry:
@@ -242,8 +252,9 @@ class LfOdometry:
         """Forget the state, the calibration and the vessel memory."""
         n = self.ndof
         self._memory: VesselMemory | None = None
-        self._pose_cov: dict[str, PoseErrorModel] = {}
-        self._twist_cov: dict[str, FloatArray] = {}
+        self._pose_cov: dict[str, ErrorModel] = {}
+        self._twist_cov: dict[str, ErrorModel] = {}
+        self._accel: tuple[float, FloatArray, FloatArray] | None = None  # (t, twist, accel)
         self._history: deque[Published] = deque(maxlen=HISTORY_SAMPLES)
         self._x: FloatArray | None = None
         self._p = np.zeros((2 * n, 2 * n))
@@ -317,7 +328,8 @@ class LfOdometry:
         self._pending_since = None
         x = self._require_state()
         twist = x[self.ndof:].copy()
-        self._history.append(Published(t, z.copy(), twist, source))
+        accel = self._twist_change(t, twist)
+        self._history.append(Published(t, z.copy(), twist, source, accel))
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
         self._slow_twist = twist.copy() if self._slow_twist is None else \
             self._slow_twist + alpha * (twist - self._slow_twist)
@@ -325,7 +337,8 @@ class LfOdometry:
                                             self._pose_covariance(source, z, twist))
         out = OdometryEstimate(
             stamp=t, pose=published, pose_cov=pose_cov, twist=self._full(twist),
-            twist_cov=self._twist_covariance(source), mode='tracking', dead_reckoning_time=0.0,
+            twist_cov=self._twist_covariance(source, accel), mode='tracking',
+            dead_reckoning_time=0.0,
             calibrated=self.calibrated, reckoner=self._reckoner())
         out.pose[2] = wrap_angle(float(out.pose[2]))
         self._last_output = out
@@ -616,11 +629,23 @@ class LfOdometry:
             inner = np.diag(np.array(self.params.prior_pose_std[:n]) ** 2)
         return self._embed(inner)
 
-    def _twist_covariance(self, source: EstimateSource) -> FloatArray:
+    def _twist_change(self, t: float, twist: FloatArray) -> FloatArray:
+        """The twist's change per second low-passed over ``twist_accel_time`` (O(n))."""
+        last = self._accel
+        if last is None or t <= last[0]:
+            accel = np.zeros(self.ndof) if last is None else last[2]
+        else:
+            dt = t - last[0]
+            alpha = min(1.0, dt / self.params.twist_accel_time)
+            accel = last[2] + alpha * ((twist - last[1]) / dt - last[2])
+        self._accel = (t, twist, accel)
+        return accel
+
+    def _twist_covariance(self, source: EstimateSource, accel: FloatArray) -> FloatArray:
         n = self.ndof
         if self._twist_cov:
-            inner = self.params.twist_cov_scale * self._twist_cov.get(
-                source, self._twist_cov['all'])
+            model = self._twist_cov.get(source, self._twist_cov['all'])
+            inner = self.params.twist_cov_scale * model.covariance(accel, 1.0)
         else:
             inner = self._p[n:, n:].copy()
         return self._embed(inner)
@@ -659,7 +684,7 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
     Every published estimate whose stamp is a target instant (not the first or last) is
     compared with the target and with the targets' differentiated body velocity: per source
     ('network', 'fallback': only with ``min_samples`` matches) and over all, the pose error
-    model (`fit_pose_error`, prior lag time ``lag_prior`` [s]) and the twist error's second
+    model (`fit_error_model`, prior lag time ``lag_prior`` [s]) and the twist error's second
     moment (bias included). None when nothing matches. Pure: runs on a worker.
     """
     stamps = np.asarray(times, dtype=np.float64)
@@ -685,13 +710,14 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
     twist_err = twists - velocity[idx]
     rates = lag_rates(np.array([p.pose for p in rows]), twists)
     sources = np.array([p.source for p in rows])
-    pose_cov: dict[str, PoseErrorModel] = {'all': fit_pose_error(pose_err, rates, lag_prior)}
-    twist_cov: dict[str, FloatArray] = {'all': _second_moment(twist_err)}
+    pose_cov: dict[str, ErrorModel] = {'all': fit_error_model(pose_err, rates, lag_prior)}
+    accel = np.array([p.accel for p in rows])
+    twist_cov: dict[str, ErrorModel] = {'all': fit_error_model(twist_err, accel)}
     for source in SOURCES:
         mask = sources == source
         if np.count_nonzero(mask) >= min_samples:
-            pose_cov[source] = fit_pose_error(pose_err[mask], rates[mask], lag_prior)
-            twist_cov[source] = _second_moment(twist_err[mask])
+            pose_cov[source] = fit_error_model(pose_err[mask], rates[mask], lag_prior)
+            twist_cov[source] = fit_error_model(twist_err[mask], accel[mask])
     return pose_cov, twist_cov
 
 
@@ -707,9 +733,9 @@ def lag_rates(poses: FloatArray, twists: FloatArray) -> FloatArray:
                             s * twists[:, 0] + c * twists[:, 1], twists[:, 2]])
 
 
-def fit_pose_error(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0
-                   ) -> PoseErrorModel:
-    """Fit E[e_i²] = σ²_hold,i + T_i² w_i² per DOF (module docstring); errors, rates (m, n).
+def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0
+                   ) -> ErrorModel:
+    """Fit E[e_i²] = σ²_hold,i + T_i² w_i² per DOF (module docstring); errors, regressor (m, n).
 
     T_i² = the least-squares slope of e_i² on w_i² (clipped at 0), shrunk towards the prior
     T₀² = ``lag_prior``² with a prior standard deviation of T₀²: the slope's own variance is
@@ -756,8 +782,8 @@ def fit_pose_error(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0
         corr = np.where(np.outer(diag, diag) > 0.0, moment / np.outer(diag, diag), 0.0)
     np.fill_diagonal(corr, 1.0)
     std = np.sqrt(hold)
-    return PoseErrorModel(moment=moment, hold=np.asarray(corr * np.outer(std, std)),
-                          lag_gain=gain)
+    return ErrorModel(moment=moment, hold=np.asarray(corr * np.outer(std, std)),
+                          gain=gain)
 
 
 def normalized_error_squared(error: ArrayLike, covariance: ArrayLike) -> FloatArray:

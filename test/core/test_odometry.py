@@ -10,10 +10,10 @@ from lf_predictor_ros.core.lf_dynamics import DriftCurve, VesselMemory
 from lf_predictor_ros.core.odometry import (
     HOLD_FLOOR_FRACTION,
     UNESTIMATED_VARIANCE,
+    ErrorModel,
     LfOdometry,
     OdometryParams,
-    PoseErrorModel,
-    fit_pose_error,
+    fit_error_model,
     lag_rates,
     normalized_error_squared,
 )
@@ -82,13 +82,13 @@ def test_pose_error_model_recovers_lag_time_and_holding_std() -> None:
     rates = rng.uniform(-1.0, 1.0, size=(m, 3)) * np.array([0.1, 0.1, 0.003])
     errors = lag * rates + sigma * rng.normal(size=(m, 3))
     for prior in (0.0, 1.2):
-        model = fit_pose_error(errors, rates, prior)
-        np.testing.assert_allclose(np.sqrt(model.lag_gain), lag, rtol=0.05)
+        model = fit_error_model(errors, rates, prior)
+        np.testing.assert_allclose(np.sqrt(model.gain), lag, rtol=0.05)
         np.testing.assert_allclose(np.sqrt(np.diag(model.hold)), sigma, rtol=0.1)
         np.testing.assert_allclose(model.moment, errors.T @ errors / m)
     # the published covariance at a rate w: σ² + T² w² (lag_scale 1), off-diagonals from hold
     cov = model.covariance(np.array([0.2, 0.0, 0.005]), 1.0)
-    np.testing.assert_allclose(np.diag(cov), np.diag(model.hold) + model.lag_gain *
+    np.testing.assert_allclose(np.diag(cov), np.diag(model.hold) + model.gain *
                                np.array([0.04, 0.0, 2.5e-5]))
 
 
@@ -97,17 +97,17 @@ def test_pose_error_model_of_a_still_window_is_the_prior() -> None:
     rng = np.random.default_rng(4)
     errors = rng.normal(size=(500, 3)) * np.array([0.1, 0.2, 0.01])
     for rates in (np.zeros((500, 3)), np.full((500, 3), 0.01)):
-        model = fit_pose_error(errors, rates, 1.5)
-        np.testing.assert_allclose(model.lag_gain, [2.25, 2.25, 2.25])
+        model = fit_error_model(errors, rates, 1.5)
+        np.testing.assert_allclose(model.gain, [2.25, 2.25, 2.25])
         expected = np.maximum(np.mean(errors ** 2, axis=0) - 2.25 * rates[0] ** 2,
                               HOLD_FLOOR_FRACTION * np.mean(errors ** 2, axis=0))
         np.testing.assert_allclose(np.diag(model.hold), expected)
-        assert fit_pose_error(errors, rates, 0.0).lag_gain.tolist() == [0.0, 0.0, 0.0]
+        assert fit_error_model(errors, rates, 0.0).gain.tolist() == [0.0, 0.0, 0.0]
     # errors that shrink with motion give no negative lag; σ² stays above its floor
     rates = rng.uniform(-0.5, 0.5, size=(500, 1))
     errors = 0.1 * rng.normal(size=(500, 1)) / (1.0 + 10.0 * np.abs(rates))
-    model = fit_pose_error(errors, rates, 0.0)
-    assert model.lag_gain[0] == 0.0
+    model = fit_error_model(errors, rates, 0.0)
+    assert model.gain[0] == 0.0
     assert model.hold[0, 0] == pytest.approx(np.mean(errors ** 2))
 
 
@@ -116,9 +116,10 @@ def test_published_pose_covariance_grows_with_the_lf_velocity() -> None:
     params = OdometryParams(pose_cov_scale=2.0, pose_lag_scale=3.0)
     odo = LfOdometry(3, H, params)
     hold = np.diag([0.01, 0.04, 1e-4])
-    model = PoseErrorModel(moment=hold, hold=hold, lag_gain=np.array([9.0, 4.0, 16.0]))
+    model = ErrorModel(moment=hold, hold=hold, gain=np.array([9.0, 4.0, 16.0]))
     cal = {'all': model, 'network': model}
-    odo.apply_learned(None, (cal, {'all': np.eye(3)}))
+    twist_model = ErrorModel(moment=np.eye(3), hold=np.eye(3), gain=np.zeros(3))
+    odo.apply_learned(None, (cal, {'all': twist_model}))
     heading = math.radians(30.0)
     _track_line(odo, 0.4, heading, 300)
     out = odo.track(300.0, [0.4 * 300 * math.cos(heading), 0.4 * 300 * math.sin(heading),
@@ -127,9 +128,32 @@ def test_published_pose_covariance_grows_with_the_lf_velocity() -> None:
     rates = lag_rates(out.pose[None, :], out.twist[None, :])[0]
     np.testing.assert_allclose(rates[:2], [0.4 * math.cos(heading), 0.4 * math.sin(heading)],
                                atol=2e-3)
-    expected = 2.0 * (hold + 3.0 * np.diag(model.lag_gain * rates ** 2))
+    expected = 2.0 * (hold + 3.0 * np.diag(model.gain * rates ** 2))
     np.testing.assert_allclose(out.pose_cov, expected, rtol=1e-12, atol=1e-15)
     assert out.pose_cov[0, 0] == pytest.approx(2.0 * (0.01 + 27.0 * 0.12), rel=0.01)
+
+
+def test_published_twist_covariance_grows_with_the_acceleration() -> None:
+    """Known twist model: P = twist_cov_scale · (Σ_hold + K² a²), a the low-passed twist change.
+
+    North motion with a constant acceleration of 0.002 m/s² from rest: after 200 s a → 0.002
+    (twist_accel_time 10 s), so P_uu = 0.5 · (1e-4 + 100 · 4e-6) = 2.5e-4; at constant speed
+    (a → 0) it is 0.5e-4.
+    """
+    params = OdometryParams(twist_cov_scale=0.5, twist_accel_time=10.0)
+    hold = 1e-4 * np.eye(3)
+    pose_model = ErrorModel(moment=hold, hold=hold, gain=np.zeros(3))
+    twist_model = ErrorModel(moment=hold, hold=hold, gain=np.full(3, 100.0))
+    for accel, expected in ((0.002, 2.5e-4), (0.0, 0.5e-4)):
+        odo = LfOdometry(3, H, params)
+        odo.apply_learned(None, ({'all': pose_model}, {'all': twist_model}))
+        out = None
+        for k in range(201):
+            north = 0.5 * accel * k ** 2 + (0.0 if accel else 0.1 * k)
+            out = odo.track(float(k), [north, 0.0, 0.0], np.zeros(3))
+        assert out is not None and out.calibrated
+        assert out.twist_cov[0, 0] == pytest.approx(expected, rel=0.03)
+        assert out.twist_cov[1, 1] == pytest.approx(0.5e-4, rel=1e-6)
 
 
 def test_one_dof_marks_the_other_entries_unestimated() -> None:

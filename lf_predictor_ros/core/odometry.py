@@ -18,7 +18,8 @@ thrust, and gives an ``OdometryEstimate``:
   the earth-frame velocity R(ψ)[u, v], yaw: r), E[e_i²] = σ²_hold,i + T_i² w_i²; σ²_hold,i and
   T_i² are fitted by least squares of e_i² on w_i² over the window (``fit_error_model``: T_i² ≥
   0, shrunk towards ``pose_lag_prior`` by the evidence the window has, σ²_hold,i ≥
-  ``HOLD_FLOOR_FRACTION`` of the mean e_i²). The published pose covariance is
+  ``HOLD_FLOOR_FRACTION`` of the mean e_i²; T_i from every source of the window, which has more
+  motion to fit it, σ²_hold,i per source). The published pose covariance is
   ``pose_cov_scale`` · (Σ_hold + ``pose_lag_scale`` · diag(T_i² w_i²)) with w the current
   twist (Σ_hold: the correlation of the mean e eᵀ with the σ²_hold diagonal; O(n²) per sample).
   Twist: the same model with the twist's change per second, low-passed over
@@ -710,13 +711,15 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
     twist_err = twists - velocity[idx]
     rates = lag_rates(np.array([p.pose for p in rows]), twists)
     sources = np.array([p.source for p in rows])
-    pose_cov: dict[str, ErrorModel] = {'all': fit_error_model(pose_err, rates, lag_prior)}
+    pooled = fit_error_model(pose_err, rates, lag_prior)
+    pose_cov: dict[str, ErrorModel] = {'all': pooled}
     accel = np.array([p.accel for p in rows])
     twist_cov: dict[str, ErrorModel] = {'all': fit_error_model(twist_err, accel)}
     for source in SOURCES:
         mask = sources == source
         if np.count_nonzero(mask) >= min_samples:
-            pose_cov[source] = fit_error_model(pose_err[mask], rates[mask], lag_prior)
+            # the lag time from every source (more motion to fit it), the holding part per source
+            pose_cov[source] = fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain)
             twist_cov[source] = fit_error_model(twist_err[mask], accel[mask])
     return pose_cov, twist_cov
 
@@ -733,8 +736,8 @@ def lag_rates(poses: FloatArray, twists: FloatArray) -> FloatArray:
                             s * twists[:, 0] + c * twists[:, 1], twists[:, 2]])
 
 
-def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0
-                   ) -> ErrorModel:
+def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,
+                    gain: FloatArray | None = None) -> ErrorModel:
     """Fit E[e_i²] = σ²_hold,i + T_i² w_i² per DOF (module docstring); errors, regressor (m, n).
 
     T_i² = the least-squares slope of e_i² on w_i² (clipped at 0), shrunk towards the prior
@@ -742,6 +745,8 @@ def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0
     2 σ⁴_hold / Σ (w_i² − mean)² (Gaussian errors), so a window without motion (w² constant)
     gives the prior and a window with motion its own fit. σ²_hold,i = mean e_i² − T_i² mean w_i²,
     at least ``HOLD_FLOOR_FRACTION`` · mean e_i². Σ_hold keeps the correlations of the mean e eᵀ.
+    A given ``gain`` (T_i² [s²], e.g. fitted on every source) is used as it is: only σ²_hold is
+    fitted.
     """
     e = np.asarray(errors, dtype=np.float64)
     w = np.asarray(rates, dtype=np.float64)
@@ -755,35 +760,43 @@ def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0
     sxy = np.sum(dw2 * (e2 - mean_e2), axis=0)
     prior = lag_prior ** 2
     n = e.shape[1]
-    gain = np.zeros(n)
+    given = gain is not None
+    gains = np.zeros(n) if gain is None else np.array(gain, dtype=np.float64).reshape(n)
     hold = np.zeros(n)
     for i in range(n):
-        # no motion to fit: w² constant (up to rounding)
-        still = sxx[i] <= 1e-12 * e.shape[0] * float(np.mean(w2[:, i] ** 2))
-        slope = math.nan if still else max(float(sxy[i] / sxx[i]), 0.0)
         floor = HOLD_FLOOR_FRACTION * float(mean_e2[i])
-        if prior > 0.0:
-            fitted = 0.0 if math.isnan(slope) else slope
-            hold_ref = max(float(mean_e2[i]) - fitted * float(mean_w2[i]), floor)
-            # precision of the slope (Gaussian errors) against the prior's 1 / T₀⁴
-            evidence = sxx[i] / (2.0 * hold_ref ** 2) if hold_ref > 0.0 else math.inf
-            if math.isnan(slope):
-                gain[i] = prior
-            elif math.isinf(evidence):
-                gain[i] = slope
-            else:
-                weight = evidence * prior ** 2
-                gain[i] = (weight * slope + prior) / (weight + 1.0)
-        else:
-            gain[i] = 0.0 if math.isnan(slope) else slope
-        hold[i] = max(float(mean_e2[i]) - gain[i] * float(mean_w2[i]), floor)
+        if not given:
+            gains[i] = _lag_gain(float(sxx[i]), float(sxy[i]), float(mean_e2[i]),
+                                 float(mean_w2[i]), floor, prior,
+                                 still=bool(sxx[i] <= 1e-12 * e.shape[0] *
+                                            float(np.mean(w2[:, i] ** 2))))
+        hold[i] = max(float(mean_e2[i]) - gains[i] * float(mean_w2[i]), floor)
     diag = np.sqrt(np.diag(moment))
     with np.errstate(divide='ignore', invalid='ignore'):
         corr = np.where(np.outer(diag, diag) > 0.0, moment / np.outer(diag, diag), 0.0)
     np.fill_diagonal(corr, 1.0)
     std = np.sqrt(hold)
-    return ErrorModel(moment=moment, hold=np.asarray(corr * np.outer(std, std)),
-                          gain=gain)
+    return ErrorModel(moment=moment, hold=np.asarray(corr * np.outer(std, std)), gain=gains)
+
+
+def _lag_gain(sxx: float, sxy: float, mean_e2: float, mean_w2: float, floor: float,
+              prior: float, still: bool) -> float:
+    """T² of one DOF: the clipped least-squares slope shrunk towards ``prior`` (fit_error_model).
+
+    ``still``: no motion to fit (w² constant up to rounding): the prior.
+    """
+    slope = 0.0 if still else max(sxy / sxx, 0.0)
+    if prior <= 0.0:
+        return slope
+    if still:
+        return prior
+    hold_ref = max(mean_e2 - slope * mean_w2, floor)
+    if hold_ref <= 0.0:  # error-free window: the fit is exact
+        return slope
+    # precision of the slope, Σ (w² − mean)² / (2 σ⁴_hold) (Gaussian errors), against the
+    # prior's 1 / T₀⁴ (standard deviation of T² equal to T₀²)
+    weight = sxx / (2.0 * hold_ref ** 2) * prior ** 2
+    return (weight * slope + prior) / (weight + 1.0)
 
 
 def normalized_error_squared(error: ArrayLike, covariance: ArrayLike) -> FloatArray:

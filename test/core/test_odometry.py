@@ -103,6 +103,14 @@ def test_pose_error_model_of_a_still_window_is_the_prior() -> None:
                               HOLD_FLOOR_FRACTION * np.mean(errors ** 2, axis=0))
         np.testing.assert_allclose(np.diag(model.hold), expected)
         assert fit_error_model(errors, rates, 0.0).gain.tolist() == [0.0, 0.0, 0.0]
+    # a given gain (the lag time fitted on every source): only σ²_hold is fitted
+    rates = rng.uniform(-0.2, 0.2, size=(500, 3))
+    model = fit_error_model(errors, rates, 1.5, gain=np.array([0.5, 1.0, 0.0]))
+    np.testing.assert_allclose(model.gain, [0.5, 1.0, 0.0])
+    mean_e2 = np.mean(errors ** 2, axis=0)
+    np.testing.assert_allclose(np.diag(model.hold), np.maximum(
+        mean_e2 - np.array([0.5, 1.0, 0.0]) * np.mean(rates ** 2, axis=0),
+        HOLD_FLOOR_FRACTION * mean_e2))
     # errors that shrink with motion give no negative lag; σ² stays above its floor
     rates = rng.uniform(-0.5, 0.5, size=(500, 1))
     errors = 0.1 * rng.normal(size=(500, 1)) / (1.0 + 10.0 * np.abs(rates))

@@ -44,8 +44,14 @@ Usage (2 Dask workers; ``--scheduler none`` runs in this process)::
     python -m lf_predictor_ros.benchmark.odometry_bench run --seeds 1 2 --no-loops \\
         --pose-cov-scale 1 --twist-cov-scale 1 -o /tmp/odo_tuning.json
     python -m lf_predictor_ros.benchmark.odometry_bench calibrate /tmp/odo_tuning.json
+
     python -m lf_predictor_ros.benchmark.odometry_bench run --seeds 11 12 ... -o held_out.json
     python -m lf_predictor_ros.benchmark.odometry_bench report held_out.json
+
+``calibrate`` also prints ``pose_log_spread`` / ``twist_log_spread``, the standard deviation of
+log(per-DOF mean NEES) over the runs (what a scale cannot fix, what a better covariance model
+lowers); ``run --pose-lag-scale A B …`` runs every case per value and ``calibrate`` then reports
+per value (docs/BENCHMARKS.md "State-dependent covariance").
 """
 from __future__ import annotations
 
@@ -612,7 +618,8 @@ def report(cases: Sequence[dict[str, Any]]) -> str:
     seconds = sum(c.get('seconds', 0.0) for c in cases)
     return '\n\n'.join([
         f'{len(cases)} runs, seeds {sorted({c["seed"] for c in cases})}, pose_cov_scale '
-        f'{cases[0]["pose_cov_scale"]:.4g}, twist_cov_scale {cases[0]["twist_cov_scale"]:.4g}, '
+        f'{cases[0]["pose_cov_scale"]:.4g}, pose_lag_scale {cases[0].get("pose_lag_scale", "–")}, '
+        f'twist_cov_scale {cases[0]["twist_cov_scale"]:.4g}, '
         f'{seconds / 60:.1f} worker-min',
         '**Covariance consistency (NEES)**', nees_table(cases), '**Twist accuracy**',
         twist_table(cases), '**Dead-reckoning drift**', drift_table(cases),

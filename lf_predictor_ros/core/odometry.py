@@ -220,7 +220,9 @@ class ErrorModel:
 
     def covariance(self, rates: FloatArray, lag_scale: float) -> FloatArray:
         """Σ_hold + lag_scale · diag(T_i² w_i²) for the regressor w (ndof,)."""
-        return self.hold + np.diag(lag_scale * self.gain * rates ** 2)
+        cov = self.hold.copy()
+        cov.flat[::cov.shape[0] + 1] += lag_scale * self.gain * rates * rates
+        return cov
 
 
 @dataclass(frozen=True)
@@ -625,7 +627,12 @@ class LfOdometry:
         n = self.ndof
         if self._pose_cov:
             model = self._pose_cov.get(source, self._pose_cov['all'])
-            rates = lag_rates(pose[None, :], twist[None, :])[0]
+            if n == 3:  # lag_rates of one sample, without the array overhead
+                c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+                u, v = float(twist[0]), float(twist[1])
+                rates = np.array([c * u - s * v, s * u + c * v, float(twist[2])])
+            else:
+                rates = twist
             inner = self.params.pose_cov_scale * model.covariance(rates,
                                                                   self.params.pose_lag_scale)
         else:

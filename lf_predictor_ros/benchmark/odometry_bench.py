@@ -53,8 +53,14 @@ Usage (2 Dask workers; ``--scheduler none`` runs in this process)::
     python -m lf_predictor_ros.benchmark.odometry_bench run --seeds 1 2 --no-loops \\
         --pose-cov-scale 1 --twist-cov-scale 1 -o /tmp/odo_tuning.json
     python -m lf_predictor_ros.benchmark.odometry_bench calibrate /tmp/odo_tuning.json
+
     python -m lf_predictor_ros.benchmark.odometry_bench run --seeds 11 12 ... -o held_out.json
     python -m lf_predictor_ros.benchmark.odometry_bench report held_out.json
+
+``calibrate`` also prints ``pose_log_spread`` / ``twist_log_spread``, the standard deviation of
+log(per-DOF mean NEES) over the runs (what a scale cannot fix, what a better covariance model
+lowers); ``run --pose-lag-scale A B …`` runs every case per value and ``calibrate`` then reports
+per value (docs/BENCHMARKS.md "State-dependent covariance").
 """
 from __future__ import annotations
 
@@ -483,6 +489,8 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
     out: dict[str, Any] = {'scenario': scenario_name, 'seed': seed, 'ndof': params.ndof,
                            'duration': total, 'warmup': float(data['t'][begin]),
                            'pose_cov_scale': odometry.pose_cov_scale,
+                           'pose_lag_scale': odometry.pose_lag_scale,
+                           'pose_lag_prior': odometry.pose_lag_prior,
                            'twist_cov_scale': odometry.twist_cov_scale,
                            'twist_bandwidth': odometry.twist_bandwidth,
                            'dead_reckoning_timeout': odometry.dead_reckoning_timeout,
@@ -508,6 +516,7 @@ class OdometrySpec:
     pose_cov_scale: float | None = None  # None: the OdometryParams default
     twist_cov_scale: float | None = None
     twist_bandwidth: float | None = None
+    pose_lag_scale: float | None = None
     loops: bool = True
     dead_reckoning: bool = True
     tracking: bool = True
@@ -523,7 +532,7 @@ class OdometrySpec:
     def __hash__(self) -> int:
         """Hash of the printable fields."""
         return hash((self.scenario, self.seed, self.duration, self.pose_cov_scale,
-                     self.twist_cov_scale, self.twist_bandwidth, self.loops,
+                     self.twist_cov_scale, self.twist_bandwidth, self.pose_lag_scale, self.loops,
                      self.dead_reckoning, self.tracking,
                      tuple(sorted(self.params_overrides.items())), self.dropout_loops,
                      tuple(sorted(self.odometry_overrides.items()))))
@@ -541,6 +550,8 @@ def run_spec(spec: OdometrySpec) -> dict[str, Any]:
         values['twist_cov_scale'] = spec.twist_cov_scale
     if spec.twist_bandwidth is not None:
         values['twist_bandwidth'] = spec.twist_bandwidth
+    if spec.pose_lag_scale is not None:
+        values['pose_lag_scale'] = spec.pose_lag_scale
     return run_odometry_case(spec.scenario, spec.seed, spec.duration,
                              odometry=OdometryParams(**values),
                              params_overrides=dict(spec.params_overrides) or None,
@@ -562,14 +573,25 @@ def run_specs(specs: Sequence[OdometrySpec], scheduler: str | None = None,
 
 # ---------------------------------------------------------------- summaries
 
-def calibrate(cases: Sequence[dict[str, Any]]) -> dict[str, float]:
-    """Scales making the mean NEES 1: the old scale × geometric mean of the runs' per-DOF NEES."""
-    out: dict[str, float] = {}
+def calibrate(cases: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Scales making the mean NEES 1: the old scale × geometric mean of the runs' per-DOF NEES.
+
+    The pose also reports ``pose_log_spread``: the standard deviation over runs and DOFs of
+    log(per-DOF mean NEES) (unchanged by the scale: what a better covariance model lowers).
+    Cases of several ``pose_lag_scale`` values: one such result per value, keyed by it.
+    """
+    lags = sorted({case.get('pose_lag_scale', 0.0) for case in cases})
+    if len(lags) > 1:
+        return {f'pose_lag_scale {lag:g}': calibrate([case for case in cases
+                                                      if case.get('pose_lag_scale', 0.0) == lag])
+                for lag in lags}
+    out: dict[str, Any] = {}
     for kind in ('pose', 'twist'):
         logs = [math.log(dof['mean_nees']) + math.log(case[f'{kind}_cov_scale'])
                 for case in cases if 'tracking' in case
                 for dof in case['tracking'][kind]['dof']]
         out[f'{kind}_cov_scale'] = math.exp(float(np.mean(logs)))
+        out[f'{kind}_log_spread'] = float(np.std(logs))
     return out
 
 
@@ -577,15 +599,19 @@ def _by_scenario(cases: Sequence[dict[str, Any]], key: str | None = None,
                  ) -> dict[str, list[dict[str, Any]]]:
     """Cases by scenario (those with ``key`` only, if given).
 
-    Cases of several ``twist_bandwidth`` values are grouped per scenario and bandwidth.
+    Cases of several ``twist_bandwidth`` (``pose_lag_scale``) values are grouped per scenario
+    and value.
     """
     several = len({case.get('twist_bandwidth') for case in cases}) > 1
+    several_lags = len({case.get('pose_lag_scale') for case in cases}) > 1
     groups: dict[str, list[dict[str, Any]]] = {}
     for case in cases:
         if key is None or key in case:
             label = case['scenario']
             if several:
                 label += f' (twist_bandwidth {case.get("twist_bandwidth")})'
+            if several_lags:
+                label += f' (pose_lag_scale {case.get("pose_lag_scale")})'
             groups.setdefault(label, []).append(case)
     return groups
 
@@ -736,7 +762,8 @@ def report(cases: Sequence[dict[str, Any]]) -> str:
     seconds = sum(c.get('seconds', 0.0) for c in cases)
     return '\n\n'.join([
         f'{len(cases)} runs, seeds {sorted({c["seed"] for c in cases})}, pose_cov_scale '
-        f'{cases[0]["pose_cov_scale"]:.4g}, twist_cov_scale {cases[0]["twist_cov_scale"]:.4g}, '
+        f'{cases[0]["pose_cov_scale"]:.4g}, pose_lag_scale {cases[0].get("pose_lag_scale", "–")}, '
+        f'twist_cov_scale {cases[0]["twist_cov_scale"]:.4g}, '
         f'{seconds / 60:.1f} worker-min',
         '**Covariance consistency (NEES)**', nees_table(cases), '**Twist accuracy**',
         twist_table(cases), '**Dead-reckoning drift**', drift_table(cases),
@@ -776,6 +803,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     run.add_argument('--twist-bandwidth', nargs='+', type=float, default=[None],
                      help='twist Kalman filter bandwidth(s) [rad/s] (default: the '
                      'OdometryParams default); several: every case once per value')
+    run.add_argument('--pose-lag-scale', nargs='+', type=float, default=[None],
+                     help='OdometryParams.pose_lag_scale value(s) (default: its default); '
+                     'several: every case once per value')
     run.add_argument('--no-loops', action='store_true', help='skip the closed loops (item 4)')
     run.add_argument('--loop-seeds', nargs='*', type=int, default=None,
                      help='run the closed loops only for these seeds (default: every seed)')
@@ -804,11 +834,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             parser.error(f'--odometry takes FIELD=VALUE with FIELD an OdometryParams field and '
                          f'a valid value, got {args.odometry}')
         specs = [OdometrySpec(s, seed, args.duration, args.pose_cov_scale, args.twist_cov_scale,
-                              bandwidth, not args.no_loops and seed in loop_seeds,
+                              bandwidth, lag, not args.no_loops and seed in loop_seeds,
                               not args.no_dead_reckoning, not args.no_tracking,
                               dropout_loops=args.dropout_loops,
                               odometry_overrides=overrides)
-                 for bandwidth in args.twist_bandwidth
+                 for bandwidth in args.twist_bandwidth for lag in args.pose_lag_scale
                  for s in args.scenarios for seed in args.seeds]
         results = run_specs(specs, args.scheduler, args.workers)
         with open(args.output, 'w', encoding='utf-8') as stream:

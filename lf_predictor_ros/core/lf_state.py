@@ -150,7 +150,7 @@ class LfStateEstimator:
         odometry = self.odometry
         args = (times, values, np.array(self._forces), rows, sos, odometry.published(),
                 self.sample_time, self.ndof, odometry.params.dead_reckoning_timeout,
-                odometry.params.min_calibration_samples)
+                odometry.params.min_calibration_samples, odometry.params.pose_lag_prior)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -175,7 +175,8 @@ class LfStateEstimator:
 
 def _learn(times: FloatArray, values: FloatArray, all_forces: FloatArray, rows: NDArray[np.int64],
            sos: FloatArray | None, published: list[Published], sample_time: float, ndof: int,
-           horizon: float, min_samples: int) -> tuple[VesselMemory | None, Covariances | None]:
+           horizon: float, min_samples: int,
+           lag_prior: float) -> tuple[VesselMemory | None, Covariances | None]:
     """Worker job: the vessel memory of one target window and the calibrated covariances.
 
     ``all_forces``: the buffered thrust, ``rows``: its rows at the targets' instants, ``sos``:
@@ -194,4 +195,5 @@ def _learn(times: FloatArray, values: FloatArray, all_forces: FloatArray, rows: 
         memory: VesselMemory | None = learn_vessel_memory(values, forces, sample_time, horizon)
     except ValueError:
         memory = None
-    return memory, calibrate(published, times, values, ndof, sample_time, min_samples)
+    return memory, calibrate(published, times, values, ndof, sample_time, min_samples,
+                             lag_prior)

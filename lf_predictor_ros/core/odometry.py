@@ -10,13 +10,23 @@ thrust, and gives an ``OdometryEstimate``:
   measurement is the LF pose and whose process model is the learned vessel memory
   (``core.lf_dynamics``) when the data chose it, else constant velocity; its bandwidth is
   ``twist_bandwidth`` (a D term needs a timely velocity more than a smooth one);
-- **covariances, calibrated empirically**: every retraining brings new zero-phase targets (an LF
-  pose series of the past, thesis §4.2.2). The pose and twist actually published are compared
-  with them (twist: with the targets' differentiated body velocity), separately for samples
-  from the network and from the fallback; the mean of e eᵀ, times ``pose_cov_scale`` /
-  ``twist_cov_scale`` (calibrated on simulations against the truth: the targets are not the
-  truth), is the published covariance. Before the first targets, ``prior_pose_std`` and the
-  Kalman filter's velocity covariance stand in and ``calibrated`` is False;
+- **covariances, calibrated empirically and state-dependent**: every retraining brings new
+  zero-phase targets (an LF pose series of the past, thesis §4.2.2). The pose and twist actually
+  published are compared with them (twist: with the targets' differentiated body velocity),
+  separately for samples from the network and from the fallback. Pose: the error of each DOF i
+  is a holding part plus a lag part proportional to the LF rate w_i the odometry publishes (N/E:
+  the earth-frame velocity R(ψ)[u, v], yaw: r), E[e_i²] = σ²_hold,i + T_i² w_i²; σ²_hold,i and
+  T_i² are fitted by least squares of e_i² on w_i² over the window (``fit_error_model``: T_i² ≥
+  0, shrunk towards ``pose_lag_prior`` by the evidence the window has, σ²_hold,i ≥
+  ``HOLD_FLOOR_FRACTION`` of the mean e_i²; T_i from every source of the window, which has more
+  motion to fit it, σ²_hold,i per source). The published pose covariance is
+  ``pose_cov_scale`` · (Σ_hold + ``pose_lag_scale`` · diag(T_i² w_i²)) with w the current
+  twist (Σ_hold: the correlation of the mean e eᵀ with the σ²_hold diagonal; O(n²) per sample).
+  Twist: the same model with the twist's change per second, low-passed over
+  ``twist_accel_time``, as regressor (no prior), times ``twist_cov_scale``. The scales are
+  calibrated on simulations against the truth (the targets are not the truth). Before the
+  first targets, ``prior_pose_std`` and the Kalman filter's velocity covariance stand in and
+  ``calibrated`` is False;
 - **dead reckoning**: when poses stop or are rejected while thrust keeps coming (``coast``), the
   state is integrated with the dead reckoner the vessel memory chose (learned model, constant
   velocity or hold) and the applied thrust, starting from the twist low-passed over
@@ -60,8 +70,8 @@ from lf_predictor_ros.core.lf_dynamics import (
 FloatArray = NDArray[np.float64]
 OdometryMode = Literal['tracking', 'dead_reckoning', 'lost']
 EstimateSource = Literal['network', 'fallback']
-# (pose, twist) covariances per source ('network', 'fallback', 'all'), ndof × ndof
-Covariances = tuple[dict[str, NDArray[np.float64]], dict[str, NDArray[np.float64]]]
+# (pose error model, twist error model) per source ('network', 'fallback', 'all')
+Covariances = tuple[dict[str, 'ErrorModel'], dict[str, 'ErrorModel']]
 SOURCES: tuple[EstimateSource, ...] = ('network', 'fallback')
 
 # Variance published for a pose/twist entry that is not estimated (ndof 1: east, yaw) [m², rad²].
@@ -71,6 +81,10 @@ ACCELERATION_CORRELATION_TIME = 1.0
 # Published samples kept for the covariance calibration (at most this many) [-].
 HISTORY_SAMPLES = 20000
 CHI2_3DOF_999 = 16.27  # χ²(3) 99.9 % quantile [-]
+# The holding variance σ²_hold of the pose error model is at least this fraction of the mean
+# squared error of the window [-] (a lag fit must not claim that a still vessel is exact; on the
+# tuning seeds 0.05–0.5 change the calibrated NEES by < 10 %).
+HOLD_FLOOR_FRACTION = 0.1
 
 
 @dataclass(frozen=True)
@@ -79,13 +93,28 @@ class OdometryParams:
 
     dead_reckoning_timeout: float = field(default=120.0, metadata=field_doc(
         'longest dead reckoning through a pose dropout; afterwards lf_odom/lf_pose stop', 's'))
-    pose_cov_scale: float = field(default=1.91, metadata=field_doc(
-        'published pose covariance = this × mean (estimate − target)² (calibrated against the '
-        'truth on tuning seeds 1–2 of four vessels so that the mean NEES is 1, the geometric '
-        'mean of the per-DOF mean NEES; docs/BENCHMARKS.md, issue 14)', ''))
-    twist_cov_scale: float = field(default=0.58, metadata=field_doc(
-        'published twist covariance = this × mean (twist − target velocity)² (calibrated as '
-        'pose_cov_scale)', ''))
+    pose_cov_scale: float = field(default=0.62, metadata=field_doc(
+        'published pose covariance = this × (Σ_hold + pose_lag_scale · diag(T_i² w_i²)), the '
+        'pose error model fitted against the targets (calibrated against the truth on tuning '
+        'seeds 1–2 of four vessels so that the geometric mean of the per-DOF mean NEES is 1; '
+        'docs/BENCHMARKS.md "State-dependent covariance", issue 14)', ''))
+    pose_lag_scale: float = field(default=8.0, metadata=field_doc(
+        'the lag part T_i² w_i² of the pose error model (fitted against the targets) is '
+        'multiplied by this inside pose_cov_scale (the errors against the targets show less lag '
+        'than against the truth; chosen on tuning seeds 1–2 where the spread of the per-DOF NEES '
+        'stops falling, docs/BENCHMARKS.md "State-dependent covariance")', ''))
+    pose_lag_prior: float = field(default=1.2, metadata=field_doc(
+        'lag time T assumed for every DOF where a calibration window has no motion to fit it '
+        '(prior of the least-squares fit, with a standard deviation of T² equal to T²; '
+        '0 = no prior)', 's'))
+    twist_cov_scale: float = field(default=0.63, metadata=field_doc(
+        'published twist covariance = this × (holding part + K² a²) of the twist error model '
+        'fitted against the target velocity (a: the twist change, twist_accel_time; '
+        'calibrated as pose_cov_scale)', ''))
+    twist_accel_time: float = field(default=10.0, metadata=field_doc(
+        'the twist error model grows with the change of the published twist per second, '
+        'low-passed over this time (chosen from 2 / 5 / 10 / 20 s on tuning seeds 1–2, '
+        'docs/BENCHMARKS.md "State-dependent covariance")', 's'))
     prior_pose_std: tuple[float, ...] = field(default=(0.5, 0.5, 0.01), metadata=field_doc(
         'pose error std assumed before the first targets (north, east, yaw)', 'm, m, rad'))
     prior_accel_std: tuple[float, ...] = field(default=(0.005, 0.005, 5e-5), metadata=field_doc(
@@ -119,10 +148,16 @@ class OdometryParams:
     def __post_init__(self) -> None:
         """Check every rule; the message says what to change."""
         for name in ('dead_reckoning_timeout', 'pose_cov_scale', 'twist_cov_scale',
-                     'reacquire_gate'):
+                     'twist_accel_time', 'reacquire_gate'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'{name} must be a positive finite number, got {value}')
+        if not (math.isfinite(self.pose_lag_scale) and self.pose_lag_scale >= 0.0):
+            raise ValueError(f'pose_lag_scale must be a finite number >= 0, got '
+                             f'{self.pose_lag_scale}')
+        if not (math.isfinite(self.pose_lag_prior) and self.pose_lag_prior >= 0.0):
+            raise ValueError(f'pose_lag_prior must be a finite number >= 0 s, got '
+                             f'{self.pose_lag_prior}')
         if not (math.isfinite(self.dead_reckoning_velocity_time) and
                 self.dead_reckoning_velocity_time > 0.0):
             raise ValueError('dead_reckoning_velocity_time must be a positive number of seconds, '
@@ -173,6 +208,32 @@ class OdometryEstimate:
 
 
 @dataclass(frozen=True)
+class ErrorModel:
+    """Pose or twist error of one source against the targets (see the module docstring).
+
+    E[e eᵀ] = hold + diag(gain ∘ w²) for the regressor w: for the pose the LF rates of
+    `lag_rates`, for the twist the low-passed change of the twist ``twist_accel_time``.
+
+    Attributes:
+        moment: mean e eᵀ over the window, ndof × ndof (pose [m², m·rad, rad²]: the Kalman
+            filter's measurement covariance; twist [m²/s², m·rad/s², rad²/s²]).
+        hold: holding part Σ_hold, ndof × ndof (the correlation of ``moment``, diagonal σ²_hold).
+        gain: T_i² per DOF [s²]: variance added per squared regressor w_i² (pose: N/E
+            earth-frame velocity [m/s], yaw rate [rad/s]; twist: acceleration [m/s², rad/s²]).
+    """
+
+    moment: FloatArray
+    hold: FloatArray
+    gain: FloatArray
+
+    def covariance(self, rates: FloatArray, lag_scale: float) -> FloatArray:
+        """Σ_hold + lag_scale · diag(T_i² w_i²) for the regressor w (ndof,)."""
+        cov = self.hold.copy()
+        cov.flat[::cov.shape[0] + 1] += lag_scale * self.gain * rates * rates
+        return cov
+
+
+@dataclass(frozen=True)
 class Published:
     """One published estimate as the calibration sees it (pose unwrapped, ndof entries)."""
 
@@ -180,6 +241,7 @@ class Published:
     pose: FloatArray  # unwrapped, ndof entries
     twist: FloatArray
     source: EstimateSource
+    accel: FloatArray  # the twist's low-passed change per second (twist error model regressor)
 
 
 class LfOdometry:
@@ -203,8 +265,9 @@ class LfOdometry:
         """Forget the state, the calibration and the vessel memory."""
         n = self.ndof
         self._memory: VesselMemory | None = None
-        self._pose_cov: dict[str, FloatArray] = {}
-        self._twist_cov: dict[str, FloatArray] = {}
+        self._pose_cov: dict[str, ErrorModel] = {}
+        self._twist_cov: dict[str, ErrorModel] = {}
+        self._accel: tuple[float, FloatArray, FloatArray] | None = None  # (t, twist, accel)
         self._history: deque[Published] = deque(maxlen=HISTORY_SAMPLES)
         self._x: FloatArray | None = None
         self._p = np.zeros((2 * n, 2 * n))
@@ -278,15 +341,17 @@ class LfOdometry:
         self._pending_since = None
         x = self._require_state()
         twist = x[self.ndof:].copy()
-        self._history.append(Published(t, z.copy(), twist, source))
+        accel = self._twist_change(t, twist)
+        self._history.append(Published(t, z.copy(), twist, source, accel))
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
         self._slow_twist = twist.copy() if self._slow_twist is None else \
             self._slow_twist + alpha * (twist - self._slow_twist)
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
-                                            self._pose_covariance(source))
+                                            self._pose_covariance(source, z, twist))
         out = OdometryEstimate(
             stamp=t, pose=published, pose_cov=pose_cov, twist=self._full(twist),
-            twist_cov=self._twist_covariance(source), mode='tracking', dead_reckoning_time=0.0,
+            twist_cov=self._twist_covariance(source, accel), mode='tracking',
+            dead_reckoning_time=0.0,
             calibrated=self.calibrated, reckoner=self._reckoner())
         out.pose[2] = wrap_angle(float(out.pose[2]))
         self._last_output = out
@@ -342,7 +407,8 @@ class LfOdometry:
         """
         self.apply_learned(memory, calibrate(self.published(), times, targets, self.ndof,
                                              self.sample_time,
-                                             self.params.min_calibration_samples))
+                                             self.params.min_calibration_samples,
+                                             self.params.pose_lag_prior))
 
     def published(self) -> list[Published]:
         """A copy of the published history the covariances are calibrated on (oldest first)."""
@@ -447,7 +513,7 @@ class LfOdometry:
 
     def _measurement_cov(self) -> FloatArray:
         if 'all' in self._pose_cov:
-            return self._pose_cov['all'] + 1e-12 * np.eye(self.ndof)
+            return self._pose_cov['all'].moment + 1e-12 * np.eye(self.ndof)
         return np.diag(np.array(self.params.prior_pose_std[:self.ndof]) ** 2)
 
     # ---- dead reckoning --------------------------------------------------------------------
@@ -570,19 +636,41 @@ class LfOdometry:
 
     # ---- covariance calibration ------------------------------------------------------------
 
-    def _pose_covariance(self, source: EstimateSource) -> FloatArray:
+    def _pose_covariance(self, source: EstimateSource, pose: FloatArray, twist: FloatArray
+                         ) -> FloatArray:
+        """The pose error model of ``source`` at the published pose and twist (ndof each)."""
         n = self.ndof
         if self._pose_cov:
-            inner = self.params.pose_cov_scale * self._pose_cov.get(source, self._pose_cov['all'])
+            model = self._pose_cov.get(source, self._pose_cov['all'])
+            if n == 3:  # lag_rates of one sample, without the array overhead
+                c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+                u, v = float(twist[0]), float(twist[1])
+                rates = np.array([c * u - s * v, s * u + c * v, float(twist[2])])
+            else:
+                rates = twist
+            inner = self.params.pose_cov_scale * model.covariance(rates,
+                                                                  self.params.pose_lag_scale)
         else:
             inner = np.diag(np.array(self.params.prior_pose_std[:n]) ** 2)
         return self._embed(inner)
 
-    def _twist_covariance(self, source: EstimateSource) -> FloatArray:
+    def _twist_change(self, t: float, twist: FloatArray) -> FloatArray:
+        """The twist's change per second low-passed over ``twist_accel_time`` (O(n))."""
+        last = self._accel
+        if last is None or t <= last[0]:
+            accel = np.zeros(self.ndof) if last is None else last[2]
+        else:
+            dt = t - last[0]
+            alpha = min(1.0, dt / self.params.twist_accel_time)
+            accel = last[2] + alpha * ((twist - last[1]) / dt - last[2])
+        self._accel = (t, twist, accel)
+        return accel
+
+    def _twist_covariance(self, source: EstimateSource, accel: FloatArray) -> FloatArray:
         n = self.ndof
         if self._twist_cov:
-            inner = self.params.twist_cov_scale * self._twist_cov.get(
-                source, self._twist_cov['all'])
+            model = self._twist_cov.get(source, self._twist_cov['all'])
+            inner = self.params.twist_cov_scale * model.covariance(accel, 1.0)
         else:
             inner = self._p[n:, n:].copy()
         return self._embed(inner)
@@ -614,13 +702,15 @@ class LfOdometry:
 
 
 def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike, ndof: int,
-              sample_time: float, min_samples: int) -> Covariances | None:
-    """Covariances of the published pose and twist against the targets (module docstring).
+              sample_time: float, min_samples: int, lag_prior: float = 0.0
+              ) -> Covariances | None:
+    """Pose error models and twist covariances against the targets (module docstring).
 
     Every published estimate whose stamp is a target instant (not the first or last) is
-    compared with the target and with the targets' differentiated body velocity; the second
-    moments (bias included) per source ('network', 'fallback': only with ``min_samples``
-    matches) and over all. None when nothing matches. Pure: runs on a worker.
+    compared with the target and with the targets' differentiated body velocity: per source
+    ('network', 'fallback': only with ``min_samples`` matches) and over all, the pose error
+    model (`fit_error_model`, prior lag time ``lag_prior`` [s]) and the twist error's second
+    moment (bias included). None when nothing matches. Pure: runs on a worker.
     """
     stamps = np.asarray(times, dtype=np.float64)
     values = np.array(targets, dtype=np.float64).reshape(stamps.shape[0], -1)
@@ -641,16 +731,96 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
     pose_err = np.array([p.pose for p in rows]) - values[idx]
     if ndof == 3:
         pose_err[:, 2] = wrap_angle(pose_err[:, 2])
-    twist_err = np.array([p.twist for p in rows]) - velocity[idx]
+    twists = np.array([p.twist for p in rows])
+    twist_err = twists - velocity[idx]
+    rates = lag_rates(np.array([p.pose for p in rows]), twists)
     sources = np.array([p.source for p in rows])
-    pose_cov: dict[str, FloatArray] = {'all': _second_moment(pose_err)}
-    twist_cov: dict[str, FloatArray] = {'all': _second_moment(twist_err)}
+    pooled = fit_error_model(pose_err, rates, lag_prior)
+    pose_cov: dict[str, ErrorModel] = {'all': pooled}
+    accel = np.array([p.accel for p in rows])
+    twist_cov: dict[str, ErrorModel] = {'all': fit_error_model(twist_err, accel)}
     for source in SOURCES:
         mask = sources == source
         if np.count_nonzero(mask) >= min_samples:
-            pose_cov[source] = _second_moment(pose_err[mask])
-            twist_cov[source] = _second_moment(twist_err[mask])
+            # the lag time from every source (more motion to fit it), the holding part per source
+            pose_cov[source] = fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain)
+            twist_cov[source] = fit_error_model(twist_err[mask], accel[mask])
     return pose_cov, twist_cov
+
+
+def lag_rates(poses: FloatArray, twists: FloatArray) -> FloatArray:
+    """The LF rates of the pose error model: (m, ndof) poses and body twists → (m, ndof).
+
+    3 DOF: the earth-frame velocity R(ψ) [u, v] [m/s] and the yaw rate r [rad/s]; 1 DOF: u.
+    """
+    if twists.shape[1] == 1:
+        return np.array(twists, dtype=np.float64)
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    return np.column_stack([c * twists[:, 0] - s * twists[:, 1],
+                            s * twists[:, 0] + c * twists[:, 1], twists[:, 2]])
+
+
+def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,
+                    gain: FloatArray | None = None) -> ErrorModel:
+    """Fit E[e_i²] = σ²_hold,i + T_i² w_i² per DOF (module docstring); errors, regressor (m, n).
+
+    T_i² = the least-squares slope of e_i² on w_i² (clipped at 0), shrunk towards the prior
+    T₀² = ``lag_prior``² with a prior standard deviation of T₀²: the slope's own variance is
+    2 σ⁴_hold / Σ (w_i² − mean)² (Gaussian errors), so a window without motion (w² constant)
+    gives the prior and a window with motion its own fit. σ²_hold,i = mean e_i² − T_i² mean w_i²,
+    at least ``HOLD_FLOOR_FRACTION`` · mean e_i². Σ_hold keeps the correlations of the mean e eᵀ.
+    A given ``gain`` (T_i² [s²], e.g. fitted on every source) is used as it is: only σ²_hold is
+    fitted.
+    """
+    e = np.asarray(errors, dtype=np.float64)
+    w = np.asarray(rates, dtype=np.float64)
+    if e.ndim != 2 or w.shape != e.shape or e.shape[0] < 1:
+        raise ValueError(f'errors and rates must be (m >= 1, n), got {e.shape} and {w.shape}')
+    moment = _second_moment(e)
+    e2, w2 = e ** 2, w ** 2
+    mean_e2, mean_w2 = e2.mean(axis=0), w2.mean(axis=0)
+    dw2 = w2 - mean_w2
+    sxx = np.sum(dw2 ** 2, axis=0)
+    sxy = np.sum(dw2 * (e2 - mean_e2), axis=0)
+    prior = lag_prior ** 2
+    n = e.shape[1]
+    given = gain is not None
+    gains = np.zeros(n) if gain is None else np.array(gain, dtype=np.float64).reshape(n)
+    hold = np.zeros(n)
+    for i in range(n):
+        floor = HOLD_FLOOR_FRACTION * float(mean_e2[i])
+        if not given:
+            gains[i] = _lag_gain(float(sxx[i]), float(sxy[i]), float(mean_e2[i]),
+                                 float(mean_w2[i]), floor, prior,
+                                 still=bool(sxx[i] <= 1e-12 * e.shape[0] *
+                                            float(np.mean(w2[:, i] ** 2))))
+        hold[i] = max(float(mean_e2[i]) - gains[i] * float(mean_w2[i]), floor)
+    diag = np.sqrt(np.diag(moment))
+    with np.errstate(divide='ignore', invalid='ignore'):
+        corr = np.where(np.outer(diag, diag) > 0.0, moment / np.outer(diag, diag), 0.0)
+    np.fill_diagonal(corr, 1.0)
+    std = np.sqrt(hold)
+    return ErrorModel(moment=moment, hold=np.asarray(corr * np.outer(std, std)), gain=gains)
+
+
+def _lag_gain(sxx: float, sxy: float, mean_e2: float, mean_w2: float, floor: float,
+              prior: float, still: bool) -> float:
+    """T² of one DOF: the clipped least-squares slope shrunk towards ``prior`` (fit_error_model).
+
+    ``still``: no motion to fit (w² constant up to rounding): the prior.
+    """
+    slope = 0.0 if still else max(sxy / sxx, 0.0)
+    if prior <= 0.0:
+        return slope
+    if still:
+        return prior
+    hold_ref = max(mean_e2 - slope * mean_w2, floor)
+    if hold_ref <= 0.0:  # error-free window: the fit is exact
+        return slope
+    # precision of the slope, Σ (w² − mean)² / (2 σ⁴_hold) (Gaussian errors), against the
+    # prior's 1 / T₀⁴ (standard deviation of T² equal to T₀²)
+    weight = sxx / (2.0 * hold_ref ** 2) * prior ** 2
+    return (weight * slope + prior) / (weight + 1.0)
 
 
 def normalized_error_squared(error: ArrayLike, covariance: ArrayLike) -> FloatArray:

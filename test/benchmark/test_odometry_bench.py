@@ -62,6 +62,12 @@ def test_calibrate_is_geometric_mean_times_scale() -> None:
     out = calibrate([case([2.0, 8.0], [1.0], 2.0), case([4.0], [4.0], 2.0)])  # type: ignore
     assert math.isclose(out['pose_cov_scale'], 8.0)
     assert math.isclose(out['twist_cov_scale'], 2.0)
+    # spread of log(scale × NEES): logs of 4, 16, 8 (pose) → std of (2, 4, 3) · ln 2
+    assert math.isclose(out['pose_log_spread'], math.sqrt(2.0 / 3.0) * math.log(2.0))
+    lagged = [{**case([2.0], [1.0], 1.0), 'pose_lag_scale': lag} for lag in (1.0, 8.0)]
+    per_value = calibrate(lagged)  # type: ignore[arg-type]
+    assert sorted(per_value) == ['pose_lag_scale 1', 'pose_lag_scale 8']
+    assert math.isclose(per_value['pose_lag_scale 8']['pose_cov_scale'], 2.0)
 
 
 def test_pid_velocity_of_a_ramp() -> None:

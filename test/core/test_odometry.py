@@ -8,9 +8,13 @@ import pytest
 
 from lf_predictor_ros.core.lf_dynamics import DriftCurve, LfDynamics, VesselMemory
 from lf_predictor_ros.core.odometry import (
+    HOLD_FLOOR_FRACTION,
     UNESTIMATED_VARIANCE,
+    ErrorModel,
     LfOdometry,
     OdometryParams,
+    fit_error_model,
+    lag_rates,
     normalized_error_squared,
 )
 
@@ -49,9 +53,11 @@ def test_twist_is_the_body_velocity_of_a_straight_line() -> None:
 def test_covariance_is_calibrated_from_target_comparison() -> None:
     """Published poses with a known ±0.2 m north error against the targets.
 
-    The covariance is the error's second moment times the scale.
+    The covariance is the error's second moment times the scale: the squared error is constant,
+    so it does not grow with the velocity (no lag part) once no lag prior is assumed (with the
+    default prior of 1.2 s, lag scale 8, the window's little motion leaves +6 %).
     """
-    odo = LfOdometry(3, H, OdometryParams(pose_cov_scale=2.0))
+    odo = LfOdometry(3, H, OdometryParams(pose_cov_scale=2.0, pose_lag_prior=0.0))
     times = np.arange(300.0)
     truth = np.column_stack([np.zeros(300), np.zeros(300), np.zeros(300)])
     rng = np.random.default_rng(0)
@@ -63,6 +69,101 @@ def test_covariance_is_calibrated_from_target_comparison() -> None:
     assert out is not None and out.calibrated
     assert out.pose_cov[0, 0] == pytest.approx(2.0 * 0.04, rel=0.02)
     assert out.pose_cov[1, 1] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_pose_error_model_recovers_lag_time_and_holding_std() -> None:
+    """Errors T·w + σ·noise with T = (3 s, 2 s, 4 s), σ = (0.1 m, 0.05 m, 0.004 rad).
+
+    Least squares of e² on w² recovers T² and σ² (20 000 samples: T within 5 %, σ within 10 %),
+    with no prior and with a 1.2 s prior (a window full of motion overrules it).
+    """
+    rng = np.random.default_rng(3)
+    m = 20000
+    lag = np.array([3.0, 2.0, 4.0])
+    sigma = np.array([0.1, 0.05, 0.004])
+    rates = rng.uniform(-1.0, 1.0, size=(m, 3)) * np.array([0.1, 0.1, 0.003])
+    errors = lag * rates + sigma * rng.normal(size=(m, 3))
+    for prior in (0.0, 1.2):
+        model = fit_error_model(errors, rates, prior)
+        np.testing.assert_allclose(np.sqrt(model.gain), lag, rtol=0.05)
+        np.testing.assert_allclose(np.sqrt(np.diag(model.hold)), sigma, rtol=0.1)
+        np.testing.assert_allclose(model.moment, errors.T @ errors / m)
+    # the published covariance at a rate w: σ² + T² w² (lag_scale 1), off-diagonals from hold
+    cov = model.covariance(np.array([0.2, 0.0, 0.005]), 1.0)
+    np.testing.assert_allclose(np.diag(cov), np.diag(model.hold) + model.gain *
+                               np.array([0.04, 0.0, 2.5e-5]))
+
+
+def test_pose_error_model_of_a_still_window_is_the_prior() -> None:
+    """No motion (w ≡ 0 or constant): T² = prior², σ²_hold = the mean e²; no prior: T = 0."""
+    rng = np.random.default_rng(4)
+    errors = rng.normal(size=(500, 3)) * np.array([0.1, 0.2, 0.01])
+    for rates in (np.zeros((500, 3)), np.full((500, 3), 0.01)):
+        model = fit_error_model(errors, rates, 1.5)
+        np.testing.assert_allclose(model.gain, [2.25, 2.25, 2.25])
+        expected = np.maximum(np.mean(errors ** 2, axis=0) - 2.25 * rates[0] ** 2,
+                              HOLD_FLOOR_FRACTION * np.mean(errors ** 2, axis=0))
+        np.testing.assert_allclose(np.diag(model.hold), expected)
+        assert fit_error_model(errors, rates, 0.0).gain.tolist() == [0.0, 0.0, 0.0]
+    # a given gain (the lag time fitted on every source): only σ²_hold is fitted
+    rates = rng.uniform(-0.2, 0.2, size=(500, 3))
+    model = fit_error_model(errors, rates, 1.5, gain=np.array([0.5, 1.0, 0.0]))
+    np.testing.assert_allclose(model.gain, [0.5, 1.0, 0.0])
+    mean_e2 = np.mean(errors ** 2, axis=0)
+    np.testing.assert_allclose(np.diag(model.hold), np.maximum(
+        mean_e2 - np.array([0.5, 1.0, 0.0]) * np.mean(rates ** 2, axis=0),
+        HOLD_FLOOR_FRACTION * mean_e2))
+    # errors that shrink with motion give no negative lag; σ² stays above its floor
+    rates = rng.uniform(-0.5, 0.5, size=(500, 1))
+    errors = 0.1 * rng.normal(size=(500, 1)) / (1.0 + 10.0 * np.abs(rates))
+    model = fit_error_model(errors, rates, 0.0)
+    assert model.gain[0] == 0.0
+    assert model.hold[0, 0] == pytest.approx(np.mean(errors ** 2))
+
+
+def test_published_pose_covariance_grows_with_the_lf_velocity() -> None:
+    """Known error model: P = pose_cov_scale · (Σ_hold + pose_lag_scale · T² w²), w = R(ψ) ν."""
+    params = OdometryParams(pose_cov_scale=2.0, pose_lag_scale=3.0)
+    odo = LfOdometry(3, H, params)
+    hold = np.diag([0.01, 0.04, 1e-4])
+    model = ErrorModel(moment=hold, hold=hold, gain=np.array([9.0, 4.0, 16.0]))
+    cal = {'all': model, 'network': model}
+    twist_model = ErrorModel(moment=np.eye(3), hold=np.eye(3), gain=np.zeros(3))
+    odo.apply_learned(None, (cal, {'all': twist_model}))
+    heading = math.radians(30.0)
+    _track_line(odo, 0.4, heading, 300)
+    out = odo.track(300.0, [0.4 * 300 * math.cos(heading), 0.4 * 300 * math.sin(heading),
+                            heading], np.zeros(3))
+    assert out is not None and out.calibrated
+    rates = lag_rates(out.pose[None, :], out.twist[None, :])[0]
+    np.testing.assert_allclose(rates[:2], [0.4 * math.cos(heading), 0.4 * math.sin(heading)],
+                               atol=2e-3)
+    expected = 2.0 * (hold + 3.0 * np.diag(model.gain * rates ** 2))
+    np.testing.assert_allclose(out.pose_cov, expected, rtol=1e-12, atol=1e-15)
+    assert out.pose_cov[0, 0] == pytest.approx(2.0 * (0.01 + 27.0 * 0.12), rel=0.01)
+
+
+def test_published_twist_covariance_grows_with_the_acceleration() -> None:
+    """Known twist model: P = twist_cov_scale · (Σ_hold + K² a²), a the low-passed twist change.
+
+    North motion with a constant acceleration of 0.002 m/s² from rest: after 200 s a → 0.002
+    (twist_accel_time 10 s), so P_uu = 0.5 · (1e-4 + 100 · 4e-6) = 2.5e-4; at constant speed
+    (a → 0) it is 0.5e-4.
+    """
+    params = OdometryParams(twist_cov_scale=0.5, twist_accel_time=10.0)
+    hold = 1e-4 * np.eye(3)
+    pose_model = ErrorModel(moment=hold, hold=hold, gain=np.zeros(3))
+    twist_model = ErrorModel(moment=hold, hold=hold, gain=np.full(3, 100.0))
+    for accel, expected in ((0.002, 2.5e-4), (0.0, 0.5e-4)):
+        odo = LfOdometry(3, H, params)
+        odo.apply_learned(None, ({'all': pose_model}, {'all': twist_model}))
+        out = None
+        for k in range(201):
+            north = 0.5 * accel * k ** 2 + (0.0 if accel else 0.1 * k)
+            out = odo.track(float(k), [north, 0.0, 0.0], np.zeros(3))
+        assert out is not None and out.calibrated
+        assert out.twist_cov[0, 0] == pytest.approx(expected, rel=0.03)
+        assert out.twist_cov[1, 1] == pytest.approx(0.5e-4, rel=1e-6)
 
 
 def test_one_dof_marks_the_other_entries_unestimated() -> None:

@@ -243,17 +243,23 @@ class DriftCurve:
     def variance(self, elapsed: float) -> FloatArray:
         """Pose drift variance per DOF after ``elapsed`` seconds.
 
-        Linear interpolation from 0; beyond the longest horizon it grows with the square of the
-        time, as for a velocity error.
+        The largest mean square reached up to that horizon (a measured curve from a few test
+        starts oscillates with the LF motion; a covariance that shrinks while dead reckoning
+        would claim the pose got better without a fix), linearly interpolated from 0; beyond
+        the longest horizon it grows with the square of the time, as for a velocity error.
         """
-        return _interpolate(self.horizons, self.mean_square, elapsed, 2.0)
+        return _interpolate(self.horizons, np.maximum.accumulate(self.mean_square, axis=0),
+                            elapsed, 2.0)
 
     def velocity_variance(self, elapsed: float) -> FloatArray:
         """Velocity drift variance per DOF after ``elapsed`` seconds.
 
-        Beyond the longest horizon it grows linearly with the time, as for a random walk.
+        The largest reached so far, as ``variance``; beyond the longest horizon it grows
+        linearly with the time, as for a random walk.
         """
-        return _interpolate(self.horizons, self.velocity_mean_square, elapsed, 1.0)
+        return _interpolate(self.horizons,
+                            np.maximum.accumulate(self.velocity_mean_square, axis=0), elapsed,
+                            1.0)
 
     def rms_at(self, elapsed: float) -> FloatArray:
         """RMS drift per DOF after ``elapsed`` seconds."""

@@ -20,9 +20,9 @@ Bound on the excursion (horizontal distance of the true LF pose from the setpoin
 truth, the PD part keeps the vessel within 3.8 m of the setpoint against the worst environmental
 forces of this scenario (test_nodes.py, closed-loop test); the controller here holds the
 *estimate* on the setpoint, so the truth is off by the estimate's error on top; the stated
-bound is 3.8 m throughout. Measured (seed 3, twist_bandwidth 1.0, dead reckoning from the 30 s
-low-passed twist): 1.7 m before, 6.6 m during and 13.2 m after the dropout: the loop drifts away
-on the dead reckoning (xfail, with the evidence and the earlier numbers).
+bound is 3.8 m throughout. Measured (seed 3, twist_bandwidth 1.0, hold reckoner): 1.7 m before,
+6.0 m during and 16.5 m after the dropout: the loop drifts away on the dead reckoning (xfail,
+with the evidence and the earlier numbers).
 """
 # rclpy's Node, executor and lifecycle methods are untyped in Jazzy.
 # mypy: disable-error-code="no-untyped-call"
@@ -249,8 +249,9 @@ def test_dp_controller_on_lf_odom_holds_the_vessel_through_a_30_s_pose_dropout(
     assert first['odom_calibrated'] == 'true' and first['vessel_memory'] == 'true'
     assert int(first['trainings']) >= 3 and int(first['odom_calibrations']) >= 3
     # (the reports come on the wall clock: how many fall in the 30 s of simulated dropout
-    # depends on the speed of the run, so only their range is checked)
-    assert all(0.0 <= float(v['dead_reckoning_time']) <= 32.0 for _, v in reckoning)
+    # depends on the speed of the run, so only their range is checked; a first fix outside the
+    # reacquisition gate is held back up to reacquire_time = 10 s, dead reckoning meanwhile)
+    assert all(0.0 <= float(v['dead_reckoning_time']) <= 30.0 + 10.0 + 2.0 for _, v in reckoning)
     final = loop.values[-1]
     assert int(final['callback_errors']) == 0 and int(final['odom_lost']) == 0
 
@@ -283,9 +284,13 @@ def test_dp_controller_on_lf_odom_holds_the_vessel_through_a_30_s_pose_dropout(
 
 @pytest.mark.dds
 @pytest.mark.xfail(strict=True, reason=(
-    'BUG (closed loop on dead reckoning): measured at twist_bandwidth 1.0 with dead reckoning '
-    'from the 30 s low-passed twist (this commit, 1 run): excursion of the true LF pose from '
-    'the setpoint 1.7 m before, 6.6 m during and 13.2 m after the dropout (bound 3.8 m); at '
+    'BUG (closed loop on dead reckoning): measured with the hold reckoner (too few drift tests '
+    'in these small windows; fbce964), twist_bandwidth 1.0: excursion of the true LF pose from '
+    'the setpoint 1.73 m before, 5.95 m during and 16.5 m after the dropout (bound 3.8 m): '
+    'the controller holds the P term of the frozen pose and its integrator winds on it, with '
+    'no feedback, and the vessel accelerates away (the tuned observer dead reckoning on its '
+    'model: 4.7 m worst in 60 s dropouts, docs/BENCHMARKS.md); at 28c8921 (constant '
+    'velocity from the 30 s low-passed twist): 1.7 / 6.6 / 13.2 m; at '
     '035eb44 (dead reckoning from the last twist): 1.7-4.1 / 15.7-19.4 / 42-46 m; at '
     'twist_bandwidth 0.5 (b9ea25d): 3.9 / 2.4 / 7.0 m; before f42d74e: 9.0 / 16.9 / 91.6 m. '
     'The loop still drifts away on the dead-reckoned lf_odom with these small test windows; '

@@ -140,11 +140,12 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
     """Least-squares fit of ν̇ = F ν + G τ + B β(ψ) on an LF pose series and its body forces.
 
     ``structure`` 'diagonal' (default): F and G diagonal, each DOF fitted on its own velocity
-    and force (+ the environment basis); 'full': every DOF on all of them. Data from a DP loop
-    are closed-loop data: the thrust is computed from the vessel's own motion, and the full fit
-    spreads that correlation over the cross terms. On supply_closed_loop tuning seed 1 (targets
-    of 1200 s windows) the full fit came out unstable (growth 0.16 1/s) in the loop, the
-    diagonal one damped with M⁻¹ within 0.4–0.95 of the truth (docs/BENCHMARKS.md, issue 14).
+    and force (+ the environment basis), its damping rate held ≥ ``MIN_DAMPING_RATE``; 'full':
+    every DOF on all of them. Data from a DP loop are closed-loop data: the thrust is computed
+    from the vessel's own motion, and the full fit spreads that correlation over the cross
+    terms. On supply_closed_loop (tuning seed 1, the predictor in the loop) the full fit was
+    unstable in every window (growth 0.04–0.16 1/s); on the fair recording of the same seed the
+    diagonal fit gave M⁻¹ at 0.94 / 1.37 / 0.39 of the truth (docs/BENCHMARKS.md, issue 14).
 
     Args:
         targets: LF poses, shape (m, n) (n = 1 or 3, heading unwrapped), uniform sample time.
@@ -344,8 +345,8 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     The returned model is refitted on the whole window. Ties and too few test starts keep
     'hold': in a DP loop the controller acts on the dead-reckoned pose, and a velocity that is
     extrapolated without the thrust that would stop it is acted against (on tuning seeds 1–2 of
-    the closed loops through 60 s dropouts, constant velocity turned the supply vessels by up to
-    2.1 rad where hold kept 0.95 rad; docs/BENCHMARKS.md, issue 14).
+    the closed loops through 60 s dropouts, constant velocity turned rao_supply by 2.1 rad where
+    hold kept 0.95 rad; docs/BENCHMARKS.md, issue 14).
     """
     eta_t = _as_2d(targets, 'targets')
     tau = _as_2d(forces, 'forces')

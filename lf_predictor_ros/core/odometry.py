@@ -28,14 +28,14 @@ thrust, and gives an ``OdometryEstimate``:
   first targets, ``prior_pose_std`` and the Kalman filter's velocity covariance stand in and
   ``calibrated`` is False;
 - **dead reckoning**: when poses stop or are rejected while thrust keeps coming (``coast``), the
-  state is integrated with the dead reckoner the vessel memory chose (learned model, constant
-  velocity or hold) and the applied thrust, starting from the twist low-passed over
-  ``dead_reckoning_velocity_time`` (a DP loop acts against the velocity it is shown, so a frozen
-  wave-band twist would push the vessel away). The pose continues from the last published pose
-  (no step); its covariance is the last tracking covariance + the drift variance measured by the
-  vessel memory's own dead-reckoning tests at the elapsed time + the velocity uncertainty
-  propagated (elapsed² · R Σ_ν Rᵀ). After ``dead_reckoning_timeout`` nothing is published (mode
-  'lost'): no guesses;
+  state is integrated with the dead reckoner ``dead_reckoner`` names (default: the one the vessel
+  memory chose — learned model, constant velocity or hold) and the applied thrust, starting from
+  the twist low-passed over ``dead_reckoning_velocity_time`` (a DP loop acts against the velocity
+  it is shown, so a frozen wave-band twist would push the vessel away). The pose continues from the
+  last published pose (no step); its covariance is the last tracking covariance + the drift
+  variance measured by the vessel memory's own dead-reckoning tests at the elapsed time + the
+  velocity uncertainty propagated (elapsed² · R Σ_ν Rᵀ). After ``dead_reckoning_timeout`` nothing
+  is published (mode 'lost'): no guesses;
 - **reacquisition gated by plausibility**: a fix whose squared Mahalanobis distance to the
   dead-reckoned pose is within ``reacquire_gate`` is accepted at once; a fix far from it is
   accepted only after ``reacquire_time`` seconds of consecutive fixes (the position reference
@@ -132,8 +132,10 @@ class OdometryParams:
         'wave-band twist would drive the vessel away while the poses are missing', 's'))
     dead_reckoner: str = field(default='auto', metadata=field_doc(
         "dead reckoner through a pose dropout: 'auto' (the vessel memory's choice by the "
-        "open-loop drift test), 'model' (the learned LF model driven by the thrust; the "
-        "memory's choice while no model is fitted), 'constant_velocity' or 'hold'", ''))
+        "open-loop drift test; hold when the test cannot tell), 'model' (the learned LF model "
+        "driven by the thrust; the memory's choice while no model is fitted), "
+        "'constant_velocity' or 'hold' (tuning seeds, DP loops through 60 s dropouts: auto; "
+        "model unsafe on rao_supply; docs/BENCHMARKS.md)", ''))
     reacquire_gate: float = field(default=CHI2_3DOF_999, metadata=field_doc(
         'a fix within this squared Mahalanobis distance of the dead-reckoned pose is accepted '
         'at once', ''))

@@ -136,7 +136,8 @@ class LfDynamics:
 
 
 def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
-                    ridge: float = RIDGE, structure: ModelStructure = 'diagonal') -> LfDynamics:
+                    ridge: float = RIDGE, structure: ModelStructure = 'diagonal',
+                    input_gain: ArrayLike | None = None) -> LfDynamics:
     """Least-squares fit of ν̇ = F ν + G τ + B β(ψ) on an LF pose series and its body forces.
 
     ``structure`` 'diagonal' (default): F and G diagonal, each DOF fitted on its own velocity
@@ -153,6 +154,9 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
         sample_time: h [s].
         ridge: relative ridge penalty on RMS-scaled regressors.
         structure: 'diagonal' or 'full'.
+        input_gain: a known diagonal thrust gain G_ii = 1 / M_ii per DOF (M the vessel's inertia
+            with added mass) [1/kg, 1/(kg·m²)], or None to fit it; with it only the damping and
+            the environment terms are fitted (diagonal structure).
 
     Raises:
         ValueError: bad shapes, too few samples, non-finite data, or a fit that is not a damped
@@ -175,7 +179,13 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
     if phi.shape[0] < 5 * phi.shape[1]:
         raise ValueError(f'{phi.shape[0]} samples are too few to fit {phi.shape[1]} '
                          'coefficients per DOF: use a longer window')
-    if structure == 'full':
+    known = None if input_gain is None else np.asarray(input_gain, dtype=np.float64)
+    if known is not None and (known.shape != (n,) or not np.all(np.isfinite(known)) or
+                              np.any(known <= 0.0)):
+        raise ValueError(f'input_gain must be {n} positive finite numbers 1/M_ii, got {known}')
+    if known is not None:
+        coef, residual_std = _fit_known_gain(nu, nu_dot, tau, eta, known, ridge)
+    elif structure == 'full':
         coef, residual_std = _ridge(phi, nu_dot, ridge)
     else:
         coef = np.zeros((n, phi.shape[1]))
@@ -201,6 +211,43 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
         raise ValueError(f'the fitted thrust gain {np.diag(model.input_gain)} has an entry <= 0 '
                          '(the thrust would push the vessel the other way): not used')
     return model
+
+
+def _fit_known_gain(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, eta: FloatArray,
+                    gain: FloatArray, ridge: float) -> tuple[FloatArray, FloatArray]:
+    """Damping and environment with a known diagonal thrust gain G (coefficient rows as `phi`).
+
+    Surge and sway share one earth-fixed environment force b = [b_N, b_E] (Fossen 2011 eq. 7.8,
+    R(ψ)ᵀ b): u̇ − G_u τ_u = f_u u + G_u (b_N cos ψ + b_E sin ψ), v̇ − G_v τ_v = f_v v +
+    G_v (−b_N sin ψ + b_E cos ψ), one least squares over both; yaw a constant moment. A free
+    [1, cos ψ, sin ψ] per DOF fitted on a window of one heading extrapolates to absurd forces
+    at another (rao_supply after a 45° turn: 0.09 m/s² in sway, the loop ran away).
+    """
+    n = gain.shape[0]
+    coef = np.zeros((n, 3 * n if n == 3 else 3))
+    residual = nu_dot - tau * gain
+    if n == 1:
+        own, std = _ridge(np.column_stack([nu[:, 0], np.ones(nu.shape[0])]), residual, ridge)
+        coef[0, 0], coef[0, 1], coef[0, 2] = min(float(own[0, 0]), -MIN_DAMPING_RATE), gain[0], \
+            own[0, 1]
+        return coef, std
+    c, s = np.cos(eta[:, 2]), np.sin(eta[:, 2])
+    zero = np.zeros_like(c)
+    phi = np.vstack([np.column_stack([nu[:, 0], zero, gain[0] * c, gain[0] * s]),
+                     np.column_stack([zero, nu[:, 1], -gain[1] * s, gain[1] * c])])
+    own, _ = _ridge(phi, np.concatenate([residual[:, 0], residual[:, 1]])[:, None], ridge)
+    f_u, f_v, b_north, b_east = own[0]
+    yaw, _ = _ridge(np.column_stack([nu[:, 2], np.ones(nu.shape[0])]), residual[:, 2:3], ridge)
+    coef[0, 0] = min(float(f_u), -MIN_DAMPING_RATE)
+    coef[1, 1] = min(float(f_v), -MIN_DAMPING_RATE)
+    coef[2, 2] = min(float(yaw[0, 0]), -MIN_DAMPING_RATE)
+    coef[np.arange(3), 3 + np.arange(3)] = gain
+    coef[0, 7:9] = gain[0] * b_north, gain[0] * b_east  # u̇: cos ψ, sin ψ
+    coef[1, 7:9] = gain[1] * b_east, -gain[1] * b_north  # v̇: cos ψ, sin ψ
+    coef[2, 6] = yaw[0, 1]
+    basis = heading_basis(eta[:, 2], 3)
+    fitted = nu @ np.diag(np.diag(coef[:, :3])) + tau * gain + basis @ coef[:, 6:].T
+    return coef, np.std(nu_dot - fitted, axis=0)
 
 
 def dead_reckon_step(model: LfDynamics | None, reckoner: DeadReckoner, eta: FloatArray,
@@ -336,7 +383,7 @@ def drift_test(model: LfDynamics | None, reckoner: DeadReckoner, targets: ArrayL
 
 
 def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: float,
-                        horizon: float) -> VesselMemory:
+                        horizon: float, input_gain: ArrayLike | None = None) -> VesselMemory:
     """Fit the LF dynamics on the older part of a window; pick the dead reckoner on the newest.
 
     The fit uses the oldest 1 − ``VALIDATION_FRACTION`` of the window; each dead reckoner is
@@ -354,7 +401,8 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     model: LfDynamics | None = None
     message = ''
     try:
-        model = fit_lf_dynamics(eta_t[:split], tau[:split], sample_time)
+        model = fit_lf_dynamics(eta_t[:split], tau[:split], sample_time,
+                                input_gain=input_gain)
     except ValueError as exc:
         message = f'LF dynamics not fitted: {exc}'
     curves = {name: drift_test(model, name, eta_t[split:], tau[split:], sample_time,
@@ -375,7 +423,7 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
         message = message or 'too few dead-reckoning tests: hold kept'
     if model is not None:
         try:
-            model = fit_lf_dynamics(eta_t, tau, sample_time)
+            model = fit_lf_dynamics(eta_t, tau, sample_time, input_gain=input_gain)
         except ValueError as exc:
             model, message = None, f'LF dynamics not refitted: {exc}'
             chosen = 'hold' if chosen == 'model' else chosen

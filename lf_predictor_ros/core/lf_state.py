@@ -150,7 +150,8 @@ class LfStateEstimator:
         odometry = self.odometry
         args = (times, values, np.array(self._forces), rows, sos, odometry.published(),
                 self.sample_time, self.ndof, odometry.params.dead_reckoning_timeout,
-                odometry.params.min_calibration_samples, odometry.params.pose_lag_prior)
+                odometry.params.min_calibration_samples, odometry.params.pose_lag_prior,
+                _input_gain(odometry.params.vessel_inertia, self.ndof))
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -175,8 +176,9 @@ class LfStateEstimator:
 
 def _learn(times: FloatArray, values: FloatArray, all_forces: FloatArray, rows: NDArray[np.int64],
            sos: FloatArray | None, published: list[Published], sample_time: float, ndof: int,
-           horizon: float, min_samples: int,
-           lag_prior: float) -> tuple[VesselMemory | None, Covariances | None]:
+           horizon: float, min_samples: int, lag_prior: float,
+           input_gain: FloatArray | None = None) -> tuple[VesselMemory | None,
+                                                          Covariances | None]:
     """Worker job: the vessel memory of one target window and the calibrated covariances.
 
     ``all_forces``: the buffered thrust, ``rows``: its rows at the targets' instants, ``sos``:
@@ -192,8 +194,16 @@ def _learn(times: FloatArray, values: FloatArray, all_forces: FloatArray, rows: 
                                                                                   sos)
     forces = forces[rows]
     try:
-        memory: VesselMemory | None = learn_vessel_memory(values, forces, sample_time, horizon)
+        memory: VesselMemory | None = learn_vessel_memory(values, forces, sample_time, horizon,
+                                                          input_gain)
     except ValueError:
         memory = None
     return memory, calibrate(published, times, values, ndof, sample_time, min_samples,
                              lag_prior)
+
+
+def _input_gain(inertia: tuple[float, ...], ndof: int) -> FloatArray | None:
+    """1 / M_ii for the estimated DOFs, or None when the inertia is not given (0)."""
+    if inertia[0] <= 0.0:
+        return None
+    return 1.0 / np.array(inertia[:ndof], dtype=np.float64)

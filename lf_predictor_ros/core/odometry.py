@@ -130,6 +130,11 @@ class OdometryParams:
         'dead reckoning starts from the twist averaged over this time (first-order low-pass), '
         'not from the last twist: a DP loop acts against any velocity it sees, so a frozen '
         'wave-band twist would drive the vessel away while the poses are missing', 's'))
+    vessel_inertia: tuple[float, ...] = field(default=(0.0, 0.0, 0.0), metadata=field_doc(
+        'optional: the vessel inertia M_ii with added mass per DOF (surge, sway, yaw); when '
+        'given, the vessel memory uses the thrust gain 1/M_ii instead of fitting it (station-'
+        'keeping data cannot identify it: the LF thrust mostly cancels the environment) and '
+        "'auto' dead-reckons on the model; 0 = learn it", 'kg, kg, kg·m²'))
     dead_reckoner: str = field(default='auto', metadata=field_doc(
         "dead reckoner through a pose dropout: 'auto' (the vessel memory's choice by the "
         "open-loop drift test; hold when the test cannot tell), 'model' (the learned LF model "
@@ -174,6 +179,12 @@ class OdometryParams:
                 raise ValueError(f'{name} must be 3 positive numbers (north, east, yaw), '
                                  f'got {value}')
             object.__setattr__(self, name, tuple(float(v) for v in value))
+        inertia = tuple(float(v) for v in self.vessel_inertia)
+        if len(inertia) != 3 or not all(math.isfinite(v) and v >= 0.0 for v in inertia) or (
+                any(v > 0.0 for v in inertia) and not all(v > 0.0 for v in inertia)):
+            raise ValueError('vessel_inertia must be 3 finite numbers, all 0 (learn) or all > 0 '
+                             f'[kg, kg, kg·m²], got {self.vessel_inertia}')
+        object.__setattr__(self, 'vessel_inertia', inertia)
         if self.dead_reckoner not in ('auto', *DEAD_RECKONERS):
             raise ValueError(f"dead_reckoner must be 'auto' or one of {DEAD_RECKONERS}, got "
                              f'{self.dead_reckoner!r}')
@@ -525,6 +536,8 @@ class LfOdometry:
         if memory is None:
             return 'constant_velocity'
         choice = self.params.dead_reckoner
+        if choice == 'auto' and self.params.vessel_inertia[0] > 0.0 and memory.model is not None:
+            return 'model'
         if choice == 'auto' or (choice == 'model' and memory.model is None):
             return memory.reckoner
         return cast(DeadReckoner, choice)

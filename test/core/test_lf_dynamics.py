@@ -74,6 +74,28 @@ def test_fit_recovers_mass_and_damping_at_a_steady_heading() -> None:
     assert model.bias[0] @ np.array([1.0, c, s]) == pytest.approx(expected, rel=0.1)
 
 
+@pytest.mark.parametrize(('seed', 'kwargs'), [(0, {}), (4, {'yaw_scale': 0.1, 'heading': 0.3})])
+def test_known_inertia_fits_damping_and_one_earth_fixed_force(seed: int,
+                                                             kwargs: dict[str, float]) -> None:
+    """With G = 1/M given, surge and sway share one earth-fixed force b = [b_N, b_E].
+
+    u̇ bias = G_u (b_N cos ψ + b_E sin ψ), v̇ bias = G_v (−b_N sin ψ + b_E cos ψ): the
+    coefficients of [1, cos ψ, sin ψ] are [0, G_u b_N, G_u b_E] and [0, G_v b_E, −G_v b_N],
+    turning or at a steady heading (where a free basis per DOF is not identified).
+    """
+    poses, forces = _vessel_run(seed, **kwargs)
+    model = fit_lf_dynamics(poses, forces, H, input_gain=1.0 / MASS)
+    np.testing.assert_array_equal(np.diag(model.input_gain), 1.0 / MASS)
+    np.testing.assert_allclose(np.diag(model.damping), -DAMPING / MASS, rtol=0.03)
+    north, east = ENV_FORCE
+    np.testing.assert_allclose(model.bias[0], [0.0, north / MASS[0], east / MASS[0]], rtol=0.03,
+                               atol=1e-9)
+    np.testing.assert_allclose(model.bias[1], [0.0, east / MASS[1], -north / MASS[1]], rtol=0.03,
+                               atol=1e-9)
+    with pytest.raises(ValueError, match='input_gain'):
+        fit_lf_dynamics(poses, forces, H, input_gain=[1e-7, 0.0, 1e-9])
+
+
 def test_fit_refuses_bad_input_with_a_message() -> None:
     poses, forces = _vessel_run(1, samples=200)
     with pytest.raises(ValueError, match='shape'):

@@ -15,7 +15,7 @@ pytestmark = pytest.mark.filterwarnings(
     'ignore:`torch.jit.script` is deprecated:DeprecationWarning')
 
 # Default windows: the vessel memory's dead-reckoning tests need the newest third of a 20 min
-# window (shorter windows leave too few tests and keep constant velocity).
+# window (shorter windows leave too few tests and keep hold).
 PARAMS = PredictorParams(ndof=1)
 SCORED_FROM = 1300  # [samples] after the first training (1200 s) and one retraining
 
@@ -59,3 +59,27 @@ def test_twist_beats_zero_and_covariances_are_calibrated(run: dict[str, np.ndarr
     # bounds is in the benchmark, docs/BENCHMARKS.md)
     assert 1.0 / 3.0 < float(np.mean(nees_pose)) < 3.0
     assert 1.0 / 3.0 < float(np.mean(nees_twist)) < 3.0
+
+
+def test_a_given_vessel_inertia_is_the_thrust_gain_of_the_memory() -> None:
+    """vessel_inertia M reaches the worker's fit as G = 1/M (1 DOF: surge only)."""
+    from lf_predictor_ros.core.lf_state import _input_gain, _learn
+
+    rng = np.random.default_rng(0)
+    mass, damping, h = 2e6, 4e4, 1.0  # [kg], [N·s/m], [s]
+    x, u, force = 0.0, 0.0, 0.0
+    poses, forces = [], []
+    for _ in range(1200):
+        force += 0.02 * (3e4 * rng.normal() - force)
+        poses.append([x])
+        forces.append([force, 0.0, 0.0])
+        u += h * (force - damping * u) / mass
+        x += h * u
+    gain = _input_gain((mass, 1.0, 1.0), 1)
+    assert gain is not None and gain.tolist() == [1.0 / mass]
+    assert _input_gain((0.0, 0.0, 0.0), 3) is None
+    memory, _ = _learn(np.arange(1200.0), np.array(poses), np.array(forces)[:, :1],
+                       np.arange(1200), None, [], h, 1, 120.0, 60, 1.2, gain)
+    assert memory is not None and memory.model is not None
+    assert memory.model.input_gain[0, 0] == 1.0 / mass
+    assert memory.model.damping[0, 0] == pytest.approx(-damping / mass, rel=0.05)

@@ -250,6 +250,15 @@ def test_forced_model_dead_reckoner_follows_the_thrust() -> None:
     assert out is not None and out.reckoner == 'hold'
     with pytest.raises(ValueError, match='dead_reckoner'):
         OdometryParams(dead_reckoner='kalman')
+    # a given vessel inertia makes 'auto' dead reckon on the model (the memory chose hold)
+    odo = LfOdometry(3, H, OdometryParams(vessel_inertia=(1e6, 1e6, 1e9)))
+    _track_line(odo, 0.0, 0.0, 10)
+    odo._memory = memory  # noqa: SLF001
+    out = odo.coast(11.0, force)
+    assert out is not None and out.reckoner == 'model'
+    for bad in ((1e6, 0.0, 1e9), (1e6, 1e6), (1e6, -1e6, 1e9), (math.inf, 1e6, 1e9)):
+        with pytest.raises(ValueError, match='vessel_inertia'):
+            OdometryParams(vessel_inertia=bad)
 
 
 def test_reacquisition_inside_the_gate_is_immediate_and_outside_waits() -> None:

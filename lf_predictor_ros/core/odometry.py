@@ -531,6 +531,11 @@ class LfOdometry:
 
     # ---- dead reckoning --------------------------------------------------------------------
 
+    @property
+    def reckoner(self) -> DeadReckoner:
+        """The dead reckoner a dropout would use now (``dead_reckoner`` and the memory)."""
+        return self._reckoner()
+
     def _reckoner(self) -> DeadReckoner:
         memory = self._memory
         if memory is None:

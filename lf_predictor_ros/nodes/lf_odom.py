@@ -155,7 +155,7 @@ class OdomDriver:
         values: dict[str, DiagnosticValue] = {
             'odom_mode': odometry.mode,
             'dead_reckoning_time': self.dead_reckoning_time(),
-            'reckoner': memory.reckoner if memory is not None else 'constant_velocity',
+            'reckoner': odometry.reckoner,
             'odom_calibrated': odometry.calibrated,
             'vessel_memory': memory is not None,
             'vessel_memory_error': self.state.memory_error or '',

@@ -185,8 +185,8 @@ def _learn(times: FloatArray, values: FloatArray, all_forces: FloatArray, rows: 
     the targets' zero-phase filter (None: no ω0 yet). The thrust is filtered with the same
     filter as the poses were before the fit: the model ν̇ = F ν + G τ + B β is linear, so it
     holds between the filtered signals too, while the wave-band thrust a DP loop makes from its
-    estimate's wave leakage (std up to 10× the LF thrust in the predictor's own loop) would be
-    an error in the regressor and bias the thrust gain G towards 0 (errors in variables).
+    estimate's wave leakage would be an error in the regressor and bias the thrust gain G
+    towards 0 (errors in variables).
     The memory is None if it cannot be learned; the covariances compare the published estimates
     with the window (`odometry.calibrate`).
     """

@@ -17,7 +17,10 @@ difference runs on the poses all the time, so the fallback starts warm.
 
 dt is the difference of consecutive pose stamps (never the wall clock), so the controller is
 correct in simulated time at any speed, with or without ``use_sim_time``. A pose whose stamp is
-not newer than the last accepted one is ignored and counted in ``/diagnostics``. The first pose
+not newer than the last accepted one is ignored and counted in ``/diagnostics``, except the last
+accepted sample offered again (same stamp and pose), which is answered again with the same
+command without stepping the PID (a lockstep simulator re-offers its first sample until it
+hears an answer, and the first answer can be lost before the publishers match). The first pose
 (no previous stamp) uses ``nominal_dt``; a gap longer than ``max_dt`` restarts the controller
 from the new pose (reference filter, integrator and velocity estimate reset; counted).
 
@@ -220,6 +223,7 @@ class DpControllerNode(Node):
         self._schedule = self._params.value.schedule()
         self._state = PidState()
         self._last_stamp_ns: int | None = None
+        self._last_pose: np.ndarray | None = None
         self._poses = 0
         self._non_increasing = 0
         self._invalid = 0
@@ -332,6 +336,12 @@ class DpControllerNode(Node):
     def _control(self, pose: np.ndarray, stamp: Time, velocity: np.ndarray | None) -> None:
         """One PID step on a valid pose; ``velocity`` [u, v, r] for the D term or None."""
         stamp_ns = stamp_to_ns(stamp)
+        if self._is_reoffer(stamp_ns, pose):
+            # the same sample offered again (a lockstep simulator re-offers its first sample
+            # until it hears an answer; the first answer can be lost while the publisher has
+            # not matched yet): answer it again, the PID does not step
+            self._command_pub.publish(wrench_to_msg(self._last_tau, stamp))
+            return
         if self._last_stamp_ns is not None and stamp_ns <= self._last_stamp_ns:
             self._non_increasing += 1
             return
@@ -356,9 +366,15 @@ class DpControllerNode(Node):
         self._poses += 1
         self._last_dt = dt
         self._last_tau = tau
+        self._last_pose = pose.copy()
         self._saturated = tau_max is not None and bool(
             np.any(np.abs(tau) >= np.asarray(tau_max) * (1.0 - 1e-12)))
         self._command_pub.publish(wrench_to_msg(tau, stamp))
+
+    def _is_reoffer(self, stamp_ns: int, pose: np.ndarray) -> bool:
+        """The last answered sample again: same stamp, same pose."""
+        return (self._last_stamp_ns is not None and stamp_ns == self._last_stamp_ns
+                and self._last_pose is not None and np.array_equal(pose, self._last_pose))
 
     def _note_d_term(self, source: str) -> None:
         """Count and log the switches between the odometry twist and the fallback."""

@@ -204,6 +204,36 @@ def test_dp_controller_answers_each_new_pose_with_its_stamp(
 
 
 @pytest.mark.dds
+def test_dp_controller_answers_a_reoffered_sample_again_without_stepping(
+        ros_context: object, executor: SingleThreadedExecutor) -> None:
+    """A lockstep simulator re-offers its first sample until it hears an answer.
+
+    The first answer can be lost before the command publisher has matched (a fresh-clone CI run
+    deadlocked there: the controller dropped the re-offer as a non-increasing stamp). The same
+    stamp with the same pose is answered again with the same command; the PID does not step.
+    """
+    ctl = DpControllerNode(context=ros_context, parameter_overrides=[
+        Parameter('scenario', value=''), Parameter('setpoint', value=[0.0, 0.0, 0.0])])
+    probe_node = Node('probe', context=ros_context)
+    probe = Probe(probe_node, {'thrust_command': WrenchStamped})
+    pose_pub = probe_node.create_publisher(PoseStamped, 'lf_pose', _probe_qos())
+    executor.add_node(ctl)
+    executor.add_node(probe_node)
+    _spin_for(executor, 0.5)
+    stamp = Time(sec=1, nanosec=0)
+    for _ in range(3):
+        pose_pub.publish(pose_to_msg([10.0, 2.0, 0.1], stamp))
+        _spin_for(executor, 0.1)
+    _spin_for(executor, 0.3)
+    commands = probe.messages['thrust_command']
+    assert [_stamp_of(m) for m in commands] == [1_000_000_000] * 3
+    forces = {(m.wrench.force.x, m.wrench.force.y, m.wrench.torque.z) for m in commands}
+    assert len(forces) == 1 and abs(next(iter(forces))[0]) > 0.0
+    assert ctl.counters == {'poses': 1, 'non_increasing_stamps': 0, 'invalid_poses': 0,
+                            'restarts': 0}
+
+
+@pytest.mark.dds
 def test_dp_controller_rejects_invalid_runtime_gains(ros_context: object) -> None:
     ctl = DpControllerNode(context=ros_context)
     try:

@@ -162,9 +162,9 @@ def test_step_pacer_keeps_speed_factor_and_does_not_burst() -> None:
     assert simulator_node.StepPacer(0.1, 0.0, 0.0).due(0.0) == sys.maxsize
 
 
-@pytest.mark.dds
-def test_dp_controller_answers_each_new_pose_with_its_stamp(
-        ros_context: object, executor: SingleThreadedExecutor) -> None:
+def _controller_with_probe(ros_context: object, executor: SingleThreadedExecutor) -> tuple[
+        DpControllerNode, Probe, Any]:
+    """dp_controller at setpoint 0 (no scenario), a probe on its commands, a pose publisher."""
     ctl = DpControllerNode(context=ros_context, parameter_overrides=[
         Parameter('scenario', value=''), Parameter('setpoint', value=[0.0, 0.0, 0.0])])
     probe_node = Node('probe', context=ros_context)
@@ -173,6 +173,13 @@ def test_dp_controller_answers_each_new_pose_with_its_stamp(
     executor.add_node(ctl)
     executor.add_node(probe_node)
     _spin_for(executor, 0.5)
+    return ctl, probe, pose_pub
+
+
+@pytest.mark.dds
+def test_dp_controller_answers_each_new_pose_with_its_stamp(
+        ros_context: object, executor: SingleThreadedExecutor) -> None:
+    ctl, probe, pose_pub = _controller_with_probe(ros_context, executor)
     stamps_ns = [1_000_000_000, 1_100_000_000, 1_100_000_000, 1_050_000_000, 1_200_000_000]
     poses = [[10.0, 0.0, 0.0], [10.0, 0.0, 0.0], [99.0, 0.0, 0.0], [99.0, 0.0, 0.0],
              [10.0, 0.0, 0.0]]
@@ -212,14 +219,7 @@ def test_dp_controller_answers_a_reoffered_sample_again_without_stepping(
     deadlocked there: the controller dropped the re-offer as a non-increasing stamp). The same
     stamp with the same pose is answered again with the same command; the PID does not step.
     """
-    ctl = DpControllerNode(context=ros_context, parameter_overrides=[
-        Parameter('scenario', value=''), Parameter('setpoint', value=[0.0, 0.0, 0.0])])
-    probe_node = Node('probe', context=ros_context)
-    probe = Probe(probe_node, {'thrust_command': WrenchStamped})
-    pose_pub = probe_node.create_publisher(PoseStamped, 'lf_pose', _probe_qos())
-    executor.add_node(ctl)
-    executor.add_node(probe_node)
-    _spin_for(executor, 0.5)
+    ctl, probe, pose_pub = _controller_with_probe(ros_context, executor)
     stamp = Time(sec=1, nanosec=0)
     for _ in range(3):
         pose_pub.publish(pose_to_msg([10.0, 2.0, 0.1], stamp))

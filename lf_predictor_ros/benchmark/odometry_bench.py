@@ -44,9 +44,10 @@ unwrapped, central differences).
    in a dropout, ``restart_segment`` after it; 'lost' gives no estimate and the PID holds its
    last one) and for the tuned passive observer (the classical answer: its model alone,
    ``PassiveObserver.coast``). Per dropout: the largest horizontal distance [m] and heading
-   difference [rad] of the loop's true LF pose from the ideal loop's (PID on the true LF pose,
-   same seed) during the dropout and in the ``AFTER_DROPOUT`` s after it, next to the same
-   windows of the same estimator's loop without dropouts (items 4 and the observer loop).
+   difference [rad] of the loop's true LF pose from the loop reference (the setpoint; with a
+   setpoint schedule the ideal loop's LF track, PID on the true LF pose, same seed: as the
+   suite scores loops) during the dropout and in the ``AFTER_DROPOUT`` s after it, next to the
+   same windows of the same estimator's loop without dropouts (items 4 and the observer loop).
 
 Usage (2 Dask workers; ``--scheduler none`` runs in this process)::
 

@@ -102,10 +102,9 @@ from lf_predictor_ros.nodes.conversions import (
 from lf_predictor_ros.nodes.diagnostics import (
     DiagnosticValue,
     input_values,
-    level_byte,
     make_diagnostic_array,
     predictor_values,
-    worse,
+    with_reference_and_odometry,
 )
 from lf_predictor_ros.nodes.lf_odom import OdomDriver, dead_reckoning_silence
 from lf_predictor_ros.nodes.qos import publisher_qos
@@ -132,7 +131,6 @@ ALIGNER_KEYS = tuple(f.name for f in fields(AlignerSettings) if f.name != 'sampl
 NODE_KEYS_USED = ('frame_id', 'diagnostics_period', 'dead_reckoning_after')
 ODOMETRY_KEYS = tuple(f.name for f in fields(OdometryParams))
 NODE_KEYS_IGNORED = ('model_path', 'autostart', 'use_sim_time')
-_LEVEL_NAMES = ('OK', 'WARN', 'ERROR', 'STALE')
 _LEVEL_OF_STATE = {'warming_up': 'OK', 'trained': 'OK', 'ok': 'OK', 'fallback': 'WARN',
                    'error': 'ERROR'}
 
@@ -319,7 +317,8 @@ def predictor_diagnostics(status: EstimatorStatus, counters: Mapping[str, int],
                           aligner_counters: Mapping[str, int], stamp: Time, *,
                           samples: int, name: str = DIAGNOSTICS_NAME,
                           extra: Mapping[str, DiagnosticValue] | None = None,
-                          reference: tuple[str, str] | None = None) -> DiagnosticArray:
+                          reference: tuple[str, str] = ('OK', ''),
+                          odometry: tuple[str, str] = ('OK', '')) -> DiagnosticArray:
     """/diagnostics of the predictor with the predictor node's level, message and keys.
 
     Level by state: warming_up / trained → OK, fallback → WARN, error → ERROR; message
@@ -328,7 +327,8 @@ def predictor_diagnostics(status: EstimatorStatus, counters: Mapping[str, int],
     trainings, rejected_trainings, overruns, training_errors, guard_trips, segments, samples,
     dropped (= invalid + out_of_order + outliers), invalid, out_of_order, outliers, gaps, resets,
     stale_thrust; then `extra`. ``reference`` (level, reason) of the position-reference checks
-    raises the level as in the node (the reason leads the message).
+    and ``odometry`` (level, message) of the LF odometry raise the level as in the node
+    (`nodes.diagnostics.with_reference_and_odometry`).
     """
     values: dict[str, DiagnosticValue] = {
         **predictor_values(status, counters),
@@ -337,9 +337,7 @@ def predictor_diagnostics(status: EstimatorStatus, counters: Mapping[str, int],
     values.update(extra or {})
     level = _LEVEL_OF_STATE.get(status.state, 'WARN')
     message = f'{status.state}: {status.message}'
-    if reference is not None:
-        level, message = worse(level, message, reference[0],
-                               f'position reference {reference[1]}; {message}')
+    level, message = with_reference_and_odometry(level, message, reference, odometry)
     return make_diagnostic_array(name, level, message, values, stamp=stamp)
 
 
@@ -671,21 +669,11 @@ class _Replayer:
         extra['ndof'] = self.config.params.ndof
         extra['unfiltered_dofs'] = 'east yaw' if self.config.params.ndof == 1 else 'none'
         extra.update(self.odom.values())
-        reference: tuple[str, str] | None = self.checker.status()
-        odom_level, odom_message = self.odom.status()
-        if odom_level != 'OK':  # as the node: dead reckoning (WARN) or lost (ERROR) leads
-            if reference is not None and reference[0] != 'OK':
-                odom_message = f'{odom_message}; position reference {reference[1]}'
-            reference = None
         array = predictor_diagnostics(status, self.predictor.counters,
                                       self.aligner.counters.as_dict(), sec_to_stamp(t),
                                       samples=self.result.estimates, extra=extra,
-                                      reference=reference)
-        if odom_level != 'OK':
-            diagnostic = array.status[0]
-            level = worse(_LEVEL_NAMES[diagnostic.level[0]], '', odom_level, '')[0]
-            diagnostic.level = level_byte(level)
-            diagnostic.message = f'{odom_message}; {diagnostic.message}'
+                                      reference=self.checker.status(),
+                                      odometry=self.odom.status())
         self._write(self._diagnostics_channel, log_time_ns, serialize(array))
 
 

@@ -35,6 +35,24 @@ def worse(level: str, message: str, other_level: str, other_message: str) -> tup
     return level, message
 
 
+def with_reference_and_odometry(level: str, message: str, reference: tuple[str, str],
+                                odometry: tuple[str, str]) -> tuple[str, str]:
+    """Raise (level, message) by the position-reference checks and the LF odometry state.
+
+    ``reference``: (level, reason) of the checks; ``odometry``: (level, message) of the
+    odometry driver. While the odometry is not tracking it leads the message — dead reckoning
+    bridges a reference fault (WARN), lost is ERROR — and names the reference fault; otherwise a
+    reference fault raises the level and leads. The predictor node and ``replay`` both use it.
+    """
+    ref_level, ref_reason = reference
+    odom_level, odom_message = odometry
+    if odom_level != 'OK':
+        if ref_level != 'OK':
+            odom_message = f'{odom_message}; position reference {ref_reason}'
+        return worse(level, message, odom_level, odom_message)[0], f'{odom_message}; {message}'
+    return worse(level, message, ref_level, f'position reference {ref_reason}; {message}')
+
+
 def level_byte(level: str | int | bytes) -> bytes:
     """Normalize a level given as a name ('OK', 'warn'), an int 0–3 or a byte to a byte."""
     if isinstance(level, str):

@@ -135,6 +135,7 @@ from lf_predictor_ros.nodes.diagnostics import (
     input_values,
     make_diagnostic_array,
     predictor_values,
+    with_reference_and_odometry,
     worse,
 )
 from lf_predictor_ros.nodes.health import FloatArray, InputHealth
@@ -676,17 +677,8 @@ class PredictorNode(InputHealth, LifecycleNode):
         status = predictor.status()
         level, message = diagnostic_level(status), f'{status.state}: {status.message}'
         silence = checker.silent_for(self._clock_seconds())
-        ref_level, ref_reason = checker.status()
-        odom_level, odom_message = driver.status()
-        if odom_level != 'OK':
-            # dead reckoning bridges the reference fault (WARN); lost is ERROR
-            if ref_level != 'OK':
-                odom_message = f'{odom_message}; position reference {ref_reason}'
-            level = worse(level, message, odom_level, odom_message)[0]
-            message = f'{odom_message}; {message}'
-        else:
-            level, message = worse(level, message, ref_level,
-                                   f'position reference {ref_reason}; {message}')
+        level, message = with_reference_and_odometry(level, message, checker.status(),
+                                                     driver.status())
         unfiltered = 'east yaw' if self._params.ndof == 1 else 'none'
         if self._passthrough_moving:
             level, message = worse(level, message, 'WARN',

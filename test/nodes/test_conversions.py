@@ -264,3 +264,18 @@ def test_odometry_inputs_are_not_modified() -> None:
     np.testing.assert_array_equal(twist, [0.1, 0.2, 0.3])
     np.testing.assert_array_equal(pose_cov, POSE_COV)
     np.testing.assert_array_equal(twist_cov, TWIST_COV)
+
+
+def test_odometry_state_leads_the_diagnostics_and_names_the_reference_fault() -> None:
+    from lf_predictor_ros.nodes.diagnostics import with_reference_and_odometry
+
+    base = ('OK', 'trained: ok')
+    ok = ('OK', '')
+    assert with_reference_and_odometry(*base, ok, ok) == base
+    assert with_reference_and_odometry(*base, ('WARN', 'frozen'), ok) == (
+        'WARN', 'position reference frozen; trained: ok')
+    # dead reckoning bridges the fault: WARN, the odometry leads and names the fault
+    assert with_reference_and_odometry(*base, ('ERROR', 'jump'), ('WARN', 'dead_reckoning')) == (
+        'WARN', 'dead_reckoning; position reference jump; trained: ok')
+    assert with_reference_and_odometry('WARN', 'fallback: x', ok, ('ERROR', 'lost')) == (
+        'ERROR', 'lost; fallback: x')

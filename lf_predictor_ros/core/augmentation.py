@@ -114,25 +114,34 @@ def periodic_zero_phase(motion: FloatArray, sos: FloatArray, sample_time: float)
     return filtered
 
 
+Window = tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]  # u, y, targets, mask
+
+
 def augment_window(u: FloatArray, y: FloatArray, targets: FloatArray, mask: NDArray[np.bool_],
-                   motion: FloatArray, motion_targets: FloatArray, guard: int,
-                   ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
-    """The window followed by its copy with ``motion`` added (new arrays, inputs untouched).
+                   motion: FloatArray, motion_targets: FloatArray, guard: int) -> Window:
+    """The window followed by its `augmented_copy` (new arrays, inputs untouched)."""
+    copy = augmented_copy(u, y, targets, mask, motion, motion_targets, guard)
+    return (np.concatenate([u, copy[0]]), np.concatenate([y, copy[1]]),
+            np.concatenate([targets, copy[2]]), np.concatenate([mask, copy[3]]))
+
+
+def augmented_copy(u: FloatArray, y: FloatArray, targets: FloatArray, mask: NDArray[np.bool_],
+                   motion: FloatArray, motion_targets: FloatArray, guard: int) -> Window:
+    """A copy of the window with ``motion`` added (new arrays, inputs untouched).
 
     ``u`` (n, k), ``y`` and ``targets`` (n, ndof), ``mask`` (n,), ``motion`` (n, ndof) added to
     y, ``motion_targets`` (n, ndof) added to the targets (the target filter's output for the
-    motion); ``guard`` ≥ 1 (the longest regressor + 1): targets masked at the start of the copy.
+    motion); ``guard`` ≥ 1 (the longest regressor + 1): targets masked at the start of the copy,
+    whose regressors would reach into the previous window.
     """
     n = y.shape[0]
     if motion.shape != y.shape or motion_targets.shape != y.shape or targets.shape[0] != n \
             or u.shape[0] != n or mask.shape != (n,):
-        raise ValueError(f'augment_window needs u, y, targets, mask and motion of one length '
+        raise ValueError(f'augmented_copy needs u, y, targets, mask and motion of one length '
                          f'with motion shaped like y {y.shape}; got u {u.shape}, targets '
                          f'{targets.shape}, mask {mask.shape}, motion {motion.shape}')
     if guard < 1:
         raise ValueError(f'guard must be ≥ 1 sample, got {guard}')
     copy_mask = mask.copy()
     copy_mask[:guard] = False
-    return (np.concatenate([u, u]), np.concatenate([y, y + motion]),
-            np.concatenate([targets, targets + motion_targets]),
-            np.concatenate([mask, copy_mask]))
+    return u.copy(), y + motion, targets + motion_targets, copy_mask

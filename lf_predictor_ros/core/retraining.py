@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 import torch
 
 from lf_predictor_ros.core.augmentation import (
-    augment_window,
+    augmented_copy,
     band_limited_motion,
     lf_motion,
     periodic_zero_phase,
@@ -310,7 +310,7 @@ def training_data(params: PredictorParams, snapshot: Snapshot, u: FloatArray, y:
                   ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
     """What the trainer fits: the window, plus its augmentation copies when enabled.
 
-    ``params.wave_augmentation`` > 0 appends the copy of `augmentation.augment_window`: synthetic
+    ``params.wave_augmentation`` > 0 appends a copy (`augmentation.augmented_copy`) with synthetic
     motion over [ωLP, Nyquist] with ``wave_augmentation`` × the window's wave spread (its
     measured WF RMS) per DOF added to y, and its zero-phase target-filter output added to the
     targets. ``params.lf_augmentation`` > 0 (any DOF) appends a copy with LF motion
@@ -318,32 +318,26 @@ def training_data(params: PredictorParams, snapshot: Snapshot, u: FloatArray, y:
     filter, to the targets. The generator is seeded by the predictor seed, the segment and the
     sample index, so a replay trains on the same data.
     """
+    wave = params.wave_augmentation > 0.0 and bool(np.all(np.isfinite(spread)))
+    speeds = np.array(params.lf_augmentation[:y.shape[1]])
+    if not wave and not np.any(speeds > 0.0):
+        return u, y, targets, mask
     rng = np.random.default_rng([params.seed, snapshot.segment, snapshot.end_index])
     sos = target_filter(params, wave_peak_freq)
-    guard = params.max_lag + 1
-    parts = [(u, y, targets, mask)]
-    if params.wave_augmentation > 0.0 and np.all(np.isfinite(spread)):
-        motion = band_limited_motion(len(y), y.shape[1], params.sample_time,
-                                     (params.lowpass_cutoff(wave_peak_freq),
-                                      params.nyquist_freq),
-                                     params.wave_augmentation * spread, rng)
-        parts.append(_copy(augment_window(u, y, targets, mask, motion, periodic_zero_phase(
-            motion, sos, params.sample_time), guard), len(y)))
-    speeds = np.array(params.lf_augmentation[:y.shape[1]])
+    motions = []
+    if wave:
+        motions.append(band_limited_motion(len(y), y.shape[1], params.sample_time,
+                                           (params.lowpass_cutoff(wave_peak_freq),
+                                            params.nyquist_freq),
+                                           params.wave_augmentation * spread, rng))
     if np.any(speeds > 0.0):
-        motion = lf_motion(len(y), params.sample_time, speeds, rng)
-        parts.append(_copy(augment_window(u, y, targets, mask, motion, periodic_zero_phase(
-            motion, sos, params.sample_time), guard), len(y)))
-    if len(parts) == 1:
-        return u, y, targets, mask
+        motions.append(lf_motion(len(y), params.sample_time, speeds, rng))
+    parts = [(u, y, targets, mask)] + [
+        augmented_copy(u, y, targets, mask, motion,
+                       periodic_zero_phase(motion, sos, params.sample_time), params.max_lag + 1)
+        for motion in motions]
     return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
             np.concatenate([p[2] for p in parts]), np.concatenate([p[3] for p in parts]))
-
-
-def _copy(window: tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]], n: int,
-          ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
-    """The appended copy of an `augment_window` result (its second half)."""
-    return window[0][n:], window[1][n:], window[2][n:], window[3][n:]
 
 
 def cascade_loss(params: PredictorParams, y: FloatArray, targets: FloatArray,

@@ -34,6 +34,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lf_predictor_ros.core.filters import zero_phase
+
 FloatArray = NDArray[np.float64]
 DeadReckoner = Literal['model', 'constant_velocity', 'hold']
 ModelStructure = Literal['diagonal', 'full']
@@ -383,7 +385,8 @@ def drift_test(model: LfDynamics | None, reckoner: DeadReckoner, targets: ArrayL
 
 
 def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: float,
-                        horizon: float, input_gain: ArrayLike | None = None) -> VesselMemory:
+                        horizon: float, input_gain: ArrayLike | None = None,
+                        targets_filter: FloatArray | None = None) -> VesselMemory:
     """Fit the LF dynamics on the older part of a window; pick the dead reckoner on the newest.
 
     The fit uses the oldest 1 − ``VALIDATION_FRACTION`` of the window; each dead reckoner is
@@ -394,9 +397,12 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     extrapolated without the thrust that would stop it is acted against (on tuning seeds 1–2 of
     the closed loops through 60 s dropouts, constant velocity turned rao_supply by 2.1 rad where
     hold kept 0.95 rad; docs/BENCHMARKS.md, issue 14).
+
+    ``input_gain``: a known thrust gain (`fit_lf_dynamics`). ``targets_filter``: the SOS the
+    targets were zero-phase filtered with (`paired_forces`).
     """
     eta_t = _as_2d(targets, 'targets')
-    tau = _as_2d(forces, 'forces')
+    tau = paired_forces(forces, targets_filter)
     split, test_horizon = _held_out_split(eta_t.shape[0], sample_time, horizon)
     model: LfDynamics | None = None
     message = ''
@@ -435,7 +441,8 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
 
 
 def thrust_improves_dead_reckoning(targets: ArrayLike, forces: ArrayLike, sample_time: float,
-                                   horizon: float) -> bool:
+                                   horizon: float,
+                                   targets_filter: FloatArray | None = None) -> bool:
     """Does the thrust make the learned LF model dead-reckon better? (issue 13, hypothesis 1).
 
     This is the thrust's validated contribution on the newest data. Two models are fitted on the
@@ -445,9 +452,10 @@ def thrust_improves_dead_reckoning(targets: ArrayLike, forces: ArrayLike, sample
     summed over DOFs (each normalized by the hold reckoner's drift). A fit with thrust that is
     refused where the one without is not (e.g. a thrust gain <= 0) gives False; any other failed
     fit, or too few tests, gives True: the thesis's structure is kept when the data cannot tell.
+    ``targets_filter``: as `learn_vessel_memory`.
     """
     eta_t = _as_2d(targets, 'targets')
-    tau = _as_2d(forces, 'forces')
+    tau = paired_forces(forces, targets_filter)
     split, test_horizon = _held_out_split(eta_t.shape[0], sample_time, horizon)
     try:
         without = fit_lf_dynamics(eta_t[:split], np.zeros_like(tau[:split]), sample_time)
@@ -468,6 +476,20 @@ def thrust_improves_dead_reckoning(targets: ArrayLike, forces: ArrayLike, sample
                            test_horizon)
         drift[name] = float(np.sum(np.sqrt(curve.mean_square[-1]) / scale))
     return drift['with'] < (1.0 - THRUST_MIN_GAIN) * drift['without']
+
+
+def paired_forces(forces: ArrayLike, targets_filter: FloatArray | None) -> FloatArray:
+    """The forces as the fit pairs them with zero-phase targets: filtered by the same SOS.
+
+    The model ν̇ = F ν + G τ + B β is linear, so it holds between the filtered signals too;
+    unfiltered, the wave-band thrust a DP loop makes from its estimate's wave leakage is an
+    error in the regressor and biases the thrust gain G towards 0 (errors in variables).
+    None: the forces as given (new array).
+    """
+    tau = _as_2d(forces, 'forces')
+    if targets_filter is None or tau.shape[0] < 2:
+        return tau
+    return zero_phase(tau, targets_filter)
 
 
 def _held_out_split(samples: int, sample_time: float, horizon: float) -> tuple[int, float]:

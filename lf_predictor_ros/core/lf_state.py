@@ -20,7 +20,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lf_predictor_ros.core.estimator import EstimatorStatus
-from lf_predictor_ros.core.filters import zero_phase
 from lf_predictor_ros.core.lf_dynamics import VesselMemory, learn_vessel_memory
 from lf_predictor_ros.core.odometry import (
     Covariances,
@@ -144,11 +143,11 @@ class LfStateEstimator:
         values = np.array(targets.values, dtype=np.float64).reshape(len(targets), -1)[keep]
         # the newest ε targets are still filter transients (targets.training_mask): left out
         usable = max(3, values.shape[0] - self.params.transient_samples)
-        times, values, rows = times[:usable], values[:usable], idx[keep][:usable]
+        times, values, rows = times[:usable], values[:usable], idx[keep][:usable]  # contiguous
         freq = self.predictor.wave_peak_freq
         sos = None if freq is None else target_filter(self.params, freq)
         odometry = self.odometry
-        args = (times, values, np.array(self._forces), rows, sos, odometry.published(),
+        args = (times, values, np.array(self._forces)[rows], sos, odometry.published(),
                 self.sample_time, self.ndof, odometry.params.dead_reckoning_timeout,
                 odometry.params.min_calibration_samples, odometry.params.pose_lag_prior,
                 _input_gain(odometry.params.vessel_inertia, self.ndof))
@@ -174,28 +173,21 @@ class LfStateEstimator:
         self._memory_error = None
 
 
-def _learn(times: FloatArray, values: FloatArray, all_forces: FloatArray, rows: NDArray[np.int64],
-           sos: FloatArray | None, published: list[Published], sample_time: float, ndof: int,
-           horizon: float, min_samples: int, lag_prior: float,
+def _learn(times: FloatArray, values: FloatArray, forces: FloatArray, sos: FloatArray | None,
+           published: list[Published], sample_time: float, ndof: int, horizon: float,
+           min_samples: int, lag_prior: float,
            input_gain: FloatArray | None = None) -> tuple[VesselMemory | None,
                                                           Covariances | None]:
     """Worker job: the vessel memory of one target window and the calibrated covariances.
 
-    ``all_forces``: the buffered thrust, ``rows``: its rows at the targets' instants, ``sos``:
-    the targets' zero-phase filter (None: no ω0 yet). The thrust is filtered with the same
-    filter as the poses were before the fit: the model ν̇ = F ν + G τ + B β is linear, so it
-    holds between the filtered signals too, while the wave-band thrust a DP loop makes from its
-    estimate's wave leakage would be an error in the regressor and bias the thrust gain G
-    towards 0 (errors in variables).
+    ``forces``: the thrust at the targets' instants; ``sos``: the targets' zero-phase filter
+    (None: no ω0 yet), which the fit applies to the forces too (`lf_dynamics.paired_forces`).
     The memory is None if it cannot be learned; the covariances compare the published estimates
     with the window (`odometry.calibrate`).
     """
-    forces = all_forces if sos is None or all_forces.shape[0] < 2 else zero_phase(all_forces,
-                                                                                  sos)
-    forces = forces[rows]
     try:
         memory: VesselMemory | None = learn_vessel_memory(values, forces, sample_time, horizon,
-                                                          input_gain)
+                                                          input_gain, sos)
     except ValueError:
         memory = None
     return memory, calibrate(published, times, values, ndof, sample_time, min_samples,

@@ -107,13 +107,15 @@ THRUST_TEST_HORIZON = 120.0
 
 
 def thrust_predicts_motion(params: PredictorParams, u: FloatArray, targets: FloatArray,
-                           mask: NDArray[np.bool_]) -> bool:
+                           mask: NDArray[np.bool_], wave_peak_freq: float | None = None) -> bool:
     """Does the thrust of this window predict its LF motion? (``thrust_validation``)
 
     `lf_dynamics.thrust_improves_dead_reckoning`: the LF model ν̇ = Fν + Gτ + Bβ(ψ) fitted on
     the older two thirds of the window's targets with the thrust must dead-reckon the newest
     third better than the same model fitted without it. ``u`` holds the predictor's force
     channels (earth frame for 3 DOF: turned back to the body with the targets' heading).
+    ``wave_peak_freq``: the ω0 of the targets' filter, which the fit applies to the thrust too
+    (`lf_dynamics.paired_forces`; None: the thrust as it is).
     """
     keep = np.flatnonzero(mask)
     if keep.size < 3:
@@ -121,7 +123,9 @@ def thrust_predicts_motion(params: PredictorParams, u: FloatArray, targets: Floa
     end = int(keep[-1]) + 1
     eta = targets[:end]
     forces = earth_to_body(eta, np.asarray(u[:end], dtype=np.float64), params.ndof)
-    return thrust_improves_dead_reckoning(eta, forces, params.sample_time, THRUST_TEST_HORIZON)
+    sos = None if wave_peak_freq is None else target_filter(params, wave_peak_freq)
+    return thrust_improves_dead_reckoning(eta, forces, params.sample_time, THRUST_TEST_HORIZON,
+                                          sos)
 
 
 def network_spec(params: PredictorParams) -> NnarmaxSpec:
@@ -273,7 +277,7 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
         net = NnarmaxNet.from_state(spec, incumbent)
     settings = train_settings(params)
     thrust_used = not params.thrust_validation or params.nu == 0 or \
-        thrust_predicts_motion(params, u, t_values, mask)
+        thrust_predicts_motion(params, u, t_values, mask, frequency.wave_peak_freq)
     u_fit = u if thrust_used else np.zeros_like(u)
     result = train(net, *training_data(params, snapshot, u_fit, y, t_values, mask, spread,
                                        frequency.wave_peak_freq),

@@ -14,6 +14,7 @@ from lf_predictor_ros.core.lf_dynamics import (
     drift_test,
     fit_lf_dynamics,
     learn_vessel_memory,
+    paired_forces,
 )
 
 H = 1.0  # s
@@ -197,3 +198,18 @@ def test_body_velocity_rotates_into_the_body_frame() -> None:
     poses = np.column_stack([np.zeros_like(t), 2.0 * t, heading_east])  # moving east, bow east
     np.testing.assert_allclose(body_velocity(poses, 1.0), np.tile([2.0, 0.0, 0.0], (10, 1)),
                                atol=1e-12)
+
+
+def test_forces_are_paired_with_the_targets_by_their_filter() -> None:
+    from lf_predictor_ros.core.filters import design_wave_filter, zero_phase
+
+    rng = np.random.default_rng(9)
+    forces = rng.normal(size=(300, 3)) * 1e5
+    same = paired_forces(forces, None)
+    np.testing.assert_array_equal(same, forces)
+    assert same is not forces
+    sos = design_wave_filter(0.8, H)
+    np.testing.assert_array_equal(paired_forces(forces, sos), zero_phase(forces, sos))
+    # the wave-band part is what the filter removes: a 0.8 rad/s thrust is notched out
+    wave = np.sin(0.8 * np.arange(300.0))[:, None] * np.ones(3) * 1e5
+    assert np.max(np.abs(paired_forces(wave, sos)[50:-50])) < 0.05 * 1e5

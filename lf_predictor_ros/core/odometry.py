@@ -206,7 +206,7 @@ class OdometryEstimate:
         mode: 'tracking' or 'dead_reckoning' ('lost' is never published).
         dead_reckoning_time: time since the last accepted fix [s] (0 while tracking).
         calibrated: the covariances come from a target comparison (False: priors).
-        reckoner: the dead reckoner in use (vessel memory's choice).
+        reckoner: the dead reckoner in use (``LfOdometry.reckoner``).
     """
 
     stamp: float
@@ -288,7 +288,7 @@ class LfOdometry:
         self._mode: OdometryMode = 'tracking'
         self._last_fix: float | None = None
         self._last_output: OdometryEstimate | None = None
-        self._dr_anchor: FloatArray | None = None  # (published pose, state pose) at DR start
+        self._dr_anchor: FloatArray | None = None  # published pose at the start of a DR
         self._dr_eta0: FloatArray | None = None
         self._pending_since: float | None = None
         self._blend: tuple[float, FloatArray] | None = None  # (start time, DR pose − fix)
@@ -365,7 +365,7 @@ class LfOdometry:
             stamp=t, pose=published, pose_cov=pose_cov, twist=self._full(twist),
             twist_cov=self._twist_covariance(source, accel), mode='tracking',
             dead_reckoning_time=0.0,
-            calibrated=self.calibrated, reckoner=self._reckoner())
+            calibrated=self.calibrated, reckoner=self.reckoner)
         out.pose[2] = wrap_angle(float(out.pose[2]))
         self._last_output = out
         return out
@@ -534,9 +534,6 @@ class LfOdometry:
     @property
     def reckoner(self) -> DeadReckoner:
         """The dead reckoner a dropout would use now (``dead_reckoner`` and the memory)."""
-        return self._reckoner()
-
-    def _reckoner(self) -> DeadReckoner:
         memory = self._memory
         if memory is None:
             return 'constant_velocity'
@@ -561,7 +558,7 @@ class LfOdometry:
             for _ in range(steps):
                 a, _b = self._transition(x, tau[:n], h)
                 self._p = a @ self._p @ a.T + self._process_noise(h)
-                eta, nu = dead_reckon_step(model, self._reckoner(), eta, nu, tau[:n], h)
+                eta, nu = dead_reckon_step(model, self.reckoner, eta, nu, tau[:n], h)
         if not _finite(eta, nu):
             # an absurd (finite) thrust overflowed the model: hold the last finite pose
             self.counters['numeric_failures'] += 1
@@ -581,7 +578,7 @@ class LfOdometry:
         pose_cov = pose_cov0.copy()
         twist_cov = twist_cov0.copy()
         memory = self._memory
-        reckoner = self._reckoner()
+        reckoner = self.reckoner
         if memory is not None and memory.curve(reckoner).starts > 0:
             drift = memory.curve(reckoner)
             pose_cov[:n, :n] += np.diag(drift.variance(elapsed))

@@ -38,7 +38,6 @@ from lf_predictor_ros.core.filters import zero_phase
 
 FloatArray = NDArray[np.float64]
 DeadReckoner = Literal['model', 'constant_velocity', 'hold']
-ModelStructure = Literal['diagonal', 'full']
 DEAD_RECKONERS: tuple[DeadReckoner, ...] = ('model', 'constant_velocity', 'hold')
 
 # Relative ridge penalty of the least-squares fit (on standardized regressors) [-].
@@ -138,27 +137,25 @@ class LfDynamics:
 
 
 def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
-                    ridge: float = RIDGE, structure: ModelStructure = 'diagonal',
-                    input_gain: ArrayLike | None = None) -> LfDynamics:
+                    ridge: float = RIDGE, input_gain: ArrayLike | None = None) -> LfDynamics:
     """Least-squares fit of ν̇ = F ν + G τ + B β(ψ) on an LF pose series and its body forces.
 
-    ``structure`` 'diagonal' (default): F and G diagonal, each DOF fitted on its own velocity
-    and force (+ the environment basis), its damping rate held ≥ ``MIN_DAMPING_RATE``; 'full':
-    every DOF on all of them. Data from a DP loop are closed-loop data: the thrust is computed
-    from the vessel's own motion, and the full fit spreads that correlation over the cross
-    terms. On supply_closed_loop (tuning seed 1, the predictor in the loop) the full fit was
-    unstable in every window (growth 0.04–0.16 1/s); on the fair recording of the same seed the
-    diagonal fit gave M⁻¹ at 0.94 / 1.37 / 0.39 of the truth (docs/BENCHMARKS.md, issue 14).
+    F and G are diagonal: each DOF is fitted on its own velocity and force (+ the environment
+    basis), its damping rate held ≥ ``MIN_DAMPING_RATE``. Data from a DP loop are closed-loop
+    data: the thrust is computed from the vessel's own motion, and a full fit (every DOF on all
+    of them, before fbce964) spreads that correlation over the cross terms. On
+    supply_closed_loop (tuning seed 1, the predictor in the loop) the full fit was unstable in
+    every window (growth 0.04–0.16 1/s); on the fair recording of the same seed the diagonal fit
+    gave M⁻¹ at 0.94 / 1.37 / 0.39 of the truth (docs/BENCHMARKS.md, issue 14).
 
     Args:
         targets: LF poses, shape (m, n) (n = 1 or 3, heading unwrapped), uniform sample time.
         forces: body-frame forces applied at the same instants, shape (m, n).
         sample_time: h [s].
         ridge: relative ridge penalty on RMS-scaled regressors.
-        structure: 'diagonal' or 'full'.
         input_gain: a known diagonal thrust gain G_ii = 1 / M_ii per DOF (M the vessel's inertia
             with added mass) [1/kg, 1/(kg·m²)], or None to fit it; with it only the damping and
-            the environment terms are fitted (diagonal structure).
+            the environment terms are fitted (`_fit_known_gain`).
 
     Raises:
         ValueError: bad shapes, too few samples, non-finite data, or a fit that is not a damped
@@ -175,8 +172,6 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
     nu = body_velocity(eta, sample_time)
     nu_dot = np.gradient(nu, sample_time, axis=0)
     basis = heading_basis(eta[:, 2] if n == 3 else np.zeros(eta.shape[0]), n)
-    if structure not in ('diagonal', 'full'):
-        raise ValueError(f"structure must be 'diagonal' or 'full', got {structure!r}")
     phi = np.hstack([nu, tau, basis])
     if phi.shape[0] < 5 * phi.shape[1]:
         raise ValueError(f'{phi.shape[0]} samples are too few to fit {phi.shape[1]} '
@@ -185,25 +180,8 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
     if known is not None and (known.shape != (n,) or not np.all(np.isfinite(known)) or
                               np.any(known <= 0.0)):
         raise ValueError(f'input_gain must be {n} positive finite numbers 1/M_ii, got {known}')
-    if known is not None:
-        coef, residual_std = _fit_known_gain(nu, nu_dot, tau, eta, known, ridge)
-    elif structure == 'full':
-        coef, residual_std = _ridge(phi, nu_dot, ridge)
-    else:
-        coef = np.zeros((n, phi.shape[1]))
-        residual_std = np.zeros(n)
-        for i in range(n):
-            columns = [i, n + i, *range(2 * n, phi.shape[1])]
-            own, residual_std[i:i + 1] = _ridge(phi[:, columns], nu_dot[:, i:i + 1], ridge)
-            if own[0, 0] > -MIN_DAMPING_RATE:
-                # no vessel is undamped: closed-loop data (τ ≈ −K_d ν) let a larger G pass for
-                # a negative damping; the damping is set to the least and G, B refitted
-                own[0, 0] = -MIN_DAMPING_RATE
-                rest, residual_std[i:i + 1] = _ridge(
-                    phi[:, columns[1:]], nu_dot[:, i:i + 1] + MIN_DAMPING_RATE * nu[:, i:i + 1],
-                    ridge)
-                own[0, 1:] = rest[0]
-            coef[i, columns] = own[0]
+    coef, residual_std = _fit_diagonal(phi, nu, nu_dot, ridge) if known is None else \
+        _fit_known_gain(nu, nu_dot, tau, eta, known, ridge)
     model = LfDynamics(damping=coef[:, :n], input_gain=coef[:, n:2 * n], bias=coef[:, 2 * n:],
                        residual_std=residual_std)
     if model.growth_rate() > MAX_GROWTH_RATE:
@@ -213,6 +191,27 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
         raise ValueError(f'the fitted thrust gain {np.diag(model.input_gain)} has an entry <= 0 '
                          '(the thrust would push the vessel the other way): not used')
     return model
+
+
+def _fit_diagonal(phi: FloatArray, nu: FloatArray, nu_dot: FloatArray,
+                  ridge: float) -> tuple[FloatArray, FloatArray]:
+    """Each DOF on its own velocity and force + the basis (coefficient rows as ``phi``)."""
+    n = nu.shape[1]
+    coef = np.zeros((n, phi.shape[1]))
+    residual_std = np.zeros(n)
+    for i in range(n):
+        columns = [i, n + i, *range(2 * n, phi.shape[1])]
+        own, residual_std[i:i + 1] = _ridge(phi[:, columns], nu_dot[:, i:i + 1], ridge)
+        if own[0, 0] > -MIN_DAMPING_RATE:
+            # no vessel is undamped: closed-loop data (τ ≈ −K_d ν) let a larger G pass for a
+            # negative damping; the damping is set to the least and G, B refitted
+            own[0, 0] = -MIN_DAMPING_RATE
+            rest, residual_std[i:i + 1] = _ridge(
+                phi[:, columns[1:]], nu_dot[:, i:i + 1] + MIN_DAMPING_RATE * nu[:, i:i + 1],
+                ridge)
+            own[0, 1:] = rest[0]
+        coef[i, columns] = own[0]
+    return coef, residual_std
 
 
 def _fit_known_gain(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, eta: FloatArray,

@@ -15,6 +15,9 @@ import pytest
 _REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if _REPO not in sys.path:
     sys.path.insert(0, _REPO)
+_TESTS = os.path.dirname(os.path.abspath(__file__))  # dds_helpers, shared by the DDS tests
+if _TESTS not in sys.path:
+    sys.path.append(_TESTS)
 
 
 def _isolated_domain_id(pid: int) -> int:

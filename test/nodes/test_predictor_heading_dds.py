@@ -16,13 +16,13 @@ finish (in real time a training has a whole retrain period), so the run is repro
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Callable
 import dataclasses
 import functools
 import math
 import time
 from typing import Any
 
+from dds_helpers import last_is, longer_than, spin_until
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 import numpy as np
@@ -54,7 +54,6 @@ WINDOWS: dict[str, Any] = {'retrain_period': 20.0, 'training_window': 200.0,
                            'max_train_seconds': 10.0}
 FIRST_TRAINING = first_training_samples(PredictorParams(**WINDOWS))  # [samples] 120
 SETTLED = FIRST_TRAINING + 20  # [samples] from here on the output comes from a trained network
-WAIT = 20.0  # [s wall] generous bound of every wait (a loaded 2-core machine)
 
 torch.set_num_threads(1)
 
@@ -101,21 +100,6 @@ def stream() -> Stream:
                   thrust=record.thrust.copy())
 
 
-def _spin_until(executor: SingleThreadedExecutor, done: Callable[[], bool], what: str) -> None:
-    end = time.monotonic() + WAIT
-    while not done():
-        assert time.monotonic() < end, f'timed out after {WAIT} s waiting for {what}'
-        executor.spin_once(timeout_sec=0.01)
-
-
-def _last_is(seen: list[float], t: float) -> bool:
-    return bool(seen) and seen[-1] == t
-
-
-def _longer_than(messages: list[Any], count: int) -> bool:
-    return len(messages) > count
-
-
 @pytest.mark.dds
 def test_default_node_follows_a_vessel_heading_180_degrees_and_estimates_north_and_east(
         ros_context: Context, executor: SingleThreadedExecutor, stream: Stream) -> None:
@@ -152,7 +136,7 @@ def test_default_node_follows_a_vessel_heading_180_degrees_and_estimates_north_a
     probe.create_subscription(DiagnosticArray, '/diagnostics', received['diag'].append, qos)
     executor.add_node(node)
     executor.add_node(probe)
-    _spin_until(executor, lambda: pose_pub.get_subscription_count() > 0
+    spin_until(executor, lambda: pose_pub.get_subscription_count() > 0
                 and thrust_pub.get_subscription_count() > 0
                 and probe.count_publishers('/lf_pose') > 0
                 and probe.count_publishers('/diagnostics') > 0, 'DDS discovery')
@@ -162,17 +146,17 @@ def test_default_node_follows_a_vessel_heading_180_degrees_and_estimates_north_a
     for k in range(n):
         t = float(stream.t[k])
         thrust_pub.publish(wrench_to_msg(stream.thrust[k], t))
-        _spin_until(executor, functools.partial(_last_is, thrust_seen, t),
+        spin_until(executor, functools.partial(last_is, thrust_seen, t),
                     f'thrust {k} at the node')
         pose_pub.publish(pose_to_msg(stream.measured[k], t))
-        _spin_until(executor, functools.partial(_longer_than, received['lf_pose'], k),
+        spin_until(executor, functools.partial(longer_than, received['lf_pose'], k),
                     f'lf_pose {k}')
         # a training (or ω0 job) started by this sample ends before the next sample: the run is
         # the same whatever the machine's load
         assert predictor.wait_for_training(timeout=60.0), 'a training did not end within 60 s'
     feed_seconds = time.monotonic() - start
     reports_before = len(received['diag'])
-    _spin_until(executor, lambda: len(received['diag']) > reports_before + 1, 'diagnostics')
+    spin_until(executor, lambda: len(received['diag']) > reports_before + 1, 'diagnostics')
 
     lf = received['lf_pose']
     assert len(lf) == n, 'one lf_pose per sample'

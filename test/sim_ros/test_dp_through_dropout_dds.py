@@ -36,18 +36,15 @@ from pathlib import Path
 import time
 from typing import Any
 
+from dds_helpers import own_executor
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
-from rclpy import init
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.utilities import try_shutdown
 import torch
 import yaml
 
@@ -150,10 +147,7 @@ def _closed_loop(tmp_path_factory: pytest.TempPathFactory,
                  extra: dict[str, Any]) -> Iterator[Loop]:
     """Run the closed loop once (own context) and keep everything."""
     scenario_path = _scenario_path(tmp_path_factory.mktemp('dropout'))
-    context = Context()
-    init(context=context)
-    executor = SingleThreadedExecutor(context=context)
-    try:
+    with own_executor() as (context, executor):
         predictor = PredictorNode(context=context, parameter_overrides=[
             Parameter(name, value=value) for name, value in
             {**WINDOWS, 'diagnostics_period': 0.1, **extra}.items()])
@@ -216,12 +210,6 @@ def _closed_loop(tmp_path_factory: pytest.TempPathFactory,
             truth={stamp_to_ns(m.header.stamp) / NS_PER_S: msg_to_pose(m)
                    for m in received['truth/lf_pose']},
             lockstep_timeouts=simulator.lockstep_timeouts)
-    finally:
-        for node_ in list(executor.get_nodes()):
-            executor.remove_node(node_)
-            node_.destroy_node()
-        executor.shutdown()
-        try_shutdown(context=context)
 
 
 @pytest.mark.dds

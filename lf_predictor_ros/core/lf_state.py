@@ -144,12 +144,11 @@ class LfStateEstimator:
         # the newest ε targets are still filter transients (targets.training_mask): left out
         usable = max(3, values.shape[0] - self.params.transient_samples)
         times, values, rows = times[:usable], values[:usable], idx[keep][:usable]  # contiguous
-        freq = self.predictor.wave_peak_freq
-        sos = None if freq is None else target_filter(self.params, freq)
         odometry = self.odometry
-        args = (times, values, np.array(self._forces)[rows], sos, odometry.published(),
-                self.sample_time, self.ndof, odometry.params.dead_reckoning_timeout,
-                odometry.params.min_calibration_samples, odometry.params.pose_lag_prior,
+        args = (self.params, times, values, np.array(self._forces)[rows],
+                self.predictor.wave_peak_freq, odometry.published(),
+                odometry.params.dead_reckoning_timeout, odometry.params.min_calibration_samples,
+                odometry.params.pose_lag_prior,
                 _input_gain(odometry.params.vessel_inertia, self.ndof))
         if self.background:
             if self._executor is None:
@@ -173,25 +172,27 @@ class LfStateEstimator:
         self._memory_error = None
 
 
-def _learn(times: FloatArray, values: FloatArray, forces: FloatArray, sos: FloatArray | None,
-           published: list[Published], sample_time: float, ndof: int, horizon: float,
+def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, forces: FloatArray,
+           wave_peak_freq: float | None, published: list[Published], horizon: float,
            min_samples: int, lag_prior: float,
            input_gain: FloatArray | None = None) -> tuple[VesselMemory | None,
                                                           Covariances | None]:
     """Worker job: the vessel memory of one target window and the calibrated covariances.
 
-    ``forces``: the thrust at the targets' instants; ``sos``: the targets' zero-phase filter
-    (None: no ω0 yet), which the fit applies to the forces too (`lf_dynamics.paired_forces`).
+    ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
+    ``wave_peak_freq``; None: no ω0 yet, no filter) is designed here, off the predict path
+    (≈ 0.6 ms), and the fit applies it to the forces too (`lf_dynamics.paired_forces`).
     The memory is None if it cannot be learned; the covariances compare the published estimates
     with the window (`odometry.calibrate`).
     """
+    sos = None if wave_peak_freq is None else target_filter(params, wave_peak_freq)
     try:
-        memory: VesselMemory | None = learn_vessel_memory(values, forces, sample_time, horizon,
-                                                          input_gain, sos)
+        memory: VesselMemory | None = learn_vessel_memory(values, forces, params.sample_time,
+                                                          horizon, input_gain, sos)
     except ValueError:
         memory = None
-    return memory, calibrate(published, times, values, ndof, sample_time, min_samples,
-                             lag_prior)
+    return memory, calibrate(published, times, values, params.ndof, params.sample_time,
+                             min_samples, lag_prior)
 
 
 def _input_gain(inertia: tuple[float, ...], ndof: int) -> FloatArray | None:

@@ -78,8 +78,8 @@ def test_a_given_vessel_inertia_is_the_thrust_gain_of_the_memory() -> None:
     gain = _input_gain((mass, 1.0, 1.0), 1)
     assert gain is not None and gain.tolist() == [1.0 / mass]
     assert _input_gain((0.0, 0.0, 0.0), 3) is None
-    memory, _ = _learn(np.arange(1200.0), np.array(poses), np.array(forces)[:, :1], None, [],
-                       h, 1, 120.0, 60, 1.2, gain)
+    memory, _ = _learn(PredictorParams(ndof=1, sample_time=h), np.arange(1200.0),
+                       np.array(poses), np.array(forces)[:, :1], None, [], 120.0, 60, 1.2, gain)
     assert memory is not None and memory.model is not None
     assert memory.model.input_gain[0, 0] == 1.0 / mass
     assert memory.model.damping[0, 0] == pytest.approx(-damping / mass, rel=0.05)

@@ -1,0 +1,173 @@
+"""The DP controller's gains, read from the thrust it commands; the inertia they imply.
+
+A DP loop on the LF odometry computes its thrust from the published pose and twist. Its PD part
+(Fossen 2011 §12.2.6, the DP PID τ = −Kp Rᵀ(ψ)(η − η_d) − Kd ν − Ki ∫…) is visible in the data:
+regressed on the published estimates (and their integral), the commanded thrust's fast part
+(above the setpoint changes, high-passed over ``HIGHPASS_TIME``) gives per DOF the stiffness Kp
+and the damping Kd the controller applies. This needs no vessel model and no excitation: the
+controller is a known function of the published estimates, whatever the sea does.
+
+Station-keeping data cannot teach the vessel's inertia (the LF thrust cancels the environment:
+closed-loop identification without excitation, docs/BENCHMARKS.md, issue 14). A dead reckoner
+without one holds the pose, and a controller acting on a held pose pushes the vessel away with
+Kp × (the error when the fix was lost) + its integrator. A dead reckoner driven by the thrust
+closes the loop through its model instead. The inertia
+
+    M_i = Kd_i² / (4 Kp_i)
+
+is the one under which the controller's own PD is critically damped (M s² + Kd s + Kp with
+ζ = Kd / (2 √(Kp M)) = 1). A controller designed with Kp = M ω_n², Kd = 2 ζ M ω_n (the MSS
+PID and most DP designs) implies ζ² M: the true inertia for ζ = 1, a lighter vessel for a less
+damped design, which makes the model loop faster and more damped, never unstable.
+
+Conventions as ``core.lf_dynamics``: 1 DOF = surge (north, no rotation), 3 DOF = [north m,
+east m, heading rad] with the heading unwrapped, ν and τ in ``base_link_fsd``. Pure functions.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.ndimage import uniform_filter1d
+
+FloatArray = NDArray[np.float64]
+
+# The thrust and the estimates are high-passed by subtracting their moving mean over this window
+# before the regression: it removes the integrator's slow force, the environment and setpoint
+# changes (the DP setpoint filter's time constant is tens of seconds) [s].
+HIGHPASS_TIME = 60.0
+# The thrust may lag the estimate it was computed from by a few samples (message timing): the
+# regression is done for every shift up to this many samples either way and the best one kept.
+MAX_SHIFT = 2
+# A DOF's gains are believed only if the PD law explains at least this fraction of the
+# high-passed thrust variance (R²): a thrust from another estimator, an open-loop test or a
+# joystick explains little [-].
+MIN_R_SQUARED = 0.5
+# Fewer samples than this give no gains [-].
+MIN_SAMPLES = 120
+
+
+@dataclass(frozen=True)
+class ControllerGains:
+    """The PD part of a DP controller as seen in its thrust, one entry per DOF.
+
+    Attributes:
+        stiffness: Kp [N/m, N/m, N·m/rad] (body frame).
+        damping: Kd [N·s/m, N·s/m, N·m·s/rad].
+        r_squared: fraction of the high-passed thrust variance the PD law explains [-].
+        shift: samples the thrust lags the estimates by (negative: leads).
+    """
+
+    stiffness: FloatArray
+    damping: FloatArray
+    r_squared: FloatArray
+    shift: int
+
+    def believed(self) -> NDArray[np.bool_]:
+        """Per DOF: a PD law that explains the thrust, with positive gains."""
+        return (self.r_squared >= MIN_R_SQUARED) & (self.stiffness > 0.0) & (self.damping > 0.0)
+
+    def implied_inertia(self) -> FloatArray | None:
+        """M_i = Kd_i² / (4 Kp_i) per DOF (module docstring), or None unless every DOF is believed.
+
+        [kg, kg, kg·m²].
+        """
+        if not np.all(self.believed()):
+            return None
+        return self.damping ** 2 / (4.0 * self.stiffness)
+
+
+def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
+                         sample_time: float, highpass_time: float = HIGHPASS_TIME,
+                         max_shift: int = MAX_SHIFT) -> ControllerGains:
+    """Least squares of the high-passed thrust on −(body-frame pose), −ν and −∫pose, per DOF.
+
+    Args:
+        poses: the estimates the controller was given, shape (m, n), n = 1 or 3 (heading
+            unwrapped), uniform sample time.
+        twists: their body velocities ν, shape (m, n).
+        forces: the commanded body-frame thrust at the same instants, shape (m, n).
+        sample_time: h [s].
+        highpass_time: window of the moving mean removed from every signal [s].
+        max_shift: largest shift of the thrust against the estimates tried [samples].
+
+    Raises:
+        ValueError: bad shapes, non-finite values, fewer than ``MIN_SAMPLES`` samples or a bad
+            sample time: pass a longer, clean, uniformly sampled series.
+    """
+    eta = _as_2d(poses, 'poses')
+    nu = _as_2d(twists, 'twists')
+    tau = _as_2d(forces, 'forces')
+    n = eta.shape[1]
+    if n not in (1, 3) or nu.shape != eta.shape or tau.shape != eta.shape:
+        raise ValueError(f'poses, twists and forces must all have shape (m, 1) or (m, 3), got '
+                         f'{eta.shape}, {nu.shape} and {tau.shape}')
+    if not (np.isfinite(sample_time) and sample_time > 0.0 and highpass_time > sample_time):
+        raise ValueError(f'sample_time must be > 0 and highpass_time > sample_time [s], got '
+                         f'{sample_time} and {highpass_time}')
+    if eta.shape[0] < MIN_SAMPLES + 2 * max_shift:
+        raise ValueError(f'{eta.shape[0]} samples are too few to read controller gains (need '
+                         f'{MIN_SAMPLES + 2 * max_shift}): use a longer window')
+    window = max(3, int(round(highpass_time / sample_time)))
+    body = _body_position(eta)
+    position = _highpass(body, window)
+    integral = _highpass(np.cumsum(body, axis=0) * sample_time, window)
+    velocity = _highpass(nu, window)
+    thrust = _highpass(tau, window)
+    best: ControllerGains | None = None
+    m = eta.shape[0]
+    for shift in range(-max_shift, max_shift + 1):
+        # thrust[k + shift] was computed from the estimate at k
+        lo, hi = max(0, -shift), min(m, m - shift)
+        gains = _fit_pid(position[lo:hi], integral[lo:hi], velocity[lo:hi],
+                         thrust[lo + shift:hi + shift], shift)
+        if best is None or float(np.sum(gains.r_squared)) > float(np.sum(best.r_squared)):
+            best = gains
+    assert best is not None
+    return best
+
+
+def _fit_pid(position: FloatArray, integral: FloatArray, velocity: FloatArray,
+             thrust: FloatArray, shift: int) -> ControllerGains:
+    """Per DOF the least squares of τ = −Kp x − Kd ν − Ki ∫x.
+
+    The integral is a regressor too, else its force (in quadrature with x, against ν) is read as
+    damping (−11 % Kd in yaw on the MSS PID).
+    """
+    n = position.shape[1]
+    stiffness, damping, r_squared = np.zeros(n), np.zeros(n), np.zeros(n)
+    for i in range(n):
+        phi = -np.column_stack([position[:, i], velocity[:, i], integral[:, i]])
+        y = thrust[:, i]
+        total = float(np.sum(y ** 2))
+        if total <= 0.0 or not np.all(np.any(phi != 0.0, axis=0)):
+            continue
+        coef, *_ = np.linalg.lstsq(phi, y, rcond=None)
+        stiffness[i], damping[i] = coef[0], coef[1]
+        r_squared[i] = 1.0 - float(np.sum((y - phi @ coef) ** 2)) / total
+    return ControllerGains(stiffness, damping, r_squared, shift)
+
+
+def _body_position(eta: FloatArray) -> FloatArray:
+    """[R(ψ)ᵀ [N, E], ψ] per row for 3 DOF (the error the controller turns into body force)."""
+    if eta.shape[1] == 1:
+        return eta.copy()
+    c, s = np.cos(eta[:, 2]), np.sin(eta[:, 2])
+    return np.column_stack([c * eta[:, 0] + s * eta[:, 1], -s * eta[:, 0] + c * eta[:, 1],
+                            eta[:, 2]])
+
+
+def _highpass(values: FloatArray, window: int) -> FloatArray:
+    """Values minus their centred moving mean over ``window`` samples (edges: nearest)."""
+    result: FloatArray = values - uniform_filter1d(values, window, axis=0, mode='nearest')
+    return result
+
+
+def _as_2d(values: ArrayLike, name: str) -> FloatArray:
+    array = np.array(values, dtype=np.float64)
+    if array.ndim == 1:
+        array = array[:, None]
+    if array.ndim != 2 or not np.all(np.isfinite(array)):
+        raise ValueError(f'{name} must be a finite (m, n) array, got shape {array.shape}')
+    return array

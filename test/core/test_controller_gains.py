@@ -1,0 +1,124 @@
+"""The DP controller's gains read from its thrust; the inertia they imply."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+from lf_predictor_ros.core.controller_gains import (
+    MIN_R_SQUARED,
+    ControllerGains,
+    fit_controller_gains,
+)
+from lf_predictor_ros.core.lf_dynamics import body_velocity
+from sim_ros.control.pid import PidState, gains_from_bandwidth, pid_step
+
+H = 1.0  # s
+MASS = np.array([6.7644e6, 1.13412e7, 4.4524e9])  # supply vessel M_ii [kg, kg, kg·m²]
+BANDWIDTH = np.array([0.1, 0.1, 0.15])  # rad/s
+
+
+def _lf_track(seed: int, m: int = 1500, heading: float = 0.0) -> np.ndarray:
+    """A smooth random LF pose series around (0, 0, heading): 0.5 m / 0.01 rad."""
+    rng = np.random.default_rng(seed)
+    a = np.exp(-H / 30.0)
+    smooth = lfilter([1 - a], [1, -a], lfilter([1 - a], [1, -a], rng.standard_normal((m, 3)),
+                                               axis=0), axis=0)
+    smooth /= np.std(smooth, axis=0)
+    return np.array([0.0, 0.0, heading]) + smooth * np.array([0.5, 0.5, 0.01])
+
+
+def _pid_thrust(eta: np.ndarray, nu: np.ndarray, zeta: float, lag: int = 0) -> np.ndarray:
+    gains = gains_from_bandwidth(MASS, BANDWIDTH, zeta)
+    state = PidState()
+    tau = np.zeros_like(eta)
+    for k in range(eta.shape[0]):
+        tau[k], state = pid_step(state, gains, eta[k], np.array([0.0, 0.0, eta[0, 2]]), H,
+                                 velocity_body=nu[k])
+    # the thrust at k computed from the estimate at k − lag
+    return np.concatenate([np.repeat(tau[:1], lag, axis=0), tau[:tau.shape[0] - lag]])
+
+
+@pytest.mark.parametrize('zeta', [1.0, 0.7])
+def test_gains_and_implied_inertia_of_the_mss_pid(zeta: float) -> None:
+    eta = _lf_track(1)
+    nu = body_velocity(eta, H)
+    gains = fit_controller_gains(eta, nu, _pid_thrust(eta, nu, zeta), H)
+    design = gains_from_bandwidth(MASS, BANDWIDTH, zeta)
+    np.testing.assert_allclose(gains.stiffness, design.kp, rtol=0.05)
+    np.testing.assert_allclose(gains.damping, design.kd, rtol=0.05)
+    assert np.all(gains.r_squared > 0.95)
+    assert gains.shift == 0
+    # Kd² / (4 Kp) = (2 ζ ω M)² / (4 ω² M) = ζ² M
+    inertia = gains.implied_inertia()
+    assert inertia is not None
+    np.testing.assert_allclose(inertia, zeta ** 2 * MASS, rtol=0.1)
+
+
+def test_heading_turned_body_frame_and_a_lagging_thrust() -> None:
+    eta = _lf_track(2, heading=2.0)
+    nu = body_velocity(eta, H)
+    gains = fit_controller_gains(eta, nu, _pid_thrust(eta, nu, 1.0, lag=1), H)
+    assert gains.shift == 1
+    # the MSS PID applies Kp in the earth frame: at ψ = 2 rad body surge sees
+    # cos²ψ Kp_N + sin²ψ Kp_E, sway sin²ψ Kp_N + cos²ψ Kp_E (cross terms average out)
+    design = gains_from_bandwidth(MASS, BANDWIDTH, 1.0)
+    c2, s2 = np.cos(2.0) ** 2, np.sin(2.0) ** 2
+    mixed = np.array([c2 * design.kp[0] + s2 * design.kp[1], s2 * design.kp[0] +
+                      c2 * design.kp[1], design.kp[2]])
+    np.testing.assert_allclose(gains.stiffness, mixed, rtol=0.1)
+    np.testing.assert_allclose(gains.damping, design.kd, rtol=0.08)
+    assert gains.implied_inertia() is not None
+
+
+def test_unrelated_thrust_gives_no_inertia() -> None:
+    eta = _lf_track(3)
+    nu = body_velocity(eta, H)
+    noise = np.random.default_rng(4).standard_normal(eta.shape) * np.array([1e5, 1e5, 1e7])
+    gains = fit_controller_gains(eta, nu, noise, H)
+    assert np.all(gains.r_squared < MIN_R_SQUARED)
+    assert gains.implied_inertia() is None
+
+
+def test_negative_gain_is_not_believed() -> None:
+    gains = ControllerGains(np.array([1.0, -1.0, 1.0]), np.ones(3), np.ones(3), 0)
+    assert gains.believed().tolist() == [True, False, True]
+    assert gains.implied_inertia() is None
+
+
+def test_one_dof() -> None:
+    eta = _lf_track(5)[:, :1]
+    nu = np.gradient(eta, H, axis=0)
+    tau = -2.0e4 * eta - 3.0e5 * nu
+    gains = fit_controller_gains(eta, nu, tau, H)
+    np.testing.assert_allclose([gains.stiffness[0], gains.damping[0]], [2.0e4, 3.0e5], rtol=1e-6)
+    inertia = gains.implied_inertia()
+    assert inertia is not None
+    np.testing.assert_allclose(inertia, [3.0e5 ** 2 / 8.0e4], rtol=1e-6)
+
+
+@pytest.mark.parametrize('bad', ['nan', 'shape', 'short', 'sample_time'])
+def test_bad_input_is_refused_with_a_message(bad: str) -> None:
+    eta = _lf_track(6)
+    nu, tau = body_velocity(eta, H), np.zeros_like(eta)
+    h = H
+    if bad == 'nan':
+        eta[5, 0] = np.nan
+    elif bad == 'shape':
+        tau = tau[:, :2]
+    elif bad == 'short':
+        eta, nu, tau = eta[:50], nu[:50], tau[:50]
+    else:
+        h = 0.0
+    with pytest.raises(ValueError, match='must|too few'):
+        fit_controller_gains(eta, nu, tau, h)
+
+
+def test_inputs_are_not_modified() -> None:
+    eta = _lf_track(7)
+    nu = body_velocity(eta, H)
+    tau = _pid_thrust(eta, nu, 1.0)
+    copies = eta.copy(), nu.copy(), tau.copy()
+    fit_controller_gains(eta, nu, tau, H)
+    for before, after in zip(copies, (eta, nu, tau), strict=True):
+        np.testing.assert_array_equal(before, after)

@@ -330,6 +330,8 @@ class VesselMemory:
         force_limit: largest force per DOF the model is used with (``FORCE_MARGIN`` × the
             largest in the window; inf if the window had none) [N, N, N·m].
         drift_curves: the drift curve of every tested reckoner (``curve``).
+        known_gain: where the thrust gain 1/M_ii of a known-gain fit came from: '' (fitted),
+            'vessel_inertia' (given) or 'controller' (`core.controller_gains`).
     """
 
     model: LfDynamics | None
@@ -340,6 +342,7 @@ class VesselMemory:
     accel_std: FloatArray
     force_limit: FloatArray = field(default_factory=lambda: np.full(3, np.inf))
     drift_curves: dict[DeadReckoner, DriftCurve] = field(default_factory=dict)
+    known_gain: str = ''
 
     def curve(self, reckoner: DeadReckoner) -> DriftCurve:
         """The drift curve of ``reckoner`` (the chosen one's if it was not tested)."""

@@ -10,15 +10,21 @@ path only hands over copies and picks up a finished result, it never waits), as 
 training does.
 
 ``coast(t, force)`` is the dead-reckoning step for a time with thrust but no accepted pose.
+``command(t, force)`` logs the DP controller's command (``thrust_command``): without a given
+``vessel_inertia`` the dead reckoner's thrust gain is the one implied by the controller's gains
+(``core.controller_gains``).
 """
 from __future__ import annotations
 
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import replace
+import math
 
 import numpy as np
 from numpy.typing import NDArray
 
+from lf_predictor_ros.core.controller_gains import MAX_SHIFT, MIN_SAMPLES, fit_controller_gains
 from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.lf_dynamics import VesselMemory, learn_vessel_memory
 from lf_predictor_ros.core.odometry import (
@@ -57,6 +63,9 @@ class LfStateEstimator:
         self._executor: ThreadPoolExecutor | None = None
         self._job: Future[tuple[VesselMemory | None, Covariances | None]] | None = None
         self._memory_error: str | None = None
+        # the controller's commands, kept across segments (matched to the published estimates)
+        self._command_times: deque[float] = deque(maxlen=self._capacity)
+        self._commands: deque[FloatArray] = deque(maxlen=self._capacity)
         self._restart_buffers()
 
     def update(self, t: float, pose: FloatArray, force: FloatArray) -> tuple[
@@ -78,6 +87,25 @@ class LfStateEstimator:
         odom = self.odometry.track(t + self.sample_time, lf_pose, force, source)
         return lf_pose, odom
 
+    def command(self, t: float, force: FloatArray) -> bool:
+        """The DP controller's commanded force for the estimate stamped t (``thrust_command``).
+
+        Logged for reading the controller's gains (``OdometryParams.controller_inertia``,
+        `implied_input_gain`); False (ignored) if t is not newer than the last command.
+
+        Raises:
+            ValueError: a non-finite stamp or force, or fewer than ndof force entries.
+        """
+        tau = np.array(force, dtype=np.float64).reshape(-1)
+        if not math.isfinite(t) or tau.shape[0] < self.ndof or not np.all(np.isfinite(tau)):
+            raise ValueError(f'a thrust command needs a finite stamp and {self.ndof} finite '
+                             f'force entries [N, N, N·m], got t={t}, force={force!r}')
+        if self._command_times and t <= self._command_times[-1]:
+            return False
+        self._command_times.append(float(t))
+        self._commands.append(tau[:self.ndof])
+        return True
+
     def coast(self, t: float, force: FloatArray) -> OdometryEstimate | None:
         """Thrust at t without an accepted pose: dead reckoning (None when lost or never fixed)."""
         self._collect()
@@ -97,6 +125,8 @@ class LfStateEstimator:
         self.predictor.reset()
         self.odometry.reset()
         self._job = None
+        self._command_times.clear()
+        self._commands.clear()
         self._restart_buffers()
 
     def status(self) -> EstimatorStatus:
@@ -145,11 +175,13 @@ class LfStateEstimator:
         usable = max(3, values.shape[0] - self.params.transient_samples)
         times, values, rows = times[:usable], values[:usable], idx[keep][:usable]  # contiguous
         odometry = self.odometry
+        commands = (np.array(self._command_times), np.array(self._commands)) if \
+            odometry.params.controller_inertia and self._commands else None
         args = (self.params, times, values, np.array(self._forces)[rows],
                 self.predictor.wave_peak_freq, odometry.published(),
                 odometry.params.dead_reckoning_timeout, odometry.params.min_calibration_samples,
                 odometry.params.pose_lag_prior,
-                _input_gain(odometry.params.vessel_inertia, self.ndof))
+                _input_gain(odometry.params.vessel_inertia, self.ndof), commands)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -174,25 +206,72 @@ class LfStateEstimator:
 
 def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, forces: FloatArray,
            wave_peak_freq: float | None, published: list[Published], horizon: float,
-           min_samples: int, lag_prior: float,
-           input_gain: FloatArray | None = None) -> tuple[VesselMemory | None,
-                                                          Covariances | None]:
+           min_samples: int, lag_prior: float, input_gain: FloatArray | None = None,
+           commands: tuple[FloatArray, FloatArray] | None = None
+           ) -> tuple[VesselMemory | None, Covariances | None]:
     """Worker job: the vessel memory of one target window and the calibrated covariances.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
     ``wave_peak_freq``; None: no ω0 yet, no filter) is designed here, off the predict path
     (≈ 0.6 ms), and the fit applies it to the forces too (`lf_dynamics.paired_forces`).
-    The memory is None if it cannot be learned; the covariances compare the published estimates
-    with the window (`odometry.calibrate`).
+    ``input_gain``: 1/M_ii from ``vessel_inertia``; without it and with ``commands`` (stamps,
+    commanded forces) the gain implied by the DP controller's gains is used if the controller
+    can be read (`implied_input_gain`). The memory is None if it cannot be learned; the covariances
+    compare the published estimates with the window (`odometry.calibrate`).
     """
     sos = None if wave_peak_freq is None else target_filter(params, wave_peak_freq)
+    source = 'vessel_inertia' if input_gain is not None else ''
+    note = ''
+    if input_gain is None and commands is not None:
+        input_gain, note = implied_input_gain(published, *commands, params.sample_time)
+        source = 'controller' if input_gain is not None else ''
     try:
         memory: VesselMemory | None = learn_vessel_memory(values, forces, params.sample_time,
                                                           horizon, input_gain, sos)
     except ValueError:
         memory = None
+    if memory is not None and (source or note):
+        memory = replace(memory, known_gain=source if memory.model is not None else '',
+                         message=f'{memory.message}; {note}' if note else memory.message)
     return memory, calibrate(published, times, values, params.ndof, params.sample_time,
                              min_samples, lag_prior)
+
+
+def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,
+                       sample_time: float) -> tuple[FloatArray | None, str]:
+    """1/M_ii implied by the DP controller acting on the published estimates, and a note.
+
+    ``times``, ``forces``: the controller's commands and their stamps (a controller stamps its
+    command with the stamp of the estimate it acted on; `fit_controller_gains` also tries a few
+    samples of shift). The applied thrust does not do: actuator lag (1 s shaft dynamics on the
+    simulated supply vessel) turns the D term's high-frequency part into apparent stiffness,
+    and Kd² / (4 Kp) came out at 0.03–0.13 of the inertia. Pairs over the newest contiguous run
+    of published estimates; (None, why) if the controller cannot be read.
+    """
+    if not published or times.shape[0] == 0:
+        return None, 'controller gains: no data'
+    stamps = np.array([p.stamp for p in published])
+    index = np.searchsorted(times, stamps - 0.5 * sample_time)
+    index = np.clip(index, 0, times.shape[0] - 1)
+    matched = np.abs(times[index] - stamps) < 0.5 * sample_time
+    unmatched = np.flatnonzero(~matched)
+    run_starts = np.flatnonzero(np.r_[True, np.diff(stamps) > 1.5 * sample_time])
+    start = max(int(unmatched[-1]) + 1 if unmatched.size else 0, int(run_starts[-1]))
+    rows = np.arange(start, stamps.shape[0])
+    if rows.size < MIN_SAMPLES + 2 * MAX_SHIFT:
+        return None, f'controller gains: {rows.size} contiguous samples, too few'
+    poses = np.array([published[k].pose for k in rows])
+    twists = np.array([published[k].twist for k in rows])
+    try:
+        gains = fit_controller_gains(poses, twists, forces[index[rows]], sample_time)
+    except ValueError as exc:
+        return None, f'controller gains: {exc}'
+    inertia = gains.implied_inertia()
+    r2 = ', '.join(f'{v:.2f}' for v in gains.r_squared)
+    if inertia is None:
+        return None, f'controller gains not read (R² {r2})'
+    return 1.0 / inertia, (f"controller-implied inertia {', '.join(f'{v:.3g}' for v in inertia)}"
+                           f' (R² {r2})')
 
 
 def _input_gain(inertia: tuple[float, ...], ndof: int) -> FloatArray | None:

@@ -135,6 +135,11 @@ class OdometryParams:
         'given, the vessel memory uses the thrust gain 1/M_ii instead of fitting it (station-'
         'keeping data cannot identify it: the LF thrust mostly cancels the environment) and '
         "'auto' dead-reckons on the model; 0 = learn it", 'kg, kg, kg·m²'))
+    controller_inertia: bool = field(default=True, metadata=field_doc(
+        "without vessel_inertia: read the DP controller's PD gains Kp, Kd from its commands "
+        '(thrust_command) on the published estimates and dead-reckon on the inertia Kd²/(4 Kp) '
+        'under which that controller is critically damped (core.controller_gains); no commands, '
+        "or commands the PD law does not explain (R² < 0.5): the memory's choice", ''))
     dead_reckoner: str = field(default='auto', metadata=field_doc(
         "dead reckoner through a pose dropout: 'auto' (the vessel memory's choice by the "
         "open-loop drift test; hold when the test cannot tell), 'model' (the learned LF model "
@@ -538,8 +543,8 @@ class LfOdometry:
         if memory is None:
             return 'constant_velocity'
         choice = self.params.dead_reckoner
-        if choice == 'auto' and self.params.vessel_inertia[0] > 0.0 and memory.model is not None:
-            return 'model'
+        if choice == 'auto' and memory.known_gain and memory.model is not None:
+            return 'model'  # the thrust gain is given or implied by the controller
         if choice == 'auto' or (choice == 'model' and memory.model is None):
             return memory.reckoner
         return cast(DeadReckoner, choice)

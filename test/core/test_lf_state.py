@@ -1,13 +1,15 @@
 """LF state estimator (core.lf_state): predictor + vessel memory + odometry on a simulated run."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
 
 from lf_predictor_ros.core.lf_dynamics import body_velocity
-from lf_predictor_ros.core.lf_state import LfStateEstimator
-from lf_predictor_ros.core.odometry import normalized_error_squared
+from lf_predictor_ros.core.lf_state import LfStateEstimator, implied_input_gain
+from lf_predictor_ros.core.odometry import Published, normalized_error_squared
 from lf_predictor_ros.core.params import PredictorParams
 from sim_ros.simulation import load_scenario, simulate
 
@@ -83,3 +85,77 @@ def test_a_given_vessel_inertia_is_the_thrust_gain_of_the_memory() -> None:
     assert memory is not None and memory.model is not None
     assert memory.model.input_gain[0, 0] == 1.0 / mass
     assert memory.model.damping[0, 0] == pytest.approx(-damping / mass, rel=0.05)
+
+
+def _published_pd_loop(m: int, t0: float = 0.0) -> tuple[list[Published], np.ndarray,
+                                                          np.ndarray]:
+    """Published estimates of a 1-DOF vessel and a PD thrust on them (Kp 2e4, Kd 3e5)."""
+    rng = np.random.default_rng(8)
+    a = np.exp(-1.0 / 30.0)
+    x = np.zeros(m)
+    for k in range(1, m):
+        x[k] = a * x[k - 1] + (1 - a) * rng.standard_normal() * 5.0
+    v = np.gradient(x)
+    stamps = t0 + np.arange(m, dtype=np.float64)
+    published = [Published(float(s), np.array([p]), np.array([w]), 'network', np.zeros(1))
+                 for s, p, w in zip(stamps, x, v, strict=True)]
+    return published, stamps, (-2.0e4 * x - 3.0e5 * v)[:, None]
+
+
+def test_implied_input_gain_reads_the_controller_on_the_newest_run() -> None:
+    published, times, forces = _published_pd_loop(400)
+    gain, note = implied_input_gain(published, times, forces, 1.0)
+    assert gain is not None
+    np.testing.assert_allclose(gain, [8.0e4 / 3.0e5 ** 2], rtol=1e-6)  # 4 Kp / Kd²
+    assert 'controller-implied inertia' in note and 'R² 1.00' in note
+    # a gap: only the newest contiguous run counts, here too short
+    late, late_times, late_forces = _published_pd_loop(50, t0=1000.0)
+    gain, note = implied_input_gain(published + late, np.r_[times, late_times],
+                                    np.r_[forces, late_forces], 1.0)
+    assert gain is None and 'too few' in note
+    # a thrust that no PD law on the estimates explains
+    noise = np.random.default_rng(9).standard_normal(forces.shape)
+    gain, note = implied_input_gain(published, times, noise, 1.0)
+    assert gain is None and 'not read' in note
+    # thrust logged at other instants: nothing pairs
+    gain, note = implied_input_gain(published, times + 0.5, forces, 1.0)
+    assert gain is None and 'too few' in note
+
+
+def test_the_controller_implied_inertia_reaches_the_memory_unless_one_is_given() -> None:
+    """_learn with the controller's commands: G = 4 Kp / Kd², known_gain 'controller'."""
+    from lf_predictor_ros.core.lf_state import _learn
+
+    published, stamps, commands = _published_pd_loop(1200)
+    rng = np.random.default_rng(1)
+    poses = np.cumsum(np.cumsum(rng.normal(size=(1200, 1)) * 1e-3, axis=0), axis=0)
+    params = PredictorParams(ndof=1, sample_time=1.0)
+    args = (params, stamps, poses, commands, None, published, 120.0, 60, 1.2)
+    memory, _ = _learn(*args, None, (stamps, commands))
+    assert memory is not None and memory.model is not None
+    assert memory.known_gain == 'controller'
+    assert memory.model.input_gain[0, 0] == pytest.approx(8.0e4 / 3.0e5 ** 2, rel=1e-6)
+    assert 'controller-implied inertia' in memory.message
+    given = np.array([1.0 / 2e6])
+    memory, _ = _learn(*args, given, (stamps, commands))
+    assert memory is not None and memory.model is not None
+    assert memory.known_gain == 'vessel_inertia' and memory.model.input_gain[0, 0] == given[0]
+    memory, _ = _learn(*args, None, None)  # no commands: the gain is fitted (or refused)
+    assert memory is None or memory.known_gain == ''
+
+
+def test_commands_are_checked_and_kept_in_order() -> None:
+    est = LfStateEstimator(PredictorParams(ndof=3), background=False)
+    try:
+        assert est.command(1.0, np.array([1.0, 2.0, 3.0]))
+        assert not est.command(1.0, np.array([1.0, 2.0, 3.0]))  # not newer: ignored
+        assert not est.command(0.5, np.array([1.0, 2.0, 3.0]))
+        for t, bad in ((2.0, np.array([1.0, np.nan, 3.0])), (math.nan, np.zeros(3)),
+                       (2.0, np.zeros(2))):
+            with pytest.raises(ValueError, match='thrust command'):
+                est.command(t, bad)
+        assert est.command(2.0, np.zeros(3))
+        est.reset()
+        assert est.command(0.5, np.zeros(3))  # a reset forgets the commands
+    finally:
+        est.close()

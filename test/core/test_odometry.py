@@ -1,6 +1,7 @@
 """LF odometry (core.odometry): velocity, calibrated covariance, dead reckoning, reacquisition."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -250,12 +251,15 @@ def test_forced_model_dead_reckoner_follows_the_thrust() -> None:
     assert out is not None and out.reckoner == 'hold'
     with pytest.raises(ValueError, match='dead_reckoner'):
         OdometryParams(dead_reckoner='kalman')
-    # a given vessel inertia makes 'auto' dead reckon on the model (the memory chose hold)
-    odo = LfOdometry(3, H, OdometryParams(vessel_inertia=(1e6, 1e6, 1e9)))
-    _track_line(odo, 0.0, 0.0, 10)
-    odo._memory = memory  # noqa: SLF001
-    out = odo.coast(11.0, force)
-    assert out is not None and out.reckoner == 'model'
+    # a thrust gain that was given or implied by the controller (the memory's known_gain) makes
+    # 'auto' dead reckon on the model although the memory chose hold; a fitted one does not
+    for known, expected_reckoner in (('vessel_inertia', 'model'), ('controller', 'model'),
+                                     ('', 'hold')):
+        odo = LfOdometry(3, H, OdometryParams(vessel_inertia=(1e6, 1e6, 1e9)))
+        _track_line(odo, 0.0, 0.0, 10)
+        odo._memory = dataclasses.replace(memory, known_gain=known)  # noqa: SLF001
+        out = odo.coast(11.0, force)
+        assert out is not None and out.reckoner == expected_reckoner
     for bad in ((1e6, 0.0, 1e9), (1e6, 1e6), (1e6, -1e6, 1e9), (math.inf, 1e6, 1e9)):
         with pytest.raises(ValueError, match='vessel_inertia'):
             OdometryParams(vessel_inertia=bad)

@@ -1,8 +1,8 @@
 """`replay`: run the adaptive LF predictor over a recorded bag, offline and deterministically.
 
     replay INPUT -o OUTPUT.mcap [--params-file FILE] [--pose-topic T] [--thrust-topic T]
-           [--lf-topic T] [--odom-topic T] [--truth-topic T] [--seed N] [--metrics FILE.json]
-           [--load-model CKPT] [--save-model CKPT] [--no-progress] [--force]
+           [--command-topic T] [--lf-topic T] [--odom-topic T] [--truth-topic T] [--seed N]
+           [--metrics FILE.json] [--load-model CKPT] [--save-model CKPT] [--no-progress] [--force]
 
 INPUT is an `.mcap` file or a rosbag2 directory (`BagReader`). Messages are taken in log-time
 order; thrust (WrenchStamped, default `/thrust`) goes to `InputAligner.add_force` and pose
@@ -19,6 +19,10 @@ position-reference checks of the node (`core.reference_checks`) run on every pos
 aligner and on every aligned sample against the previous prediction, as in the node: a rejected
 pose is not replayed into the predictor, and a fault found after the fact restarts the data
 segment. Dropouts are judged on the pose stamps (a stamp gap longer than `dropout_timeout`).
+The DP controller's commands (WrenchStamped, default `/thrust_command`, optional) go to
+`OdomDriver.command`, as in the node: the dead reckoner's inertia from the controller's gains
+(`controller_inertia`; commands computed from another estimator's poses than the replayed one
+explain less of the regression and are then not used).
 
 OUTPUT gets every input message (same bytes, log and publish times; same channel types, schema
 text, QoS metadata and type hash) plus, with the log time of the pose message that produced them:
@@ -149,6 +153,7 @@ class ReplayOptions:
     params_file: str | None = None
     pose_topic: str = '/measured_pose'
     thrust_topic: str = '/thrust'
+    command_topic: str = '/thrust_command'
     lf_topic: str = '/lf_pose'
     odom_topic: str = '/lf_odom'
     truth_topic: str = '/truth/lf_pose'
@@ -174,6 +179,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help='measured pose topic (default /measured_pose)')
     parser.add_argument('--thrust-topic', default='/thrust', metavar='T',
                         help='applied thrust topic (default /thrust)')
+    parser.add_argument('--command-topic', default='/thrust_command', metavar='T',
+                        help='DP controller command topic, optional (default /thrust_command): '
+                             "its gains give the dead reckoner's inertia (controller_inertia)")
     parser.add_argument('--lf-topic', default='/lf_pose', metavar='T',
                         help='output LF estimate topic (default /lf_pose)')
     parser.add_argument('--odom-topic', default='/lf_odom', metavar='T',
@@ -197,7 +205,8 @@ def parse_args(argv: Sequence[str] | None) -> ReplayOptions:
     ns = build_parser().parse_args(list(argv) if argv is not None else sys.argv[1:])
     return ReplayOptions(input=ns.input, output=ns.output, params_file=ns.params_file,
                          pose_topic=ns.pose_topic, thrust_topic=ns.thrust_topic,
-                         lf_topic=ns.lf_topic, odom_topic=ns.odom_topic,
+                         command_topic=ns.command_topic, lf_topic=ns.lf_topic,
+                         odom_topic=ns.odom_topic,
                          truth_topic=ns.truth_topic, seed=ns.seed,
                          metrics=ns.metrics, load_model=ns.load_model,
                          save_model=ns.save_model, progress=not ns.no_progress,
@@ -470,6 +479,10 @@ def _check_input_topics(reader: BagReader, options: ReplayOptions) -> dict[str, 
     truth = options.truth_topic
     if truth in topics and topics[truth] != POSE_TYPE:
         raise BagError(f'truth topic {truth!r} has type {topics[truth]}, expected {POSE_TYPE}')
+    command = options.command_topic
+    if command in topics and topics[command] != WRENCH_TYPE:
+        raise BagError(f'command topic {command!r} has type {topics[command]}, expected '
+                       f'{WRENCH_TYPE} (choose with --command-topic)')
     return topics
 
 
@@ -544,6 +557,8 @@ class _Replayer:
                 self._pose(message.data, message.log_time)
             elif topic == self.options.truth_topic:
                 self._truth(message.data, message.log_time)
+            elif topic == self.options.command_topic:
+                self._command(message.data, message.log_time)
             progress.update(message.log_time, self.result.messages_in)
         progress.update(self.reader.end_time_ns, self.result.messages_in, force=True)
 
@@ -572,6 +587,14 @@ class _Replayer:
                 self._write_estimate(estimate, log_time_ns)
             if self.odom.state.odometry.mode != 'tracking':
                 self._maybe_diagnostics(t, log_time_ns)
+
+    def _command(self, data: bytes, log_time_ns: int) -> None:
+        message = self._decode(data, WRENCH_TYPE, self.options.command_topic)
+        try:
+            force = msg_to_force(message)
+        except ValueError:
+            force = np.full(3, np.nan)  # counted by the driver (commands_invalid)
+        self.odom.command(_stamp_seconds(message, log_time_ns), force)
 
     def _truth(self, data: bytes, log_time_ns: int) -> None:
         message = self._decode(data, POSE_TYPE, self.options.truth_topic)
@@ -850,6 +873,7 @@ def metrics_document(result: ReplayResult, options: ReplayOptions,
         'seed': config.params.seed,
         'params': config.params.to_dict(),
         'topics': {'pose': options.pose_topic, 'thrust': options.thrust_topic,
+                   'command': options.command_topic,
                    'lf': options.lf_topic, 'odom': options.odom_topic,
                    'truth': options.truth_topic},
         'messages_in': result.messages_in,

@@ -64,7 +64,8 @@ class OdomDriver:
         self.state = state
         self.dead_reckoning_after = dead_reckoning_after
         self.backward_jump = backward_jump
-        self.counters = {'late_samples': 0, 'time_jumps': 0, 'coasts': 0}
+        self.counters = {'late_samples': 0, 'time_jumps': 0, 'coasts': 0,
+                         'commands_invalid': 0, 'commands_out_of_order': 0}
         self.reset()
 
     def reset(self) -> None:
@@ -103,6 +104,20 @@ class OdomDriver:
             return None, None
         self._odom_stamp = stamp if self._odom_stamp is None else max(self._odom_stamp, stamp)
         return lf_pose, estimate
+
+    def command(self, t: float, force: FloatArray) -> None:
+        """A DP controller command stamped t (``thrust_command``): logged for its gains.
+
+        A non-finite stamp or force is counted (``commands_invalid``) and dropped, one not newer
+        than the last command too (``commands_out_of_order``).
+        """
+        try:
+            accepted = self.state.command(t, force)
+        except ValueError:
+            self.counters['commands_invalid'] += 1
+            return
+        if not accepted:
+            self.counters['commands_out_of_order'] += 1
 
     def thrust(self, t: float, force: FloatArray) -> OdometryEstimate | None:
         """An accepted thrust stamped t: the dead-reckoned estimate to publish, or None."""
@@ -159,6 +174,8 @@ class OdomDriver:
             'odom_calibrated': odometry.calibrated,
             'vessel_memory': memory is not None,
             'vessel_memory_error': self.state.memory_error or '',
+            'vessel_memory_note': memory.message if memory is not None else '',
+            'thrust_gain_source': (memory.known_gain or 'fitted') if memory is not None else '',
             'dead_reckoning_after': self.dead_reckoning_after,
             'dead_reckoning_timeout': odometry.params.dead_reckoning_timeout,
         }

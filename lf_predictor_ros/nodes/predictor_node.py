@@ -26,6 +26,9 @@ odometry gates them for plausibility and blends from the dead-reckoned pose
 (``reacquire_blend_time``), so ``lf_pose`` does not step. Every ``OdometryParams`` field is a
 node parameter (``core/odometry.py``, ``config/predictor.yaml``: the dead-reckoning timeout and
 start velocity, the covariance scales and priors, the twist bandwidth, the reacquisition gate).
+``thrust_command`` (WrenchStamped, command QoS; optional) → ``OdomDriver.command``: the DP
+controller's commands, from which the vessel memory reads the controller's gains and the inertia
+they imply for dead reckoning (``controller_inertia``, ``core.controller_gains``).
 
 Training runs on the core's worker thread; no callback ever waits for it. With ``model_path``
 set, the node loads that checkpoint at configure time (warm start) and the worker saves after
@@ -126,9 +129,11 @@ from lf_predictor_ros.core.reference_checks import ReferenceChecker, ReferenceCh
 from lf_predictor_ros.nodes.conversions import (
     FRAME_BODY,
     FRAME_EARTH,
+    msg_to_force,
     odometry_to_msg,
     pose_to_msg,
     sec_to_stamp,
+    stamp_to_sec,
 )
 from lf_predictor_ros.nodes.diagnostics import (
     DiagnosticValue,
@@ -142,7 +147,7 @@ from lf_predictor_ros.nodes.health import FloatArray, InputHealth
 from lf_predictor_ros.nodes.lf_odom import OdomDriver, dead_reckoning_silence
 from lf_predictor_ros.nodes.params import declare_and_load, parameter_table, validated_update
 from lf_predictor_ros.nodes.params import param_meta as _meta
-from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
+from lf_predictor_ros.nodes.qos import command_qos, publisher_qos, sensor_qos
 from lf_predictor_ros.nodes.runner import spin_node
 
 if TYPE_CHECKING:  # torch is imported on configure, so --help and bad parameters answer fast
@@ -319,7 +324,9 @@ class PredictorNode(InputHealth, LifecycleNode):
         self._diag_pub = self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics', qos)
         self._subscriptions_in_use = [
             self.create_subscription(WrenchStamped, 'thrust', self.on_thrust, sensor_qos()),
-            self.create_subscription(PoseStamped, 'measured_pose', self.on_pose, sensor_qos())]
+            self.create_subscription(PoseStamped, 'measured_pose', self.on_pose, sensor_qos()),
+            self.create_subscription(WrenchStamped, 'thrust_command', self.on_command,
+                                     command_qos())]
         self._services_in_use = [
             self.create_service(Trigger, '~/retrain', self._on_retrain),
             self.create_service(Trigger, '~/reset', self._on_reset),
@@ -531,6 +538,16 @@ class PredictorNode(InputHealth, LifecycleNode):
                         self._publish(estimate)
                 except Exception as error:  # noqa: BLE001 - a callback must never kill the node
                     self._count_error('dead reckoning', error)
+
+    def on_command(self, msg: WrenchStamped) -> None:
+        """Log a DP controller command (its gains imply the dead reckoner's inertia)."""
+        if self._active and self._odom is not None:
+            try:
+                force = self._converted('thrust_command', msg, FRAME_BODY, msg_to_force)
+                if force is not None:
+                    self._odom.command(stamp_to_sec(msg.header.stamp), force)
+            except Exception as error:  # noqa: BLE001 - a callback must never kill the node
+                self._count_error('thrust_command', error)
 
     def on_pose(self, msg: PoseStamped) -> None:
         """Align a measured pose; predict and publish for every completed grid sample."""

@@ -19,6 +19,7 @@ from collections.abc import Iterator
 import contextlib
 import io
 import json
+import math
 from pathlib import Path
 import shutil
 from typing import Any
@@ -586,3 +587,37 @@ def test_pose_rows_store_rows_compactly_and_round_trip() -> None:
     np.testing.assert_array_equal(np.array(list(rows)), data)
     with pytest.raises(IndexError):
         rows[10]
+
+
+def test_wrong_command_topic_type(work: Path, short_bag: Path) -> None:
+    code, _, stderr = run_replay(short_bag, '-o', work / 'wrong_cmd.mcap', '--command-topic',
+                                 '/truth/lf_pose')
+    _assert_clean_failure(code, stderr, 1, "'/truth/lf_pose'", WRENCH, '--command-topic')
+
+
+def test_thrust_commands_reach_the_odometry_and_bad_ones_are_counted(
+        work: Path, record: SimRecord, params_file: Path) -> None:
+    """/thrust_command goes to OdomDriver.command: a NaN one and a repeated stamp are counted."""
+    bag = write_sim_bag(work / 'with_commands.mcap', record, duration=40.0)
+    extended = work / 'with_commands_2.mcap'
+    with BagWriter(extended) as writer:
+        reader = BagReader(bag)
+        channels: dict[str, int] = {}
+        for channel, message in reader.records():
+            if channel.topic not in channels:
+                channels[channel.topic] = writer.add_topic(channel.topic,
+                                                           reader.topics()[channel.topic])
+            writer.write(channels[channel.topic], message.log_time, message.data)
+        command = writer.add_topic('/thrust_command', WRENCH)
+        for t, surge in ((5.0, 1e4), (6.0, math.nan), (6.0, 2e4), (6.0, 3e4)):
+            message = wrench_to_msg(np.zeros(3), t)
+            message.wrench.force.x = surge  # a NaN cannot be built by wrench_to_msg
+            writer.write(command, int(t * 1e9) + 1, serialize(message))
+    output = work / 'with_commands_out.mcap'
+    code, _, stderr = run_replay(extended, '-o', output, '--params-file', params_file)
+    assert code == 0, stderr
+    last = read_diagnostics(output)[-1][2]
+    assert last['odom_commands_invalid'] == '1'
+    assert last['odom_commands_out_of_order'] == '1'  # the second 6.0 s command
+    copied = [m for c, m in BagReader(output).records() if c.topic == '/thrust_command']
+    assert len(copied) == 4  # the input is copied unchanged, the bad one too

@@ -898,7 +898,9 @@ def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | Non
                      estimate: PoseEstimator, period: float, *,
                      abort_excursion: float | None = None,
                      pid_period: float | None = None,
-                     velocity: VelocityEstimate | None = None) -> ClosedLoopRun:
+                     velocity: VelocityEstimate | None = None,
+                     command: Callable[[float, FloatArray], object] | None = None
+                     ) -> ClosedLoopRun:
     """Closed loop with the scenario's PID acting on the pose an estimator returns.
 
     The same loop as `simulate` (gains `controller_gains`, `pid_step` every sample_time, the
@@ -921,6 +923,10 @@ def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | Non
     ``velocity_body`` (the D term −Kd ν, as the dp_controller node with ``velocity_source:
     odometry`` does with lf_odom's twist). None or a non-finite value: the PID uses the finite
     difference until the next valid velocity (counted in ``missing_velocities``).
+
+    ``command`` (default None): called right before each estimator call with (t, the command
+    held during the period ending at t), as the ``thrust_command`` topic delivers it: with
+    ``pid_period = period`` the command the PID computed from the previous estimate (valid at t).
 
     The run is deterministic for a seed and a deterministic estimator; it stops early when the
     true LF pose leaves ``abort_excursion`` [m] from the setpoint (a diverged loop; with a
@@ -959,6 +965,8 @@ def simulate_in_loop(scenario: Scenario, seed: int | None, duration: float | Non
         sample = sim.step(sim.excitation(sim.t) + tau_pid)
         buffer.store(k, sample)
         if (k + 1) % stride == 0:
+            if command is not None:
+                command(sample.t, sample.thrust_command.copy())
             value = np.array(estimate(sample.t, sample.measured_pose.copy(),
                                       sample.thrust.copy()), dtype=np.float64)
             if value.shape != (3,):

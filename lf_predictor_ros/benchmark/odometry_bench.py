@@ -348,7 +348,8 @@ def _odometry_loop(scenario: Scenario, seed: int, duration: float, params: Predi
     Without dropouts the PID takes the predictor's LF pose (= lf_odom's pose while tracking
     without a reacquisition blend). With dropouts it takes lf_odom's pose, as `dp_controller`
     with ``velocity_source: odometry``: dead-reckoned in a dropout (``coast``), blended after
-    it; NaN when 'lost' (the PID holds its last estimate).
+    it; NaN when 'lost' (the PID holds its last estimate). The PID's commands reach the
+    estimator as ``thrust_command`` does the node (``LfStateEstimator.command``).
     """
     est = LfStateEstimator(params, odometry, background=False)
     latest: list[FloatArray | None] = [None]
@@ -372,7 +373,7 @@ def _odometry_loop(scenario: Scenario, seed: int, duration: float, params: Predi
 
     try:
         return run_loop(scenario, seed, duration, params.sample_time, step,
-                        velocity=lambda: latest[0])
+                        velocity=lambda: latest[0], command=est.command)
     finally:
         est.close()
 

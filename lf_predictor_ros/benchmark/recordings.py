@@ -153,6 +153,10 @@ class GridInput:
         self._poses: list[FloatArray] = []
         self._held: FloatArray | None = None
 
+    def steps_next(self) -> bool:
+        """True if the next sensor sample completes a grid interval (``step`` will run)."""
+        return len(self._poses) + 1 == self.stride
+
     def __call__(self, t: float, pose: FloatArray, thrust: FloatArray) -> FloatArray:
         """The estimate to hold after this sensor sample."""
         self._poses.append(pose)
@@ -165,7 +169,8 @@ class GridInput:
 
 def run_loop(scenario: Scenario, seed: int, duration: float | None, sample_time: float,
              step: Callable[[float, FloatArray, FloatArray, float], FloatArray], *,
-             velocity: VelocityEstimate | None = None) -> ClosedLoopRun:
+             velocity: VelocityEstimate | None = None,
+             command: Callable[[float, FloatArray], object] | None = None) -> ClosedLoopRun:
     """The scenario's DP loop closed on ``step`` (an estimator) fed one grid sample per h.
 
     The PID runs once per estimate and its command is held, as `dp_controller` does on each
@@ -175,12 +180,18 @@ def run_loop(scenario: Scenario, seed: int, duration: float | None, sample_time:
     (e.g. ``lambda: stream.estimator.velocity``); the PID takes its D term from it, as
     `dp_controller` with ``velocity_source: odometry`` does from /lf_odom
     (`simulate_in_loop`'s ``velocity``; it is read after every sensor sample, so it must return
-    the value of the last ``step``).
+    the value of the last ``step``). ``command``: called before each ``step`` with (t, the PID's
+    command for the estimate valid at t), the ``thrust_command`` topic of the DDS pipeline.
     """
     grid = GridInput(step, scenario.waves.peak_freq, grid_stride(scenario, sample_time))
+
+    def grid_command(t: float, tau: FloatArray) -> None:
+        if command is not None and grid.steps_next():
+            command(t, tau)
+
     return simulate_in_loop(scenario, seed, duration, grid, scenario.sample_time,
                             abort_excursion=ABORT_EXCURSION, pid_period=sample_time,
-                            velocity=velocity)
+                            velocity=velocity, command=None if command is None else grid_command)
 
 
 def record(scenario: Scenario, seed: int, duration: float | None, sample_time: float,

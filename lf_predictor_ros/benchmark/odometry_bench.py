@@ -48,6 +48,10 @@ unwrapped, central differences).
    setpoint schedule the ideal loop's LF track, PID on the true LF pose, same seed: as the
    suite scores loops) during the dropout and in the ``AFTER_DROPOUT`` s after it, next to the
    same windows of the same estimator's loop without dropouts (items 4 and the observer loop).
+   Trust in the loop (lf_odom only): the fraction of the dead-reckoned estimates of each dropout
+   whose 95 % covariance ellipse (eᵀ P⁻¹ e ≤ χ²₀.₉₅(n), e against the loop's true LF pose at the
+   estimate's stamp) contains the truth, and at the end of the dropout the published horizontal
+   standard deviation √(P_NN + P_EE) next to the horizontal error.
 
 Usage (2 Dask workers; ``--scheduler none`` runs in this process)::
 
@@ -342,14 +346,16 @@ def _in_dropout(t: float, dropouts: Sequence[tuple[float, float]]) -> bool:
 
 def _odometry_loop(scenario: Scenario, seed: int, duration: float, params: PredictorParams,
                    odometry: OdometryParams,
-                   dropouts: Sequence[tuple[float, float]] = ()) -> ClosedLoopRun:
+                   dropouts: Sequence[tuple[float, float]] = (),
+                   log: list[OdometryEstimate] | None = None) -> ClosedLoopRun:
     """The predictor loop with the D term from the odometry twist (items 4 and 5).
 
     Without dropouts the PID takes the predictor's LF pose (= lf_odom's pose while tracking
     without a reacquisition blend). With dropouts it takes lf_odom's pose, as `dp_controller`
     with ``velocity_source: odometry``: dead-reckoned in a dropout (``coast``), blended after
     it; NaN when 'lost' (the PID holds its last estimate). The PID's commands reach the
-    estimator as ``thrust_command`` does the node (``LfStateEstimator.command``).
+    estimator as ``thrust_command`` does the node (``LfStateEstimator.command``). ``log``: every
+    dead-reckoned estimate is appended to it.
     """
     est = LfStateEstimator(params, odometry, background=False)
     latest: list[FloatArray | None] = [None]
@@ -360,6 +366,8 @@ def _odometry_loop(scenario: Scenario, seed: int, duration: float, params: Predi
             dropped[0] = True
             out = est.coast(t, force)
             lf_pose = np.full(3, np.nan) if out is None else out.pose
+            if log is not None and out is not None:
+                log.append(out)
         else:
             if dropped[0]:
                 est.restart_segment()
@@ -418,13 +426,46 @@ def dropout_deviation(run: ClosedLoopRun, reference: FloatArray, ndof: int,
     return out
 
 
+def dropout_coverage(log: Sequence[OdometryEstimate], run: ClosedLoopRun, ndof: int,
+                     dropouts: Sequence[tuple[float, float]]) -> list[dict[str, Any]]:
+    """Item 5, trust: per dropout, how often the published 95 % ellipse holds the truth.
+
+    Returns per dropout the fraction of its dead-reckoned estimates (stamps in [a, a + L)) whose
+    ellipse contains the loop's true LF pose at the stamp (NaN if none), and for the last one
+    the published horizontal std √(P_NN + P_EE) [m] and the horizontal error [m].
+    """
+    rec = run.record
+    chi2_95 = float(stats.chi2.ppf(CONFIDENCE, ndof))
+    out = []
+    for start, length in dropouts:
+        inside: list[bool] = []
+        last: tuple[float, float] | None = None
+        for estimate in log:
+            if not start <= estimate.stamp < start + length:
+                continue
+            k = int(np.searchsorted(rec.t, estimate.stamp - 1e-9))
+            if k >= rec.t.size or abs(rec.t[k] - estimate.stamp) > 1e-6:
+                continue  # beyond an aborted run's end
+            err = _wrap_error(estimate.pose, rec.truth_lf_pose[k], ndof)
+            cov = estimate.pose_cov[:ndof, :ndof]
+            inside.append(bool(err @ np.linalg.solve(cov, err) <= chi2_95))
+            horizontal = slice(0, min(ndof, 2))
+            last = (float(np.sqrt(np.trace(cov[horizontal, horizontal]))),
+                    float(np.linalg.norm(err[horizontal])))
+        out.append({'start': start, 'inside': float(np.mean(inside)) if inside else math.nan,
+                    'end_std': last[0] if last else math.nan,
+                    'end_error': last[1] if last else math.nan})
+    return out
+
+
 def _dropout_loops(scenario: Scenario, seed: int, duration: float, params: PredictorParams,
                    odometry: OdometryParams, setup: Any, ideal: SimRecord,
                    odom_run: ClosedLoopRun) -> dict[str, Any]:
     """Item 5 of the module docstring (``odom_run``: item 4's loop without dropouts)."""
     dropouts = default_dropouts(params, duration, length=DROPOUT_LOOP_LENGTH)
-    runs = {'lf_odom': (_odometry_loop(scenario, seed, duration, params, odometry, dropouts),
-                        odom_run),
+    log: list[OdometryEstimate] = []
+    odom_with = _odometry_loop(scenario, seed, duration, params, odometry, dropouts, log)
+    runs = {'lf_odom': (odom_with, odom_run),
             'observer': (_observer_loop(scenario, seed, duration, setup, dropouts),
                          _observer_loop(scenario, seed, duration, setup, ()))}
     out: dict[str, Any] = {'dropouts': [list(d) for d in dropouts]}
@@ -436,6 +477,7 @@ def _dropout_loops(scenario: Scenario, seed: int, duration: float, params: Predi
                          without, _loop_reference(scenario, without.record, ideal),
                          params.ndof, dropouts),
                      'aborted_at': with_dropouts.aborted_at}
+    out['lf_odom']['coverage'] = dropout_coverage(log, odom_with, params.ndof, dropouts)
     return out
 
 
@@ -759,6 +801,28 @@ def dropout_loop_table(cases: Sequence[dict[str, Any]]) -> str:
     return '\n'.join(lines)
 
 
+def dropout_trust_table(cases: Sequence[dict[str, Any]]) -> str:
+    """Markdown: item 5, trust: the published covariance against the loop's truth."""
+    lines = ['| scenario | dropouts | truth inside the published 95 % ellipse (mean fraction of '
+             'the dead-reckoned estimates per dropout) | horizontal std published at the end '
+             '[m] | horizontal error at the end [m] | dropouts with error > 2 × std |',
+             '|---|---|---|---|---|---|']
+    for scenario, group in _by_scenario(cases, 'closed_loop').items():
+        rows = [d for c in group if 'dropout_loops' in c['closed_loop']
+                for d in c['closed_loop']['dropout_loops']['lf_odom'].get('coverage', [])]
+        rows = [d for d in rows if math.isfinite(d['inside'])]
+        if not rows:
+            continue
+
+        def cell(key: str, rows_: list[dict[str, Any]] = rows) -> str:
+            return interval([float(d[key]) for d in rows_]).cell(_fmt)
+
+        wide = sum(d['end_error'] > 2.0 * d['end_std'] for d in rows)
+        lines.append(f"| {scenario} | {len(rows)} | {cell('inside')} | {cell('end_std')} | "
+                     f"{cell('end_error')} | {wide}/{len(rows)} |")
+    return '\n'.join(lines)
+
+
 def report(cases: Sequence[dict[str, Any]]) -> str:
     """Every table."""
     seconds = sum(c.get('seconds', 0.0) for c in cases)
@@ -770,7 +834,8 @@ def report(cases: Sequence[dict[str, Any]]) -> str:
         '**Covariance consistency (NEES)**', nees_table(cases), '**Twist accuracy**',
         twist_table(cases), '**Dead-reckoning drift**', drift_table(cases),
         '**Closed loop, D term**', loop_table(cases),
-        '**Closed loop through pose dropouts**', dropout_loop_table(cases)])
+        '**Closed loop through pose dropouts**', dropout_loop_table(cases),
+        '**Trust in the loop through pose dropouts (lf_odom)**', dropout_trust_table(cases)])
 
 
 # ---------------------------------------------------------------- CLI

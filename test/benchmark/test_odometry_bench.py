@@ -1,6 +1,7 @@
 """The odometry benchmark (issue 14): statistics and a fast smoke run on a short scenario."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -15,13 +16,15 @@ from lf_predictor_ros.benchmark.odometry_bench import (
     chi2_mean_bounds,
     consistency,
     default_dropouts,
+    dropout_coverage,
     dropout_deviation,
+    dropout_trust_table,
     integrated_autocorrelation_time,
     pid_velocity,
     report,
     run_odometry_case,
 )
-from lf_predictor_ros.core.odometry import OdometryParams
+from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from sim_ros.simulation import ClosedLoopRun, SimRecord
 
@@ -133,6 +136,28 @@ def test_dropout_deviation_is_the_worst_distance_per_window() -> None:
     north[:, 0] = -np.where(moving, 0.2, 0.0)
     (one,) = dropout_deviation(_run_on(t, north), reference, 1, [(100.0, 60.0)])
     assert one['during'] == pytest.approx(0.2) and 'during_heading' not in one
+
+
+def test_dropout_coverage_counts_the_truth_inside_the_published_ellipse() -> None:
+    """Truth at 0; estimates 1 m east with std 1 m (inside: 1 < 7.81) then 3 m (outside)."""
+    t = np.arange(0.0, 200.0, 1.0)
+    run = _run_on(t, np.zeros((t.size, 3)))
+    cov = np.diag([1.0, 1.0, 1e-4])
+    log = [OdometryEstimate(stamp=float(s), pose=np.array([0.0, 1.0 if s < 130 else 3.0, 0.0]),
+                            pose_cov=cov, twist=np.zeros(3), twist_cov=np.eye(3),
+                            mode='dead_reckoning', dead_reckoning_time=float(s - 100),
+                            calibrated=True, reckoner='model')
+           for s in range(100, 160)]
+    log.append(dataclasses.replace(log[0], stamp=250.0))  # beyond the run: ignored
+    (row, empty) = dropout_coverage(log, run, 3, [(100.0, 60.0), (170.0, 10.0)])
+    assert row['inside'] == pytest.approx(0.5)  # (3/1)² = 9 > χ²₀.₉₅(3) = 7.81
+    assert row['end_std'] == pytest.approx(math.sqrt(2.0))
+    assert row['end_error'] == pytest.approx(3.0)
+    assert math.isnan(empty['inside'])
+    case = {'scenario': 's', 'seed': 1, 'ndof': 3, 'closed_loop': {'dropout_loops': {
+        'lf_odom': {'coverage': [row, empty]}}}}
+    table = dropout_trust_table([case])
+    assert '| s | 1 | 0.5' in table and '| 1/1 |' in table
 
 
 def test_odometry_overrides_are_validated() -> None:

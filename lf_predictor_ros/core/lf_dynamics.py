@@ -251,6 +251,38 @@ def _fit_known_gain(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, eta: Fl
     return coef, np.std(nu_dot - fitted, axis=0)
 
 
+def balanced_at(model: LfDynamics, heading: float, nu: ArrayLike,
+                force: ArrayLike) -> LfDynamics:
+    """The model with its environment term re-set so that ν̇ = 0 at (ν, τ, ψ); a new model.
+
+    The environment force the window's fit gives is a mean over 20 minutes; the one acting when
+    the fixes stop is the one the thrust was balancing then (in station keeping τ ≈ −b(t)), as
+    the passive observer's bias estimate holds it (Fossen 2011 §11.4). With ν, τ the twist and
+    thrust low-passed over the last seconds: B β(ψ) = −(F ν + G τ). Surge and sway keep it an
+    earth-fixed force (so it turns with the vessel), R(ψ) G⁻¹ (−F ν − G τ) [N]; yaw a constant
+    moment. A thrust gain ≤ 0 in surge or sway (not a damped, thrust-driven vessel) gives the
+    model back unchanged.
+    """
+    n = model.ndof
+    nu_a = np.asarray(nu, dtype=np.float64).reshape(n)
+    tau = np.asarray(force, dtype=np.float64).reshape(-1)[:n]
+    required = -(model.damping @ nu_a + model.input_gain @ tau)  # environment's ν̇ now
+    if n == 1:
+        bias = required[:, None]
+    else:
+        gain = np.diag(model.input_gain)
+        if np.any(gain[:2] <= 0.0):
+            return model
+        f_u, f_v = required[0] / gain[0], required[1] / gain[1]  # body force [N]
+        c, s = math.cos(heading), math.sin(heading)
+        b_north, b_east = c * f_u - s * f_v, s * f_u + c * f_v  # R(ψ) f, earth-fixed [N]
+        bias = np.zeros((3, 3))
+        bias[0, 1:] = gain[0] * b_north, gain[0] * b_east  # u̇: cos ψ, sin ψ
+        bias[1, 1:] = gain[1] * b_east, -gain[1] * b_north  # v̇: cos ψ, sin ψ
+        bias[2, 0] = required[2]
+    return LfDynamics(model.damping, model.input_gain, bias, model.residual_std)
+
+
 def dead_reckon_step(model: LfDynamics | None, reckoner: DeadReckoner, eta: FloatArray,
                      nu: FloatArray, force: FloatArray, sample_time: float) -> tuple[
                          FloatArray, FloatArray]:

@@ -9,6 +9,7 @@ import pytest
 from lf_predictor_ros.core.lf_dynamics import (
     DriftCurve,
     LfDynamics,
+    balanced_at,
     body_velocity,
     dead_reckon_step,
     drift_test,
@@ -213,3 +214,37 @@ def test_forces_are_paired_with_the_targets_by_their_filter() -> None:
     # the wave-band part is what the filter removes: a 0.8 rad/s thrust is notched out
     wave = np.sin(0.8 * np.arange(300.0))[:, None] * np.ones(3) * 1e5
     assert np.max(np.abs(paired_forces(wave, sos)[50:-50])) < 0.05 * 1e5
+
+
+def test_balanced_at_puts_the_model_in_equilibrium_with_an_earth_fixed_force() -> None:
+    """ν̇ = 0 at the balance point; the environment force turns with the vessel (earth-fixed)."""
+    model = LfDynamics(damping=-np.diag(DAMPING / MASS), input_gain=np.diag(1.0 / MASS),
+                       bias=np.ones((3, 3)) * 1e-3, residual_std=np.full(3, 1e-4))
+    nu, force, heading = np.array([0.05, -0.02, 1e-3]), np.array([3e4, -2e4, 1e6]), 0.7
+    copies = nu.copy(), force.copy()
+    balanced = balanced_at(model, heading, nu, force)
+    np.testing.assert_allclose(balanced.acceleration(nu, force, heading), 0.0, atol=1e-15)
+    np.testing.assert_array_equal(balanced.damping, model.damping)
+    np.testing.assert_array_equal(balanced.input_gain, model.input_gain)
+    np.testing.assert_array_equal(nu, copies[0])
+    np.testing.assert_array_equal(force, copies[1])
+
+    def earth_force(psi: float) -> np.ndarray:
+        """The environment part of ν̇ at rest without thrust, as an earth-frame force [N]."""
+        accel = balanced.acceleration(np.zeros(3), np.zeros(3), psi)
+        body = accel[:2] * MASS[:2]
+        c, s = np.cos(psi), np.sin(psi)
+        return np.array([c * body[0] - s * body[1], s * body[0] + c * body[1]])
+
+    np.testing.assert_allclose(earth_force(heading + 1.5), earth_force(heading), rtol=1e-12)
+    # at the balance point: −(τ + D ν) rotated to the earth
+    expected = -(force[:2] - DAMPING[:2] * nu[:2])
+    c, s = np.cos(heading), np.sin(heading)
+    np.testing.assert_allclose(earth_force(heading), [c * expected[0] - s * expected[1],
+                                                      s * expected[0] + c * expected[1]])
+    # 1 DOF: a constant; a thrust gain <= 0 in surge/sway: the model unchanged
+    one = LfDynamics(damping=np.array([[-0.01]]), input_gain=np.array([[1e-6]]),
+                     bias=np.array([[0.5]]), residual_std=np.array([1e-4]))
+    assert balanced_at(one, 0.0, [0.1], [2e3]).bias[0, 0] == pytest.approx(0.01 * 0.1 - 2e-3)
+    pushing_back = LfDynamics(model.damping, -model.input_gain, model.bias, model.residual_std)
+    assert balanced_at(pushing_back, heading, nu, force) is pushing_back

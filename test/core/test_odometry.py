@@ -366,3 +366,38 @@ def test_absurd_thrust_never_makes_the_state_non_finite() -> None:
     assert out is not None and np.all(np.isfinite(out.pose))
     assert odo.counters['numeric_failures'] == 1
     assert odo.is_late(50.0) and not odo.is_late(70.0)
+
+
+def test_dead_reckoning_starts_from_the_balance_the_thrust_held() -> None:
+    """The window's mean environment force is replaced by the one the thrust was balancing.
+
+    The memory's model pushes 1e-3 m/s² in surge (its fitted mean environment); while tracking,
+    the vessel sat still with 2e3 N of surge thrust (gain 1e-6/kg: 2e-3 m/s²), so the force
+    acting then was −2e3 N. Coasting on the same thrust the dead-reckoned pose stays put (the
+    window's mean would have moved it 1.7 m in 60 s); 1e3 N more thrust moves it like the
+    model's surge response to 1e3 N alone, u_k = (1 − 0.99^k) · 1e3 · 1e-6 · 100 m/s.
+    """
+    model = LfDynamics(np.diag([-0.01, -0.01, -0.01]), np.diag([1e-6, 1e-6, 1e-9]),
+                       np.array([[1e-3, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]),
+                       np.full(3, 1e-4))
+    horizons = np.arange(1.0, 61.0)
+    ms = np.tile((horizons / 60.0) ** 2, (3, 1)).T
+    # (chosen 'hold', forced 'model': the tracking twist filter does not use the model, so the
+    # twist at rest is 0 and the balance is the thrust's alone)
+    memory = VesselMemory(model, 'hold', DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test',
+                          np.full(3, 1e-3))
+    held = np.array([2e3, 0.0, 0.0])
+    for extra, expected in ((0.0, 0.0), (1e3, None)):
+        odo = LfOdometry(3, H, OdometryParams(dead_reckoner='model'))
+        odo._memory = memory  # noqa: SLF001 - a known vessel memory
+        for k in range(200):
+            odo.track(float(k), np.zeros(3), held)
+        for k in range(1, 61):
+            out = odo.coast(200.0 + k, held + np.array([extra, 0.0, 0.0]))
+            assert out is not None
+        if expected is not None:
+            assert abs(out.pose[0]) < 1e-9 and abs(out.pose[1]) < 1e-9
+        else:
+            # 61 steps of h from the last fix at 199 s (semi-implicit Euler, u_k as above)
+            u = (1.0 - 0.99 ** np.arange(1, 62)) * 1e3 * 1e-6 * 100.0
+            assert out.pose[0] == pytest.approx(u.sum(), rel=1e-6)

@@ -251,8 +251,8 @@ def _fit_known_gain(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, eta: Fl
     return coef, np.std(nu_dot - fitted, axis=0)
 
 
-def balanced_at(model: LfDynamics, heading: float, nu: ArrayLike,
-                force: ArrayLike) -> LfDynamics:
+def balanced_at(model: LfDynamics, heading: float, nu: ArrayLike, force: ArrayLike,
+                dofs: ArrayLike | None = None) -> LfDynamics:
     """The model with its environment term re-set so that ν̇ = 0 at (ν, τ, ψ); a new model.
 
     The environment force the window's fit gives is a mean over 20 minutes; the one acting when
@@ -261,7 +261,8 @@ def balanced_at(model: LfDynamics, heading: float, nu: ArrayLike,
     thrust low-passed over the last seconds: B β(ψ) = −(F ν + G τ). Surge and sway keep it an
     earth-fixed force (so it turns with the vessel), R(ψ) G⁻¹ (−F ν − G τ) [N]; yaw a constant
     moment. A thrust gain ≤ 0 in surge or sway (not a damped, thrust-driven vessel) gives the
-    model back unchanged.
+    model back unchanged. ``dofs`` (n booleans, default all): the DOFs re-set; the others keep
+    the fitted term (surge and sway go together: one earth-fixed force).
     """
     n = model.ndof
     nu_a = np.asarray(nu, dtype=np.float64).reshape(n)
@@ -280,6 +281,10 @@ def balanced_at(model: LfDynamics, heading: float, nu: ArrayLike,
         bias[0, 1:] = gain[0] * b_north, gain[0] * b_east  # u̇: cos ψ, sin ψ
         bias[1, 1:] = gain[1] * b_east, -gain[1] * b_north  # v̇: cos ψ, sin ψ
         bias[2, 0] = required[2]
+    keep = np.ones(n, dtype=bool) if dofs is None else np.asarray(dofs, dtype=bool).reshape(n)
+    if n == 3:
+        keep[:2] = keep[0] or keep[1]
+    bias = np.where(keep[:, None], bias, model.bias)
     return LfDynamics(model.damping, model.input_gain, bias, model.residual_std)
 
 

@@ -132,9 +132,13 @@ class OdometryParams:
         'dead reckoning starts from the twist averaged over this time (first-order low-pass), '
         'not from the last twist: a DP loop acts against any velocity it sees, so a frozen '
         'wave-band twist would drive the vessel away while the poses are missing', 's'))
-    dead_reckoning_force_time: float = field(default=30.0, metadata=field_doc(
+    dead_reckoning_force_time: tuple[float, ...] = field(default=(30.0, 30.0, 0.0),
+                                                         metadata=field_doc(
         'the model dead-reckons from the environment force the thrust balanced before the '
-        'fixes stopped: the thrust low-passed over this time (lf_dynamics.balanced_at)', 's'))
+        'fixes stopped: the thrust low-passed over this time per DOF (surge, sway, yaw; '
+        'lf_dynamics.balanced_at); 0: that DOF keeps the environment fitted over the window '
+        '(yaw: a DP loop\'s heading oscillation leaks into a 30 s mean; chosen from 30 / 120 / '
+        '300 / 0 s on tuning seeds 1–2, docs/BENCHMARKS.md)', 's, s, s'))
     vessel_inertia: tuple[float, ...] = field(default=(0.0, 0.0, 0.0), metadata=field_doc(
         'optional: the vessel inertia M_ii with added mass per DOF (surge, sway, yaw); when '
         'given, the vessel memory uses the thrust gain 1/M_ii instead of fitting it (station-'
@@ -175,14 +179,20 @@ class OdometryParams:
         if not (math.isfinite(self.pose_lag_prior) and self.pose_lag_prior >= 0.0):
             raise ValueError(f'pose_lag_prior must be a finite number >= 0 s, got '
                              f'{self.pose_lag_prior}')
-        for name in ('dead_reckoning_velocity_time', 'dead_reckoning_force_time'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f'{name} must be a positive number of seconds, got {value}')
+        if not (math.isfinite(self.dead_reckoning_velocity_time) and
+                self.dead_reckoning_velocity_time > 0.0):
+            raise ValueError('dead_reckoning_velocity_time must be a positive number of seconds, '
+                             f'got {self.dead_reckoning_velocity_time}')
         for name in ('reacquire_time', 'reacquire_blend_time', 'twist_bandwidth'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f'{name} must be a finite number >= 0 s, got {value}')
+        force_time = tuple(self.dead_reckoning_force_time)
+        if len(force_time) != 3 or not all(math.isfinite(v) and v >= 0.0 for v in force_time):
+            raise ValueError('dead_reckoning_force_time must be 3 finite numbers >= 0 s (surge, '
+                             f'sway, yaw; 0: keep the fitted environment), got {force_time}')
+        object.__setattr__(self, 'dead_reckoning_force_time',
+                           tuple(float(v) for v in force_time))
         for name in ('prior_pose_std', 'prior_accel_std'):
             value = tuple(getattr(self, name))
             if len(value) != 3 or not all(math.isfinite(v) and v > 0.0 for v in value):
@@ -374,7 +384,9 @@ class LfOdometry:
         self._slow_twist = twist.copy() if self._slow_twist is None else \
             self._slow_twist + alpha * (twist - self._slow_twist)
         applied = (tau if self._memory is None else self._memory.plausible_force(tau))[:self.ndof]
-        beta = min(1.0, self.sample_time / self.params.dead_reckoning_force_time)
+        times = np.array(self.params.dead_reckoning_force_time[:self.ndof])
+        beta = np.where(times > 0.0, np.minimum(1.0, self.sample_time / np.maximum(times, 1e-9)),
+                        1.0)
         self._slow_force = applied.copy() if self._slow_force is None else \
             self._slow_force + beta * (applied - self._slow_force)
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
@@ -574,7 +586,8 @@ class LfOdometry:
         if memory is None or memory.model is None or x is None or self._slow_force is None:
             return None
         heading = float(x[2]) if self.ndof == 3 else 0.0
-        return balanced_at(memory.model, heading, np.zeros(self.ndof), self._slow_force)
+        dofs = np.array(self.params.dead_reckoning_force_time[:self.ndof]) > 0.0
+        return balanced_at(memory.model, heading, np.zeros(self.ndof), self._slow_force, dofs)
 
     def _dead_reckon_to(self, t: float, tau: FloatArray) -> None:
         tau = self._plausible(tau)

@@ -248,3 +248,10 @@ def test_balanced_at_puts_the_model_in_equilibrium_with_an_earth_fixed_force() -
     assert balanced_at(one, 0.0, [0.1], [2e3]).bias[0, 0] == pytest.approx(0.01 * 0.1 - 2e-3)
     pushing_back = LfDynamics(model.damping, -model.input_gain, model.bias, model.residual_std)
     assert balanced_at(pushing_back, heading, nu, force) is pushing_back
+    # only some DOFs: the others keep the fitted term; surge and sway go together
+    yaw_only = balanced_at(model, heading, nu, force, dofs=[False, False, True])
+    np.testing.assert_array_equal(yaw_only.bias[:2], model.bias[:2])
+    np.testing.assert_array_equal(yaw_only.bias[2], balanced.bias[2])
+    surge = balanced_at(model, heading, nu, force, dofs=[True, False, False])
+    np.testing.assert_array_equal(surge.bias[:2], balanced.bias[:2])
+    np.testing.assert_array_equal(surge.bias[2], model.bias[2])

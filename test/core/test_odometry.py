@@ -401,3 +401,10 @@ def test_dead_reckoning_starts_from_the_balance_the_thrust_held() -> None:
             # 61 steps of h from the last fix at 199 s (semi-implicit Euler, u_k as above)
             u = (1.0 - 0.99 ** np.arange(1, 62)) * 1e3 * 1e-6 * 100.0
             assert out.pose[0] == pytest.approx(u.sum(), rel=1e-6)
+
+
+@pytest.mark.parametrize('bad', [(30.0, 30.0), (30.0, -1.0, 0.0), (30.0, math.nan, 0.0)])
+def test_dead_reckoning_force_time_is_checked(bad: tuple[float, ...]) -> None:
+    with pytest.raises(ValueError, match='dead_reckoning_force_time'):
+        OdometryParams(dead_reckoning_force_time=bad)
+    assert OdometryParams().dead_reckoning_force_time == (30.0, 30.0, 0.0)

@@ -137,8 +137,8 @@ class OdometryParams:
         'the model dead-reckons from the environment force the thrust balanced before the '
         'fixes stopped: the thrust low-passed over this time per DOF (surge, sway, yaw; '
         'lf_dynamics.balanced_at); 0: that DOF keeps the environment fitted over the window '
-        '(yaw: the heading oscillation of a DP loop leaks into a 30 s mean; chosen from 30 / 120 / '
-        '300 / 0 s on tuning seeds 1–2, docs/BENCHMARKS.md)', 's, s, s'))
+        '(yaw: the heading oscillation of a DP loop leaks into a 30 s mean; chosen from '
+        '30 / 120 / 300 / 0 s on tuning seeds 1–2, docs/BENCHMARKS.md)', 's, s, s'))
     vessel_inertia: tuple[float, ...] = field(default=(0.0, 0.0, 0.0), metadata=field_doc(
         'optional: the vessel inertia M_ii with added mass per DOF (surge, sway, yaw); when '
         'given, the vessel memory uses the thrust gain 1/M_ii instead of fitting it (station-'

@@ -31,6 +31,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import uniform_filter1d
 
+from lf_predictor_ros.core.lf_dynamics import as_series
+
 FloatArray = NDArray[np.float64]
 
 # The thrust and the estimates are high-passed by subtracting their moving mean over this window
@@ -96,9 +98,9 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
         ValueError: bad shapes, non-finite values, fewer than ``MIN_SAMPLES`` samples or a bad
             sample time: pass a longer, clean, uniformly sampled series.
     """
-    eta = _as_2d(poses, 'poses')
-    nu = _as_2d(twists, 'twists')
-    tau = _as_2d(forces, 'forces')
+    eta = as_series(poses, 'poses')
+    nu = as_series(twists, 'twists')
+    tau = as_series(forces, 'forces')
     n = eta.shape[1]
     if n not in (1, 3) or nu.shape != eta.shape or tau.shape != eta.shape:
         raise ValueError(f'poses, twists and forces must all have shape (m, 1) or (m, 3), got '
@@ -163,11 +165,3 @@ def _highpass(values: FloatArray, window: int) -> FloatArray:
     result: FloatArray = values - uniform_filter1d(values, window, axis=0, mode='nearest')
     return result
 
-
-def _as_2d(values: ArrayLike, name: str) -> FloatArray:
-    array = np.array(values, dtype=np.float64)
-    if array.ndim == 1:
-        array = array[:, None]
-    if array.ndim != 2 or not np.all(np.isfinite(array)):
-        raise ValueError(f'{name} must be a finite (m, n) array, got shape {array.shape}')
-    return array

@@ -86,7 +86,7 @@ def earth_to_body(eta: FloatArray, eta_dot: FloatArray, ndof: int) -> FloatArray
 
 def body_velocity(targets: ArrayLike, sample_time: float) -> FloatArray:
     """LF body velocity ν of an LF pose series (central differences, then rotated)."""
-    eta = _as_2d(targets, 'targets')
+    eta = as_series(targets, 'targets')
     if eta.shape[0] < 3:
         raise ValueError(f'need at least 3 LF poses to differentiate, got {eta.shape[0]}')
     return earth_to_body(eta, np.gradient(eta, sample_time, axis=0), eta.shape[1])
@@ -162,8 +162,8 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
             vessel (growth rate above ``MAX_GROWTH_RATE``, or a thrust that does not push the
             vessel its way, G_ii ≤ 0): collect more (excited) data.
     """
-    eta = _as_2d(targets, 'targets')
-    tau = _as_2d(forces, 'forces')
+    eta = as_series(targets, 'targets')
+    tau = as_series(forces, 'forces')
     n = eta.shape[1]
     if n not in (1, 3) or tau.shape != eta.shape:
         raise ValueError(f'targets and forces must both have shape (m, 1) or (m, 3), got '
@@ -400,8 +400,8 @@ def drift_test(model: LfDynamics | None, reckoner: DeadReckoner, targets: ArrayL
     ``dead_reckon_step`` with the recorded forces for ``horizon`` seconds (or as far as the series
     allows); the error against the targets at every step gives the mean-square drift.
     """
-    eta_t = _as_2d(targets, 'targets')
-    tau = _as_2d(forces, 'forces')
+    eta_t = as_series(targets, 'targets')
+    tau = as_series(forces, 'forces')
     _check_sample_time(sample_time)
     steps = int(round(horizon / sample_time))
     spacing = max(1, int(round(start_spacing / sample_time)))
@@ -440,7 +440,7 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     ``input_gain``: a known thrust gain (`fit_lf_dynamics`). ``targets_filter``: the SOS the
     targets were zero-phase filtered with (`paired_forces`).
     """
-    eta_t = _as_2d(targets, 'targets')
+    eta_t = as_series(targets, 'targets')
     tau = paired_forces(forces, targets_filter)
     split, test_horizon = _held_out_split(eta_t.shape[0], sample_time, horizon)
     model: LfDynamics | None = None
@@ -493,7 +493,7 @@ def thrust_improves_dead_reckoning(targets: ArrayLike, forces: ArrayLike, sample
     fit, or too few tests, gives True: the thesis's structure is kept when the data cannot tell.
     ``targets_filter``: as `learn_vessel_memory`.
     """
-    eta_t = _as_2d(targets, 'targets')
+    eta_t = as_series(targets, 'targets')
     tau = paired_forces(forces, targets_filter)
     split, test_horizon = _held_out_split(eta_t.shape[0], sample_time, horizon)
     try:
@@ -525,7 +525,7 @@ def paired_forces(forces: ArrayLike, targets_filter: FloatArray | None) -> Float
     error in the regressor and biases the thrust gain G towards 0 (errors in variables).
     None: the forces as given (new array).
     """
-    tau = _as_2d(forces, 'forces')
+    tau = as_series(forces, 'forces')
     if targets_filter is None or tau.shape[0] < 2:
         return tau
     return zero_phase(tau, targets_filter)
@@ -588,7 +588,8 @@ def _ridge(phi: FloatArray, y: FloatArray, ridge: float) -> tuple[FloatArray, Fl
     return coef, np.std(residual, axis=0)
 
 
-def _as_2d(values: ArrayLike, name: str) -> FloatArray:
+def as_series(values: ArrayLike, name: str) -> FloatArray:
+    """A finite (m, n) float copy of a series ((m,) becomes (m, 1)); ValueError names it."""
     array = np.array(values, dtype=np.float64)
     if array.ndim == 1:
         array = array[:, None]

@@ -369,6 +369,8 @@ class VesselMemory:
         drift_curves: the drift curve of every tested reckoner (``curve``).
         known_gain: where the thrust gain 1/M_ii of a known-gain fit came from: '' (fitted),
             'vessel_inertia' (given) or 'controller' (`core.controller_gains`).
+        dp_controlled: the thrust was read as a DP controller's (its PD law explains the
+            commands on the published estimates): its LF part balances the environment.
     """
 
     model: LfDynamics | None
@@ -380,6 +382,7 @@ class VesselMemory:
     force_limit: FloatArray = field(default_factory=lambda: np.full(3, np.inf))
     drift_curves: dict[DeadReckoner, DriftCurve] = field(default_factory=dict)
     known_gain: str = ''
+    dp_controlled: bool = False
 
     def curve(self, reckoner: DeadReckoner) -> DriftCurve:
         """The drift curve of ``reckoner`` (the chosen one's if it was not tested)."""

@@ -216,15 +216,19 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     (≈ 0.6 ms), and the fit applies it to the forces too (`lf_dynamics.paired_forces`).
     ``input_gain``: 1/M_ii from ``vessel_inertia``; without it and with ``commands`` (stamps,
     commanded forces) the gain implied by the DP controller's gains is used if the controller
-    can be read (`implied_input_gain`). The memory is None if it cannot be learned; the covariances
-    compare the published estimates with the window (`odometry.calibrate`).
+    can be read (`implied_input_gain`); a controller read marks the memory ``dp_controlled``.
+    The memory is None if it cannot be learned; the covariances compare the published estimates
+    with the window (`odometry.calibrate`).
     """
     sos = None if wave_peak_freq is None else target_filter(params, wave_peak_freq)
     source = 'vessel_inertia' if input_gain is not None else ''
     note = ''
-    if input_gain is None and commands is not None:
-        input_gain, note = implied_input_gain(published, *commands, params.sample_time)
-        source = 'controller' if input_gain is not None else ''
+    controlled = False
+    if commands is not None:
+        implied, note = implied_input_gain(published, *commands, params.sample_time)
+        controlled = implied is not None
+        if input_gain is None and implied is not None:
+            input_gain, source = implied, 'controller'
     try:
         memory: VesselMemory | None = learn_vessel_memory(values, forces, params.sample_time,
                                                           horizon, input_gain, sos)
@@ -232,6 +236,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
         memory = None
     if memory is not None and (source or note):
         memory = replace(memory, known_gain=source if memory.model is not None else '',
+                         dp_controlled=controlled,
                          message=f'{memory.message}; {note}' if note else memory.message)
     return memory, calibrate(published, times, values, params.ndof, params.sample_time,
                              min_samples, lag_prior)

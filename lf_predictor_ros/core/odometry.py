@@ -575,16 +575,21 @@ class LfOdometry:
         return cast(DeadReckoner, choice)
 
     def _balanced_model(self) -> LfDynamics | None:
-        """The memory's model in balance with the low-passed twist and thrust (None: none).
+        """The memory's model for a dead reckoning starting now (None: none).
 
-        `lf_dynamics.balanced_at`: the environment force acting when the fixes stopped is the
-        one the thrust balanced, not the window's mean (tuning seeds: the mean turned the
-        supply vessel by 0.22–0.27 rad in two of six 60 s dropouts in the loop).
+        Under a DP controller (``memory.dp_controlled``) the LF thrust balances the environment,
+        so the environment acting when the fixes stopped is the one the low-passed thrust held,
+        not the window's mean (`lf_dynamics.balanced_at`, at rest: station keeping). Otherwise
+        (an excited or open-loop vessel, whose thrust accelerates it) the fitted model: balanced
+        there, the open-loop dead reckoning of threedof_open_loop drifted 18 m in 120 s instead
+        of 6 m (tuning seeds, docs/BENCHMARKS.md).
         """
         memory = self._memory
         x = self._x
         if memory is None or memory.model is None or x is None or self._slow_force is None:
             return None
+        if not memory.dp_controlled:
+            return memory.model
         heading = float(x[2]) if self.ndof == 3 else 0.0
         dofs = np.array(self.params.dead_reckoning_force_time[:self.ndof]) > 0.0
         return balanced_at(memory.model, heading, np.zeros(self.ndof), self._slow_force, dofs)

@@ -133,15 +133,16 @@ def test_the_controller_implied_inertia_reaches_the_memory_unless_one_is_given()
     args = (params, stamps, poses, commands, None, published, 120.0, 60, 1.2)
     memory, _ = _learn(*args, None, (stamps, commands))
     assert memory is not None and memory.model is not None
-    assert memory.known_gain == 'controller'
+    assert memory.known_gain == 'controller' and memory.dp_controlled
     assert memory.model.input_gain[0, 0] == pytest.approx(8.0e4 / 3.0e5 ** 2, rel=1e-6)
     assert 'controller-implied inertia' in memory.message
     given = np.array([1.0 / 2e6])
     memory, _ = _learn(*args, given, (stamps, commands))
     assert memory is not None and memory.model is not None
     assert memory.known_gain == 'vessel_inertia' and memory.model.input_gain[0, 0] == given[0]
+    assert memory.dp_controlled  # the controller was read all the same
     memory, _ = _learn(*args, None, None)  # no commands: the gain is fitted (or refused)
-    assert memory is None or memory.known_gain == ''
+    assert memory is None or (memory.known_gain == '' and not memory.dp_controlled)
 
 
 def test_commands_are_checked_and_kept_in_order() -> None:

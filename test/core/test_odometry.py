@@ -369,7 +369,7 @@ def test_absurd_thrust_never_makes_the_state_non_finite() -> None:
 
 
 def test_dead_reckoning_starts_from_the_balance_the_thrust_held() -> None:
-    """The window's mean environment force is replaced by the one the thrust was balancing.
+    """Under a DP controller the window's mean environment is replaced by the balanced one.
 
     The memory's model pushes 1e-3 m/s² in surge (its fitted mean environment); while tracking,
     the vessel sat still with 2e3 N of surge thrust (gain 1e-6/kg: 2e-3 m/s²), so the force
@@ -385,7 +385,7 @@ def test_dead_reckoning_starts_from_the_balance_the_thrust_held() -> None:
     # (chosen 'hold', forced 'model': the tracking twist filter does not use the model, so the
     # twist at rest is 0 and the balance is the thrust's alone)
     memory = VesselMemory(model, 'hold', DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test',
-                          np.full(3, 1e-3))
+                          np.full(3, 1e-3), dp_controlled=True)
     held = np.array([2e3, 0.0, 0.0])
     for extra, expected in ((0.0, 0.0), (1e3, None)):
         odo = LfOdometry(3, H, OdometryParams(dead_reckoner='model'))
@@ -401,6 +401,17 @@ def test_dead_reckoning_starts_from_the_balance_the_thrust_held() -> None:
             # 61 steps of h from the last fix at 199 s (semi-implicit Euler, u_k as above)
             u = (1.0 - 0.99 ** np.arange(1, 62)) * 1e3 * 1e-6 * 100.0
             assert out.pose[0] == pytest.approx(u.sum(), rel=1e-6)
+    # without a DP controller (an excited vessel: its thrust accelerates it) the fitted model:
+    # 2e3 N + the mean 1e-3 m/s², u_k = (1 − 0.99^k) · 3e-3 · 100 m/s
+    odo = LfOdometry(3, H, OdometryParams(dead_reckoner='model'))
+    odo._memory = dataclasses.replace(memory, dp_controlled=False)  # noqa: SLF001
+    for k in range(200):
+        odo.track(float(k), np.zeros(3), held)
+    for k in range(1, 61):
+        out = odo.coast(200.0 + k, held)
+    assert out is not None
+    u = (1.0 - 0.99 ** np.arange(1, 62)) * 3e-3 * 100.0
+    assert out.pose[0] == pytest.approx(u.sum(), rel=1e-6)
 
 
 @pytest.mark.parametrize('bad', [(30.0, 30.0), (30.0, -1.0, 0.0), (30.0, math.nan, 0.0)])

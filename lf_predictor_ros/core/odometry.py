@@ -313,7 +313,7 @@ class LfOdometry:
         self._pending_since: float | None = None
         self._blend: tuple[float, FloatArray] | None = None  # (start time, DR pose − fix)
         self._slow_twist: FloatArray | None = None  # low-passed twist, start of dead reckoning
-        self._slow_force: FloatArray | None = None  # low-passed thrust, same time constant
+        self._slow_force: FloatArray | None = None  # thrust low-passed per DOF (force time)
         # the memory's model balanced at the DR start, and the memory it was made from
         self._dr_model: tuple[VesselMemory, LfDynamics | None] | None = None
         self.counters = {'dead_reckoning_episodes': 0, 'lost': 0, 'reacquired': 0,
@@ -586,9 +586,9 @@ class LfOdometry:
         """
         memory = self._memory
         x = self._x
-        if memory is None or memory.model is None or x is None or self._slow_force is None:
+        if memory is None or memory.model is None:
             return None
-        if not memory.dp_controlled:
+        if not memory.dp_controlled or x is None or self._slow_force is None:
             return memory.model
         heading = float(x[2]) if self.ndof == 3 else 0.0
         dofs = np.array(self.params.dead_reckoning_force_time[:self.ndof]) > 0.0

@@ -139,6 +139,10 @@ class OdometryParams:
         'lf_dynamics.balanced_at); 0: that DOF keeps the environment fitted over the window '
         '(yaw: the heading oscillation of a DP loop leaks into a 30 s mean; chosen from '
         '30 / 120 / 300 / 0 s on tuning seeds 1–2, docs/BENCHMARKS.md)', 's, s, s'))
+    twist_model: bool = field(default=False, metadata=field_doc(
+        "the twist Kalman filter predicts with the vessel memory's model whenever its thrust "
+        'gain is given or implied by the controller (else only when the drift test chose it)',
+        ''))
     vessel_inertia: tuple[float, ...] = field(default=(0.0, 0.0, 0.0), metadata=field_doc(
         'optional: the vessel inertia M_ii with added mass per DOF (surge, sway, yaw); when '
         'given, the vessel memory uses the thrust gain 1/M_ii instead of fitting it (station-'
@@ -523,7 +527,8 @@ class LfOdometry:
         memory = self._memory
         damping = np.zeros((n, n))
         drive = np.zeros(n)
-        if memory is not None and memory.reckoner == 'model' and memory.model is not None:
+        if self._twist_uses_model():
+            assert memory is not None and memory.model is not None
             model = memory.model
             damping = model.damping
             heading = float(x[2]) if n == 3 else 0.0
@@ -534,6 +539,12 @@ class LfOdometry:
         b = np.zeros(2 * n)
         b[n:] = h * drive
         return a, b
+
+    def _twist_uses_model(self) -> bool:
+        memory = self._memory
+        if memory is None or memory.model is None:
+            return False
+        return memory.reckoner == 'model' or (self.params.twist_model and bool(memory.known_gain))
 
     def _process_noise(self, h: float) -> FloatArray:
         n = self.ndof

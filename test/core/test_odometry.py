@@ -419,3 +419,22 @@ def test_dead_reckoning_force_time_is_checked(bad: tuple[float, ...]) -> None:
     with pytest.raises(ValueError, match='dead_reckoning_force_time'):
         OdometryParams(dead_reckoning_force_time=bad)
     assert OdometryParams().dead_reckoning_force_time == (30.0, 30.0, 0.0)
+
+
+def test_twist_model_option_uses_a_given_or_implied_gain() -> None:
+    """twist_model: the twist filter predicts with the model when its gain is known."""
+    model = LfDynamics(np.diag([-0.01, -0.01, -0.01]), np.diag([1e-6, 1e-6, 1e-9]),
+                       np.zeros((3, 3)), np.full(3, 1e-4))
+    memory = dataclasses.replace(_hold_memory(), model=model, known_gain='controller')
+    x, tau = np.zeros(6), np.array([1e3, 0.0, 0.0])
+    drives = {}
+    for option in (False, True):
+        odo = LfOdometry(3, H, OdometryParams(twist_model=option))
+        odo._memory = memory  # noqa: SLF001 - a known vessel memory
+        _a, b = odo._transition(x, tau, 1.0)  # noqa: SLF001
+        drives[option] = b[3]
+    assert drives[False] == 0.0  # the drift test chose hold: constant velocity
+    assert drives[True] == pytest.approx(1e-3)  # h G τ
+    odo = LfOdometry(3, H, OdometryParams(twist_model=True))
+    odo._memory = dataclasses.replace(memory, known_gain='')  # noqa: SLF001 - fitted gain
+    assert odo._transition(x, tau, 1.0)[1][3] == 0.0  # noqa: SLF001

@@ -769,17 +769,24 @@ def loop_table(cases: Sequence[dict[str, Any]]) -> str:
     return '\n'.join(lines)
 
 
+def _dropout_loop_runs(cases: Sequence[dict[str, Any]]
+                       ) -> dict[str, tuple[int, list[dict[str, Any]]]]:
+    """(ndof, item 5 results) per scenario; runs without dropout loops, empty groups left out."""
+    out: dict[str, tuple[int, list[dict[str, Any]]]] = {}
+    for scenario, group in _by_scenario(cases, 'closed_loop').items():
+        rows = [c['closed_loop']['dropout_loops'] for c in group
+                if 'dropout_loops' in c['closed_loop']]
+        if rows:
+            out[scenario] = (int(group[0]['ndof']), rows)
+    return out
+
+
 def dropout_loop_table(cases: Sequence[dict[str, Any]]) -> str:
     """Markdown: item 5, worst distance from the reference during and after the dropouts."""
     lines = ['| scenario | runs | estimator | dropouts | worst during [m] (without dropout) | '
              'worst in the 120 s after [m] (without) | heading during / after [rad] | '
              'aborted |', '|---|---|---|---|---|---|---|---|']
-    for scenario, group in _by_scenario(cases, 'closed_loop').items():
-        rows = [c['closed_loop']['dropout_loops'] for c in group
-                if 'dropout_loops' in c['closed_loop']]
-        if not rows:
-            continue
-        n = group[0]['ndof']
+    for scenario, (n, rows) in _dropout_loop_runs(cases).items():
         for name in ('lf_odom', 'observer'):
             def worst(key: str, part: str, rows_: Sequence[dict[str, Any]] = rows,
                       name_: str = name) -> list[float]:
@@ -807,10 +814,9 @@ def dropout_trust_table(cases: Sequence[dict[str, Any]]) -> str:
              'the dead-reckoned estimates per dropout) | horizontal std published at the end '
              '[m] | horizontal error at the end [m] | dropouts with error > 2 × std |',
              '|---|---|---|---|---|---|']
-    for scenario, group in _by_scenario(cases, 'closed_loop').items():
-        rows = [d for c in group if 'dropout_loops' in c['closed_loop']
-                for d in c['closed_loop']['dropout_loops']['lf_odom'].get('coverage', [])]
-        rows = [d for d in rows if math.isfinite(d['inside'])]
+    for scenario, (_, runs) in _dropout_loop_runs(cases).items():
+        rows = [d for r in runs for d in r['lf_odom'].get('coverage', [])
+                if math.isfinite(d['inside'])]
         if not rows:
             continue
 
@@ -820,6 +826,51 @@ def dropout_trust_table(cases: Sequence[dict[str, Any]]) -> str:
         wide = sum(d['end_error'] > 2.0 * d['end_std'] for d in rows)
         lines.append(f"| {scenario} | {len(rows)} | {cell('inside')} | {cell('end_std')} | "
                      f"{cell('end_error')} | {wide}/{len(rows)} |")
+    return '\n'.join(lines)
+
+
+def _per_run_mean(runs: Sequence[dict[str, Any]], name: str, key: str) -> FloatArray:
+    """Per run the mean of ``key`` over the dropouts of estimator ``name``."""
+    return np.array([np.mean([d[key] for d in r[name]['with_dropouts']]) for r in runs])
+
+
+def _heading_cell(runs: Sequence[dict[str, Any]], name: str) -> str:
+    """Mean / max over all dropouts of the larger heading difference of during and after."""
+    values = [max(d.get('during_heading', math.nan), d.get('after_heading', math.nan))
+              for r in runs for d in r[name]['with_dropouts']]
+    if not all(math.isfinite(v) for v in values):
+        return '–'
+    return f'{np.mean(values):.3f} / {np.max(values):.2f}'
+
+
+def _finite_cell(values: FloatArray) -> str:
+    return interval(list(values)).cell(_fmt) if np.all(np.isfinite(values)) else 'n/a'
+
+
+def dropout_mean_table(cases: Sequence[dict[str, Any]]) -> str:
+    """Markdown: item 5 per run as the mean over its dropouts, lf_odom against the observer.
+
+    Per run the mean distance during (after) its dropouts, then mean [95 % interval] over runs,
+    and the per-run ratio lf_odom / observer of the same seed; heading: the larger of during
+    and after per dropout, mean / max over all dropouts; how many dropouts lf_odom stayed
+    closer than the observer in.
+    """
+    lines = ['| scenario | lf_odom during [m] | observer during [m] | ratio per run | '
+             'lf_odom after [m] | observer after [m] | heading lf_odom [rad] | '
+             'heading observer [rad] | lf_odom closer |', '|---|---|---|---|---|---|---|---|---|']
+    for scenario, (_, runs) in _dropout_loop_runs(cases).items():
+        during = {name: _per_run_mean(runs, name, 'during') for name in ('lf_odom', 'observer')}
+        after = {name: _per_run_mean(runs, name, 'after') for name in ('lf_odom', 'observer')}
+        pairs = [(a['during'], b['during']) for r in runs
+                 for a, b in zip(r['lf_odom']['with_dropouts'], r['observer']['with_dropouts'],
+                                 strict=True)]
+        closer = sum(a < b for a, b in pairs)
+        lines.append(f"| {scenario} | {_finite_cell(during['lf_odom'])} | "
+                     f"{_finite_cell(during['observer'])} | "
+                     f"{_finite_cell(during['lf_odom'] / during['observer'])} | "
+                     f"{_finite_cell(after['lf_odom'])} | {_finite_cell(after['observer'])} | "
+                     f"{_heading_cell(runs, 'lf_odom')} | {_heading_cell(runs, 'observer')} | "
+                     f"{closer}/{len(pairs)} |")
     return '\n'.join(lines)
 
 
@@ -835,6 +886,7 @@ def report(cases: Sequence[dict[str, Any]]) -> str:
         twist_table(cases), '**Dead-reckoning drift**', drift_table(cases),
         '**Closed loop, D term**', loop_table(cases),
         '**Closed loop through pose dropouts**', dropout_loop_table(cases),
+        '**The same, per run the mean over its dropouts**', dropout_mean_table(cases),
         '**Trust in the loop through pose dropouts (lf_odom)**', dropout_trust_table(cases)])
 
 

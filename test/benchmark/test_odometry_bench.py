@@ -18,6 +18,7 @@ from lf_predictor_ros.benchmark.odometry_bench import (
     default_dropouts,
     dropout_coverage,
     dropout_deviation,
+    dropout_mean_table,
     dropout_trust_table,
     integrated_autocorrelation_time,
     pid_velocity,
@@ -158,6 +159,26 @@ def test_dropout_coverage_counts_the_truth_inside_the_published_ellipse() -> Non
         'lf_odom': {'coverage': [row, empty]}}}}
     table = dropout_trust_table([case])
     assert '| s | 1 | 0.5' in table and '| 1/1 |' in table
+
+
+def test_dropout_mean_table_compares_per_run_means_with_the_observer() -> None:
+    """Two runs of two dropouts: means, the per-run ratio, headings and who stayed closer."""
+    def run(lf: list[float], obs: list[float]) -> dict[str, object]:
+        def rows(values: list[float]) -> list[dict[str, float]]:
+            return [{'during': v, 'after': 2 * v, 'during_heading': v / 100,
+                     'after_heading': v / 50} for v in values]
+        return {'lf_odom': {'with_dropouts': rows(lf)}, 'observer': {'with_dropouts': rows(obs)}}
+
+    cases = [{'scenario': 's', 'seed': k, 'ndof': 3, 'closed_loop': {'dropout_loops': r}}
+             for k, r in enumerate([run([2.0, 4.0], [1.0, 5.0]), run([6.0, 6.0], [3.0, 3.0])])]
+    table = dropout_mean_table(cases)
+    row = table.splitlines()[2].split(' | ')
+    assert row[1].startswith('4.5 ')  # per-run means 3 and 6
+    assert row[2].startswith('3 ')  # 3 and 3
+    assert row[3].startswith('1.5 ')  # ratios 1 and 2
+    assert row[4].startswith('9 ')  # after = 2 × during
+    assert row[6] == '0.090 / 0.12'  # after_heading = during / 50 is the larger
+    assert row[8] == '1/4 |'  # 2.0 < 5.0 only
 
 
 def test_odometry_overrides_are_validated() -> None:

@@ -541,6 +541,7 @@ class LfOdometry:
         return a, b
 
     def _twist_uses_model(self) -> bool:
+        """The twist filter predicts with the memory's model (transition and process noise)."""
         memory = self._memory
         if memory is None or memory.model is None:
             return False
@@ -555,7 +556,7 @@ class LfOdometry:
             q = np.zeros((2 * n, 2 * n))
             q[n:, n:] = np.diag(accel_var * h)
             return q
-        if memory is not None and memory.reckoner == 'model' and memory.model is not None:
+        if memory is not None and memory.model is not None and self._twist_uses_model():
             accel_var = memory.model.residual_std ** 2 + 1e-12
         elif memory is not None:
             accel_var = memory.accel_std ** 2 + 1e-12

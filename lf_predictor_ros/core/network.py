@@ -112,6 +112,7 @@ class NnarmaxSpec:
     linear_bypass: bool = True
     relative: bool = False
     body_frame: bool = False
+    ramp_invariant: bool = False
 
     def __post_init__(self) -> None:
         """Validate the spec; raise ValueError naming the broken rule."""
@@ -146,6 +147,12 @@ class NnarmaxSpec:
                                     and self.n_inputs_u == 3):
             raise ValueError('NnarmaxSpec.body_frame needs relative = True and 3 outputs and 3 '
                              'force channels (north, east, yaw): set them or body_frame False')
+        if not isinstance(self.ramp_invariant, bool):
+            raise ValueError(
+                f'NnarmaxSpec.ramp_invariant must be a bool, got {self.ramp_invariant!r}')
+        if self.ramp_invariant and not (self.relative and self.ny >= 2 and self.nfb == 0):
+            raise ValueError('NnarmaxSpec.ramp_invariant needs relative = True, ny ≥ 2 (a slope '
+                             'needs two positions) and nfb = 0: set them or ramp_invariant False')
 
     @property
     def n_regressors(self) -> int:
@@ -158,13 +165,14 @@ class NnarmaxSpec:
         return first_index(self)
 
     def to_dict(self) -> dict[str, int | bool]:
-        """Plain dict (for checkpoints and logs); ``body_frame`` only when True.
+        """Plain dict (for checkpoints, logs); ``body_frame``, ``ramp_invariant`` only when True.
 
-        An earth-frame spec writes the same dict (and checkpoint) as before the field existed.
+        A spec without them writes the same dict (and checkpoint) as before the fields existed.
         """
         values: dict[str, int | bool] = dict(asdict(self))
-        if not self.body_frame:
-            del values['body_frame']
+        for name in ('body_frame', 'ramp_invariant'):
+            if not values[name]:
+                del values[name]
         return values
 
     @classmethod
@@ -182,12 +190,17 @@ class NnarmaxSpec:
             raise ValueError(f'incomplete NnarmaxSpec {dict(values)}: {exc}') from exc
 
 
-def relative_spread(y: FloatArray, ny: int, body_frame: bool = False) -> FloatArray:
+def relative_spread(y: FloatArray, ny: int, body_frame: bool = False,
+                    ramp_invariant: bool = False) -> FloatArray:
     """RMS of y(t − i) − y(t) over i = 1 … max(1, ny − 1) and all t, per channel.
 
     The scale of a relative network's position regressors and of its output ŷLF(t + 1) − y(t).
     With ``body_frame`` (3 channels) each difference is first rotated by R(ψ(t))ᵀ, ψ = y[:, 2].
+    With ``ramp_invariant`` the differences are those from the least-squares line through the ny
+    newest positions (what such a network sees, ``_relative_frame_numpy``).
     """
+    if ramp_invariant and y.shape[0] > ny:
+        return _detrended_spread(y, ny, body_frame)
     lags = range(1, min(max(1, ny - 1), y.shape[0] - 1) + 1)
     if not lags:
         return np.asarray(y.std(axis=0), dtype=np.float64)
@@ -198,6 +211,23 @@ def relative_spread(y: FloatArray, ny: int, body_frame: bool = False) -> FloatAr
         return np.asarray(np.sqrt(np.mean(squares, axis=0)), dtype=np.float64)
     squares = [np.mean((y[:-lag] - y[lag:]) ** 2, axis=0) for lag in lags]
     return np.asarray(np.sqrt(np.mean(squares, axis=0)), dtype=np.float64)
+
+
+def _detrended_spread(y: FloatArray, ny: int, body_frame: bool) -> FloatArray:
+    """RMS of y(t − i) − (y(t) − i·v̂(t)), i = 1 … ny − 1, per channel (see ``relative_spread``)."""
+    windows = np.lib.stride_tricks.sliding_window_view(y, ny, axis=0)[..., ::-1]
+    block = np.swapaxes(windows, 1, 2)  # (rows, lag i newest first, channel)
+    slope = np.einsum('i,rio->ro', ramp_slope_weights(ny), block)
+    lags = np.arange(ny, dtype=np.float64)
+    offsets = block - (block[:, :1, :] - lags[None, :, None] * slope[:, None, :])
+    offsets = offsets[:, 1:, :]
+    if body_frame:
+        heading = block[:, 0, 2]
+        cos, sin = np.cos(heading)[:, None], np.sin(heading)[:, None]
+        north, east = offsets[..., 0], offsets[..., 1]
+        offsets = np.stack((cos * north + sin * east, -sin * north + cos * east,
+                            offsets[..., 2]), axis=-1)
+    return np.asarray(np.sqrt(np.mean(offsets ** 2, axis=(0, 1))), dtype=np.float64)
 
 
 def _safe_std(std: FloatArray, mean: FloatArray) -> FloatArray:
@@ -269,14 +299,13 @@ class NnarmaxNet(torch.nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Predict ŷLF(t + 1) for raw regressor rows ``x`` of shape (rows, n_regressors)."""
         if self.spec.relative:
-            offset = _position_offset(self.spec)
-            ref = x[:, offset:offset + self.spec.n_outputs]
-            relative = x - _relative_shift(self.spec, ref)
+            ref, shift, base = _relative_frame_torch(self.spec, x)
+            relative = x - shift
             if self.spec.body_frame:
                 cos, sin = torch.cos(ref[:, 2]), torch.sin(ref[:, 2])
                 body = self._forward_absolute(rotate_blocks_torch(relative, cos, -sin))
-                return ref + rotate_blocks_torch(body, cos, sin)
-            return ref + self._forward_absolute(relative)
+                return base + rotate_blocks_torch(body, cos, sin)
+            return base + self._forward_absolute(relative)
         return self._forward_absolute(x)
 
     def _forward_absolute(self, x: torch.Tensor) -> torch.Tensor:
@@ -308,10 +337,9 @@ class NnarmaxNet(torch.nn.Module):
             ref = torch.zeros_like(target)
             step = target
             if self.spec.relative:
-                offset = _position_offset(self.spec)
-                ref = x[:, offset:offset + self.spec.n_outputs]
-                x = x - _relative_shift(self.spec, ref)
-                step = target - ref
+                ref, shift, base = _relative_frame_torch(self.spec, x)
+                x = x - shift
+                step = target - base
                 if self.spec.body_frame:
                     cos, sin = torch.cos(ref[:, 2]), torch.sin(ref[:, 2])
                     x = rotate_blocks_torch(x, cos, -sin)
@@ -414,8 +442,8 @@ class NnarmaxNet(torch.nn.Module):
             # spread: over a 10-min window a drifting vessel spreads tens of metres, which would
             # squeeze every relative regressor and output into a sliver of the tanh range.
             y_mean = np.zeros_like(y_mean)
-            y_std = _safe_std(relative_spread(y_series, self.spec.ny, self.spec.body_frame),
-                              y_mean)
+            y_std = _safe_std(relative_spread(y_series, self.spec.ny, self.spec.body_frame,
+                                              self.spec.ramp_invariant), y_mean)
         new = {
             'u_mean': torch.from_numpy(u_mean),
             'u_std': torch.from_numpy(u_std),
@@ -586,6 +614,62 @@ def _relative_shift(spec: NnarmaxSpec, ref: torch.Tensor) -> torch.Tensor:
     return torch.cat((zeros, ref.repeat(1, spec.ny + spec.nfb)), dim=1)
 
 
+def ramp_slope_weights(ny: int) -> FloatArray:
+    """C with v̂ = Σᵢ cᵢ y(t − i), i = 0 … ny − 1: the least-squares slope per sample.
+
+    The line a + v̂·(−i) fitted to the ny newest positions; Σ cᵢ = 0 (translation invariant) and
+    Σ cᵢ·(−i) = 1 (a ramp's slope is returned exactly).
+    """
+    if ny < 2:
+        raise ValueError(f'a slope needs ny ≥ 2 positions, got ny = {ny}')
+    lags = np.arange(ny, dtype=np.float64)
+    centred = lags - lags.mean()
+    weights: FloatArray = -centred / float(np.sum(centred ** 2))
+    return weights
+
+
+def _relative_frame_torch(spec: NnarmaxSpec, x: torch.Tensor,
+                          ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(ref, shift, base) of raw regressor rows ``x``: see ``_relative_frame_numpy``."""
+    offset = _position_offset(spec)
+    n_out = spec.n_outputs
+    ref = x[:, offset:offset + n_out]
+    if not spec.ramp_invariant:
+        return ref, _relative_shift(spec, ref), ref
+    block = x[:, offset:offset + spec.ny * n_out].reshape(x.shape[0], spec.ny, n_out)
+    weights = torch.from_numpy(ramp_slope_weights(spec.ny))
+    slope = torch.einsum('i,rio->ro', weights, block)
+    lags = torch.arange(spec.ny, dtype=x.dtype)
+    line = ref[:, None, :] - lags[None, :, None] * slope[:, None, :]
+    zeros = torch.zeros(x.shape[0], spec.nu * spec.n_inputs_u, dtype=x.dtype)
+    return ref, torch.cat((zeros, line.reshape(x.shape[0], -1)), dim=1), ref + slope
+
+
+def _relative_frame_numpy(spec: NnarmaxSpec, x: FloatArray,
+                          ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(ref, shift, base) of raw regressor rows ``x`` (rows, n_regressors) or one row.
+
+    ref = y(t), the newest measured position. The network sees ``x − shift`` and its output is
+    added to ``base``. Plain relative: shift = ref on every position and feedback block, base =
+    ref (translation invariance). ``ramp_invariant``: shift = the least-squares line through the
+    ny newest positions (ref − i·v̂ on lag block i, ``ramp_slope_weights``) and base = ref + v̂,
+    so a vessel moving at constant velocity is followed without lag for any weights (a ramp
+    leaves only the forces and the constant bias in front of the network).
+    """
+    offset = _position_offset(spec)
+    n_out = spec.n_outputs
+    ref = x[..., offset:offset + n_out]
+    zeros = np.zeros(x.shape[:-1] + (spec.nu * spec.n_inputs_u,))
+    if not spec.ramp_invariant:
+        return ref, np.concatenate((zeros, np.tile(ref, spec.ny + spec.nfb)), axis=-1), ref
+    block = x[..., offset:offset + spec.ny * n_out].reshape(x.shape[:-1] + (spec.ny, n_out))
+    slope = np.einsum('i,...io->...o', ramp_slope_weights(spec.ny), block)
+    lags = np.arange(spec.ny, dtype=np.float64)
+    line = ref[..., None, :] - lags[:, None] * slope[..., None, :]
+    shift = np.concatenate((zeros, line.reshape(x.shape[:-1] + (spec.ny * n_out,))), axis=-1)
+    return ref, shift, ref + slope
+
+
 def rotate_blocks_torch(values: torch.Tensor, cos: torch.Tensor,
                         sin: torch.Tensor) -> torch.Tensor:
     """``regressors.rotate_blocks`` in torch (differentiable, vmap-safe): rows (rows, 3·k)."""
@@ -643,17 +727,13 @@ class NumpyNnarmax:
         """ŷLF(t + 1) for regressor rows (rows, n_regressors) or one row (n_regressors,)."""
         spec = self.spec
         if spec.relative:
-            offset = _position_offset(spec)
-            ref = x[..., offset:offset + spec.n_outputs]
-            shift = np.concatenate(
-                (np.zeros(x.shape[:-1] + (spec.nu * spec.n_inputs_u,)),
-                 np.tile(ref, spec.ny + spec.nfb)), axis=-1)
+            ref, shift, base = _relative_frame_numpy(spec, x)
             if spec.body_frame:
                 cos, sin = np.cos(ref[..., 2]), np.sin(ref[..., 2])
                 body = self._forward_absolute(rotate_blocks(x - shift, cos, -sin))
-                turned: FloatArray = ref + rotate_blocks(body, cos, sin)
+                turned: FloatArray = base + rotate_blocks(body, cos, sin)
                 return turned
-            result: FloatArray = ref + self._forward_absolute(x - shift)
+            result: FloatArray = base + self._forward_absolute(x - shift)
             return result
         return self._forward_absolute(x)
 

@@ -44,7 +44,7 @@ _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'tra
                   'filter_window', 'append_length')
 _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame')
-_BOOL_FIELDS = ('linear_init', 'thrust_validation')
+_BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -73,6 +73,18 @@ class PredictorParams:
             'the newest position, forces rotated to north/east) or body (the same rotated into '
             'the body frame of the newest heading of each row: rotation invariant; ndof 3 only; '
             'issue 13, hypothesis 3)'))
+    ramp_invariant: bool = field(
+        default=False, metadata=_doc(
+            'positions relative to the least-squares line through the ny newest positions and '
+            'the predicted step taken from its extrapolation: a vessel moving at constant '
+            'velocity (setpoint moves, turns) is followed without lag whatever the window taught '
+            '(issue 13; nfb 0 only)'))
+    motion_gate: bool = field(
+        default=False, metadata=_doc(
+            'train a ramp-invariant twin of the network on the same data and blend it in, per '
+            'DOF, when the vessel moves faster than it did over the training window (setpoint '
+            'moves, turns; core/motion_gate.py; twice the training cost; nfb 0, '
+            'ramp_invariant false)'))
     estimation_window: float = field(
         default=1200.0, metadata=_doc('frequency-estimation window γ (eq. 4.3)', 's'))
     retrain_period: float = field(
@@ -345,6 +357,14 @@ class PredictorParams:
             raise ValueError('regressor frame rule: regressor_frame body has no parallel (free '
                              'run) training with LF feedback: set training_mode '
                              'series_parallel, nfb 0 or regressor_frame earth')
+        if self.motion_gate and self.ramp_invariant:
+            raise ValueError('ramp rule: motion_gate blends a plain (holding) network with a '
+                             'ramp-invariant twin of it: set ramp_invariant false, or '
+                             'motion_gate false for a ramp-invariant network alone')
+        if (self.ramp_invariant or self.motion_gate) and (self.nfb > 0 or self.ny < 2):
+            raise ValueError(f'ramp rule: ramp_invariant and motion_gate fit a line through the '
+                             f'measured positions and need ny ≥ 2 and nfb 0, got ny {self.ny}, '
+                             f'nfb {self.nfb}: change them or set both false')
 
     def _check_frequencies(self) -> None:
         low, high = self.wave_band

@@ -133,7 +133,8 @@ def network_spec(params: PredictorParams) -> NnarmaxSpec:
     return NnarmaxSpec(n_outputs=params.ndof, n_inputs_u=params.ndof, nu=params.nu,
                        ny=params.ny, nfb=params.nfb, hidden_units=params.hidden_units,
                        hidden_layers=params.hidden_layers, relative=True,
-                       body_frame=params.regressor_frame == 'body')
+                       body_frame=params.regressor_frame == 'body',
+                       ramp_invariant=params.ramp_invariant)
 
 
 def train_settings(params: PredictorParams) -> TrainSettings:

@@ -1,0 +1,149 @@
+"""Ramp-invariant regressors (``PredictorParams.ramp_invariant``, issue 13).
+
+A relative network is translation invariant: it sees y(t − i) − y(t). With ``ramp_invariant``
+it sees the positions relative to the least-squares line through its ny newest positions and
+its output is added to that line's extrapolation y(t) + v̂. A vessel moving at constant velocity
+(a ramp in every channel) then leaves only the forces and the constant biases in front of the
+network, so the prediction of a ramp is the ramp's next value plus one constant, whatever the
+ramp's offset and slope, for any weights. Without the option a network does not have that.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+import pytest
+import torch
+
+from lf_predictor_ros.core.network import (
+    NnarmaxNet,
+    NnarmaxSpec,
+    NumpyNnarmax,
+    predict_step,
+    ramp_slope_weights,
+    relative_spread,
+)
+from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.regressors import rotate_blocks
+from lf_predictor_ros.core.retraining import network_spec, train_settings
+from lf_predictor_ros.core.training import train
+
+FloatArray = NDArray[np.float64]
+RAMPS = (((5.0, -3.0, 0.4), (0.2, -0.1, 0.01)), ((50.0, 30.0, -2.0), (-1.0, 0.3, -0.02)))
+
+
+@pytest.fixture(autouse=True)
+def _one_thread() -> None:
+    """Trainings in these tests run on one core (the machine is shared)."""
+    torch.set_num_threads(1)
+
+
+def random_network(params: PredictorParams, seed: int = 3) -> NnarmaxNet:
+    """A network with random (not trained) weights and non-trivial standardization."""
+    net = NnarmaxNet(network_spec(params), seed=seed)
+    rng = np.random.default_rng(seed)
+    net.set_standardization(rng.normal(1.0, 2.0, size=(300, 3)), rng.normal(size=(300, 3)))
+    generator = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        assert net.bypass is not None
+        net.bypass.weight.copy_(torch.randn(net.bypass.weight.shape, generator=generator,
+                                            dtype=torch.float64))
+        net.output.weight.copy_(torch.randn(net.output.weight.shape, generator=generator,
+                                            dtype=torch.float64))
+    return net
+
+
+def ramp(offset: tuple[float, ...], velocity: tuple[float, ...], n: int = 40) -> FloatArray:
+    """Positions offset + k·velocity, k = 0 … n − 1 (per sample)."""
+    return np.asarray(offset) + np.arange(n, dtype=np.float64)[:, None] * np.asarray(velocity)
+
+
+def test_slope_weights_return_a_ramps_slope() -> None:
+    for ny in (2, 3, 24):
+        weights = ramp_slope_weights(ny)
+        lags = np.arange(ny)
+        assert weights.sum() == pytest.approx(0.0, abs=1e-12)
+        assert np.dot(weights, -lags) == pytest.approx(1.0, abs=1e-12)
+    assert ramp_slope_weights(2) == pytest.approx([0.5 * 2, -0.5 * 2])  # v̂ = y(t) − y(t−1)
+    with pytest.raises(ValueError, match='ny ≥ 2'):
+        ramp_slope_weights(1)
+
+
+@pytest.mark.parametrize('frame', ['earth', 'body'])
+def test_a_ramp_is_predicted_up_to_one_constant(frame: str) -> None:
+    net = random_network(PredictorParams(ramp_invariant=True, regressor_frame=frame))
+    fast = NumpyNnarmax.from_module(net)
+    forces = np.zeros((40, 3))
+    residuals = []
+    for offset, velocity in RAMPS:
+        y = ramp(offset, velocity)
+        if frame == 'body':  # the constant is a body-frame offset: same final heading
+            y[:, 2] += 0.7 - y[-1, 2]
+        prediction = predict_step(fast, forces, y, y)
+        assert predict_step(net, forces, y, y) == pytest.approx(prediction, abs=1e-12)
+        residuals.append(prediction - (y[-1] + np.asarray(velocity)))
+    assert residuals[0] == pytest.approx(residuals[1], abs=1e-9)
+    assert np.max(np.abs(residuals[0])) > 1e-3  # the random constant is there (not a 0 test)
+
+
+def test_without_the_option_a_ramp_is_not_followed() -> None:
+    net = random_network(PredictorParams())
+    fast = NumpyNnarmax.from_module(net)
+    residuals = [predict_step(fast, np.zeros((40, 3)), ramp(o, v), ramp(o, v))
+                 - (ramp(o, v)[-1] + np.asarray(v)) for o, v in RAMPS]
+    assert np.max(np.abs(residuals[0] - residuals[1])) > 0.1
+
+
+def test_spread_is_measured_from_the_line() -> None:
+    y = ramp((1.0, 2.0, 0.3), (0.5, -0.2, 0.01), n=100)
+    assert relative_spread(y, 24, ramp_invariant=True) == pytest.approx(np.zeros(3), abs=1e-9)
+    assert relative_spread(y, 24)[0] > 1.0
+    noise = np.random.default_rng(0).normal(size=(60, 3))
+    noise[:, 2] = np.cumsum(noise[:, 2]) * 0.1
+    ny = 5
+    weights = ramp_slope_weights(ny)
+    expected: list[FloatArray] = []
+    for t in range(ny - 1, 60):
+        lags = noise[t - np.arange(ny)]
+        slope = weights @ lags
+        offsets = lags[1:] - (lags[0] - np.arange(1, ny)[:, None] * slope)
+        heading = lags[0, 2]
+        expected.append(rotate_blocks(offsets.reshape(1, -1), np.full(1, np.cos(heading)),
+                                      np.full(1, -np.sin(heading))).reshape(ny - 1, 3))
+    rms = np.sqrt(np.mean(np.concatenate(expected) ** 2, axis=0))
+    assert relative_spread(noise, ny, body_frame=True, ramp_invariant=True) == pytest.approx(
+        rms, rel=1e-12)
+
+
+def test_rules() -> None:
+    with pytest.raises(ValueError, match='ramp_invariant needs relative'):
+        NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=4, nfb=1, hidden_units=2,
+                    relative=True, ramp_invariant=True)
+    with pytest.raises(ValueError, match='ramp_invariant needs relative'):
+        NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=1, nfb=0, hidden_units=2,
+                    relative=True, ramp_invariant=True)
+    with pytest.raises(ValueError, match='ramp rule'):
+        PredictorParams(ramp_invariant=True, nfb=2)
+    spec = network_spec(PredictorParams(ramp_invariant=True))
+    assert spec.to_dict()['ramp_invariant'] is True
+    assert NnarmaxSpec.from_dict(spec.to_dict()) == spec
+    assert 'ramp_invariant' not in network_spec(PredictorParams()).to_dict()
+
+
+def test_training_on_station_keeping_still_follows_a_ramp() -> None:
+    """Trained on a window that never moves, the network still extrapolates a ramp (earth)."""
+    params = PredictorParams(ramp_invariant=True, ny=12, nu=4)
+    rng = np.random.default_rng(1)
+    n = 400
+    t = np.arange(n, dtype=np.float64)
+    lf = np.cumsum(rng.normal(0.0, 0.01, size=(n, 3)), axis=0)
+    waves = 0.5 * np.sin(0.8 * t)[:, None] * np.array([1.0, 0.7, 0.01])
+    y = lf + waves
+    u = rng.normal(size=(n, 3))
+    net = NnarmaxNet(network_spec(params), seed=0)
+    result = train(net, u, y, lf, None, train_settings(params))
+    assert result.loss < result.initial_loss
+    net.load_state_dict(result.state_dict)
+    fast = NumpyNnarmax.from_module(net)
+    residuals = [predict_step(fast, np.zeros((40, 3)), ramp(o, v), ramp(o, v))
+                 - (ramp(o, v)[-1] + np.asarray(v)) for o, v in RAMPS]
+    assert residuals[0] == pytest.approx(residuals[1], abs=1e-9)

@@ -59,6 +59,7 @@ from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.estimator import EstimatorState, EstimatorStatus
 from lf_predictor_ros.core.frequency import FrequencyEstimate
 from lf_predictor_ros.core.heading import ContinuousHeading, wrap_angle
+from lf_predictor_ros.core.motion_gate import MotionGate, blend
 from lf_predictor_ros.core.network import (
     NnarmaxNet,
     NumpyNnarmax,
@@ -187,6 +188,17 @@ class AdaptivePredictor:
         self._no_thrust = 0  # accepted trainings whose thrust test failed (thrust_validation)
         self._smoothing = params.switch_blend_time > 0.0 or any(
             rate > 0.0 for rate in params.max_output_rate[:params.ndof])
+        # Motion gate (issue 13): a ramp-invariant twin on the same data, blended in by
+        # core.motion_gate when the vessel moves faster than it usually does.
+        self._moving: AdaptivePredictor | None = None
+        self._gate: MotionGate | None = None
+        if params.motion_gate:
+            self._moving = AdaptivePredictor(
+                params.replace(motion_gate=False, ramp_invariant=True), background=background,
+                max_trainings=max_trainings)
+            self._gate = MotionGate(params.ndof, params.sample_time,
+                                    window=params.training_window)
+        self._gain = np.zeros(params.ndof)
         self._clear_output_state()
         self._start_segment()
         if background:
@@ -231,10 +243,12 @@ class AdaptivePredictor:
             estimate = self._bumpless(t, estimate, model if prediction is not None else None,
                                       self._position(lf_now, update_heading=False))
         self._maybe_retrain(t)
-        return self._output(estimate, pose_arr)
+        return self._gated(t, self._output(estimate, pose_arr), pose_arr, force_arr)
 
     def reset(self) -> None:
         """Forget everything learned and collected (parameters stay); a running job is dropped."""
+        if self._moving is not None:
+            self._moving.reset()
         self._stop.set()
         self._generation += 1
         self._stop = threading.Event()
@@ -283,6 +297,9 @@ class AdaptivePredictor:
         self._segment += 1
         self._start_segment()
         self._fallback.reset()
+        if self._moving is not None and self._gate is not None:
+            self._moving.restart_segment()
+            self._gate.reset()
 
     def discard_running_job(self) -> None:
         """Drop the result of a running training or ω0 job; the network in service stays.
@@ -291,6 +308,8 @@ class AdaptivePredictor:
         snapshot may hold faulty samples, so its result must not be used. The worker stops at its
         next epoch boundary; no new job starts until it has ended.
         """
+        if self._moving is not None:
+            self._moving.discard_running_job()
         self._stop.set()
         self._generation += 1
         self._stop = threading.Event()
@@ -303,18 +322,23 @@ class AdaptivePredictor:
         if self._job_running():
             return False, 'a training is already running'
         self._retrain_requested = True
+        if self._moving is not None:
+            self._moving.request_retrain()
         return True, 'training starts with the next sample'
 
     def wait_for_training(self, timeout: float | None = None) -> bool:
         """Block until the running job (if any) finishes; for tests and offline tools only."""
+        done = True if self._moving is None else self._moving.wait_for_training(timeout)
         worker = self._worker
         if worker is None:
-            return True
+            return done
         worker.join(timeout)
-        return not worker.is_alive()
+        return done and not worker.is_alive()
 
     def close(self) -> None:
         """Stop a running training (it is abandoned at its next epoch boundary)."""
+        if self._moving is not None:
+            self._moving.close()
         self._stop.set()
         self.wait_for_training(timeout=5.0)
 
@@ -338,10 +362,19 @@ class AdaptivePredictor:
     @property
     def counters(self) -> dict[str, int]:
         """Trainings accepted/rejected, overruns (a retrain due while one ran), errors."""
-        return {'trainings': self._trainings, 'rejected_trainings': self._rejected,
-                'overruns': self._overruns, 'training_errors': self._errors,
-                'guard_trips': self._guard_trips,
-                'segments': self._segment, 'trainings_without_thrust': self._no_thrust}
+        counts = {'trainings': self._trainings, 'rejected_trainings': self._rejected,
+                  'overruns': self._overruns, 'training_errors': self._errors,
+                  'guard_trips': self._guard_trips,
+                  'segments': self._segment, 'trainings_without_thrust': self._no_thrust}
+        if self._moving is not None:
+            counts.update({f'moving_{key}': value for key, value in
+                           self._moving.counters.items() if key != 'segments'})
+        return counts
+
+    @property
+    def motion_gain(self) -> FloatArray:
+        """The motion gate's gain g per DOF at the last sample (zeros when the gate is off)."""
+        return self._gain.copy()
 
     @property
     def source_switches(self) -> int:
@@ -557,6 +590,23 @@ class AdaptivePredictor:
         if self.ndof == 3:
             difference[2] = wrap_angle(float(difference[2]))
         return difference
+
+    def _gated(self, t: float, out: FloatArray, pose: FloatArray,
+               force: FloatArray) -> FloatArray:
+        """The holding network's output blended with the moving twin's (``core.motion_gate``).
+
+        Only while the twin uses its network (its cascade fallback is the holding side's);
+        the holding side may be on its cascade fallback, which lags a move as its network does.
+        """
+        if self._moving is None or self._gate is None:
+            return out
+        moving = self._moving.update(t, pose, force)
+        gain = self._gate.update(moving)
+        if not self._moving.using_network:
+            self._gain = np.zeros(self.ndof)
+            return out
+        self._gain = gain
+        return blend(out, moving, gain, self.ndof)
 
     def _output(self, estimate: FloatArray, measured: FloatArray) -> FloatArray:
         """Estimate as a pose; for 1 DOF east and yaw are the measurement, unfiltered."""

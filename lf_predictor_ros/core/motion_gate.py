@@ -1,0 +1,111 @@
+"""Motion gate: blend a holding and a moving filter by how fast the vessel moves (issue 13).
+
+A learned filter fitted on a window of station keeping is the best filter for holding position,
+but nothing in that window tells it how to follow a setpoint move or a turn: it lags them. The
+ramp-invariant network (``PredictorParams.ramp_invariant``, ``network._relative_frame_numpy``)
+follows any constant-velocity motion without lag by construction, and pays for it while the
+vessel holds still (more wave-band motion in its estimate). The motion gate runs both and
+publishes, per DOF,
+
+    ŷ = ŷ_hold + g · (ŷ_move − ŷ_hold),      g = s² / (s² + k · s̄²)
+
+where s is the LF velocity of the moving filter's estimate, low-passed with time constant
+``GATE_TIME``, and s̄² the median of s² over the last ``GATE_WINDOW`` (the training window's
+length): the velocity the filter sees while the vessel does what it usually does. The median,
+not the mean, so that a move that fills less than half the window does not raise the scale and
+close the gate on itself. A velocity well above that opens the gate (g → 1: a move), one at or
+below it keeps it nearly shut (g ≤ 1/(1 + k)). The gate learns its scale from the data; nothing
+about the vessel is assumed.
+
+Constants chosen on tuning seed 1 only (open loop, fair recordings of rao_supply, rao_swell,
+supply_closed_loop and threedof_open_loop; docs/BENCHMARKS.md "Motion gate").
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lf_predictor_ros.core.heading import wrap_angle
+
+FloatArray = NDArray[np.float64]
+
+# Time constant of the low-pass on the moving estimate's per-sample step [s].
+GATE_TIME = 10.0
+# k: the gate is half open when s² = k · s̄². For a Gaussian velocity the median of s² is
+# 0.455 × its mean, so k = 9 opens the gate half at s² ≈ 4 × the mean square (3 × 0.455 ≈ 4.1)
+# [-].
+GATE_RATIO = 9.0
+# Length of the history that sets the usual velocity s̄ [s] (the default training window).
+GATE_WINDOW = 1200.0
+
+
+def gate_gain(velocity_sq: FloatArray, usual_sq: FloatArray, ratio: float = GATE_RATIO,
+              ) -> FloatArray:
+    """G = s² / (s² + k·s̄²) per DOF, in [0, 1]; 0 where both are 0 (no motion seen yet)."""
+    s2 = np.asarray(velocity_sq, dtype=np.float64)
+    denominator = s2 + ratio * np.asarray(usual_sq, dtype=np.float64)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        gain = np.where(denominator > 0.0, s2 / denominator, 0.0)
+    return np.asarray(np.clip(gain, 0.0, 1.0), dtype=np.float64)
+
+
+def blend(holding: FloatArray, moving: FloatArray, gain: FloatArray, ndof: int) -> FloatArray:
+    """Holding + g·(moving − holding) on the first ``ndof`` entries (yaw difference wrapped).
+
+    Poses are [north m, east m, yaw rad] (3 DOF) or [north m, …] (1 DOF: only north blended);
+    the inputs are not modified.
+    """
+    out = np.array(holding, dtype=np.float64)
+    difference = np.asarray(moving, dtype=np.float64)[:ndof] - out[:ndof]
+    if ndof == 3:
+        difference[2] = float(wrap_angle(difference[2]))
+    out[:ndof] += np.asarray(gain, dtype=np.float64)[:ndof] * difference
+    if ndof == 3:
+        out[2] = float(wrap_angle(out[2]))
+    return out
+
+
+class MotionGate:
+    """The gain g of the module docstring, updated once per predictor sample."""
+
+    def __init__(self, ndof: int, sample_time: float, time_constant: float = GATE_TIME,
+                 window: float = GATE_WINDOW, ratio: float = GATE_RATIO) -> None:
+        """Create for ``ndof`` DOFs at ``sample_time`` [s]; times in s (all > 0)."""
+        if ndof not in (1, 3):
+            raise ValueError(f'MotionGate needs ndof 1 or 3, got {ndof!r}')
+        for name, value in (('sample_time', sample_time), ('time_constant', time_constant),
+                            ('window', window), ('ratio', ratio)):
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f'MotionGate {name} must be finite and > 0, got {value!r}')
+        self.ndof = ndof
+        self.ratio = ratio
+        self._alpha = min(1.0, sample_time / time_constant)
+        self._squares = np.zeros((max(1, int(round(window / sample_time))), ndof))
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the motion seen (a new data segment)."""
+        self._last: FloatArray | None = None
+        self._velocity = np.zeros(self.ndof)
+        self._count = 0  # filled rows of the ring buffer ``_squares``
+        self._index = 0  # next row to write
+
+    def update(self, moving: FloatArray) -> FloatArray:
+        """Add the moving filter's newest estimate (a pose); return g per DOF (shape (ndof,))."""
+        value = np.asarray(moving, dtype=np.float64)[:self.ndof]
+        if not np.all(np.isfinite(value)):
+            return np.zeros(self.ndof)  # no motion evidence: hold the holding filter
+        if self._last is not None:
+            step = value - self._last
+            if self.ndof == 3:
+                step[2] = float(wrap_angle(step[2]))
+            self._velocity = self._velocity + self._alpha * (step - self._velocity)
+        self._last = value
+        square = self._velocity ** 2
+        self._squares[self._index] = square
+        self._index = (self._index + 1) % self._squares.shape[0]
+        self._count = min(self._count + 1, self._squares.shape[0])
+        usual = np.median(self._squares[:self._count], axis=0)
+        return gate_gain(square, usual, self.ratio)

@@ -1,0 +1,116 @@
+"""Motion gate (``core.motion_gate``, ``PredictorParams.motion_gate``; issue 13).
+
+The gain g = s²/(s² + k·s̄²) against its analytic values; the blend on the circle; the gate
+shut while the vessel does what it usually does and open in a move; and the gated predictor's
+output equal, sample by sample, to the blend of the two networks run on their own.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+import pytest
+import torch
+
+from lf_predictor_ros.core.motion_gate import GATE_RATIO, MotionGate, blend, gate_gain
+from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.predictor import AdaptivePredictor
+
+FloatArray = NDArray[np.float64]
+SMALL = PredictorParams(ndof=3, sample_time=1.0, retrain_period=20.0, training_window=200.0,
+                        transient_length=10.0, filter_window=60.0, append_length=40.0,
+                        estimation_window=480.0, max_epochs=5, nu=4, ny=12)
+
+
+@pytest.fixture(autouse=True)
+def _one_thread() -> None:
+    """Trainings in these tests run on one core (the machine is shared)."""
+    torch.set_num_threads(1)
+
+
+def test_gain_is_half_where_the_velocity_is_sqrt_k_times_usual() -> None:
+    usual = np.array([0.01, 0.04, 1e-6])
+    assert gate_gain(GATE_RATIO * usual, usual) == pytest.approx([0.5, 0.5, 0.5])
+    assert gate_gain(np.zeros(3), usual) == pytest.approx(np.zeros(3))
+    assert gate_gain(np.ones(3), np.zeros(3)) == pytest.approx(np.ones(3))
+    assert gate_gain(np.zeros(3), np.zeros(3)) == pytest.approx(np.zeros(3))  # nothing seen
+    assert gate_gain(usual, usual, ratio=1.0) == pytest.approx([0.5, 0.5, 0.5])
+
+
+def test_blend_takes_the_short_way_round_and_keeps_its_inputs() -> None:
+    holding = np.array([1.0, 2.0, math.pi - 0.1])
+    moving = np.array([3.0, 0.0, -math.pi + 0.1])
+    out = blend(holding, moving, np.array([0.5, 0.25, 0.5]), 3)
+    assert out == pytest.approx([2.0, 1.5, math.pi], abs=1e-12) or \
+        out == pytest.approx([2.0, 1.5, -math.pi], abs=1e-12)
+    assert holding[2] == math.pi - 0.1 and moving[0] == 3.0
+    one = blend(np.array([1.0, 5.0, 0.3]), np.array([3.0, 9.0, 0.9]), np.array([0.5]), 1)
+    assert one == pytest.approx([2.0, 5.0, 0.3])  # 1 DOF: only north is blended
+
+
+def test_gate_stays_shut_while_holding_and_opens_in_a_move() -> None:
+    gate = MotionGate(3, 1.0, time_constant=10.0, window=600.0)
+    rng = np.random.default_rng(4)
+    pose = np.zeros(3)
+    gains = []
+    for _k in range(1200):  # holding: slow random LF motion, RMS step ≈ 0.01 m, 2e-4 rad
+        pose = 0.99 * pose + rng.normal(0.0, [0.01, 0.01, 0.0002])
+        gains.append(gate.update(pose))
+    holding = np.array(gains[600:])
+    assert np.all(np.mean(holding, axis=0) < 0.3)
+    velocity = np.array([0.3, -0.2, 0.005])  # [m/s, m/s, rad/s]: a setpoint move and a turn
+    for k in range(60):
+        gain = gate.update(pose + (k + 1) * velocity)
+    assert np.all(gain > 0.9)
+    assert np.all(gate.update(np.array([np.nan, 0.0, 0.0])) == 0.0)
+    gate.reset()
+    assert np.all(gate.update(pose) == 0.0)
+
+
+def test_gate_rejects_bad_settings() -> None:
+    with pytest.raises(ValueError, match='ndof 1 or 3'):
+        MotionGate(2, 1.0)
+    with pytest.raises(ValueError, match='time_constant'):
+        MotionGate(3, 1.0, time_constant=0.0)
+    with pytest.raises(ValueError, match='motion_gate blends'):
+        PredictorParams(motion_gate=True, ramp_invariant=True)
+    with pytest.raises(ValueError, match='ramp rule'):
+        PredictorParams(motion_gate=True, nfb=1)
+
+
+def moving_run(n: int, seed: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(t, pose, force): holding with waves, then a 30 m setpoint move and a 45° turn."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n, dtype=np.float64)
+    lf = np.zeros((n, 3))
+    ramp = np.clip((t - 0.75 * n) / 100.0, 0.0, 1.0)
+    lf[:, 0] = 30.0 * ramp
+    lf[:, 2] = 0.2 + math.radians(45.0) * ramp
+    waves = np.sin(0.8 * t[:, None] + rng.uniform(0, 6, size=3)) * np.array([0.4, 0.3, 0.01])
+    pose = lf + waves + rng.normal(0.0, [0.02, 0.02, 0.001], size=(n, 3))
+    force = rng.normal(0.0, 1.0, size=(n, 3))
+    return t, pose, force
+
+
+def test_gated_output_is_the_blend_of_the_two_networks_run_alone() -> None:
+    t, pose, force = moving_run(600, 2)
+    gated = AdaptivePredictor(SMALL.replace(motion_gate=True), background=False)
+    holding = AdaptivePredictor(SMALL, background=False)
+    moving = AdaptivePredictor(SMALL.replace(ramp_invariant=True), background=False)
+    blended = 0
+    for k in range(t.size):
+        out = gated.update(t[k], pose[k], force[k])
+        a = holding.update(t[k], pose[k], force[k])
+        b = moving.update(t[k], pose[k], force[k])
+        gain = gated.motion_gain
+        if moving.using_network:
+            assert out == pytest.approx(blend(a, b, gain, 3), abs=1e-9)
+            blended += int(np.any(gain > 0.5))
+        else:
+            assert np.all(gain == 0.0)
+            assert out == pytest.approx(a, abs=1e-12)
+    counters = gated.counters
+    assert counters['moving_trainings'] == moving.counters['trainings'] > 0
+    assert counters['trainings'] == holding.counters['trainings']
+    assert blended > 20  # the move opened the gate (not a test of the zero gain only)

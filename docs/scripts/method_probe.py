@@ -2,19 +2,25 @@
 
     python docs/scripts/method_probe.py --scenarios rao_supply supply_closed_loop --seeds 1 \
         --variant default --variant aug=lf_augmentation:0.1,0.1,0.01 \
-        --variant tv=thrust_validation:true [--profile]
+        --variant tv=thrust_validation:true [--profile] [--closed-loop]
 
 Per (scenario, seed): the fair recording (`suite.make_recording`: DP loop closed on the tuned
 observer, 1800 s), then the adaptive predictor with each variant's `PredictorParams` overrides
 (inline training, deterministic) over the same grid arrays; RMSE per DOF against the true LF pose
 from the benchmark's first scored sample (`suite.scored_start`), trainings accepted / rejected and
-trainings without thrust. ``--profile`` adds the error per 60 s block (where it is made). Only the
-tuning seeds 1 and 2 are accepted; held-out seeds are for `benchmark` only.
+trainings without thrust. ``--profile`` adds the error per 60 s block (where it is made).
+``--closed-loop`` also puts each variant in its own DP loop (`suite.run_closed_loops`, same seed,
+scored like `benchmark` from the same sample) next to the observer (the recording's own loop),
+oracle_kf and raw loops: position / heading RMSE, largest excursion, wave-band thrust power per
+DOF as a share of the raw loop's, stability. Only the tuning seeds 1 and 2 are accepted; held-out
+seeds are for `benchmark` only.
 """
 from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
+from dataclasses import replace
+import math
 import sys
 from typing import Any
 
@@ -23,10 +29,17 @@ import torch
 
 from lf_predictor_ros.benchmark.baseline_tuning import TUNING_SEEDS
 from lf_predictor_ros.benchmark.estimators import predictor_params
-from lf_predictor_ros.benchmark.suite import make_recording, make_setup, scored_start
+from lf_predictor_ros.benchmark.suite import (
+    make_recording,
+    make_setup,
+    run_closed_loops,
+    scored_start,
+)
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.predictor import AdaptivePredictor
-from sim_ros.simulation import load_scenario
+from sim_ros.simulation import load_scenario, simulate
+
+LOOP_REFERENCES = ('observer', 'oracle_kf', 'raw')
 
 
 def parse_variant(text: str) -> tuple[str, dict[str, Any]]:
@@ -51,11 +64,13 @@ def parse_variant(text: str) -> tuple[str, dict[str, Any]]:
 
 
 def run(scenario_name: str, seed: int, variants: Sequence[tuple[str, dict[str, Any]]],
-        duration: float, profile: bool) -> None:
+        duration: float, profile: bool, closed_loop: bool = False) -> None:
     """Print one line per variant (and the error profile with ``profile``)."""
     scenario = load_scenario(scenario_name)
     base = predictor_params(scenario)
-    data = make_recording(scenario, seed, duration, make_setup(scenario, seed, base)).data()
+    setup = make_setup(scenario, seed, base)
+    recording = make_recording(scenario, seed, duration, setup)
+    data = recording.data()
     t, y, u, truth = data['t'], data['y'], data['u'], data['truth']
     for name, overrides in variants:
         if scenario.ndof == 1:
@@ -76,6 +91,34 @@ def run(scenario_name: str, seed: int, variants: Sequence[tuple[str, dict[str, A
             for a in range(start, len(error), 60):
                 block = np.sqrt(np.mean(error[a:a + 60, :n] ** 2, axis=0))
                 print(f'    t {t[a]:6.0f} s  ' + ' '.join(f'{v:.3f}' for v in block))
+    if closed_loop and scenario.controller.enabled:
+        loops(scenario, seed, duration, setup, recording, variants,
+              float(t[scored_start(base, len(t))]))
+
+
+def loops(scenario: Any, seed: int, duration: float, setup: Any, recording: Any,
+          variants: Sequence[tuple[str, dict[str, Any]]], start: float) -> None:
+    """One DP loop per variant and per reference; print one line each."""
+    ideal = simulate(scenario, seed=seed, duration=duration, controller=True,
+                     feedback='truth_lf')
+    recorded = {'observer': recording.loop_run} if recording.loop_run is not None else None
+    results, _ = run_closed_loops(scenario, seed, duration, setup, LOOP_REFERENCES, ideal,
+                                  start, recorded)
+    for name, overrides in variants:
+        if scenario.ndof == 1:
+            overrides = {k: v for k, v in overrides.items() if k != 'regressor_frame'}
+        variant_setup = replace(setup, params=predictor_params(scenario, overrides))
+        loop, _ = run_closed_loops(scenario, seed, duration, variant_setup, ('adaptive',),
+                                   ideal, start)
+        results[f'adaptive {name}'] = loop['adaptive']
+    raw = list(results['raw']['thrust_wave_band_power'].values())
+    for name, entry in results.items():
+        power = list(entry['thrust_wave_band_power'].values())
+        share = ' / '.join(f'{100 * p / r:.2f}' for p, r in zip(power, raw, strict=True))
+        print(f"  loop {scenario.name:18s} {seed} {name:20s} position "
+              f"{entry['position_rmse']:.4f} m heading {entry.get('heading_rmse', math.nan):.5f} "
+              f"rad max {entry['max_excursion']:.2f} m thrust WF % raw {share} stable "
+              f"{entry['stability']['stable']}", flush=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -87,6 +130,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--variant', action='append', default=[], help='name=field:value;…')
     parser.add_argument('--duration', type=float, default=1800.0, help='simulated s')
     parser.add_argument('--profile', action='store_true', help='error per 60 s block')
+    parser.add_argument('--closed-loop', action='store_true', help='also run the DP loops')
     args = parser.parse_args(argv)
     if set(args.seeds) - set(TUNING_SEEDS):
         parser.error(f'only the tuning seeds {TUNING_SEEDS} (held-out seeds: `benchmark`)')
@@ -94,7 +138,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     variants = [parse_variant(v) for v in (args.variant or ['default'])]
     for scenario_name in args.scenarios:
         for seed in args.seeds:
-            run(scenario_name, seed, variants, args.duration, args.profile)
+            run(scenario_name, seed, variants, args.duration, args.profile, args.closed_loop)
     return 0
 
 

@@ -1,6 +1,6 @@
 """Motion gate (``core.motion_gate``, ``PredictorParams.motion_gate``; issue 13).
 
-The gain g = s²/(s² + k·s̄²) against its analytic values; the blend on the circle; the gate
+The gain g = r²/(1 + r²), r = s²/(k·s̄²), against its analytic values; the blend on the circle; the gate
 shut while the vessel does what it usually does and open in a move; and the gated predictor's
 output equal, sample by sample, to the blend of the two networks run on their own.
 """
@@ -36,6 +36,8 @@ def test_gain_is_half_where_the_velocity_is_sqrt_k_times_usual() -> None:
     assert gate_gain(np.ones(3), np.zeros(3)) == pytest.approx(np.ones(3))
     assert gate_gain(np.zeros(3), np.zeros(3)) == pytest.approx(np.zeros(3))  # nothing seen
     assert gate_gain(usual, usual, ratio=1.0) == pytest.approx([0.5, 0.5, 0.5])
+    assert gate_gain(usual, usual) == pytest.approx(np.full(3, 1.0 / (1.0 + GATE_RATIO ** 2)))
+    assert gate_gain(3.0 * GATE_RATIO * usual, usual) == pytest.approx(np.full(3, 0.9))
 
 
 def test_blend_takes_the_short_way_round_and_keeps_its_inputs() -> None:

@@ -41,6 +41,10 @@ GATE_TIME = 10.0
 GATE_RATIO = 9.0
 # Length of the history that sets the usual velocity s̄ [s] (the default training window).
 GATE_WINDOW = 1200.0
+# The gate stays shut until its history holds this fraction of GATE_WINDOW: a median of a few
+# samples is no measure of the usual motion (right after start, the first samples would open
+# it fully) [-].
+GATE_MIN_FILL = 0.25
 
 
 def gate_gain(velocity_sq: FloatArray, usual_sq: FloatArray, ratio: float = GATE_RATIO,
@@ -90,14 +94,23 @@ class MotionGate:
         self.ratio = ratio
         self._alpha = min(1.0, sample_time / time_constant)
         self._squares = np.zeros((max(1, int(round(window / sample_time))), ndof))
+        self._min_count = max(1, int(math.ceil(GATE_MIN_FILL * self._squares.shape[0])))
         self.reset()
 
     def reset(self) -> None:
-        """Forget the motion seen (a new data segment)."""
-        self._last: FloatArray | None = None
-        self._velocity = np.zeros(self.ndof)
+        """Forget everything: the motion seen and the usual velocity (a new vessel or sea)."""
+        self.restart()
         self._count = 0  # filled rows of the ring buffer ``_squares``
         self._index = 0  # next row to write
+
+    def restart(self) -> None:
+        """A new data segment (after a gap): the velocity restarts, the usual velocity stays.
+
+        What the vessel usually does outlives a gap in the poses; an empty history would make
+        the first motion after the gap look unusual and open the gate.
+        """
+        self._last: FloatArray | None = None
+        self._velocity = np.zeros(self.ndof)
 
     def update(self, moving: FloatArray) -> FloatArray:
         """Add the moving filter's newest estimate (a pose); return g per DOF (shape (ndof,))."""
@@ -114,5 +127,7 @@ class MotionGate:
         self._squares[self._index] = square
         self._index = (self._index + 1) % self._squares.shape[0]
         self._count = min(self._count + 1, self._squares.shape[0])
+        if self._count < self._min_count:
+            return np.zeros(self.ndof)
         usual = np.median(self._squares[:self._count], axis=0)
         return gate_gain(square, usual, self.ratio)

@@ -247,8 +247,9 @@ class AdaptivePredictor:
 
     def reset(self) -> None:
         """Forget everything learned and collected (parameters stay); a running job is dropped."""
-        if self._moving is not None:
+        if self._moving is not None and self._gate is not None:
             self._moving.reset()
+            self._gate.reset()
         self._stop.set()
         self._generation += 1
         self._stop = threading.Event()
@@ -299,7 +300,7 @@ class AdaptivePredictor:
         self._fallback.reset()
         if self._moving is not None and self._gate is not None:
             self._moving.restart_segment()
-            self._gate.reset()
+            self._gate.restart()
 
     def discard_running_job(self) -> None:
         """Drop the result of a running training or ω0 job; the network in service stays.

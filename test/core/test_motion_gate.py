@@ -1,8 +1,9 @@
 """Motion gate (``core.motion_gate``, ``PredictorParams.motion_gate``; issue 13).
 
-The gain g = r²/(1 + r²), r = s²/(k·s̄²), against its analytic values; the blend on the circle; the gate
-shut while the vessel does what it usually does and open in a move; and the gated predictor's
-output equal, sample by sample, to the blend of the two networks run on their own.
+The gain g = r²/(1 + r²), r = s²/(k·s̄²), against its analytic values; the blend on the
+circle; the gate shut while the vessel does what it usually does and open in a move, also right
+after a gap; and the gated predictor's output equal, sample by sample, to the blend of the two
+networks run on their own.
 """
 from __future__ import annotations
 
@@ -20,7 +21,8 @@ from lf_predictor_ros.core.predictor import AdaptivePredictor
 FloatArray = NDArray[np.float64]
 SMALL = PredictorParams(ndof=3, sample_time=1.0, retrain_period=20.0, training_window=200.0,
                         transient_length=10.0, filter_window=60.0, append_length=40.0,
-                        estimation_window=480.0, max_epochs=5, nu=4, ny=12)
+                        estimation_window=480.0, max_epochs=5, nu=4, ny=12,
+                        motion_gate=False)
 
 
 @pytest.fixture(autouse=True)
@@ -66,8 +68,14 @@ def test_gate_stays_shut_while_holding_and_opens_in_a_move() -> None:
         gain = gate.update(pose + (k + 1) * velocity)
     assert np.all(gain > 0.9)
     assert np.all(gate.update(np.array([np.nan, 0.0, 0.0])) == 0.0)
-    gate.reset()
-    assert np.all(gate.update(pose) == 0.0)
+    gate.restart()  # a gap: the usual velocity is kept, the move is still unusual
+    for k in range(60):
+        gain = gate.update(pose + 40.0 + (k + 1) * velocity)
+    assert np.all(gain > 0.9)
+    gate.reset()  # everything forgotten: shut until a quarter of the window is seen again
+    for k in range(149):
+        assert np.all(gate.update(pose + (k + 1) * velocity) == 0.0)
+    assert np.all(gate.update(pose + 150 * velocity) > 0.0)
 
 
 def test_gate_rejects_bad_settings() -> None:
@@ -98,6 +106,7 @@ def moving_run(n: int, seed: int) -> tuple[FloatArray, FloatArray, FloatArray]:
 def test_gated_output_is_the_blend_of_the_two_networks_run_alone() -> None:
     t, pose, force = moving_run(600, 2)
     gated = AdaptivePredictor(SMALL.replace(motion_gate=True), background=False)
+    assert not SMALL.motion_gate
     holding = AdaptivePredictor(SMALL, background=False)
     moving = AdaptivePredictor(SMALL.replace(ramp_invariant=True), background=False)
     blended = 0

@@ -80,7 +80,7 @@ class PredictorParams:
             'velocity (setpoint moves, turns) is followed without lag whatever the window taught '
             '(issue 13; nfb 0 only)'))
     motion_gate: bool = field(
-        default=True, metadata=_doc(
+        default=False, metadata=_doc(
             'train a ramp-invariant twin of the network on the same data and blend it in, per '
             'DOF, when the vessel moves faster than it did over the training window (setpoint '
             'moves, turns; core/motion_gate.py; twice the training cost; nfb 0, '

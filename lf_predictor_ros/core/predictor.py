@@ -143,13 +143,16 @@ class AdaptivePredictor:
     """Adaptive NNARMAX LF-pose predictor (implements `core.estimator.LfEstimator`)."""
 
     def __init__(self, params: PredictorParams, *, background: bool = True,
-                 checkpoint_path: str | None = None, max_trainings: int | None = None) -> None:
+                 checkpoint_path: str | None = None, max_trainings: int | None = None,
+                 training_lock: threading.Lock | None = None) -> None:
         """Create an untrained predictor.
 
         ``background``: train on a worker thread (True, for nodes) or inline at the retraining
         instant (False: deterministic, for replay and benchmarks). ``checkpoint_path``: the worker
         saves every accepted network there. ``max_trainings``: stop retraining after that many
         accepted trainings (1 gives the thesis's static network; None = adaptive).
+        ``training_lock``: held by a worker while it trains, so predictors sharing it train one
+        after the other (the motion gate's twin shares its holding network's).
         """
         self.params = params
         self.max_trainings = max_trainings
@@ -160,6 +163,7 @@ class AdaptivePredictor:
         self._capacity = max(params.training_samples + params.transient_samples,
                              params.estimation_samples, params.filter_samples) + params.max_lag
         self._first_training = first_training_samples(params)
+        self._training_lock = training_lock or threading.Lock()
         self._outcomes: queue.SimpleQueue[_JobOutcome] = queue.SimpleQueue()
         self._stop = threading.Event()
         self._worker: threading.Thread | None = None
@@ -195,7 +199,7 @@ class AdaptivePredictor:
         if params.motion_gate:
             self._moving = AdaptivePredictor(
                 params.replace(motion_gate=False, ramp_invariant=True), background=background,
-                max_trainings=max_trainings)
+                max_trainings=max_trainings, training_lock=self._training_lock)
             self._gate = MotionGate(params.ndof, params.sample_time,
                                     window=params.training_window)
         self._gain = np.zeros(params.ndof)
@@ -679,7 +683,9 @@ class AdaptivePredictor:
              frequency: FrequencyEstimate | float | None, stop: threading.Event) -> None:
         """Worker body: never raises; the outcome goes through the queue."""
         try:
-            result = run_retraining(self.params, snapshot, incumbent, targets, frequency, stop)
+            with self._training_lock:  # one training at a time per lock (the gate's twin)
+                result = run_retraining(self.params, snapshot, incumbent, targets, frequency,
+                                        stop)
         except Exception as exc:  # noqa: BLE001 - any failure must keep the node alive
             self._outcomes.put(_JobOutcome(generation, None, exc))
             return

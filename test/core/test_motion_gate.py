@@ -125,3 +125,39 @@ def test_gated_output_is_the_blend_of_the_two_networks_run_alone() -> None:
     assert counters['moving_trainings'] == moving.counters['trainings'] > 0
     assert counters['trainings'] == holding.counters['trainings']
     assert blended > 20  # the move opened the gate (not a test of the zero gain only)
+
+
+def test_the_twin_never_trains_beside_the_holding_network(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """In background mode the two trainings share one lock: they run one after the other."""
+    import threading
+    import time
+
+    import lf_predictor_ros.core.predictor as predictor_module
+
+    real = predictor_module.run_retraining
+    intervals: list[tuple[float, float, str]] = []
+    guard = threading.Lock()
+
+    def timed(*args: object, **kwargs: object) -> object:
+        start = time.monotonic()
+        result = real(*args, **kwargs)  # type: ignore[arg-type]
+        time.sleep(0.05)  # widen the window in which an overlap would show
+        with guard:
+            intervals.append((start, time.monotonic(), threading.current_thread().name))
+        return result
+
+    monkeypatch.setattr(predictor_module, 'run_retraining', timed)
+    t, pose, force = moving_run(300, 3)
+    gated = AdaptivePredictor(SMALL.replace(motion_gate=True), background=True)
+    try:
+        for k in range(t.size):
+            gated.update(t[k], pose[k], force[k])
+            gated.wait_for_training(timeout=30.0)  # the next sample sees the finished jobs
+    finally:
+        gated.close()
+    counters = gated.counters
+    assert counters['trainings'] >= 2 and counters['moving_trainings'] >= 2
+    ordered = sorted(intervals)
+    assert len(ordered) >= 4
+    assert all(b[0] >= a[1] for a, b in zip(ordered, ordered[1:], strict=False))

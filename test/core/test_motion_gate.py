@@ -8,6 +8,8 @@ networks run on their own.
 from __future__ import annotations
 
 import math
+import threading
+import time
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,6 +19,7 @@ import torch
 from lf_predictor_ros.core.motion_gate import GATE_RATIO, MotionGate, blend, gate_gain
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
+from lf_predictor_ros.core.retraining import run_retraining
 
 FloatArray = NDArray[np.float64]
 SMALL = PredictorParams(ndof=3, sample_time=1.0, retrain_period=20.0, training_window=200.0,
@@ -130,24 +133,18 @@ def test_gated_output_is_the_blend_of_the_two_networks_run_alone() -> None:
 def test_the_twin_never_trains_beside_the_holding_network(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """In background mode the two trainings share one lock: they run one after the other."""
-    import threading
-    import time
-
-    import lf_predictor_ros.core.predictor as predictor_module
-
-    real = predictor_module.run_retraining
     intervals: list[tuple[float, float, str]] = []
     guard = threading.Lock()
 
     def timed(*args: object, **kwargs: object) -> object:
         start = time.monotonic()
-        result = real(*args, **kwargs)  # type: ignore[arg-type]
+        result = run_retraining(*args, **kwargs)  # type: ignore[arg-type]
         time.sleep(0.05)  # widen the window in which an overlap would show
         with guard:
             intervals.append((start, time.monotonic(), threading.current_thread().name))
         return result
 
-    monkeypatch.setattr(predictor_module, 'run_retraining', timed)
+    monkeypatch.setattr('lf_predictor_ros.core.predictor.run_retraining', timed)
     t, pose, force = moving_run(300, 3)
     gated = AdaptivePredictor(SMALL.replace(motion_gate=True), background=True)
     try:

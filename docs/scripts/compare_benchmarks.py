@@ -1,7 +1,8 @@
 """Paired comparison of one estimator across two `benchmark --json` runs (same seeds).
 
-    python docs/scripts/compare_benchmarks.py runs/benchmark-full.json runs/benchmark-gate.json \
-        [--estimator adaptive] [--reference observer]
+    python docs/scripts/compare_benchmarks.py docs/results/benchmark/default_held_out.json.gz \
+        docs/results/benchmark/motion_gate_held_out.json.gz [--estimator adaptive] \
+        [--reference observer]
 
 Per scenario, over the seeds both runs share: the closed-loop position RMSE, heading RMSE and
 wave-band thrust power per DOF of the estimator's loop in each run, their per-seed ratio new /
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
+import gzip
 import json
 import math
 import sys
@@ -24,9 +26,13 @@ DOFS = ('north', 'east', 'yaw')
 
 
 def cases(path: str) -> dict[tuple[str, int], dict[str, Any]]:
-    """(scenario, seed) → case of a benchmark JSON."""
-    with open(path, encoding='utf-8') as handle:
-        data = json.load(handle)
+    """(scenario, seed) → case of a benchmark JSON (gzip-compressed if it ends in .gz)."""
+    if path.endswith('.gz'):
+        with gzip.open(path, 'rt', encoding='utf-8') as compressed:
+            data = json.load(compressed)
+    else:
+        with open(path, encoding='utf-8') as handle:
+            data = json.load(handle)
     return {(case['scenario'], int(case['seed'])): case for case in data['cases']}
 
 

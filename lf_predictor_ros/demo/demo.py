@@ -64,8 +64,9 @@ SETTLE_TIME = 0.5  # [s wall] after the simulator exits, so the recorder gets th
 MIN_REAL_TIME_FACTOR = 1.0  # the run is aborted if slower than real time (plus start-up)
 START_UP_ALLOWANCE = 120.0  # [s wall] added to the run-time limit
 # Subscriptions that must exist before the simulator starts: predictor + recorder on the
-# measurements, controller + recorder on lf_pose, recorder on the commands.
-REQUIRED_SUBSCRIBERS = {'/measured_pose': 2, '/thrust': 2, '/lf_pose': 2, '/thrust_command': 1}
+# measurements, controller + recorder on lf_pose, predictor + recorder on the commands (the
+# predictor reads the controller's gains from them; a command it missed shortens that fit).
+REQUIRED_SUBSCRIBERS = {'/measured_pose': 2, '/thrust': 2, '/lf_pose': 2, '/thrust_command': 2}
 NO_TRAINING_WARMUP = 0.1  # fraction of the run excluded from the metrics without a training
 
 

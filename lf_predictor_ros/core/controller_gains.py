@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import uniform_filter1d
 
-from lf_predictor_ros.core.lf_dynamics import as_series
+from lf_predictor_ros.core.lf_dynamics import as_series, earth_to_body
 
 FloatArray = NDArray[np.float64]
 
@@ -112,7 +112,7 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
         raise ValueError(f'{eta.shape[0]} samples are too few to read controller gains (need '
                          f'{MIN_SAMPLES + 2 * max_shift}): use a longer window')
     window = max(3, int(round(highpass_time / sample_time)))
-    body = _body_position(eta)
+    body = earth_to_body(eta, eta, n)  # R(ψ)ᵀ[N, E] and ψ: the error the PD turns into force
     position = _highpass(body, window)
     integral = _highpass(np.cumsum(body, axis=0) * sample_time, window)
     velocity = _highpass(nu, window)
@@ -149,15 +149,6 @@ def _fit_pid(position: FloatArray, integral: FloatArray, velocity: FloatArray,
         stiffness[i], damping[i] = coef[0], coef[1]
         r_squared[i] = 1.0 - float(np.sum((y - phi @ coef) ** 2)) / total
     return ControllerGains(stiffness, damping, r_squared, shift)
-
-
-def _body_position(eta: FloatArray) -> FloatArray:
-    """[R(ψ)ᵀ [N, E], ψ] per row for 3 DOF (the error the controller turns into body force)."""
-    if eta.shape[1] == 1:
-        return eta.copy()
-    c, s = np.cos(eta[:, 2]), np.sin(eta[:, 2])
-    return np.column_stack([c * eta[:, 0] + s * eta[:, 1], -s * eta[:, 0] + c * eta[:, 1],
-                            eta[:, 2]])
 
 
 def _highpass(values: FloatArray, window: int) -> FloatArray:

@@ -223,10 +223,8 @@ def _detrended_spread(y: FloatArray, ny: int, body_frame: bool) -> FloatArray:
     offsets = offsets[:, 1:, :]
     if body_frame:
         heading = block[:, 0, 2]
-        cos, sin = np.cos(heading)[:, None], np.sin(heading)[:, None]
-        north, east = offsets[..., 0], offsets[..., 1]
-        offsets = np.stack((cos * north + sin * east, -sin * north + cos * east,
-                            offsets[..., 2]), axis=-1)
+        rows = offsets.reshape(offsets.shape[0], -1)
+        offsets = rotate_blocks(rows, np.cos(heading), -np.sin(heading)).reshape(offsets.shape)
     return np.asarray(np.sqrt(np.mean(offsets ** 2, axis=(0, 1))), dtype=np.float64)
 
 

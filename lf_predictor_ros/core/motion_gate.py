@@ -30,7 +30,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from lf_predictor_ros.core.heading import wrap_angle
+from lf_predictor_ros.core.heading import wrap_pose
 
 FloatArray = NDArray[np.float64]
 
@@ -69,13 +69,9 @@ def blend(holding: FloatArray, moving: FloatArray, gain: FloatArray, ndof: int) 
     the inputs are not modified.
     """
     out = np.array(holding, dtype=np.float64)
-    difference = np.asarray(moving, dtype=np.float64)[:ndof] - out[:ndof]
-    if ndof == 3:
-        difference[2] = float(wrap_angle(difference[2]))
+    difference = wrap_pose(np.asarray(moving, dtype=np.float64)[:ndof] - out[:ndof], ndof)
     out[:ndof] += np.asarray(gain, dtype=np.float64)[:ndof] * difference
-    if ndof == 3:
-        out[2] = float(wrap_angle(out[2]))
-    return out
+    return wrap_pose(out, ndof)
 
 
 class MotionGate:
@@ -118,9 +114,7 @@ class MotionGate:
         if not np.all(np.isfinite(value)):
             return np.zeros(self.ndof)  # no motion evidence: hold the holding filter
         if self._last is not None:
-            step = value - self._last
-            if self.ndof == 3:
-                step[2] = float(wrap_angle(step[2]))
+            step = wrap_pose(value - self._last, self.ndof)
             self._velocity = self._velocity + self._alpha * (step - self._velocity)
         self._last = value
         square = self._velocity ** 2

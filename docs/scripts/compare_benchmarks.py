@@ -37,12 +37,8 @@ def cases(path: str) -> dict[tuple[str, int], dict[str, Any]]:
 
 
 def cell(values: Sequence[float]) -> str:
-    """Mean [95 % interval] of finite values; '–' when none."""
-    finite = [v for v in values if math.isfinite(v)]
-    if not finite:
-        return '–'
-    spread = interval(finite)
-    return f'{spread.mean:.3g} [{spread.low:.3g}, {spread.high:.3g}]'
+    """Mean [95 % interval] of the finite values (`scoring.Interval.cell`); '–' when none."""
+    return interval(values).cell(lambda value: f'{value:.3g}')
 
 
 def loop_rows(scenario: str, pairs: list[tuple[dict[str, Any], dict[str, Any]]], estimator: str,

@@ -556,7 +556,8 @@ class LfOdometry:
             q = np.zeros((2 * n, 2 * n))
             q[n:, n:] = np.diag(accel_var * h)
             return q
-        if memory is not None and memory.model is not None and self._twist_uses_model():
+        if self._twist_uses_model():
+            assert memory is not None and memory.model is not None
             accel_var = memory.model.residual_std ** 2 + 1e-12
         elif memory is not None:
             accel_var = memory.accel_std ** 2 + 1e-12

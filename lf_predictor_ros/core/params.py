@@ -338,6 +338,7 @@ class PredictorParams:
             raise ValueError(f'training mode rule: training_mode must be one of '
                              f'{TRAINING_MODES}, got {self.training_mode!r}')
         self._check_regressor_frame()
+        self._check_ramp()
         if self.max_train_seconds > self.retrain_period:
             raise ValueError(
                 f'training time rule: max_train_seconds = {self.max_train_seconds} s exceeds '
@@ -357,6 +358,8 @@ class PredictorParams:
             raise ValueError('regressor frame rule: regressor_frame body has no parallel (free '
                              'run) training with LF feedback: set training_mode '
                              'series_parallel, nfb 0 or regressor_frame earth')
+
+    def _check_ramp(self) -> None:
         if self.motion_gate and self.ramp_invariant:
             raise ValueError('ramp rule: motion_gate blends a plain (holding) network with a '
                              'ramp-invariant twin of it: set ramp_invariant false, or '

@@ -22,6 +22,12 @@ about the vessel is assumed.
 
 Constants chosen on tuning seed 1 only (open loop, fair recordings of rao_supply, rao_swell,
 supply_closed_loop and threedof_open_loop; docs/BENCHMARKS.md "Motion gate").
+
+With ``PredictorParams.motion_gate_smoothing`` T > 0 the gated output is
+ŷ_hold + g · LP_T(ŷ_move − ŷ_hold), LP_T a first-order low-pass: the twin's estimate carries
+more wave motion than the holding network's (it follows any ramp, so it cannot learn to ignore
+the slow part of a wave group), and in a DP loop whatever the gate lets through of it shows as
+wave-band thrust. A move or a turn changes the difference slowly, so the low-pass keeps it.
 """
 from __future__ import annotations
 
@@ -62,16 +68,27 @@ def gate_gain(velocity_sq: FloatArray, usual_sq: FloatArray, ratio: float = GATE
     return np.asarray(np.clip(gain, 0.0, 1.0), dtype=np.float64)
 
 
+def moving_offset(holding: FloatArray, moving: FloatArray, ndof: int) -> FloatArray:
+    """The offset moving − holding on the first ``ndof`` entries (yaw wrapped), shape (ndof,)."""
+    return wrap_pose(np.asarray(moving, dtype=np.float64)[:ndof]
+                     - np.asarray(holding, dtype=np.float64)[:ndof], ndof)
+
+
+def shifted(holding: FloatArray, offset: FloatArray, ndof: int) -> FloatArray:
+    """The pose holding + offset on the first ``ndof`` entries (yaw wrapped), a new array."""
+    out = np.array(holding, dtype=np.float64)
+    out[:ndof] += np.asarray(offset, dtype=np.float64)[:ndof]
+    return wrap_pose(out, ndof)
+
+
 def blend(holding: FloatArray, moving: FloatArray, gain: FloatArray, ndof: int) -> FloatArray:
     """Holding + g·(moving − holding) on the first ``ndof`` entries (yaw difference wrapped).
 
     Poses are [north m, east m, yaw rad] (3 DOF) or [north m, …] (1 DOF: only north blended);
     the inputs are not modified.
     """
-    out = np.array(holding, dtype=np.float64)
-    difference = wrap_pose(np.asarray(moving, dtype=np.float64)[:ndof] - out[:ndof], ndof)
-    out[:ndof] += np.asarray(gain, dtype=np.float64)[:ndof] * difference
-    return wrap_pose(out, ndof)
+    return shifted(holding, np.asarray(gain, dtype=np.float64)[:ndof]
+                   * moving_offset(holding, moving, ndof), ndof)
 
 
 class MotionGate:

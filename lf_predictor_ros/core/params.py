@@ -85,6 +85,13 @@ class PredictorParams:
             'DOF, when the vessel moves faster than it did over the training window (setpoint '
             'moves, turns; core/motion_gate.py; twice the training cost; nfb 0, '
             'ramp_invariant false)'))
+    motion_gate_smoothing: float = field(
+        default=0.0, metadata=_doc(
+            'with motion_gate: time constant of a first-order low-pass on the twin-minus-'
+            'holding difference before the gate scales it (the gated output is holding + '
+            'g·LP(moving − holding)): the extra wave motion of the twin stays out of the '
+            'estimate; '
+            '0 = off (holding + g·(moving − holding))', 's'))
     estimation_window: float = field(
         default=1200.0, metadata=_doc('frequency-estimation window γ (eq. 4.3)', 's'))
     retrain_period: float = field(
@@ -296,7 +303,7 @@ class PredictorParams:
                 raise ValueError(f'positivity rule: {name} must be > 0, got '
                                  f'{getattr(self, name)!r}: give a positive value')
         for name in ('weight_decay', 'derivative_weight', 'initial_wave_peak_freq',
-                     'wave_augmentation', 'switch_blend_time'):
+                     'wave_augmentation', 'switch_blend_time', 'motion_gate_smoothing'):
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')

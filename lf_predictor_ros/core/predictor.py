@@ -59,7 +59,7 @@ from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.estimator import EstimatorState, EstimatorStatus
 from lf_predictor_ros.core.frequency import FrequencyEstimate
 from lf_predictor_ros.core.heading import ContinuousHeading, wrap_angle
-from lf_predictor_ros.core.motion_gate import MotionGate, blend
+from lf_predictor_ros.core.motion_gate import MotionGate, moving_offset, shifted
 from lf_predictor_ros.core.network import (
     NnarmaxNet,
     NumpyNnarmax,
@@ -203,6 +203,9 @@ class AdaptivePredictor:
             self._gate = MotionGate(params.ndof, params.sample_time,
                                     window=params.training_window)
         self._gain = np.zeros(params.ndof)
+        smoothing = params.motion_gate_smoothing
+        self._gate_alpha = 1.0 if smoothing <= 0.0 else min(1.0, params.sample_time / smoothing)
+        self._gate_offset = np.zeros(params.ndof)  # LP(moving − holding) (motion_gate_smoothing)
         self._clear_output_state()
         self._start_segment()
         if background:
@@ -421,6 +424,7 @@ class AdaptivePredictor:
         self._y: deque[FloatArray] = deque(maxlen=self._capacity)
         self._fb: deque[FloatArray] = deque(maxlen=max(1, self.params.nfb))
         self._heading = ContinuousHeading()
+        self._gate_offset = np.zeros(self.ndof)
         self._k = -1
         self._fb_next = -1
         self._last_train_k: int | None = None
@@ -607,11 +611,17 @@ class AdaptivePredictor:
             return out
         moving = self._moving.update(t, pose, force)
         gain = self._gate.update(moving)
-        if not self._moving.using_network:
+        offset = moving_offset(out, moving, self.ndof)
+        if not self._moving.using_network or not np.all(np.isfinite(offset)):
             self._gain = np.zeros(self.ndof)
+            self._gate_offset = np.zeros(self.ndof)
             return out
         self._gain = gain
-        return blend(out, moving, gain, self.ndof)
+        if self._gate_alpha < 1.0:
+            # LP(moving − holding) of core.motion_gate (motion_gate_smoothing)
+            self._gate_offset = self._gate_offset + self._gate_alpha * (offset - self._gate_offset)
+            offset = self._gate_offset
+        return shifted(out, gain * offset, self.ndof)
 
     def _output(self, estimate: FloatArray, measured: FloatArray) -> FloatArray:
         """Estimate as a pose; for 1 DOF east and yaw are the measurement, unfiltered."""

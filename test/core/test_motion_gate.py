@@ -16,7 +16,13 @@ from numpy.typing import NDArray
 import pytest
 import torch
 
-from lf_predictor_ros.core.motion_gate import GATE_RATIO, MotionGate, blend, gate_gain
+from lf_predictor_ros.core.motion_gate import (
+    GATE_RATIO,
+    MotionGate,
+    blend,
+    gate_gain,
+    moving_offset,
+)
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
 from lf_predictor_ros.core.retraining import run_retraining
@@ -130,6 +136,38 @@ def test_gated_output_is_the_blend_of_the_two_networks_run_alone() -> None:
     assert blended > 20  # the move opened the gate (not a test of the zero gain only)
 
 
+def test_smoothed_gate_blends_the_low_passed_offset_of_the_two_networks() -> None:
+    """motion_gate_smoothing T: out = holding + g·LP_T(moving − holding), LP restarting at 0."""
+    smoothing = 5.0
+    t, pose, force = moving_run(600, 2)
+    gated = AdaptivePredictor(SMALL.replace(motion_gate=True, motion_gate_smoothing=smoothing),
+                              background=False)
+    plain = AdaptivePredictor(SMALL.replace(motion_gate=True), background=False)
+    holding = AdaptivePredictor(SMALL, background=False)
+    moving = AdaptivePredictor(SMALL.replace(ramp_invariant=True), background=False)
+    alpha = SMALL.sample_time / smoothing
+    low_passed = np.zeros(3)
+    smaller = 0
+    for k in range(t.size):
+        out = gated.update(t[k], pose[k], force[k])
+        unsmoothed = plain.update(t[k], pose[k], force[k])
+        a = holding.update(t[k], pose[k], force[k])
+        b = moving.update(t[k], pose[k], force[k])
+        if not moving.using_network:
+            low_passed = np.zeros(3)
+            assert out == pytest.approx(a, abs=1e-12)
+            continue
+        low_passed = low_passed + alpha * (moving_offset(a, b, 3) - low_passed)
+        gain = gated.motion_gain
+        expected = a.copy()
+        expected[:3] += gain * low_passed
+        assert out[:2] == pytest.approx(expected[:2], abs=1e-9)
+        assert math.remainder(out[2] - expected[2], 2 * math.pi) == pytest.approx(0, abs=1e-9)
+        smaller += int(np.linalg.norm(out[:2] - a[:2]) < np.linalg.norm(unsmoothed[:2] - a[:2]))
+    assert gated.counters['moving_trainings'] > 0
+    assert smaller > 100  # the low-pass changed the output (not the unsmoothed gate again)
+
+
 def test_the_twin_never_trains_beside_the_holding_network(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """In background mode the two trainings share one lock: they run one after the other."""
@@ -158,3 +196,11 @@ def test_the_twin_never_trains_beside_the_holding_network(
     ordered = sorted(intervals)
     assert len(ordered) >= 4
     assert all(b[0] >= a[1] for a, b in zip(ordered, ordered[1:], strict=False))
+
+
+@pytest.mark.parametrize(('value', 'message'), [
+    (-1.0, 'motion_gate_smoothing must be ≥ 0'),
+    (math.nan, 'motion_gate_smoothing must be finite')])
+def test_negative_or_nan_smoothing_is_refused(value: float, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        SMALL.replace(motion_gate=True, motion_gate_smoothing=value)

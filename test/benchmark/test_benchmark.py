@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from lf_predictor_ros.benchmark.adaptation import AdaptationEvent
-from lf_predictor_ros.benchmark.benchmark import main, render, write_figures
+from lf_predictor_ros.benchmark.benchmark import main, param_overrides, render, write_figures
 from lf_predictor_ros.benchmark.recordings import LeakError, record
 from lf_predictor_ros.benchmark.suite import (
     CAUSAL,
@@ -281,6 +281,23 @@ def test_predictor_params_overrides_win_and_the_sample_time_must_fit_the_sensor(
 def test_unknown_predictor_override_is_a_clear_error() -> None:
     with pytest.raises(ValueError, match=r"unknown predictor parameter\(s\) \['average_poses'\]"):
         predictor_params(load_scenario('onedof_reference'), {'average_poses': False})
+
+
+def test_param_overrides_are_checked_before_a_run_and_said_on_the_page(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    assert param_overrides(['motion_gate=true', 'motion_gate_smoothing=5',
+                            'max_output_rate=[0.5, 0.5, 0.02]']) == {
+        'motion_gate': True, 'motion_gate_smoothing': 5, 'max_output_rate': (0.5, 0.5, 0.02)}
+    for bad, message in ((['motion_gate_smoothing=-1'], 'must be ≥ 0'),
+                         (['average_poses=false'], 'unknown PredictorParams key'),
+                         (['motion_gate'], 'write FIELD=VALUE')):
+        with pytest.raises(SystemExit):
+            main(['--scenarios', 'onedof_reference', '--param', *bad])
+        assert message in capsys.readouterr().err
+    case = _case(2, 2.0)
+    assert 'adaptive = the product (shipped defaults);' in render([case], 'b', 1.0, 'here')
+    page = render([case], 'b', 1.0, 'here', overrides={'motion_gate': True})
+    assert 'adaptive = the product (shipped defaults except `motion_gate: True`);' in page
 
 
 def test_untuned_baselines_are_said_on_the_page() -> None:

@@ -58,7 +58,7 @@ import torch
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.estimator import EstimatorState, EstimatorStatus
 from lf_predictor_ros.core.frequency import FrequencyEstimate
-from lf_predictor_ros.core.heading import ContinuousHeading, wrap_angle
+from lf_predictor_ros.core.heading import ContinuousHeading, wrap_angle, wrap_pose
 from lf_predictor_ros.core.motion_gate import MotionGate, moving_offset, shifted
 from lf_predictor_ros.core.network import (
     NnarmaxNet,
@@ -335,12 +335,17 @@ class AdaptivePredictor:
         return True, 'training starts with the next sample'
 
     def wait_for_training(self, timeout: float | None = None) -> bool:
-        """Block until the running job (if any) finishes; for tests and offline tools only."""
+        """Block until the running jobs finish or ``timeout`` [s] has passed (None: no limit).
+
+        True when none is running any more; with the motion gate the twin's job and the
+        holding network's share the one timeout. For tests and offline tools only.
+        """
+        deadline = None if timeout is None else time.monotonic() + timeout
         done = True if self._moving is None else self._moving.wait_for_training(timeout)
         worker = self._worker
         if worker is None:
             return done
-        worker.join(timeout)
+        worker.join(None if deadline is None else max(0.0, deadline - time.monotonic()))
         return done and not worker.is_alive()
 
     def close(self) -> None:
@@ -595,10 +600,7 @@ class AdaptivePredictor:
 
     def _difference(self, a: FloatArray, b: FloatArray) -> FloatArray:
         """The difference a − b of two positions, heading wrapped to (−π, π]."""
-        difference = np.asarray(a - b, dtype=np.float64)
-        if self.ndof == 3:
-            difference[2] = wrap_angle(float(difference[2]))
-        return difference
+        return wrap_pose(np.asarray(a, dtype=np.float64) - b, self.ndof)
 
     def _gated(self, t: float, out: FloatArray, pose: FloatArray,
                force: FloatArray) -> FloatArray:

@@ -204,3 +204,28 @@ def test_the_twin_never_trains_beside_the_holding_network(
 def test_negative_or_nan_smoothing_is_refused(value: float, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         SMALL.replace(motion_gate=True, motion_gate_smoothing=value)
+
+
+def test_wait_for_training_keeps_one_timeout_for_both_networks(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """With the twin's job queued behind the holding network's, the wait still ends on time."""
+    started = threading.Event()
+
+    def slow(*args: object, **kwargs: object) -> object:
+        started.set()
+        time.sleep(3.0)
+        return run_retraining(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr('lf_predictor_ros.core.predictor.run_retraining', slow)
+    t, pose, force = moving_run(300, 3)
+    gated = AdaptivePredictor(SMALL.replace(motion_gate=True), background=True)
+    try:
+        k = 0
+        while not started.is_set():
+            gated.update(t[k], pose[k], force[k])
+            k += 1
+        begin = time.monotonic()
+        assert not gated.wait_for_training(timeout=1.0)  # both jobs still busy
+        assert time.monotonic() - begin < 1.6  # one timeout, not one per network (2 s)
+    finally:
+        gated.close()

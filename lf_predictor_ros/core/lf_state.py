@@ -18,8 +18,9 @@ from __future__ import annotations
 
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import replace
+from dataclasses import dataclass, replace
 import math
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,6 +43,7 @@ from lf_predictor_ros.core.retraining import target_filter
 from lf_predictor_ros.core.targets import TargetWindow
 
 FloatArray = NDArray[np.float64]
+ReadOutcome = Literal['read', 'no_data', 'no_fit']
 
 
 class LfStateEstimator:
@@ -225,7 +227,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     note = ''
     controlled = False
     if commands is not None:
-        implied, note = implied_input_gain(published, *commands, params.sample_time)
+        read = implied_input_gain(published, *commands, params.sample_time)
+        implied, note = read.gain, read.note
         controlled = implied is not None
         if input_gain is None and implied is not None:
             input_gain, source = implied, 'controller'
@@ -242,41 +245,74 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                              min_samples, lag_prior)
 
 
+@dataclass(frozen=True)
+class ControllerRead:
+    """One attempt to read the DP controller's implied thrust gain (`implied_input_gain`).
+
+    Attributes:
+        gain: 1/M_ii per DOF (M_ii = Kd² / (4 Kp)), None if the controller was not read.
+        note: what was read (implied inertia, R² per DOF, the samples used) or why not.
+        outcome: 'read'; 'no_data' (no commands or published estimates, or no contiguous run
+            long enough: says nothing about the controller); 'no_fit' (enough data, but the PD
+            law with positive gains does not explain every DOF: another controller, or none).
+        stamp: the newest published estimate the read used [s] (None unless read).
+    """
+
+    gain: FloatArray | None
+    note: str
+    outcome: ReadOutcome
+    stamp: float | None = None
+
+
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,
-                       sample_time: float) -> tuple[FloatArray | None, str]:
-    """1/M_ii implied by the DP controller acting on the published estimates, and a note.
+                       sample_time: float) -> ControllerRead:
+    """1/M_ii implied by the DP controller acting on the published estimates.
 
     ``times``, ``forces``: the controller's commands and their stamps (a controller stamps its
     command with the stamp of the estimate it acted on; `fit_controller_gains` also tries a few
     samples of shift). The applied thrust does not do: actuator lag (1 s shaft dynamics on the
     simulated supply vessel) turns the D term's high-frequency part into apparent stiffness,
-    and Kd² / (4 Kp) came out at 0.03–0.13 of the inertia. Pairs over the newest contiguous run
-    of published estimates; (None, why) if the controller cannot be read.
+    and Kd² / (4 Kp) came out at 0.03–0.13 of the inertia.
+
+    Every published estimate is paired with the command stamped like it; the pairs form
+    contiguous runs, broken by a gap in the stamps or by an estimate without a command (a late
+    or lost sample or command). Every run of at least ``MIN_SAMPLES`` + 2 ``MAX_SHIFT`` pairs
+    is used, pooled into one fit (no high-pass, integral or shift crosses a break); shorter
+    runs are left out. So one short break costs only the samples around it, not the read.
     """
     if not published or times.shape[0] == 0:
-        return None, 'controller gains: no data'
+        return ControllerRead(None, 'controller gains: no data', 'no_data')
     stamps = np.array([p.stamp for p in published])
     index = np.searchsorted(times, stamps - 0.5 * sample_time)
     index = np.clip(index, 0, times.shape[0] - 1)
     matched = np.abs(times[index] - stamps) < 0.5 * sample_time
-    unmatched = np.flatnonzero(~matched)
-    run_starts = np.flatnonzero(np.r_[True, np.diff(stamps) > 1.5 * sample_time])
-    start = max(int(unmatched[-1]) + 1 if unmatched.size else 0, int(run_starts[-1]))
-    rows = np.arange(start, stamps.shape[0])
-    if rows.size < MIN_SAMPLES + 2 * MAX_SHIFT:
-        return None, f'controller gains: {rows.size} contiguous samples, too few'
+    # blocks of equal `matched` without a gap in the stamps: [edges[j], edges[j + 1])
+    edges = np.flatnonzero(np.r_[True, (np.diff(stamps) > 1.5 * sample_time) |
+                                 (matched[1:] != matched[:-1]), True])
+    need = MIN_SAMPLES + 2 * MAX_SHIFT
+    runs = [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True) if matched[a]]
+    longest = max((b - a for a, b in runs), default=0)
+    runs = [(a, b) for a, b in runs if b - a >= need]
+    if not runs:
+        return ControllerRead(None, f'controller gains: longest contiguous run {longest} '
+                                    f'samples, too few (need {need})', 'no_data')
+    rows = np.concatenate([np.arange(a, b) for a, b in runs])
+    starts = np.cumsum([b - a for a, b in runs])[:-1].tolist()
     poses = np.array([published[k].pose for k in rows])
     twists = np.array([published[k].twist for k in rows])
     try:
-        gains = fit_controller_gains(poses, twists, forces[index[rows]], sample_time)
-    except ValueError as exc:
-        return None, f'controller gains: {exc}'
+        gains = fit_controller_gains(poses, twists, forces[index[rows]], sample_time,
+                                     run_starts=starts)
+    except ValueError as exc:  # non-finite values: nothing learned about the controller
+        return ControllerRead(None, f'controller gains: {exc}', 'no_data')
     inertia = gains.implied_inertia()
     r2 = ', '.join(f'{v:.2f}' for v in gains.r_squared)
     if inertia is None:
-        return None, f'controller gains not read (R² {r2})'
-    return 1.0 / inertia, (f"controller-implied inertia {', '.join(f'{v:.3g}' for v in inertia)}"
-                           f' (R² {r2})')
+        return ControllerRead(None, f'controller gains not read (R² {r2})', 'no_fit')
+    used = f'{rows.size} samples' + (f' in {len(runs)} runs' if len(runs) > 1 else '')
+    return ControllerRead(1.0 / inertia, (f"controller-implied inertia "
+                                          f"{', '.join(f'{v:.3g}' for v in inertia)} "
+                                          f'(R² {r2}; {used})'), 'read', float(stamps[rows[-1]]))
 
 
 def _input_gain(inertia: tuple[float, ...], ndof: int) -> FloatArray | None:

@@ -102,24 +102,46 @@ def _published_pd_loop(m: int, t0: float = 0.0) -> tuple[list[Published], np.nda
     return published, stamps, (-2.0e4 * x - 3.0e5 * v)[:, None]
 
 
-def test_implied_input_gain_reads_the_controller_on_the_newest_run() -> None:
+def test_implied_input_gain_reads_the_controller_on_every_long_enough_run() -> None:
     published, times, forces = _published_pd_loop(400)
-    gain, note = implied_input_gain(published, times, forces, 1.0)
-    assert gain is not None
-    np.testing.assert_allclose(gain, [8.0e4 / 3.0e5 ** 2], rtol=1e-6)  # 4 Kp / Kd²
-    assert 'controller-implied inertia' in note and 'R² 1.00' in note
-    # a gap: only the newest contiguous run counts, here too short
+    read = implied_input_gain(published, times, forces, 1.0)
+    assert read.outcome == 'read' and read.gain is not None and read.stamp == 399.0
+    np.testing.assert_allclose(read.gain, [8.0e4 / 3.0e5 ** 2], rtol=1e-6)  # 4 Kp / Kd²
+    assert 'controller-implied inertia' in read.note and 'R² 1.00; 400 samples)' in read.note
+    # a short break near the end (two commands lost: the node fell behind for 2 s) leaves a
+    # 30-sample newest run: the 368 samples before the break are still read (before: None)
+    kept = np.r_[0:368, 370:400]
+    read = implied_input_gain(published, times[kept], forces[kept], 1.0)
+    assert read.outcome == 'read' and read.gain is not None and read.stamp == 367.0
+    np.testing.assert_allclose(read.gain, [8.0e4 / 3.0e5 ** 2], rtol=1e-6)
+    assert '; 368 samples)' in read.note
+    # a gap in the stamps and a short newest run: the same
     late, late_times, late_forces = _published_pd_loop(50, t0=1000.0)
-    gain, note = implied_input_gain(published + late, np.r_[times, late_times],
-                                    np.r_[forces, late_forces], 1.0)
-    assert gain is None and 'too few' in note
-    # a thrust that no PD law on the estimates explains
+    read = implied_input_gain(published + late, np.r_[times, late_times],
+                              np.r_[forces, late_forces], 1.0)
+    assert read.gain is not None and read.stamp == 399.0
+    np.testing.assert_allclose(read.gain, [8.0e4 / 3.0e5 ** 2], rtol=1e-6)
+    # two long runs are pooled
+    later, later_times, later_forces = _published_pd_loop(200, t0=1000.0)
+    read = implied_input_gain(published + later, np.r_[times, later_times],
+                              np.r_[forces, later_forces], 1.0)
+    assert read.gain is not None and read.stamp == 1199.0
+    np.testing.assert_allclose(read.gain, [8.0e4 / 3.0e5 ** 2], rtol=1e-6)
+    assert '; 600 samples in 2 runs)' in read.note
+    # a command lost every 100 samples: no run of 124, nothing read for lack of data
+    kept = np.setdiff1d(np.arange(400), [100, 200, 300])
+    read = implied_input_gain(published, times[kept], forces[kept], 1.0)
+    assert read.gain is None and read.outcome == 'no_data' and read.stamp is None
+    assert 'longest contiguous run 100 samples, too few (need 124)' in read.note
+    # a thrust that no PD law on the estimates explains: enough data, no fit
     noise = np.random.default_rng(9).standard_normal(forces.shape)
-    gain, note = implied_input_gain(published, times, noise, 1.0)
-    assert gain is None and 'not read' in note
+    read = implied_input_gain(published, times, noise, 1.0)
+    assert read.gain is None and read.outcome == 'no_fit' and 'not read' in read.note
     # thrust logged at other instants: nothing pairs
-    gain, note = implied_input_gain(published, times + 0.5, forces, 1.0)
-    assert gain is None and 'too few' in note
+    read = implied_input_gain(published, times + 0.5, forces, 1.0)
+    assert read.gain is None and read.outcome == 'no_data' and 'run 0 samples' in read.note
+    read = implied_input_gain([], times, forces, 1.0)
+    assert read.gain is None and read.outcome == 'no_data' and 'no data' in read.note
 
 
 def test_the_controller_implied_inertia_reaches_the_memory_unless_one_is_given() -> None:

@@ -25,6 +25,7 @@ east m, heading rad] with the heading unwrapped, ν and τ in ``base_link_fsd``.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -82,21 +83,29 @@ class ControllerGains:
 
 def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
                          sample_time: float, highpass_time: float = HIGHPASS_TIME,
-                         max_shift: int = MAX_SHIFT) -> ControllerGains:
+                         max_shift: int = MAX_SHIFT, run_starts: Sequence[int] = ()
+                         ) -> ControllerGains:
     """Least squares of the high-passed thrust on −(body-frame pose), −ν and −∫pose, per DOF.
+
+    The series may be several contiguous runs one after the other (``run_starts``): each run is
+    high-passed, integrated and shifted on its own, so no moving mean, integral or shift crosses
+    a break, and the runs are pooled into one regression with one shift.
 
     Args:
         poses: the estimates the controller was given, shape (m, n), n = 1 or 3 (heading
-            unwrapped), uniform sample time.
+            unwrapped), uniform sample time within a run.
         twists: their body velocities ν, shape (m, n).
         forces: the commanded body-frame thrust at the same instants, shape (m, n).
         sample_time: h [s].
         highpass_time: window of the moving mean removed from every signal [s].
         max_shift: largest shift of the thrust against the estimates tried [samples].
+        run_starts: the row where each run after the first starts, increasing, in (0, m);
+            empty: one run.
 
     Raises:
-        ValueError: bad shapes, non-finite values, fewer than ``MIN_SAMPLES`` samples or a bad
-            sample time: pass a longer, clean, uniformly sampled series.
+        ValueError: bad shapes, non-finite values, bad run starts, a run shorter than
+            ``MIN_SAMPLES`` + 2 ``max_shift`` samples or a bad sample time: pass longer, clean,
+            uniformly sampled runs.
     """
     eta = as_series(poses, 'poses')
     nu = as_series(twists, 'twists')
@@ -108,22 +117,33 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
     if not (np.isfinite(sample_time) and sample_time > 0.0 and highpass_time > sample_time):
         raise ValueError(f'sample_time must be > 0 and highpass_time > sample_time [s], got '
                          f'{sample_time} and {highpass_time}')
-    if eta.shape[0] < MIN_SAMPLES + 2 * max_shift:
-        raise ValueError(f'{eta.shape[0]} samples are too few to read controller gains (need '
-                         f'{MIN_SAMPLES + 2 * max_shift}): use a longer window')
-    window = max(3, int(round(highpass_time / sample_time)))
-    body = earth_to_body(eta, eta, n)  # R(ψ)ᵀ[N, E] and ψ: the error the PD turns into force
-    position = _highpass(body, window)
-    integral = _highpass(np.cumsum(body, axis=0) * sample_time, window)
-    velocity = _highpass(nu, window)
-    thrust = _highpass(tau, window)
-    best: ControllerGains | None = None
     m = eta.shape[0]
+    bounds = np.r_[0, np.array(run_starts, dtype=np.int64).reshape(-1), m]
+    if np.any(np.diff(bounds) <= 0):
+        raise ValueError(f'run_starts must increase within (0, {m}), got {list(run_starts)}')
+    need = MIN_SAMPLES + 2 * max_shift
+    if np.any(np.diff(bounds) < need):
+        raise ValueError(f'runs of {np.diff(bounds).tolist()} samples: a run with fewer than '
+                         f'{need} is too few to read controller gains: use longer runs')
+    window = max(3, int(round(highpass_time / sample_time)))
+    runs = []  # per run: high-passed position, integral, velocity, thrust
+    for first, end in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
+        body = earth_to_body(eta[first:end], eta[first:end], n)  # R(ψ)ᵀ[N, E], ψ: PD's error
+        runs.append((_highpass(body, window),
+                     _highpass(np.cumsum(body, axis=0) * sample_time, window),
+                     _highpass(nu[first:end], window), _highpass(tau[first:end], window)))
+    best: ControllerGains | None = None
     for shift in range(-max_shift, max_shift + 1):
-        # thrust[k + shift] was computed from the estimate at k
-        lo, hi = max(0, -shift), min(m, m - shift)
-        gains = _fit_pid(position[lo:hi], integral[lo:hi], velocity[lo:hi],
-                         thrust[lo + shift:hi + shift], shift)
+        # thrust[k + shift] was computed from the estimate at k, both in the same run
+        parts = []
+        for run_position, run_integral, run_velocity, run_thrust in runs:
+            k = run_thrust.shape[0]
+            lo, hi = max(0, -shift), min(k, k - shift)
+            parts.append((run_position[lo:hi], run_integral[lo:hi], run_velocity[lo:hi],
+                          run_thrust[lo + shift:hi + shift]))
+        position, integral, velocity, thrust = (np.concatenate(column)
+                                                for column in zip(*parts, strict=True))
+        gains = _fit_pid(position, integral, velocity, thrust, shift)
         if best is None or float(np.sum(gains.r_squared)) > float(np.sum(best.r_squared)):
             best = gains
     assert best is not None

@@ -12,14 +12,19 @@ training does.
 ``coast(t, force)`` is the dead-reckoning step for a time with thrust but no accepted pose.
 ``command(t, force)`` logs the DP controller's command (``thrust_command``): without a given
 ``vessel_inertia`` the dead reckoner's thrust gain is the one implied by the controller's gains
-(``core.controller_gains``).
+(``core.controller_gains``). The last successful read is remembered: a window whose read fails
+for lack of data (no run of contiguous estimates with commands long enough, no commands) keeps
+the remembered gain, and its memory says so (``remembered from t=…``); a read that fails because
+the PD law does not explain the commands (R² too low: the controller may have changed) forgets
+it, as does ``reset``.
 """
 from __future__ import annotations
 
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import replace
+from dataclasses import dataclass, replace
 import math
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,6 +47,37 @@ from lf_predictor_ros.core.retraining import target_filter
 from lf_predictor_ros.core.targets import TargetWindow
 
 FloatArray = NDArray[np.float64]
+ReadOutcome = Literal['read', 'no_data', 'no_fit']
+
+
+@dataclass(frozen=True)
+class ControllerRead:
+    """One attempt to read the DP controller's implied thrust gain (`implied_input_gain`).
+
+    Attributes:
+        gain: 1/M_ii per DOF (M_ii = Kd² / (4 Kp)), None if the controller was not read.
+        note: what was read (implied inertia, R² per DOF, the samples used) or why not.
+        outcome: 'read'; 'no_data' (no commands or published estimates, or no contiguous run
+            long enough: says nothing about the controller); 'no_fit' (enough data, but the PD
+            law with positive gains does not explain every DOF: another controller, or none).
+        stamp: the newest published estimate the read used [s] (None unless read).
+    """
+
+    gain: FloatArray | None
+    note: str
+    outcome: ReadOutcome
+    stamp: float | None = None
+
+    def __post_init__(self) -> None:
+        """Keep a read-only copy of the gain (a read is handed between threads)."""
+        if self.gain is not None:
+            gain = np.array(self.gain, dtype=np.float64)
+            gain.setflags(write=False)
+            object.__setattr__(self, 'gain', gain)
+
+
+# what a vessel-memory job returns: the memory, the calibration, the controller read in force
+Learned = tuple[VesselMemory | None, Covariances | None, ControllerRead | None]
 
 
 class LfStateEstimator:
@@ -61,8 +97,10 @@ class LfStateEstimator:
         self._capacity = params.training_samples + params.transient_samples + params.max_lag + \
             params.retrain_samples * 2
         self._executor: ThreadPoolExecutor | None = None
-        self._job: Future[tuple[VesselMemory | None, Covariances | None]] | None = None
+        self._job: Future[Learned] | None = None
         self._memory_error: str | None = None
+        # the last successful controller read (held here, handed to the worker by value)
+        self._controller_read: ControllerRead | None = None
         # the controller's commands, kept across segments (matched to the published estimates)
         self._command_times: deque[float] = deque(maxlen=self._capacity)
         self._commands: deque[FloatArray] = deque(maxlen=self._capacity)
@@ -121,10 +159,11 @@ class LfStateEstimator:
         self._restart_buffers()
 
     def reset(self) -> None:
-        """Forget everything (predictor, odometry, memory)."""
+        """Forget everything (predictor, odometry, memory, the remembered controller read)."""
         self.predictor.reset()
         self.odometry.reset()
         self._job = None
+        self._controller_read = None
         self._command_times.clear()
         self._commands.clear()
         self._restart_buffers()
@@ -144,6 +183,15 @@ class LfStateEstimator:
     def memory(self) -> VesselMemory | None:
         """The vessel memory in use."""
         return self.odometry.memory
+
+    @property
+    def controller_read(self) -> ControllerRead | None:
+        """The last successful read of the controller's gains, still in force (None if none).
+
+        A new vessel memory uses it when its own read fails for lack of data; a read that
+        finds no PD law (``no_fit``) or a ``reset`` forgets it; a new successful read replaces it.
+        """
+        return self._controller_read
 
     @property
     def memory_error(self) -> str | None:
@@ -175,13 +223,15 @@ class LfStateEstimator:
         usable = max(3, values.shape[0] - self.params.transient_samples)
         times, values, rows = times[:usable], values[:usable], idx[keep][:usable]  # contiguous
         odometry = self.odometry
+        reading = odometry.params.controller_inertia
         commands = (np.array(self._command_times), np.array(self._commands)) if \
-            odometry.params.controller_inertia and self._commands else None
+            reading and self._commands else None
         args = (self.params, times, values, np.array(self._forces)[rows],
                 self.predictor.wave_peak_freq, odometry.published(),
                 odometry.params.dead_reckoning_timeout, odometry.params.min_calibration_samples,
                 odometry.params.pose_lag_prior,
-                _input_gain(odometry.params.vessel_inertia, self.ndof), commands)
+                _input_gain(odometry.params.vessel_inertia, self.ndof), commands,
+                self._controller_read if reading else None)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -199,36 +249,50 @@ class LfStateEstimator:
         except Exception as exc:  # noqa: BLE001 - reported in the diagnostics, never raised
             self._memory_error = f'{type(exc).__name__}: {exc}'
 
-    def _apply(self, result: tuple[VesselMemory | None, Covariances | None]) -> None:
-        self.odometry.apply_learned(*result)
+    def _apply(self, result: Learned) -> None:
+        memory, covariances, controller_read = result
+        self.odometry.apply_learned(memory, covariances)
+        self._controller_read = controller_read
         self._memory_error = None
 
 
 def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, forces: FloatArray,
            wave_peak_freq: float | None, published: list[Published], horizon: float,
            min_samples: int, lag_prior: float, input_gain: FloatArray | None = None,
-           commands: tuple[FloatArray, FloatArray] | None = None
-           ) -> tuple[VesselMemory | None, Covariances | None]:
-    """Worker job: the vessel memory of one target window and the calibrated covariances.
+           commands: tuple[FloatArray, FloatArray] | None = None,
+           remembered: ControllerRead | None = None) -> Learned:
+    """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
     ``wave_peak_freq``; None: no ω0 yet, no filter) is designed here, off the predict path
     (≈ 0.6 ms), and the fit applies it to the forces too (`lf_dynamics.paired_forces`).
     ``input_gain``: 1/M_ii from ``vessel_inertia``; without it and with ``commands`` (stamps,
     commanded forces) the gain implied by the DP controller's gains is used if the controller
-    can be read (`implied_input_gain`); a controller read marks the memory ``dp_controlled``.
+    can be read (`implied_input_gain`). ``remembered``: the last successful read (None: none);
+    it stands in when this read fails for lack of data (``no_data``, or no ``commands``), not
+    when the commands do not fit a PD law (``no_fit``: the controller may have changed). A read
+    or a remembered read marks the memory ``dp_controlled``, and the memory's message carries
+    its note ('… remembered from t=… s' for a remembered one).
     The memory is None if it cannot be learned; the covariances compare the published estimates
-    with the window (`odometry.calibrate`).
+    with the window (`odometry.calibrate`). The read returned is the one in force afterwards:
+    this read if it succeeded, ``remembered`` if it failed for lack of data, else None.
     """
     sos = None if wave_peak_freq is None else target_filter(params, wave_peak_freq)
     source = 'vessel_inertia' if input_gain is not None else ''
-    note = ''
-    controlled = False
+    read: ControllerRead | None = None
     if commands is not None:
-        implied, note = implied_input_gain(published, *commands, params.sample_time)
-        controlled = implied is not None
-        if input_gain is None and implied is not None:
-            input_gain, source = implied, 'controller'
+        read = implied_input_gain(published, *commands, params.sample_time)
+    elif remembered is not None:
+        read = ControllerRead(None, 'controller gains: no commands', 'no_data')
+    in_force: ControllerRead | None = read if read is not None and read.outcome == 'read' \
+        else None
+    note = '' if read is None else read.note
+    if read is not None and read.outcome == 'no_data' and remembered is not None:
+        in_force = remembered
+        since = '' if remembered.stamp is None else f' from t={remembered.stamp:.1f} s'
+        note = f'{remembered.note}, remembered{since} ({read.note})'
+    if input_gain is None and in_force is not None:
+        input_gain, source = in_force.gain, 'controller'
     try:
         memory: VesselMemory | None = learn_vessel_memory(values, forces, params.sample_time,
                                                           horizon, input_gain, sos)
@@ -236,47 +300,61 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
         memory = None
     if memory is not None and (source or note):
         memory = replace(memory, known_gain=source if memory.model is not None else '',
-                         dp_controlled=controlled,
+                         dp_controlled=in_force is not None,
                          message=f'{memory.message}; {note}' if note else memory.message)
     return memory, calibrate(published, times, values, params.ndof, params.sample_time,
-                             min_samples, lag_prior)
+                             min_samples, lag_prior), in_force
 
 
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,
-                       sample_time: float) -> tuple[FloatArray | None, str]:
-    """1/M_ii implied by the DP controller acting on the published estimates, and a note.
+                       sample_time: float) -> ControllerRead:
+    """1/M_ii implied by the DP controller acting on the published estimates.
 
     ``times``, ``forces``: the controller's commands and their stamps (a controller stamps its
     command with the stamp of the estimate it acted on; `fit_controller_gains` also tries a few
     samples of shift). The applied thrust does not do: actuator lag (1 s shaft dynamics on the
     simulated supply vessel) turns the D term's high-frequency part into apparent stiffness,
-    and Kd² / (4 Kp) came out at 0.03–0.13 of the inertia. Pairs over the newest contiguous run
-    of published estimates; (None, why) if the controller cannot be read.
+    and Kd² / (4 Kp) came out at 0.03–0.13 of the inertia.
+
+    Every published estimate is paired with the command stamped like it; the pairs form
+    contiguous runs, broken by a gap in the stamps or by an estimate without a command (a late
+    or lost sample or command). Every run of at least ``MIN_SAMPLES`` + 2 ``MAX_SHIFT`` pairs
+    is used, pooled into one fit (no high-pass, integral or shift crosses a break); shorter
+    runs are left out. So one short break costs only the samples around it, not the read.
     """
     if not published or times.shape[0] == 0:
-        return None, 'controller gains: no data'
+        return ControllerRead(None, 'controller gains: no data', 'no_data')
     stamps = np.array([p.stamp for p in published])
     index = np.searchsorted(times, stamps - 0.5 * sample_time)
     index = np.clip(index, 0, times.shape[0] - 1)
     matched = np.abs(times[index] - stamps) < 0.5 * sample_time
-    unmatched = np.flatnonzero(~matched)
-    run_starts = np.flatnonzero(np.r_[True, np.diff(stamps) > 1.5 * sample_time])
-    start = max(int(unmatched[-1]) + 1 if unmatched.size else 0, int(run_starts[-1]))
-    rows = np.arange(start, stamps.shape[0])
-    if rows.size < MIN_SAMPLES + 2 * MAX_SHIFT:
-        return None, f'controller gains: {rows.size} contiguous samples, too few'
+    # blocks of equal `matched` without a gap in the stamps: [edges[j], edges[j + 1])
+    edges = np.flatnonzero(np.r_[True, (np.diff(stamps) > 1.5 * sample_time) |
+                                 (matched[1:] != matched[:-1]), True])
+    need = MIN_SAMPLES + 2 * MAX_SHIFT
+    runs = [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True) if matched[a]]
+    longest = max((b - a for a, b in runs), default=0)
+    runs = [(a, b) for a, b in runs if b - a >= need]
+    if not runs:
+        return ControllerRead(None, f'controller gains: longest contiguous run {longest} '
+                                    f'samples, too few (need {need})', 'no_data')
+    rows = np.concatenate([np.arange(a, b) for a, b in runs])
+    starts = np.cumsum([b - a for a, b in runs])[:-1].tolist()
     poses = np.array([published[k].pose for k in rows])
     twists = np.array([published[k].twist for k in rows])
     try:
-        gains = fit_controller_gains(poses, twists, forces[index[rows]], sample_time)
-    except ValueError as exc:
-        return None, f'controller gains: {exc}'
+        gains = fit_controller_gains(poses, twists, forces[index[rows]], sample_time,
+                                     run_starts=starts)
+    except ValueError as exc:  # non-finite values: nothing learned about the controller
+        return ControllerRead(None, f'controller gains: {exc}', 'no_data')
     inertia = gains.implied_inertia()
     r2 = ', '.join(f'{v:.2f}' for v in gains.r_squared)
     if inertia is None:
-        return None, f'controller gains not read (R² {r2})'
-    return 1.0 / inertia, (f"controller-implied inertia {', '.join(f'{v:.3g}' for v in inertia)}"
-                           f' (R² {r2})')
+        return ControllerRead(None, f'controller gains not read (R² {r2})', 'no_fit')
+    used = f'{rows.size} samples' + (f' in {len(runs)} runs' if len(runs) > 1 else '')
+    return ControllerRead(1.0 / inertia, (f"controller-implied inertia "
+                                          f"{', '.join(f'{v:.3g}' for v in inertia)} "
+                                          f'(R² {r2}; {used})'), 'read', float(stamps[rows[-1]]))
 
 
 def _input_gain(inertia: tuple[float, ...], ndof: int) -> FloatArray | None:

@@ -151,8 +151,9 @@ class OdometryParams:
     controller_inertia: bool = field(default=True, metadata=field_doc(
         "without vessel_inertia: read the DP controller's PD gains Kp, Kd from its commands "
         '(thrust_command) on the published estimates and dead-reckon on the inertia Kd²/(4 Kp) '
-        'under which that controller is critically damped (core.controller_gains); no commands, '
-        "or commands the PD law does not explain (R² < 0.5): the memory's choice", ''))
+        'under which that controller is critically damped (core.controller_gains); too few '
+        'contiguous commands: the last successful read; no read yet, or commands the PD law does '
+        "not explain (R² < 0.5, which also forgets the last read): the memory's choice", ''))
     dead_reckoner: str = field(default='auto', metadata=field_doc(
         "dead reckoner through a pose dropout: 'auto' (the vessel memory's choice by the "
         "open-loop drift test; hold when the test cannot tell), 'model' (the learned LF model "

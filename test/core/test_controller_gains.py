@@ -97,6 +97,27 @@ def test_one_dof() -> None:
     np.testing.assert_allclose(inertia, [3.0e5 ** 2 / 8.0e4], rtol=1e-6)
 
 
+def test_runs_are_pooled_without_crossing_a_break() -> None:
+    """Two runs (the second 20 m further) of a PD with a 1-sample lag, pooled into one fit."""
+    runs = [_lf_track(10, m=200)[:, :1] * 4.0, 20.0 + _lf_track(11, m=200)[:, :1] * 4.0]
+    taus = []
+    for run in runs:
+        pd = -2.0e4 * run - 3.0e5 * np.gradient(run, H, axis=0)
+        taus.append(np.concatenate([pd[:1], pd[:-1]]))  # thrust at k from the estimate at k − 1
+    eta, tau = np.concatenate(runs), np.concatenate(taus)
+    nu = np.concatenate([np.gradient(run, H, axis=0) for run in runs])
+    gains = fit_controller_gains(eta, nu, tau, H, run_starts=[200])
+    assert gains.shift == 1 and gains.r_squared[0] > 0.99
+    # measured 0.973 / 0.998 of the design gains (the high-pass edges of 200-sample runs)
+    np.testing.assert_allclose([gains.stiffness[0], gains.damping[0]], [2.0e4, 3.0e5], rtol=0.05)
+    # read as one run, the high-pass and the shift cross the 20 m break: Kd measured 0.85 ×
+    joined = fit_controller_gains(eta, nu, tau, H)
+    assert abs(joined.damping[0] / 3.0e5 - 1.0) > 0.1
+    for starts in ([0], [200, 150], [400], [50]):  # not increasing in (0, m), or a short run
+        with pytest.raises(ValueError, match='run_starts|too few'):
+            fit_controller_gains(eta, nu, tau, H, run_starts=starts)
+
+
 @pytest.mark.parametrize('bad', ['nan', 'shape', 'short', 'sample_time'])
 def test_bad_input_is_refused_with_a_message(bad: str) -> None:
     eta = _lf_track(6)

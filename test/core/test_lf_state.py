@@ -11,6 +11,7 @@ from lf_predictor_ros.core.lf_dynamics import body_velocity
 from lf_predictor_ros.core.lf_state import LfStateEstimator, implied_input_gain
 from lf_predictor_ros.core.odometry import Published, normalized_error_squared
 from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.targets import TargetWindow
 from sim_ros.simulation import load_scenario, simulate
 
 pytestmark = pytest.mark.filterwarnings(
@@ -80,8 +81,9 @@ def test_a_given_vessel_inertia_is_the_thrust_gain_of_the_memory() -> None:
     gain = _input_gain((mass, 1.0, 1.0), 1)
     assert gain is not None and gain.tolist() == [1.0 / mass]
     assert _input_gain((0.0, 0.0, 0.0), 3) is None
-    memory, _ = _learn(PredictorParams(ndof=1, sample_time=h), np.arange(1200.0),
-                       np.array(poses), np.array(forces)[:, :1], None, [], 120.0, 60, 1.2, gain)
+    memory, _, _ = _learn(PredictorParams(ndof=1, sample_time=h), np.arange(1200.0),
+                          np.array(poses), np.array(forces)[:, :1], None, [], 120.0, 60, 1.2,
+                          gain)
     assert memory is not None and memory.model is not None
     assert memory.model.input_gain[0, 0] == 1.0 / mass
     assert memory.model.damping[0, 0] == pytest.approx(-damping / mass, rel=0.05)
@@ -102,24 +104,46 @@ def _published_pd_loop(m: int, t0: float = 0.0) -> tuple[list[Published], np.nda
     return published, stamps, (-2.0e4 * x - 3.0e5 * v)[:, None]
 
 
-def test_implied_input_gain_reads_the_controller_on_the_newest_run() -> None:
+def test_implied_input_gain_reads_the_controller_on_every_long_enough_run() -> None:
     published, times, forces = _published_pd_loop(400)
-    gain, note = implied_input_gain(published, times, forces, 1.0)
-    assert gain is not None
-    np.testing.assert_allclose(gain, [8.0e4 / 3.0e5 ** 2], rtol=1e-6)  # 4 Kp / Kd²
-    assert 'controller-implied inertia' in note and 'R² 1.00' in note
-    # a gap: only the newest contiguous run counts, here too short
+    read = implied_input_gain(published, times, forces, 1.0)
+    assert read.outcome == 'read' and read.gain is not None and read.stamp == 399.0
+    np.testing.assert_allclose(read.gain, [8.0e4 / 3.0e5 ** 2], rtol=1e-6)  # 4 Kp / Kd²
+    assert 'controller-implied inertia' in read.note and 'R² 1.00; 400 samples)' in read.note
+    # a short break near the end (two commands lost: the node fell behind for 2 s) leaves a
+    # 30-sample newest run: the 368 samples before the break are still read (before: None)
+    kept = np.r_[0:368, 370:400]
+    read = implied_input_gain(published, times[kept], forces[kept], 1.0)
+    assert read.outcome == 'read' and read.gain is not None and read.stamp == 367.0
+    np.testing.assert_allclose(read.gain, [8.0e4 / 3.0e5 ** 2], rtol=1e-6)
+    assert '; 368 samples)' in read.note
+    # a gap in the stamps and a short newest run: the same
     late, late_times, late_forces = _published_pd_loop(50, t0=1000.0)
-    gain, note = implied_input_gain(published + late, np.r_[times, late_times],
-                                    np.r_[forces, late_forces], 1.0)
-    assert gain is None and 'too few' in note
-    # a thrust that no PD law on the estimates explains
+    read = implied_input_gain(published + late, np.r_[times, late_times],
+                              np.r_[forces, late_forces], 1.0)
+    assert read.gain is not None and read.stamp == 399.0
+    np.testing.assert_allclose(read.gain, [8.0e4 / 3.0e5 ** 2], rtol=1e-6)
+    # two long runs are pooled
+    later, later_times, later_forces = _published_pd_loop(200, t0=1000.0)
+    read = implied_input_gain(published + later, np.r_[times, later_times],
+                              np.r_[forces, later_forces], 1.0)
+    assert read.gain is not None and read.stamp == 1199.0
+    np.testing.assert_allclose(read.gain, [8.0e4 / 3.0e5 ** 2], rtol=1e-6)
+    assert '; 600 samples in 2 runs)' in read.note
+    # a command lost every 100 samples: no run of 124, nothing read for lack of data
+    kept = np.setdiff1d(np.arange(400), [100, 200, 300])
+    read = implied_input_gain(published, times[kept], forces[kept], 1.0)
+    assert read.gain is None and read.outcome == 'no_data' and read.stamp is None
+    assert 'longest contiguous run 100 samples, too few (need 124)' in read.note
+    # a thrust that no PD law on the estimates explains: enough data, no fit
     noise = np.random.default_rng(9).standard_normal(forces.shape)
-    gain, note = implied_input_gain(published, times, noise, 1.0)
-    assert gain is None and 'not read' in note
+    read = implied_input_gain(published, times, noise, 1.0)
+    assert read.gain is None and read.outcome == 'no_fit' and 'not read' in read.note
     # thrust logged at other instants: nothing pairs
-    gain, note = implied_input_gain(published, times + 0.5, forces, 1.0)
-    assert gain is None and 'too few' in note
+    read = implied_input_gain(published, times + 0.5, forces, 1.0)
+    assert read.gain is None and read.outcome == 'no_data' and 'run 0 samples' in read.note
+    read = implied_input_gain([], times, forces, 1.0)
+    assert read.gain is None and read.outcome == 'no_data' and 'no data' in read.note
 
 
 def test_the_controller_implied_inertia_reaches_the_memory_unless_one_is_given() -> None:
@@ -131,18 +155,123 @@ def test_the_controller_implied_inertia_reaches_the_memory_unless_one_is_given()
     poses = np.cumsum(np.cumsum(rng.normal(size=(1200, 1)) * 1e-3, axis=0), axis=0)
     params = PredictorParams(ndof=1, sample_time=1.0)
     args = (params, stamps, poses, commands, None, published, 120.0, 60, 1.2)
-    memory, _ = _learn(*args, None, (stamps, commands))
+    memory, _, read = _learn(*args, None, (stamps, commands))
     assert memory is not None and memory.model is not None
     assert memory.known_gain == 'controller' and memory.dp_controlled
     assert memory.model.input_gain[0, 0] == pytest.approx(8.0e4 / 3.0e5 ** 2, rel=1e-6)
     assert 'controller-implied inertia' in memory.message
+    assert read is not None and read.outcome == 'read' and read.stamp == 1199.0
     given = np.array([1.0 / 2e6])
-    memory, _ = _learn(*args, given, (stamps, commands))
+    memory, _, _ = _learn(*args, given, (stamps, commands))
     assert memory is not None and memory.model is not None
     assert memory.known_gain == 'vessel_inertia' and memory.model.input_gain[0, 0] == given[0]
     assert memory.dp_controlled  # the controller was read all the same
-    memory, _ = _learn(*args, None, None)  # no commands: the gain is fitted (or refused)
+    memory, _, none = _learn(*args, None, None)  # no commands: the gain is fitted (or refused)
     assert memory is None or (memory.known_gain == '' and not memory.dp_controlled)
+    assert none is None
+    # no commands, but a remembered read: it stands in (a given inertia still takes precedence)
+    memory, _, kept = _learn(*args, None, None, read)
+    assert kept is read and memory is not None and memory.model is not None
+    assert memory.known_gain == 'controller' and memory.dp_controlled
+    assert memory.model.input_gain[0, 0] == pytest.approx(8.0e4 / 3.0e5 ** 2, rel=1e-6)
+    assert 'remembered from t=1199.0 s (controller gains: no commands)' in memory.message
+    memory, _, kept = _learn(*args, given, None, read)
+    assert kept is read and memory is not None and memory.model is not None
+    assert memory.known_gain == 'vessel_inertia' and memory.model.input_gain[0, 0] == given[0]
+    assert memory.dp_controlled and 'remembered' in memory.message
+
+
+class _WindowPredictor:
+    """Stands in for the AdaptivePredictor: the pose passes through, the test sets the targets."""
+
+    using_network = False
+    wave_peak_freq = None
+
+    def __init__(self) -> None:
+        self.targets: TargetWindow | None = None
+
+    def update(self, t: float, pose: np.ndarray, force: np.ndarray) -> np.ndarray:
+        return np.array(pose, dtype=np.float64)
+
+    def reset(self) -> None:
+        self.targets = None
+
+    def close(self) -> None:
+        pass
+
+
+def test_the_last_controller_read_stands_in_for_a_window_without_enough_data() -> None:
+    """Windows: read → too few contiguous commands (remembered) → noise (forgotten) → too few."""
+    # short windows: the estimator keeps the newest 274 commands (its buffer capacity)
+    params = PredictorParams(ndof=1, sample_time=1.0, retrain_period=20.0,
+                             training_window=200.0, transient_length=10.0, filter_window=60.0,
+                             append_length=40.0, estimation_window=600.0)
+    fake = _WindowPredictor()
+    est = LfStateEstimator(params, background=False, predictor=fake)  # type: ignore[arg-type]
+    rng = np.random.default_rng(5)
+    a = np.exp(-1.0 / 30.0)
+    x = np.zeros(1500)
+    for k in range(1, x.shape[0]):
+        x[k] = a * x[k - 1] + (1 - a) * rng.standard_normal() * 5.0
+    force = np.zeros(3)
+    gain = 8.0e4 / 3.0e5 ** 2  # 4 Kp / Kd² of the PD below
+
+    def run(lo: int, hi: int, commands: str) -> None:
+        """Samples lo..hi − 1 with commands: 'pd', 'lossy' (one lost in 100) or 'noise'."""
+        nonlocal force
+        for k in range(lo, hi):
+            if k == hi - 1:  # a new target window: the vessel memory is learned at this update
+                fake.targets = TargetWindow(x[k - 249:k + 1, None], k)
+            _, odom = est.update(float(k), np.array([x[k], 0.0, 0.0]), force)
+            assert odom is not None
+            pd = -2.0e4 * odom.pose[0] - 3.0e5 * odom.twist[0]
+            tau = rng.standard_normal() * 1e5 if commands == 'noise' else pd
+            force = np.array([tau, 0.0, 0.0])
+            if commands != 'lossy' or k % 100 != 50:
+                assert est.command(odom.stamp, force)
+
+    try:
+        run(0, 400, 'pd')
+        read, memory = est.controller_read, est.memory
+        assert read is not None and read.outcome == 'read' and read.stamp == 399.0
+        assert memory is not None and memory.model is not None
+        assert memory.known_gain == 'controller' and memory.dp_controlled
+        assert memory.model.input_gain[0, 0] == pytest.approx(gain, rel=1e-6)
+        assert 'controller-implied inertia' in memory.message
+        assert 'remembered' not in memory.message
+        # a command lost every 100 samples: no contiguous run of 124 among the newest 274
+        run(400, 700, 'lossy')
+        memory = est.memory
+        assert est.controller_read is read  # kept
+        assert est.odometry.counters['memory_updates'] == 2
+        assert memory is not None and memory.model is not None
+        assert memory.known_gain == 'controller' and memory.dp_controlled
+        assert memory.model.input_gain[0, 0] == pytest.approx(gain, rel=1e-6)
+        assert 'remembered from t=399.0 s (controller gains: longest contiguous run 99 ' \
+            'samples, too few (need 124))' in memory.message
+        # commands no PD law explains: the controller may have changed, the read is forgotten
+        run(700, 1000, 'noise')
+        memory = est.memory
+        assert est.controller_read is None
+        assert est.odometry.counters['memory_updates'] == 3
+        assert memory is not None and memory.known_gain == '' and not memory.dp_controlled
+        assert 'controller gains not read' in memory.message
+        assert 'remembered' not in memory.message
+        # too few contiguous commands again: nothing left to stand in
+        run(1000, 1300, 'lossy')
+        memory = est.memory
+        assert est.controller_read is None
+        assert est.odometry.counters['memory_updates'] == 4
+        assert memory is not None and memory.known_gain == '' and not memory.dp_controlled
+        assert 'too few' in memory.message and 'remembered' not in memory.message
+        # a new read; a reset forgets it
+        run(1300, 1500, 'pd')
+        assert est.controller_read is not None and est.controller_read.stamp == 1499.0
+        assert est.memory is not None and est.memory.known_gain == 'controller'
+        est.reset()
+        assert est.controller_read is None and est.memory is None
+    finally:
+        est.close()
 
 
 def test_commands_are_checked_and_kept_in_order() -> None:

@@ -158,6 +158,24 @@ class LfStateEstimator:
         self.predictor.restart_segment()
         self._restart_buffers()
 
+    def carry_over(self, previous: LfStateEstimator) -> None:
+        """Continue ``previous``'s odometry, command log and controller read (new parameters).
+
+        For a predictor re-created with new tuning parameters (same ndof and sample time): the
+        dead reckoning, the calibration, the vessel memory and what was read of the controller
+        go on; the data buffers of this estimator start empty. ValueError if the ndof or the
+        sample time differ (then start afresh instead).
+        """
+        odometry = previous.odometry
+        if odometry.ndof != self.ndof or odometry.sample_time != self.sample_time:
+            raise ValueError(f'cannot carry over an odometry of ndof {odometry.ndof} at '
+                             f'{odometry.sample_time} s into ndof {self.ndof} at '
+                             f'{self.sample_time} s: start a new one (reset)')
+        self.odometry = odometry
+        self._controller_read = previous.controller_read
+        self._command_times.extend(previous._command_times)
+        self._commands.extend(previous._commands)
+
     def reset(self) -> None:
         """Forget everything (predictor, odometry, memory, the remembered controller read)."""
         self.predictor.reset()

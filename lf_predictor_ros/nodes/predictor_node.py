@@ -457,7 +457,8 @@ class PredictorNode(InputHealth, LifecycleNode):
         if driver is not None:
             odometry = driver.state.odometry
             if odometry.ndof == params.ndof and odometry.sample_time == params.sample_time:
-                state.odometry = odometry  # dead reckoning, calibration and memory carry over
+                # dead reckoning, calibration, memory and the controller read carry over
+                state.carry_over(driver.state)
             else:
                 driver.reset()  # a new odometry: a new timeline
             driver.state = state

@@ -268,6 +268,15 @@ def test_the_last_controller_read_stands_in_for_a_window_without_enough_data() -
         run(1300, 1500, 'pd')
         assert est.controller_read is not None and est.controller_read.stamp == 1499.0
         assert est.memory is not None and est.memory.known_gain == 'controller'
+        # new tuning parameters (the node re-creates the estimator): the read carries over
+        other = LfStateEstimator(params.replace(max_epochs=3), background=False,
+                                 predictor=_WindowPredictor())  # type: ignore[arg-type]
+        other.carry_over(est)
+        assert other.controller_read is est.controller_read
+        assert other.odometry is est.odometry and other.memory is est.memory
+        with pytest.raises(ValueError, match='cannot carry over an odometry of ndof 1'):
+            LfStateEstimator(params.replace(ndof=3), background=False,
+                             predictor=_WindowPredictor()).carry_over(est)  # type: ignore[arg-type]
         est.reset()
         assert est.controller_read is None and est.memory is None
     finally:

@@ -42,7 +42,8 @@ MAX_BIN_FRACTION_OF_BAND = 1.0 / 20.0
 MIN_TRAINING_EXAMPLES = 20
 _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'transient_length',
                   'filter_window', 'append_length')
-_INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed')
+_INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed',
+               'motion_gate_ny')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
@@ -92,6 +93,11 @@ class PredictorParams:
             'g·LP(moving − holding)): the extra wave motion of the twin stays out of the '
             'estimate; '
             '0 = off (holding + g·(moving − holding))', 's'))
+    motion_gate_ny: int = field(
+        default=0, metadata=_doc(
+            'with motion_gate: delayed positions n_y of the ramp-invariant twin (its line is '
+            'fitted through them: fewer lag less in accelerations, let through more waves); '
+            '0 = ny', 'samples'))
     estimation_window: float = field(
         default=1200.0, metadata=_doc('frequency-estimation window γ (eq. 4.3)', 's'))
     retrain_period: float = field(
@@ -375,6 +381,9 @@ class PredictorParams:
             raise ValueError(f'ramp rule: ramp_invariant and motion_gate fit a line through the '
                              f'measured positions and need ny ≥ 2 and nfb 0, got ny {self.ny}, '
                              f'nfb {self.nfb}: change them or set both false')
+        if self.motion_gate_ny == 1 or self.motion_gate_ny < 0:
+            raise ValueError(f'ramp rule: motion_gate_ny is the ny of the twin (a line needs ≥ 2 '
+                             f'positions) or 0 for ny, got {self.motion_gate_ny}')
 
     def _check_frequencies(self) -> None:
         low, high = self.wave_band

@@ -198,7 +198,8 @@ class AdaptivePredictor:
         self._gate: MotionGate | None = None
         if params.motion_gate:
             self._moving = AdaptivePredictor(
-                params.replace(motion_gate=False, ramp_invariant=True), background=background,
+                params.replace(motion_gate=False, ramp_invariant=True,
+                               ny=params.motion_gate_ny or params.ny), background=background,
                 max_trainings=max_trainings, training_lock=self._training_lock)
             self._gate = MotionGate(params.ndof, params.sample_time,
                                     window=params.training_window)

@@ -28,6 +28,13 @@ With ``PredictorParams.motion_gate_smoothing`` T > 0 the gated output is
 more wave motion than the holding network's (it follows any ramp, so it cannot learn to ignore
 the slow part of a wave group), and in a DP loop whatever the gate lets through of it shows as
 wave-band thrust. A move or a turn changes the difference slowly, so the low-pass keeps it.
+
+With ``PredictorParams.motion_gate_validation`` the data decide, per DOF, whether the gate may
+act at all (`gate_validated`): at every new target window (the zero-phase LF targets of the last
+training window, thesis §4.2.2) the gated output the gate *would* have published is compared
+with the holding network's output; the gate acts on a DOF only while its output was the closer
+of the two on the last window. It starts shut: a gate that has not yet been shown to help on
+this vessel (a start-up, a vessel that never moves) publishes the holding network alone.
 """
 from __future__ import annotations
 
@@ -89,6 +96,30 @@ def blend(holding: FloatArray, moving: FloatArray, gain: FloatArray, ndof: int) 
     """
     return shifted(holding, np.asarray(gain, dtype=np.float64)[:ndof]
                    * moving_offset(holding, moving, ndof), ndof)
+
+
+def gate_validated(holding: FloatArray, gated: FloatArray, targets: FloatArray,
+                   previous: NDArray[np.bool_], min_samples: int) -> NDArray[np.bool_]:
+    """Per DOF, whether the gated output was closer to the targets than the holding output.
+
+    ``holding``, ``gated``, ``targets``: (m, ndof), row i the two outputs predicted for the
+    instant of target i (yaw differences wrapped when ndof is 3). True where the mean squared
+    error of ``gated`` is below that of ``holding``; ``previous`` (a copy) when fewer than
+    ``min_samples`` finite rows are given. The inputs are not modified.
+    """
+    h = np.asarray(holding, dtype=np.float64)
+    g = np.asarray(gated, dtype=np.float64)
+    y = np.asarray(targets, dtype=np.float64)
+    if h.shape != g.shape or h.shape != y.shape or h.ndim != 2:
+        raise ValueError(f'holding, gated and targets must be (m, ndof) alike, got {h.shape}, '
+                         f'{g.shape} and {y.shape}')
+    ndof = h.shape[1]
+    finite = np.all(np.isfinite(h) & np.isfinite(g) & np.isfinite(y), axis=1)
+    if np.count_nonzero(finite) < max(1, min_samples):
+        return np.array(previous, dtype=bool)
+    error_hold = np.mean(wrap_pose(h[finite] - y[finite], ndof) ** 2, axis=0)
+    error_gated = np.mean(wrap_pose(g[finite] - y[finite], ndof) ** 2, axis=0)
+    return np.asarray(error_gated < error_hold, dtype=bool)
 
 
 class MotionGate:

@@ -45,7 +45,8 @@ _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'tra
 _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed',
                'motion_gate_ny')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame')
-_BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate')
+_BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
+                'motion_gate_validation')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -98,6 +99,11 @@ class PredictorParams:
             'with motion_gate: delayed positions n_y of the ramp-invariant twin (its line is '
             'fitted through them: fewer lag less in accelerations, let through more waves); '
             '0 = ny', 'samples'))
+    motion_gate_validation: bool = field(
+        default=False, metadata=_doc(
+            'with motion_gate: the gate acts on a DOF only while its output was closer to the '
+            'targets of the last training window than the holding network alone (checked at '
+            'every new target window; shut until the first check; core/motion_gate.py)'))
     estimation_window: float = field(
         default=1200.0, metadata=_doc('frequency-estimation window γ (eq. 4.3)', 's'))
     retrain_period: float = field(

@@ -59,7 +59,12 @@ from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.estimator import EstimatorState, EstimatorStatus
 from lf_predictor_ros.core.frequency import FrequencyEstimate
 from lf_predictor_ros.core.heading import ContinuousHeading, wrap_angle, wrap_pose
-from lf_predictor_ros.core.motion_gate import MotionGate, moving_offset, shifted
+from lf_predictor_ros.core.motion_gate import (
+    MotionGate,
+    gate_validated,
+    moving_offset,
+    shifted,
+)
 from lf_predictor_ros.core.network import (
     NnarmaxNet,
     NumpyNnarmax,
@@ -207,6 +212,8 @@ class AdaptivePredictor:
         smoothing = params.motion_gate_smoothing
         self._gate_alpha = 1.0 if smoothing <= 0.0 else min(1.0, params.sample_time / smoothing)
         self._gate_offset = np.zeros(params.ndof)  # LP(moving − holding) (motion_gate_smoothing)
+        # motion_gate_validation: per DOF, may the gate act (shut until the first check)
+        self._gate_valid = np.full(params.ndof, not params.motion_gate_validation)
         self._clear_output_state()
         self._start_segment()
         if background:
@@ -258,6 +265,7 @@ class AdaptivePredictor:
         if self._moving is not None and self._gate is not None:
             self._moving.reset()
             self._gate.reset()
+        self._gate_valid = np.full(self.ndof, not self.params.motion_gate_validation)
         self._stop.set()
         self._generation += 1
         self._stop = threading.Event()
@@ -391,6 +399,11 @@ class AdaptivePredictor:
         return self._gain.copy()
 
     @property
+    def motion_gate_valid(self) -> NDArray[np.bool_]:
+        """Per DOF, whether the gate may act (always True without motion_gate_validation)."""
+        return self._gate_valid.copy()
+
+    @property
     def source_switches(self) -> int:
         """Changes of the output's source seen with bumpless transfer on (0 when off)."""
         return self._switches
@@ -431,6 +444,9 @@ class AdaptivePredictor:
         self._fb: deque[FloatArray] = deque(maxlen=max(1, self.params.nfb))
         self._heading = ContinuousHeading()
         self._gate_offset = np.zeros(self.ndof)
+        # (k, holding output, gated output) per sample, for motion_gate_validation
+        self._gate_log: deque[tuple[int, FloatArray, FloatArray]] = deque(maxlen=self._capacity)
+        self._gate_checked: TargetWindow | None = None
         self._k = -1
         self._fb_next = -1
         self._last_train_k: int | None = None
@@ -618,13 +634,43 @@ class AdaptivePredictor:
         if not self._moving.using_network or not np.all(np.isfinite(offset)):
             self._gain = np.zeros(self.ndof)
             self._gate_offset = np.zeros(self.ndof)
+            self._validate_gate(out, out)
             return out
-        self._gain = gain
         if self._gate_alpha < 1.0:
             # LP(moving − holding) of core.motion_gate (motion_gate_smoothing)
             self._gate_offset = self._gate_offset + self._gate_alpha * (offset - self._gate_offset)
             offset = self._gate_offset
-        return shifted(out, gain * offset, self.ndof)
+        self._validate_gate(out, shifted(out, gain * offset, self.ndof))
+        self._gain = gain * self._gate_valid
+        return shifted(out, self._gain * offset, self.ndof)
+
+    def _validate_gate(self, holding: FloatArray, gated: FloatArray) -> None:
+        """motion_gate_validation: log this sample's two outputs; check at a new target window.
+
+        The output predicted at sample k is for k + 1: it is compared with target k + 1. The
+        newest ε targets (filter transients) are left out.
+        """
+        if not self.params.motion_gate_validation:
+            return
+        self._gate_log.append((self._k, holding[:self.ndof].copy(), gated[:self.ndof].copy()))
+        targets = self._targets
+        if targets is None or targets is self._gate_checked:
+            return
+        self._gate_checked = targets
+        usable = len(targets) - self.params.transient_samples
+        if usable <= 0:
+            return
+        values = np.asarray(targets.values, dtype=np.float64).reshape(len(targets), -1)[:usable]
+        wanted = targets.indices()[:usable] - 1  # the sample whose output predicted the target
+        logged = np.array([entry[0] for entry in self._gate_log])
+        where = np.searchsorted(logged, wanted)
+        found = (where < logged.shape[0]) & (logged[np.minimum(where, logged.shape[0] - 1)]
+                                             == wanted)
+        rows = where[found]
+        holding_rows = np.array([self._gate_log[i][1] for i in rows]).reshape(-1, self.ndof)
+        gated_rows = np.array([self._gate_log[i][2] for i in rows]).reshape(-1, self.ndof)
+        self._gate_valid = gate_validated(holding_rows, gated_rows, values[found],
+                                          self._gate_valid, max(1, usable // 2))
 
     def _output(self, estimate: FloatArray, measured: FloatArray) -> FloatArray:
         """Estimate as a pose; for 1 DOF east and yaw are the measurement, unfiltered."""

@@ -21,6 +21,7 @@ from lf_predictor_ros.core.motion_gate import (
     MotionGate,
     blend,
     gate_gain,
+    gate_validated,
     moving_offset,
 )
 from lf_predictor_ros.core.params import PredictorParams
@@ -243,3 +244,66 @@ def test_wait_for_training_keeps_one_timeout_for_both_networks(
         assert time.monotonic() - begin < 3.2  # one timeout, not one per network (4 s)
     finally:
         gated.close()
+
+
+def test_gate_validated_compares_the_mean_squared_errors_per_dof() -> None:
+    targets = np.zeros((4, 3))
+    holding = np.array([[0.1, 0.3, 3.1]] * 4)
+    gated = np.array([[0.2, 0.1, -3.1]] * 4)  # yaw: 0.08 rad from π, closer than 3.1 is to 0
+    previous = np.array([True, True, True])
+    assert gate_validated(holding, gated, targets, previous, 4).tolist() == [False, True, True]
+    # errors wrap: the gated yaw 2π − 0.05 is 0.05 from the target
+    gated[:, 2] = 2 * math.pi - 0.05
+    assert gate_validated(holding, gated, targets, previous, 4).tolist() == [False, True, True]
+    # too few finite rows: the previous verdict, as a copy
+    gated[1:, 0] = np.nan
+    kept = gate_validated(holding, gated, targets, previous, 2)
+    assert kept.tolist() == [True, True, True] and kept is not previous
+    assert gate_validated(holding[:1, :1], gated[:1, :1], targets[:1, :1], previous[:1],
+                          1).tolist() == [False]
+    with pytest.raises(ValueError, match='must be'):
+        gate_validated(holding, gated[:, :2], targets, previous, 1)
+
+
+def _wrapped(error: FloatArray) -> FloatArray:
+    out = np.array(error, dtype=np.float64)
+    out[..., 2] = np.remainder(out[..., 2] + math.pi, 2 * math.pi) - math.pi
+    return out
+
+
+def test_validated_gate_acts_only_on_dofs_where_it_beat_the_holding_network() -> None:
+    """The published output: the holding one on unchecked DOFs, the gated one on checked ones."""
+    params = SMALL.replace(motion_gate=True, motion_gate_smoothing=5.0)
+    checked = AdaptivePredictor(params.replace(motion_gate_validation=True), background=False)
+    plain = AdaptivePredictor(params, background=False)
+    holding = AdaptivePredictor(SMALL, background=False)
+    t, pose, force = moving_run(600, 2)
+    held: dict[int, FloatArray] = {}
+    gated: dict[int, FloatArray] = {}
+    seen = None
+    valid = np.zeros(3, dtype=bool)
+    checks = acted = 0
+    for k in range(t.size):
+        out = checked.update(t[k], pose[k], force[k])
+        gated[k] = plain.update(t[k], pose[k], force[k])
+        held[k] = holding.update(t[k], pose[k], force[k])
+        targets = checked.targets
+        if targets is not None and targets is not seen:
+            seen = targets
+            usable = len(targets) - SMALL.transient_samples
+            pairs = [(i, index - 1) for i, index in enumerate(targets.indices()[:usable])
+                     if index - 1 in held]
+            if len(pairs) >= usable // 2:
+                values = np.array([targets.values[i] for i, _ in pairs])
+                hold_mse = np.mean(_wrapped(np.array([held[j] for _, j in pairs]) - values) ** 2,
+                                   axis=0)
+                gate_mse = np.mean(_wrapped(np.array([gated[j] for _, j in pairs]) - values) ** 2,
+                                   axis=0)
+                valid = gate_mse < hold_mse
+                checks += 1
+        assert checked.motion_gate_valid.tolist() == valid.tolist(), k
+        expected = held[k] + valid * _wrapped(gated[k] - held[k])
+        assert _wrapped(out - expected) == pytest.approx(np.zeros(3), abs=1e-9), k
+        acted += int(np.any(valid) and np.max(np.abs(gated[k] - held[k])) > 1e-6)
+    assert checks >= 3 and acted > 0
+    assert plain.motion_gate_valid.tolist() == [True, True, True]  # without the check: always

@@ -662,13 +662,14 @@ class AdaptivePredictor:
             return
         values = np.asarray(targets.values, dtype=np.float64).reshape(len(targets), -1)[:usable]
         wanted = targets.indices()[:usable] - 1  # the sample whose output predicted the target
-        logged = np.array([entry[0] for entry in self._gate_log])
+        log = list(self._gate_log)  # a deque indexes in O(n)
+        logged = np.array([entry[0] for entry in log])
         where = np.searchsorted(logged, wanted)
         found = (where < logged.shape[0]) & (logged[np.minimum(where, logged.shape[0] - 1)]
                                              == wanted)
         rows = where[found]
-        holding_rows = np.array([self._gate_log[i][1] for i in rows]).reshape(-1, self.ndof)
-        gated_rows = np.array([self._gate_log[i][2] for i in rows]).reshape(-1, self.ndof)
+        holding_rows = np.array([log[i][1] for i in rows]).reshape(-1, self.ndof)
+        gated_rows = np.array([log[i][2] for i in rows]).reshape(-1, self.ndof)
         self._gate_valid = gate_validated(holding_rows, gated_rows, values[found],
                                           self._gate_valid, max(1, usable // 2))
 

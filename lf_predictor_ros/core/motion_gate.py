@@ -75,6 +75,20 @@ def gate_gain(velocity_sq: FloatArray, usual_sq: FloatArray, ratio: float = GATE
     return np.asarray(np.clip(gain, 0.0, 1.0), dtype=np.float64)
 
 
+def dead_zoned(gain: FloatArray, dead_zone: float) -> FloatArray:
+    """The gain with a dead zone a in [0, 1): clip((g − a) / (1 − a), 0, 1) (a = 0: g itself).
+
+    Shuts the small gains of a vessel holding position (``PredictorParams.motion_gate_dead_zone``:
+    the twin's wave motion would leak through them into the thrust) and leaves a move (g → 1)
+    alone. The input is not modified. Scratch probe on the tuning seeds: docs/BENCHMARKS.md,
+    "a dead zone on the gain".
+    """
+    if not 0.0 <= dead_zone < 1.0:
+        raise ValueError(f'the dead zone must be in [0, 1), got {dead_zone!r}')
+    g = np.asarray(gain, dtype=np.float64)
+    return np.asarray(np.clip((g - dead_zone) / (1.0 - dead_zone), 0.0, 1.0), dtype=np.float64)
+
+
 def moving_offset(holding: FloatArray, moving: FloatArray, ndof: int) -> FloatArray:
     """The offset moving − holding on the first ``ndof`` entries (yaw wrapped), shape (ndof,)."""
     return wrap_pose(np.asarray(moving, dtype=np.float64)[:ndof]

@@ -99,6 +99,11 @@ class PredictorParams:
             'with motion_gate: delayed positions n_y of the ramp-invariant twin (its line is '
             'fitted through them: fewer lag less in accelerations, let through more waves); '
             '0 = ny', 'samples'))
+    motion_gate_dead_zone: float = field(
+        default=0.0, metadata=_doc(
+            'with motion_gate: dead zone a of the gain g, used as clip((g − a)/(1 − a), 0, 1): '
+            'the small gains of a vessel holding position are shut (no wave motion of the twin '
+            'leaks through them), a move (g → 1) is not touched; in [0, 1), 0 = off'))
     motion_gate_validation: bool = field(
         default=False, metadata=_doc(
             'with motion_gate: the gate acts on a DOF only while its output was closer to the '
@@ -387,6 +392,9 @@ class PredictorParams:
             raise ValueError(f'ramp rule: ramp_invariant and motion_gate fit a line through the '
                              f'measured positions and need ny ≥ 2 and nfb 0, got ny {self.ny}, '
                              f'nfb {self.nfb}: change them or set both false')
+        if not 0.0 <= self.motion_gate_dead_zone < 1.0:
+            raise ValueError(f'ramp rule: motion_gate_dead_zone must be in [0, 1) (0 = off), got '
+                             f'{self.motion_gate_dead_zone}')
         if self.motion_gate_ny == 1 or self.motion_gate_ny < 0:
             raise ValueError(f'ramp rule: motion_gate_ny is the ny of the twin (a line needs ≥ 2 '
                              f'positions) or 0 for ny, got {self.motion_gate_ny}')

@@ -61,6 +61,7 @@ from lf_predictor_ros.core.frequency import FrequencyEstimate
 from lf_predictor_ros.core.heading import ContinuousHeading, wrap_angle, wrap_pose
 from lf_predictor_ros.core.motion_gate import (
     MotionGate,
+    dead_zoned,
     gate_validated,
     moving_offset,
     shifted,
@@ -629,7 +630,7 @@ class AdaptivePredictor:
         if self._moving is None or self._gate is None:
             return out
         moving = self._moving.update(t, pose, force)
-        gain = self._gate.update(moving)
+        gain = dead_zoned(self._gate.update(moving), self.params.motion_gate_dead_zone)
         offset = moving_offset(out, moving, self.ndof)
         if not self._moving.using_network or not np.all(np.isfinite(offset)):
             self._gain = np.zeros(self.ndof)

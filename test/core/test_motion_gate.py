@@ -20,6 +20,7 @@ from lf_predictor_ros.core.motion_gate import (
     GATE_RATIO,
     MotionGate,
     blend,
+    dead_zoned,
     gate_gain,
     gate_validated,
     moving_offset,
@@ -307,3 +308,28 @@ def test_validated_gate_acts_only_on_dofs_where_it_beat_the_holding_network() ->
         acted += int(np.any(valid) and np.max(np.abs(gated[k] - held[k])) > 1e-6)
     assert checks >= 3 and acted > 0
     assert plain.motion_gate_valid.tolist() == [True, True, True]  # without the check: always
+
+
+def test_dead_zone_shuts_small_gains_and_keeps_a_full_one() -> None:
+    gain = np.array([0.0, 0.1, 0.2, 0.6, 1.0])
+    assert dead_zoned(gain, 0.2) == pytest.approx([0.0, 0.0, 0.0, 0.5, 1.0])
+    assert dead_zoned(gain, 0.0) == pytest.approx(gain) and gain[1] == 0.1
+    with pytest.raises(ValueError, match=r'\[0, 1\)'):
+        dead_zoned(gain, 1.0)
+    with pytest.raises(ValueError, match='motion_gate_dead_zone must be in'):
+        SMALL.replace(motion_gate=True, motion_gate_dead_zone=-0.1)
+
+
+def test_the_dead_zone_scales_the_published_gain() -> None:
+    t, pose, force = moving_run(600, 2)
+    zoned = AdaptivePredictor(SMALL.replace(motion_gate=True, motion_gate_dead_zone=0.3),
+                              background=False)
+    plain = AdaptivePredictor(SMALL.replace(motion_gate=True), background=False)
+    shut = opened = 0
+    for k in range(t.size):
+        zoned.update(t[k], pose[k], force[k])
+        plain.update(t[k], pose[k], force[k])
+        assert zoned.motion_gain == pytest.approx(dead_zoned(plain.motion_gain, 0.3), abs=1e-12)
+        shut += int(np.any((plain.motion_gain > 0.0) & (plain.motion_gain <= 0.3)))
+        opened += int(np.any(zoned.motion_gain > 0.5))
+    assert shut > 0 and opened > 0

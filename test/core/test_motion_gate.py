@@ -236,10 +236,14 @@ def test_wait_for_training_keeps_one_timeout_for_both_networks(
     t, pose, force = moving_run(300, 3)
     gated = AdaptivePredictor(SMALL.replace(motion_gate=True), background=True)
     try:
-        k = 0
-        while not started.is_set():
+        for k in range(t.size):
             gated.update(t[k], pose[k], force[k])
-            k += 1
+            if gated.wait_for_training(timeout=0.0):
+                continue  # no job running
+            if started.wait(timeout=5.0):
+                break  # a training is running (and the twin's queued behind it)
+            gated.wait_for_training(timeout=30.0)  # an ω0 job: let it end before the next sample
+        assert started.is_set(), 'no training started'
         begin = time.monotonic()
         assert not gated.wait_for_training(timeout=2.0)  # both jobs still busy
         assert time.monotonic() - begin < 3.2  # one timeout, not one per network (4 s)

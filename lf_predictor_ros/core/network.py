@@ -42,6 +42,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
+import functools
 import io
 import json
 import os
@@ -54,6 +55,7 @@ from numpy.typing import ArrayLike, NDArray
 import torch
 
 from lf_predictor_ros.core.regressors import (
+    RAMP_ORDERS,
     as_series,
     build_regressors,
     first_index,
@@ -113,6 +115,7 @@ class NnarmaxSpec:
     relative: bool = False
     body_frame: bool = False
     ramp_invariant: bool = False
+    ramp_order: int = 1
 
     def __post_init__(self) -> None:
         """Validate the spec; raise ValueError naming the broken rule."""
@@ -153,6 +156,12 @@ class NnarmaxSpec:
         if self.ramp_invariant and not (self.relative and self.ny >= 2 and self.nfb == 0):
             raise ValueError('NnarmaxSpec.ramp_invariant needs relative = True, ny ≥ 2 (a slope '
                              'needs two positions) and nfb = 0: set them or ramp_invariant False')
+        if self.ramp_order not in RAMP_ORDERS or isinstance(self.ramp_order, bool):
+            raise ValueError(f'NnarmaxSpec.ramp_order must be one of {RAMP_ORDERS} (1 line, 2 '
+                             f'parabola), got {self.ramp_order!r}')
+        if self.ramp_invariant and self.ny < self.ramp_order + 1:
+            raise ValueError(f'NnarmaxSpec.ramp_order {self.ramp_order} fits a polynomial of that '
+                             f'order and needs ny ≥ {self.ramp_order + 1}, got ny {self.ny}')
 
     @property
     def n_regressors(self) -> int:
@@ -165,14 +174,18 @@ class NnarmaxSpec:
         return first_index(self)
 
     def to_dict(self) -> dict[str, int | bool]:
-        """Plain dict (for checkpoints, logs); ``body_frame``, ``ramp_invariant`` only when True.
+        """Plain dict (for checkpoints, logs); optional fields only when not at their default.
 
-        A spec without them writes the same dict (and checkpoint) as before the fields existed.
+        ``body_frame`` and ``ramp_invariant`` are written only when True, ``ramp_order`` only
+        when not 1: a spec without them writes the same dict (and checkpoint) as before the
+        fields existed.
         """
         values: dict[str, int | bool] = dict(asdict(self))
         for name in ('body_frame', 'ramp_invariant'):
             if not values[name]:
                 del values[name]
+        if values['ramp_order'] == 1:
+            del values['ramp_order']
         return values
 
     @classmethod
@@ -191,16 +204,17 @@ class NnarmaxSpec:
 
 
 def relative_spread(y: FloatArray, ny: int, body_frame: bool = False,
-                    ramp_invariant: bool = False) -> FloatArray:
+                    ramp_invariant: bool = False, ramp_order: int = 1) -> FloatArray:
     """RMS of y(t − i) − y(t) over i = 1 … max(1, ny − 1) and all t, per channel.
 
     The scale of a relative network's position regressors and of its output ŷLF(t + 1) − y(t).
     With ``body_frame`` (3 channels) each difference is first rotated by R(ψ(t))ᵀ, ψ = y[:, 2].
     With ``ramp_invariant`` the differences are those from the least-squares line through the ny
-    newest positions (what such a network sees, ``_relative_frame_numpy``).
+    newest positions (what such a network sees, ``_relative_frame_numpy``; with ``ramp_order``
+    2 the least-squares parabola).
     """
     if ramp_invariant and y.shape[0] > ny:
-        return _detrended_spread(y, ny, body_frame)
+        return _detrended_spread(y, ny, body_frame, ramp_order)
     lags = range(1, min(max(1, ny - 1), y.shape[0] - 1) + 1)
     if not lags:
         return np.asarray(y.std(axis=0), dtype=np.float64)
@@ -213,14 +227,16 @@ def relative_spread(y: FloatArray, ny: int, body_frame: bool = False,
     return np.asarray(np.sqrt(np.mean(squares, axis=0)), dtype=np.float64)
 
 
-def _detrended_spread(y: FloatArray, ny: int, body_frame: bool) -> FloatArray:
-    """RMS of y(t − i) − (y(t) − i·v̂(t)), i = 1 … ny − 1, per channel (see ``relative_spread``)."""
+def _detrended_spread(y: FloatArray, ny: int, body_frame: bool, order: int = 1) -> FloatArray:
+    """RMS of y(t − i) − (y(t) + Σₖ âₖ(t)·(−i)ᵏ), i = 1 … ny − 1, per channel.
+
+    Order 1: y(t − i) − (y(t) − i·v̂(t)); see ``relative_spread``.
+    """
     windows = np.lib.stride_tricks.sliding_window_view(y, ny, axis=0)[..., ::-1]
     block = np.swapaxes(windows, 1, 2)  # (rows, lag i newest first, channel)
-    slope = np.einsum('i,rio->ro', ramp_slope_weights(ny), block)
-    lags = np.arange(ny, dtype=np.float64)
-    offsets = block - (block[:, :1, :] - lags[None, :, None] * slope[:, None, :])
-    offsets = offsets[:, 1:, :]
+    coeffs = np.einsum('ki,rio->rko', ramp_fit_weights(ny, order), block)
+    fitted = block[:, :1, :] + np.einsum('ik,rko->rio', _ramp_powers(ny, order), coeffs)
+    offsets = (block - fitted)[:, 1:, :]
     if body_frame:
         heading = block[:, 0, 2]
         rows = offsets.reshape(offsets.shape[0], -1)
@@ -441,7 +457,8 @@ class NnarmaxNet(torch.nn.Module):
             # squeeze every relative regressor and output into a sliver of the tanh range.
             y_mean = np.zeros_like(y_mean)
             y_std = _safe_std(relative_spread(y_series, self.spec.ny, self.spec.body_frame,
-                                              self.spec.ramp_invariant), y_mean)
+                                              self.spec.ramp_invariant, self.spec.ramp_order),
+                              y_mean)
         new = {
             'u_mean': torch.from_numpy(u_mean),
             'u_std': torch.from_numpy(u_std),
@@ -626,6 +643,37 @@ def ramp_slope_weights(ny: int) -> FloatArray:
     return weights
 
 
+@functools.lru_cache(maxsize=16)
+def ramp_fit_weights(ny: int, order: int = 1) -> FloatArray:
+    """W (order, ny) with âₖ = Σᵢ Wₖᵢ y(t − i): the least-squares polynomial's coefficients.
+
+    The polynomial a₀ + Σₖ aₖ·(−i)ᵏ, k = 1 … order, fitted to the ny newest positions
+    (i = 0 … ny − 1, newest first); row k − 1 returns aₖ (per sample^k). Order 1 is
+    ``ramp_slope_weights``. Every row sums to 0 (translation invariance) and a polynomial of at
+    most that order is returned exactly. Cached: the array is read-only.
+    """
+    if order == 1:
+        weights = ramp_slope_weights(ny)[None, :]
+    elif ny < order + 1:
+        raise ValueError(f'a polynomial of order {order} needs ny ≥ {order + 1} positions, '
+                         f'got ny = {ny}')
+    else:
+        vandermonde = _ramp_powers(ny, order, constant=True)
+        weights = np.asarray(np.linalg.pinv(vandermonde)[1:], dtype=np.float64)
+    weights.setflags(write=False)
+    return weights
+
+
+@functools.lru_cache(maxsize=32)
+def _ramp_powers(ny: int, order: int, constant: bool = False) -> FloatArray:
+    """(ny, order) matrix of (−i)ᵏ, i = 0 … ny − 1, k = 1 … order (k from 0 with constant)."""
+    lags = -np.arange(ny, dtype=np.float64)
+    powers = np.arange(0 if constant else 1, order + 1)
+    matrix = np.asarray(lags[:, None] ** powers[None, :], dtype=np.float64)
+    matrix.setflags(write=False)
+    return matrix
+
+
 def _relative_frame_torch(spec: NnarmaxSpec, x: torch.Tensor,
                           ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """(ref, shift, base) of raw regressor rows ``x``: see ``_relative_frame_numpy``."""
@@ -635,12 +683,12 @@ def _relative_frame_torch(spec: NnarmaxSpec, x: torch.Tensor,
     if not spec.ramp_invariant:
         return ref, _relative_shift(spec, ref), ref
     block = x[:, offset:offset + spec.ny * n_out].reshape(x.shape[0], spec.ny, n_out)
-    weights = torch.from_numpy(ramp_slope_weights(spec.ny))
-    slope = torch.einsum('i,rio->ro', weights, block)
-    lags = torch.arange(spec.ny, dtype=x.dtype)
-    line = ref[:, None, :] - lags[None, :, None] * slope[:, None, :]
+    weights = torch.tensor(ramp_fit_weights(spec.ny, spec.ramp_order))
+    coeffs = torch.einsum('ki,rio->rko', weights, block)
+    powers = torch.tensor(_ramp_powers(spec.ny, spec.ramp_order))
+    line = ref[:, None, :] + torch.einsum('ik,rko->rio', powers, coeffs)
     zeros = torch.zeros(x.shape[0], spec.nu * spec.n_inputs_u, dtype=x.dtype)
-    return ref, torch.cat((zeros, line.reshape(x.shape[0], -1)), dim=1), ref + slope
+    return ref, torch.cat((zeros, line.reshape(x.shape[0], -1)), dim=1), ref + coeffs.sum(dim=1)
 
 
 def _relative_frame_numpy(spec: NnarmaxSpec, x: FloatArray,
@@ -661,11 +709,11 @@ def _relative_frame_numpy(spec: NnarmaxSpec, x: FloatArray,
     if not spec.ramp_invariant:
         return ref, np.concatenate((zeros, np.tile(ref, spec.ny + spec.nfb)), axis=-1), ref
     block = x[..., offset:offset + spec.ny * n_out].reshape(x.shape[:-1] + (spec.ny, n_out))
-    slope = np.einsum('i,...io->...o', ramp_slope_weights(spec.ny), block)
-    lags = np.arange(spec.ny, dtype=np.float64)
-    line = ref[..., None, :] - lags[:, None] * slope[..., None, :]
+    coeffs = np.einsum('ki,...io->...ko', ramp_fit_weights(spec.ny, spec.ramp_order), block)
+    line = ref[..., None, :] + np.einsum('ik,...ko->...io', _ramp_powers(spec.ny, spec.ramp_order),
+                                         coeffs)
     shift = np.concatenate((zeros, line.reshape(x.shape[:-1] + (spec.ny * n_out,))), axis=-1)
-    return ref, shift, ref + slope
+    return ref, shift, ref + coeffs.sum(axis=-2)
 
 
 def rotate_blocks_torch(values: torch.Tensor, cos: torch.Tensor,

@@ -30,6 +30,7 @@ from typing import Any
 
 from lf_predictor_ros.core.field_meta import field_doc
 from lf_predictor_ros.core.frequency import welch_resolution
+from lf_predictor_ros.core.regressors import RAMP_ORDERS
 
 TRAINERS = ('lm', 'lbfgs', 'adam')
 TRAINING_MODES = ('series_parallel', 'parallel')
@@ -43,7 +44,7 @@ MIN_TRAINING_EXAMPLES = 20
 _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'transient_length',
                   'filter_window', 'append_length')
 _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed',
-               'motion_gate_ny')
+               'motion_gate_ny', 'ramp_order')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
                 'motion_gate_validation')
@@ -81,6 +82,11 @@ class PredictorParams:
             'the predicted step taken from its extrapolation: a vessel moving at constant '
             'velocity (setpoint moves, turns) is followed without lag whatever the window taught '
             '(issue 13; nfb 0 only)'))
+    ramp_order: int = field(
+        default=1, metadata=_doc(
+            'polynomial fitted by ramp_invariant networks and the motion gate twin: 1 a line '
+            '(constant velocity followed without lag), 2 a parabola (constant acceleration too; '
+            'lets more wave motion through; needs ny ≥ 3)'))
     motion_gate: bool = field(
         default=False, metadata=_doc(
             'train a ramp-invariant twin of the network on the same data and blend it in, per '
@@ -398,6 +404,15 @@ class PredictorParams:
         if self.motion_gate_ny == 1 or self.motion_gate_ny < 0:
             raise ValueError(f'ramp rule: motion_gate_ny is the ny of the twin (a line needs ≥ 2 '
                              f'positions) or 0 for ny, got {self.motion_gate_ny}')
+        if self.ramp_order not in RAMP_ORDERS:
+            raise ValueError(f'ramp rule: ramp_order must be one of {RAMP_ORDERS} (1 line, 2 '
+                             f'parabola), got {self.ramp_order}')
+        ramp_ny = self.motion_gate_ny or self.ny
+        if (self.ramp_invariant or self.motion_gate) and ramp_ny < self.ramp_order + 1:
+            raise ValueError(f'ramp rule: ramp_order {self.ramp_order} fits a polynomial through '
+                             f'the ny positions of the ramp-invariant network and needs at least '
+                             f'{self.ramp_order + 1}, got {ramp_ny}: raise ny (motion_gate_ny) or '
+                             'lower ramp_order')
 
     def _check_frequencies(self) -> None:
         low, high = self.wave_band

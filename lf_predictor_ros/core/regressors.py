@@ -39,6 +39,10 @@ from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 
+# Polynomial orders of the ramp-invariant frame (``network.ramp_fit_weights``): 1 a line
+# (constant velocity), 2 a parabola (constant acceleration).
+RAMP_ORDERS = (1, 2)
+
 
 class RegressorLags(Protocol):
     """The part of a network spec that defines its regressors (``NnarmaxSpec`` satisfies it)."""

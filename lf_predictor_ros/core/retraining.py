@@ -134,7 +134,7 @@ def network_spec(params: PredictorParams) -> NnarmaxSpec:
                        ny=params.ny, nfb=params.nfb, hidden_units=params.hidden_units,
                        hidden_layers=params.hidden_layers, relative=True,
                        body_frame=params.regressor_frame == 'body',
-                       ramp_invariant=params.ramp_invariant)
+                       ramp_invariant=params.ramp_invariant, ramp_order=params.ramp_order)
 
 
 def train_settings(params: PredictorParams) -> TrainSettings:

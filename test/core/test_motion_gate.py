@@ -200,16 +200,20 @@ def test_the_twin_never_trains_beside_the_holding_network(
     assert all(b[0] >= a[1] for a, b in zip(ordered, ordered[1:], strict=False))
 
 
-def test_the_twin_has_its_own_ny_when_given() -> None:
+@pytest.mark.parametrize('order', [1, 2])
+def test_the_twin_has_its_own_ny_when_given_and_the_ramp_order(order: int) -> None:
     t, pose, force = moving_run(400, 4)
-    gated = AdaptivePredictor(SMALL.replace(motion_gate=True, motion_gate_ny=6), background=False)
-    moving = AdaptivePredictor(SMALL.replace(ramp_invariant=True, ny=6), background=False)
+    gated = AdaptivePredictor(SMALL.replace(motion_gate=True, motion_gate_ny=6, ramp_order=order),
+                              background=False)
+    moving = AdaptivePredictor(SMALL.replace(ramp_invariant=True, ny=6, ramp_order=order),
+                               background=False)
     for k in range(t.size):
         gated.update(t[k], pose[k], force[k])
         moving.update(t[k], pose[k], force[k])
     twin = gated._moving  # the twin, to compare with a ramp-invariant network of ny 6
     assert twin is not None and twin.params.ny == 6 and gated.params.ny == SMALL.ny == 12
     assert twin.model is not None and moving.model is not None
+    assert twin.model.spec.ramp_order == order
     assert twin.update(t[-1] + 1, pose[-1], force[-1]) == pytest.approx(
         moving.update(t[-1] + 1, pose[-1], force[-1]), abs=1e-9)
 

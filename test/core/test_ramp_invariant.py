@@ -6,6 +6,7 @@ its output is added to that line's extrapolation y(t) + v̂. A vessel moving at 
 (a ramp in every channel) then leaves only the forces and the constant biases in front of the
 network, so the prediction of a ramp is the ramp's next value plus one constant, whatever the
 ramp's offset and slope, for any weights. Without the option a network does not have that.
+With ``ramp_order`` 2 the same holds for a parabola (constant acceleration).
 """
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from lf_predictor_ros.core.network import (
     NnarmaxSpec,
     NumpyNnarmax,
     predict_step,
+    ramp_fit_weights,
     ramp_slope_weights,
     relative_spread,
 )
@@ -57,6 +59,14 @@ def ramp(offset: tuple[float, ...], velocity: tuple[float, ...], n: int = 40) ->
     return np.asarray(offset) + np.arange(n, dtype=np.float64)[:, None] * np.asarray(velocity)
 
 
+def parabola(offset: tuple[float, ...], velocity: tuple[float, ...],
+             acceleration: tuple[float, ...], n: int = 41) -> FloatArray:
+    """Positions offset + k·velocity + k²·acceleration / 2, k = 0 … n − 1 (per sample)."""
+    k = np.arange(n, dtype=np.float64)[:, None]
+    return (np.asarray(offset) + k * np.asarray(velocity)
+            + 0.5 * k ** 2 * np.asarray(acceleration))
+
+
 def test_slope_weights_return_a_ramps_slope() -> None:
     for ny in (2, 3, 24):
         weights = ramp_slope_weights(ny)
@@ -83,6 +93,44 @@ def test_a_ramp_is_predicted_up_to_one_constant(frame: str) -> None:
         residuals.append(prediction - (y[-1] + np.asarray(velocity)))
     assert residuals[0] == pytest.approx(residuals[1], abs=1e-9)
     assert np.max(np.abs(residuals[0])) > 1e-3  # the random constant is there (not a 0 test)
+
+
+def test_fit_weights_return_a_polynomials_coefficients() -> None:
+    assert ramp_fit_weights(24, 1) == pytest.approx(ramp_slope_weights(24)[None, :], abs=1e-15)
+    lags = np.arange(12, dtype=np.float64)
+    y = 3.0 - 0.5 * lags + 0.02 * lags ** 2  # a₀ + a₁·(−i) + a₂·(−i)², newest first
+    weights = ramp_fit_weights(12, 2)
+    assert weights.shape == (2, 12)
+    assert weights @ y == pytest.approx([0.5, 0.02], abs=1e-12)
+    assert weights.sum(axis=1) == pytest.approx([0.0, 0.0], abs=1e-12)
+    with pytest.raises(ValueError, match='ny ≥ 3'):
+        ramp_fit_weights(2, 2)
+
+
+@pytest.mark.parametrize('frame', ['earth', 'body'])
+def test_a_parabola_is_predicted_up_to_one_constant_with_order_2(frame: str) -> None:
+    net = random_network(PredictorParams(ramp_invariant=True, ramp_order=2, regressor_frame=frame))
+    fast = NumpyNnarmax.from_module(net)
+    forces = np.zeros((41, 3))
+    cases = (((5.0, -3.0, 0.4), (0.2, -0.1, 0.01), (0.01, 0.02, -0.001)),
+             ((50.0, 30.0, -2.0), (-1.0, 0.3, -0.02), (-0.03, 0.005, 0.002)))
+    residuals = []
+    for offset, velocity, acceleration in cases:
+        y = parabola(offset, velocity, acceleration)
+        if frame == 'body':
+            y[:, 2] += 0.7 - y[-1, 2]
+        next_value = parabola(offset, velocity, acceleration, n=42)[-1]
+        next_value[2] += y[-1, 2] - parabola(offset, velocity, acceleration)[-1, 2]
+        prediction = predict_step(fast, forces, y, y)
+        assert predict_step(net, forces, y, y) == pytest.approx(prediction, abs=1e-12)
+        residuals.append(prediction - next_value)
+    assert residuals[0] == pytest.approx(residuals[1], abs=1e-8)
+    assert np.max(np.abs(residuals[0])) > 1e-3
+    line = random_network(PredictorParams(ramp_invariant=True, regressor_frame=frame))
+    line_fast = NumpyNnarmax.from_module(line)
+    y0, y1 = (parabola(*case) for case in cases)
+    assert np.max(np.abs((predict_step(line_fast, forces, y0, y0) - y0[-1])
+                         - (predict_step(line_fast, forces, y1, y1) - y1[-1]))) > 0.1
 
 
 def test_without_the_option_a_ramp_is_not_followed() -> None:
@@ -112,6 +160,10 @@ def test_spread_is_measured_from_the_line() -> None:
     rms = np.sqrt(np.mean(np.concatenate(expected) ** 2, axis=0))
     assert relative_spread(noise, ny, body_frame=True, ramp_invariant=True) == pytest.approx(
         rms, rel=1e-12)
+    curve = parabola((1.0, 2.0, 0.3), (0.5, -0.2, 0.01), (0.01, -0.02, 0.001), n=100)
+    assert relative_spread(curve, 24, ramp_invariant=True, ramp_order=2) == pytest.approx(
+        np.zeros(3), abs=1e-9)
+    assert relative_spread(curve, 24, ramp_invariant=True)[0] > 0.1
 
 
 def test_rules() -> None:
@@ -127,6 +179,17 @@ def test_rules() -> None:
     assert spec.to_dict()['ramp_invariant'] is True
     assert NnarmaxSpec.from_dict(spec.to_dict()) == spec
     assert 'ramp_invariant' not in network_spec(PredictorParams()).to_dict()
+    assert 'ramp_order' not in spec.to_dict()
+    parabolic = network_spec(PredictorParams(ramp_invariant=True, ramp_order=2))
+    assert parabolic.to_dict()['ramp_order'] == 2
+    assert NnarmaxSpec.from_dict(parabolic.to_dict()) == parabolic
+    with pytest.raises(ValueError, match='ramp_order must be one of'):
+        PredictorParams(ramp_order=3)
+    with pytest.raises(ValueError, match='needs at least 3, got 2'):
+        PredictorParams(motion_gate=True, motion_gate_ny=2, ramp_order=2)
+    with pytest.raises(ValueError, match='ramp_order 2 fits a polynomial'):
+        NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=2, nfb=0, hidden_units=2,
+                    relative=True, ramp_invariant=True, ramp_order=2)
 
 
 def test_training_on_station_keeping_still_follows_a_ramp() -> None:

@@ -134,7 +134,10 @@ def network_spec(params: PredictorParams) -> NnarmaxSpec:
                        ny=params.ny, nfb=params.nfb, hidden_units=params.hidden_units,
                        hidden_layers=params.hidden_layers, relative=True,
                        body_frame=params.regressor_frame == 'body',
-                       ramp_invariant=params.ramp_invariant, ramp_order=params.ramp_order)
+                       ramp_invariant=params.ramp_invariant,
+                       # the order matters only to a ramp-invariant network: a plain one keeps
+                       # the spec (and checkpoint) it always had
+                       ramp_order=params.ramp_order if params.ramp_invariant else 1)
 
 
 def train_settings(params: PredictorParams) -> TrainSettings:

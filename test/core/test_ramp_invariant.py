@@ -180,6 +180,7 @@ def test_rules() -> None:
     assert NnarmaxSpec.from_dict(spec.to_dict()) == spec
     assert 'ramp_invariant' not in network_spec(PredictorParams()).to_dict()
     assert 'ramp_order' not in spec.to_dict()
+    assert network_spec(PredictorParams(ramp_order=2)) == network_spec(PredictorParams())
     parabolic = network_spec(PredictorParams(ramp_invariant=True, ramp_order=2))
     assert parabolic.to_dict()['ramp_order'] == 2
     assert NnarmaxSpec.from_dict(parabolic.to_dict()) == parabolic

@@ -78,10 +78,10 @@ class PredictorParams:
             'issue 13, hypothesis 3)'))
     ramp_invariant: bool = field(
         default=False, metadata=_doc(
-            'positions relative to the least-squares line through the ny newest positions and '
-            'the predicted step taken from its extrapolation: a vessel moving at constant '
-            'velocity (setpoint moves, turns) is followed without lag whatever the window taught '
-            '(issue 13; nfb 0 only)'))
+            'positions relative to the least-squares line (ramp_order 2: parabola) through the '
+            'ny newest positions and the predicted step taken from its extrapolation: a vessel '
+            'moving at constant velocity (setpoint moves, turns) is followed without lag '
+            'whatever the window taught (issue 13; nfb 0 only)'))
     ramp_order: int = field(
         default=1, metadata=_doc(
             'polynomial fitted by ramp_invariant networks and the motion gate twin: 1 a line '

@@ -626,17 +626,23 @@ class AdaptivePredictor:
 
         Only while the twin uses its network (its cascade fallback is the holding side's);
         the holding side may be on its cascade fallback, which lags a move as its network does.
+        The gate's velocity and usual velocity are those of the twin's network alone: while the
+        twin is on its fallback the gate restarts (its history of the network's motion stays),
+        so it opens only after ``GATE_MIN_FILL`` of a window of the network's own outputs.
         """
         if self._moving is None or self._gate is None:
             return out
         moving = self._moving.update(t, pose, force)
-        gain = dead_zoned(self._gate.update(moving), self.params.motion_gate_dead_zone)
         offset = moving_offset(out, moving, self.ndof)
         if not self._moving.using_network or not np.all(np.isfinite(offset)):
+            # The gate measures the twin's network alone: the usual velocity of the cascade
+            # fallback is another filter's, and the step where the source switches is no motion.
+            self._gate.restart()
             self._gain = np.zeros(self.ndof)
             self._gate_offset = np.zeros(self.ndof)
             self._validate_gate(out, out)
             return out
+        gain = dead_zoned(self._gate.update(moving), self.params.motion_gate_dead_zone)
         if self._gate_alpha < 1.0:
             # LP(moving − holding) of core.motion_gate (motion_gate_smoothing)
             self._gate_offset = self._gate_offset + self._gate_alpha * (offset - self._gate_offset)

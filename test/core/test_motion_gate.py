@@ -17,6 +17,7 @@ import pytest
 import torch
 
 from lf_predictor_ros.core.motion_gate import (
+    GATE_MIN_FILL,
     GATE_RATIO,
     MotionGate,
     blend,
@@ -136,6 +137,31 @@ def test_gated_output_is_the_blend_of_the_two_networks_run_alone() -> None:
     assert counters['moving_trainings'] == moving.counters['trainings'] > 0
     assert counters['trainings'] == holding.counters['trainings']
     assert blended > 20  # the move opened the gate (not a test of the zero gain only)
+
+
+def test_the_usual_velocity_is_measured_on_the_twins_network_alone() -> None:
+    """Shut until GATE_MIN_FILL of a training window of the twin's network outputs is seen.
+
+    Before its first training the twin publishes its cascade fallback, another filter with
+    other velocities (and the switch to the network is a step, not a motion): the gate must
+    not count them as the vessel's usual motion. With SMALL (200 s window) the gate needs 50
+    samples of the network after the twin's first training, however long the fallback ran.
+    """
+    t, pose, force = moving_run(600, 2)
+    gated = AdaptivePredictor(SMALL.replace(motion_gate=True), background=False)
+    twin = gated._moving
+    assert twin is not None
+    needed = math.ceil(GATE_MIN_FILL * SMALL.training_window / SMALL.sample_time)
+    on_network = 0
+    first_open = None
+    for k in range(t.size):
+        gated.update(t[k], pose[k], force[k])
+        on_network += int(twin.using_network)
+        if first_open is None and np.any(gated.motion_gain > 0.0):
+            first_open = on_network
+    assert needed == 50
+    assert first_open is not None and first_open >= needed  # the move opens it later
+    assert on_network > needed + 100
 
 
 def test_smoothed_gate_blends_the_low_passed_offset_of_the_two_networks() -> None:

@@ -191,9 +191,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--seed', type=int, metavar='N',
                         help='network initialization seed (overrides the params file)')
     parser.add_argument('--metrics', metavar='FILE.json', help='write metrics and run info')
-    parser.add_argument('--load-model', metavar='CKPT', help='warm start from a checkpoint')
+    parser.add_argument('--load-model', metavar='CKPT',
+                        help='warm start from a checkpoint (motion_gate: the twin from CKPT.twin '
+                             'when it is there)')
     parser.add_argument('--save-model', metavar='CKPT',
-                        help='save the network in service at the end')
+                        help='save the network in service at the end (motion_gate: the twin '
+                             'to CKPT.twin)')
     parser.add_argument('--no-progress', action='store_true',
                         help='no progress bar (it is shown only on a terminal anyway)')
     parser.add_argument('--force', action='store_true', help='overwrite OUTPUT if it exists')

@@ -35,6 +35,13 @@ fast the published estimate moves. Both act on the published output only: the re
 feedback history and trainings see exactly what they see with both off, and with both off the
 output is bit-identical to the plain switch.
 
+Checkpoints: `save(path)` writes the network in service to ``path`` (``network.save_checkpoint``);
+with the motion gate on, the twin's network goes to the sibling file ``path + '.twin'``
+(`twin_checkpoint_path`, same format) and `load(path)` restores the twin from it when it is there
+(a checkpoint without one, e.g. from a gate-off predictor, loads with a cold twin). A gate-off
+predictor writes and reads ``path`` alone, as it always did. With ``checkpoint_path`` set, each
+network's worker saves its own file after each of its accepted trainings.
+
 Bad input: `update` raises ValueError for a non-finite or wrongly shaped pose/force and leaves its
 state unchanged (the node filters such samples before they get here). A training that raises is
 caught on the worker; the network in service stays, and the status reports the error.
@@ -68,6 +75,7 @@ from lf_predictor_ros.core.motion_gate import (
 )
 from lf_predictor_ros.core.network import (
     NnarmaxNet,
+    NnarmaxSpec,
     NumpyNnarmax,
     load_checkpoint,
     predict_step,
@@ -90,6 +98,8 @@ from lf_predictor_ros.core.training import warm_up
 # and the feedback history is re-seeded from it (stops a free-running recursion from running away).
 GUARD_SPREADS = 6.0
 GUARD_FLOOR = np.array([0.5, 0.5, 0.02])  # [m, m, rad]
+# Appended to a checkpoint's path to name the motion gate twin's checkpoint beside it.
+TWIN_SUFFIX = '.twin'
 
 FloatArray = NDArray[np.float64]
 
@@ -109,6 +119,16 @@ class _Transfer:
         self.source = source
         self.offset = offset
         self.start = start
+
+
+def twin_checkpoint_path(path: str) -> str:
+    """Where `AdaptivePredictor.save(path)` puts the motion gate twin's checkpoint.
+
+    ``path + '.twin'``: a sibling of the holding network's file (same folder, so the same
+    permissions and disk), named from the whole path whatever its suffix, and never a name a
+    holding checkpoint ending in '.pt' could have.
+    """
+    return path + TWIN_SUFFIX
 
 
 def _smoothstep(phase: float) -> float:
@@ -155,7 +175,8 @@ class AdaptivePredictor:
 
         ``background``: train on a worker thread (True, for nodes) or inline at the retraining
         instant (False: deterministic, for replay and benchmarks). ``checkpoint_path``: the worker
-        saves every accepted network there. ``max_trainings``: stop retraining after that many
+        saves every accepted network there (the motion gate twin's worker its own to
+        `twin_checkpoint_path` of it). ``max_trainings``: stop retraining after that many
         accepted trainings (1 gives the thesis's static network; None = adaptive).
         ``training_lock``: held by a worker while it trains, so predictors sharing it train one
         after the other (the motion gate's twin shares its holding network's).
@@ -165,7 +186,7 @@ class AdaptivePredictor:
         self.ndof = params.ndof
         self.sample_time = params.sample_time
         self.background = background
-        self.checkpoint_path = checkpoint_path
+        self._checkpoint_path = checkpoint_path
         self._capacity = max(params.training_samples + params.transient_samples,
                              params.estimation_samples, params.filter_samples) + params.max_lag
         self._first_training = first_training_samples(params)
@@ -206,6 +227,7 @@ class AdaptivePredictor:
             self._moving = AdaptivePredictor(
                 params.replace(motion_gate=False, ramp_invariant=True,
                                ny=params.motion_gate_ny or params.ny), background=background,
+                checkpoint_path=twin_checkpoint_path(checkpoint_path) if checkpoint_path else None,
                 max_trainings=max_trainings, training_lock=self._training_lock)
             self._gate = MotionGate(params.ndof, params.sample_time,
                                     window=params.training_window)
@@ -366,6 +388,20 @@ class AdaptivePredictor:
         self.wait_for_training(timeout=5.0)
 
     @property
+    def checkpoint_path(self) -> str | None:
+        """Where the worker saves each accepted network (None or '': nowhere).
+
+        Setting it also points the motion gate twin's worker at `twin_checkpoint_path` of it.
+        """
+        return self._checkpoint_path
+
+    @checkpoint_path.setter
+    def checkpoint_path(self, path: str | None) -> None:
+        self._checkpoint_path = path
+        if self._moving is not None:
+            self._moving.checkpoint_path = twin_checkpoint_path(path) if path else None
+
+    @property
     def using_network(self) -> bool:
         """True when the last output came from the network (``status().state == 'trained'``)."""
         return self._model is not None and self._used_network
@@ -395,6 +431,11 @@ class AdaptivePredictor:
         return counts
 
     @property
+    def twin_model(self) -> NumpyNnarmax | None:
+        """The motion gate twin's network in service (None: gate off, or the twin is cold)."""
+        return None if self._moving is None else self._moving.model
+
+    @property
     def motion_gain(self) -> FloatArray:
         """The motion gate's gain g per DOF at the last sample (zeros when the gate is off)."""
         return self._gain.copy()
@@ -415,18 +456,68 @@ class AdaptivePredictor:
         return self._targets
 
     def save(self, path: str) -> None:
-        """Write the network in service to a checkpoint; ValueError if there is none."""
+        """Write the network in service to a checkpoint; ValueError if there is none.
+
+        With the motion gate on, the twin's network is written to `twin_checkpoint_path`
+        (``path + '.twin'``) when it has one; when it has none, a twin file left there by an
+        earlier save is removed, so that `load` never pairs this network with a stale twin.
+        Gate off: ``path`` alone, nothing else touched.
+        """
         if self._state_dict is None:
             raise ValueError('no trained network to save yet: wait for the first training')
         save_checkpoint(path, network_spec(self.params), self._state_dict, self._meta())
+        if self._moving is None:
+            return
+        twin_path = twin_checkpoint_path(path)
+        if self._moving._state_dict is None:
+            Path(twin_path).unlink(missing_ok=True)
+        else:
+            self._moving.save(twin_path)
 
-    def load(self, path: str) -> None:
-        """Warm start from a checkpoint; ValueError (clear message) if it does not fit."""
+    def load(self, path: str, *, strict_twin: bool = True) -> None:
+        """Warm start from a checkpoint; ValueError (clear message) if it does not fit.
+
+        With the motion gate on, the twin is restored from `twin_checkpoint_path` (``path +
+        '.twin'``) too. No twin file: the twin stays as it is (cold in a new predictor) and the
+        status message says so. A twin file that does not fit the twin (its spec, or another
+        sample_time) or is corrupt: ValueError and nothing is loaded, or with ``strict_twin``
+        False the holding network is loaded and the twin stays cold (the status message says
+        why; the node's carry-over after a run-time change of ``motion_gate_ny``).
+        """
+        checkpoint = self._read_checkpoint(path)
+        twin_path = twin_checkpoint_path(path)
+        twin_checkpoint = None
+        note = ''
+        if self._moving is not None:
+            try:
+                twin_checkpoint = self._moving._read_checkpoint(twin_path)
+            except FileNotFoundError:
+                note = f'; motion gate twin cold (no {Path(twin_path).name})'
+            except (ValueError, OSError) as exc:
+                if strict_twin:
+                    raise ValueError(f'{exc}; or delete {twin_path} (the motion gate twin of '
+                                     f'{path}) to start the twin cold') from exc
+                note = f'; motion gate twin cold ({Path(twin_path).name} not loaded: {exc})'
+        self._install(path, checkpoint)
+        if self._moving is not None and twin_checkpoint is not None:
+            self._moving._install(twin_path, twin_checkpoint)
+            note = f'; motion gate twin from {Path(twin_path).name}'
+        self._message = f'warm start from {Path(path).name}{note}'
+
+    def _read_checkpoint(
+            self, path: str) -> tuple[NnarmaxSpec, dict[str, torch.Tensor], dict[str, Any]]:
+        """A checkpoint that fits this predictor: (spec, state, meta); ValueError if not."""
         spec, state, meta = load_checkpoint(path, expected_spec=network_spec(self.params))
         if float(meta.get('sample_time', self.sample_time)) != self.sample_time:
             raise ValueError(f'checkpoint {path} was trained at sample_time '
                              f'{meta.get("sample_time")} s, this predictor runs at '
                              f'{self.sample_time} s: use the same sample_time or retrain')
+        return spec, state, meta
+
+    def _install(self, path: str, checkpoint: tuple[NnarmaxSpec, dict[str, torch.Tensor],
+                                                    dict[str, Any]]) -> None:
+        """Put a checked checkpoint's network in service (its ω0 and loss with it)."""
+        spec, state, meta = checkpoint
         self._state_dict = state
         self._model = NumpyNnarmax.from_module(NnarmaxNet.from_state(spec, state))
         self._model_time = None

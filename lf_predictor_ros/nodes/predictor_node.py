@@ -33,8 +33,11 @@ they imply for dead reckoning (``controller_inertia``, ``core.controller_gains``
 Training runs on the core's worker thread; no callback ever waits for it. With ``model_path``
 set, the node loads that checkpoint at configure time (warm start) and the worker saves after
 each accepted training (after a run-time change of the network structure the file then holds the
-new shape). A file that does not fit the parameters or is corrupt is refused with an ERROR log,
-the node starts cold and does not save over the refused file.
+new shape). With ``motion_gate`` the ramp-invariant twin has its own checkpoint beside it,
+``model_path + '.twin'``: loaded with the holding network (a missing one: the twin starts cold,
+``model_file`` in the diagnostics says so) and saved by the twin's worker after each of its
+accepted trainings. A file (or twin file) that does not fit the parameters or is corrupt is
+refused with an ERROR log, the node starts cold and does not save over the refused files.
 
 Position-reference checks (``core.reference_checks``, parameters ``reference_checks``,
 ``frozen_time``, ``motion_*``, ``jump_*``, ``drift_*``, ``dropout_timeout``) run on every pose
@@ -81,9 +84,11 @@ activates at start, so ``ros2 run lf_predictor_ros predictor`` just works.
 Runtime parameter changes are validated (the reason of a rejection is returned) and applied as:
 - ``PredictorParams`` fields: the predictor is re-created with the new values (logged). When
   neither the network structure (ndof, nu, ny, nfb, hidden_units, hidden_layers,
-  regressor_frame) nor sample_time changes, the trained network and ω0 are carried over (warm
-  start); otherwise it starts cold. Collected data restarts in both cases (the next training
-  needs a full window).
+  regressor_frame, ramp_invariant, ramp_order) nor sample_time changes, the trained network and
+  ω0 are carried over (warm start), and so is the motion gate's trained twin unless its own
+  structure (``motion_gate_ny``) changed (then the twin alone starts cold, as it does when
+  ``motion_gate`` is switched on); otherwise it starts cold. Collected data restarts in both
+  cases (the next training needs a full window).
 - aligner settings (max_gap, thrust_timeout, backward_jump, max_speed, average_poses): a new
   aligner, a new data segment. ``frame_id``: immediately.
 - reference-check settings (and ``ndof``): new checks with fresh statistics (counters kept).
@@ -161,6 +166,11 @@ STRUCTURE_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 
 NOTE_STRUCTURE = ' (run-time change: re-creates the predictor cold, data restarts)'
 NOTE_TUNING = (' (run-time change: re-creates the predictor keeping the trained network, '
                'data restarts)')
+# PredictorParams fields that change only the motion gate twin's network: a change keeps the
+# holding network, the twin starts cold.
+TWIN_STRUCTURE_FIELDS = ('motion_gate_ny',)
+NOTE_TWIN = (' (run-time change: re-creates the predictor keeping the trained network; the '
+             'motion gate twin starts cold, data restarts)')
 
 
 @dataclass(frozen=True)
@@ -169,7 +179,7 @@ class PredictorNodeSettings:
 
     model_path: str = field(default='', metadata=_meta(
         "checkpoint: loaded at start (warm start), saved after each accepted training; '' = "
-        'none', read_only=True))
+        "none; with motion_gate the twin's checkpoint is model_path + '.twin'", read_only=True))
     frame_id: str = field(default=FRAME_EARTH, metadata=_meta(
         'frame of measured_pose (expected) and of lf_pose (published)'))
     max_gap: float = field(default=5.0, metadata=_meta(
@@ -219,7 +229,9 @@ class PredictorNodeSettings:
 
 
 def _change_note(name: str) -> str:
-    return NOTE_STRUCTURE if name in STRUCTURE_FIELDS else NOTE_TUNING
+    if name in STRUCTURE_FIELDS:
+        return NOTE_STRUCTURE
+    return NOTE_TWIN if name in TWIN_STRUCTURE_FIELDS else NOTE_TUNING
 
 
 def diagnostic_level(status: EstimatorStatus) -> str:
@@ -416,6 +428,8 @@ class PredictorNode(InputHealth, LifecycleNode):
 
     def _load_model(self) -> None:
         """Warm start from ``model_path`` when it exists; refuse a file that does not fit."""
+        from lf_predictor_ros.core.predictor import twin_checkpoint_path  # torch: already imported
+
         assert self._predictor is not None
         path = self._settings.model_path
         self._warm_start = False
@@ -434,12 +448,21 @@ class PredictorNode(InputHealth, LifecycleNode):
                     f'model file {path} refused, starting cold and not saving over it: {error}')
             else:
                 self._warm_start = True
-                self._model_file = f'{path} (warm start)'
-                self.get_logger().info(f'warm start from {path}')
+                twin = ''
+                if self._predictor.params.motion_gate:
+                    twin = ', motion gate twin ' + (
+                        'restored' if self._predictor.twin_model is not None else
+                        f'cold: no {twin_checkpoint_path(path)}')
+                self._model_file = f'{path} (warm start{twin})'
+                self.get_logger().info(f'warm start from {path}{twin}')
         self._predictor.checkpoint_path = self._save_path
 
     def _replace_predictor(self, params: PredictorParams) -> None:
-        """Re-create the predictor; carry the network over when its structure is unchanged."""
+        """Re-create the predictor; carry the network over when its structure is unchanged.
+
+        The motion gate twin comes with it when its own structure is unchanged too (else the
+        twin starts cold: ``strict_twin`` False).
+        """
         old = self._predictor
         keep = old is not None and old.model is not None and all(
             getattr(old.params, name) == getattr(params, name) for name in STRUCTURE_FIELDS)
@@ -447,8 +470,8 @@ class PredictorNode(InputHealth, LifecycleNode):
         if old is not None and keep:
             with tempfile.TemporaryDirectory() as folder:
                 path = os.path.join(folder, 'carry_over.pt')
-                old.save(path)
-                new.load(path)
+                old.save(path)  # with the gate: carry_over.pt.twin too
+                new.load(path, strict_twin=False)
         if old is not None:
             old.reset()  # drops a running training without waiting for it
         self._predictor = new
@@ -463,6 +486,8 @@ class PredictorNode(InputHealth, LifecycleNode):
                 driver.reset()  # a new odometry: a new timeline
             driver.state = state
         how = 'trained network kept' if keep else 'starting cold'
+        if keep and params.motion_gate:
+            how += ', motion gate twin ' + ('kept' if new.twin_model is not None else 'cold')
         self.get_logger().info(f'parameters changed: predictor re-created ({how}); data restarts')
 
     # ---- runtime parameters --------------------------------------------------------------

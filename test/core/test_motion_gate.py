@@ -2,12 +2,13 @@
 
 The gain g = r²/(1 + r²), r = s²/(k·s̄²), against its analytic values; the blend on the
 circle; the gate shut while the vessel does what it usually does and open in a move, also right
-after a gap; and the gated predictor's output equal, sample by sample, to the blend of the two
-networks run on their own.
+after a gap; the gated predictor's output equal, sample by sample, to the blend of the two
+networks run on their own; and the twin's checkpoint beside the holding network's.
 """
 from __future__ import annotations
 
 import math
+from pathlib import Path
 import threading
 import time
 
@@ -26,8 +27,9 @@ from lf_predictor_ros.core.motion_gate import (
     gate_validated,
     moving_offset,
 )
+from lf_predictor_ros.core.network import load_checkpoint, save_checkpoint
 from lf_predictor_ros.core.params import PredictorParams
-from lf_predictor_ros.core.predictor import AdaptivePredictor
+from lf_predictor_ros.core.predictor import AdaptivePredictor, twin_checkpoint_path
 from lf_predictor_ros.core.retraining import run_retraining
 
 FloatArray = NDArray[np.float64]
@@ -367,3 +369,156 @@ def test_the_dead_zone_scales_the_published_gain() -> None:
         shut += int(np.any((plain.motion_gain > 0.0) & (plain.motion_gain <= 0.3)))
         opened += int(np.any(zoned.motion_gain > 0.5))
     assert shut > 0 and opened > 0
+
+
+# ---- the twin's checkpoint -------------------------------------------------------------------
+
+GATED = SMALL.replace(motion_gate=True)
+SAVED_AT = 130  # [samples] the saved predictor trained once, at sample 120
+FED = 110  # [samples] fed after loading: fewer than a first training needs (120), no training
+RUN = SAVED_AT + FED  # the move starts at 0.75 × RUN = 180, 50 samples after the load
+
+
+@pytest.fixture(scope='module')
+def saved(tmp_path_factory: pytest.TempPathFactory) -> tuple[AdaptivePredictor, Path]:
+    """A gated predictor trained once on the holding part of `moving_run`, and its checkpoint.
+
+    Saved by the workers (``checkpoint_path`` set after construction, as the node does).
+    """
+    torch.set_num_threads(1)  # a module fixture runs before the autouse one
+    path = tmp_path_factory.mktemp('twin') / 'gated.pt'
+    source = AdaptivePredictor(GATED, background=False, max_trainings=1)
+    source.checkpoint_path = str(path)
+    t, pose, force = moving_run(RUN, 6)
+    for k in range(SAVED_AT):
+        source.update(t[k], pose[k], force[k])
+    assert source.model is not None and source.twin_model is not None
+    return source, path
+
+
+def _rows(model: object, n: int = 40) -> FloatArray:
+    spec = model.spec  # type: ignore[attr-defined]
+    return np.random.default_rng(41).normal(size=(n, spec.n_regressors)) * 5.0
+
+
+def test_the_workers_save_the_twin_beside_the_holding_network(
+        saved: tuple[AdaptivePredictor, Path]) -> None:
+    source, path = saved
+    twin_path = Path(twin_checkpoint_path(str(path)))
+    assert twin_path.name == 'gated.pt.twin'
+    assert sorted(p.name for p in path.parent.iterdir()) == ['gated.pt', 'gated.pt.twin']
+    spec, state, meta = load_checkpoint(twin_path)
+    assert spec.ramp_invariant and spec.ny == GATED.ny and meta['sample_time'] == 1.0
+    assert source.twin_model is not None
+    assert spec == source.twin_model.spec
+    source.checkpoint_path = None  # the twin's worker stops saving too
+    assert source._moving is not None and source._moving.checkpoint_path is None
+    source.checkpoint_path = str(path)
+    assert source._moving.checkpoint_path == str(twin_path)
+
+
+def test_save_and_load_round_trip_the_twin_and_the_gated_output(
+        saved: tuple[AdaptivePredictor, Path], tmp_path: Path) -> None:
+    source, _ = saved
+    path = tmp_path / 'round.pt'
+    source.save(str(path))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['round.pt', 'round.pt.twin']
+    loaded = AdaptivePredictor(GATED, background=False)
+    loaded.load(str(path))
+    assert loaded.status().message == 'warm start from round.pt; motion gate twin from ' \
+        'round.pt.twin'
+    assert source.model is not None and source.twin_model is not None
+    assert loaded.model is not None and loaded.twin_model is not None
+    rows = _rows(source.twin_model)
+    np.testing.assert_array_equal(loaded.twin_model.forward(rows), source.twin_model.forward(rows))
+    rows = _rows(source.model)
+    np.testing.assert_array_equal(loaded.model.forward(rows), source.model.forward(rows))
+    # the loaded predictor is the blend of the two networks loaded on their own, from the first
+    # samples on (a cold twin would use its cascade fallback until its first training: no gate)
+    holding = AdaptivePredictor(SMALL, background=False)
+    holding.load(str(path))
+    moving = AdaptivePredictor(SMALL.replace(ramp_invariant=True), background=False)
+    moving.load(twin_checkpoint_path(str(path)))
+    t, pose, force = moving_run(RUN, 6)
+    opened = 0
+    for k in range(SAVED_AT, RUN):
+        out = loaded.update(t[k], pose[k], force[k])
+        a = holding.update(t[k], pose[k], force[k])
+        b = moving.update(t[k], pose[k], force[k])
+        assert moving.using_network == (k - SAVED_AT + 1 >= GATED.max_lag)
+        assert out == pytest.approx(blend(a, b, loaded.motion_gain, 3), abs=1e-9), k
+        opened += int(np.any(loaded.motion_gain > 0.5))
+    assert loaded.counters['moving_trainings'] == loaded.counters['trainings'] == 0
+    assert opened > 20  # the move opened the gate on the loaded twin
+    assert loaded.twin_model is not None
+    twin = loaded._moving
+    assert twin is not None
+    assert twin.update(t[-1] + 1, pose[-1], force[-1]) == pytest.approx(
+        moving.update(t[-1] + 1, pose[-1], force[-1]), abs=1e-9)
+
+
+def test_a_plain_checkpoint_loads_with_a_cold_twin_and_a_plain_predictor_saves_one_file(
+        tmp_path: Path) -> None:
+    plain = AdaptivePredictor(SMALL, background=False, max_trainings=1)
+    t, pose, force = moving_run(RUN, 6)
+    for k in range(SAVED_AT):
+        plain.update(t[k], pose[k], force[k])
+    path = tmp_path / 'plain.pt'
+    plain.save(str(path))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['plain.pt']  # no twin file
+    gated = AdaptivePredictor(GATED, background=False)
+    gated.load(str(path))
+    assert gated.status().message == 'warm start from plain.pt; motion gate twin cold (no ' \
+        'plain.pt.twin)'
+    assert plain.model is not None and gated.model is not None and gated.twin_model is None
+    rows = _rows(plain.model)
+    np.testing.assert_array_equal(gated.model.forward(rows), plain.model.forward(rows))
+    # a cold twin: the holding network alone until the twin's first training
+    reference = AdaptivePredictor(SMALL, background=False)
+    reference.load(str(path))
+    for k in range(SAVED_AT, RUN):
+        out = gated.update(t[k], pose[k], force[k])
+        assert out == pytest.approx(reference.update(t[k], pose[k], force[k]), abs=1e-12), k
+        assert np.all(gated.motion_gain == 0.0)
+    # saved again with its twin still cold: a stale twin file beside it goes
+    stale = Path(twin_checkpoint_path(str(path)))
+    stale.write_bytes(b'an older twin')
+    gated.save(str(path))
+    assert not stale.exists()
+
+
+def test_a_twin_checkpoint_that_does_not_fit_is_refused_and_nothing_is_loaded(
+        saved: tuple[AdaptivePredictor, Path], tmp_path: Path) -> None:
+    source, _ = saved
+    path = tmp_path / 'gated.pt'
+    source.save(str(path))
+    twin_path = twin_checkpoint_path(str(path))
+    shorter = AdaptivePredictor(GATED.replace(motion_gate_ny=6), background=False)
+    with pytest.raises(ValueError, match=r"'ny': 12,.*'ny': 6,.*was expected: change the "
+                                         r'predictor parameters or retrain; or delete '
+                                         r'.*gated\.pt\.twin \(the motion gate twin of '
+                                         r'.*gated\.pt\) to start the twin cold'):
+        shorter.load(str(path))
+    assert shorter.model is None and shorter.twin_model is None  # all or nothing
+    assert shorter.status().message == 'collecting data'
+    # strict_twin False (the node's carry-over): the holding network, the twin cold
+    shorter.load(str(path), strict_twin=False)
+    assert shorter.model is not None and shorter.twin_model is None
+    assert shorter.status().message.startswith(
+        'warm start from gated.pt; motion gate twin cold (gated.pt.twin not loaded: checkpoint ')
+    # another sample time, or a corrupt file: refused alike
+    assert source.twin_model is not None and source._moving is not None
+    spec, state, meta = load_checkpoint(twin_path)
+    save_checkpoint(twin_path, spec, state, {**meta, 'sample_time': 2.0})
+    fresh = AdaptivePredictor(GATED, background=False)
+    with pytest.raises(ValueError, match=r'trained at sample_time 2.0 s, this predictor runs at '
+                                         r'1.0 s: use the same sample_time or retrain; or delete'):
+        fresh.load(str(path))
+    Path(twin_path).write_bytes(b'not a checkpoint')
+    with pytest.raises(ValueError, match=r'corrupt or not a torch file.*; or delete'):
+        fresh.load(str(path))
+    assert fresh.model is None and fresh.twin_model is None
+    # a gate-off predictor reads the holding network alone and never looks at the twin file
+    plain = AdaptivePredictor(SMALL, background=False)
+    plain.load(str(path))
+    assert plain.status().message == 'warm start from gated.pt'

@@ -28,7 +28,7 @@ import yaml
 from lf_predictor_ros.core.frequency import welch_resolution
 from lf_predictor_ros.core.odometry import OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
-from lf_predictor_ros.core.predictor import AdaptivePredictor
+from lf_predictor_ros.core.predictor import AdaptivePredictor, twin_checkpoint_path
 from lf_predictor_ros.core.reference_checks import ReferenceCheckSettings
 from lf_predictor_ros.core.retraining import first_training_samples
 from lf_predictor_ros.nodes import predictor_node
@@ -237,6 +237,77 @@ def test_corrupt_model_file_is_refused_with_a_clear_reason(
         node.destroy_node()
 
 
+def test_motion_gate_twin_warm_starts_and_survives_a_tuning_change(
+        ros_context: Context, record: SimRecord, tmp_path: Path,
+        capfd: pytest.CaptureFixture[str]) -> None:
+    """The twin's checkpoint (model_path + '.twin'): read at start, kept by a tuning change."""
+    gated = {**SMALL, 'motion_gate': True}
+    source = AdaptivePredictor(PredictorParams(**gated), background=False, max_trainings=1)
+    for k in range(FIRST_TRAINING + 1):
+        source.update(float(record.t[k]), record.measured_pose[k], record.thrust[k])
+    assert source.model is not None and source.twin_model is not None
+    model_path = tmp_path / 'model.pt'
+    source.save(str(model_path))
+    twin_path = Path(twin_checkpoint_path(str(model_path)))
+    rows = np.random.default_rng(5).normal(size=(20, source.twin_model.spec.n_regressors))
+    expected = source.twin_model.forward(rows)
+
+    node = _make(ros_context, model_path=str(model_path), motion_gate=True)
+    try:
+        values = node.diagnostic_values()[2]
+        assert values['warm_start'] is True
+        assert values['model_file'] == f'{model_path} (warm start, motion gate twin restored)'
+        predictor = node.predictor
+        assert predictor is not None and predictor.twin_model is not None
+        np.testing.assert_array_equal(predictor.twin_model.forward(rows), expected)
+        # the twin's worker saves beside the holding network's
+        assert predictor._moving is not None
+        assert predictor._moving.checkpoint_path == str(twin_path)
+        # a tuning change: both networks carried over (through carry_over.pt and its .twin)
+        assert node.set_parameters([Parameter('max_epochs', value=3)])[0].successful
+        assert node.predictor is not predictor and node.predictor.model is not None
+        assert node.predictor.twin_model is not None
+        np.testing.assert_array_equal(node.predictor.twin_model.forward(rows), expected)
+        assert node.predictor._moving is not None
+        assert node.predictor._moving.checkpoint_path == str(twin_path)
+        # the twin's own structure changes: the holding network stays, the twin starts cold
+        assert node.set_parameters([Parameter('motion_gate_ny', value=6)])[0].successful
+        assert node.predictor.model is not None and node.predictor.twin_model is None
+        log = capfd.readouterr().err
+        assert 'predictor re-created (trained network kept, motion gate twin kept)' in log
+        assert 'predictor re-created (trained network kept, motion gate twin cold)' in log
+    finally:
+        node.destroy_node()
+
+    # a twin file that does not fit (motion_gate_ny 6 at start): the file pair is refused
+    before = model_path.read_bytes(), twin_path.read_bytes()
+    refused = _make(ros_context, model_path=str(model_path), motion_gate=True, motion_gate_ny=6)
+    try:
+        values = refused.diagnostic_values()[2]
+        assert values['warm_start'] is False
+        assert 'refused' in str(values['model_file'])
+        assert f'or delete {twin_path}' in str(values['model_file'])
+        assert refused.predictor is not None and refused.predictor.model is None
+        assert refused.predictor.checkpoint_path is None
+        assert refused.predictor._moving is not None
+        assert refused.predictor._moving.checkpoint_path is None  # no saving over the twin file
+    finally:
+        refused.destroy_node()
+    assert (model_path.read_bytes(), twin_path.read_bytes()) == before
+
+    # no twin file: warm start with a cold twin, and the diagnostics say so
+    twin_path.unlink()
+    cold_twin = _make(ros_context, model_path=str(model_path), motion_gate=True)
+    try:
+        values = cold_twin.diagnostic_values()[2]
+        assert values['model_file'] == f'{model_path} (warm start, motion gate twin cold: no ' \
+            f'{twin_path})'
+        assert cold_twin.predictor is not None and cold_twin.predictor.model is not None
+        assert cold_twin.predictor.twin_model is None
+    finally:
+        cold_twin.destroy_node()
+
+
 @pytest.mark.dds
 def test_services_reset_and_retrain(
         ros_context: Context, executor: SingleThreadedExecutor, record: SimRecord) -> None:
@@ -438,3 +509,12 @@ def test_every_field_that_changes_the_network_restarts_cold() -> None:
     for name, value in changes.items():
         assert network_spec(base.replace(**{name: value})) != network_spec(base), name
         assert name in predictor_node.STRUCTURE_FIELDS, name
+    # the motion gate twin's own structure: the holding network carries over, the twin starts
+    # cold (its checkpoint is loaded with strict_twin False)
+    gated = base.replace(motion_gate=True)
+    changed = gated.replace(motion_gate_ny=6)
+    assert network_spec(changed) == network_spec(gated)
+    assert network_spec(changed.replace(motion_gate=False, ramp_invariant=True, ny=6)) != \
+        network_spec(gated.replace(motion_gate=False, ramp_invariant=True))
+    assert predictor_node.TWIN_STRUCTURE_FIELDS == ('motion_gate_ny',)
+    assert predictor_node._change_note('motion_gate_ny') == predictor_node.NOTE_TWIN

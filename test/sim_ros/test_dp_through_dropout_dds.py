@@ -65,6 +65,10 @@ WINDOWS: dict[str, Any] = {'retrain_period': 20.0, 'training_window': 200.0,
                            'append_length': 40.0, 'estimation_window': 600.0,
                            'max_train_seconds': 10.0}
 WALL_LIMIT = 60.0  # [s wall] of the closed loop
+# [s wall] the simulator's wait for a command: long enough that a slow callback under load does
+# not release the lockstep (a timeout changes the loop's course: measured in the full suite,
+# 2 timeouts at 0.25 s, 5.1 m before the dropout against 1.73 m alone with 1)
+LOCKSTEP_TIMEOUT = 1.0
 # M_ii with added mass of the supply vessel (MSS supply.m: m T⁻¹ Mbis T⁻¹, sim_ros.physics.vessels)
 SUPPLY_INERTIA = (6.7644e6, 1.13412e7, 4.4524e9)  # [kg, kg, kg·m²]
 
@@ -182,7 +186,8 @@ def _closed_loop(tmp_path_factory: pytest.TempPathFactory,
             # fall inside the 30 s of simulated dropout, which take < 0.1 s unpaced
             Parameter('speed_factor', value=SPEED_FACTOR), Parameter('lockstep', value=True),
             Parameter('lockstep_period', value=1.0), Parameter('lockstep_lead', value=1.0),
-            Parameter('lockstep_timeout', value=0.25), Parameter('command_timeout', value=3.0),
+            Parameter('lockstep_timeout', value=LOCKSTEP_TIMEOUT),
+            Parameter('command_timeout', value=3.0),
             Parameter('duration', value=DURATION)])
         executor.add_node(simulator)
         start = time.monotonic()

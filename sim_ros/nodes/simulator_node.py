@@ -288,6 +288,7 @@ class SimulatorNode(Node):
         self._wait_start = time.monotonic()  # [s wall] start of the current lockstep wait
         self._steps = 0
         self._lockstep_timeouts = 0
+        self._lockstep_timeout_times: list[float] = []  # [s sim]
         self._dropouts = 0
         self._invalid_commands = 0
         self._wave_peak_freq = math.nan
@@ -321,6 +322,21 @@ class SimulatorNode(Node):
     def lockstep_timeouts(self) -> int:
         """Lockstep waits that ended by timeout after the first command."""
         return self._lockstep_timeouts
+
+    @property
+    def lockstep_timeout_times(self) -> list[float]:
+        """Simulated times [s] of the samples whose lockstep wait ended by timeout."""
+        return list(self._lockstep_timeout_times)
+
+    def restart_lockstep_wait(self) -> None:
+        """Start the wall-clock wait for the current lockstep answer again from now.
+
+        For a callback on the same executor that blocks on purpose (a test's relay that waits
+        for the predictor's trainings before it forwards a pose): the time it blocked then does
+        not count against ``lockstep_timeout``, so a slow training under load cannot release the
+        lockstep and change the loop's course.
+        """
+        self._wait_start = time.monotonic()
 
     def _on_config_change(self, config: SimulatorConfig) -> None:
         self._pacer.reset(config.speed_factor, time.monotonic())
@@ -363,6 +379,7 @@ class SimulatorNode(Node):
             self._wait_start = time.monotonic()
             return False
         self._lockstep_timeouts += 1
+        self._lockstep_timeout_times.append(float(self._sim.t))
         return True
 
     def _advance(self) -> None:

@@ -152,6 +152,30 @@ def test_lockstep_period_waits_only_at_multiples_for_the_lead_stamped_answer(
         node.destroy_node()
 
 
+def test_a_restarted_lockstep_wait_does_not_count_the_time_before(ros_context: object) -> None:
+    """restart_lockstep_wait: 0.15 + 0.15 s without an answer is no timeout at 0.2 s."""
+    node = SimulatorNode(context=ros_context, parameter_overrides=[
+        Parameter('lockstep', value=True), Parameter('lockstep_timeout', value=0.2),
+        Parameter('speed_factor', value=0.0)])
+    try:
+        node._peer_seen_at = -math.inf  # no controller process here: skip the discovery wait
+        node.count_publishers = lambda topic_name: 1  # type: ignore[method-assign]
+        node._advance()  # offers t = 0
+        node._on_command(_command(0.0))  # answers t = 0: one step to 0.1, then waits
+        assert node.steps == 1 and node.lockstep_timeouts == 0
+        time.sleep(0.15)
+        node.restart_lockstep_wait()  # e.g. a callback that blocked on purpose
+        time.sleep(0.15)
+        node._advance()
+        assert node.steps == 1 and node.lockstep_timeouts == 0  # 0.15 s since the restart
+        time.sleep(0.1)
+        node._advance()  # now 0.25 s since the restart: step on with the held command
+        assert node.steps >= 2 and node.lockstep_timeouts >= 1
+        assert node.lockstep_timeout_times[0] == pytest.approx(0.1)
+    finally:
+        node.destroy_node()
+
+
 def test_lockstep_period_must_be_a_multiple_and_below_command_timeout() -> None:
     assert simulator_node.lockstep_period_ns(0.5, 0.1) == 500_000_000
     assert simulator_node.lockstep_period_ns(0.0, 0.1) == 0

@@ -87,11 +87,20 @@ def _scenario_path(directory: Path) -> Path:
 
 
 class Relay:
-    """raw_pose → measured_pose, dropping [DROP_START, DROP_END); waits for the jobs."""
+    """raw_pose → measured_pose, dropping [DROP_START, DROP_END); waits for the jobs.
+
+    The wait blocks the executor while the simulator's lockstep clock runs; afterwards the relay
+    restarts that clock (``SimulatorNode.restart_lockstep_wait``), so the time spent training
+    never counts as a missing answer: under load (or with the motion gate's second training)
+    the wait alone used to exceed ``lockstep_timeout``, the simulator stepped on with the held
+    command and the loop took another course (measured: 3.7 / 4.0 / 7.1 m with the gate, which
+    published exactly the gate-off estimate until then).
+    """
 
     def __init__(self, node: Node, predictor: PredictorNode) -> None:
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         self.predictor = predictor
+        self.simulator: SimulatorNode | None = None  # set once the simulator exists
         self.forwarded: list[float] = []
         self.dropped: list[float] = []
         self.publisher = node.create_publisher(PoseStamped, 'measured_pose', qos)
@@ -109,6 +118,8 @@ class Relay:
         job = state._job  # the vessel-memory job
         if job is not None:
             job.result(timeout=60.0)
+        if self.simulator is not None:
+            self.simulator.restart_lockstep_wait()
         self.publisher.publish(msg)
         self.forwarded.append(t)
 
@@ -133,6 +144,7 @@ class Loop:
     thrust: list[WrenchStamped]
     truth: dict[float, Any]  # true LF pose by stamp
     lockstep_timeouts: int
+    lockstep_timeout_times: list[float]  # [s sim] samples whose wait ended by timeout
 
 
 @pytest.fixture(scope='module')
@@ -189,6 +201,7 @@ def _closed_loop(tmp_path_factory: pytest.TempPathFactory,
             Parameter('lockstep_timeout', value=LOCKSTEP_TIMEOUT),
             Parameter('command_timeout', value=3.0),
             Parameter('duration', value=DURATION)])
+        relay.simulator = simulator
         executor.add_node(simulator)
         start = time.monotonic()
         executor.spin_until_future_complete(simulator.done, timeout_sec=WALL_LIMIT + 30.0)
@@ -214,7 +227,8 @@ def _closed_loop(tmp_path_factory: pytest.TempPathFactory,
             thrust=list(received['thrust']),
             truth={stamp_to_ns(m.header.stamp) / NS_PER_S: msg_to_pose(m)
                    for m in received['truth/lf_pose']},
-            lockstep_timeouts=simulator.lockstep_timeouts)
+            lockstep_timeouts=simulator.lockstep_timeouts,
+            lockstep_timeout_times=simulator.lockstep_timeout_times)
 
 
 @pytest.mark.dds
@@ -287,8 +301,11 @@ def test_dp_controller_on_lf_odom_holds_the_vessel_through_a_30_s_pose_dropout(
     assert thrust_t == [float(t) for t in range(int(DURATION) + 1)]
     dead_reckoned = sum(1 for t in stamps if mode_at[t] == 'dead_reckoning')
     assert dead_reckoned >= 25
-    # (+ an occasional wait longer than the timeout under load)
-    assert loop.lockstep_timeouts <= 2 + 5, (loop.lockstep_timeouts, dead_reckoned)
+    # and no other wait timed out: a timeout outside the dropout changes the loop's course (the
+    # relay's training waits no longer count, `Relay`); measured 1, at t = 200 s
+    assert 1 <= loop.lockstep_timeouts <= 2, loop.lockstep_timeout_times
+    assert all(DROP_START <= t < DROP_END for t in loop.lockstep_timeout_times), \
+        loop.lockstep_timeout_times
 
     # the thrust really held against the environment (the current alone: 90 m in 180 s)
     assert np.abs(np.array([[m.wrench.force.x, m.wrench.force.y]

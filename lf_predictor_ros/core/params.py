@@ -185,6 +185,12 @@ class PredictorParams:
                                    "old source's value to the new one's over this time, "
                                    'smoothly, both running; 0 = off (the output switches at '
                                    'once)', 's'))
+    output_notch_zeta: float = field(
+        default=0.0, metadata=_doc(
+            'width (relative damping of the poles) of a causal notch at the estimated wave peak '
+            'frequency ω0, depth notch_depth, on the published estimate: it removes the wave '
+            'peak the learned filter lets through (in a DP loop, wave-band thrust) at a phase '
+            'lag of about 2·ζ/ω0 seconds in the LF band; 0 = off (core/predictor.py)', ''))
     max_output_rate: tuple[float, ...] = field(
         default=(0.0, 0.0, 0.0), metadata=_doc(
             'largest rate of change of the published estimate (north, east, yaw); set it above '
@@ -326,7 +332,8 @@ class PredictorParams:
                 raise ValueError(f'positivity rule: {name} must be > 0, got '
                                  f'{getattr(self, name)!r}: give a positive value')
         for name in ('weight_decay', 'derivative_weight', 'initial_wave_peak_freq',
-                     'wave_augmentation', 'switch_blend_time', 'motion_gate_smoothing'):
+                     'wave_augmentation', 'switch_blend_time', 'motion_gate_smoothing',
+                     'output_notch_zeta'):
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')

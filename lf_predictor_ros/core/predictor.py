@@ -35,6 +35,15 @@ fast the published estimate moves. Both act on the published output only: the re
 feedback history and trainings see exactly what they see with both off, and with both off the
 output is bit-identical to the plain switch.
 
+Output notch (off by default, issue 13): with ``output_notch_zeta`` ζ > 0 the published estimate
+(after the motion gate, if on) runs through a causal notch at the current ω0 estimate (depth
+``notch_depth``; `baselines.cascade.CascadeFilter` without its low-pass, retuned with the output
+kept continuous whenever ω0 changes, restarted with the data segment). The learned filter is
+fitted for the smallest error against the targets and lets part of the wave peak through, which a
+DP loop turns into wave-band thrust; the notch takes out the peak at a phase lag of about 2ζ/ω0
+seconds in the LF band (Fossen 2011 §11.3.2, the classical cascade's notch). Like the bumpless
+transfer it acts on the published output only (regressors, feedback and trainings unchanged).
+
 Checkpoints: `save(path)` writes the network in service to ``path`` (``network.save_checkpoint``);
 with the motion gate on, the twin's network goes to the sibling file ``path + '.twin'``
 (`twin_checkpoint_path`, same format) and `load(path)` restores the twin from it when it is there
@@ -100,6 +109,9 @@ GUARD_SPREADS = 6.0
 GUARD_FLOOR = np.array([0.5, 0.5, 0.02])  # [m, m, rad]
 # Appended to a checkpoint's path to name the motion gate twin's checkpoint beside it.
 TWIN_SUFFIX = '.twin'
+# The force argument of the output notch's `CascadeFilter.update` (it ignores the force).
+_NO_FORCE = np.zeros(3)
+_NO_FORCE.flags.writeable = False
 
 FloatArray = NDArray[np.float64]
 
@@ -211,6 +223,13 @@ class AdaptivePredictor:
                                        notch_zeta=params.fallback_notch_zeta,
                                        notch_depth=params.notch_depth,
                                        lowpass_offset=params.lowpass_offset)
+        self._output_notch: CascadeFilter | None = None  # output_notch_zeta > 0
+        if params.output_notch_zeta > 0.0:
+            self._output_notch = CascadeFilter(params.ndof, params.sample_time,
+                                               self._fallback_freq(),
+                                               notch_zeta=params.output_notch_zeta,
+                                               notch_depth=params.notch_depth,
+                                               lowpass_offset=None)
         self._now: float | None = None
         self._segment = 0
         self._fb_next: int = -1
@@ -281,7 +300,8 @@ class AdaptivePredictor:
             estimate = self._bumpless(t, estimate, model if prediction is not None else None,
                                       self._position(lf_now, update_heading=False))
         self._maybe_retrain(t)
-        return self._gated(t, self._output(estimate, pose_arr), pose_arr, force_arr)
+        return self._notched(t, self._gated(t, self._output(estimate, pose_arr), pose_arr,
+                                            force_arr))
 
     def reset(self) -> None:
         """Forget everything learned and collected (parameters stay); a running job is dropped."""
@@ -301,7 +321,7 @@ class AdaptivePredictor:
         self._last_error = None
         self._wave_spread = None
         self._message = 'reset: collecting data'
-        self._fallback.set_wave_peak_freq(self._fallback_freq())
+        self._tune_wave_filters(self._fallback_freq())
         self._clear_output_state()
         self.restart_segment()
 
@@ -337,6 +357,8 @@ class AdaptivePredictor:
         self._segment += 1
         self._start_segment()
         self._fallback.reset()
+        if self._output_notch is not None:
+            self._output_notch.reset()
         if self._moving is not None and self._gate is not None:
             self._moving.restart_segment()
             self._gate.restart()
@@ -524,7 +546,7 @@ class AdaptivePredictor:
         freq = meta.get('wave_peak_freq')
         if isinstance(freq, (int, float)) and freq > 0:
             self._frequency = float(freq)
-            self._fallback.set_wave_peak_freq(float(freq))
+            self._tune_wave_filters(float(freq))
         self._last_loss = meta.get('loss')
         self._message = f'warm start from {Path(path).name}'
 
@@ -546,6 +568,28 @@ class AdaptivePredictor:
         self._targets: TargetWindow | None = None
         self._retrain_requested = False
         self._used_network = False
+
+    def _tune_wave_filters(self, wave_peak_freq: float) -> None:
+        """Retune the cascade fallback and the output notch to ω0 [rad/s] (outputs continuous)."""
+        self._fallback.set_wave_peak_freq(wave_peak_freq)
+        if self._output_notch is not None:
+            self._output_notch.set_wave_peak_freq(wave_peak_freq)
+
+    def _notched(self, t: float, out: FloatArray) -> FloatArray:
+        """The published pose through the output notch (``output_notch_zeta``; off: ``out``).
+
+        Only the estimated DOFs are filtered (1 DOF: east and yaw stay the measured ones). A
+        non-finite output passes unchanged and restarts the notch, which starts again in steady
+        state at the next finite output (no step).
+        """
+        if self._output_notch is None:
+            return out
+        if not np.all(np.isfinite(out)):
+            self._output_notch.reset()
+            return out
+        notched = np.array(out, dtype=np.float64)
+        notched[:self.ndof] = self._output_notch.update(t, out, _NO_FORCE)[:self.ndof]
+        return notched
 
     def _fallback_freq(self) -> float:
         freq = self.wave_peak_freq
@@ -869,7 +913,7 @@ class AdaptivePredictor:
         if outcome.frequency is not None:
             if outcome.frequency.confident or self._frequency is None:
                 self._frequency = outcome.frequency
-                self._fallback.set_wave_peak_freq(outcome.frequency.wave_peak_freq)
+                self._tune_wave_filters(outcome.frequency.wave_peak_freq)
                 self._message = (f'collecting data; ω0 ≈ {outcome.frequency.wave_peak_freq:.3f} '
                                  'rad/s, cascade fallback tuned to it')
             return
@@ -883,7 +927,7 @@ class AdaptivePredictor:
         if result.segment == self._segment:
             self._targets = result.targets
         self._frequency = result.frequency
-        self._fallback.set_wave_peak_freq(result.frequency.wave_peak_freq)
+        self._tune_wave_filters(result.frequency.wave_peak_freq)
         if result.accepted and result.model is not None:
             self._model, self._state_dict = result.model, result.state_dict
             self._no_thrust += 0 if result.thrust_used else 1

@@ -64,6 +64,10 @@ class FrequencyEstimate:
         peak_ratio: combined normalized PSD at the peak divided by its median over the wave
             band [-] (1 = no peak at all).
         per_dof: each DOF's own peak frequency [rad/s] (NaN for a DOF without in-band power).
+        peak_damping: relative damping λ of the wave-motion spectrum fitted to the combined peak
+            (step 5; its half-power width is ≈ 2λω0) [-]; NaN when the fit did not run or
+            failed. The sea's bandwidth: ≈ 0.01 for the thesis's narrow shaping-filter seas,
+            ≈ 0.1 for a JONSWAP sea (docs/BENCHMARKS.md, eleventh session).
 
     """
 
@@ -71,6 +75,7 @@ class FrequencyEstimate:
     confident: bool
     peak_ratio: float
     per_dof: tuple[float, ...]
+    peak_damping: float = math.nan
 
 
 def welch_segment_length(n_samples: int) -> int:
@@ -136,17 +141,18 @@ def estimate_wave_peak_freq(
         if not median > 0.0:
             per_dof.append(math.nan)
             continue
-        per_dof.append(_fit_peak(omega, column, in_band, _refined_peak(omega, column, in_band)))
+        per_dof.append(_fit_peak(omega, column, in_band,
+                                 _refined_peak(omega, column, in_band))[0])
         normalized.append(column / median)
     if not normalized:
         return _fallback(previous, math.nan, tuple(per_dof), wave_band)
     combined = np.sum(normalized, axis=0)
     peak = _refined_peak(omega, combined, in_band)
     _, peak_value, is_local_max = peak
-    peak_freq = _fit_peak(omega, combined, in_band, peak)
+    peak_freq, peak_damping = _fit_peak(omega, combined, in_band, peak)
     peak_ratio = peak_value / float(np.median(combined[in_band]))
     if is_local_max and peak_ratio >= min_peak_ratio:
-        return FrequencyEstimate(peak_freq, True, peak_ratio, tuple(per_dof))
+        return FrequencyEstimate(peak_freq, True, peak_ratio, tuple(per_dof), peak_damping)
     return _fallback(previous, peak_ratio, tuple(per_dof), wave_band, peak_freq)
 
 
@@ -231,17 +237,17 @@ def _refined_peak(omega: _FloatArray, psd: _FloatArray,
 
 
 def _fit_peak(omega: _FloatArray, psd: _FloatArray, in_band: NDArray[np.bool_],
-              start: tuple[float, float, bool]) -> float:
+              start: tuple[float, float, bool]) -> tuple[float, float]:
     """Whittle fit of the 2nd-order wave-motion spectrum (thesis eq. 3.10) around ``start``.
 
-    Returns the fitted ω0 [rad/s], or the start frequency when there is no local maximum, the fit
-    fails or its ω0 leaves the band.
+    Returns the fitted (ω0 [rad/s], damping λ [-]), or (start frequency, NaN) when there is no
+    local maximum, the fit fails or its ω0 leaves the band.
     """
     start_freq, start_value, is_local_max = start
     band_omega = omega[in_band]
     band_psd = psd[in_band]
     if not is_local_max or start_value <= 0.0:
-        return start_freq
+        return start_freq, math.nan
     floor = max(float(np.median(band_psd)), start_value * 1e-6)
     low, high = float(band_omega[0]), float(band_omega[-1])
 
@@ -263,8 +269,8 @@ def _fit_peak(omega: _FloatArray, psd: _FloatArray, in_band: NDArray[np.bool_],
                                    options={'xatol': 1e-5, 'fatol': 1e-9, 'maxiter': 2000})
     fitted = float(result.x[0])
     if not (math.isfinite(result.fun) and low < fitted < high):
-        return start_freq
-    return fitted
+        return start_freq, math.nan
+    return fitted, math.exp(float(result.x[1]))
 
 
 def _wave_spectrum(omega: _FloatArray, wave_freq: float, damping: float) -> _FloatArray:
@@ -276,13 +282,18 @@ def _wave_spectrum(omega: _FloatArray, wave_freq: float, damping: float) -> _Flo
 def _fallback(previous: float | FrequencyEstimate | None, peak_ratio: float,
               per_dof: tuple[float, ...], wave_band: tuple[float, float],
               raw_freq: float | None = None) -> FrequencyEstimate:
-    """Estimate without a clear peak: the previous value, else the raw peak, flagged unsure."""
+    """Estimate without a clear peak: the previous value, else the raw peak, flagged unsure.
+
+    The previous estimate's peak damping is kept with its frequency (NaN without one).
+    """
+    damping = math.nan
     if isinstance(previous, FrequencyEstimate):
+        damping = previous.peak_damping
         previous = previous.wave_peak_freq
     if previous is not None and math.isfinite(previous):
         freq = float(previous)
     elif raw_freq is not None:
-        freq = raw_freq
+        freq, damping = raw_freq, math.nan
     else:
-        freq = math.sqrt(wave_band[0] * wave_band[1])  # geometric band centre [rad/s]
-    return FrequencyEstimate(freq, False, peak_ratio, per_dof)
+        freq, damping = math.sqrt(wave_band[0] * wave_band[1]), math.nan  # band centre [rad/s]
+    return FrequencyEstimate(freq, False, peak_ratio, per_dof, damping)

@@ -41,6 +41,10 @@ NDOF_VALUES = (1, 3)
 MAX_BIN_FRACTION_OF_BAND = 1.0 / 20.0
 # N rule: training examples left after the regressor start-up and the masked transient.
 MIN_TRAINING_EXAMPLES = 20
+# A sea whose fitted spectral peak damping λ is at least this is broadband
+# (``notch_zeta_broadband``): measured λ 0.005–0.017 on the thesis's vessels, 0.07–0.14 on the
+# supply and RAO vessels' seas (tuning seeds, docs/BENCHMARKS.md eleventh session) [-].
+BROADBAND_PEAK_DAMPING = 0.05
 _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'transient_length',
                   'filter_window', 'append_length')
 _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed',
@@ -131,6 +135,18 @@ class PredictorParams:
         default=0.2, metadata=_doc('high-pass cutoff ωHP before the PSD (§4.2.1)', 'rad/s'))
     notch_zeta: float = field(
         default=0.8, metadata=_doc('notch width: relative damping of the notch poles', ''))
+    notch_zeta_broadband: float = field(
+        default=0.0, metadata=_doc(
+            "with > 0: the targets' notch width in a broadband sea, one whose fitted spectral "
+            'peak damping λ (core/frequency.py) is at least BROADBAND_PEAK_DAMPING (a JONSWAP '
+            "sea ≈ 0.1; the thesis's shaping-filter seas ≈ 0.01 keep notch_zeta); still limited "
+            'by notch_lower_edge; 0 = notch_zeta in every sea', ''))
+    notch_lower_edge: float = field(
+        default=0.0, metadata=_doc(
+            'with notch_zeta_broadband: the broadband notch is no wider than the width whose '
+            'lower -3 dB edge ω0·(√(1 + ζ²) − ζ) is this frequency, ζ ≤ (1 − r²) / (2r), r = '
+            'edge / ω0 (a swell keeps its notch out of the LF band), and never narrower than '
+            'notch_zeta; 0 = no limit', 'rad/s'))
     fallback_notch_zeta: float = field(
         default=0.1, metadata=_doc('notch width of the causal cascade fallback (narrower than '
                                    "the targets' notch: less phase lag in a DP loop)", ''))
@@ -282,6 +298,25 @@ class PredictorParams:
         """The prior ω0 [rad/s], or None when ``initial_wave_peak_freq`` is 0."""
         return self.initial_wave_peak_freq if self.initial_wave_peak_freq > 0.0 else None
 
+    def target_notch_zeta(self, notch_freq: float, peak_damping: float = math.nan) -> float:
+        """Width ζ of the targets' notch at ω0 = ``notch_freq`` [rad/s].
+
+        ``notch_zeta``; in a broadband sea (``notch_zeta_broadband`` on and the fitted peak
+        damping ``peak_damping``, `frequency.FrequencyEstimate.peak_damping`, at least
+        ``BROADBAND_PEAK_DAMPING``; NaN: unknown, not broadband) the wider
+        ``notch_zeta_broadband``, but (with ``notch_lower_edge`` > 0) no wider than the width
+        whose lower −3 dB edge is ``notch_lower_edge``, and never narrower than ``notch_zeta``.
+        The edges of the notch (s² + ω0²)/(s² + 2ζω0 s + ω0²) lie at ω0(√(1 + ζ²) ∓ ζ); the
+        lower one is at ω_e for ζ = (1 − r²)/(2r), r = ω_e/ω0.
+        """
+        if not (self.notch_zeta_broadband > 0.0 and peak_damping >= BROADBAND_PEAK_DAMPING):
+            return self.notch_zeta
+        wide = self.notch_zeta_broadband
+        if self.notch_lower_edge > 0.0:
+            ratio = self.notch_lower_edge / notch_freq
+            wide = min(wide, (1.0 - ratio * ratio) / (2.0 * ratio))
+        return max(self.notch_zeta, wide)
+
     def lowpass_cutoff(self, notch_freq: float) -> float:
         """ωLP = ωnotch + lowpass_offset [rad/s] (thesis Fig. 4.8)."""
         return notch_freq + self.lowpass_offset
@@ -333,7 +368,7 @@ class PredictorParams:
                                  f'{getattr(self, name)!r}: give a positive value')
         for name in ('weight_decay', 'derivative_weight', 'initial_wave_peak_freq',
                      'wave_augmentation', 'switch_blend_time', 'motion_gate_smoothing',
-                     'output_notch_zeta'):
+                     'output_notch_zeta', 'notch_lower_edge', 'notch_zeta_broadband'):
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')

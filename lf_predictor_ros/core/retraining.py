@@ -107,7 +107,8 @@ THRUST_TEST_HORIZON = 120.0
 
 
 def thrust_predicts_motion(params: PredictorParams, u: FloatArray, targets: FloatArray,
-                           mask: NDArray[np.bool_], wave_peak_freq: float | None = None) -> bool:
+                           mask: NDArray[np.bool_], wave_peak_freq: float | None = None,
+                           peak_damping: float = math.nan) -> bool:
     """Does the thrust of this window predict its LF motion? (``thrust_validation``)
 
     `lf_dynamics.thrust_improves_dead_reckoning`: the LF model ν̇ = Fν + Gτ + Bβ(ψ) fitted on
@@ -123,7 +124,8 @@ def thrust_predicts_motion(params: PredictorParams, u: FloatArray, targets: Floa
     end = int(keep[-1]) + 1
     eta = targets[:end]
     forces = earth_to_body(eta, np.asarray(u[:end], dtype=np.float64), params.ndof)
-    sos = None if wave_peak_freq is None else target_filter(params, wave_peak_freq)
+    sos = None if wave_peak_freq is None else target_filter(params, wave_peak_freq,
+                                                            peak_damping)
     return thrust_improves_dead_reckoning(eta, forces, params.sample_time, THRUST_TEST_HORIZON,
                                           sos)
 
@@ -217,21 +219,28 @@ def _relative_change(value: float, reference: float) -> float:
     return abs(value - reference) / reference if reference > 0.0 else math.inf
 
 
-def target_filter(params: PredictorParams, wave_peak_freq: float) -> FloatArray:
-    """The targets' notch at ω0 + low-pass at ω0 + offset (Algorithm 4.1 lines 25–26), as SOS."""
-    return design_wave_filter(wave_peak_freq, params.sample_time, notch_zeta=params.notch_zeta,
+def target_filter(params: PredictorParams, wave_peak_freq: float,
+                  peak_damping: float = math.nan) -> FloatArray:
+    """The targets' notch at ω0 + low-pass at ω0 + offset (Algorithm 4.1 lines 25–26), as SOS.
+
+    The notch's width is `PredictorParams.target_notch_zeta` of ω0 and of the sea's fitted peak
+    damping ``peak_damping`` (NaN: unknown, not broadband).
+    """
+    return design_wave_filter(wave_peak_freq, params.sample_time,
+                              notch_zeta=params.target_notch_zeta(wave_peak_freq, peak_damping),
                               notch_depth=params.notch_depth,
                               lowpass_offset=params.lowpass_offset)
 
 
 def make_targets(params: PredictorParams, y: FloatArray, end_index: int,
-                 wave_peak_freq: float, previous: TargetWindow | None) -> TargetWindow:
+                 wave_peak_freq: float, previous: TargetWindow | None,
+                 peak_damping: float = math.nan) -> TargetWindow:
     """Algorithm 4.1 lines 24–35: zero-phase notch + low-pass and appending.
 
     The first targets (``previous`` None, or too old to append without a gap) come from filtering
     everything available up to N + ε samples, minus the last ε.
     """
-    sos = target_filter(params, wave_peak_freq)
+    sos = target_filter(params, wave_peak_freq, peak_damping)
     eps, beta = params.transient_samples, params.append_samples
     if previous is not None:
         shift = end_index - previous.end_index
@@ -268,10 +277,11 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
         # a new sea: the old targets were filtered at the old ω0 and the old data shows the old
         # waves, so the training window restarts on the newest samples and grows back to N
         targets = make_targets(params, snapshot.y[-change_samples(params):],
-                               snapshot.end_index, frequency.wave_peak_freq, None)
+                               snapshot.end_index, frequency.wave_peak_freq, None,
+                               frequency.peak_damping)
     else:
         targets = make_targets(params, snapshot.y, snapshot.end_index,
-                               frequency.wave_peak_freq, previous_targets)
+                               frequency.wave_peak_freq, previous_targets, frequency.peak_damping)
     u, y, t_values, mask = training_window(params, snapshot, targets)
     spread = wave_spread(y, t_values, mask)
     spec = network_spec(params)
@@ -281,10 +291,11 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
         net = NnarmaxNet.from_state(spec, incumbent)
     settings = train_settings(params)
     thrust_used = not params.thrust_validation or params.nu == 0 or \
-        thrust_predicts_motion(params, u, t_values, mask, frequency.wave_peak_freq)
+        thrust_predicts_motion(params, u, t_values, mask, frequency.wave_peak_freq,
+                               frequency.peak_damping)
     u_fit = u if thrust_used else np.zeros_like(u)
     result = train(net, *training_data(params, snapshot, u_fit, y, t_values, mask, spread,
-                                       frequency.wave_peak_freq),
+                                       frequency.wave_peak_freq, frequency.peak_damping),
                    settings, stop_event=stop_event)
     if not thrust_used:
         result = replace(result, state_dict=without_force_inputs(result.state_dict, spec))
@@ -314,7 +325,7 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
 
 def training_data(params: PredictorParams, snapshot: Snapshot, u: FloatArray, y: FloatArray,
                   targets: FloatArray, mask: NDArray[np.bool_], spread: FloatArray,
-                  wave_peak_freq: float,
+                  wave_peak_freq: float, peak_damping: float = math.nan,
                   ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
     """What the trainer fits: the window, plus its augmentation copies when enabled.
 
@@ -331,7 +342,7 @@ def training_data(params: PredictorParams, snapshot: Snapshot, u: FloatArray, y:
     if not wave and not np.any(speeds > 0.0):
         return u, y, targets, mask
     rng = np.random.default_rng([params.seed, snapshot.segment, snapshot.end_index])
-    sos = target_filter(params, wave_peak_freq)
+    sos = target_filter(params, wave_peak_freq, peak_damping)
     motions = []
     if wave:
         motions.append(band_limited_motion(len(y), y.shape[1], params.sample_time,

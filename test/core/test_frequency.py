@@ -166,3 +166,34 @@ def test_invalid_input_raises() -> None:
 def test_welch_resolution() -> None:
     # 2400 samples at 0.5 s: segments of 600 samples = 300 s, bin 2π/300 rad/s
     assert welch_resolution(2400, 0.5) == pytest.approx(2.0 * math.pi / 300.0)
+
+
+@pytest.mark.parametrize('damping', [0.01, 0.1])
+def test_the_fitted_peak_damping_measures_the_seas_bandwidth(damping: float) -> None:
+    """20 min at 1 Hz, ω0 0.8 rad/s, five seeds, either side of the broadband threshold.
+
+    λ = 0.1 is recovered within a factor 1.6. A peak as narrow as λ = 0.01 (half-power width
+    2λω0 = 0.016 rad/s) is narrower than the Welch bin (2π/300 s = 0.021 rad/s): the fit
+    cannot resolve it and gives a λ below bin / (2ω0) ≈ 0.013 (here < 0.025). Either way the
+    sea falls on the right side of `params.BROADBAND_PEAK_DAMPING`.
+    """
+    from lf_predictor_ros.core.params import BROADBAND_PEAK_DAMPING
+
+    for seed in range(5):
+        result = estimate(measured(seed, 0.8, 1200.0, 1.0, damping), 1.0)
+        assert result.confident
+        if damping > BROADBAND_PEAK_DAMPING:
+            assert damping / 1.6 < result.peak_damping < damping * 1.6, (seed,
+                                                                         result.peak_damping)
+        else:
+            assert result.peak_damping < 0.025, (seed, result.peak_damping)
+        assert (result.peak_damping >= BROADBAND_PEAK_DAMPING) == (damping > 0.05)
+
+
+def test_an_unsure_estimate_keeps_the_previous_peak_damping() -> None:
+    previous = FrequencyEstimate(0.55, True, 30.0, (0.55,), 0.12)
+    flat = np.random.default_rng(3).standard_normal(1200)  # no peak
+    result = estimate(flat, 1.0, previous=previous)
+    assert not result.confident
+    assert result.wave_peak_freq == 0.55 and result.peak_damping == 0.12
+    assert math.isnan(estimate(flat, 1.0).peak_damping)

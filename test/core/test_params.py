@@ -26,6 +26,10 @@ RULE_CASES: list[tuple[str, dict[str, Any], str]] = [
     ('estimation_window', {'estimation_window': -5.0}, r'estimation_window must be > 0'),
     ('highpass_cutoff', {'highpass_cutoff': 0.0}, r'highpass_cutoff must be > 0'),
     ('notch_zeta', {'notch_zeta': 0.0}, r'notch_zeta must be > 0'),
+    ('notch_lower_edge', {'notch_lower_edge': -0.1}, r'notch_lower_edge must be ≥ 0'),
+    ('notch_zeta_broadband', {'notch_zeta_broadband': -1.0},
+     r'notch_zeta_broadband must be ≥ 0'),
+    ('output_notch_zeta', {'output_notch_zeta': -0.5}, r'output_notch_zeta must be ≥ 0'),
     ('lowpass_offset', {'lowpass_offset': -0.2}, r'lowpass_offset must be > 0'),
     ('max_train_seconds', {'max_train_seconds': 0.0}, r'max_train_seconds must be > 0'),
     ('weight_decay', {'weight_decay': -1e-3}, r'weight_decay must be ≥ 0'),
@@ -152,3 +156,38 @@ def test_linear_init_must_be_a_bool() -> None:
     assert PredictorParams(linear_init=False).linear_init is False
     with pytest.raises(ValueError, match='linear_init must be true or false'):
         PredictorParams(linear_init=1)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize('wave_peak_freq', [0.5, 0.8, 1.2])
+def test_the_broadband_notch_has_its_lower_edge_at_notch_lower_edge(
+        wave_peak_freq: float) -> None:
+    """|H(jω_e)|² = 1/2 for the notch (s² + ω0²)/(s² + 2ζω0 s + ω0²) with ζ of the edge rule."""
+    from scipy import signal
+
+    from lf_predictor_ros.core.filters import continuous_wave_filter
+
+    edge = 0.27  # [rad/s]
+    params = PredictorParams(notch_lower_edge=edge, notch_zeta=0.1, notch_zeta_broadband=10.0)
+    zeta = params.target_notch_zeta(wave_peak_freq, peak_damping=0.1)
+    b, a = continuous_wave_filter(wave_peak_freq, notch_zeta=zeta, notch_depth=0.0,
+                                  lowpass_offset=None)
+    _, response = signal.freqs(b, a, worN=[edge])
+    assert abs(response[0]) ** 2 == pytest.approx(0.5, rel=1e-9)
+    assert 0.1 < zeta < 10.0
+
+
+def test_the_targets_notch_widens_only_in_a_broadband_sea() -> None:
+    from lf_predictor_ros.core.params import BROADBAND_PEAK_DAMPING
+
+    off = PredictorParams(notch_zeta=0.8)
+    assert off.target_notch_zeta(0.8, peak_damping=0.1) == 0.8  # broadband option off
+    wide = PredictorParams(notch_zeta=0.8, notch_zeta_broadband=1.3, notch_lower_edge=0.23)
+    assert wide.target_notch_zeta(0.8) == 0.8  # sea bandwidth unknown
+    assert wide.target_notch_zeta(0.8, peak_damping=0.01) == 0.8  # a narrow (thesis) sea
+    assert wide.target_notch_zeta(0.8, peak_damping=BROADBAND_PEAK_DAMPING) == 1.3
+    r = 0.23 / 0.65
+    assert wide.target_notch_zeta(0.65, peak_damping=0.1) == pytest.approx((1 - r * r) / (2 * r))
+    # a swell: the edge would ask less than notch_zeta, which stays (never narrower)
+    assert wide.target_notch_zeta(0.4, peak_damping=0.1) == 0.8
+    assert PredictorParams(notch_zeta_broadband=1.3).target_notch_zeta(
+        0.4, peak_damping=0.1) == 1.3  # no edge: no limit

@@ -249,7 +249,7 @@ class LfStateEstimator:
                 odometry.params.dead_reckoning_timeout, odometry.params.min_calibration_samples,
                 odometry.params.pose_lag_prior,
                 _input_gain(odometry.params.vessel_inertia, self.ndof), commands,
-                self._controller_read if reading else None)
+                self._controller_read if reading else None, self.predictor.wave_peak_damping)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -278,12 +278,14 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            wave_peak_freq: float | None, published: list[Published], horizon: float,
            min_samples: int, lag_prior: float, input_gain: FloatArray | None = None,
            commands: tuple[FloatArray, FloatArray] | None = None,
-           remembered: ControllerRead | None = None) -> Learned:
+           remembered: ControllerRead | None = None,
+           peak_damping: float = math.nan) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
-    ``wave_peak_freq``; None: no ω0 yet, no filter) is designed here, off the predict path
-    (≈ 0.6 ms), and the fit applies it to the forces too (`lf_dynamics.paired_forces`).
+    ``wave_peak_freq`` and the sea's fitted ``peak_damping``, as the retraining designs it;
+    None: no ω0 yet, no filter) is designed here, off the predict path (≈ 0.6 ms), and the fit
+    applies it to the forces too (`lf_dynamics.paired_forces`).
     ``input_gain``: 1/M_ii from ``vessel_inertia``; without it and with ``commands`` (stamps,
     commanded forces) the gain implied by the DP controller's gains is used if the controller
     can be read (`implied_input_gain`). ``remembered``: the last successful read (None: none);
@@ -295,7 +297,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     with the window (`odometry.calibrate`). The read returned is the one in force afterwards:
     this read if it succeeded, ``remembered`` if it failed for lack of data, else None.
     """
-    sos = None if wave_peak_freq is None else target_filter(params, wave_peak_freq)
+    sos = None if wave_peak_freq is None else target_filter(params, wave_peak_freq,
+                                                            peak_damping)
     source = 'vessel_inertia' if input_gain is not None else ''
     read: ControllerRead | None = None
     if commands is not None:

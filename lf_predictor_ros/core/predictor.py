@@ -436,6 +436,13 @@ class AdaptivePredictor:
         return self._frequency
 
     @property
+    def wave_peak_damping(self) -> float:
+        """The sea's fitted spectral peak damping λ with the latest ω0 estimate (NaN: unknown)."""
+        if isinstance(self._frequency, FrequencyEstimate):
+            return self._frequency.peak_damping
+        return math.nan
+
+    @property
     def model(self) -> NumpyNnarmax | None:
         """The network in service (immutable), None before the first accepted training."""
         return self._model

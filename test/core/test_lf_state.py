@@ -186,6 +186,7 @@ class _WindowPredictor:
 
     using_network = False
     wave_peak_freq = None
+    wave_peak_damping = math.nan
 
     def __init__(self) -> None:
         self.targets: TargetWindow | None = None
@@ -298,3 +299,32 @@ def test_commands_are_checked_and_kept_in_order() -> None:
         assert est.command(0.5, np.zeros(3))  # a reset forgets the commands
     finally:
         est.close()
+
+
+def test_the_vessel_memory_filters_the_thrust_like_the_targets_in_a_broadband_sea(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """`_learn` designs the targets' filter with the sea's peak damping (notch_zeta_broadband)."""
+    from lf_predictor_ros.core import lf_state
+    from lf_predictor_ros.core.retraining import target_filter
+
+    designed: list[np.ndarray] = []
+
+    def spy(params: PredictorParams, wave_peak_freq: float,
+            peak_damping: float = math.nan) -> np.ndarray:
+        sos = target_filter(params, wave_peak_freq, peak_damping)
+        designed.append(sos)
+        return sos
+
+    monkeypatch.setattr(lf_state, 'target_filter', spy)
+    params = PredictorParams(ndof=1, notch_zeta_broadband=1.3)
+    rng = np.random.default_rng(2)
+    values = np.cumsum(rng.normal(0.0, 0.01, (600, 1)), axis=0)
+    forces = rng.normal(0.0, 1e4, (600, 1))
+    for damping in (0.1, math.nan):
+        lf_state._learn(params, np.arange(600.0), values, forces, 0.8, [], 120.0, 60, 1.2,
+                        None, None, None, damping)
+    wide = target_filter(params, 0.8, 0.1)
+    narrow = target_filter(params, 0.8)
+    assert not np.allclose(wide, narrow)
+    np.testing.assert_array_equal(designed[0], wide)
+    np.testing.assert_array_equal(designed[1], narrow)

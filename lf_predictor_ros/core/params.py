@@ -51,7 +51,7 @@ _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_
                'motion_gate_ny', 'ramp_order')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
-                'motion_gate_validation')
+                'motion_gate_validation', 'notch_broadband_holding_only')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -141,6 +141,11 @@ class PredictorParams:
             'peak damping λ (core/frequency.py) is at least BROADBAND_PEAK_DAMPING (a JONSWAP '
             "sea ≈ 0.1; the thesis's shaping-filter seas ≈ 0.01 keep notch_zeta); still limited "
             'by notch_lower_edge; 0 = notch_zeta in every sea', ''))
+    notch_broadband_holding_only: bool = field(
+        default=False, metadata=_doc(
+            'with notch_zeta_broadband: the broadband width only for a training window of '
+            'station keeping; a window with a setpoint move or a turn (core/manoeuvre.py) keeps '
+            'notch_zeta'))
     notch_lower_edge: float = field(
         default=0.0, metadata=_doc(
             'with notch_zeta_broadband: the broadband notch is no wider than the width whose '

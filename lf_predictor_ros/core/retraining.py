@@ -37,6 +37,7 @@ from lf_predictor_ros.core.lf_dynamics import (
     earth_to_body,
     thrust_improves_dead_reckoning,
 )
+from lf_predictor_ros.core.manoeuvre import manoeuvring
 from lf_predictor_ros.core.network import (
     NnarmaxNet,
     NnarmaxSpec,
@@ -232,6 +233,20 @@ def target_filter(params: PredictorParams, wave_peak_freq: float,
                               lowpass_offset=params.lowpass_offset)
 
 
+def targets_peak_damping(params: PredictorParams, snapshot: Snapshot,
+                         frequency: FrequencyEstimate) -> float:
+    """The sea's peak damping the targets' notch is designed with (`target_filter`).
+
+    ``frequency.peak_damping``, or NaN (not broadband: ``notch_zeta``) with
+    ``notch_broadband_holding_only`` when the training window's positions show a setpoint move
+    or a turn (`manoeuvre.manoeuvring` of its newest N samples).
+    """
+    if params.notch_broadband_holding_only and params.notch_zeta_broadband > 0.0 and \
+            manoeuvring(snapshot.y[-params.training_samples:], params.sample_time):
+        return math.nan
+    return frequency.peak_damping
+
+
 def make_targets(params: PredictorParams, y: FloatArray, end_index: int,
                  wave_peak_freq: float, previous: TargetWindow | None,
                  peak_damping: float = math.nan) -> TargetWindow:
@@ -273,15 +288,15 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
     """One full retraining (see module docstring); never modifies its arguments."""
     start = time.monotonic()
     frequency = sea_state_estimate(params, snapshot.y, previous_frequency)
+    damping = targets_peak_damping(params, snapshot, frequency)
     if sea_state_changed(previous_frequency, frequency):
         # a new sea: the old targets were filtered at the old ω0 and the old data shows the old
         # waves, so the training window restarts on the newest samples and grows back to N
         targets = make_targets(params, snapshot.y[-change_samples(params):],
-                               snapshot.end_index, frequency.wave_peak_freq, None,
-                               frequency.peak_damping)
+                               snapshot.end_index, frequency.wave_peak_freq, None, damping)
     else:
         targets = make_targets(params, snapshot.y, snapshot.end_index,
-                               frequency.wave_peak_freq, previous_targets, frequency.peak_damping)
+                               frequency.wave_peak_freq, previous_targets, damping)
     u, y, t_values, mask = training_window(params, snapshot, targets)
     spread = wave_spread(y, t_values, mask)
     spec = network_spec(params)
@@ -291,11 +306,10 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
         net = NnarmaxNet.from_state(spec, incumbent)
     settings = train_settings(params)
     thrust_used = not params.thrust_validation or params.nu == 0 or \
-        thrust_predicts_motion(params, u, t_values, mask, frequency.wave_peak_freq,
-                               frequency.peak_damping)
+        thrust_predicts_motion(params, u, t_values, mask, frequency.wave_peak_freq, damping)
     u_fit = u if thrust_used else np.zeros_like(u)
     result = train(net, *training_data(params, snapshot, u_fit, y, t_values, mask, spread,
-                                       frequency.wave_peak_freq, frequency.peak_damping),
+                                       frequency.wave_peak_freq, damping),
                    settings, stop_event=stop_event)
     if not thrust_used:
         result = replace(result, state_dict=without_force_inputs(result.state_dict, spec))

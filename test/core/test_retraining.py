@@ -427,3 +427,26 @@ def test_a_steady_sea_keeps_the_long_window_estimate() -> None:
     assert estimate == long
     assert not retraining.sea_state_changed(long.wave_peak_freq, estimate)
     assert not retraining.sea_state_changed(None, estimate)
+
+
+def test_the_broadband_notch_is_kept_for_station_keeping_windows_only() -> None:
+    """notch_broadband_holding_only: a window with a 10 m move designs the targets narrow."""
+    from lf_predictor_ros.core.frequency import FrequencyEstimate
+    from lf_predictor_ros.core.retraining import Snapshot, targets_peak_damping
+
+    rng = np.random.default_rng(4)
+    n = 600
+    still = np.c_[0.3 * np.sin(0.8 * np.arange(n)) + rng.normal(0.0, 0.05, n)]
+    moved = still + np.clip(np.arange(n) - 300.0, 0.0, 60.0)[:, None] / 6.0  # 10 m in 60 s
+    estimate = FrequencyEstimate(0.8, True, 50.0, (0.8,), 0.1)
+    params = SMALL.replace(notch_zeta_broadband=1.3, training_window=400.0)
+    for y, holding_only, expected in ((still, True, 0.1), (moved, False, 0.1),
+                                      (moved, True, math.nan)):
+        snapshot = Snapshot(u=np.zeros((n, 1)), y=y, end_index=n - 1, segment=0)
+        damping = targets_peak_damping(
+            params.replace(notch_broadband_holding_only=holding_only), snapshot, estimate)
+        assert damping == expected or (math.isnan(expected) and math.isnan(damping))
+    # only the newest N samples count: the move at 300–360 s is older than the last 180 s
+    snapshot = Snapshot(u=np.zeros((n, 1)), y=moved, end_index=n - 1, segment=0)
+    assert targets_peak_damping(params.replace(notch_broadband_holding_only=True,
+                                               training_window=180.0), snapshot, estimate) == 0.1

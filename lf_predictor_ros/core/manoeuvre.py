@@ -1,0 +1,61 @@
+"""Has the vessel manoeuvred in a window of positions? (station keeping vs. moves and turns)
+
+DP systems filter harder while the vessel holds station than while it moves: the LF motion of a
+vessel holding position is slow and small, a setpoint move or a turn puts LF motion up to the
+controller's bandwidth. ``PredictorParams.notch_broadband_holding_only`` uses this test to give
+the targets' wide broadband notch only to windows of station keeping (issue 13; docs/
+BENCHMARKS.md, eleventh session: the wide notch helps the supply vessel's loops and hurts
+rao_supply's, whose windows hold its setpoint moves and turns).
+
+The test needs no model: the positions are averaged over consecutive blocks of
+``MANOEUVRE_BLOCK`` seconds (wave periods of 5–20 s average out), and the window shows a
+manoeuvre when two consecutive block means differ by more than ``MANOEUVRE_STEP`` in any DOF.
+Holding station, the block means of the tuning seeds' DP loops move by well under a metre; a
+15 m setpoint move or a 45° turn moves them by several metres or tens of degrees per block.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+# Block over which the positions are averaged [s].
+MANOEUVRE_BLOCK = 60.0
+# Change of the block mean between two consecutive blocks that counts as a manoeuvre
+# [m, m, rad] (north, east, heading; 2° in heading).
+MANOEUVRE_STEP = (2.0, 2.0, 0.035)
+
+
+def block_means(y: FloatArray, sample_time: float) -> FloatArray:
+    """Means of ``y`` (n, ndof) over consecutive whole blocks of ``MANOEUVRE_BLOCK`` seconds.
+
+    The newest samples set the block boundaries (a partial oldest block is left out); shape
+    (blocks, ndof), oldest first. The input is not modified.
+    """
+    data = np.asarray(y, dtype=np.float64)
+    if data.ndim != 2:
+        raise ValueError(f'y must have shape (n, ndof), got {data.shape}')
+    if not sample_time > 0.0:
+        raise ValueError(f'sample_time must be > 0 s, got {sample_time!r}')
+    length = max(1, int(round(MANOEUVRE_BLOCK / sample_time)))
+    blocks = data.shape[0] // length
+    if blocks == 0:
+        return np.empty((0, data.shape[1]))
+    tail = data[data.shape[0] - blocks * length:]
+    return np.asarray(tail.reshape(blocks, length, data.shape[1]).mean(axis=1), dtype=np.float64)
+
+
+def manoeuvring(y: FloatArray, sample_time: float) -> bool:
+    """True when two consecutive block means of ``y`` differ by more than ``MANOEUVRE_STEP``.
+
+    ``y`` (n, ndof): positions [m] and, for 3 DOF, the unwrapped heading [rad]. Fewer than two
+    whole blocks, or non-finite block means: False (no evidence of a manoeuvre).
+    """
+    means = block_means(y, sample_time)
+    if means.shape[0] < 2:
+        return False
+    steps = np.abs(np.diff(means, axis=0))
+    limit = np.asarray(MANOEUVRE_STEP[:means.shape[1]], dtype=np.float64)
+    with np.errstate(invalid='ignore'):
+        return bool(np.any(steps > limit))

@@ -44,7 +44,7 @@ from lf_predictor_ros.core.network import (
     NumpyNnarmax,
     without_force_inputs,
 )
-from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.params import BROADBAND_PEAK_DAMPING, PredictorParams
 from lf_predictor_ros.core.targets import TargetWindow, training_mask
 from lf_predictor_ros.core.training import (
     TrainSettings,
@@ -239,9 +239,12 @@ def targets_peak_damping(params: PredictorParams, snapshot: Snapshot,
 
     ``frequency.peak_damping``, or NaN (not broadband: ``notch_zeta``) with
     ``notch_broadband_holding_only`` when the training window's positions show a setpoint move
-    or a turn (`manoeuvre.manoeuvring` of its newest N samples).
+    or a turn (`manoeuvre.manoeuvring` of its newest N samples). `run_retraining` then filters
+    that window's targets afresh instead of appending to the previous ones (which may hold
+    wide-notch targets of station keeping).
     """
     if params.notch_broadband_holding_only and params.notch_zeta_broadband > 0.0 and \
+            frequency.peak_damping >= BROADBAND_PEAK_DAMPING and \
             manoeuvring(snapshot.y[-params.training_samples:], params.sample_time):
         return math.nan
     return frequency.peak_damping
@@ -289,14 +292,17 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
     start = time.monotonic()
     frequency = sea_state_estimate(params, snapshot.y, previous_frequency)
     damping = targets_peak_damping(params, snapshot, frequency)
+    # a window flagged as a manoeuvre in a broadband sea: its targets are filtered afresh, so
+    # the wide-notch targets of earlier station-keeping windows do not stay appended in it
+    narrowed = math.isnan(damping) and frequency.peak_damping >= BROADBAND_PEAK_DAMPING
     if sea_state_changed(previous_frequency, frequency):
         # a new sea: the old targets were filtered at the old ω0 and the old data shows the old
         # waves, so the training window restarts on the newest samples and grows back to N
         targets = make_targets(params, snapshot.y[-change_samples(params):],
                                snapshot.end_index, frequency.wave_peak_freq, None, damping)
     else:
-        targets = make_targets(params, snapshot.y, snapshot.end_index,
-                               frequency.wave_peak_freq, previous_targets, damping)
+        targets = make_targets(params, snapshot.y, snapshot.end_index, frequency.wave_peak_freq,
+                               None if narrowed else previous_targets, damping)
     u, y, t_values, mask = training_window(params, snapshot, targets)
     spread = wave_spread(y, t_values, mask)
     spec = network_spec(params)

@@ -450,3 +450,32 @@ def test_the_broadband_notch_is_kept_for_station_keeping_windows_only() -> None:
     snapshot = Snapshot(u=np.zeros((n, 1)), y=moved, end_index=n - 1, segment=0)
     assert targets_peak_damping(params.replace(notch_broadband_holding_only=True,
                                                training_window=180.0), snapshot, estimate) == 0.1
+
+
+def test_a_manoeuvring_window_in_a_broadband_sea_filters_its_targets_afresh(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """notch_broadband_holding_only: no wide-notch targets stay appended in a flagged window."""
+    from lf_predictor_ros.core.frequency import FrequencyEstimate
+
+    broadband = FrequencyEstimate(WAVE_PEAK_FREQ, True, 50.0, (WAVE_PEAK_FREQ,), 0.1)
+    monkeypatch.setattr(retraining, 'sea_state_estimate', lambda *args: broadband)
+    params = RETRAIN.replace(max_epochs=2, notch_zeta_broadband=1.3,
+                             notch_broadband_holding_only=True)
+    rng = np.random.default_rng(6)
+    n = 700
+    t = np.arange(float(n))
+    y = (0.3 * np.sin(WAVE_PEAK_FREQ * t) + rng.normal(0.0, 0.05, n))[:, None]  # holding
+    y[675:, 0] += np.clip(np.arange(25.0), 0.0, 5.0) * 1.6  # then an 8 m move in 5 s
+    u = rng.normal(0.0, 1.0, (n, 1))
+    first = run_retraining(params, Snapshot(u=u[:680], y=y[:680], end_index=679, segment=1),
+                           None, None, None)
+    wide = make_targets(params, y[:680], 679, WAVE_PEAK_FREQ, None, 0.1)
+    np.testing.assert_array_equal(first.targets.values, wide.values)  # station keeping: wide
+    second = run_retraining(params, Snapshot(u=u, y=y, end_index=n - 1, segment=1),
+                            first.state_dict, first.targets, broadband)
+    fresh = make_targets(params, y, n - 1, WAVE_PEAK_FREQ, None)  # narrow, filtered afresh
+    np.testing.assert_array_equal(second.targets.values, fresh.values)
+    # without the restart: the wide targets of the first window appended with narrow new ones
+    appended = make_targets(params, y, n - 1, WAVE_PEAK_FREQ, first.targets)
+    np.testing.assert_array_equal(appended.values[:200], first.targets.values[20:220])
+    assert np.max(np.abs(second.targets.values[:200] - appended.values[:200])) > 1e-3

@@ -44,7 +44,7 @@ from lf_predictor_ros.core.network import (
     NumpyNnarmax,
     without_force_inputs,
 )
-from lf_predictor_ros.core.params import BROADBAND_PEAK_DAMPING, PredictorParams
+from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.targets import TargetWindow, training_mask
 from lf_predictor_ros.core.training import (
     TrainSettings,
@@ -237,17 +237,19 @@ def targets_peak_damping(params: PredictorParams, snapshot: Snapshot,
                          frequency: FrequencyEstimate) -> float:
     """The sea's peak damping the targets' notch is designed with (`target_filter`).
 
-    ``frequency.peak_damping``, or NaN (not broadband: ``notch_zeta``) with
-    ``notch_broadband_holding_only`` when the training window's positions show a setpoint move
-    or a turn (`manoeuvre.manoeuvring` of its newest N samples). `run_retraining` then filters
-    that window's targets afresh instead of appending to the previous ones (which may hold
-    wide-notch targets of station keeping).
+    ``frequency.peak_damping``, or NaN (unknown: ``notch_zeta``) with
+    ``notch_broadband_holding_only`` when `PredictorParams.target_notch_zeta` would widen the
+    notch for this sea but the training window's positions show a setpoint move or a turn
+    (`manoeuvre.manoeuvring` of its newest N samples). `run_retraining` then filters that
+    window's targets afresh instead of appending to the previous ones (which may hold wide-notch
+    targets of station keeping).
     """
-    if params.notch_broadband_holding_only and params.notch_zeta_broadband > 0.0 and \
-            frequency.peak_damping >= BROADBAND_PEAK_DAMPING and \
+    wave_peak_freq, damping = frequency.wave_peak_freq, frequency.peak_damping
+    if params.notch_broadband_holding_only and \
+            params.target_notch_zeta(wave_peak_freq, damping) > params.notch_zeta and \
             manoeuvring(snapshot.y[-params.training_samples:], params.sample_time):
         return math.nan
-    return frequency.peak_damping
+    return damping
 
 
 def make_targets(params: PredictorParams, y: FloatArray, end_index: int,
@@ -294,7 +296,7 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
     damping = targets_peak_damping(params, snapshot, frequency)
     # a window flagged as a manoeuvre in a broadband sea: its targets are filtered afresh, so
     # the wide-notch targets of earlier station-keeping windows do not stay appended in it
-    narrowed = math.isnan(damping) and frequency.peak_damping >= BROADBAND_PEAK_DAMPING
+    narrowed = math.isnan(damping) and not math.isnan(frequency.peak_damping)
     if sea_state_changed(previous_frequency, frequency):
         # a new sea: the old targets were filtered at the old ω0 and the old data shows the old
         # waves, so the training window restarts on the newest samples and grows back to N

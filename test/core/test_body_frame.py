@@ -51,12 +51,6 @@ REFERENCE = Path(__file__).parent / 'data' / 'earth_frame_run.npz'
 TURN = 0.7  # [rad] a generic angle: north and east mix, no channel is swapped
 
 
-@pytest.fixture(autouse=True)
-def _one_thread() -> None:
-    """Trainings in these tests run on one core (the machine is shared)."""
-    torch.set_num_threads(1)
-
-
 def reference() -> tuple[PredictorParams, FloatArray, FloatArray, FloatArray, FloatArray]:
     """(params, t, pose, force, output) of the stored earth-frame run."""
     data = np.load(REFERENCE)

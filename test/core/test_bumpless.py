@@ -14,7 +14,6 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 import pytest
-import torch
 
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
@@ -31,12 +30,6 @@ SMALL = PredictorParams(ndof=1, sample_time=1.0, retrain_period=20.0, training_w
 FIRST_TRAINING = 120  # [samples] the first network is in service from the next sample on
 GUARD_WINDOW = (250, 280)  # [samples] the network is forced to lose in this window
 N_SAMPLES = 330
-
-
-@pytest.fixture(autouse=True)
-def _one_thread() -> None:
-    """Trainings in these tests run on one core (the machine is shared)."""
-    torch.set_num_threads(1)
 
 
 @functools.cache

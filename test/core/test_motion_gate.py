@@ -39,12 +39,6 @@ SMALL = PredictorParams(ndof=3, sample_time=1.0, retrain_period=20.0, training_w
                         motion_gate=False)
 
 
-@pytest.fixture(autouse=True)
-def _one_thread() -> None:
-    """Trainings in these tests run on one core (the machine is shared)."""
-    torch.set_num_threads(1)
-
-
 def test_gain_is_half_where_the_velocity_is_sqrt_k_times_usual() -> None:
     usual = np.array([0.01, 0.04, 1e-6])
     assert gate_gain(GATE_RATIO * usual, usual) == pytest.approx([0.5, 0.5, 0.5])

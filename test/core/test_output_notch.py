@@ -14,7 +14,6 @@ import numpy as np
 from numpy.typing import NDArray
 import pytest
 from scipy import signal
-import torch
 
 from lf_predictor_ros.core.filters import design_wave_filter
 from lf_predictor_ros.core.params import PredictorParams
@@ -30,12 +29,6 @@ SMALL = PredictorParams(ndof=3, sample_time=1.0, retrain_period=20.0, training_w
                         transient_length=10.0, filter_window=60.0, append_length=40.0,
                         estimation_window=480.0, max_epochs=3, nu=4, ny=12,
                         initial_wave_peak_freq=WAVE_PEAK_FREQ)
-
-
-@pytest.fixture(autouse=True)
-def _one_thread() -> None:
-    """Trainings in these tests run on one core (the machine is shared)."""
-    torch.set_num_threads(1)
 
 
 def poses(n: int, seed: int = 0) -> tuple[FloatArray, FloatArray]:

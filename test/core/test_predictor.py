@@ -49,12 +49,6 @@ LATENCY_BOUND = 0.050  # [s] generous bound on one update while a training runs
 SENSOR_PERIOD = 0.002  # [s] pause between two updates in the background tests
 
 
-@pytest.fixture(autouse=True)
-def _one_thread() -> None:
-    """Trainings in these tests run on one core (the machine is shared)."""
-    torch.set_num_threads(1)
-
-
 # ---- data ----------------------------------------------------------------------------------
 
 @functools.cache

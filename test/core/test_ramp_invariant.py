@@ -33,12 +33,6 @@ FloatArray = NDArray[np.float64]
 RAMPS = (((5.0, -3.0, 0.4), (0.2, -0.1, 0.01)), ((50.0, 30.0, -2.0), (-1.0, 0.3, -0.02)))
 
 
-@pytest.fixture(autouse=True)
-def _one_thread() -> None:
-    """Trainings in these tests run on one core (the machine is shared)."""
-    torch.set_num_threads(1)
-
-
 def random_network(params: PredictorParams, seed: int = 3) -> NnarmaxNet:
     """A network with random (not trained) weights and non-trivial standardization."""
     net = NnarmaxNet(network_spec(params), seed=seed)

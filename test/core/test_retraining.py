@@ -46,12 +46,6 @@ DELTA, N_TRAIN, EPS, ALPHA, BETA = 20, 200, 10, 60, 40  # [samples] at h = 1 s
 WAVE_PEAK_FREQ = 0.8  # [rad/s] ω0 of the onedof_excited scenario and of the synthetic waves
 
 
-@pytest.fixture(autouse=True)
-def _one_thread() -> None:
-    """Trainings in these tests run on one core (the machine is shared)."""
-    torch.set_num_threads(1)
-
-
 def test_small_params_match_the_sample_counts_used_below() -> None:
     assert (SMALL.retrain_samples, SMALL.training_samples, SMALL.transient_samples,
             SMALL.filter_samples, SMALL.append_samples) == (DELTA, N_TRAIN, EPS, ALPHA, BETA)

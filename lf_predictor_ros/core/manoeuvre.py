@@ -31,7 +31,9 @@ def block_means(y: FloatArray, sample_time: float) -> FloatArray:
     """Means of ``y`` (n, ndof) over consecutive whole blocks of ``MANOEUVRE_BLOCK`` seconds.
 
     The newest samples set the block boundaries (a partial oldest block is left out); shape
-    (blocks, ndof), oldest first. The input is not modified.
+    (blocks, ndof), oldest first. The input is not modified. (`alignment.block_mean_poses`
+    averages wrapped 3-DOF poses circularly for the input grid; here every column is a plain
+    series, the heading unwrapped, so that block-to-block steps never see a ±π crossing.)
     """
     data = np.asarray(y, dtype=np.float64)
     if data.ndim != 2:

@@ -43,7 +43,8 @@ loop independent of scheduling: the same seed gives the same run at any speed. F
 - afterwards, when no answer comes within ``lockstep_timeout`` wall seconds (e.g. a sensor dropout
   skipped ``measured_pose`` and the controller listens to it, or a best-effort pose was lost), it
   steps on with the held command and counts a ``lockstep_timeouts`` in the diagnostics: a run
-  with zero timeouts is reproducible.
+  with zero timeouts is reproducible. It then goes on at ``speed_factor`` from that instant: the
+  wall time spent waiting is not caught up in a burst of steps (``StepPacer.resync``).
 
 Lockstep through a slower estimator (``lockstep_period`` > 0 [s sim], a multiple of the sample
 time). A predictor in the loop answers only once per its own sample time h (e.g. 0.5 s) while the
@@ -247,6 +248,17 @@ class StepPacer:
         """Record steps made."""
         self._steps_since_anchor += steps
 
+    def resync(self, wall_now: float) -> None:
+        """Re-anchor so that exactly one step is due at ``wall_now`` and none of the past is.
+
+        After a lockstep wait that ended by timeout: the wall time spent waiting for a silent
+        peer is not caught up in a burst of steps (a burst would run a whole sensor dropout
+        through in milliseconds, faster than any wall-clock timer, e.g. the diagnostics).
+        """
+        if self._speed_factor == 0.0:
+            return
+        self.reset(self._speed_factor, wall_now - self._sample_time / self._speed_factor)
+
 
 @dataclass
 class _Published:
@@ -293,6 +305,7 @@ class SimulatorNode(Node):
         self._invalid_commands = 0
         self._wave_peak_freq = math.nan
         self._pacer = StepPacer(self._sample_time, config.speed_factor, time.monotonic())
+        self._resync_pacer = False  # set by a lockstep timeout: _advance re-anchors the pacer
         self._diag_mark = (time.monotonic(), float(self._sim.t))
 
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -380,6 +393,7 @@ class SimulatorNode(Node):
             return False
         self._lockstep_timeouts += 1
         self._lockstep_timeout_times.append(float(self._sim.t))
+        self._resync_pacer = True
         return True
 
     def _advance(self) -> None:
@@ -395,6 +409,11 @@ class SimulatorNode(Node):
         due = self._pacer.due(start)
         made = 0
         while made < due and self._lockstep_ready():
+            if self._resync_pacer:  # a wait ended by timeout: go on at pace, no catching up
+                self._resync_pacer = False
+                now = time.monotonic()
+                self._pacer.resync(now)
+                made, due = 0, self._pacer.due(now)
             self._step()
             made += 1
             if config.duration > 0.0 and float(self._sim.t) >= config.duration - 1e-9:

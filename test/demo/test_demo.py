@@ -176,6 +176,37 @@ def test_a_restarted_lockstep_wait_does_not_count_the_time_before(ros_context: o
         node.destroy_node()
 
 
+def test_after_a_lockstep_timeout_the_simulator_does_not_catch_up_the_wait(
+        ros_context: object) -> None:
+    """Speed 10x, period 0.5 s: a 0.25 s wait that times out releases one step, not a burst.
+
+    Before the pacer was re-anchored after a timeout, the 0.25 s wall waited (25 samples at 10x,
+    below MAX_BACKLOG) were caught up at once: all 5 free steps to the next lockstep instant.
+    """
+    node = SimulatorNode(context=ros_context, parameter_overrides=[
+        Parameter('lockstep', value=True), Parameter('lockstep_period', value=0.5),
+        Parameter('lockstep_lead', value=0.5), Parameter('lockstep_timeout', value=0.2),
+        Parameter('speed_factor', value=10.0)])
+    try:
+        node._peer_seen_at = -math.inf  # no controller process here: skip the discovery wait
+        node.count_publishers = lambda topic_name: 1  # type: ignore[method-assign]
+        node._advance()  # offers t = 0
+        node._on_command(_command(0.5))  # answer to t = 0
+        deadline = time.monotonic() + 0.15  # paced at 10x: 5 steps in 0.05 s wall, then the
+        while node.steps < 5 and time.monotonic() < deadline:  # wait at 0.5 (timeout 0.2 s)
+            time.sleep(0.005)
+            node._advance()
+        assert node.steps == 5 and node.lockstep_timeouts == 0
+        time.sleep(0.25)  # no answer within lockstep_timeout
+        node._advance()
+        assert node.lockstep_timeouts == 1 and node.steps == 6  # one step, at pace from now
+        time.sleep(0.1)
+        node._advance()
+        assert node.steps == 10  # the free steps to the next instant, at 10x (0.04 s wall)
+    finally:
+        node.destroy_node()
+
+
 def test_lockstep_period_must_be_a_multiple_and_below_command_timeout() -> None:
     assert simulator_node.lockstep_period_ns(0.5, 0.1) == 500_000_000
     assert simulator_node.lockstep_period_ns(0.0, 0.1) == 0

@@ -67,11 +67,10 @@ WINDOWS: dict[str, Any] = {'retrain_period': 20.0, 'training_window': 200.0,
 WALL_LIMIT = 60.0  # [s wall] of the closed loop
 # [s wall] the simulator's wait for a command: long enough that a slow callback under load does
 # not release the lockstep (a timeout changes the loop's course: measured in the full suite,
-# 2 timeouts at 0.25 s, 5.1 m before the dropout against 1.73 m alone with 1), and longer than
-# the pacing's MAX_BACKLOG: the one expected timeout (the first dropped pose) then re-anchors the
-# pacing. At 1.0 s (= MAX_BACKLOG) the backlog of that wait could stay just below the limit and
-# the simulator caught up by bursting through the whole 30 s dropout in milliseconds: no
-# /diagnostics report fell inside it (one failure in a full-suite run at dea43c8)
+# 2 timeouts at 0.25 s, 5.1 m before the dropout against 1.73 m alone with 1). Before the pacing
+# re-anchored after a timeout (StepPacer.resync), a wait below MAX_BACKLOG was caught up in a
+# burst through the whole 30 s dropout in milliseconds and no /diagnostics report fell inside it
+# (one failure in a full-suite run at dea43c8); 2 × MAX_BACKLOG is kept as the margin for load.
 LOCKSTEP_TIMEOUT = 2.0 * MAX_BACKLOG
 # M_ii with added mass of the supply vessel (MSS supply.m: m T⁻¹ Mbis T⁻¹, sim_ros.physics.vessels)
 SUPPLY_INERTIA = (6.7644e6, 1.13412e7, 4.4524e9)  # [kg, kg, kg·m²]

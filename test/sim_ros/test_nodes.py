@@ -162,6 +162,18 @@ def test_step_pacer_keeps_speed_factor_and_does_not_burst() -> None:
     assert simulator_node.StepPacer(0.1, 0.0, 0.0).due(0.0) == sys.maxsize
 
 
+def test_step_pacer_resync_forgets_the_backlog() -> None:
+    pacer = simulator_node.StepPacer(sample_time=0.1, speed_factor=10.0, wall_now=100.0)
+    assert pacer.due(100.5) == 50  # 0.5 s wall behind (< MAX_BACKLOG): would catch up
+    pacer.resync(100.5)
+    assert pacer.due(100.5) == 1  # only the step of now
+    pacer.stepped(1)
+    assert pacer.due(100.505) == 0 and pacer.due(100.51) == 1  # then at 10x: 0.01 s wall/step
+    unpaced = simulator_node.StepPacer(0.1, 0.0, 0.0)
+    unpaced.resync(5.0)
+    assert unpaced.due(5.0) == sys.maxsize
+
+
 def _controller_with_probe(ros_context: object, executor: SingleThreadedExecutor) -> tuple[
         DpControllerNode, Probe, Any]:
     """dp_controller at setpoint 0 (no scenario), a probe on its commands, a pose publisher."""

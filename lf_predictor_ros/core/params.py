@@ -51,7 +51,7 @@ _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_
                'motion_gate_ny', 'ramp_order')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
-                'motion_gate_validation', 'notch_broadband_holding_only')
+                'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -119,6 +119,11 @@ class PredictorParams:
             'with motion_gate: the gate acts on a DOF only while its output was closer to the '
             'targets of the last training window than the holding network alone (checked at '
             'every new target window; shut until the first check; core/motion_gate.py)'))
+    motion_gate_yaw: bool = field(
+        default=True, metadata=_doc(
+            'with motion_gate and 3 DOF: the gate acts on the heading too; false: north and '
+            'east only, the heading is the holding network\'s (the twin lets more of a swell\'s '
+            'yaw motion through in turns)'))
     estimation_window: float = field(
         default=1200.0, metadata=_doc('frequency-estimation window γ (eq. 4.3)', 's'))
     retrain_period: float = field(

@@ -256,6 +256,8 @@ class AdaptivePredictor:
         self._gate_offset = np.zeros(params.ndof)  # LP(moving − holding) (motion_gate_smoothing)
         # motion_gate_validation: per DOF, may the gate act (shut until the first check)
         self._gate_valid = np.full(params.ndof, not params.motion_gate_validation)
+        # motion_gate_yaw false: the gate never acts on the heading
+        self._gate_dofs = np.array([True, True, params.motion_gate_yaw][:params.ndof])
         self._clear_output_state()
         self._start_segment()
         if background:
@@ -789,6 +791,7 @@ class AdaptivePredictor:
             # LP(moving − holding) of core.motion_gate (motion_gate_smoothing)
             self._gate_offset = self._gate_offset + self._gate_alpha * (offset - self._gate_offset)
             offset = self._gate_offset
+        gain = gain * self._gate_dofs
         self._validate_gate(out, shifted(out, gain * offset, self.ndof))
         self._gain = gain * self._gate_valid
         return shifted(out, self._gain * offset, self.ndof)

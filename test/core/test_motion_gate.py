@@ -7,10 +7,15 @@ networks run on their own; and the twin's checkpoint beside the holding network'
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+import functools
 import math
 from pathlib import Path
 import threading
 import time
+from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,6 +36,7 @@ from lf_predictor_ros.core.network import load_checkpoint, save_checkpoint
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor, twin_checkpoint_path
 from lf_predictor_ros.core.retraining import run_retraining
+from lf_predictor_ros.core.targets import TargetWindow
 
 FloatArray = NDArray[np.float64]
 SMALL = PredictorParams(ndof=3, sample_time=1.0, retrain_period=20.0, training_window=200.0,
@@ -111,19 +117,83 @@ def moving_run(n: int, seed: int) -> tuple[FloatArray, FloatArray, FloatArray]:
     return t, pose, force
 
 
-def test_gated_output_is_the_blend_of_the_two_networks_run_alone() -> None:
+@dataclass(frozen=True, eq=False)
+class Trace:
+    """One predictor run over ``moving_run(600, 2)``, read right after every `update`.
+
+    The arrays are read-only copies (a test cannot change what the next one reads).
+
+    Attributes:
+        out: the outputs, shape (600, 3).
+        gain: `motion_gain`, shape (600, ndof).
+        valid: `motion_gate_valid`, shape (600, ndof).
+        using_network: the predictor's `using_network`, shape (600,).
+        twin_using_network: the twin's (``_moving``) `using_network`; None without a twin.
+        targets: the `targets` window (the same object until a new window comes).
+        counters: the `counters` after the last sample.
+
+    """
+
+    out: FloatArray
+    gain: FloatArray
+    valid: NDArray[np.bool_]
+    using_network: NDArray[np.bool_]
+    twin_using_network: NDArray[np.bool_] | None
+    targets: tuple[TargetWindow | None, ...]
+    counters: Mapping[str, int]
+
+
+def _frozen(rows: list[Any], dtype: type) -> NDArray[Any]:
+    array: NDArray[Any] = np.array(rows, dtype=dtype)  # a new array: every row copied
+    array.setflags(write=False)
+    return array
+
+
+def _run(params: PredictorParams) -> Trace:
+    """Run `params` (background=False, deterministic) over ``moving_run(600, 2)``."""
+    torch.set_num_threads(1)  # one core, whoever calls it (as the autouse fixture sets)
     t, pose, force = moving_run(600, 2)
-    gated = AdaptivePredictor(SMALL.replace(motion_gate=True), background=False)
-    assert not SMALL.motion_gate
-    holding = AdaptivePredictor(SMALL, background=False)
-    moving = AdaptivePredictor(SMALL.replace(ramp_invariant=True), background=False)
-    blended = 0
+    predictor = AdaptivePredictor(params, background=False)
+    out: list[FloatArray] = []
+    gain: list[FloatArray] = []
+    valid: list[NDArray[np.bool_]] = []
+    on_network: list[bool] = []
+    twin_on_network: list[bool] = []
+    targets: list[TargetWindow | None] = []
     for k in range(t.size):
-        out = gated.update(t[k], pose[k], force[k])
-        a = holding.update(t[k], pose[k], force[k])
-        b = moving.update(t[k], pose[k], force[k])
-        gain = gated.motion_gain
-        if moving.using_network:
+        out.append(np.array(predictor.update(t[k], pose[k], force[k]), dtype=np.float64))
+        gain.append(np.array(predictor.motion_gain, dtype=np.float64))
+        valid.append(np.array(predictor.motion_gate_valid, dtype=bool))
+        on_network.append(bool(predictor.using_network))
+        twin = predictor._moving
+        if twin is not None:
+            twin_on_network.append(bool(twin.using_network))
+        targets.append(predictor.targets)  # immutable: values read-only, frozen
+    assert t.size == 600 and len(twin_on_network) in (0, t.size)
+    return Trace(out=_frozen(out, np.float64), gain=_frozen(gain, np.float64),
+                 valid=_frozen(valid, bool), using_network=_frozen(on_network, bool),
+                 twin_using_network=_frozen(twin_on_network, bool) if twin_on_network else None,
+                 targets=tuple(targets),
+                 counters=MappingProxyType(dict(predictor.counters)))
+
+
+@pytest.fixture(scope='module')
+def trace() -> Callable[[PredictorParams], Trace]:
+    """`_run`, cached for the module: each configuration runs once (PredictorParams hashes)."""
+    return functools.cache(_run)
+
+
+def test_gated_output_is_the_blend_of_the_two_networks_run_alone(
+        trace: Callable[[PredictorParams], Trace]) -> None:
+    gated = trace(SMALL.replace(motion_gate=True))
+    assert not SMALL.motion_gate
+    holding = trace(SMALL)
+    moving = trace(SMALL.replace(ramp_invariant=True))
+    blended = 0
+    for k in range(gated.out.shape[0]):
+        out, a, b = gated.out[k], holding.out[k], moving.out[k]
+        gain = gated.gain[k]
+        if moving.using_network[k]:
             assert out == pytest.approx(blend(a, b, gain, 3), abs=1e-9)
             blended += int(np.any(gain > 0.5))
         else:
@@ -135,7 +205,8 @@ def test_gated_output_is_the_blend_of_the_two_networks_run_alone() -> None:
     assert blended > 20  # the move opened the gate (not a test of the zero gain only)
 
 
-def test_the_usual_velocity_is_measured_on_the_twins_network_alone() -> None:
+def test_the_usual_velocity_is_measured_on_the_twins_network_alone(
+        trace: Callable[[PredictorParams], Trace]) -> None:
     """Shut until GATE_MIN_FILL of a training window of the twin's network outputs is seen.
 
     Before its first training the twin publishes its cascade fallback, another filter with
@@ -143,46 +214,40 @@ def test_the_usual_velocity_is_measured_on_the_twins_network_alone() -> None:
     not count them as the vessel's usual motion. With SMALL (200 s window) the gate needs 50
     samples of the network after the twin's first training, however long the fallback ran.
     """
-    t, pose, force = moving_run(600, 2)
-    gated = AdaptivePredictor(SMALL.replace(motion_gate=True), background=False)
-    twin = gated._moving
+    gated = trace(SMALL.replace(motion_gate=True))
+    twin = gated.twin_using_network
     assert twin is not None
     needed = math.ceil(GATE_MIN_FILL * SMALL.training_window / SMALL.sample_time)
     on_network = 0
     first_open = None
-    for k in range(t.size):
-        gated.update(t[k], pose[k], force[k])
-        on_network += int(twin.using_network)
-        if first_open is None and np.any(gated.motion_gain > 0.0):
+    for k in range(gated.out.shape[0]):
+        on_network += int(twin[k])
+        if first_open is None and np.any(gated.gain[k] > 0.0):
             first_open = on_network
     assert needed == 50
     assert first_open is not None and first_open >= needed  # the move opens it later
     assert on_network > needed + 100
 
 
-def test_smoothed_gate_blends_the_low_passed_offset_of_the_two_networks() -> None:
+def test_smoothed_gate_blends_the_low_passed_offset_of_the_two_networks(
+        trace: Callable[[PredictorParams], Trace]) -> None:
     """motion_gate_smoothing T: out = holding + g·LP_T(moving − holding), LP restarting at 0."""
     smoothing = 5.0
-    t, pose, force = moving_run(600, 2)
-    gated = AdaptivePredictor(SMALL.replace(motion_gate=True, motion_gate_smoothing=smoothing),
-                              background=False)
-    plain = AdaptivePredictor(SMALL.replace(motion_gate=True), background=False)
-    holding = AdaptivePredictor(SMALL, background=False)
-    moving = AdaptivePredictor(SMALL.replace(ramp_invariant=True), background=False)
+    gated = trace(SMALL.replace(motion_gate=True, motion_gate_smoothing=smoothing))
+    plain = trace(SMALL.replace(motion_gate=True))
+    holding = trace(SMALL)
+    moving = trace(SMALL.replace(ramp_invariant=True))
     alpha = SMALL.sample_time / smoothing
     low_passed = np.zeros(3)
     smaller = 0
-    for k in range(t.size):
-        out = gated.update(t[k], pose[k], force[k])
-        unsmoothed = plain.update(t[k], pose[k], force[k])
-        a = holding.update(t[k], pose[k], force[k])
-        b = moving.update(t[k], pose[k], force[k])
-        if not moving.using_network:
+    for k in range(gated.out.shape[0]):
+        out, unsmoothed, a, b = gated.out[k], plain.out[k], holding.out[k], moving.out[k]
+        if not moving.using_network[k]:
             low_passed = np.zeros(3)
             assert out == pytest.approx(a, abs=1e-12)
             continue
         low_passed = low_passed + alpha * (moving_offset(a, b, 3) - low_passed)
-        gain = gated.motion_gain
+        gain = gated.gain[k]
         expected = a.copy()
         expected[:3] += gain * low_passed
         assert out[:2] == pytest.approx(expected[:2], abs=1e-9)
@@ -250,12 +315,18 @@ def test_negative_or_nan_smoothing_is_refused(value: float, message: str) -> Non
 
 def test_wait_for_training_keeps_one_timeout_for_both_networks(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """With the twin's job queued behind the holding network's, the wait still ends on time."""
+    """With the twin's job queued behind the holding network's, the wait still ends on time.
+
+    Each training is held 6 s before it runs, or until the checks are done (``release``): the
+    jobs are as busy during the checks as with a plain 6 s sleep, and `close` need not wait
+    for both sleeps to end.
+    """
     started = threading.Event()
+    release = threading.Event()
 
     def slow(*args: object, **kwargs: object) -> object:
         started.set()
-        time.sleep(6.0)
+        release.wait(timeout=6.0)
         return run_retraining(*args, **kwargs)  # type: ignore[arg-type]
 
     monkeypatch.setattr('lf_predictor_ros.core.predictor.run_retraining', slow)
@@ -266,14 +337,19 @@ def test_wait_for_training_keeps_one_timeout_for_both_networks(
             gated.update(t[k], pose[k], force[k])
             if gated.wait_for_training(timeout=0.0):
                 continue  # no job running
-            if started.wait(timeout=5.0):
+            # a training (`slow` sets `started` as it begins) or an ω0 job: wait for either
+            deadline = time.monotonic() + 30.0
+            while not started.wait(timeout=0.01) and time.monotonic() < deadline:
+                if gated.wait_for_training(timeout=0.0):
+                    break  # an ω0 job, ended before the next sample
+            if started.is_set():
                 break  # a training is running (and the twin's queued behind it)
-            gated.wait_for_training(timeout=30.0)  # an ω0 job: let it end before the next sample
         assert started.is_set(), 'no training started'
         begin = time.monotonic()
         assert not gated.wait_for_training(timeout=2.0)  # both jobs still busy
         assert time.monotonic() - begin < 3.2  # one timeout, not one per network (4 s)
     finally:
+        release.set()
         gated.close()
 
 
@@ -302,23 +378,23 @@ def _wrapped(error: FloatArray) -> FloatArray:
     return out
 
 
-def test_validated_gate_acts_only_on_dofs_where_it_beat_the_holding_network() -> None:
+def test_validated_gate_acts_only_on_dofs_where_it_beat_the_holding_network(
+        trace: Callable[[PredictorParams], Trace]) -> None:
     """The published output: the holding one on unchecked DOFs, the gated one on checked ones."""
     params = SMALL.replace(motion_gate=True, motion_gate_smoothing=5.0)
-    checked = AdaptivePredictor(params.replace(motion_gate_validation=True), background=False)
-    plain = AdaptivePredictor(params, background=False)
-    holding = AdaptivePredictor(SMALL, background=False)
-    t, pose, force = moving_run(600, 2)
+    checked = trace(params.replace(motion_gate_validation=True))
+    plain = trace(params)
+    holding = trace(SMALL)
     held: dict[int, FloatArray] = {}
     gated: dict[int, FloatArray] = {}
     seen = None
     valid = np.zeros(3, dtype=bool)
     checks = acted = 0
-    for k in range(t.size):
-        out = checked.update(t[k], pose[k], force[k])
-        gated[k] = plain.update(t[k], pose[k], force[k])
-        held[k] = holding.update(t[k], pose[k], force[k])
-        targets = checked.targets
+    for k in range(checked.out.shape[0]):
+        out = checked.out[k]
+        gated[k] = plain.out[k]
+        held[k] = holding.out[k]  # the samples up to k only, as when run side by side
+        targets = checked.targets[k]
         if targets is not None and targets is not seen:
             seen = targets
             usable = len(targets) - SMALL.transient_samples
@@ -332,12 +408,12 @@ def test_validated_gate_acts_only_on_dofs_where_it_beat_the_holding_network() ->
                                    axis=0)
                 valid = gate_mse < hold_mse
                 checks += 1
-        assert checked.motion_gate_valid.tolist() == valid.tolist(), k
+        assert checked.valid[k].tolist() == valid.tolist(), k
         expected = held[k] + valid * _wrapped(gated[k] - held[k])
         assert _wrapped(out - expected) == pytest.approx(np.zeros(3), abs=1e-9), k
         acted += int(np.any(valid) and np.max(np.abs(gated[k] - held[k])) > 1e-6)
     assert checks >= 3 and acted > 0
-    assert plain.motion_gate_valid.tolist() == [True, True, True]  # without the check: always
+    assert plain.valid[-1].tolist() == [True, True, True]  # without the check: always
 
 
 def test_dead_zone_shuts_small_gains_and_keeps_a_full_one() -> None:
@@ -350,18 +426,16 @@ def test_dead_zone_shuts_small_gains_and_keeps_a_full_one() -> None:
         SMALL.replace(motion_gate=True, motion_gate_dead_zone=-0.1)
 
 
-def test_the_dead_zone_scales_the_published_gain() -> None:
-    t, pose, force = moving_run(600, 2)
-    zoned = AdaptivePredictor(SMALL.replace(motion_gate=True, motion_gate_dead_zone=0.3),
-                              background=False)
-    plain = AdaptivePredictor(SMALL.replace(motion_gate=True), background=False)
+def test_the_dead_zone_scales_the_published_gain(
+        trace: Callable[[PredictorParams], Trace]) -> None:
+    zoned = trace(SMALL.replace(motion_gate=True, motion_gate_dead_zone=0.3))
+    plain = trace(SMALL.replace(motion_gate=True))
     shut = opened = 0
-    for k in range(t.size):
-        zoned.update(t[k], pose[k], force[k])
-        plain.update(t[k], pose[k], force[k])
-        assert zoned.motion_gain == pytest.approx(dead_zoned(plain.motion_gain, 0.3), abs=1e-12)
-        shut += int(np.any((plain.motion_gain > 0.0) & (plain.motion_gain <= 0.3)))
-        opened += int(np.any(zoned.motion_gain > 0.5))
+    for k in range(zoned.out.shape[0]):
+        zoned_gain, plain_gain = zoned.gain[k], plain.gain[k]
+        assert zoned_gain == pytest.approx(dead_zoned(plain_gain, 0.3), abs=1e-12)
+        shut += int(np.any((plain_gain > 0.0) & (plain_gain <= 0.3)))
+        opened += int(np.any(zoned_gain > 0.5))
     assert shut > 0 and opened > 0
 
 

@@ -205,6 +205,20 @@ def test_gated_output_is_the_blend_of_the_two_networks_run_alone(
     assert blended > 20  # the move opened the gate (not a test of the zero gain only)
 
 
+def test_without_yaw_the_gate_blends_north_and_east_and_keeps_the_holding_heading(
+        trace: Callable[[PredictorParams], Trace]) -> None:
+    """motion_gate_yaw false: yaw gain 0, heading = holding network's, north/east as gated."""
+    no_yaw = trace(SMALL.replace(motion_gate=True, motion_gate_yaw=False))
+    gated = trace(SMALL.replace(motion_gate=True))
+    holding = trace(SMALL)
+    assert np.all(no_yaw.gain[:, 2] == 0.0)
+    assert np.array_equal(no_yaw.gain[:, :2], gated.gain[:, :2])
+    assert no_yaw.out[:, :2] == pytest.approx(gated.out[:, :2], abs=1e-12)
+    assert no_yaw.out[:, 2] == pytest.approx(holding.out[:, 2], abs=1e-12)
+    assert np.count_nonzero(gated.gain[:, 2] > 0.5) > 20  # the turn opens the gate in yaw
+    assert np.max(np.abs(gated.out[:, 2] - holding.out[:, 2])) > 1e-3  # and that shows
+
+
 def test_the_usual_velocity_is_measured_on_the_twins_network_alone(
         trace: Callable[[PredictorParams], Trace]) -> None:
     """Shut until GATE_MIN_FILL of a training window of the twin's network outputs is seen.

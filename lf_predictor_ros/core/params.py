@@ -122,7 +122,7 @@ class PredictorParams:
     motion_gate_yaw: bool = field(
         default=True, metadata=_doc(
             'with motion_gate and 3 DOF: the gate acts on the heading too; false: north and '
-            'east only, the heading is the holding network\'s (the twin lets more of a swell\'s '
+            "east only, the heading is the holding network's (the twin lets more of a swell's "
             'yaw motion through in turns)'))
     estimation_window: float = field(
         default=1200.0, metadata=_doc('frequency-estimation window γ (eq. 4.3)', 's'))

@@ -129,9 +129,12 @@ def test_spec_body_frame_needs_relative_three_dof_and_is_absent_from_earth_dicts
 @pytest.mark.parametrize('explicit', [False, True])
 def test_earth_frame_run_is_bit_identical_to_the_stored_run(explicit: bool) -> None:
     params, t, pose, force, stored = reference()
-    # the stored run predates the motion gate, which blends a second network in: it must stay
-    # off here whatever its default (the gated output is tested in test_motion_gate.py)
-    params = params.replace(motion_gate=False)
+    # the stored run predates the motion gate, which blends a second network in, and the
+    # broadband targets' notch, which widens the targets' notch in a broadband sea: both must
+    # stay off here whatever their defaults (the gate's smoothing, dead zone, yaw and
+    # ramp_order, the notch's lower edge and holding-only act only with them or with
+    # ramp_invariant, off; the gated output is tested in test_motion_gate.py)
+    params = params.replace(motion_gate=False, notch_zeta_broadband=0.0)
     if explicit:
         params = params.replace(regressor_frame='earth')
     out = run(params, t, pose, force)

@@ -83,9 +83,13 @@ def test_defaults_are_off_and_the_output_path_is_untouched(
 
 def test_blending_changes_the_output_only_within_t_after_a_switch(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """Same run with T = 5 s: bit-identical to the default run except in the blend windows."""
+    """Same run with T = 5 s: bit-identical to the default run except in the blend windows.
+
+    The holding network alone (motion gate off): the gate's twin is a predictor of its own with
+    its own transfers, which the spy would count as well.
+    """
     blend = 5.0
-    plain, _ = run(max_trainings=None)
+    plain, _ = run(max_trainings=None, motion_gate=False)
     starts: list[float] = []
     begin = AdaptivePredictor._begin_transfer
 
@@ -94,7 +98,7 @@ def test_blending_changes_the_output_only_within_t_after_a_switch(
         begin(self, t, *args)  # type: ignore[arg-type]
 
     monkeypatch.setattr(AdaptivePredictor, '_begin_transfer', spy)
-    blended, predictor = run(max_trainings=None, switch_blend_time=blend)
+    blended, predictor = run(max_trainings=None, motion_gate=False, switch_blend_time=blend)
     # cascade → first network, new networks every Δ = 20 samples, the forced switches
     assert predictor.source_switches == len(starts) >= 8
     t = onedof_record(5, 400.0)[0][:N_SAMPLES]

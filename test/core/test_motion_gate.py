@@ -39,10 +39,15 @@ from lf_predictor_ros.core.retraining import run_retraining
 from lf_predictor_ros.core.targets import TargetWindow
 
 FloatArray = NDArray[np.float64]
+# The holding network alone (a test switches the gate on); the gate's shaping off, unlike the
+# shipped defaults, so that the gated output is the plain blend and a test sets the stage it
+# checks: no low-pass (motion_gate_smoothing 0), no dead zone, the heading gated too, and a
+# line (ramp_order 1) for the twin (SMALL.replace(ramp_invariant=True), the same network).
 SMALL = PredictorParams(ndof=3, sample_time=1.0, retrain_period=20.0, training_window=200.0,
                         transient_length=10.0, filter_window=60.0, append_length=40.0,
                         estimation_window=480.0, max_epochs=5, nu=4, ny=12,
-                        motion_gate=False)
+                        motion_gate=False, motion_gate_smoothing=0.0, motion_gate_dead_zone=0.0,
+                        motion_gate_yaw=True, ramp_order=1)
 
 
 def test_gain_is_half_where_the_velocity_is_sqrt_k_times_usual() -> None:

@@ -281,7 +281,9 @@ def test_background_training_never_blocks_update_and_swaps_atomically(
     spy = PredictSpy(predict_step)
     monkeypatch.setattr(predictor_module, 'predict_step', spy)
     t, pose, force = synthetic_onedof(4000, seed=21)
-    predictor = AdaptivePredictor(LONG, background=True)
+    # the holding network alone: the spy and the swap check follow one network (the motion
+    # gate's twin, tested in test_motion_gate.py, calls predict_step too and blends its output in)
+    predictor = AdaptivePredictor(LONG.replace(motion_gate=False), background=True)
     try:
         latencies: list[float] = []
         running: list[bool] = []
@@ -546,11 +548,13 @@ def test_rejected_candidate_keeps_the_incumbent(monkeypatch: pytest.MonkeyPatch)
 # ---- checkpoints -----------------------------------------------------------------------------
 
 def test_save_load_round_trip_gives_the_same_network(tmp_path: Path) -> None:
+    # one network, one file: the motion gate off (its twin's file: test_motion_gate.py)
+    plain = SMALL.replace(motion_gate=False)
     t, pose, force, _ = onedof_record(5, 400.0)
-    source = trained_predictor(200)
+    source = trained_predictor(200, motion_gate=False)
     path = tmp_path / 'lf.pt'
     source.save(str(path))
-    target = AdaptivePredictor(SMALL, background=False)
+    target = AdaptivePredictor(plain, background=False)
     target.load(str(path))
     assert source.model is not None and target.model is not None
     rows = np.random.default_rng(31).normal(size=(50, source.model.spec.n_regressors)) * 10.0
@@ -558,7 +562,7 @@ def test_save_load_round_trip_gives_the_same_network(tmp_path: Path) -> None:
     assert target.wave_peak_freq == source.wave_peak_freq
     assert target.status().message == 'warm start from lf.pt'
     # same network and same data from a common start: the same predictions
-    twin = AdaptivePredictor(SMALL, background=False)
+    twin = AdaptivePredictor(plain, background=False)
     twin.load(str(path))
     out_a = feed(target, t, pose, force, 200, 300)
     out_b = feed(twin, t, pose, force, 200, 300)

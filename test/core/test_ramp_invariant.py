@@ -31,6 +31,8 @@ from lf_predictor_ros.core.training import train
 
 FloatArray = NDArray[np.float64]
 RAMPS = (((5.0, -3.0, 0.4), (0.2, -0.1, 0.01)), ((50.0, 30.0, -2.0), (-1.0, 0.3, -0.02)))
+# A ramp-invariant network alone needs motion_gate false (on by default; the ramp rule refuses
+# both); ramp_order is pinned (the default is 2) where a test means a line.
 
 
 def random_network(params: PredictorParams, seed: int = 3) -> NnarmaxNet:
@@ -74,7 +76,8 @@ def test_slope_weights_return_a_ramps_slope() -> None:
 
 @pytest.mark.parametrize('frame', ['earth', 'body'])
 def test_a_ramp_is_predicted_up_to_one_constant(frame: str) -> None:
-    net = random_network(PredictorParams(ramp_invariant=True, regressor_frame=frame))
+    net = random_network(PredictorParams(motion_gate=False, ramp_invariant=True, ramp_order=1,
+                                         regressor_frame=frame))
     fast = NumpyNnarmax.from_module(net)
     forces = np.zeros((40, 3))
     residuals = []
@@ -103,7 +106,8 @@ def test_fit_weights_return_a_polynomials_coefficients() -> None:
 
 @pytest.mark.parametrize('frame', ['earth', 'body'])
 def test_a_parabola_is_predicted_up_to_one_constant_with_order_2(frame: str) -> None:
-    net = random_network(PredictorParams(ramp_invariant=True, ramp_order=2, regressor_frame=frame))
+    net = random_network(PredictorParams(motion_gate=False, ramp_invariant=True, ramp_order=2,
+                                         regressor_frame=frame))
     fast = NumpyNnarmax.from_module(net)
     forces = np.zeros((41, 3))
     cases = (((5.0, -3.0, 0.4), (0.2, -0.1, 0.01), (0.01, 0.02, -0.001)),
@@ -120,7 +124,8 @@ def test_a_parabola_is_predicted_up_to_one_constant_with_order_2(frame: str) -> 
         residuals.append(prediction - next_value)
     assert residuals[0] == pytest.approx(residuals[1], abs=1e-8)
     assert np.max(np.abs(residuals[0])) > 1e-3
-    line = random_network(PredictorParams(ramp_invariant=True, regressor_frame=frame))
+    line = random_network(PredictorParams(motion_gate=False, ramp_invariant=True, ramp_order=1,
+                                          regressor_frame=frame))
     line_fast = NumpyNnarmax.from_module(line)
     y0, y1 = (parabola(*case) for case in cases)
     assert np.max(np.abs((predict_step(line_fast, forces, y0, y0) - y0[-1])
@@ -168,14 +173,16 @@ def test_rules() -> None:
         NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=1, nfb=0, hidden_units=2,
                     relative=True, ramp_invariant=True)
     with pytest.raises(ValueError, match='ramp rule'):
-        PredictorParams(ramp_invariant=True, nfb=2)
-    spec = network_spec(PredictorParams(ramp_invariant=True))
+        PredictorParams(motion_gate=False, ramp_invariant=True, nfb=2)
+    spec = network_spec(PredictorParams(motion_gate=False, ramp_invariant=True, ramp_order=1))
     assert spec.to_dict()['ramp_invariant'] is True
     assert NnarmaxSpec.from_dict(spec.to_dict()) == spec
     assert 'ramp_invariant' not in network_spec(PredictorParams()).to_dict()
     assert 'ramp_order' not in spec.to_dict()
-    assert network_spec(PredictorParams(ramp_order=2)) == network_spec(PredictorParams())
-    parabolic = network_spec(PredictorParams(ramp_invariant=True, ramp_order=2))
+    # a plain network: the order changes nothing (both pinned: the default order is 2)
+    assert network_spec(PredictorParams(ramp_order=2)) == \
+        network_spec(PredictorParams(ramp_order=1))
+    parabolic = network_spec(PredictorParams(motion_gate=False, ramp_invariant=True, ramp_order=2))
     assert parabolic.to_dict()['ramp_order'] == 2
     assert NnarmaxSpec.from_dict(parabolic.to_dict()) == parabolic
     with pytest.raises(ValueError, match='ramp_order must be one of'):
@@ -189,7 +196,7 @@ def test_rules() -> None:
 
 def test_training_on_station_keeping_still_follows_a_ramp() -> None:
     """Trained on a window that never moves, the network still extrapolates a ramp (earth)."""
-    params = PredictorParams(ramp_invariant=True, ny=12, nu=4)
+    params = PredictorParams(motion_gate=False, ramp_invariant=True, ramp_order=1, ny=12, nu=4)
     rng = np.random.default_rng(1)
     n = 400
     t = np.arange(n, dtype=np.float64)

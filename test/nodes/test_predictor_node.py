@@ -503,7 +503,7 @@ def test_every_field_that_changes_the_network_restarts_cold() -> None:
     """
     from lf_predictor_ros.core.retraining import network_spec
 
-    base = PredictorParams()
+    base = PredictorParams(motion_gate=False)  # the holding network (nfb 1: gate off, ramp rule)
     changes = {'ndof': 1, 'nu': 3, 'ny': 5, 'nfb': 1, 'hidden_units': 3, 'hidden_layers': 2,
                'regressor_frame': 'body'}
     for name, value in changes.items():

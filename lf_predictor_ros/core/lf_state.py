@@ -249,7 +249,7 @@ class LfStateEstimator:
                 odometry.params.dead_reckoning_timeout, odometry.params.min_calibration_samples,
                 odometry.params.pose_lag_prior,
                 _input_gain(odometry.params.vessel_inertia, self.ndof), commands,
-                self._controller_read if reading else None, self.predictor.wave_peak_damping)
+                self._controller_read if reading else None, self.predictor.targets_peak_damping)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')

@@ -438,11 +438,14 @@ class AdaptivePredictor:
         return self._frequency
 
     @property
-    def wave_peak_damping(self) -> float:
-        """The sea's fitted spectral peak damping λ with the latest ω0 estimate (NaN: unknown)."""
-        if isinstance(self._frequency, FrequencyEstimate):
-            return self._frequency.peak_damping
-        return math.nan
+    def targets_peak_damping(self) -> float:
+        """The sea's peak damping λ the current targets' filter was designed with (NaN: none).
+
+        The fitted λ of the ω0 estimate, or NaN where ``notch_broadband_holding_only`` kept a
+        manoeuvring window's notch narrow (`retraining.targets_peak_damping`): whoever filters
+        other signals like the targets (the vessel memory's thrust) asks this, not the raw λ.
+        """
+        return self._targets_damping
 
     @property
     def model(self) -> NumpyNnarmax | None:
@@ -575,6 +578,7 @@ class AdaptivePredictor:
         self._last_train_k: int | None = None
         self._last_freq_k: int | None = None
         self._targets: TargetWindow | None = None
+        self._targets_damping = math.nan  # targets_peak_damping of ``_targets``
         self._retrain_requested = False
         self._used_network = False
 
@@ -936,6 +940,7 @@ class AdaptivePredictor:
         self._train_seconds = result.seconds
         if result.segment == self._segment:
             self._targets = result.targets
+            self._targets_damping = result.targets_peak_damping
         self._frequency = result.frequency
         self._tune_wave_filters(result.frequency.wave_peak_freq)
         if result.accepted and result.model is not None:

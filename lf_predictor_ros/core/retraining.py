@@ -100,6 +100,8 @@ class RetrainResult:
     baseline_loss: float | None = None
     retire_incumbent: bool = False
     thrust_used: bool = True  # False: thrust_validation found no thrust information
+    # the sea's peak damping the targets' filter was designed with (`targets_peak_damping`)
+    targets_peak_damping: float = math.nan
 
 
 # Dead-reckoning horizon of the thrust test of ``thrust_validation`` [s] (the dead-reckoning
@@ -342,7 +344,8 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
                          loss=loss, incumbent_loss=incumbent_loss, accepted=accepted,
                          reason=reason, seconds=time.monotonic() - start, epochs=result.epochs,
                          wave_spread=spread, baseline_loss=baseline,
-                         retire_incumbent=retire, thrust_used=thrust_used)
+                         retire_incumbent=retire, thrust_used=thrust_used,
+                         targets_peak_damping=damping)
 
 
 def training_data(params: PredictorParams, snapshot: Snapshot, u: FloatArray, y: FloatArray,

@@ -186,7 +186,7 @@ class _WindowPredictor:
 
     using_network = False
     wave_peak_freq = None
-    wave_peak_damping = math.nan
+    targets_peak_damping = math.nan
 
     def __init__(self) -> None:
         self.targets: TargetWindow | None = None

@@ -127,16 +127,22 @@ def _command(stamp: float) -> WrenchStamped:
     return wrench_to_msg(np.array([1e4, 0.0, 0.0]), ns_to_stamp(sec_to_ns(stamp)))
 
 
+def _lockstep_node(ros_context: object, **overrides: float) -> SimulatorNode:
+    """A lockstep SimulatorNode (timeout 0.2 s) that sees a controller without one running."""
+    values: dict[str, float | bool] = {'lockstep': True, 'lockstep_timeout': 0.2,
+                                       'speed_factor': 0.0, **overrides}
+    node = SimulatorNode(context=ros_context, parameter_overrides=[
+        Parameter(name, value=value) for name, value in values.items()])
+    node._peer_seen_at = -math.inf  # no controller process here: skip the discovery wait
+    node.count_publishers = lambda topic_name: 1  # type: ignore[method-assign]
+    return node
+
+
 def test_lockstep_period_waits_only_at_multiples_for_the_lead_stamped_answer(
         ros_context: object) -> None:
     """Sample time 0.1 s, period = lead = 0.5 s: an answer stamped t_k + 0.5 releases 5 steps."""
-    node = SimulatorNode(context=ros_context, parameter_overrides=[
-        Parameter('lockstep', value=True), Parameter('lockstep_period', value=0.5),
-        Parameter('lockstep_lead', value=0.5), Parameter('lockstep_timeout', value=0.2),
-        Parameter('speed_factor', value=0.0)])
+    node = _lockstep_node(ros_context, lockstep_period=0.5, lockstep_lead=0.5)
     try:
-        node._peer_seen_at = -math.inf  # no controller process here: skip the discovery wait
-        node.count_publishers = lambda topic_name: 1  # type: ignore[method-assign]
         node._advance()  # offers t = 0 and waits (no command yet)
         assert node.steps == 0
         node._on_command(_command(0.5))  # answer to t = 0: steps freely to 0.5
@@ -154,12 +160,8 @@ def test_lockstep_period_waits_only_at_multiples_for_the_lead_stamped_answer(
 
 def test_a_restarted_lockstep_wait_does_not_count_the_time_before(ros_context: object) -> None:
     """restart_lockstep_wait: 0.15 + 0.15 s without an answer is no timeout at 0.2 s."""
-    node = SimulatorNode(context=ros_context, parameter_overrides=[
-        Parameter('lockstep', value=True), Parameter('lockstep_timeout', value=0.2),
-        Parameter('speed_factor', value=0.0)])
+    node = _lockstep_node(ros_context)
     try:
-        node._peer_seen_at = -math.inf  # no controller process here: skip the discovery wait
-        node.count_publishers = lambda topic_name: 1  # type: ignore[method-assign]
         node._advance()  # offers t = 0
         node._on_command(_command(0.0))  # answers t = 0: one step to 0.1, then waits
         assert node.steps == 1 and node.lockstep_timeouts == 0
@@ -183,13 +185,9 @@ def test_after_a_lockstep_timeout_the_simulator_does_not_catch_up_the_wait(
     Before the pacer was re-anchored after a timeout, the 0.25 s wall waited (25 samples at 10x,
     below MAX_BACKLOG) were caught up at once: all 5 free steps to the next lockstep instant.
     """
-    node = SimulatorNode(context=ros_context, parameter_overrides=[
-        Parameter('lockstep', value=True), Parameter('lockstep_period', value=0.5),
-        Parameter('lockstep_lead', value=0.5), Parameter('lockstep_timeout', value=0.2),
-        Parameter('speed_factor', value=10.0)])
+    node = _lockstep_node(ros_context, lockstep_period=0.5, lockstep_lead=0.5,
+                          speed_factor=10.0)
     try:
-        node._peer_seen_at = -math.inf  # no controller process here: skip the discovery wait
-        node.count_publishers = lambda topic_name: 1  # type: ignore[method-assign]
         node._advance()  # offers t = 0
         node._on_command(_command(0.5))  # answer to t = 0
         deadline = time.monotonic() + 0.15  # paced at 10x: 5 steps in 0.05 s wall, then the

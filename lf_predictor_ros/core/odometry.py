@@ -168,6 +168,12 @@ class OdometryParams:
     reacquire_blend_time: float = field(default=30.0, metadata=field_doc(
         'after reacquisition the published pose moves from the dead-reckoned pose to the '
         'estimate over this time (no step); 0 = jump at once', 's'))
+    narrow_reference: bool = field(default=True, metadata=field_doc(
+        "calibrate against the targets' samples filtered with the predictor's narrow notch_zeta "
+        'when its training targets use the broadband notch (notch_zeta_broadband): those wide-'
+        'notch targets are smoother than the truth by a sea-dependent amount, so errors measured '
+        'against them do not scale to the errors against the truth (retraining.narrow_reference; '
+        'false: the training targets themselves)', ''))
     min_calibration_samples: int = field(default=60, metadata=field_doc(
         'fewest matched samples of one source for its own covariance (else all sources)', ''))
 

@@ -187,6 +187,7 @@ class _WindowPredictor:
     using_network = False
     wave_peak_freq = None
     targets_peak_damping = math.nan
+    narrow_reference = None  # narrow targets: the covariances are fitted against them
 
     def __init__(self) -> None:
         self.targets: TargetWindow | None = None

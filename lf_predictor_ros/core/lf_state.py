@@ -237,10 +237,14 @@ class LfStateEstimator:
             return
         times = np.array(self._times)[idx[keep]]
         values = np.array(targets.values, dtype=np.float64).reshape(len(targets), -1)[keep]
+        odometry = self.odometry
+        narrow = self.predictor.narrow_reference if odometry.params.narrow_reference else None
+        reference = values if narrow is None else \
+            np.array(narrow, dtype=np.float64).reshape(len(targets), -1)[keep]
         # the newest ε targets are still filter transients (targets.training_mask): left out
         usable = max(3, values.shape[0] - self.params.transient_samples)
         times, values, rows = times[:usable], values[:usable], idx[keep][:usable]  # contiguous
-        odometry = self.odometry
+        reference = reference[:usable]
         reading = odometry.params.controller_inertia
         commands = (np.array(self._command_times), np.array(self._commands)) if \
             reading and self._commands else None
@@ -249,7 +253,8 @@ class LfStateEstimator:
                 odometry.params.dead_reckoning_timeout, odometry.params.min_calibration_samples,
                 odometry.params.pose_lag_prior,
                 _input_gain(odometry.params.vessel_inertia, self.ndof), commands,
-                self._controller_read if reading else None, self.predictor.targets_peak_damping)
+                self._controller_read if reading else None, self.predictor.targets_peak_damping,
+                reference)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -279,7 +284,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            min_samples: int, lag_prior: float, input_gain: FloatArray | None = None,
            commands: tuple[FloatArray, FloatArray] | None = None,
            remembered: ControllerRead | None = None,
-           peak_damping: float = math.nan) -> Learned:
+           peak_damping: float = math.nan, reference: FloatArray | None = None) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -294,8 +299,9 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     or a remembered read marks the memory ``dp_controlled``, and the memory's message carries
     its note ('… remembered from t=… s' for a remembered one).
     The memory is None if it cannot be learned; the covariances compare the published estimates
-    with the window (`odometry.calibrate`). The read returned is the one in force afterwards:
-    this read if it succeeded, ``remembered`` if it failed for lack of data, else None.
+    with ``reference`` (same instants; None: the targets ``values``; `odometry.calibrate`).
+    The read returned is the one in force afterwards: this read if it succeeded,
+    ``remembered`` if it failed for lack of data, else None.
     """
     sos = None if wave_peak_freq is None else target_filter(params, wave_peak_freq,
                                                             peak_damping)
@@ -323,8 +329,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
         memory = replace(memory, known_gain=source if memory.model is not None else '',
                          dp_controlled=in_force is not None,
                          message=f'{memory.message}; {note}' if note else memory.message)
-    return memory, calibrate(published, times, values, params.ndof, params.sample_time,
-                             min_samples, lag_prior), in_force
+    return memory, calibrate(published, times, values if reference is None else reference,
+                             params.ndof, params.sample_time, min_samples, lag_prior), in_force
 
 
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,

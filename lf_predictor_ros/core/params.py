@@ -87,18 +87,18 @@ class PredictorParams:
             'moving at constant velocity (setpoint moves, turns) is followed without lag '
             'whatever the window taught (issue 13; nfb 0 only)'))
     ramp_order: int = field(
-        default=1, metadata=_doc(
+        default=2, metadata=_doc(
             'polynomial fitted by ramp_invariant networks and the motion gate twin: 1 a line '
             '(constant velocity followed without lag), 2 a parabola (constant acceleration too; '
             'lets more wave motion through; needs ny ≥ 3)'))
     motion_gate: bool = field(
-        default=False, metadata=_doc(
+        default=True, metadata=_doc(
             'train a ramp-invariant twin of the network on the same data and blend it in, per '
             'DOF, when the vessel moves faster than it did over the training window (setpoint '
             'moves, turns; core/motion_gate.py; twice the training cost; nfb 0, '
             'ramp_invariant false)'))
     motion_gate_smoothing: float = field(
-        default=0.0, metadata=_doc(
+        default=5.0, metadata=_doc(
             'with motion_gate: time constant of a first-order low-pass on the twin-minus-'
             'holding difference before the gate scales it (the gated output is holding + '
             'g·LP(moving − holding)): the extra wave motion of the twin stays out of the '
@@ -110,7 +110,7 @@ class PredictorParams:
             'fitted through them: fewer lag less in accelerations, let through more waves); '
             '0 = ny', 'samples'))
     motion_gate_dead_zone: float = field(
-        default=0.0, metadata=_doc(
+        default=0.6, metadata=_doc(
             'with motion_gate: dead zone a of the gain g, used as clip((g − a)/(1 − a), 0, 1): '
             'the small gains of a vessel holding position are shut (no wave motion of the twin '
             'leaks through them), a move (g → 1) is not touched; in [0, 1), 0 = off'))
@@ -120,7 +120,7 @@ class PredictorParams:
             'targets of the last training window than the holding network alone (checked at '
             'every new target window; shut until the first check; core/motion_gate.py)'))
     motion_gate_yaw: bool = field(
-        default=True, metadata=_doc(
+        default=False, metadata=_doc(
             'with motion_gate and 3 DOF: the gate acts on the heading too; false: north and '
             "east only, the heading is the holding network's (the twin lets more of a swell's "
             'yaw motion through in turns)'))
@@ -141,18 +141,18 @@ class PredictorParams:
     notch_zeta: float = field(
         default=0.8, metadata=_doc('notch width: relative damping of the notch poles', ''))
     notch_zeta_broadband: float = field(
-        default=0.0, metadata=_doc(
+        default=1.3, metadata=_doc(
             "with > 0: the targets' notch width in a broadband sea, one whose fitted spectral "
             'peak damping λ (core/frequency.py) is at least BROADBAND_PEAK_DAMPING (a JONSWAP '
             "sea ≈ 0.1; the thesis's shaping-filter seas ≈ 0.01 keep notch_zeta); still limited "
             'by notch_lower_edge; 0 = notch_zeta in every sea', ''))
     notch_broadband_holding_only: bool = field(
-        default=False, metadata=_doc(
+        default=True, metadata=_doc(
             'with notch_zeta_broadband: the broadband width only for a training window of '
             'station keeping; a window with a setpoint move or a turn (core/manoeuvre.py) keeps '
             'notch_zeta'))
     notch_lower_edge: float = field(
-        default=0.0, metadata=_doc(
+        default=0.23, metadata=_doc(
             'with notch_zeta_broadband: the broadband notch is no wider than the width whose '
             'lower -3 dB edge ω0·(√(1 + ζ²) − ζ) is this frequency, ζ ≤ (1 − r²) / (2r), r = '
             'edge / ω0 (a swell keeps its notch out of the LF band), and never narrower than '

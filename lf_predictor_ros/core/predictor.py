@@ -448,6 +448,15 @@ class AdaptivePredictor:
         return self._targets_damping
 
     @property
+    def narrow_reference(self) -> FloatArray | None:
+        """The current targets' samples filtered with the narrow ``notch_zeta`` (read-only).
+
+        None when the targets' notch is that narrow one (`retraining.narrow_reference`); else
+        shape (len(targets), ndof), aligned with `targets`. The odometry's calibration reference.
+        """
+        return self._narrow_reference
+
+    @property
     def model(self) -> NumpyNnarmax | None:
         """The network in service (immutable), None before the first accepted training."""
         return self._model
@@ -579,6 +588,7 @@ class AdaptivePredictor:
         self._last_freq_k: int | None = None
         self._targets: TargetWindow | None = None
         self._targets_damping = math.nan  # targets_peak_damping of ``_targets``
+        self._narrow_reference: FloatArray | None = None  # narrow_reference of ``_targets``
         self._retrain_requested = False
         self._used_network = False
 
@@ -941,6 +951,7 @@ class AdaptivePredictor:
         if result.segment == self._segment:
             self._targets = result.targets
             self._targets_damping = result.targets_peak_damping
+            self._narrow_reference = result.narrow_reference
         self._frequency = result.frequency
         self._tune_wave_filters(result.frequency.wave_peak_freq)
         if result.accepted and result.model is not None:

@@ -102,6 +102,9 @@ class RetrainResult:
     thrust_used: bool = True  # False: thrust_validation found no thrust information
     # the sea's peak damping the targets' filter was designed with (`targets_peak_damping`)
     targets_peak_damping: float = math.nan
+    # the targets' samples filtered with the narrow notch_zeta (`narrow_reference`; None: the
+    # targets' notch is that narrow one)
+    narrow_reference: FloatArray | None = None
 
 
 # Dead-reckoning horizon of the thrust test of ``thrust_validation`` [s] (the dead-reckoning
@@ -273,6 +276,28 @@ def make_targets(params: PredictorParams, y: FloatArray, end_index: int,
     return TargetWindow.start(zero_phase(y[-span:], sos), end_index, eps)
 
 
+def narrow_reference(params: PredictorParams, y: FloatArray, count: int, wave_peak_freq: float,
+                     peak_damping: float = math.nan) -> FloatArray | None:
+    """The newest ``count`` samples of ``y`` filtered like the targets but with the narrow notch.
+
+    None when the targets' notch (`target_filter` at ``peak_damping``) is the narrow
+    ``notch_zeta`` one already. Otherwise ``y`` (newest last, ending at the targets' end) is
+    filtered zero-phase with ``notch_zeta`` over the targets' span plus ε older samples (edge
+    transient), in one pass. The odometry calibrates its covariances against this reference
+    (`OdometryParams.narrow_reference`): the broadband notch's targets are smoother than the
+    truth in a way that depends on the sea, so the errors measured against them do not scale to
+    the errors against the truth as the narrow targets' do (issue 14).
+    """
+    if params.target_notch_zeta(wave_peak_freq, peak_damping) <= params.notch_zeta:
+        return None
+    if count < 1 or count > y.shape[0]:
+        raise ValueError(f'count must lie in [1, {y.shape[0]}] samples, got {count}')
+    span = min(y.shape[0], count + params.transient_samples)
+    reference = zero_phase(y[-span:], target_filter(params, wave_peak_freq))[-count:]
+    reference.setflags(write=False)  # handed to the odometry's worker
+    return reference
+
+
 def training_window(params: PredictorParams, snapshot: Snapshot,
                     targets: TargetWindow) -> tuple[FloatArray, FloatArray, FloatArray,
                                                     NDArray[np.bool_]]:
@@ -302,11 +327,15 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
     if sea_state_changed(previous_frequency, frequency):
         # a new sea: the old targets were filtered at the old ω0 and the old data shows the old
         # waves, so the training window restarts on the newest samples and grows back to N
-        targets = make_targets(params, snapshot.y[-change_samples(params):],
-                               snapshot.end_index, frequency.wave_peak_freq, None, damping)
+        measured = snapshot.y[-change_samples(params):]
+        targets = make_targets(params, measured, snapshot.end_index, frequency.wave_peak_freq,
+                               None, damping)
     else:
+        measured = snapshot.y
         targets = make_targets(params, snapshot.y, snapshot.end_index, frequency.wave_peak_freq,
                                None if narrowed else previous_targets, damping)
+    reference = narrow_reference(params, measured, len(targets), frequency.wave_peak_freq,
+                                 damping)
     u, y, t_values, mask = training_window(params, snapshot, targets)
     spread = wave_spread(y, t_values, mask)
     spec = network_spec(params)
@@ -345,7 +374,7 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
                          reason=reason, seconds=time.monotonic() - start, epochs=result.epochs,
                          wave_spread=spread, baseline_loss=baseline,
                          retire_incumbent=retire, thrust_used=thrust_used,
-                         targets_peak_damping=damping)
+                         targets_peak_damping=damping, narrow_reference=reference)
 
 
 def training_data(params: PredictorParams, snapshot: Snapshot, u: FloatArray, y: FloatArray,

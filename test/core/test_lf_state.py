@@ -187,6 +187,7 @@ class _WindowPredictor:
     using_network = False
     wave_peak_freq = None
     targets_peak_damping = math.nan
+    narrow_reference = None  # narrow targets: the covariances are fitted against them
 
     def __init__(self) -> None:
         self.targets: TargetWindow | None = None
@@ -328,3 +329,41 @@ def test_the_vessel_memory_filters_the_thrust_like_the_targets_in_a_broadband_se
     assert not np.allclose(wide, narrow)
     np.testing.assert_array_equal(designed[0], wide)
     np.testing.assert_array_equal(designed[1], narrow)
+
+
+@pytest.mark.parametrize('narrow', [True, False])
+def test_wide_notch_targets_are_replaced_by_the_narrow_reference_for_calibration(
+        monkeypatch: pytest.MonkeyPatch, narrow: bool) -> None:
+    """OdometryParams.narrow_reference: the covariances are fitted against narrow-notch targets."""
+    from lf_predictor_ros.core import lf_state, retraining
+    from lf_predictor_ros.core.frequency import FrequencyEstimate
+    from lf_predictor_ros.core.odometry import OdometryParams, calibrate
+
+    broadband = FrequencyEstimate(0.8, True, 50.0, (0.8,), 0.1)  # λ 0.1: the wide notch applies
+    monkeypatch.setattr(retraining, 'sea_state_estimate', lambda *args: broadband)
+    compared: list[np.ndarray] = []
+
+    def spy(history: list[Published], times: np.ndarray, targets: np.ndarray,
+            *args: object) -> object:
+        compared.append(np.array(targets))
+        return calibrate(history, times, targets, *args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(lf_state, 'calibrate', spy)
+    params = PredictorParams(ndof=1, sample_time=1.0, retrain_period=20.0, training_window=200.0,
+                             transient_length=10.0, filter_window=60.0, append_length=40.0,
+                             estimation_window=480.0, max_epochs=2, motion_gate=False,
+                             notch_zeta_broadband=1.3, notch_broadband_holding_only=False)
+    record = simulate(load_scenario('onedof_excited'), 3, 600.0)
+    est = LfStateEstimator(params, OdometryParams(narrow_reference=narrow), background=False)
+    try:
+        for k in range(record.t.shape[0]):
+            est.update(float(record.t[k]), record.measured_pose[k], record.thrust[k])
+        targets, reference = est.predictor.targets, est.predictor.narrow_reference
+        assert compared and targets is not None and reference is not None
+        values = np.array(targets.values).reshape(len(targets), 1)
+        assert np.sqrt(np.mean((reference - values) ** 2)) > 1e-3  # the two notches differ
+        # the newest ε samples are filter transients either way and are left out
+        expected = (reference if narrow else values)[:-params.transient_samples]
+        np.testing.assert_array_equal(compared[-1], expected)
+    finally:
+        est.close()

@@ -10,10 +10,11 @@ import pytest
 from lf_predictor_ros.core.params import PredictorParams
 
 # A legal tiny configuration used to reach the "N long enough for the regressors" rule:
-# h = 0.5 s, Δ = 2, ε = 2, α = 8, β = 4 samples satisfy eqs. 4.4/4.5.
+# h = 0.5 s, Δ = 2, ε = 2, α = 8, β = 4 samples satisfy eqs. 4.4/4.5. nfb 2 needs the motion
+# gate (default on) off: the ramp rule refuses LF feedback with it.
 _TINY = {'sample_time': 0.5, 'nu': 2, 'ny': 2, 'nfb': 2, 'retrain_period': 1.0,
          'transient_length': 1.0, 'filter_window': 4.0, 'append_length': 2.0,
-         'max_train_seconds': 0.5}
+         'max_train_seconds': 0.5, 'motion_gate': False}
 
 # (changes, regex the message must contain): each breaks exactly one rule of the defaults
 # (h = 1 s, Δ = 60 s, ε = 30 s, α = 180 s, β = 120 s, N = 600 s, γ = 1200 s).
@@ -85,7 +86,8 @@ def test_every_rule_rejects_a_violating_value(changes: dict[str, Any], message: 
 
 
 def test_defaults_and_sample_counts() -> None:
-    params = PredictorParams(sample_time=0.5, nu=2, ny=2, nfb=2)
+    # nfb 2 (LF feedback) needs the motion gate off (ramp rule)
+    params = PredictorParams(sample_time=0.5, nu=2, ny=2, nfb=2, motion_gate=False)
     assert (params.retrain_samples, params.transient_samples, params.filter_samples,
             params.append_samples, params.training_samples, params.estimation_samples) == (
                 120, 60, 360, 240, 2400, 2400)
@@ -96,6 +98,15 @@ def test_defaults_and_sample_counts() -> None:
     assert params.lowpass_cutoff(0.3) == pytest.approx(0.5)  # thesis Fig. 4.8
     assert params.wave_peak_prior is None
     assert PredictorParams(initial_wave_peak_freq=0.6).wave_peak_prior == 0.6
+    # the shipped motion gate (parabola twin, T 5 s, dead zone 0.6, north/east only) and the
+    # broadband targets' notch for station keeping (ζ 1.3, lower edge 0.23 rad/s)
+    defaults = PredictorParams()
+    assert (defaults.motion_gate, defaults.ramp_order, defaults.motion_gate_smoothing,
+            defaults.motion_gate_dead_zone, defaults.motion_gate_yaw) == (True, 2, 5.0, 0.6, False)
+    assert (defaults.ramp_invariant, defaults.motion_gate_ny,
+            defaults.motion_gate_validation) == (False, 0, False)
+    assert (defaults.notch_zeta, defaults.notch_zeta_broadband, defaults.notch_lower_edge,
+            defaults.notch_broadband_holding_only) == (0.8, 1.3, 0.23, True)
 
 
 def test_windows_in_seconds_are_rate_independent() -> None:
@@ -115,7 +126,8 @@ def test_boundaries_of_eqs_4_4_and_4_5_are_accepted() -> None:
 
 def test_numbers_are_coerced() -> None:
     raw: dict[str, Any] = {'nu': np.int64(3), 'ny': 2.0, 'retrain_period': 60,
-                           'wave_band': [0.3, 1.3]}  # as YAML / numpy would hand them over
+                           'wave_band': [0.3, 1.3],  # as YAML / numpy would hand them over
+                           'motion_gate': False}  # the default gate's parabola needs ny ≥ 3
     params = PredictorParams(**raw)
     assert isinstance(params.nu, int) and params.nu == 3
     assert isinstance(params.ny, int)
@@ -179,9 +191,11 @@ def test_the_broadband_notch_has_its_lower_edge_at_notch_lower_edge(
 def test_the_targets_notch_widens_only_in_a_broadband_sea() -> None:
     from lf_predictor_ros.core.params import BROADBAND_PEAK_DAMPING
 
-    off = PredictorParams(notch_zeta=0.8)
+    off = PredictorParams(notch_zeta=0.8, notch_zeta_broadband=0.0)
     assert off.target_notch_zeta(0.8, peak_damping=0.1) == 0.8  # broadband option off
     wide = PredictorParams(notch_zeta=0.8, notch_zeta_broadband=1.3, notch_lower_edge=0.23)
+    assert PredictorParams().target_notch_zeta(0.65, peak_damping=0.1) == \
+        wide.target_notch_zeta(0.65, peak_damping=0.1)  # the defaults' broadband notch
     assert wide.target_notch_zeta(0.8) == 0.8  # sea bandwidth unknown
     assert wide.target_notch_zeta(0.8, peak_damping=0.01) == 0.8  # a narrow (thesis) sea
     assert wide.target_notch_zeta(0.8, peak_damping=BROADBAND_PEAK_DAMPING) == 1.3
@@ -189,5 +203,5 @@ def test_the_targets_notch_widens_only_in_a_broadband_sea() -> None:
     assert wide.target_notch_zeta(0.65, peak_damping=0.1) == pytest.approx((1 - r * r) / (2 * r))
     # a swell: the edge would ask less than notch_zeta, which stays (never narrower)
     assert wide.target_notch_zeta(0.4, peak_damping=0.1) == 0.8
-    assert PredictorParams(notch_zeta_broadband=1.3).target_notch_zeta(
+    assert PredictorParams(notch_zeta_broadband=1.3, notch_lower_edge=0.0).target_notch_zeta(
         0.4, peak_damping=0.1) == 1.3  # no edge: no limit

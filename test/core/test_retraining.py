@@ -475,3 +475,34 @@ def test_a_manoeuvring_window_in_a_broadband_sea_filters_its_targets_afresh(
     assert np.max(np.abs(second.targets.values[:200] - appended.values[:200])) > 1e-3
     # the result says how its targets were designed (the vessel memory filters the thrust so)
     assert first.targets_peak_damping == 0.1 and math.isnan(second.targets_peak_damping)
+    # and carries the narrow-notch reference of wide targets only (the odometry's calibration)
+    narrow = make_targets(params, y[:680], 679, WAVE_PEAK_FREQ, None)
+    assert first.narrow_reference is not None and second.narrow_reference is None
+    np.testing.assert_array_equal(first.narrow_reference, narrow.values)
+
+
+def test_the_narrow_reference_is_the_targets_window_filtered_with_the_narrow_notch() -> None:
+    """`narrow_reference`: None for narrow targets, else one narrow zero-phase pass (issue 14)."""
+    from lf_predictor_ros.core.retraining import narrow_reference, target_filter
+
+    y, _ = synthetic_positions(700, 2)
+    params = SMALL.replace(notch_zeta_broadband=1.3)
+    assert narrow_reference(params, y, N_TRAIN, WAVE_PEAK_FREQ) is None  # λ unknown: narrow
+    off = SMALL.replace(notch_zeta_broadband=0.0)
+    assert narrow_reference(off, y, N_TRAIN, WAVE_PEAK_FREQ, 0.1) is None  # option off
+    reference = narrow_reference(params, y, N_TRAIN, WAVE_PEAK_FREQ, 0.1)
+    assert reference is not None and reference.shape == (N_TRAIN, 1)
+    assert not reference.flags.writeable
+    # the same samples as the first narrow targets: N + ε filtered, the oldest ε left out
+    fresh = make_targets(params, y, 699, WAVE_PEAK_FREQ, None)
+    np.testing.assert_array_equal(reference, fresh.values)
+    np.testing.assert_array_equal(reference, zero_phase(y[-N_TRAIN - EPS:], wave_sos())[EPS:])
+    wide = make_targets(params, y, 699, WAVE_PEAK_FREQ, None, 0.1)
+    assert np.max(np.abs(wide.values - reference)) > 1e-2  # the widths differ
+    assert not np.allclose(target_filter(params, WAVE_PEAK_FREQ, 0.1), wave_sos())
+    # fewer samples than asked for: the edge transient is cut short, never read past the data
+    short = narrow_reference(params, y[-N_TRAIN:], N_TRAIN, WAVE_PEAK_FREQ, 0.1)
+    assert short is not None
+    np.testing.assert_array_equal(short, zero_phase(y[-N_TRAIN:], wave_sos()))
+    with pytest.raises(ValueError, match='count must lie in'):
+        narrow_reference(params, y[:50], N_TRAIN, WAVE_PEAK_FREQ, 0.1)

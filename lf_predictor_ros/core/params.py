@@ -124,6 +124,12 @@ class PredictorParams:
             'with motion_gate and 3 DOF: the gate acts on the heading too; false: north and '
             "east only, the heading is the holding network's (the twin lets more of a swell's "
             'yaw motion through in turns)'))
+    motion_gate_yaw_notch: float = field(
+        default=0.0, metadata=_doc(
+            'with motion_gate and motion_gate_yaw: width ζ of a causal notch at the estimated '
+            'ω0 (depth notch_depth) on the low-passed heading difference twin − holding before '
+            "the gate scales it: the swell's yaw motion the twin lets through in turns stays "
+            'out of the heading, a turn (slow) passes; 0 = off', ''))
     estimation_window: float = field(
         default=1200.0, metadata=_doc('frequency-estimation window γ (eq. 4.3)', 's'))
     retrain_period: float = field(
@@ -378,7 +384,8 @@ class PredictorParams:
                                  f'{getattr(self, name)!r}: give a positive value')
         for name in ('weight_decay', 'derivative_weight', 'initial_wave_peak_freq',
                      'wave_augmentation', 'switch_blend_time', 'motion_gate_smoothing',
-                     'output_notch_zeta', 'notch_lower_edge', 'notch_zeta_broadband'):
+                     'output_notch_zeta', 'notch_lower_edge', 'notch_zeta_broadband',
+                     'motion_gate_yaw_notch'):
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')

@@ -258,6 +258,14 @@ class AdaptivePredictor:
         self._gate_valid = np.full(params.ndof, not params.motion_gate_validation)
         # motion_gate_yaw false: the gate never acts on the heading
         self._gate_dofs = np.array([True, True, params.motion_gate_yaw][:params.ndof])
+        # motion_gate_yaw_notch: a notch at ω0 on the gate's heading difference (1 channel)
+        self._gate_yaw_notch: CascadeFilter | None = None
+        if params.motion_gate and params.motion_gate_yaw and params.ndof == 3 and \
+                params.motion_gate_yaw_notch > 0.0:
+            self._gate_yaw_notch = CascadeFilter(1, params.sample_time, self._fallback_freq(),
+                                                 notch_zeta=params.motion_gate_yaw_notch,
+                                                 notch_depth=params.notch_depth,
+                                                 lowpass_offset=None)
         self._clear_output_state()
         self._start_segment()
         if background:
@@ -364,6 +372,8 @@ class AdaptivePredictor:
         if self._moving is not None and self._gate is not None:
             self._moving.restart_segment()
             self._gate.restart()
+        if self._gate_yaw_notch is not None:
+            self._gate_yaw_notch.reset()
 
     def discard_running_job(self) -> None:
         """Drop the result of a running training or ω0 job; the network in service stays.
@@ -597,6 +607,8 @@ class AdaptivePredictor:
         self._fallback.set_wave_peak_freq(wave_peak_freq)
         if self._output_notch is not None:
             self._output_notch.set_wave_peak_freq(wave_peak_freq)
+        if self._gate_yaw_notch is not None:
+            self._gate_yaw_notch.set_wave_peak_freq(wave_peak_freq)
 
     def _notched(self, t: float, out: FloatArray) -> FloatArray:
         """The published pose through the output notch (``output_notch_zeta``; off: ``out``).
@@ -798,6 +810,8 @@ class AdaptivePredictor:
             self._gate.restart()
             self._gain = np.zeros(self.ndof)
             self._gate_offset = np.zeros(self.ndof)
+            if self._gate_yaw_notch is not None:
+                self._gate_yaw_notch.reset()
             self._validate_gate(out, out)
             return out
         gain = dead_zoned(self._gate.update(moving), self.params.motion_gate_dead_zone)
@@ -805,10 +819,24 @@ class AdaptivePredictor:
             # LP(moving − holding) of core.motion_gate (motion_gate_smoothing)
             self._gate_offset = self._gate_offset + self._gate_alpha * (offset - self._gate_offset)
             offset = self._gate_offset
+        if self._gate_yaw_notch is not None:
+            offset = self._yaw_notched(t, offset)
         gain = gain * self._gate_dofs
         self._validate_gate(out, shifted(out, gain * offset, self.ndof))
         self._gain = gain * self._gate_valid
         return shifted(out, self._gain * offset, self.ndof)
+
+    def _yaw_notched(self, t: float, offset: FloatArray) -> FloatArray:
+        """The gate's offset with its heading entry through the notch at ω0 (a new array).
+
+        ``motion_gate_yaw_notch``: the difference is a small wrapped angle, filtered as one
+        channel (the notch starts from the first difference in steady state after a reset).
+        """
+        assert self._gate_yaw_notch is not None
+        notched = np.array(offset, dtype=np.float64)
+        notched[2] = self._gate_yaw_notch.update(t, np.array([offset[2], 0.0, 0.0]),
+                                                 _NO_FORCE)[0]
+        return notched
 
     def _validate_gate(self, holding: FloatArray, gated: FloatArray) -> None:
         """motion_gate_validation: log this sample's two outputs; check at a new target window.

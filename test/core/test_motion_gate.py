@@ -609,3 +609,35 @@ def test_a_twin_checkpoint_that_does_not_fit_is_refused_and_nothing_is_loaded(
     plain = AdaptivePredictor(SMALL, background=False)
     plain.load(str(path))
     assert plain.status().message == 'warm start from gated.pt'
+
+
+def test_the_yaw_notch_takes_the_wave_peak_out_of_the_gates_heading_difference() -> None:
+    """motion_gate_yaw_notch ζ: gain notch_depth at ω0, 1 at DC, north and east untouched."""
+    params = SMALL.replace(motion_gate=True, motion_gate_yaw_notch=0.5)
+    predictor = AdaptivePredictor(params, background=False)
+    predictor._tune_wave_filters(0.8)  # ω0 [rad/s]
+    t = np.arange(400.0)  # [s] at h = 1 s
+    rows = np.column_stack([np.full(t.size, 0.3), np.full(t.size, -0.2),
+                            0.02 * np.sin(0.8 * t)])  # [m, m, rad]
+    out = np.array([predictor._yaw_notched(t[k], rows[k]) for k in range(t.size)])
+    assert out[:, :2] == pytest.approx(rows[:, :2], abs=0.0)  # north/east pass unchanged
+    amplitude = np.max(np.abs(out[-100:, 2]))  # steady state, ≥ 12 periods after the start
+    assert amplitude == pytest.approx(params.notch_depth * 0.02, rel=0.1, abs=2e-4)
+    still = AdaptivePredictor(params, background=False)
+    turned = [still._yaw_notched(float(k), np.array([0.0, 0.0, 0.05]))[2] for k in range(50)]
+    assert turned == pytest.approx([0.05] * 50, abs=1e-12)  # a held difference passes (DC 1)
+    # only with the heading gated: no notch is built otherwise
+    assert AdaptivePredictor(params.replace(motion_gate_yaw=False),
+                             background=False)._gate_yaw_notch is None
+
+
+def test_with_the_yaw_notch_the_gate_changes_the_heading_only(
+        trace: Callable[[PredictorParams], Trace]) -> None:
+    """The notch acts on the heading difference alone: gains and north/east as without it."""
+    notched = trace(SMALL.replace(motion_gate=True, motion_gate_yaw_notch=0.5))
+    gated = trace(SMALL.replace(motion_gate=True))
+    assert np.array_equal(notched.gain, gated.gain)
+    assert notched.out[:, :2] == pytest.approx(gated.out[:, :2], abs=1e-12)
+    opened = gated.gain[:, 2] > 0.5
+    assert np.count_nonzero(opened) > 20
+    assert np.max(np.abs(notched.out[opened, 2] - gated.out[opened, 2])) > 1e-5

@@ -234,6 +234,8 @@ class AdaptivePredictor:
         self._segment = 0
         self._fb_next: int = -1
         self._wave_spread: FloatArray | None = None
+        # (the wave spread it was made from, the guard's bound per DOF), see _plausible
+        self._guard_bound: tuple[FloatArray, list[float]] | None = None
         self._guard_trips = 0
         self._no_thrust = 0  # accepted trainings whose thrust test failed (thrust_validation)
         self._smoothing = params.switch_blend_time > 0.0 or any(
@@ -645,7 +647,7 @@ class AdaptivePredictor:
         prediction = self._predict_with(model)
         if prediction is None:
             return None
-        if not np.all(np.isfinite(prediction)):
+        if not _all_finite(prediction):
             self._message = 'network output not finite: cascade fallback'
             return None
         return np.asarray(prediction, dtype=np.float64)
@@ -664,8 +666,17 @@ class AdaptivePredictor:
         spread = self._wave_spread
         if spread is None:
             return True
-        bound = GUARD_SPREADS * spread + GUARD_FLOOR[:self.ndof]
-        return bool(np.all(np.abs(prediction - y) <= bound))
+        guard = self._guard_bound
+        if guard is None or guard[0] is not spread:  # a new network's spread: a new bound
+            guard = self._guard_bound = (
+                spread, (GUARD_SPREADS * spread + GUARD_FLOOR[:self.ndof]).tolist())
+        bound = guard[1]
+        predicted, measured = np.asarray(prediction).tolist(), np.asarray(y).tolist()
+        if not (isinstance(bound, list) and isinstance(predicted, list) and
+                isinstance(measured, list) and len(bound) == len(predicted) == len(measured)):
+            return bool(np.all(np.abs(prediction - y) <= bound))  # not one pose: broadcast
+        # np.all(|prediction − y| <= bound) of one pose (NaN is not plausible)
+        return all(abs(a - b) <= c for a, b, c in zip(predicted, measured, bound, strict=True))
 
     # ---- bumpless transfer and rate limit (output only; off with the defaults) ---------------
 
@@ -792,7 +803,7 @@ class AdaptivePredictor:
             return out
         moving = self._moving.update(t, pose, force)
         offset = moving_offset(out, moving, self.ndof)
-        if not self._moving.using_network or not np.all(np.isfinite(offset)):
+        if not self._moving.using_network or not _all_finite(offset):
             # The gate measures the twin's network alone: the usual velocity of the cascade
             # fallback is another filter's, and the step where the source switches is no motion.
             self._gate.restart()
@@ -806,7 +817,8 @@ class AdaptivePredictor:
             self._gate_offset = self._gate_offset + self._gate_alpha * (offset - self._gate_offset)
             offset = self._gate_offset
         gain = gain * self._gate_dofs
-        self._validate_gate(out, shifted(out, gain * offset, self.ndof))
+        if self.params.motion_gate_validation:  # the gated output is only logged for it
+            self._validate_gate(out, shifted(out, gain * offset, self.ndof))
         self._gain = gain * self._gate_valid
         return shifted(out, self._gain * offset, self.ndof)
 
@@ -925,6 +937,8 @@ class AdaptivePredictor:
         self._outcomes.put(_JobOutcome(generation, result, None, saved_error))
 
     def _collect_outcomes(self, t: float) -> None:
+        if self._outcomes.empty():  # the usual case, without raising queue.Empty
+            return
         while True:
             try:
                 outcome = self._outcomes.get_nowait()
@@ -989,9 +1003,14 @@ def _newest(rows: deque[FloatArray], count: int) -> FloatArray:
     return np.array([rows[i] for i in range(-n, 0)])
 
 
+def _all_finite(values: FloatArray) -> bool:
+    """np.all(np.isfinite(values)) of a few entries, without numpy's per-call overhead."""
+    return all(map(math.isfinite, np.asarray(values, dtype=np.float64).ravel().tolist()))
+
+
 def _checked(value: FloatArray, name: str) -> FloatArray:
     arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+    if arr.shape != (3,) or not _all_finite(arr):
         raise ValueError(f'{name} must be 3 finite numbers [north, east, yaw] / [X, Y, N], got '
                          f'{value!r}')
     return arr

@@ -110,9 +110,12 @@ def _valid_vector(value: object, max_abs: float) -> FloatArray | None:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
         return None
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+    if arr.shape != (3,):
         return None
-    if max(abs(arr[0]), abs(arr[1])) > max_abs:
+    north, east, yaw = arr.tolist()
+    if not (math.isfinite(north) and math.isfinite(east) and math.isfinite(yaw)):
+        return None
+    if max(abs(north), abs(east)) > max_abs:
         return None
     return arr.copy()
 
@@ -162,7 +165,10 @@ class InputAligner:
         self._last_pose: FloatArray | None = None
         self._next_grid: float | None = None
         self._segment_start = True
-        self._block: list[FloatArray] = []  # valid poses stamped in (next_grid − T, next_grid]
+        # valid poses stamped in (next_grid − T, next_grid]: the first _block_size rows (an
+        # array that grows as needed, so the grid sample's mean needs no copy of a list)
+        self._block = np.zeros((16, 3))
+        self._block_size = 0
 
     def reset(self) -> None:
         """Forget the pose stream (counters are kept); the next pose starts a new segment."""
@@ -170,7 +176,7 @@ class InputAligner:
         self._last_pose = None
         self._next_grid = None
         self._segment_start = True
-        self._block = []
+        self._block_size = 0
 
     def add_force(self, t: float, force: object) -> bool:
         """Store an applied force for zero-order hold; returns False if it was dropped."""
@@ -216,7 +222,8 @@ class InputAligner:
             elif dt > s.max_gap:
                 self.counters.gaps += 1
                 self.reset()
-            elif np.hypot(*(arr[:2] - self._last_pose[:2])) > s.max_speed * dt + 1.0:
+            elif np.hypot(arr[0] - self._last_pose[0], arr[1] - self._last_pose[1]) > \
+                    s.max_speed * dt + 1.0:
                 self.counters.outliers += 1
                 return []
         self.counters.poses += 1
@@ -229,11 +236,17 @@ class InputAligner:
             self._last_t, self._last_pose = t, arr
         assert self._next_grid is not None
         if t <= self._next_grid + 1e-9:
-            self._block.append(arr)
+            self._block_append(arr)
         out = self._emit_until(prev_t, prev_pose, t, arr)
-        if t > self._next_grid - s.sample_time + 1e-9 and not self._block:
-            self._block.append(arr)  # the first pose of the next grid interval
+        if t > self._next_grid - s.sample_time + 1e-9 and not self._block_size:
+            self._block_append(arr)  # the first pose of the next grid interval
         return out
+
+    def _block_append(self, pose: FloatArray) -> None:
+        if self._block_size == self._block.shape[0]:
+            self._block = np.concatenate((self._block, np.zeros_like(self._block)))
+        self._block[self._block_size] = pose
+        self._block_size += 1
 
     def _emit_until(self, t0: float, p0: FloatArray, t1: float,
                     p1: FloatArray) -> list[AlignedSample]:
@@ -244,14 +257,14 @@ class InputAligner:
         while self._next_grid <= t1 + 1e-9:
             tg = self._next_grid
             w = 0.0 if t1 <= t0 else min(max((tg - t0) / (t1 - t0), 0.0), 1.0)
-            if self.settings.average_poses and len(self._block) > 1:
-                pose = mean_pose(np.array(self._block))
+            if self.settings.average_poses and self._block_size > 1:
+                pose = mean_pose(self._block[:self._block_size])
             elif w >= 1.0:  # exactly on the new pose: no rounding from interpolation
                 pose = p1.copy()
             else:
                 pose = p0 + w * (p1 - p0)
                 pose[2] = _wrap(float(p0[2]) + w * dyaw)
-            self._block = []
+            self._block_size = 0
             out.append(self._sample(tg, pose))
             self._next_grid = round((tg + step) / step) * step
         return out

@@ -116,6 +116,38 @@ _NO_FORCE.flags.writeable = False
 FloatArray = NDArray[np.float64]
 
 
+class _NewestRows:
+    """The newest rows of a stream in one array: the newest n rows are a view, oldest first.
+
+    Every row is written twice (at its index modulo the capacity and the capacity above it),
+    so the newest rows are always contiguous: no copy of a deque per prediction or snapshot.
+    """
+
+    __slots__ = ('_capacity', '_count', '_rows')
+
+    def __init__(self, capacity: int) -> None:
+        self._capacity = capacity
+        self._count = 0  # rows appended
+        self._rows: FloatArray | None = None  # (2 capacity, width) once the width is known
+
+    def append(self, row: FloatArray) -> None:
+        rows = self._rows
+        if rows is None:
+            rows = self._rows = np.zeros((2 * self._capacity, row.shape[0]))
+        i = self._count % self._capacity
+        rows[i] = row
+        rows[i + self._capacity] = row
+        self._count += 1
+
+    def newest(self, count: int) -> FloatArray:
+        """The newest min(count, held) rows, oldest first (a view: valid until the next append)."""
+        n = min(count, self._count, self._capacity)
+        if self._rows is None or n <= 0:
+            return np.array([])  # as np.array of no rows
+        end = (self._count - 1) % self._capacity + self._capacity + 1
+        return self._rows[end - n:end]
+
+
 class _Transfer:
     """A running bumpless transfer: the old source, blended out from ``start`` [s].
 
@@ -279,6 +311,8 @@ class AdaptivePredictor:
         u = self._force_channels(force_arr, pose_arr[2])
         self._u.append(u)
         self._y.append(y)
+        self._u_rows.append(u)
+        self._y_rows.append(y)
         self._k += 1
         lf_now = self._fallback.update(t, pose_arr, force_arr)
         if self._fb_next != self._k:  # no network prediction exists for this sample
@@ -578,6 +612,9 @@ class AdaptivePredictor:
     def _start_segment(self) -> None:
         self._u: deque[FloatArray] = deque(maxlen=self._capacity)
         self._y: deque[FloatArray] = deque(maxlen=self._capacity)
+        # the same rows in arrays: the regressors' and the snapshots' rows without copying
+        self._u_rows = _NewestRows(self._capacity)
+        self._y_rows = _NewestRows(self._capacity)
         self._fb: deque[FloatArray] = deque(maxlen=max(1, self.params.nfb))
         self._heading = ContinuousHeading()
         self._gate_offset = np.zeros(self.ndof)
@@ -657,8 +694,8 @@ class AdaptivePredictor:
         p = self.params
         if len(self._y) < p.max_lag or len(self._fb) < p.nfb:
             return None
-        u_hist = _newest(self._u, max(p.nu, 1))  # only the rows the regressors need:
-        y_hist = _newest(self._y, max(p.ny, 1))  # the buffers hold up to N + ε samples
+        u_hist = self._u_rows.newest(max(p.nu, 1))  # only the rows the regressors need:
+        y_hist = self._y_rows.newest(max(p.ny, 1))  # the buffers hold up to N + ε samples
         fb_hist = _newest(self._fb, max(p.nfb, 1))
         return predict_step(model, u_hist, y_hist, fb_hist)
 
@@ -878,7 +915,8 @@ class AdaptivePredictor:
             return
         self._retrain_requested = False
         self._last_train_k = self._k
-        snapshot = Snapshot(u=np.array(self._u), y=np.array(self._y), end_index=self._k,
+        snapshot = Snapshot(u=self._u_rows.newest(len(self._u)).copy(),
+                            y=self._y_rows.newest(len(self._y)).copy(), end_index=self._k,
                             segment=self._segment)
         args = (self._generation, snapshot, self._state_dict, self._targets, self._frequency,
                 self._stop)
@@ -900,7 +938,7 @@ class AdaptivePredictor:
         if self._job_running():
             return
         self._last_freq_k = self._k
-        args = (self._generation, np.array(self._y), self._frequency)
+        args = (self._generation, self._y_rows.newest(len(self._y)).copy(), self._frequency)
         if self.background:
             self._worker = threading.Thread(target=self._frequency_job, args=args,
                                             name='lf-predictor-frequency', daemon=True)

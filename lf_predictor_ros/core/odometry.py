@@ -382,6 +382,8 @@ class LfOdometry:
         if self.is_late(t):
             raise ValueError(f'stamp {t} is older than the last one {self._t}: restart() first')
         z = self._measurement(pose)
+        memory = self._memory  # the thrust clipped to what it has seen, once per sample
+        clipped = tau if memory is None else memory.plausible_force(tau)
         if self._x is None:
             self._initialize(t, z)
         elif self._mode != 'tracking':
@@ -390,7 +392,7 @@ class LfOdometry:
                 return self.coast(t, force)
             self._start_blend(t, pose)
         else:
-            self._predict_to(t, tau)
+            self._predict_to(t, tau, clipped)
             self._correct(z)
         self._mode = 'tracking'
         self._last_fix = t
@@ -403,7 +405,7 @@ class LfOdometry:
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
         self._slow_twist = twist.copy() if self._slow_twist is None else \
             self._slow_twist + alpha * (twist - self._slow_twist)
-        applied = (tau if self._memory is None else self._memory.plausible_force(tau))[:self.ndof]
+        applied = clipped[:self.ndof]
         beta = self._force_rate()
         self._slow_force = applied.copy() if self._slow_force is None else \
             self._slow_force + beta * (applied - self._slow_force)
@@ -508,17 +510,21 @@ class LfOdometry:
         self._beta_cache = (params, beta)
         return beta
 
-    def _plausible(self, tau: FloatArray) -> FloatArray:
-        """The thrust clipped to what the vessel memory has seen (counted when clipped)."""
+    def _plausible(self, tau: FloatArray, clipped: FloatArray | None = None) -> FloatArray:
+        """The thrust clipped to what the vessel memory has seen (counted when clipped).
+
+        ``clipped``: ``plausible_force(tau)`` of the memory in use, when already computed.
+        """
         if self._memory is None:
             return tau
-        clipped = self._memory.plausible_force(tau)
-        if not np.array_equal(clipped, tau):
+        if clipped is None:
+            clipped = self._memory.plausible_force(tau)
+        if clipped.shape != tau.shape or clipped.tolist() != tau.tolist():  # np.array_equal
             self.counters['implausible_thrust'] += 1
         return clipped
 
-    def _predict_to(self, t: float, tau: FloatArray) -> None:
-        tau = self._plausible(tau)
+    def _predict_to(self, t: float, tau: FloatArray, clipped: FloatArray | None = None) -> None:
+        tau = self._plausible(tau, clipped)
         x = self._require_state()
         t_last = self._t if self._t is not None else t
         steps = max(1, int(round((t - t_last) / self.sample_time)))

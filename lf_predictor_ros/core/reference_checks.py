@@ -443,10 +443,11 @@ class ReferenceChecker:
             return ACCEPT
         if self._drift:
             return self._reject('drift', 'drift latched: reference deselected until reset')
-        innovation = self._dofs(np.asarray(pose, dtype=np.float64)) - \
-            self._dofs(np.asarray(predicted, dtype=np.float64))
+        measured = np.asarray(pose, dtype=np.float64)[:self.ndof].tolist()
+        reference = np.asarray(predicted, dtype=np.float64)[:self.ndof].tolist()
+        innovation = [a - b for a, b in zip(measured, reference, strict=True)]
         if self.ndof == 3:
-            innovation[2] = wrap_angle(float(innovation[2]))
+            innovation[2] = wrap_angle(innovation[2])
         dt = 0.0 if self._drift_last_t is None else max(0.0, t - self._drift_last_t)
         if dt > self.settings.dropout_timeout:
             # across a dropout the first sample counts as one ordinary sample, not as the whole
@@ -456,13 +457,17 @@ class ReferenceChecker:
         self._drift_last_t = t
         tau = self.settings.drift_time_constant
         if self._drift_mean is None:
-            self._drift_mean = innovation
-        else:
-            self._drift_mean = self._drift_mean + min(1.0, dt / tau) * \
-                (innovation - self._drift_mean)
+            self._drift_mean = np.array(innovation, dtype=np.float64)
+        else:  # mean + w·(innovation − mean), entry by entry
+            weight = min(1.0, dt / tau)
+            self._drift_mean = np.array(
+                [m + weight * (v - m) for m, v in zip(self._drift_mean.tolist(), innovation,
+                                                      strict=True)], dtype=np.float64)
         self._drift_time += dt
-        limit = np.array(self.settings.drift_limit[:self.ndof])
-        if self._drift_time >= tau and np.any(np.abs(self._drift_mean) > limit):
+        if self._drift_time >= tau and any(
+                abs(m) > limit for m, limit in zip(self._drift_mean.tolist(),
+                                                   self.settings.drift_limit[:self.ndof],
+                                                   strict=True)):
             self._drift = True
             self.counters['drift'] += 1
             size = ', '.join(f'{v:.3g}' for v in self._drift_mean)

@@ -129,10 +129,11 @@ def mean_pose(poses: FloatArray) -> FloatArray:
     poses = np.asarray(poses, dtype=np.float64)
     if poses.ndim != 2 or poses.shape[1] != 3 or poses.shape[0] == 0:
         raise ValueError(f'mean_pose needs poses of shape (m ≥ 1, 3), got {poses.shape}')
-    out = poses.mean(axis=0)
+    count = poses.shape[0]
+    out = np.add.reduce(poses, axis=0) / count  # poses.mean(axis=0): sum / count
     ref = float(poses[0, 2])
     offset = np.remainder(poses[:, 2] - ref + math.pi, 2.0 * math.pi) - math.pi
-    out[2] = _wrap(ref + float(offset.mean()))
+    out[2] = _wrap(ref + float(np.add.reduce(offset)) / count)
     return np.asarray(out, dtype=np.float64)
 
 

@@ -312,9 +312,10 @@ class CausalFilter:
         return np.array(out, dtype=np.float64)
 
     def _remember(self, u: FloatArray, y: FloatArray) -> None:
+        """Keep the newest input and output rows (``filter``'s own arrays: no copies needed)."""
         order = 2 * self._sos.shape[0]
-        self._inputs.append(u.copy())
-        self._outputs.append(y.copy())
+        self._inputs.append(u)
+        self._outputs.append(y)
         if len(self._inputs) > order:
             del self._inputs[0]
             del self._outputs[0]

@@ -403,12 +403,15 @@ class LfOdometry:
         accel = self._twist_change(t, twist)
         self._history.append(Published(t, z.copy(), twist, source, accel))
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
-        self._slow_twist = twist.copy() if self._slow_twist is None else \
-            self._slow_twist + alpha * (twist - self._slow_twist)
+        # the low-passes slow + w·(new − slow), entry by entry (the same operations)
+        self._slow_twist = twist.copy() if self._slow_twist is None else np.array(
+            [a + alpha * (b - a) for a, b in zip(self._slow_twist.tolist(), twist.tolist(),
+                                                 strict=True)], dtype=np.float64)
         applied = clipped[:self.ndof]
-        beta = self._force_rate()
-        self._slow_force = applied.copy() if self._slow_force is None else \
-            self._slow_force + beta * (applied - self._slow_force)
+        self._slow_force = applied.copy() if self._slow_force is None else np.array(
+            [a + w * (b - a) for a, w, b in zip(self._slow_force.tolist(),
+                                                self._force_rate().tolist(), applied.tolist(),
+                                                strict=True)], dtype=np.float64)
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
                                             self._pose_covariance(source, z, twist))
         out = OdometryEstimate(
@@ -798,7 +801,9 @@ class LfOdometry:
         else:
             dt = t - last[0]
             alpha = min(1.0, dt / self.params.twist_accel_time)
-            accel = last[2] + alpha * ((twist - last[1]) / dt - last[2])
+            accel = np.array([a + alpha * ((b - c) / dt - a) for a, b, c in zip(
+                last[2].tolist(), twist.tolist(), last[1].tolist(), strict=True)],
+                dtype=np.float64)
         self._accel = (t, twist, accel)
         return accel
 

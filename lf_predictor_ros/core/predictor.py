@@ -850,14 +850,27 @@ class AdaptivePredictor:
             return out
         gain = dead_zoned(self._gate.update(moving), self.params.motion_gate_dead_zone)
         if self._gate_alpha < 1.0:
-            # LP(moving − holding) of core.motion_gate (motion_gate_smoothing)
-            self._gate_offset = self._gate_offset + self._gate_alpha * (offset - self._gate_offset)
+            # LP(moving − holding) of core.motion_gate (motion_gate_smoothing), entry by entry
+            alpha = self._gate_alpha
+            self._gate_offset = np.array(
+                [a + alpha * (b - a) for a, b in zip(self._gate_offset.tolist(), offset.tolist(),
+                                                     strict=True)], dtype=np.float64)
             offset = self._gate_offset
-        gain = gain * self._gate_dofs
+        # gain · motion_gate_yaw mask, then · the validation mask (bool → 1.0 / 0.0)
+        gains = [g * (1.0 if on else 0.0)
+                 for g, on in zip(gain.tolist(), self._gate_dofs.tolist(), strict=True)]
         if self.params.motion_gate_validation:  # the gated output is only logged for it
-            self._validate_gate(out, shifted(out, gain * offset, self.ndof))
-        self._gain = gain * self._gate_valid
-        return shifted(out, self._gain * offset, self.ndof)
+            self._validate_gate(out, shifted(out, np.array(gains) * offset, self.ndof))
+        gains = [g * (1.0 if on else 0.0)
+                 for g, on in zip(gains, self._gate_valid.tolist(), strict=True)]
+        self._gain = np.array(gains, dtype=np.float64)
+        # shifted(out, gain · offset): the first ndof entries moved, the heading wrapped
+        values = np.array(out, dtype=np.float64).tolist()
+        for dof, (g, o) in enumerate(zip(gains, offset.tolist(), strict=True)):
+            values[dof] = values[dof] + g * o
+        if self.ndof == 3:
+            values[2] = wrap_angle(values[2])
+        return np.array(values, dtype=np.float64)
 
     def _validate_gate(self, holding: FloatArray, gated: FloatArray) -> None:
         """motion_gate_validation: log this sample's two outputs; check at a new target window.

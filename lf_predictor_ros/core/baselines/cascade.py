@@ -90,12 +90,10 @@ class CascadeFilter:
         channels = measured[: self.ndof].copy()
         if self.ndof == 3:
             channels[_YAW] = self._continuous_yaw(float(measured[_YAW]))
-        filtered = self._filter.filter(channels)
-        estimate = np.zeros(3)
-        estimate[: self.ndof] = filtered
+        values = self._filter.filter(channels).tolist() + [0.0] * (3 - self.ndof)
         if self.ndof == 3:
-            estimate[_YAW] = wrap_to_pi_scalar(float(filtered[_YAW]))
-        return estimate
+            values[_YAW] = wrap_to_pi_scalar(values[_YAW])
+        return np.array(values, dtype=np.float64)
 
     def reset(self) -> None:
         """Forget the filter state and heading history."""

@@ -134,14 +134,15 @@ def quaternion_to_yaw(w: float, x: float, y: float, z: float) -> float:
 
 def _fill_pose(target: Pose, pose: NDArray[np.float64]) -> None:
     """Write ``[north, east, yaw]`` into a ``geometry_msgs/Pose`` (z = 0, yaw quaternion)."""
-    north, east, yaw = pose
-    target.position.x = float(north)
-    target.position.y = float(east)
-    target.position.z = 0.0
-    target.orientation.w = math.cos(0.5 * yaw)
-    target.orientation.x = 0.0
-    target.orientation.y = 0.0
-    target.orientation.z = math.sin(0.5 * yaw)
+    north, east, yaw = pose.tolist()
+    position, orientation = target.position, target.orientation  # one property read each
+    position.x = north
+    position.y = east
+    position.z = 0.0
+    orientation.w = math.cos(0.5 * yaw)
+    orientation.x = 0.0
+    orientation.y = 0.0
+    orientation.z = math.sin(0.5 * yaw)
 
 
 def _pose_of(source: Pose) -> NDArray[np.float64]:
@@ -237,18 +238,21 @@ def odometry_to_msg(
     pose_array = _vector3(pose, 'pose')
     twist_array = _vector3(twist, 'twist')
     msg = Odometry()
-    msg.header.stamp = _as_stamp(stamp_sec)
-    msg.header.frame_id = frame_id
+    header, pose_part, twist_part = msg.header, msg.pose, msg.twist  # one property read each
+    header.stamp = _as_stamp(stamp_sec)
+    header.frame_id = frame_id
     msg.child_frame_id = child_frame_id
-    _fill_pose(msg.pose.pose, pose_array)
-    msg.pose.covariance = covariance3_to_6(pose_cov, 'pose_cov')
-    msg.twist.twist.linear.x = float(twist_array[0])
-    msg.twist.twist.linear.y = float(twist_array[1])
-    msg.twist.twist.linear.z = 0.0
-    msg.twist.twist.angular.x = 0.0
-    msg.twist.twist.angular.y = 0.0
-    msg.twist.twist.angular.z = float(twist_array[2])
-    msg.twist.covariance = covariance3_to_6(twist_cov, 'twist_cov')
+    _fill_pose(pose_part.pose, pose_array)
+    pose_part.covariance = covariance3_to_6(pose_cov, 'pose_cov')
+    surge, sway, yaw_rate = twist_array.tolist()
+    linear, angular = twist_part.twist.linear, twist_part.twist.angular
+    linear.x = surge
+    linear.y = sway
+    linear.z = 0.0
+    angular.x = 0.0
+    angular.y = 0.0
+    angular.z = yaw_rate
+    twist_part.covariance = covariance3_to_6(twist_cov, 'twist_cov')
     return msg
 
 

@@ -170,6 +170,8 @@ class InputAligner:
         # array that grows as needed, so the grid sample's mean needs no copy of a list)
         self._block = np.zeros((16, 3))
         self._block_size = 0
+        # per block row: its heading about the first row's, wrapped (mean_pose's offsets)
+        self._block_offsets = np.zeros(16)
 
     def reset(self) -> None:
         """Forget the pose stream (counters are kept); the next pose starts a new segment."""
@@ -244,10 +246,25 @@ class InputAligner:
         return out
 
     def _block_append(self, pose: FloatArray) -> None:
-        if self._block_size == self._block.shape[0]:
+        size = self._block_size
+        if size == self._block.shape[0]:
             self._block = np.concatenate((self._block, np.zeros_like(self._block)))
-        self._block[self._block_size] = pose
-        self._block_size += 1
+            self._block_offsets = np.concatenate((self._block_offsets,
+                                                  np.zeros_like(self._block_offsets)))
+        self._block[size] = pose
+        yaw = float(pose[2])
+        ref = yaw if size == 0 else float(self._block[0, 2])
+        # mean_pose's np.remainder(yaw − ref + π, 2π) − π, one pose at a time
+        self._block_offsets[size] = (yaw - ref + math.pi) % (2.0 * math.pi) - math.pi
+        self._block_size = size + 1
+
+    def _block_mean(self) -> FloatArray:
+        """`mean_pose` of the block, value for value, with the offsets made as poses came."""
+        count = self._block_size
+        out = np.add.reduce(self._block[:count], axis=0) / count
+        ref = float(self._block[0, 2])
+        out[2] = _wrap(ref + float(np.add.reduce(self._block_offsets[:count])) / count)
+        return np.asarray(out, dtype=np.float64)
 
     def _emit_until(self, t0: float, p0: FloatArray, t1: float,
                     p1: FloatArray) -> list[AlignedSample]:
@@ -259,7 +276,7 @@ class InputAligner:
             tg = self._next_grid
             w = 0.0 if t1 <= t0 else min(max((tg - t0) / (t1 - t0), 0.0), 1.0)
             if self.settings.average_poses and self._block_size > 1:
-                pose = mean_pose(self._block[:self._block_size])
+                pose = self._block_mean()
             elif w >= 1.0:  # exactly on the new pose: no rounding from interpolation
                 pose = p1.copy()
             else:

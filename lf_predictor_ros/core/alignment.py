@@ -110,9 +110,12 @@ def _valid_vector(value: object, max_abs: float) -> FloatArray | None:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
         return None
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+    if arr.shape != (3,):
         return None
-    if max(abs(arr[0]), abs(arr[1])) > max_abs:
+    north, east, yaw = arr.tolist()
+    if not (math.isfinite(north) and math.isfinite(east) and math.isfinite(yaw)):
+        return None
+    if max(abs(north), abs(east)) > max_abs:
         return None
     return arr.copy()
 
@@ -126,10 +129,11 @@ def mean_pose(poses: FloatArray) -> FloatArray:
     poses = np.asarray(poses, dtype=np.float64)
     if poses.ndim != 2 or poses.shape[1] != 3 or poses.shape[0] == 0:
         raise ValueError(f'mean_pose needs poses of shape (m ≥ 1, 3), got {poses.shape}')
-    out = poses.mean(axis=0)
+    count = poses.shape[0]
+    out = np.add.reduce(poses, axis=0) / count  # poses.mean(axis=0): sum / count
     ref = float(poses[0, 2])
     offset = np.remainder(poses[:, 2] - ref + math.pi, 2.0 * math.pi) - math.pi
-    out[2] = _wrap(ref + float(offset.mean()))
+    out[2] = _wrap(ref + float(np.add.reduce(offset)) / count)
     return np.asarray(out, dtype=np.float64)
 
 
@@ -162,7 +166,12 @@ class InputAligner:
         self._last_pose: FloatArray | None = None
         self._next_grid: float | None = None
         self._segment_start = True
-        self._block: list[FloatArray] = []  # valid poses stamped in (next_grid − T, next_grid]
+        # valid poses stamped in (next_grid − T, next_grid]: the first _block_size rows (an
+        # array that grows as needed, so the grid sample's mean needs no copy of a list)
+        self._block = np.zeros((16, 3))
+        self._block_size = 0
+        # per block row: its heading about the first row's, wrapped (mean_pose's offsets)
+        self._block_offsets = np.zeros(16)
 
     def reset(self) -> None:
         """Forget the pose stream (counters are kept); the next pose starts a new segment."""
@@ -170,7 +179,7 @@ class InputAligner:
         self._last_pose = None
         self._next_grid = None
         self._segment_start = True
-        self._block = []
+        self._block_size = 0
 
     def add_force(self, t: float, force: object) -> bool:
         """Store an applied force for zero-order hold; returns False if it was dropped."""
@@ -216,7 +225,8 @@ class InputAligner:
             elif dt > s.max_gap:
                 self.counters.gaps += 1
                 self.reset()
-            elif np.hypot(*(arr[:2] - self._last_pose[:2])) > s.max_speed * dt + 1.0:
+            elif np.hypot(arr[0] - self._last_pose[0], arr[1] - self._last_pose[1]) > \
+                    s.max_speed * dt + 1.0:
                 self.counters.outliers += 1
                 return []
         self.counters.poses += 1
@@ -229,11 +239,32 @@ class InputAligner:
             self._last_t, self._last_pose = t, arr
         assert self._next_grid is not None
         if t <= self._next_grid + 1e-9:
-            self._block.append(arr)
+            self._block_append(arr)
         out = self._emit_until(prev_t, prev_pose, t, arr)
-        if t > self._next_grid - s.sample_time + 1e-9 and not self._block:
-            self._block.append(arr)  # the first pose of the next grid interval
+        if t > self._next_grid - s.sample_time + 1e-9 and not self._block_size:
+            self._block_append(arr)  # the first pose of the next grid interval
         return out
+
+    def _block_append(self, pose: FloatArray) -> None:
+        size = self._block_size
+        if size == self._block.shape[0]:
+            self._block = np.concatenate((self._block, np.zeros_like(self._block)))
+            self._block_offsets = np.concatenate((self._block_offsets,
+                                                  np.zeros_like(self._block_offsets)))
+        self._block[size] = pose
+        yaw = float(pose[2])
+        ref = yaw if size == 0 else float(self._block[0, 2])
+        # mean_pose's np.remainder(yaw − ref + π, 2π) − π, one pose at a time
+        self._block_offsets[size] = (yaw - ref + math.pi) % (2.0 * math.pi) - math.pi
+        self._block_size = size + 1
+
+    def _block_mean(self) -> FloatArray:
+        """`mean_pose` of the block, value for value, with the offsets made as poses came."""
+        count = self._block_size
+        out = np.add.reduce(self._block[:count], axis=0) / count
+        ref = float(self._block[0, 2])
+        out[2] = _wrap(ref + float(np.add.reduce(self._block_offsets[:count])) / count)
+        return np.asarray(out, dtype=np.float64)
 
     def _emit_until(self, t0: float, p0: FloatArray, t1: float,
                     p1: FloatArray) -> list[AlignedSample]:
@@ -244,14 +275,14 @@ class InputAligner:
         while self._next_grid <= t1 + 1e-9:
             tg = self._next_grid
             w = 0.0 if t1 <= t0 else min(max((tg - t0) / (t1 - t0), 0.0), 1.0)
-            if self.settings.average_poses and len(self._block) > 1:
-                pose = mean_pose(np.array(self._block))
+            if self.settings.average_poses and self._block_size > 1:
+                pose = self._block_mean()
             elif w >= 1.0:  # exactly on the new pose: no rounding from interpolation
                 pose = p1.copy()
             else:
                 pose = p0 + w * (p1 - p0)
                 pose[2] = _wrap(float(p0[2]) + w * dyaw)
-            self._block = []
+            self._block_size = 0
             out.append(self._sample(tg, pose))
             self._next_grid = round((tg + step) / step) * step
         return out

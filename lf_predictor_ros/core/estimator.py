@@ -101,3 +101,14 @@ def wrap_to_pi(angle: NDArray[np.float64] | float) -> NDArray[np.float64]:
     wrapped = np.asarray(np.angle(np.exp(1j * np.asarray(angle, dtype=np.float64))))
     # np.angle returns [-π, π]; map -π to +π for the half-open interval (−π, π].
     return np.where(wrapped <= -np.pi, wrapped + 2.0 * np.pi, wrapped).astype(np.float64)
+
+
+def wrap_to_pi_scalar(angle: float) -> float:
+    """`wrap_to_pi` of one angle [rad], value for value, without the array overhead.
+
+    The same numpy operations (complex exponential, arctan2) on one number: numpy's may differ
+    from the math module's in the last bit, so this is not ``math.atan2(sin, cos)``.
+    """
+    unit = np.exp(1j * float(angle))
+    wrapped = float(np.arctan2(unit.imag, unit.real))
+    return wrapped + 2.0 * np.pi if wrapped <= -np.pi else wrapped

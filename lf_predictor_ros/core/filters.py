@@ -220,6 +220,21 @@ def _sos_step(sos: FloatArray, state: FloatArray, u: FloatArray) -> tuple[FloatA
     return x, new_state
 
 
+def _sos_step_floats(coefficients: list[list[float]], state: FloatArray,
+                     u: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """`_sos_step` of one sample in plain floats: the same operations in the same order."""
+    x = u.tolist()
+    new_state = []
+    for (b0, b1, b2, _, a1, a2), (first, second) in zip(coefficients, state.tolist(),
+                                                        strict=True):
+        out = [b0 * xi + si for xi, si in zip(x, first, strict=True)]
+        new_state.append([[b1 * xi - a1 * oi + si for xi, oi, si in zip(x, out, second,
+                                                                        strict=True)],
+                          [b2 * xi - a2 * oi for xi, oi in zip(x, out, strict=True)]])
+        x = out
+    return np.array(x, dtype=np.float64), np.array(new_state, dtype=np.float64)
+
+
 def _state_space(sos: FloatArray) -> _StateSpace:
     """Build (A, B, C, D) of the cascade by probing the linear DF2T step with unit vectors."""
     n_states = 2 * sos.shape[0]
@@ -257,6 +272,7 @@ class CausalFilter:
         if n_channels < 1:
             raise ValueError(f'n_channels must be >= 1, got {n_channels}')
         self._sos = _check_sos(sos)
+        self._coefficients: list[list[float]] = self._sos.tolist()  # per-sample step
         self._n_channels = n_channels
         self._state: FloatArray | None = None
         self._inputs: list[FloatArray] = []
@@ -291,14 +307,15 @@ class CausalFilter:
         if self._state is None:
             zi = signal.sosfilt_zi(self._sos)  # steady state for a unit step input
             self._state = zi[:, :, None] * u[None, None, :]
-        out, self._state = _sos_step(self._sos, self._state, u)
+        out, self._state = _sos_step_floats(self._coefficients, self._state, u)
         self._remember(u, out)
         return np.array(out, dtype=np.float64)
 
     def _remember(self, u: FloatArray, y: FloatArray) -> None:
+        """Keep the newest input and output rows (``filter``'s own arrays: no copies needed)."""
         order = 2 * self._sos.shape[0]
-        self._inputs.append(u.copy())
-        self._outputs.append(y.copy())
+        self._inputs.append(u)
+        self._outputs.append(y)
         if len(self._inputs) > order:
             del self._inputs[0]
             del self._outputs[0]
@@ -313,6 +330,7 @@ class CausalFilter:
         """
         new_sos = _check_sos(sos)
         self._sos = new_sos
+        self._coefficients = new_sos.tolist()
         if self._state is None:
             return
         order = 2 * new_sos.shape[0]

@@ -109,7 +109,10 @@ def wrap_pose(poses: ArrayLike, ndof: int) -> _FloatArray:
     """Copy of a pose (3,) or pose series (n, 3) with yaw wrapped to (−π, π] when ``ndof == 3``."""
     out = np.array(poses, dtype=np.float64)
     if _has_yaw(out, ndof):
-        out[..., YAW_INDEX] = wrap_angle(out[..., YAW_INDEX])
+        if out.ndim == 1:  # one pose: the scalar wrap (the same arithmetic, less overhead)
+            out[YAW_INDEX] = wrap_angle(float(out[YAW_INDEX]))
+        else:
+            out[..., YAW_INDEX] = wrap_angle(out[..., YAW_INDEX])
     return out
 
 

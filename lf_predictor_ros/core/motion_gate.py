@@ -38,12 +38,13 @@ this vessel (a start-up, a vessel that never moves) publishes the holding networ
 """
 from __future__ import annotations
 
+import bisect
 import math
 
 import numpy as np
 from numpy.typing import NDArray
 
-from lf_predictor_ros.core.heading import wrap_pose
+from lf_predictor_ros.core.heading import wrap_angle, wrap_pose
 
 FloatArray = NDArray[np.float64]
 
@@ -86,7 +87,13 @@ def dead_zoned(gain: FloatArray, dead_zone: float) -> FloatArray:
     if not 0.0 <= dead_zone < 1.0:
         raise ValueError(f'the dead zone must be in [0, 1), got {dead_zone!r}')
     g = np.asarray(gain, dtype=np.float64)
-    return np.asarray(np.clip((g - dead_zone) / (1.0 - dead_zone), 0.0, 1.0), dtype=np.float64)
+    if g.ndim != 1:
+        return np.asarray(np.clip((g - dead_zone) / (1.0 - dead_zone), 0.0, 1.0),
+                          dtype=np.float64)
+    # one gain per DOF: np.clip of each value (NaN stays NaN, −0 stays −0)
+    scaled = [(v - dead_zone) / (1.0 - dead_zone) for v in g.tolist()]
+    return np.array([0.0 if v < 0.0 else 1.0 if v > 1.0 else v for v in scaled],
+                    dtype=np.float64)
 
 
 def moving_offset(holding: FloatArray, moving: FloatArray, ndof: int) -> FloatArray:
@@ -160,6 +167,10 @@ class MotionGate:
         self.restart()
         self._count = 0  # filled rows of the ring buffer ``_squares``
         self._index = 0  # next row to write
+        # the filled rows of ``_squares`` per DOF, sorted (NaN left out and counted): their
+        # median without sorting the window at every sample
+        self._sorted: list[list[float]] = [[] for _ in range(self.ndof)]
+        self._nans = [0] * self.ndof
 
     def restart(self) -> None:
         """A new data segment (after a gap): the velocity restarts, the usual velocity stays.
@@ -173,17 +184,63 @@ class MotionGate:
     def update(self, moving: FloatArray) -> FloatArray:
         """Add the moving filter's newest estimate (a pose); return g per DOF (shape (ndof,))."""
         value = np.asarray(moving, dtype=np.float64)[:self.ndof]
-        if not np.all(np.isfinite(value)):
+        if not all(math.isfinite(v) for v in value.tolist()):
             return np.zeros(self.ndof)  # no motion evidence: hold the holding filter
         if self._last is not None:
-            step = wrap_pose(value - self._last, self.ndof)
+            step = value - self._last
+            if self.ndof == 3:  # wrap_pose of one pose, without its copy and checks
+                step[2] = wrap_angle(float(step[2]))
             self._velocity = self._velocity + self._alpha * (step - self._velocity)
         self._last = value
         square = self._velocity ** 2
-        self._squares[self._index] = square
-        self._index = (self._index + 1) % self._squares.shape[0]
-        self._count = min(self._count + 1, self._squares.shape[0])
+        self._store(square.tolist())
         if self._count < self._min_count:
             return np.zeros(self.ndof)
-        usual = np.median(self._squares[:self._count], axis=0)
-        return gate_gain(square, usual, self.ratio)
+        return _gate_gain_floats(square.tolist(), self._usual(), self.ratio)
+
+    def _store(self, square: list[float]) -> None:
+        """Write one row of squares into the ring buffer and the sorted columns."""
+        size = self._squares.shape[0]
+        row = self._squares[self._index]
+        if self._count == size:  # the oldest row leaves the window
+            for dof, old in enumerate(row.tolist()):
+                if math.isnan(old):
+                    self._nans[dof] -= 1
+                else:
+                    column = self._sorted[dof]
+                    del column[bisect.bisect_left(column, old)]
+        row[:] = square
+        for dof, new in enumerate(square):
+            if math.isnan(new):
+                self._nans[dof] += 1
+            else:
+                bisect.insort(self._sorted[dof], new)
+        self._index = (self._index + 1) % size
+        self._count = min(self._count + 1, size)
+
+    def _usual(self) -> list[float]:
+        """s̄² per DOF: ``np.median(self._squares[:self._count], axis=0)``, value for value."""
+        usual = []
+        for column, nans in zip(self._sorted, self._nans, strict=True):
+            half = len(column) // 2
+            if nans:
+                usual.append(math.nan)
+            elif len(column) % 2:
+                usual.append(column[half])
+            else:  # an even count: the mean of the two middle values, as np.median
+                usual.append((column[half - 1] + column[half]) / 2)
+        return usual
+
+
+def _gate_gain_floats(velocity_sq: list[float], usual_sq: list[float], ratio: float
+                      ) -> FloatArray:
+    """`gate_gain` of one sample per DOF, value for value, without numpy's overhead."""
+    gain = []
+    for s2, usual in zip(velocity_sq, usual_sq, strict=True):
+        square = s2 * s2
+        scale = ratio * usual
+        denominator = square + scale * scale
+        value = square / denominator if denominator > 0.0 else 0.0
+        # np.clip(value, 0, 1): NaN stays NaN
+        gain.append(0.0 if value < 0.0 else 1.0 if value > 1.0 else value)
+    return np.array(gain, dtype=np.float64)

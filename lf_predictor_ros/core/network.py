@@ -772,6 +772,24 @@ class NumpyNnarmax:
     def forward(self, x: FloatArray) -> FloatArray:
         """ŷLF(t + 1) for regressor rows (rows, n_regressors) or one row (n_regressors,)."""
         spec = self.spec
+        if spec.relative and x.ndim == 1 and not spec.body_frame:
+            # one row: x − shift block by block, without building the shift (its force block
+            # is 0: x − 0 is x, bit for bit); the frame as _relative_frame_numpy makes it
+            offset = _position_offset(spec)
+            n_out = spec.n_outputs
+            ref = x[offset:offset + n_out]
+            positions = x[offset:].reshape(-1, n_out)  # ny (+ nfb) blocks; ramp: nfb = 0
+            if spec.ramp_invariant:
+                coeffs = np.einsum('ki,...io->...ko', ramp_fit_weights(spec.ny, spec.ramp_order),
+                                   positions)
+                line = ref[..., None, :] + np.einsum(
+                    'ik,...ko->...io', _ramp_powers(spec.ny, spec.ramp_order), coeffs)
+                relative = np.concatenate((x[:offset], (positions - line).reshape(-1)))
+                ramp: FloatArray = ref + coeffs.sum(axis=-2) + self._forward_absolute(relative)
+                return ramp
+            relative = np.concatenate((x[:offset], (positions - ref).reshape(-1)))
+            plain: FloatArray = ref + self._forward_absolute(relative)
+            return plain
         if spec.relative:
             ref, shift, base = _relative_frame_numpy(spec, x)
             if spec.body_frame:

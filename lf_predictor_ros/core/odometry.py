@@ -82,6 +82,9 @@ UNESTIMATED_VARIANCE = 1e6
 ACCELERATION_CORRELATION_TIME = 1.0
 # Published samples kept for the covariance calibration (at most this many) [-].
 HISTORY_SAMPLES = 20000
+# `LfOdometry._embed`'s 3×3 before the estimated block is written in (read-only).
+_EMBED_TEMPLATE = np.diag(np.full(3, UNESTIMATED_VARIANCE))
+_EMBED_TEMPLATE.setflags(write=False)
 CHI2_3DOF_999 = 16.27  # χ²(3) 99.9 % quantile [-]
 # The holding variance σ²_hold of the pose error model is at least this fraction of the mean
 # squared error of the window [-] (a lag fit must not claim that a still vessel is exact; on the
@@ -331,6 +334,12 @@ class LfOdometry:
                          'reacquired_outside_gate': 0, 'fixes_held_back': 0, 'calibrations': 0,
                          'memory_updates': 0, 'numeric_failures': 0,
                          'implausible_thrust': 0}
+        # per-sample values that depend only on the parameters, the calibration, the memory
+        # (and h): (the objects they were made from, the read-only value)
+        self._r_cache: tuple[OdometryParams, dict[str, ErrorModel], FloatArray] | None = None
+        self._q_cache: tuple[float, OdometryParams, dict[str, ErrorModel],
+                             VesselMemory | None, FloatArray] | None = None
+        self._beta_cache: tuple[OdometryParams, FloatArray] | None = None
 
     @property
     def mode(self) -> OdometryMode:
@@ -373,6 +382,8 @@ class LfOdometry:
         if self.is_late(t):
             raise ValueError(f'stamp {t} is older than the last one {self._t}: restart() first')
         z = self._measurement(pose)
+        memory = self._memory  # the thrust clipped to what it has seen, once per sample
+        clipped = tau if memory is None else memory.plausible_force(tau)
         if self._x is None:
             self._initialize(t, z)
         elif self._mode != 'tracking':
@@ -381,7 +392,7 @@ class LfOdometry:
                 return self.coast(t, force)
             self._start_blend(t, pose)
         else:
-            self._predict_to(t, tau)
+            self._predict_to(t, tau, clipped)
             self._correct(z)
         self._mode = 'tracking'
         self._last_fix = t
@@ -392,14 +403,15 @@ class LfOdometry:
         accel = self._twist_change(t, twist)
         self._history.append(Published(t, z.copy(), twist, source, accel))
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
-        self._slow_twist = twist.copy() if self._slow_twist is None else \
-            self._slow_twist + alpha * (twist - self._slow_twist)
-        applied = (tau if self._memory is None else self._memory.plausible_force(tau))[:self.ndof]
-        times = np.array(self.params.dead_reckoning_force_time[:self.ndof])
-        beta = np.where(times > 0.0, np.minimum(1.0, self.sample_time / np.maximum(times, 1e-9)),
-                        1.0)
-        self._slow_force = applied.copy() if self._slow_force is None else \
-            self._slow_force + beta * (applied - self._slow_force)
+        # the low-passes slow + w·(new − slow), entry by entry (the same operations)
+        self._slow_twist = twist.copy() if self._slow_twist is None else np.array(
+            [a + alpha * (b - a) for a, b in zip(self._slow_twist.tolist(), twist.tolist(),
+                                                 strict=True)], dtype=np.float64)
+        applied = clipped[:self.ndof]
+        self._slow_force = applied.copy() if self._slow_force is None else np.array(
+            [a + w * (b - a) for a, w, b in zip(self._slow_force.tolist(),
+                                                self._force_rate().tolist(), applied.tolist(),
+                                                strict=True)], dtype=np.float64)
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
                                             self._pose_covariance(source, z, twist))
         out = OdometryEstimate(
@@ -488,17 +500,34 @@ class LfOdometry:
                             [np.zeros((n, n)), np.diag(q_vel * 100.0)]])
         self._t = t
 
-    def _plausible(self, tau: FloatArray) -> FloatArray:
-        """The thrust clipped to what the vessel memory has seen (counted when clipped)."""
+    def _force_rate(self) -> FloatArray:
+        """Per-sample weight of the thrust low-pass (``dead_reckoning_force_time``; cached)."""
+        params = self.params
+        cached = self._beta_cache
+        if cached is not None and cached[0] is params:
+            return cached[1]
+        times = np.array(params.dead_reckoning_force_time[:self.ndof])
+        beta = np.where(times > 0.0, np.minimum(1.0, self.sample_time / np.maximum(times, 1e-9)),
+                        1.0)
+        beta.setflags(write=False)
+        self._beta_cache = (params, beta)
+        return beta
+
+    def _plausible(self, tau: FloatArray, clipped: FloatArray | None = None) -> FloatArray:
+        """The thrust clipped to what the vessel memory has seen (counted when clipped).
+
+        ``clipped``: ``plausible_force(tau)`` of the memory in use, when already computed.
+        """
         if self._memory is None:
             return tau
-        clipped = self._memory.plausible_force(tau)
-        if not np.array_equal(clipped, tau):
+        if clipped is None:
+            clipped = self._memory.plausible_force(tau)
+        if clipped.shape != tau.shape or clipped.tolist() != tau.tolist():  # np.array_equal
             self.counters['implausible_thrust'] += 1
         return clipped
 
-    def _predict_to(self, t: float, tau: FloatArray) -> None:
-        tau = self._plausible(tau)
+    def _predict_to(self, t: float, tau: FloatArray, clipped: FloatArray | None = None) -> None:
+        tau = self._plausible(tau, clipped)
         x = self._require_state()
         t_last = self._t if self._t is not None else t
         steps = max(1, int(round((t - t_last) / self.sample_time)))
@@ -530,6 +559,8 @@ class LfOdometry:
     def _transition(self, x: FloatArray, tau: FloatArray, h: float) -> tuple[
             FloatArray, FloatArray]:
         n = self.ndof
+        if not self._twist_uses_model():
+            return _kinematic_transition(float(x[2]) if n == 3 else 0.0, h, n)
         rot = _rotation_block(float(x[2]) if n == 3 else 0.0, n)
         memory = self._memory
         damping = np.zeros((n, n))
@@ -555,6 +586,17 @@ class LfOdometry:
         return memory.reckoner == 'model' or (self.params.twist_model and bool(memory.known_gain))
 
     def _process_noise(self, h: float) -> FloatArray:
+        """Q over a step of h [s] (cached per h, parameters, calibration and memory)."""
+        cached = self._q_cache
+        if cached is not None and cached[0] == h and cached[1] is self.params and \
+                cached[2] is self._pose_cov and cached[3] is self._memory:
+            return cached[4]
+        q = self._new_process_noise(h)
+        q.setflags(write=False)
+        self._q_cache = (h, self.params, self._pose_cov, self._memory, q)
+        return q
+
+    def _new_process_noise(self, h: float) -> FloatArray:
         n = self.ndof
         memory = self._memory
         bandwidth = self.params.twist_bandwidth
@@ -575,9 +617,17 @@ class LfOdometry:
         return q
 
     def _measurement_cov(self) -> FloatArray:
+        """R of the LF pose (cached per parameters and calibration; read-only)."""
+        cached = self._r_cache
+        if cached is not None and cached[0] is self.params and cached[1] is self._pose_cov:
+            return cached[2]
         if 'all' in self._pose_cov:
-            return self._pose_cov['all'].moment + 1e-12 * np.eye(self.ndof)
-        return np.diag(np.array(self.params.prior_pose_std[:self.ndof]) ** 2)
+            r = self._pose_cov['all'].moment + 1e-12 * np.eye(self.ndof)
+        else:
+            r = np.diag(np.array(self.params.prior_pose_std[:self.ndof]) ** 2)
+        r.setflags(write=False)
+        self._r_cache = (self.params, self._pose_cov, r)
+        return r
 
     # ---- dead reckoning --------------------------------------------------------------------
 
@@ -751,7 +801,9 @@ class LfOdometry:
         else:
             dt = t - last[0]
             alpha = min(1.0, dt / self.params.twist_accel_time)
-            accel = last[2] + alpha * ((twist - last[1]) / dt - last[2])
+            accel = np.array([a + alpha * ((b - c) / dt - a) for a, b, c in zip(
+                last[2].tolist(), twist.tolist(), last[1].tolist(), strict=True)],
+                dtype=np.float64)
         self._accel = (t, twist, accel)
         return accel
 
@@ -767,7 +819,7 @@ class LfOdometry:
     # ---- helpers ---------------------------------------------------------------------------
 
     def _embed(self, inner: FloatArray) -> FloatArray:
-        full = np.diag(np.full(3, UNESTIMATED_VARIANCE))
+        full = _EMBED_TEMPLATE.copy()
         n = self.ndof
         full[:n, :n] = inner
         return full
@@ -924,17 +976,30 @@ def normalized_error_squared(error: ArrayLike, covariance: ArrayLike) -> FloatAr
 
 
 def _finite(*arrays: FloatArray) -> bool:
-    """All entries finite.
-
-    The sum of the entries times 0 is 0, NaN for a NaN or ±inf entry, and cannot overflow;
-    cheaper on the per-sample path than np.all(np.isfinite(...)).
-    """
-    return all(float(np.sum(np.asarray(a) * 0.0)) == 0.0 for a in arrays)
+    """All entries finite (math.isfinite on the entries of these few-element arrays)."""
+    return all(all(map(math.isfinite, np.asarray(a).ravel().tolist())) for a in arrays)
 
 
 def _second_moment(errors: FloatArray) -> FloatArray:
     """Mean of e eᵀ (bias included: a biased estimate must not look confident)."""
     return np.asarray(errors.T @ errors / errors.shape[0], dtype=np.float64)
+
+
+def _kinematic_transition(heading: float, h: float, ndof: int) -> tuple[FloatArray, FloatArray]:
+    """`LfOdometry._transition` without the memory's model: (A, 0), A = [[I, h R], [0, I]].
+
+    The entries h·R(ψ) as ``h * _rotation_block(ψ)`` computes them (h ≥ 0: its zeros are +0).
+    """
+    a = np.eye(2 * ndof)
+    if ndof == 1:
+        a[0, 1] = h * 1.0
+    else:
+        c, s = math.cos(heading), math.sin(heading)
+        a[0, 3], a[0, 4] = h * c, h * -s
+        a[1, 3], a[1, 4] = h * s, h * c
+        a[0, 5] = a[1, 5] = a[2, 3] = a[2, 4] = h * 0.0
+        a[2, 5] = h * 1.0
+    return a, np.zeros(2 * ndof)
 
 
 def _rotation_block(heading: float, ndof: int) -> FloatArray:

@@ -116,6 +116,38 @@ _NO_FORCE.flags.writeable = False
 FloatArray = NDArray[np.float64]
 
 
+class _NewestRows:
+    """The newest rows of a stream in one array: the newest n rows are a view, oldest first.
+
+    Every row is written twice (at its index modulo the capacity and the capacity above it),
+    so the newest rows are always contiguous: no copy of a deque per prediction or snapshot.
+    """
+
+    __slots__ = ('_capacity', '_count', '_rows')
+
+    def __init__(self, capacity: int) -> None:
+        self._capacity = capacity
+        self._count = 0  # rows appended
+        self._rows: FloatArray | None = None  # (2 capacity, width) once the width is known
+
+    def append(self, row: FloatArray) -> None:
+        rows = self._rows
+        if rows is None:
+            rows = self._rows = np.zeros((2 * self._capacity, row.shape[0]))
+        i = self._count % self._capacity
+        rows[i] = row
+        rows[i + self._capacity] = row
+        self._count += 1
+
+    def newest(self, count: int) -> FloatArray:
+        """The newest min(count, held) rows, oldest first (a view: valid until the next append)."""
+        n = min(count, self._count, self._capacity)
+        if self._rows is None or n <= 0:
+            return np.array([])  # as np.array of no rows
+        end = (self._count - 1) % self._capacity + self._capacity + 1
+        return self._rows[end - n:end]
+
+
 class _Transfer:
     """A running bumpless transfer: the old source, blended out from ``start`` [s].
 
@@ -234,6 +266,8 @@ class AdaptivePredictor:
         self._segment = 0
         self._fb_next: int = -1
         self._wave_spread: FloatArray | None = None
+        # (the wave spread it was made from, the guard's bound per DOF), see _plausible
+        self._guard_bound: tuple[FloatArray, list[float]] | None = None
         self._guard_trips = 0
         self._no_thrust = 0  # accepted trainings whose thrust test failed (thrust_validation)
         self._smoothing = params.switch_blend_time > 0.0 or any(
@@ -285,6 +319,8 @@ class AdaptivePredictor:
         u = self._force_channels(force_arr, pose_arr[2])
         self._u.append(u)
         self._y.append(y)
+        self._u_rows.append(u)
+        self._y_rows.append(y)
         self._k += 1
         lf_now = self._fallback.update(t, pose_arr, force_arr)
         if self._fb_next != self._k:  # no network prediction exists for this sample
@@ -586,6 +622,9 @@ class AdaptivePredictor:
     def _start_segment(self) -> None:
         self._u: deque[FloatArray] = deque(maxlen=self._capacity)
         self._y: deque[FloatArray] = deque(maxlen=self._capacity)
+        # the same rows in arrays: the regressors' and the snapshots' rows without copying
+        self._u_rows = _NewestRows(self._capacity)
+        self._y_rows = _NewestRows(self._capacity)
         self._fb: deque[FloatArray] = deque(maxlen=max(1, self.params.nfb))
         self._heading = ContinuousHeading()
         self._gate_offset = np.zeros(self.ndof)
@@ -657,7 +696,7 @@ class AdaptivePredictor:
         prediction = self._predict_with(model)
         if prediction is None:
             return None
-        if not np.all(np.isfinite(prediction)):
+        if not _all_finite(prediction):
             self._message = 'network output not finite: cascade fallback'
             return None
         return np.asarray(prediction, dtype=np.float64)
@@ -667,8 +706,8 @@ class AdaptivePredictor:
         p = self.params
         if len(self._y) < p.max_lag or len(self._fb) < p.nfb:
             return None
-        u_hist = _newest(self._u, max(p.nu, 1))  # only the rows the regressors need:
-        y_hist = _newest(self._y, max(p.ny, 1))  # the buffers hold up to N + ε samples
+        u_hist = self._u_rows.newest(max(p.nu, 1))  # only the rows the regressors need:
+        y_hist = self._y_rows.newest(max(p.ny, 1))  # the buffers hold up to N + ε samples
         fb_hist = _newest(self._fb, max(p.nfb, 1))
         return predict_step(model, u_hist, y_hist, fb_hist)
 
@@ -676,8 +715,17 @@ class AdaptivePredictor:
         spread = self._wave_spread
         if spread is None:
             return True
-        bound = GUARD_SPREADS * spread + GUARD_FLOOR[:self.ndof]
-        return bool(np.all(np.abs(prediction - y) <= bound))
+        guard = self._guard_bound
+        if guard is None or guard[0] is not spread:  # a new network's spread: a new bound
+            guard = self._guard_bound = (
+                spread, (GUARD_SPREADS * spread + GUARD_FLOOR[:self.ndof]).tolist())
+        bound = guard[1]
+        predicted, measured = np.asarray(prediction).tolist(), np.asarray(y).tolist()
+        if not (isinstance(bound, list) and isinstance(predicted, list) and
+                isinstance(measured, list) and len(bound) == len(predicted) == len(measured)):
+            return bool(np.all(np.abs(prediction - y) <= bound))  # not one pose: broadcast
+        # np.all(|prediction − y| <= bound) of one pose (NaN is not plausible)
+        return all(abs(a - b) <= c for a, b, c in zip(predicted, measured, bound, strict=True))
 
     # ---- bumpless transfer and rate limit (output only; off with the defaults) ---------------
 
@@ -804,7 +852,7 @@ class AdaptivePredictor:
             return out
         moving = self._moving.update(t, pose, force)
         offset = moving_offset(out, moving, self.ndof)
-        if not self._moving.using_network or not np.all(np.isfinite(offset)):
+        if not self._moving.using_network or not _all_finite(offset):
             # The gate measures the twin's network alone: the usual velocity of the cascade
             # fallback is another filter's, and the step where the source switches is no motion.
             self._gate.restart()
@@ -816,15 +864,29 @@ class AdaptivePredictor:
             return out
         gain = dead_zoned(self._gate.update(moving), self.params.motion_gate_dead_zone)
         if self._gate_alpha < 1.0:
-            # LP(moving − holding) of core.motion_gate (motion_gate_smoothing)
-            self._gate_offset = self._gate_offset + self._gate_alpha * (offset - self._gate_offset)
+            # LP(moving − holding) of core.motion_gate (motion_gate_smoothing), entry by entry
+            alpha = self._gate_alpha
+            self._gate_offset = np.array(
+                [a + alpha * (b - a) for a, b in zip(self._gate_offset.tolist(), offset.tolist(),
+                                                     strict=True)], dtype=np.float64)
             offset = self._gate_offset
         if self._gate_yaw_notch is not None:
             offset = self._yaw_notched(t, offset)
-        gain = gain * self._gate_dofs
-        self._validate_gate(out, shifted(out, gain * offset, self.ndof))
-        self._gain = gain * self._gate_valid
-        return shifted(out, self._gain * offset, self.ndof)
+        # gain · motion_gate_yaw mask, then · the validation mask (bool → 1.0 / 0.0)
+        gains = [g * (1.0 if on else 0.0)
+                 for g, on in zip(gain.tolist(), self._gate_dofs.tolist(), strict=True)]
+        if self.params.motion_gate_validation:  # the gated output is only logged for it
+            self._validate_gate(out, shifted(out, np.array(gains) * offset, self.ndof))
+        gains = [g * (1.0 if on else 0.0)
+                 for g, on in zip(gains, self._gate_valid.tolist(), strict=True)]
+        self._gain = np.array(gains, dtype=np.float64)
+        # shifted(out, gain · offset): the first ndof entries moved, the heading wrapped
+        values = np.array(out, dtype=np.float64).tolist()
+        for dof, (g, o) in enumerate(zip(gains, offset.tolist(), strict=True)):
+            values[dof] = values[dof] + g * o
+        if self.ndof == 3:
+            values[2] = wrap_angle(values[2])
+        return np.array(values, dtype=np.float64)
 
     def _yaw_notched(self, t: float, offset: FloatArray) -> FloatArray:
         """The gate's offset with its heading entry through the notch at ω0 (a new array).
@@ -894,7 +956,8 @@ class AdaptivePredictor:
             return
         self._retrain_requested = False
         self._last_train_k = self._k
-        snapshot = Snapshot(u=np.array(self._u), y=np.array(self._y), end_index=self._k,
+        snapshot = Snapshot(u=self._u_rows.newest(len(self._u)).copy(),
+                            y=self._y_rows.newest(len(self._y)).copy(), end_index=self._k,
                             segment=self._segment)
         args = (self._generation, snapshot, self._state_dict, self._targets, self._frequency,
                 self._stop)
@@ -916,7 +979,7 @@ class AdaptivePredictor:
         if self._job_running():
             return
         self._last_freq_k = self._k
-        args = (self._generation, np.array(self._y), self._frequency)
+        args = (self._generation, self._y_rows.newest(len(self._y)).copy(), self._frequency)
         if self.background:
             self._worker = threading.Thread(target=self._frequency_job, args=args,
                                             name='lf-predictor-frequency', daemon=True)
@@ -953,6 +1016,8 @@ class AdaptivePredictor:
         self._outcomes.put(_JobOutcome(generation, result, None, saved_error))
 
     def _collect_outcomes(self, t: float) -> None:
+        if self._outcomes.empty():  # the usual case, without raising queue.Empty
+            return
         while True:
             try:
                 outcome = self._outcomes.get_nowait()
@@ -1017,9 +1082,14 @@ def _newest(rows: deque[FloatArray], count: int) -> FloatArray:
     return np.array([rows[i] for i in range(-n, 0)])
 
 
+def _all_finite(values: FloatArray) -> bool:
+    """np.all(np.isfinite(values)) of a few entries, without numpy's per-call overhead."""
+    return all(map(math.isfinite, np.asarray(values, dtype=np.float64).ravel().tolist()))
+
+
 def _checked(value: FloatArray, name: str) -> FloatArray:
     arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+    if arr.shape != (3,) or not _all_finite(arr):
         raise ValueError(f'{name} must be 3 finite numbers [north, east, yaw] / [X, Y, N], got '
                          f'{value!r}')
     return arr

@@ -178,14 +178,19 @@ class ReferenceChecker:
 
     def reset(self) -> None:
         """Clear every fault and learned statistic (counters are kept): a fresh reference."""
-        self._fit: deque[tuple[float, FloatArray]] = deque(maxlen=FIT_SAMPLES)
-        self._scale_buf: deque[FloatArray] = deque(maxlen=SCALE_SAMPLES)
-        self._gate_cache: FloatArray | None = None
+        # accepted (stamp, estimated DOFs as floats), oldest first
+        self._fit: deque[tuple[float, list[float]]] = deque(maxlen=FIT_SAMPLES)
+        # |innovation| ring buffer (rows in arrival order modulo SCALE_SAMPLES: the median does
+        # not depend on the order) and its filled rows
+        self._scale_buf = np.zeros((SCALE_SAMPLES, self.ndof))
+        self._scale_count = 0
+        self._scale_next = 0
+        self._gate_cache: list[float] | None = None
         self._since_gate = 0
-        self._pending: list[tuple[float, FloatArray]] = []  # consecutive jump rejections
+        self._pending: list[tuple[float, list[float]]] = []  # consecutive jump rejections
         self._same_since: float | None = None
         self._same_count = 0
-        self._last_raw: FloatArray | None = None
+        self._last_raw: tuple[tuple[int, ...], list[float]] | None = None  # shape, values
         self._frozen = False
         self._block: list[tuple[float, FloatArray]] = []
         self._motion_history: deque[FloatArray] = deque(maxlen=MOTION_MEMORY)
@@ -250,8 +255,9 @@ class ReferenceChecker:
                                 f'{self.settings.motion_wave_periods:g} wave periods where '
                                 'waves were seen before (frozen or smoothed reference)',
                                 motion_restart)
-        return Verdict(True, restart=step_restart or motion_restart,
-                       fault='step' if step_restart else None)
+        if not (step_restart or motion_restart):
+            return ACCEPT
+        return Verdict(True, restart=True, fault='step' if step_restart else None)
 
     def _dofs(self, pose: FloatArray) -> FloatArray:
         return np.array(pose[:self.ndof], dtype=np.float64)
@@ -265,10 +271,14 @@ class ReferenceChecker:
 
     def _check_frozen(self, t: float, pose: FloatArray) -> bool:
         """Update the identical-value run; True when a freeze is detected at this sample."""
-        if self._last_raw is not None and np.array_equal(pose, self._last_raw):
+        raw = (pose.shape, pose.ravel().tolist())
+        last = self._last_raw
+        # np.array_equal on plain floats: same shape, every entry == (NaN never equal)
+        if last is not None and raw[0] == last[0] and \
+                all(a == b for a, b in zip(raw[1], last[1], strict=True)):
             self._same_count += 1
         else:
-            self._last_raw = pose.copy()
+            self._last_raw = raw
             self._same_since, self._same_count = t, 1
             self._frozen = False
             return False
@@ -280,72 +290,100 @@ class ReferenceChecker:
             return True
         return False
 
-    def _innovation(self, t: float, y: FloatArray) -> FloatArray | None:
-        """Innovation: y minus the line through the last accepted poses (None: too few)."""
-        if len(self._fit) < 2:
-            return None
-        times = np.array([s for s, _ in self._fit]) - t
-        values = np.array([v for _, v in self._fit])
-        ref = values[-1]
-        rel = values - ref
-        if self.ndof == 3:
-            rel[:, 2] = wrap_angle(rel[:, 2])
-        # least-squares line a + b·(s − t) through (times, rel); its value at t is a
-        t_mean, rel_mean = times.mean(), rel.mean(axis=0)
-        dt = times - t_mean
-        slope = dt @ (rel - rel_mean) / float(dt @ dt)
-        innovation = y - ref - (rel_mean - slope * t_mean)
-        if self.ndof == 3:
-            innovation[2] = wrap_angle(float(innovation[2]))
-        return np.asarray(innovation, dtype=np.float64)
+    def _innovation(self, t: float, y: list[float]) -> list[float] | None:
+        """Innovation: y minus the line through the last accepted poses (None: too few).
 
-    def _gate(self) -> FloatArray | None:
+        Plain float arithmetic in numpy's order (means summed front to back); the two dot
+        products stay numpy's: the vectorized result, bit for bit, without its overhead.
+        """
+        fit = self._fit
+        n = len(fit)
+        if n < 2:
+            return None
+        ref = fit[-1][1]
+        times = [s - t for s, _ in fit]
+        rel = [[v - r for v, r in zip(values, ref, strict=True)] for _, values in fit]
+        if self.ndof == 3:
+            for row in rel:
+                row[2] = wrap_angle(row[2])
+        # least-squares line a + b·(s − t) through (times, rel); its value at t is a
+        t_sum = 0.0
+        for s in times:
+            t_sum += s
+        t_mean = t_sum / n
+        rel_sum = list(rel[0])
+        for row in rel[1:]:
+            rel_sum = [a + b for a, b in zip(rel_sum, row, strict=True)]
+        rel_mean = [a / n for a in rel_sum]
+        dt = np.array([s - t_mean for s in times])
+        centred = np.array([[v - m for v, m in zip(row, rel_mean, strict=True)] for row in rel])
+        norm = float(dt @ dt)
+        slope = (dt @ centred).tolist()
+        innovation = [(v - r) - (m - b / norm * t_mean)
+                      for v, r, m, b in zip(y, ref, rel_mean, slope, strict=True)]
+        if self.ndof == 3:
+            innovation[2] = wrap_angle(innovation[2])
+        return innovation
+
+    def _gate(self) -> list[float] | None:
         """Jump gate per DOF; the MAD is refreshed every GATE_REFRESH innovations (cost)."""
-        if len(self._scale_buf) < MIN_SCALE_SAMPLES:
+        if self._scale_count < MIN_SCALE_SAMPLES:
             return None
         if self._gate_cache is None or self._since_gate >= GATE_REFRESH:
-            scale = MAD_TO_SIGMA * np.median(np.array(self._scale_buf), axis=0)
+            scale = MAD_TO_SIGMA * np.median(self._scale_buf[:self._scale_count], axis=0)
             floor = np.array(self.settings.jump_floor[:self.ndof])
-            self._gate_cache = np.asarray(self.settings.jump_gate * scale + floor,
-                                          dtype=np.float64)
+            self._gate_cache = (self.settings.jump_gate * scale + floor).tolist()
             self._since_gate = 0
         return self._gate_cache
 
-    def _stale_allowance(self, t: float) -> FloatArray:
+    def _stale_allowance(self, t: float) -> list[float]:
         """Gate widening for a stale local prediction (jump_rate × excess time since acceptance).
 
-        The excess time is the time since the last accepted pose beyond the usual pose spacing.
-        After a rejection the line is not updated, so without this a run of rejections during
-        fast wave motion feeds itself until the 'step' test restarts the data (seen in the DDS
-        demo: two false 1 m steps in 1800 s); a real outlier of metres stays far outside.
+        The excess time is the time since the last accepted pose beyond the usual pose spacing
+        (the median spacing of the local fit's poses). After a rejection the line is not
+        updated, so without this a run of rejections during fast wave motion feeds itself until
+        the 'step' test restarts the data (seen in the DDS demo: two false 1 m steps in 1800 s);
+        a real outlier of metres stays far outside.
         """
-        rate = np.array(self.settings.jump_rate[:self.ndof])
         if len(self._fit) < 2:
-            return np.zeros(self.ndof)
-        times = np.array([s for s, _ in self._fit])
-        spacing = float(np.median(np.diff(times)))
-        excess = max(0.0, t - float(times[-1]) - spacing)
-        return np.asarray(rate * excess, dtype=np.float64)
+            return [0.0] * self.ndof
+        times = [s for s, _ in self._fit]
+        steps = sorted(b - a for a, b in zip(times, times[1:], strict=False))
+        half = len(steps) // 2
+        if any(math.isnan(step) for step in steps):
+            spacing = math.nan  # as np.median
+        elif len(steps) % 2:
+            spacing = steps[half]
+        else:  # np.median of an even count: the mean of the two middle values
+            spacing = (steps[half - 1] + steps[half]) / 2
+        excess = max(0.0, t - times[-1] - spacing)
+        return [rate * excess for rate in self.settings.jump_rate[:self.ndof]]
 
     def _check_jump(self, t: float, y: FloatArray) -> Verdict | None:
         """None: accepted and learned from; a Verdict otherwise (rejection or a new level)."""
-        innovation = self._innovation(t, y)
+        values = y.tolist()
+        innovation = self._innovation(t, values)
         gate = self._gate()
         if gate is not None:
-            gate = gate + self._stale_allowance(t)
-        if innovation is not None and gate is not None and np.any(np.abs(innovation) > gate):
-            self._pending.append((t, y))
+            gate = [g + a for g, a in zip(gate, self._stale_allowance(t), strict=True)]
+        if innovation is not None and gate is not None and \
+                any(abs(v) > g for v, g in zip(innovation, gate, strict=True)):
+            self._pending.append((t, values))
             if t - self._pending[0][0] >= self.settings.jump_confirm and \
-                    len(self._pending) >= MIN_FROZEN_SAMPLES and self._consistent(gate):
+                    len(self._pending) >= MIN_FROZEN_SAMPLES and \
+                    self._consistent(np.array(gate)):
                 return self._new_level(t)
             self.counters['jump'] += 1
-            size = float(np.max(np.abs(innovation) / gate))
+            size = float(np.max(np.abs(np.array(innovation)) / np.array(gate)))
             return self._reject('jump', f'innovation {size:.1f} × the gate against the local '
                                 'prediction (outlier)')
         self._pending = []
-        self._fit.append((t, y))
+        self._fit.append((t, values))
         if innovation is not None:
-            self._scale_buf.append(np.abs(innovation))
+            row = self._scale_next
+            self._scale_buf[row] = [abs(v) for v in innovation]
+            self._scale_next = (row + 1) % SCALE_SAMPLES
+            self._scale_count = min(self._scale_count + 1, SCALE_SAMPLES)
             self._since_gate += 1
         return None
 
@@ -360,8 +398,8 @@ class ReferenceChecker:
     def _new_level(self, t: float) -> Verdict:
         """Accept a persistent step: re-seed the local prediction on the new samples."""
         self.counters['step'] += 1
-        jump = float(np.max(np.abs(self._pending[-1][1][:2] - self._fit[-1][1][:2]))) \
-            if self._fit else math.nan
+        jump = float(np.max(np.abs(np.array(self._pending[-1][1][:2]) -
+                                   np.array(self._fit[-1][1][:2])))) if self._fit else math.nan
         self.last_reason = (f'step: the reference stepped by {jump:.2f} m and stayed for '
                             f'{self.settings.jump_confirm:g} s: taken as the new level, data '
                             'restarted')
@@ -405,10 +443,11 @@ class ReferenceChecker:
             return ACCEPT
         if self._drift:
             return self._reject('drift', 'drift latched: reference deselected until reset')
-        innovation = self._dofs(np.asarray(pose, dtype=np.float64)) - \
-            self._dofs(np.asarray(predicted, dtype=np.float64))
+        measured = np.asarray(pose, dtype=np.float64)[:self.ndof].tolist()
+        reference = np.asarray(predicted, dtype=np.float64)[:self.ndof].tolist()
+        innovation = [a - b for a, b in zip(measured, reference, strict=True)]
         if self.ndof == 3:
-            innovation[2] = wrap_angle(float(innovation[2]))
+            innovation[2] = wrap_angle(innovation[2])
         dt = 0.0 if self._drift_last_t is None else max(0.0, t - self._drift_last_t)
         if dt > self.settings.dropout_timeout:
             # across a dropout the first sample counts as one ordinary sample, not as the whole
@@ -418,13 +457,17 @@ class ReferenceChecker:
         self._drift_last_t = t
         tau = self.settings.drift_time_constant
         if self._drift_mean is None:
-            self._drift_mean = innovation
-        else:
-            self._drift_mean = self._drift_mean + min(1.0, dt / tau) * \
-                (innovation - self._drift_mean)
+            self._drift_mean = np.array(innovation, dtype=np.float64)
+        else:  # mean + w·(innovation − mean), entry by entry
+            weight = min(1.0, dt / tau)
+            self._drift_mean = np.array(
+                [m + weight * (v - m) for m, v in zip(self._drift_mean.tolist(), innovation,
+                                                      strict=True)], dtype=np.float64)
         self._drift_time += dt
-        limit = np.array(self.settings.drift_limit[:self.ndof])
-        if self._drift_time >= tau and np.any(np.abs(self._drift_mean) > limit):
+        if self._drift_time >= tau and any(
+                abs(m) > limit for m, limit in zip(self._drift_mean.tolist(),
+                                                   self.settings.drift_limit[:self.ndof],
+                                                   strict=True)):
             self._drift = True
             self.counters['drift'] += 1
             size = ', '.join(f'{v:.3g}' for v in self._drift_mean)

@@ -38,6 +38,13 @@ MAX_STAMP_SEC = 2**31 - 1  # [s] builtin_interfaces/Time.sec is int32
 # of 1000 m, rad, m/s or rad/s) that a consumer fusing the message gives these DOFs no weight, and
 # none is mistaken for a measured zero.
 ODOM_DOF_INDEX = (0, 1, 5)
+# The 6×6 layout of `covariance3_to_6` without the 3×3 block, and where the block's entries go in
+# its 36 row-major values (read-only).
+_COVARIANCE6_TEMPLATE = np.diag([0.0, 0.0, UNESTIMATED_VARIANCE, UNESTIMATED_VARIANCE,
+                                 UNESTIMATED_VARIANCE, 0.0]).reshape(-1)
+_COVARIANCE6_TEMPLATE.setflags(write=False)
+_COVARIANCE6_BLOCK = np.array([6 * row + column for row in ODOM_DOF_INDEX
+                               for column in ODOM_DOF_INDEX])
 
 
 def _vector3(values: ArrayLike, what: str) -> NDArray[np.float64]:
@@ -47,7 +54,7 @@ def _vector3(values: ArrayLike, what: str) -> NDArray[np.float64]:
         raise ValueError(
             f'{what} must have shape (3,) ([north, east, yaw] or [surge, sway, yaw]), '
             f'got shape {array.shape}; pass one sample, not a series')
-    if not np.all(np.isfinite(array)):
+    if not all(map(math.isfinite, array.tolist())):  # np.all(np.isfinite(...)), per sample
         raise ValueError(f'{what} must be finite, got {array.tolist()}; drop or repair the sample')
     return array
 
@@ -69,6 +76,11 @@ def sec_to_ns(sec: float) -> int:
         raise ValueError(f'a time must be finite, got {sec}')
     if sec < 0.0:
         raise ValueError(f'a stamp must not be negative, got {sec} s; ROS time starts at 0')
+    if isinstance(sec, float):  # the same exact rounding in integers, without Fraction's cost
+        numerator, denominator = sec.as_integer_ratio()
+        ns, remainder = divmod(numerator * NS_PER_S, denominator)
+        twice = 2 * remainder  # round half to even, as round(Fraction)
+        return ns + 1 if twice > denominator or (twice == denominator and ns % 2) else ns
     return round(Fraction(sec) * NS_PER_S)
 
 
@@ -122,14 +134,15 @@ def quaternion_to_yaw(w: float, x: float, y: float, z: float) -> float:
 
 def _fill_pose(target: Pose, pose: NDArray[np.float64]) -> None:
     """Write ``[north, east, yaw]`` into a ``geometry_msgs/Pose`` (z = 0, yaw quaternion)."""
-    north, east, yaw = pose
-    target.position.x = float(north)
-    target.position.y = float(east)
-    target.position.z = 0.0
-    target.orientation.w = math.cos(0.5 * yaw)
-    target.orientation.x = 0.0
-    target.orientation.y = 0.0
-    target.orientation.z = math.sin(0.5 * yaw)
+    north, east, yaw = pose.tolist()
+    position, orientation = target.position, target.orientation  # one property read each
+    position.x = north
+    position.y = east
+    position.z = 0.0
+    orientation.w = math.cos(0.5 * yaw)
+    orientation.x = 0.0
+    orientation.y = 0.0
+    orientation.z = math.sin(0.5 * yaw)
 
 
 def _pose_of(source: Pose) -> NDArray[np.float64]:
@@ -176,10 +189,11 @@ def _covariance3(values: ArrayLike, what: str) -> NDArray[np.float64]:
         raise ValueError(
             f'{what} must have shape (3, 3) over (x, y, yaw) or (u, v, r), got shape '
             f'{array.shape}; pass the 3-DOF block, the 6×6 message layout is built here')
-    if not np.all(np.isfinite(array)):
+    entries = array.ravel().tolist()
+    if not all(map(math.isfinite, entries)):
         raise ValueError(f'{what} must be finite, got {array.tolist()}; publish a large '
                          f'variance (e.g. {UNESTIMATED_VARIANCE:g}) for a DOF you cannot trust')
-    if np.any(np.diag(array) < 0.0):
+    if entries[0] < 0.0 or entries[4] < 0.0 or entries[8] < 0.0:
         raise ValueError(f'{what} must have variances >= 0 on its diagonal, got '
                          f'{np.diag(array).tolist()}; check the sign of the covariance')
     return array
@@ -192,10 +206,10 @@ def covariance3_to_6(covariance: ArrayLike, what: str = 'covariance') -> list[fl
     `UNESTIMATED_VARIANCE` on the diagonal, every other entry is 0.
     """
     block = _covariance3(covariance, what)
-    full = np.diag([0.0, 0.0, UNESTIMATED_VARIANCE, UNESTIMATED_VARIANCE,
-                    UNESTIMATED_VARIANCE, 0.0])
-    full[np.ix_(ODOM_DOF_INDEX, ODOM_DOF_INDEX)] = block
-    return [float(v) for v in full.reshape(-1)]
+    full = _COVARIANCE6_TEMPLATE.copy()
+    full[_COVARIANCE6_BLOCK] = block.reshape(-1)
+    values: list[float] = full.tolist()
+    return values
 
 
 def covariance6_to_3(values: ArrayLike, what: str = 'covariance') -> NDArray[np.float64]:
@@ -224,18 +238,21 @@ def odometry_to_msg(
     pose_array = _vector3(pose, 'pose')
     twist_array = _vector3(twist, 'twist')
     msg = Odometry()
-    msg.header.stamp = _as_stamp(stamp_sec)
-    msg.header.frame_id = frame_id
+    header, pose_part, twist_part = msg.header, msg.pose, msg.twist  # one property read each
+    header.stamp = _as_stamp(stamp_sec)
+    header.frame_id = frame_id
     msg.child_frame_id = child_frame_id
-    _fill_pose(msg.pose.pose, pose_array)
-    msg.pose.covariance = covariance3_to_6(pose_cov, 'pose_cov')
-    msg.twist.twist.linear.x = float(twist_array[0])
-    msg.twist.twist.linear.y = float(twist_array[1])
-    msg.twist.twist.linear.z = 0.0
-    msg.twist.twist.angular.x = 0.0
-    msg.twist.twist.angular.y = 0.0
-    msg.twist.twist.angular.z = float(twist_array[2])
-    msg.twist.covariance = covariance3_to_6(twist_cov, 'twist_cov')
+    _fill_pose(pose_part.pose, pose_array)
+    pose_part.covariance = covariance3_to_6(pose_cov, 'pose_cov')
+    surge, sway, yaw_rate = twist_array.tolist()
+    linear, angular = twist_part.twist.linear, twist_part.twist.angular
+    linear.x = surge
+    linear.y = sway
+    linear.z = 0.0
+    angular.x = 0.0
+    angular.y = 0.0
+    angular.z = yaw_rate
+    twist_part.covariance = covariance3_to_6(twist_cov, 'twist_cov')
     return msg
 
 

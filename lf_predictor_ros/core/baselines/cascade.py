@@ -7,12 +7,13 @@ beat. Heading is unwrapped before filtering so a crossing of ±π is not seen as
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from lf_predictor_ros.core.estimator import EstimatorStatus, check_ndof, wrap_to_pi
+from lf_predictor_ros.core.estimator import EstimatorStatus, check_ndof, wrap_to_pi_scalar
 from lf_predictor_ros.core.filters import (
     DEFAULT_LOWPASS_OFFSET,
     DEFAULT_LOWPASS_ORDER,
@@ -77,24 +78,22 @@ class CascadeFilter:
         if self._last_yaw is None:
             self._unwrapped_yaw = yaw
         else:
-            self._unwrapped_yaw += float(wrap_to_pi(yaw - self._last_yaw))
+            self._unwrapped_yaw += wrap_to_pi_scalar(yaw - self._last_yaw)
         self._last_yaw = yaw
         return self._unwrapped_yaw
 
     def update(self, t: float, pose: FloatArray, force: FloatArray) -> FloatArray:
         """Filter one measured pose (3,) at time t [s]; return the LF pose estimate (3,)."""
         measured = np.asarray(pose, dtype=np.float64)
-        if measured.shape != (3,) or not np.all(np.isfinite(measured)):
+        if measured.shape != (3,) or not all(map(math.isfinite, measured.tolist())):
             raise ValueError(f'pose must be 3 finite numbers [north, east, yaw], got {pose}')
         channels = measured[: self.ndof].copy()
         if self.ndof == 3:
             channels[_YAW] = self._continuous_yaw(float(measured[_YAW]))
-        filtered = self._filter.filter(channels)
-        estimate = np.zeros(3)
-        estimate[: self.ndof] = filtered
+        values = self._filter.filter(channels).tolist() + [0.0] * (3 - self.ndof)
         if self.ndof == 3:
-            estimate[_YAW] = float(wrap_to_pi(filtered[_YAW]))
-        return estimate
+            values[_YAW] = wrap_to_pi_scalar(values[_YAW])
+        return np.array(values, dtype=np.float64)
 
     def reset(self) -> None:
         """Forget the filter state and heading history."""

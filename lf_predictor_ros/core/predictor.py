@@ -451,10 +451,14 @@ class AdaptivePredictor:
         return done and not worker.is_alive()
 
     def close(self) -> None:
-        """Stop a running training (it is abandoned at its next epoch boundary)."""
+        """Stop a running training (it is abandoned at its next epoch boundary).
+
+        This one's stop is set before the twin is closed: the twin's worker may be waiting for
+        the shared training lock, which this one's training holds until it stops.
+        """
+        self._stop.set()
         if self._moving is not None:
             self._moving.close()
-        self._stop.set()
         self.wait_for_training(timeout=5.0)
 
     @property

@@ -38,7 +38,12 @@ faster than the model can follow. The jump test needs 30 accepted innovations fo
 until then only the aligner's speed limit guards against outliers.
 
 Conventions: times [s] (message stamps, or the caller's clock for the dropout watch), poses
-``[north m, east m, yaw rad]``; nothing here raises on data.
+``[north m, east m, yaw rad]``; nothing here raises on data. Stamps that do not increase: a pose
+stamped exactly at the last checked stamp (a re-published sample, e.g. a lockstep simulator
+offering its first sample again) passes untested and changes nothing (the aligner drops it as
+out of order); a pose stamped earlier (a simulator reset, a bag loop, one late message) restarts
+the local tests (line, motion block, pending step) from it. Before this, two poses with one stamp
+made the local line's time spread zero, and every later pose failed with ZeroDivisionError.
 """
 from __future__ import annotations
 
@@ -224,6 +229,12 @@ class ReferenceChecker:
         if not self.settings.reference_checks:
             return ACCEPT
         pose = np.asarray(pose, dtype=np.float64)
+        if self._last_t is not None and t <= self._last_t:
+            if t == self._last_t:
+                return ACCEPT  # a repeated stamp: nothing new to test (the aligner drops it)
+            self._block = []  # time went backwards: the local tests restart from this pose
+            self._fit.clear()
+            self._pending = []
         gap = self._last_t is not None and t - self._last_t > self.settings.dropout_timeout
         if gap:
             if not self._dropout_counted:  # a gap in the stamps the clock watch did not see
@@ -318,6 +329,8 @@ class ReferenceChecker:
         dt = np.array([s - t_mean for s in times])
         centred = np.array([[v - m for v, m in zip(row, rel_mean, strict=True)] for row in rel])
         norm = float(dt @ dt)
+        if norm <= 0.0:  # one stamp only (check_pose never lets a repeated stamp in)
+            return None
         slope = (dt @ centred).tolist()
         innovation = [(v - r) - (m - b / norm * t_mean)
                       for v, r, m, b in zip(y, ref, rel_mean, slope, strict=True)]

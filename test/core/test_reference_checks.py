@@ -217,3 +217,39 @@ def test_lost_poses_do_not_turn_wave_motion_into_steps() -> None:
         counts[label] = dict(checker.counters)
     assert counts['default']['jump'] == 0 and counts['default']['step'] == 0, counts
     assert counts['stale']['jump'] > 10, counts  # the failure the gate growth removes
+
+
+def test_a_repeated_first_stamp_changes_nothing_and_outliers_are_still_caught() -> None:
+    """A re-offered first sample (same stamp, same pose) is passed on and changes nothing.
+
+    A lockstep simulator re-offers its first sample until the loop starts. Two such poses once
+    made the local line's time spread zero, and every later pose then raised ZeroDivisionError,
+    so the node dropped every pose for the whole run.
+    """
+    record = supply()
+    poses = record.measured_pose.copy()
+    poses[1500, 0] += 5.0  # the spike of the outlier test
+    checker = ReferenceChecker(ReferenceCheckSettings(), 3)
+    for _ in range(4):
+        assert checker.check_pose(0.0, poses[0], OMEGA0).accepted
+    verdicts = {k: checker.check_pose(float(record.t[k]), poses[k], OMEGA0)
+                for k in range(1, 1600) if record.measured_valid[k]}
+    assert verdicts[1500].fault == 'jump' and not verdicts[1500].accepted
+    assert all(v.accepted for k, v in verdicts.items() if k != 1500)
+    assert checker.counters['jump'] == 1 and checker.counters['frozen'] == 0
+
+
+def test_a_backward_stamp_restarts_the_local_tests_and_the_checks_go_on() -> None:
+    """A simulator reset: the stamps start again from 0; a spike afterwards is still caught."""
+    record = supply()
+    poses = record.measured_pose.copy()
+    poses[900, 0] += 5.0
+    checker = ReferenceChecker(ReferenceCheckSettings(), 3)
+    for k in range(1200):  # 120 s, then the clock goes back to 0 with the same data
+        checker.check_pose(float(record.t[k]), poses[k], OMEGA0)
+    before = checker.counters['jump']
+    assert before == 1
+    verdicts = [checker.check_pose(float(record.t[k]), poses[k], OMEGA0) for k in range(1000)]
+    assert not verdicts[900].accepted and verdicts[900].fault == 'jump'
+    assert sum(not v.accepted for v in verdicts) == 1
+    assert checker.counters['jump'] == 2 and checker.counters['dropout'] == 0

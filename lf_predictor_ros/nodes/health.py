@@ -8,6 +8,7 @@ and `/diagnostics` can say what happened.
 from __future__ import annotations
 
 from collections.abc import Callable
+import traceback
 from typing import TYPE_CHECKING, TypeVar
 
 from geometry_msgs.msg import PoseStamped, WrenchStamped
@@ -31,6 +32,7 @@ class InputHealth:
     _callback_errors: int
     _errors_reported: int
     _last_error: str
+    _traced_errors: set[tuple[str, str]]
 
     if TYPE_CHECKING:  # provided by rclpy's Node; declared here for the type checker only
         def get_logger(self) -> RcutilsLogger: ...
@@ -42,6 +44,7 @@ class InputHealth:
         self._callback_errors = 0
         self._errors_reported = 0  # errors already reported on /diagnostics
         self._last_error = ''
+        self._traced_errors = set()  # (callback, exception type) whose traceback was logged
 
     def _check_frame(self, topic: str, frame_id: str, expected: str) -> None:
         if frame_id == expected:
@@ -56,6 +59,13 @@ class InputHealth:
     def _count_error(self, where: str, error: BaseException) -> None:
         self._callback_errors += 1
         self._last_error = f'{where}: {type(error).__name__}: {error}'
+        key = (where, type(error).__name__)
+        if key not in self._traced_errors:  # the first of each kind with its traceback
+            self._traced_errors.add(key)
+            trace = ''.join(traceback.format_exception(error))
+            self.get_logger().error(f'callback failed ({self._last_error}); it is caught, '
+                                    f'counted and throttled from now on:\n{trace}')
+            return
         self.get_logger().error(f'callback failed ({self._last_error})',
                                 throttle_duration_sec=5.0)
 

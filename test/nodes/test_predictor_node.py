@@ -443,10 +443,17 @@ def test_lifecycle_unexpected_frame_and_callback_errors(
 
         assert node.predictor is not None
         monkeypatch.setattr(node.predictor, 'update', broken)
+        logged: list[tuple[str, dict[str, object]]] = []
+        logger = node.get_logger()
+        monkeypatch.setattr(logger, 'error', lambda text, **kw: logged.append((text, kw)))
         _feed(node, record, range(3, 5))
         level, message, values = node.diagnostic_values()
         assert values['callback_errors'] == 2 and level == 'ERROR'
         assert 'RuntimeError: simulated failure' in message
+        # the first of a kind with its traceback (where it failed), then throttled, without
+        (first, first_kw), (second, second_kw) = logged
+        assert 'Traceback' in first and 'in broken' in first and not first_kw
+        assert 'Traceback' not in second and second_kw == {'throttle_duration_sec': 5.0}
         node.publish_diagnostics()  # reported once; the level then follows the state again
         assert node.diagnostic_values()[0] == 'OK'
         node.trigger_deactivate()

@@ -67,6 +67,10 @@ START_UP_ALLOWANCE = 120.0  # [s wall] added to the run-time limit
 # measurements, controller + recorder on lf_pose, predictor + recorder on the commands (the
 # predictor reads the controller's gains from them; a command it missed shortens that fit).
 REQUIRED_SUBSCRIBERS = {'/measured_pose': 2, '/thrust': 2, '/lf_pose': 2, '/thrust_command': 2}
+# the simulator offers its first sample only once its publishers have matched these (predictor +
+# recorder; recorder): the graph showing a subscription does not mean it has matched a publisher
+# that starts after it, and the bag would miss the start of the run
+START_SUBSCRIPTIONS = ('measured_pose=2', 'thrust=2', 'truth/pose=1', 'truth/lf_pose=1')
 NO_TRAINING_WARMUP = 0.1  # fraction of the run excluded from the metrics without a training
 
 
@@ -206,7 +210,8 @@ def node_commands(plan: RunPlan) -> dict[str, tuple[str, list[str]]]:
             '-p', f'scenario:={plan.scenario_arg}', '-p', f'seed:={plan.seed}',
             '-p', f'duration:={plan.duration!r}', '-p', f'speed_factor:={plan.speed_factor!r}',
             '-p', 'lockstep:=true', '-p', f'lockstep_period:={h}', '-p', f'lockstep_lead:={h}',
-            '-p', f'command_timeout:={max(1.0, 2.0 * plan.predictor_sample_time)!r}']),
+            '-p', f'command_timeout:={max(1.0, 2.0 * plan.predictor_sample_time)!r}',
+            '-p', f'start_subscriptions:={list(START_SUBSCRIPTIONS)!r}']),
     }
 
 

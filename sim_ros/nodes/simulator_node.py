@@ -39,7 +39,11 @@ loop independent of scheduling: the same seed gives the same run at any speed. F
   order and start-up time do not change the run; it offers the first sample only once a
   ``thrust_command`` publisher has been discovered and ``DISCOVERY_GRACE`` has passed, so the
   single answer of a controller behind an estimator (which ignores a re-offered stamp) is not
-  lost to a publisher that has not matched the subscription yet;
+  lost to a publisher that has not matched the subscription yet; with ``start_subscriptions``
+  (e.g. ``['measured_pose=2', 'truth/lf_pose=1']``) it also waits until each listed publisher has
+  matched that many subscriptions, so a recorder that the graph already shows has matched too
+  and records the run from t = 0 (without it a demo bag once began at 67 s, once had no
+  simulator topic at all: the recorder's subscriptions matched seconds after the loop started);
 - afterwards, when no answer comes within ``lockstep_timeout`` wall seconds (e.g. a sensor dropout
   skipped ``measured_pose`` and the controller listens to it, or a best-effort pose was lost), it
   steps on with the held command and counts a ``lockstep_timeouts`` in the diagnostics: a run
@@ -109,6 +113,24 @@ MAX_BACKLOG = 1.0  # [s wall] lag behind the speed factor after which pacing re-
 # first sample, so that publisher has matched this node's subscription too (discovery is not
 # simultaneous at both ends)
 DISCOVERY_GRACE = 0.5
+# the data topics whose start `start_subscriptions` can wait for
+START_TOPICS = ('measured_pose', 'thrust', 'truth/pose', 'truth/lf_pose')
+START_WAIT_LOG_PERIOD = 5.0  # [s wall] between two 'still waiting' lines at the start
+
+
+def parse_start_subscriptions(entries: Sequence[str]) -> dict[str, int]:
+    """``['measured_pose=2', …]`` → {topic: subscriptions}; ValueError says what is wrong."""
+    out: dict[str, int] = {}
+    for entry in entries:
+        topic, sep, count = entry.partition('=')
+        topic = topic.strip().lstrip('/')
+        if not sep or topic not in START_TOPICS or not count.strip().isdigit() or \
+                int(count) < 1:
+            raise ValueError(f"start_subscriptions entry {entry!r} must be 'topic=count' with "
+                             f'topic one of {START_TOPICS} and count >= 1, e.g. '
+                             "'measured_pose=2'")
+        out[topic] = int(count)
+    return out
 
 
 def _doc(doc: str, unit: str = '', read_only: bool = False) -> dict[str, Any]:
@@ -156,6 +178,10 @@ class SimulatorConfig:
         'wall period of the stepping timer', 's', read_only=True))
     diagnostics_period: float = field(default=1.0, metadata=_doc(
         'wall period of /diagnostics', 's', read_only=True))
+    start_subscriptions: list[str] = field(default_factory=list, metadata=_doc(
+        "lockstep start: 'topic=count' entries (topics measured_pose, thrust, truth/pose, "
+        'truth/lf_pose); the first sample is offered only once each has matched that many '
+        'subscriptions; [] = no wait', read_only=True))
 
     def __post_init__(self) -> None:
         """Check every rule; the message says what to change."""
@@ -190,6 +216,7 @@ class SimulatorConfig:
         if not (math.isfinite(self.wave_peak_freq) and self.wave_peak_freq >= 0.0):
             raise ValueError(f'wave_peak_freq must be 0 (scenario schedule) or > 0 rad/s, got '
                              f'{self.wave_peak_freq}')
+        parse_start_subscriptions(self.start_subscriptions)
 
     def scenario_with_overrides(self) -> Scenario:
         """Load the scenario and apply this node's overrides (validated by Scenario)."""
@@ -291,6 +318,12 @@ class SimulatorNode(Node):
                                                command_qos())
         self._command_topic: str = command_sub.topic_name
         self._peer_seen_at: float | None = None  # [s wall] first sight of a command publisher
+        publishers = {'measured_pose': self._measured_pub, 'thrust': self._thrust_pub,
+                      'truth/pose': self._truth_pub, 'truth/lf_pose': self._truth_lf_pub}
+        self._start_subscriptions = [
+            (publishers[topic], count)
+            for topic, count in parse_start_subscriptions(config.start_subscriptions).items()]
+        self._start_wait_logged = -math.inf  # [s wall]
 
         self._command: NDArray[np.float64] | None = None
         self._command_stamp_ns = -1
@@ -401,7 +434,7 @@ class SimulatorNode(Node):
         if self.done.done():
             return
         if self._last_step_ns is None:  # first call: offer the initial state (t = 0)
-            if not self._command_peer_ready():
+            if not self._start_ready():
                 return
             self._publish_sample(self._sim.sample)
         config = self.config
@@ -423,17 +456,25 @@ class SimulatorNode(Node):
                 break
         self._pacer.stepped(made)
 
-    def _command_peer_ready(self) -> bool:
+    def _start_ready(self) -> bool:
         """Lockstep start: wait until a thrust_command publisher is known, plus a grace time.
 
         The answer to the initial sample is published once; if it went out before the
         controller's publisher had matched this node's subscription it would be lost and the
         loop would never start (an estimator drops the re-offered sample as a repeated stamp).
+        The publishers of ``start_subscriptions`` must have matched their subscriptions first.
         """
         if not self.config.lockstep:
             return True
         now = time.monotonic()
-        if self.count_publishers(self._command_topic) == 0:
+        missing = [f'{pub.topic_name} {pub.get_subscription_count()}/{count}'
+                   for pub, count in self._start_subscriptions
+                   if pub.get_subscription_count() < count]
+        if missing and now - self._start_wait_logged >= START_WAIT_LOG_PERIOD:
+            self._start_wait_logged = now
+            self.get_logger().info('lockstep start waits for subscriptions (matched/needed): '
+                                   + ', '.join(missing))
+        if missing or self.count_publishers(self._command_topic) == 0:
             self._peer_seen_at = None
             return False
         if self._peer_seen_at is None:

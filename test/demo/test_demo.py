@@ -8,9 +8,10 @@ import math
 from pathlib import Path
 import time
 
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 import numpy as np
 import pytest
+import rclpy
 from rclpy.parameter import Parameter
 
 from lf_predictor_ros.demo import demo, processes
@@ -24,7 +25,8 @@ from lf_predictor_ros.demo.report import (
     retrain_times_from_diagnostics,
     write_report,
 )
-from lf_predictor_ros.nodes.conversions import ns_to_stamp, sec_to_ns, wrench_to_msg
+from lf_predictor_ros.nodes.conversions import ns_to_stamp, sec_to_ns, stamp_to_sec, wrench_to_msg
+from lf_predictor_ros.nodes.qos import publisher_qos
 from sim_ros.nodes import simulator_node
 from sim_ros.nodes.simulator_node import SimulatorNode
 
@@ -127,10 +129,10 @@ def _command(stamp: float) -> WrenchStamped:
     return wrench_to_msg(np.array([1e4, 0.0, 0.0]), ns_to_stamp(sec_to_ns(stamp)))
 
 
-def _lockstep_node(ros_context: object, **overrides: float) -> SimulatorNode:
+def _lockstep_node(ros_context: object, **overrides: float | list[str]) -> SimulatorNode:
     """A lockstep SimulatorNode (timeout 0.2 s) that sees a controller without one running."""
-    values: dict[str, float | bool] = {'lockstep': True, 'lockstep_timeout': 0.2,
-                                       'speed_factor': 0.0, **overrides}
+    values: dict[str, float | bool | list[str]] = {'lockstep': True, 'lockstep_timeout': 0.2,
+                                                   'speed_factor': 0.0, **overrides}
     node = SimulatorNode(context=ros_context, parameter_overrides=[
         Parameter(name, value=value) for name, value in values.items()])
     node._peer_seen_at = -math.inf  # no controller process here: skip the discovery wait
@@ -203,6 +205,44 @@ def test_after_a_lockstep_timeout_the_simulator_does_not_catch_up_the_wait(
         assert node.steps == 10  # the free steps to the next instant, at 10x (0.04 s wall)
     finally:
         node.destroy_node()
+
+
+def test_lockstep_start_waits_until_the_listed_publishers_have_matched(
+        ros_context: object) -> None:
+    """start_subscriptions: no sample before measured_pose has a subscriber; it gets t = 0."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    node = _lockstep_node(ros_context, start_subscriptions=['measured_pose=1'])
+    listener = rclpy.create_node('start_listener', context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(listener)
+    stamps: list[float] = []
+    try:
+        for _ in range(3):
+            node._advance()
+            time.sleep(0.05)
+        assert node._last_step_ns is None  # nobody listens: the first sample is not offered
+        listener.create_subscription(PoseStamped, '/measured_pose',
+                                     lambda msg: stamps.append(stamp_to_sec(msg.header.stamp)),
+                                     publisher_qos())
+        deadline = time.monotonic() + 10.0
+        while not stamps and time.monotonic() < deadline:  # matched, then DISCOVERY_GRACE
+            node._advance()
+            executor.spin_once(timeout_sec=0.05)
+        assert stamps and stamps[0] == 0.0 and node.steps == 0
+    finally:
+        executor.shutdown()
+        listener.destroy_node()
+        node.destroy_node()
+
+
+@pytest.mark.parametrize('entry', ['measured_pose', 'measured_pose=0', 'clock=1',
+                                   'measured_pose=two'])
+def test_start_subscriptions_entries_are_checked(entry: str) -> None:
+    with pytest.raises(ValueError, match="must be 'topic=count'"):
+        simulator_node.SimulatorConfig(start_subscriptions=[entry])
+    assert simulator_node.parse_start_subscriptions(['/truth/lf_pose=1', 'thrust=2']) == {
+        'truth/lf_pose': 1, 'thrust': 2}
 
 
 def test_lockstep_period_must_be_a_multiple_and_below_command_timeout() -> None:

@@ -48,6 +48,13 @@ than ``dropout_timeout`` on the node clock is a dropout (counted once; the first
 it starts a new data segment: a dropout is never bridged by interpolation). A drift latches until
 ``~/clear_reference_faults`` (or ``~/reset``).
 
+A re-offered sample: a pose with the stamp and the values of the pose whose estimate was the
+last one published (a lockstep simulator offers its first sample again until it hears an answer,
+and the first answer can be lost while publishers are still matching) is answered again with the
+same ``lf_pose`` and ``lf_odom``, without a new estimate, and counted (``reoffers_answered``).
+Without this the loop of a demo run hung at t = 0 once (1 of 6 runs): the simulator re-offered
+its first sample for 190 s and the node ignored every repeat as out of order.
+
 Default 3 DOF. With ``ndof`` 1 only north is estimated; east and yaw of ``lf_pose`` are the
 measured east and yaw passed through unfiltered (never a made-up 0): the node logs a WARN at
 configure, publishes ``unfiltered_dofs`` in the diagnostics, and the level is WARN once the
@@ -118,6 +125,7 @@ from typing import TYPE_CHECKING, Any
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from nav_msgs.msg import Odometry
+import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
@@ -255,6 +263,10 @@ class PredictorNode(InputHealth, LifecycleNode):
         self._odom: OdomDriver | None = None  # the LfStateEstimator around the predictor
         self._checker: ReferenceChecker | None = None
         self._predicted: tuple[float, FloatArray] | None = None  # (valid at, lf_pose) last out
+        self._incoming: tuple[float, FloatArray] | None = None  # (stamp, pose) being fed now
+        # (stamp, pose) of the pose whose estimate was published last, and that estimate
+        self._answer: tuple[float, FloatArray, OdometryEstimate] | None = None
+        self._reoffers_answered = 0
         self._passthrough_moving = False  # ndof 1 and the measured east/yaw are not all 0
         self._active = False
         self._subscriptions_in_use: list[Any] = []
@@ -392,6 +404,7 @@ class PredictorNode(InputHealth, LifecycleNode):
         self._aligner = None
         self._checker = None
         self._predicted = None
+        self._answer = None
         for subscription in self._subscriptions_in_use:
             self.destroy_subscription(subscription)
         for service in self._services_in_use:
@@ -589,6 +602,13 @@ class PredictorNode(InputHealth, LifecycleNode):
         checker, predictor = self._checker, self._predictor
         assert checker is not None and predictor is not None
         checker.seen(self._clock_seconds())
+        answer = self._answer
+        if answer is not None and t == answer[0] and np.array_equal(pose, answer[1]):
+            self._publish(answer[2])  # a re-offered sample: the same answer again
+            self._answer = answer
+            self._reoffers_answered += 1
+            return False
+        self._incoming = (t, pose)
         verdict = checker.check_pose(t, pose, predictor.wave_peak_freq)
         if verdict.restart:
             self._restart_data()
@@ -640,12 +660,15 @@ class PredictorNode(InputHealth, LifecycleNode):
         self._samples_in_run += 1
         if estimate is not None:  # None: lost (fix held back) or late
             self._publish(estimate)  # stamp t + h, pose = lf_pose while tracking
+            if self._incoming is not None:
+                self._answer = (*self._incoming, estimate)
         wave_peak_freq = predictor.wave_peak_freq
         if wave_peak_freq is not None:
             self._freq_pub.publish(Float64(data=float(wave_peak_freq)))
 
     def _publish(self, estimate: OdometryEstimate) -> None:
         """One estimate on lf_pose and lf_odom (same stamp, same pose)."""
+        self._answer = None  # the caller sets it again if this answers the pose being fed
         stamp = sec_to_stamp(estimate.stamp)
         frame = self._settings.frame_id
         pose_msg = pose_to_msg(estimate.pose, stamp, frame)
@@ -681,6 +704,7 @@ class PredictorNode(InputHealth, LifecycleNode):
             if self._checker is not None:
                 self._checker.reset()
             self._predicted = None
+            self._answer = None
             self._samples_in_run = 0
             self._warm_start = False
             status = self._predictor.status()
@@ -734,6 +758,7 @@ class PredictorNode(InputHealth, LifecycleNode):
             **input_values(aligner.counters.as_dict(), self._samples, self._invalid_messages),
             'unexpected_frame': self._unexpected_frame,
             'callback_errors': self._callback_errors,
+            'reoffers_answered': self._reoffers_answered,
             'last_error': self._last_error,
             **checker.values(),
             'pose_silence': math.nan if silence is None else silence,

@@ -525,3 +525,30 @@ def test_every_field_that_changes_the_network_restarts_cold() -> None:
         network_spec(gated.replace(motion_gate=False, ramp_invariant=True))
     assert predictor_node.TWIN_STRUCTURE_FIELDS == ('motion_gate_ny',)
     assert predictor_node._change_note('motion_gate_ny') == predictor_node.NOTE_TWIN
+
+
+def test_a_reoffered_sample_is_answered_again_with_the_same_estimate(
+        ros_context: Context, record: SimRecord, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A lockstep simulator re-offers its first sample until it hears an answer."""
+    node = _make(ros_context)
+    try:
+        sent: list[PoseStamped] = []
+        monkeypatch.setattr(node._lf_pub, 'publish', sent.append)
+        _feed(node, record, range(5))
+        count, last = len(sent), sent[-1]
+        assert count >= 4
+        t = float(record.t[4])
+        node.on_pose(pose_to_msg(record.measured_pose[4], t, 'map_ned'))  # offered again
+        values = node.diagnostic_values()[2]
+        assert len(sent) == count + 1 and sent[-1] == last
+        assert values['reoffers_answered'] == 1 and values['out_of_order'] == 0
+        assert values['samples'] == 5 and values['ref_rejected'] == 0
+        # the same stamp with other values is no re-offer: dropped as out of order
+        node.on_pose(pose_to_msg(record.measured_pose[4] + 0.1, t, 'map_ned'))
+        values = node.diagnostic_values()[2]
+        assert len(sent) == count + 1 and values['out_of_order'] == 1
+        _feed(node, record, range(5, 6))  # the stream goes on as before
+        assert len(sent) == count + 2 and sent[-1].header.stamp != last.header.stamp
+        assert node.diagnostic_values()[2]['samples'] == 6
+    finally:
+        node.destroy_node()

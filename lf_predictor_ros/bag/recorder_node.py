@@ -10,11 +10,16 @@ ROS parameters (`--ros-args -p NAME:=VALUE`):
   are subscribed at once, other names when discovery shows their type.
 - `chunk_size` (int, bytes): chunk size, default 262144 (256 KiB).
 - `compression` (string): `zstd` (default), `lz4` or `none`.
+- `reliability` (string): `best_effort` (default) or `reliable`, the subscriptions' reliability.
 
-Subscriptions are raw (the CDR bytes go straight to the file) with a best-effort, volatile,
-keep_last 100 QoS, which matches every publisher (reliable or best effort). A channel is created
-at a topic's first message; its `offered_qos_profiles` and `topic_type_hash` are those of the
-publishers seen then.
+Subscriptions are raw (the CDR bytes go straight to the file), volatile, keep_last 1000: the
+depth absorbs about 1 s of stall at 1000 messages/s per topic (with 100, a demo run at 90x real
+time lost 3-5 of every 10 samples for 13 s while the recorder was starved of CPU, and a burst of
+300 poses kept 113). Best effort (the default) matches every publisher, reliable or best effort.
+Reliable matches only reliable publishers (every publisher of this package and of the interface
+contract is one) and also has messages lost in transport sent again: `demo` records with it.
+A channel is created at a topic's first message; its `offered_qos_profiles` and
+`topic_type_hash` are those of the publishers seen then.
 
 Times: log time = receive time on the node clock, so it is simulated time when the node runs
 with `use_sim_time:=true` (0 until the first /clock message arrives); publish time = the
@@ -80,10 +85,20 @@ CONTRACT_TOPICS: dict[str, str] = {
     '/clock': 'rosgraph_msgs/msg/Clock',
 }
 
-# Best effort matches reliable and best-effort publishers; depth absorbs short write stalls.
-RECORD_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                        reliability=ReliabilityPolicy.BEST_EFFORT,
-                        durability=DurabilityPolicy.VOLATILE)
+RECORD_DEPTH = 1000  # [messages] keep_last depth of every subscription: absorbs stalls
+RELIABILITY = {'best_effort': ReliabilityPolicy.BEST_EFFORT,
+               'reliable': ReliabilityPolicy.RELIABLE}
+
+
+def record_qos(reliability: str = 'best_effort') -> QoSProfile:
+    """Subscription profile; best effort matches reliable and best-effort publishers."""
+    if reliability not in RELIABILITY:
+        raise ValueError(f'reliability must be one of {sorted(RELIABILITY)}, got '
+                         f'{reliability!r}; best_effort records every publisher, reliable only '
+                         'reliable ones but without burst losses')
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=RECORD_DEPTH,
+                      reliability=RELIABILITY[reliability],
+                      durability=DurabilityPolicy.VOLATILE)
 # Not the node's name: rosout would try (and fail) to publish records made after a signal.
 LOGGER_NAME = 'lf_predictor_ros.recorder'
 DISCOVERY_PERIOD = 0.5  # [s] how often to look for the types of topics given without one
@@ -112,6 +127,7 @@ class RecorderNode(Node):
         topics = list(self.declare_parameter('topics', list(CONTRACT_TOPICS)).value or [])
         chunk_size = int(self.declare_parameter('chunk_size', DEFAULT_CHUNK_SIZE).value)
         compression = str(self.declare_parameter('compression', 'zstd').value)
+        self._qos = record_qos(str(self.declare_parameter('reliability', 'best_effort').value))
         self.writer = BagWriter(output, chunk_size=chunk_size, compression=compression)
         self._channels: dict[str, int] = {}
         self._waiting: set[str] = set()
@@ -137,7 +153,7 @@ class RecorderNode(Node):
         """Raw subscription; ValueError if the type's class or .msg file is not installed."""
         full_definition(type_name)  # fail here, not in the first callback
         callback = functools.partial(self._on_message, topic, type_name)
-        self.create_subscription(message_class(type_name), topic, callback, RECORD_QOS,
+        self.create_subscription(message_class(type_name), topic, callback, self._qos,
                                  raw=True)
 
     def _discover(self) -> None:
@@ -247,7 +263,7 @@ def _parse_cli(args: Sequence[str] | None) -> None:
         epilog='ROS parameters (--ros-args -p NAME:=VALUE): output (path, default '
                'runs/record-<time>.mcap), topics (string array, default the contract topics: '
                f'{", ".join(CONTRACT_TOPICS)}), chunk_size (bytes, default {DEFAULT_CHUNK_SIZE}),'
-               ' compression (zstd | lz4 | none).')
+               ' compression (zstd | lz4 | none), reliability (best_effort | reliable).')
     argv = remove_ros_args(list(args) if args is not None else sys.argv)
     parser.parse_args(argv[1:])
 

@@ -200,7 +200,8 @@ def node_commands(plan: RunPlan) -> dict[str, tuple[str, list[str]]]:
     predictor_args += ['-p', f'ndof:={plan.scenario.ndof}']
     return {
         'recorder': ('lf_predictor_ros.bag.recorder_node', [
-            '--ros-args', '-p', 'use_sim_time:=true', '-p', f'output:={plan.bag_path}']),
+            '--ros-args', '-p', 'use_sim_time:=true', '-p', f'output:={plan.bag_path}',
+            '-p', 'reliability:=reliable']),  # every node here publishes reliably
         'predictor': ('lf_predictor_ros.nodes.predictor_node', predictor_args),
         'dp_controller': ('sim_ros.nodes.dp_controller_node', [
             '--ros-args', '--params-file', str(CONFIG_DIR / 'dp_controller.yaml'),

@@ -1,9 +1,14 @@
 """Body-frame regressors (``PredictorParams.regressor_frame``, issue 13 hypothesis 3).
 
-'earth' (the default) must stay bit-identical to the code before the field existed: the stored
-run ``data/earth_frame_run.npz`` (3 DOF, 400 s at h = 1 s, turns of +90° and −135° across ±π,
+'earth' (the default) must stay the code before the field existed: the stored run
+``data/earth_frame_run.npz`` (3 DOF, 400 s at h = 1 s, turns of +90° and −135° across ±π,
 body-frame wave motion; small Algorithm 4.1 windows, 15 trainings) was recorded with commit
-7b27a2a, before ``regressor_frame`` existed, by the inline predictor (one torch thread).
+7b27a2a, before ``regressor_frame`` existed, by the inline predictor (one torch thread). The
+comparison allows `EARTH_TOLERANCE`: the run was bit-identical on the machine that stored it and
+on CI, but on another CPU (an AMD EPYC with AVX-512, the fourteenth session) the outputs differ
+in the last bits from the first ω0 estimate on (row 80: the FFT and the kernels round
+differently) and the trainings grow that to 5.4e-9 m; a change of the earth-frame computation
+(another regressor, filter or loss) moves the output by orders of magnitude more.
 
 'body' makes the learned filter rotation invariant: a body-frame network computes the same
 function at every heading, so turning a whole input run (positions about the origin, every
@@ -49,6 +54,7 @@ pytestmark = pytest.mark.filterwarnings(
 FloatArray = NDArray[np.float64]
 REFERENCE = Path(__file__).parent / 'data' / 'earth_frame_run.npz'
 TURN = 0.7  # [rad] a generic angle: north and east mix, no channel is swapped
+EARTH_TOLERANCE = 1e-6  # [m, m, rad] the stored run on another CPU (5.4e-9 m measured)
 
 
 def reference() -> tuple[PredictorParams, FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -124,10 +130,10 @@ def test_spec_body_frame_needs_relative_three_dof_and_is_absent_from_earth_dicts
     assert NnarmaxSpec.from_dict(earth.to_dict()) == earth
 
 
-# ---- earth: bit-identical to the code before the field -----------------------------------
+# ---- earth: the code before the field -----------------------------------------------------
 
 @pytest.mark.parametrize('explicit', [False, True])
-def test_earth_frame_run_is_bit_identical_to_the_stored_run(explicit: bool) -> None:
+def test_earth_frame_run_matches_the_stored_run(explicit: bool) -> None:
     params, t, pose, force, stored = reference()
     # the stored run predates the motion gate, which blends a second network in, and the
     # broadband targets' notch, which widens the targets' notch in a broadband sea: both must
@@ -138,7 +144,7 @@ def test_earth_frame_run_is_bit_identical_to_the_stored_run(explicit: bool) -> N
     if explicit:
         params = params.replace(regressor_frame='earth')
     out = run(params, t, pose, force)
-    np.testing.assert_array_equal(out, stored)
+    np.testing.assert_allclose(out, stored, rtol=0.0, atol=EARTH_TOLERANCE)
 
 
 # ---- the rotation --------------------------------------------------------------------------

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 import traceback
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING, Generic, TypeVar
 
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 import numpy as np
@@ -21,6 +21,44 @@ from lf_predictor_ros.nodes.conversions import FRAME_BODY, msg_to_force, msg_to_
 
 FloatArray = NDArray[np.float64]
 MsgT = TypeVar('MsgT', PoseStamped, WrenchStamped)
+
+
+AnswerT = TypeVar('AnswerT')
+
+
+class ReofferAnswers(Generic[AnswerT]):
+    """Answers a re-offered sample with the output published for it (lockstep start).
+
+    A lockstep simulator offers its first sample again until it hears an answer, and the first
+    answer can be lost while publishers are still matching; an estimator that dropped the repeat
+    as out of order would hang the loop. Call `offered` with every pose before it is processed,
+    `published` with what was published for the pose being fed, and `forget` when something
+    else was published or the state restarts. A pose equal in stamp and values to the one whose
+    output was published last gets that output again (`answer`).
+    """
+
+    def __init__(self) -> None:
+        self._incoming: tuple[float, FloatArray] | None = None  # the pose being fed
+        self._last: tuple[float, FloatArray, AnswerT] | None = None  # its pose, its output
+        self.answered = 0  # re-offers answered
+
+    def answer(self, t: float, pose: FloatArray) -> AnswerT | None:
+        """The output to publish again if (t, pose) is a re-offer, else None (noted as fed)."""
+        last = self._last
+        if last is not None and t == last[0] and np.array_equal(pose, last[1]):
+            self.answered += 1
+            return last[2]
+        self._incoming = (t, pose)
+        return None
+
+    def published(self, output: AnswerT) -> None:
+        """``output`` was published for the pose being fed."""
+        if self._incoming is not None:
+            self._last = (*self._incoming, output)
+
+    def forget(self) -> None:
+        """Something else was published, or the state restarted: no re-offer to answer."""
+        self._last = None
 
 
 class InputHealth:

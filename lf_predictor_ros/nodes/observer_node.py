@@ -25,6 +25,9 @@ made-up 0), as in the predictor node.
 Runtime parameter changes are validated (the reason of a rejection is returned); an accepted
 change re-creates the estimator and the aligner (its state restarts from the next pose).
 Exceptions in callbacks are caught, counted (``callback_errors``) and reported in diagnostics.
+A re-offered sample (the stamp and values of the pose whose ``lf_pose`` was published last: a
+lockstep simulator's first sample) is answered with the same ``lf_pose`` (``reoffers_answered``),
+as in the predictor node.
 """
 # rclpy's Node and logger methods are untyped in Jazzy.
 # mypy: disable-error-code="no-untyped-call"
@@ -57,7 +60,7 @@ from lf_predictor_ros.nodes.conversions import (
     sec_to_stamp,
 )
 from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, input_values, make_diagnostic_array
-from lf_predictor_ros.nodes.health import InputHealth
+from lf_predictor_ros.nodes.health import InputHealth, ReofferAnswers
 from lf_predictor_ros.nodes.params import (
     declare_and_load,
     parameter_table,
@@ -180,6 +183,7 @@ class ObserverNode(InputHealth, Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._samples = 0
         self._init_input_health()
+        self._reoffers: ReofferAnswers[PoseStamped] = ReofferAnswers()
         qos = publisher_qos()
         self._lf_pub = self.create_publisher(PoseStamped, 'lf_pose', qos)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', qos)
@@ -230,6 +234,7 @@ class ObserverNode(InputHealth, Node):
         self._config, self._estimator = config, estimator
         self._wave_peak_freq, self._wave_source = freq, source
         self._aligner = InputAligner(config.aligner_settings())
+        self._reoffers.forget()
         self.get_logger().info(f'parameters changed: {config.method} re-created, state restarts')
         return SetParametersResult(successful=True, reason='')
 
@@ -255,7 +260,16 @@ class ObserverNode(InputHealth, Node):
 
     def on_pose(self, msg: PoseStamped) -> None:
         """Align a measured pose; estimate and publish for every completed grid sample."""
-        self._feed_pose(msg, self._aligner, self._config.frame_id, self._process)
+        self._feed_pose(msg, self._aligner, self._config.frame_id, self._process,
+                        accept=self._unless_reoffer)
+
+    def _unless_reoffer(self, t: float, pose: FloatArray) -> bool:
+        """False after answering a re-offered sample with its lf_pose again."""
+        answer = self._reoffers.answer(t, pose)
+        if answer is not None:
+            self._lf_pub.publish(answer)
+            return False
+        return True
 
     def _process(self, sample: AlignedSample) -> None:
         if sample.segment_start:
@@ -265,7 +279,9 @@ class ObserverNode(InputHealth, Node):
         if self._config.ndof == 1:  # east and yaw are not estimated: pass the measurement
             lf_pose[1:] = sample.pose[1:]  # through, never a made-up 0 (as the predictor does)
         self._samples += 1
-        self._lf_pub.publish(pose_to_msg(lf_pose, sec_to_stamp(sample.t), self._config.frame_id))
+        msg = pose_to_msg(lf_pose, sec_to_stamp(sample.t), self._config.frame_id)
+        self._lf_pub.publish(msg)
+        self._reoffers.published(msg)
 
     # ---- diagnostics ---------------------------------------------------------------------
 
@@ -285,6 +301,7 @@ class ObserverNode(InputHealth, Node):
             'unexpected_frame': self._unexpected_frame,
             'callback_errors': self._callback_errors,
             'last_error': self._last_error,
+            'reoffers_answered': self._reoffers.answered,
         }
         return level, message, values
 

@@ -125,7 +125,6 @@ from typing import TYPE_CHECKING, Any
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from nav_msgs.msg import Odometry
-import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
@@ -156,7 +155,7 @@ from lf_predictor_ros.nodes.diagnostics import (
     with_reference_and_odometry,
     worse,
 )
-from lf_predictor_ros.nodes.health import FloatArray, InputHealth
+from lf_predictor_ros.nodes.health import FloatArray, InputHealth, ReofferAnswers
 from lf_predictor_ros.nodes.lf_odom import OdomDriver, dead_reckoning_silence
 from lf_predictor_ros.nodes.params import declare_and_load, parameter_table, validated_update
 from lf_predictor_ros.nodes.params import param_meta as _meta
@@ -263,10 +262,7 @@ class PredictorNode(InputHealth, LifecycleNode):
         self._odom: OdomDriver | None = None  # the LfStateEstimator around the predictor
         self._checker: ReferenceChecker | None = None
         self._predicted: tuple[float, FloatArray] | None = None  # (valid at, lf_pose) last out
-        self._incoming: tuple[float, FloatArray] | None = None  # (stamp, pose) being fed now
-        # (stamp, pose) of the pose whose estimate was published last, and that estimate
-        self._answer: tuple[float, FloatArray, OdometryEstimate] | None = None
-        self._reoffers_answered = 0
+        self._reoffers: ReofferAnswers[OdometryEstimate] = ReofferAnswers()
         self._passthrough_moving = False  # ndof 1 and the measured east/yaw are not all 0
         self._active = False
         self._subscriptions_in_use: list[Any] = []
@@ -404,7 +400,7 @@ class PredictorNode(InputHealth, LifecycleNode):
         self._aligner = None
         self._checker = None
         self._predicted = None
-        self._answer = None
+        self._reoffers.forget()
         for subscription in self._subscriptions_in_use:
             self.destroy_subscription(subscription)
         for service in self._services_in_use:
@@ -602,13 +598,10 @@ class PredictorNode(InputHealth, LifecycleNode):
         checker, predictor = self._checker, self._predictor
         assert checker is not None and predictor is not None
         checker.seen(self._clock_seconds())
-        answer = self._answer
-        if answer is not None and t == answer[0] and np.array_equal(pose, answer[1]):
-            self._publish(answer[2])  # a re-offered sample: the same answer again
-            self._answer = answer
-            self._reoffers_answered += 1
+        answer = self._reoffers.answer(t, pose)
+        if answer is not None:  # a re-offered sample: the same estimate again
+            self._send(answer)
             return False
-        self._incoming = (t, pose)
         verdict = checker.check_pose(t, pose, predictor.wave_peak_freq)
         if verdict.restart:
             self._restart_data()
@@ -660,15 +653,18 @@ class PredictorNode(InputHealth, LifecycleNode):
         self._samples_in_run += 1
         if estimate is not None:  # None: lost (fix held back) or late
             self._publish(estimate)  # stamp t + h, pose = lf_pose while tracking
-            if self._incoming is not None:
-                self._answer = (*self._incoming, estimate)
+            self._reoffers.published(estimate)
         wave_peak_freq = predictor.wave_peak_freq
         if wave_peak_freq is not None:
             self._freq_pub.publish(Float64(data=float(wave_peak_freq)))
 
     def _publish(self, estimate: OdometryEstimate) -> None:
-        """One estimate on lf_pose and lf_odom (same stamp, same pose)."""
-        self._answer = None  # the caller sets it again if this answers the pose being fed
+        """One estimate on lf_pose and lf_odom; no re-offer answered with it unless noted."""
+        self._reoffers.forget()  # _process notes it again when it answers the pose being fed
+        self._send(estimate)
+
+    def _send(self, estimate: OdometryEstimate) -> None:
+        """Publish one estimate on lf_pose and lf_odom (same stamp, same pose)."""
         stamp = sec_to_stamp(estimate.stamp)
         frame = self._settings.frame_id
         pose_msg = pose_to_msg(estimate.pose, stamp, frame)
@@ -704,7 +700,7 @@ class PredictorNode(InputHealth, LifecycleNode):
             if self._checker is not None:
                 self._checker.reset()
             self._predicted = None
-            self._answer = None
+            self._reoffers.forget()
             self._samples_in_run = 0
             self._warm_start = False
             status = self._predictor.status()
@@ -758,7 +754,7 @@ class PredictorNode(InputHealth, LifecycleNode):
             **input_values(aligner.counters.as_dict(), self._samples, self._invalid_messages),
             'unexpected_frame': self._unexpected_frame,
             'callback_errors': self._callback_errors,
-            'reoffers_answered': self._reoffers_answered,
+            'reoffers_answered': self._reoffers.answered,
             'last_error': self._last_error,
             **checker.values(),
             'pose_silence': math.nan if silence is None else silence,

@@ -200,3 +200,27 @@ def test_help_prints_the_parameter_table_and_exits_0(capsys: pytest.CaptureFixtu
     for field in dataclasses.fields(ObserverConfig):
         assert f'\n  {field.name} ' in out
     assert 'vessel length L for the K3/K4 scaling (bias_gains) [m]' in out
+
+
+def test_a_reoffered_sample_is_answered_again_with_the_same_lf_pose(
+        ros_context: Context) -> None:
+    """A lockstep simulator re-offers its first sample until it hears an answer."""
+    node = _make(ros_context, method='cascade', wave_peak_freq=WAVE_PEAK_FREQ)
+    published: list[PoseStamped] = []
+    node._lf_pub.publish = published.append  # type: ignore[method-assign]  # noqa: SLF001
+    try:
+        t, poses = _poses()
+        for k in range(3):
+            node.on_pose(pose_to_msg(poses[k], float(t[k])))
+        assert len(published) == 3
+        node.on_pose(pose_to_msg(poses[2], float(t[2])))  # offered again
+        values = node.diagnostic_values()[2]
+        assert len(published) == 4 and published[-1] == published[-2]
+        assert values['reoffers_answered'] == 1 and values['out_of_order'] == 0
+        node.on_pose(pose_to_msg(poses[2] + 0.1, float(t[2])))  # other values: out of order
+        values = node.diagnostic_values()[2]
+        assert len(published) == 4 and values['out_of_order'] == 1
+        node.on_pose(pose_to_msg(poses[3], float(t[3])))
+        assert len(published) == 5 and values['samples'] == 3
+    finally:
+        node.destroy_node()

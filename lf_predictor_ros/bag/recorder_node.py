@@ -95,7 +95,7 @@ def record_qos(reliability: str = 'best_effort') -> QoSProfile:
     if reliability not in RELIABILITY:
         raise ValueError(f'reliability must be one of {sorted(RELIABILITY)}, got '
                          f'{reliability!r}; best_effort records every publisher, reliable only '
-                         'reliable ones but without burst losses')
+                         'reliable ones, and has messages lost in transport sent again')
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=RECORD_DEPTH,
                       reliability=RELIABILITY[reliability],
                       durability=DurabilityPolicy.VOLATILE)

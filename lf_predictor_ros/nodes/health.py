@@ -31,10 +31,11 @@ class ReofferAnswers(Generic[AnswerT]):
 
     A lockstep simulator offers its first sample again until it hears an answer, and the first
     answer can be lost while publishers are still matching; an estimator that dropped the repeat
-    as out of order would hang the loop. Call `offered` with every pose before it is processed,
-    `published` with what was published for the pose being fed, and `forget` when something
-    else was published or the state restarts. A pose equal in stamp and values to the one whose
-    output was published last gets that output again (`answer`).
+    as out of order would hang the loop. Call `answer` with every pose before it is processed
+    (a pose equal in stamp and values to the one whose output was published last gets that
+    output back, to publish again; any other is noted as the pose being fed), `published` with
+    what was published for the pose being fed, and `forget` when something else was published or
+    the state restarts.
     """
 
     def __init__(self) -> None:

@@ -11,6 +11,7 @@ from collections.abc import Callable
 import functools
 import math
 from pathlib import Path
+import threading
 import time
 
 import numpy as np
@@ -649,6 +650,62 @@ def test_close_stops_a_running_training_promptly() -> None:
     predictor.close()
     assert not worker.is_alive()
     assert time.monotonic() - start < 1.5  # [s] the training alone would run 2 s
+
+
+class HoldingFirstLock:
+    """A training lock that the holding network's worker takes before the twin's worker."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.taken = threading.Event()  # the holding network's worker holds the lock
+        self.predictor: AdaptivePredictor | None = None  # the holding network
+
+    def __enter__(self) -> HoldingFirstLock:
+        holding = self.predictor is not None and \
+            threading.current_thread() is self.predictor._worker
+        if not holding:
+            self.taken.wait(10.0)
+        self._lock.acquire()
+        if holding:
+            self.taken.set()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._lock.release()
+
+
+def test_close_with_the_twin_waiting_for_the_training_lock_is_prompt() -> None:
+    """close() while the holding network trains and the gate's twin waits for the lock.
+
+    The race of the thirteenth session's fresh-clone suite (close took 2.06 s), made certain:
+    closing the twin first waited out the holding network's whole training (2 s here), because
+    the twin's worker could not get the lock to see its stop.
+    """
+    t, pose, force = synthetic_onedof(200, seed=25)
+    lock = HoldingFirstLock()
+    predictor = AdaptivePredictor(LONG.replace(motion_gate=True), background=True,
+                                  training_lock=lock)  # type: ignore[arg-type]
+    lock.predictor = predictor
+    twin = predictor._moving
+    assert twin is not None
+    k = 0
+    while not lock.taken.is_set() and k < FIRST_TRAINING + 2 * DELTA:
+        feed(predictor, t, pose, force, k, k + 1)
+        k += 1
+        time.sleep(SENSOR_PERIOD)
+    assert lock.taken.wait(5.0), 'the holding network did not start training'
+    deadline = time.monotonic() + 5.0
+    while (twin._worker is None or not twin._worker.is_alive()) and \
+            time.monotonic() < deadline:
+        feed(predictor, t, pose, force, k, k + 1)  # the twin's training starts, then waits
+        k += 1
+        time.sleep(SENSOR_PERIOD)
+    assert twin._worker is not None and twin._worker.is_alive()
+    start = time.monotonic()
+    predictor.close()
+    assert time.monotonic() - start < 1.5  # [s] the holding training alone runs 2 s
+    assert predictor._worker is not None and not predictor._worker.is_alive()
+    assert not twin._worker.is_alive()
 
 
 EXIT_WHILE_TRAINING = r"""

@@ -569,15 +569,46 @@ def _prediction_jacobian(
 def _residual_jacobian(
     jac_prediction: torch.Tensor, window: _Window, derivative_weight: float
 ) -> torch.Tensor:
-    """Jacobian of the data residuals from that of the predictions (the map is affine)."""
+    """Jacobian of the data residuals from that of the predictions (the map is affine).
+
+    Column j is residuals(dŷ/dw_j) − residuals(0). Earth-frame windows compute all columns at
+    once (``_residual_columns``), element for element as the per-column map; the result is laid
+    out as ``vmap(..., out_dims=1)`` lays it out (transpose of a contiguous (n_weights,
+    n_residuals)), so J^T J sees the same operands.
+    """
     offset = _data_residuals(torch.zeros(jac_prediction.shape[:2], dtype=torch.float64), window,
                              derivative_weight)
+    if window.body is None:
+        columns = _residual_columns(jac_prediction, window, derivative_weight) - offset[:, None]
+        return columns.T.contiguous().T
 
     def linear_part(prediction: torch.Tensor) -> torch.Tensor:
         return _data_residuals(prediction, window, derivative_weight) - offset
 
     jacobian: torch.Tensor = vmap(linear_part, in_dims=2, out_dims=1)(jac_prediction)
     return jacobian
+
+
+def _residual_columns(
+    jac_prediction: torch.Tensor, window: _Window, derivative_weight: float
+) -> torch.Tensor:
+    """``_data_residuals`` of every column jac_prediction[:, :, j] (earth frame), (n_res, n_w).
+
+    The same element-wise operations in the same order as ``_mse_residuals`` and
+    ``_derivative_residuals``, on the (rows, n_out, n_weights) array in its own layout.
+    """
+    n_weights = jac_prediction.shape[2]
+    fitted = jac_prediction[:-1]
+    error = ((fitted - window.target[:, :, None]) / window.scale[:, None])[window.keep]
+    parts = [error.reshape(-1, n_weights) / math.sqrt(error.shape[0] * error.shape[1])]
+    if derivative_weight > 0.0:
+        target_step = window.target[1:] - window.target[:-1]
+        step = (fitted[1:] - fitted[:-1]) - target_step[:, :, None]
+        step = (step / window.diff_scale[:, None])[window.keep_pair]
+        count = step.shape[0] * step.shape[1]
+        flat = step.reshape(-1, n_weights)
+        parts.append(flat if count == 0 else flat * math.sqrt(derivative_weight / count))
+    return torch.cat(parts)
 
 
 def _levenberg_marquardt(

@@ -345,6 +345,35 @@ def test_lm_jacobian_equals_forward_mode_autodiff(mode: str) -> None:
     np.testing.assert_allclose(actual.numpy(), expected.numpy(), rtol=0, atol=1e-10 * scale)
 
 
+@pytest.mark.parametrize('derivative_weight', [0.0, 0.5])
+def test_stacked_residual_jacobian_is_bitwise_the_per_column_map(derivative_weight: float
+                                                                 ) -> None:
+    # The earth-frame fast path of _residual_jacobian must give the vmap'ed per-column map's
+    # bits and memory layout: the LM step (J^T J, solve) and so every replay output depend on it.
+    from lf_predictor_ros.core import training
+
+    spec = NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=2, nfb=0, hidden_units=4)
+    rng = np.random.default_rng(21)
+    n = 90
+    u = rng.normal(size=(n, 3))
+    x = np.cumsum(rng.normal(scale=0.05, size=(n, 3)), axis=0)
+    y = x + rng.normal(scale=0.02, size=(n, 3))
+    mask = (np.arange(n) < n - 10) & (np.arange(n) % 7 != 3)
+    window = training._prepare_window(spec, u, y, x, mask)
+    assert window.body is None
+    jac_prediction = torch.from_numpy(rng.normal(size=(window.target.shape[0] + 1, 3, 40)))
+    offset = training._data_residuals(torch.zeros(jac_prediction.shape[:2], dtype=torch.float64),
+                                      window, derivative_weight)
+
+    def linear_part(prediction: torch.Tensor) -> torch.Tensor:
+        return training._data_residuals(prediction, window, derivative_weight) - offset
+
+    expected = torch.func.vmap(linear_part, in_dims=2, out_dims=1)(jac_prediction)
+    actual = training._residual_jacobian(jac_prediction, window, derivative_weight)
+    assert torch.equal(actual, expected)
+    assert actual.stride() == expected.stride()
+
+
 def test_warm_up_does_the_slow_lazy_imports_up_front() -> None:
     # In a fresh interpreter: torch._dynamo is not loaded by importing the trainer, warm_up()
     # loads it, and the first real training afterwards pays no multi-second import.

@@ -82,7 +82,12 @@ import yaml
 
 from lf_predictor_ros.bag.mcap_reader import BagError, BagReader
 from lf_predictor_ros.bag.mcap_writer import BagWriter
-from lf_predictor_ros.bag.ros_codec import deserialize, offered_qos_yaml, serialize
+from lf_predictor_ros.bag.ros_codec import (
+    StampedFields,
+    offered_qos_yaml,
+    serialize,
+    stamped_fields,
+)
 from lf_predictor_ros.core.alignment import AlignedSample, AlignerSettings, InputAligner
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.estimator import EstimatorStatus, wrap_to_pi
@@ -96,12 +101,11 @@ from lf_predictor_ros.nodes.conversions import (
     FRAME_BODY,
     FRAME_EARTH,
     NS_PER_S,
-    msg_to_force,
-    msg_to_pose,
+    force_from_fields,
     odometry_to_msg,
+    pose_from_fields,
     pose_to_msg,
     sec_to_stamp,
-    stamp_to_ns,
 )
 from lf_predictor_ros.nodes.diagnostics import (
     DiagnosticValue,
@@ -464,10 +468,22 @@ class ReplayResult:
         return self.bag_duration / self.wall_time if self.wall_time > 0.0 else math.inf
 
 
-def _stamp_seconds(message: Any, log_time_ns: int) -> float:
+def _stamp_seconds(fields: StampedFields, log_time_ns: int) -> float:
     """Header stamp [s]; the log time when the stamp is unset (zero)."""
-    ns = stamp_to_ns(message.header.stamp)
+    ns = int(fields.sec) * NS_PER_S + int(fields.nanosec)  # nodes.conversions.stamp_to_ns
     return (ns if ns > 0 else log_time_ns) / NS_PER_S
+
+
+def _pose_of(fields: StampedFields) -> FloatArray:
+    """``msg_to_pose`` of the message (ValueError for a non-finite pose or a zero quaternion)."""
+    x, y, _, qx, qy, qz, qw = fields.values
+    return pose_from_fields(x, y, qw, qx, qy, qz)
+
+
+def _force_of(fields: StampedFields) -> FloatArray:
+    """``msg_to_force`` of the message (ValueError for a non-finite force)."""
+    surge, sway, _, _, _, yaw_moment = fields.values
+    return force_from_fields(surge, sway, yaw_moment)
 
 
 def _check_input_topics(reader: BagReader, options: ReplayOptions) -> dict[str, str]:
@@ -570,9 +586,9 @@ class _Replayer:
         self.writer.write(channel, log_time_ns, data, publish_time_ns)
         self.result.messages_out += 1
 
-    def _decode(self, data: bytes, type_name: str, topic: str) -> Any:
+    def _decode(self, data: bytes, type_name: str, topic: str) -> StampedFields:
         try:
-            return deserialize(data, type_name)
+            return stamped_fields(data, type_name)
         except Exception as err:  # rclpy raises plain exceptions on malformed CDR
             raise BagError(f'a message on {topic!r} does not decode as {type_name} ({err}); '
                            'the bag is corrupt') from None
@@ -580,7 +596,7 @@ class _Replayer:
     def _thrust(self, data: bytes, log_time_ns: int) -> None:
         message = self._decode(data, WRENCH_TYPE, self.options.thrust_topic)
         try:
-            force: object = msg_to_force(message)
+            force: object = _force_of(message)
         except ValueError:
             force = np.full(3, np.nan)  # the aligner drops and counts it
         t = _stamp_seconds(message, log_time_ns)
@@ -594,7 +610,7 @@ class _Replayer:
     def _command(self, data: bytes, log_time_ns: int) -> None:
         message = self._decode(data, WRENCH_TYPE, self.options.command_topic)
         try:
-            force = msg_to_force(message)
+            force = _force_of(message)
         except ValueError:
             force = np.full(3, np.nan)  # counted by the driver (commands_invalid)
         self.odom.command(_stamp_seconds(message, log_time_ns), force)
@@ -602,7 +618,7 @@ class _Replayer:
     def _truth(self, data: bytes, log_time_ns: int) -> None:
         message = self._decode(data, POSE_TYPE, self.options.truth_topic)
         try:
-            pose = msg_to_pose(message)
+            pose = _pose_of(message)
         except ValueError:
             return
         self.result.truth_t.append(_stamp_seconds(message, log_time_ns))
@@ -611,7 +627,7 @@ class _Replayer:
     def _pose(self, data: bytes, log_time_ns: int) -> None:
         message = self._decode(data, POSE_TYPE, self.options.pose_topic)
         try:
-            pose: object = msg_to_pose(message)
+            pose: object = _pose_of(message)
         except ValueError:
             pose = np.full(3, np.nan)  # the aligner drops and counts it
         t = _stamp_seconds(message, log_time_ns)

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 import importlib
-from typing import Any
+import struct
+from typing import Any, NamedTuple
 
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -64,6 +65,58 @@ def serialize(message: Any) -> bytes:
 def deserialize(data: bytes, type_name: str) -> Any:
     """The ROS message of type `type_name` encoded in CDR `data`."""
     return deserialize_message(data, message_class(type_name))
+
+
+class StampedFields(NamedTuple):
+    """Header stamp and the numbers of a PoseStamped or WrenchStamped (frame_id not kept)."""
+
+    sec: int
+    nanosec: int
+    values: tuple[float, ...]  # pose: position x y z, orientation x y z w; wrench: force, torque
+
+
+POSE_STAMPED = 'geometry_msgs/msg/PoseStamped'
+WRENCH_STAMPED = 'geometry_msgs/msg/WrenchStamped'
+_CDR_LE = b'\x00\x01\x00\x00'  # encapsulation: plain CDR, little endian, no options
+_HEADER = struct.Struct('<iII')  # stamp.sec, stamp.nanosec, frame_id length (NUL included)
+_BODIES = {POSE_STAMPED: struct.Struct('<7d'), WRENCH_STAMPED: struct.Struct('<6d')}
+
+
+def stamped_fields(data: bytes, type_name: str) -> StampedFields:
+    """Stamp and numbers of a PoseStamped / WrenchStamped in CDR ``data``.
+
+    The common encoding (CDR little endian, ASCII frame_id, nothing after the last double) is
+    read directly: the same numbers as ``deserialize`` gives, without building the message
+    objects. Anything else goes through ``deserialize`` (and raises what it raises).
+    """
+    body = _BODIES[type_name]
+    fields = _unpack_stamped(data, body)
+    if fields is not None:
+        return fields
+    message = deserialize(data, type_name)
+    stamp = message.header.stamp
+    if type_name == POSE_STAMPED:
+        position, q = message.pose.position, message.pose.orientation
+        values = (position.x, position.y, position.z, q.x, q.y, q.z, q.w)
+    else:
+        force, torque = message.wrench.force, message.wrench.torque
+        values = (force.x, force.y, force.z, torque.x, torque.y, torque.z)
+    return StampedFields(stamp.sec, stamp.nanosec, values)
+
+
+def _unpack_stamped(data: bytes, body: struct.Struct) -> StampedFields | None:
+    """Header + fixed block of doubles from plain little-endian CDR; None for anything else."""
+    if len(data) < 4 + _HEADER.size or data[:4] != _CDR_LE:
+        return None
+    sec, nanosec, length = _HEADER.unpack_from(data, 4)
+    end = 4 + _HEADER.size + length  # after the frame_id's NUL
+    start = 4 + ((end - 4 + 7) & ~7)  # doubles are 8-aligned in the payload
+    if length == 0 or len(data) != start + body.size or data[end - 1] != 0:
+        return None
+    frame_id = data[4 + _HEADER.size:end - 1]
+    if not frame_id.isascii() or 0 in frame_id:
+        return None
+    return StampedFields(sec, nanosec, body.unpack_from(data, start))
 
 
 def qos_to_dict(qos: QoSProfile) -> dict[str, Any]:

@@ -148,9 +148,14 @@ def _fill_pose(target: Pose, pose: NDArray[np.float64]) -> None:
 def _pose_of(source: Pose) -> NDArray[np.float64]:
     """``geometry_msgs/Pose`` → ``[north, east, yaw]`` with yaw in (−π, π]."""
     q = source.orientation
-    yaw = quaternion_to_yaw(q.w, q.x, q.y, q.z)
-    pose = np.array([source.position.x, source.position.y, yaw], dtype=np.float64)
-    return _vector3(pose, 'pose')
+    return pose_from_fields(source.position.x, source.position.y, q.w, q.x, q.y, q.z)
+
+
+def pose_from_fields(x: float, y: float, qw: float, qx: float, qy: float,
+                     qz: float) -> NDArray[np.float64]:
+    """``[north, east, yaw]`` from a Pose's position x, y and orientation (as ``_pose_of``)."""
+    yaw = quaternion_to_yaw(qw, qx, qy, qz)
+    return _vector3(np.array([x, y, yaw], dtype=np.float64), 'pose')
 
 
 def msg_to_pose(msg: PoseStamped) -> NDArray[np.float64]:
@@ -178,8 +183,12 @@ def wrench_to_msg(
 def msg_to_force(msg: WrenchStamped) -> NDArray[np.float64]:
     """``WrenchStamped`` → force ``[surge N, sway N, yaw N·m]``."""
     wrench = msg.wrench
-    force = np.array([wrench.force.x, wrench.force.y, wrench.torque.z], dtype=np.float64)
-    return _vector3(force, 'force')
+    return force_from_fields(wrench.force.x, wrench.force.y, wrench.torque.z)
+
+
+def force_from_fields(surge: float, sway: float, yaw_moment: float) -> NDArray[np.float64]:
+    """Force ``[surge N, sway N, yaw N·m]`` from a Wrench's force.x, force.y, torque.z."""
+    return _vector3(np.array([surge, sway, yaw_moment], dtype=np.float64), 'force')
 
 
 def _covariance3(values: ArrayLike, what: str) -> NDArray[np.float64]:

@@ -3,17 +3,21 @@
 # mypy: disable-error-code="no-untyped-call"
 from __future__ import annotations
 
-from geometry_msgs.msg import PoseStamped
+import math
+
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 import pytest
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.rosbag2.metadata import parse_qos
 
+from lf_predictor_ros.bag import ros_codec
 from lf_predictor_ros.bag.ros_codec import (
     deserialize,
     message_class,
     offered_qos_yaml,
     qos_from_yaml,
     serialize,
+    stamped_fields,
     type_name_of,
 )
 
@@ -51,3 +55,35 @@ def test_qos_round_trip_through_rosbag2_yaml() -> None:
     default = qos_from_yaml('')
     assert (default.reliability, default.durability, default.depth) == (
         ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 10)
+
+
+@pytest.mark.parametrize('frame_id',
+                         ['', 'a', 'map_ned', 'base_link_fsd', 'ab_cdefgh', 'nöt ascii'])
+def test_stamped_fields_reads_the_numbers_deserialize_reads(frame_id: str) -> None:
+    # The direct CDR read (ASCII frame ids) and the deserialize fallback give the same bits.
+    pose = PoseStamped()
+    pose.header.stamp.sec, pose.header.stamp.nanosec = -3, 999_999_999
+    pose.header.frame_id = frame_id
+    pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = 1e-300, -2.5, math.nan
+    q = pose.pose.orientation
+    q.x, q.y, q.z, q.w = 0.1, -0.0, math.inf, 0.3
+    data = serialize(pose)
+    fields = stamped_fields(data, 'geometry_msgs/msg/PoseStamped')
+    direct = ros_codec._unpack_stamped(data, ros_codec._BODIES['geometry_msgs/msg/PoseStamped'])
+    assert (direct is None) == (not frame_id.isascii())
+    assert (fields.sec, fields.nanosec) == (-3, 999_999_999)
+    assert [v.hex() for v in fields.values] == [
+        v.hex() for v in (1e-300, -2.5, math.nan, 0.1, -0.0, math.inf, 0.3)]
+    wrench = WrenchStamped()
+    wrench.header.stamp.sec = 7
+    wrench.header.frame_id = frame_id
+    wrench.wrench.force.x, wrench.wrench.torque.z = 3.25, -1e5
+    fields = stamped_fields(serialize(wrench), 'geometry_msgs/msg/WrenchStamped')
+    assert (fields.sec, fields.nanosec) == (7, 0)
+    assert fields.values == (3.25, 0.0, 0.0, 0.0, 0.0, -1e5)
+
+
+def test_stamped_fields_of_a_truncated_message_raises() -> None:
+    data = serialize(PoseStamped())
+    with pytest.raises(Exception):  # noqa: B017, PT011 - rclpy raises plain exceptions
+        stamped_fields(data[:-8], 'geometry_msgs/msg/PoseStamped')

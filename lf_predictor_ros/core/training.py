@@ -579,7 +579,8 @@ def _residual_jacobian(
     offset = _data_residuals(torch.zeros(jac_prediction.shape[:2], dtype=torch.float64), window,
                              derivative_weight)
     if window.body is None:
-        columns = _residual_columns(jac_prediction, window, derivative_weight) - offset[:, None]
+        columns = _residual_columns(jac_prediction, window, derivative_weight)
+        columns -= offset[:, None]
         return columns.T.contiguous().T
 
     def linear_part(prediction: torch.Tensor) -> torch.Tensor:
@@ -595,20 +596,27 @@ def _residual_columns(
     """``_data_residuals`` of every column jac_prediction[:, :, j] (earth frame), (n_res, n_w).
 
     The same element-wise operations in the same order as ``_mse_residuals`` and
-    ``_derivative_residuals``, on the (rows, n_out, n_weights) array in its own layout.
+    ``_derivative_residuals`` (kept rows picked first, which does not change them), in place
+    on the (rows, n_out, n_weights) array's layout: few new 15 MB buffers per LM epoch.
     """
     n_weights = jac_prediction.shape[2]
     fitted = jac_prediction[:-1]
-    error = ((fitted - window.target[:, :, None]) / window.scale[:, None])[window.keep]
-    parts = [error.reshape(-1, n_weights) / math.sqrt(error.shape[0] * error.shape[1])]
-    if derivative_weight > 0.0:
-        target_step = window.target[1:] - window.target[:-1]
-        step = (fitted[1:] - fitted[:-1]) - target_step[:, :, None]
-        step = (step / window.diff_scale[:, None])[window.keep_pair]
-        count = step.shape[0] * step.shape[1]
-        flat = step.reshape(-1, n_weights)
-        parts.append(flat if count == 0 else flat * math.sqrt(derivative_weight / count))
-    return torch.cat(parts)
+    error = fitted[window.keep]
+    error -= window.target[window.keep][:, :, None]
+    error /= window.scale[:, None]
+    mse = error.reshape(-1, n_weights)
+    mse /= math.sqrt(error.shape[0] * error.shape[1])
+    if not derivative_weight > 0.0:
+        return mse
+    step = fitted[1:] - fitted[:-1]
+    step -= (window.target[1:] - window.target[:-1])[:, :, None]
+    step /= window.diff_scale[:, None]
+    kept = step[window.keep_pair]
+    count = kept.shape[0] * kept.shape[1]
+    derivative = kept.reshape(-1, n_weights)
+    if count > 0:
+        derivative *= math.sqrt(derivative_weight / count)
+    return torch.cat((mse, derivative))
 
 
 def _levenberg_marquardt(

@@ -35,8 +35,10 @@ Heading must be unwrapped (``heading.unwrap_heading``) before it is passed here.
 """
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 import math
+import threading
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -51,6 +53,12 @@ MIN_BAND_BINS = 3  # Welch bins needed inside the wave band to find and refine a
 FIT_DAMPING_RANGE = (0.005, 1.0)  # λ range [-] allowed in the spectrum fit (thesis eq. 3.10)
 
 _FloatArray = NDArray[np.float64]
+
+# The last few estimates by their exact inputs: with the motion gate on, the twin's retraining
+# estimates ω0 on the very same window right after the holding network's (half of all calls).
+_RECENT_SIZE = 4
+_RECENT: OrderedDict[tuple[object, ...], FrequencyEstimate] = OrderedDict()
+_RECENT_LOCK = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -132,6 +140,26 @@ def estimate_wave_peak_freq(
     """
     data = _as_columns(y)
     _check_parameters(data.shape[0], sample_time, highpass_cutoff, wave_band, min_peak_ratio)
+    # repr is exact for floats (and tells -0.0 from 0.0), so equal keys mean equal inputs
+    key = (data.shape, data.tobytes(), repr(sample_time), repr(highpass_cutoff),
+           repr(wave_band), repr(min_peak_ratio), repr(previous))
+    with _RECENT_LOCK:
+        cached = _RECENT.get(key)
+    if cached is not None:
+        return cached
+    estimate = _estimate(data, sample_time, highpass_cutoff, wave_band, min_peak_ratio,
+                         previous)
+    with _RECENT_LOCK:
+        _RECENT[key] = estimate
+        while len(_RECENT) > _RECENT_SIZE:
+            _RECENT.popitem(last=False)
+    return estimate
+
+
+def _estimate(data: _FloatArray, sample_time: float, highpass_cutoff: float,
+              wave_band: tuple[float, float], min_peak_ratio: float,
+              previous: float | FrequencyEstimate | None) -> FrequencyEstimate:
+    """``estimate_wave_peak_freq`` of checked (n, k) data (no cache)."""
     omega, psd = _compensated_psd(data, sample_time, highpass_cutoff)
     in_band = (omega >= wave_band[0]) & (omega <= wave_band[1])
     per_dof: list[float] = []

@@ -95,6 +95,7 @@ def stamped_fields(data: bytes, type_name: str) -> StampedFields:
         return fields
     message = deserialize(data, type_name)
     stamp = message.header.stamp
+    values: tuple[float, ...]
     if type_name == POSE_STAMPED:
         position, q = message.pose.position, message.pose.orientation
         values = (position.x, position.y, position.z, q.x, q.y, q.z, q.w)

@@ -62,7 +62,12 @@ from numpy.typing import ArrayLike, NDArray
 import torch
 from torch.func import functional_call, jacrev, vmap
 
-from lf_predictor_ros.core.network import NnarmaxNet, NnarmaxSpec, rotate_blocks_torch
+from lf_predictor_ros.core.network import (
+    NnarmaxNet,
+    NnarmaxSpec,
+    _relative_frame_torch,
+    rotate_blocks_torch,
+)
 from lf_predictor_ros.core.regressors import (
     as_series,
     build_regressors,
@@ -542,6 +547,9 @@ def _prediction_jacobian(
         return out[0]
 
     if not parallel or runner.nfb == 0:
+        written_out = _one_layer_jacobian(net, layout, flat, window.x_series)
+        if written_out is not None:
+            return written_out
         jac_w: torch.Tensor = vmap(jacrev(one_row), in_dims=(None, 0))(flat, window.x_series)
         return jac_w
     nfb, n_out = runner.nfb, window.target.shape[1]
@@ -564,6 +572,69 @@ def _prediction_jacobian(
             sensitivity += feedback_gain[row, :, lag, :] @ total[row - lag - 1]
         total[row] = sensitivity
     return torch.from_numpy(total)
+
+
+_ONE_LAYER_NAMES = ('hidden.0.weight', 'hidden.0.bias', 'output.weight', 'output.bias',
+                    'bypass.weight')
+
+
+def _one_layer_jacobian(
+    net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, x: torch.Tensor
+) -> torch.Tensor | None:
+    """``vmap(jacrev(one_row))`` of an earth-frame network with one tanh layer and a bypass.
+
+    Written out, the backward pass of the basis vector e_i through ŷ = y_mean + y_std ·
+    (W2 tanh(W1 x_s + b1) + b2 + Wb x_s) gives single products only: y_std_i · x_s (Wb row i),
+    y_std_i · tanh (W2 row i), y_std_i (b2), g = tanh_backward(y_std_i · W2_i, tanh) (b1) and
+    g · x_s (W1); every other entry is 0. Computed as such over the whole window, each entry is
+    bit for bit the autograd one (zeros +0, as its accumulating products give them): checked on
+    every Jacobian of a 1800 s replay and by a test. The standardized regressors of a
+    ramp-invariant network come from ``vmap`` over the rows as in ``jacrev`` (its line fit
+    rounds differently over a batch). Returns None for any other network (the caller's vmap).
+    """
+    spec = net.spec
+    if spec.body_frame or spec.hidden_layers != 1 or layout.names != _ONE_LAYER_NAMES:
+        return None
+    params = layout.unflatten(flat)
+    w1, b1, w2 = params['hidden.0.weight'], params['hidden.0.bias'], params['output.weight']
+    rows, n_in = x.shape
+    n_out, hidden = w2.shape
+    with torch.no_grad():
+        x_s = _standardized_rows(net, x)
+        tanh = torch.tanh(torch.nn.functional.linear(x_s, w1, b1))
+        y_std = net.y_std
+        g_pre = torch.ops.aten.tanh_backward(
+            (y_std[:, None] * w2)[None].expand(rows, n_out, hidden), tanh[:, None, :])
+        jac = torch.zeros(rows, n_out, flat.numel(), dtype=torch.float64)
+        w1_end = hidden * n_in
+        jac[:, :, :w1_end].view(rows, n_out, hidden, n_in).copy_(
+            g_pre[..., None] * x_s[:, None, None, :])
+        jac[:, :, w1_end:w1_end + hidden] = g_pre
+        w2_start = w1_end + hidden
+        b2_start = w2_start + n_out * hidden
+        wb_start = b2_start + n_out
+        for i in range(n_out):
+            jac[:, i, w2_start + i * hidden:w2_start + (i + 1) * hidden] = y_std[i] * tanh
+            jac[:, i, b2_start + i] = y_std[i]
+            jac[:, i, wb_start + i * n_in:wb_start + (i + 1) * n_in] = y_std[i] * x_s
+        jac += 0.0  # −0 products to +0
+    return jac
+
+
+def _standardized_rows(net: NnarmaxNet, x: torch.Tensor) -> torch.Tensor:
+    """The standardized (relative) regressors x_s the network's first layers see, (rows, n)."""
+    spec = net.spec
+    x_mean, x_std = net.regressor_standardization()
+
+    def one(rows: torch.Tensor) -> torch.Tensor:
+        if spec.relative:
+            rows = rows - _relative_frame_torch(spec, rows)[1]
+        return (rows - x_mean) / x_std
+
+    if spec.ramp_invariant:
+        per_row: torch.Tensor = vmap(lambda row: one(row[None, :])[0])(x)
+        return per_row
+    return one(x)
 
 
 def _residual_jacobian(

@@ -374,6 +374,44 @@ def test_stacked_residual_jacobian_is_bitwise_the_per_column_map(derivative_weig
     assert actual.stride() == expected.stride()
 
 
+@pytest.mark.parametrize('ramp_invariant', [False, True])
+def test_one_layer_jacobian_is_bitwise_vmap_jacrev(ramp_invariant: bool) -> None:
+    # The written-out Jacobian of the default network shape (one tanh layer + bypass) must give
+    # vmap(jacrev)'s bits, zero signs included: the LM step and every replay output depend on it.
+    from lf_predictor_ros.core import training
+
+    spec = NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=3, ny=4, nfb=0, hidden_units=2,
+                       relative=True, ramp_invariant=ramp_invariant)
+    rng = np.random.default_rng(23)
+    n = 120
+    u = rng.normal(size=(n, 3))
+    x = np.cumsum(rng.normal(scale=0.05, size=(n, 3)), axis=0)
+    y = x + rng.normal(scale=0.02, size=(n, 3))
+    net = NnarmaxNet(spec, seed=24)
+    net.set_standardization(u, y)
+    window = training._prepare_window(spec, u, y, x, None)
+    layout = training._FlatParameters.of(net)
+    flat = torch.nn.utils.parameters_to_vector(net.parameters()).detach()
+    buffers = dict(net.named_buffers())
+
+    def one_row(weights: torch.Tensor, x_row: torch.Tensor) -> torch.Tensor:
+        return torch.func.functional_call(net, {**layout.unflatten(weights), **buffers},
+                                          (x_row[None, :],))[0]
+
+    generator = torch.Generator().manual_seed(25)
+    for weights in (flat, flat + 0.3 * torch.randn(flat.shape, generator=generator,
+                                                   dtype=torch.float64)):
+        expected = torch.func.vmap(torch.func.jacrev(one_row), in_dims=(None, 0))(
+            weights, window.x_series)
+        actual = training._one_layer_jacobian(net, layout, weights, window.x_series)
+        assert actual is not None
+        assert torch.equal(actual.view(torch.int64), expected.view(torch.int64))
+    two_layers = NnarmaxNet(NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=3, ny=4, nfb=0,
+                                        hidden_units=2, hidden_layers=2), seed=1)
+    assert training._one_layer_jacobian(two_layers, training._FlatParameters.of(two_layers),
+                                        flat, window.x_series) is None
+
+
 def test_warm_up_does_the_slow_lazy_imports_up_front() -> None:
     # In a fresh interpreter: torch._dynamo is not loaded by importing the trainer, warm_up()
     # loads it, and the first real training afterwards pays no multi-second import.

@@ -55,7 +55,7 @@ from dataclasses import dataclass
 import math
 import threading
 import time
-from typing import Literal, cast
+from typing import Literal, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -578,6 +578,35 @@ _ONE_LAYER_NAMES = ('hidden.0.weight', 'hidden.0.bias', 'output.weight', 'output
                     'bypass.weight')
 
 
+class _OneLayerParts(NamedTuple):
+    """The forward values the written-out Jacobian of a one-tanh-layer network is made of."""
+
+    x_s: torch.Tensor  # (rows, n_in) standardized regressors
+    tanh: torch.Tensor  # (rows, hidden) tanh layer output
+    g_pre: torch.Tensor  # (rows, n_out, hidden) tanh_backward(y_std_i · W2_i, tanh)
+    y_std: torch.Tensor  # (n_out,)
+
+
+def _one_layer_parts(
+    net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, x: torch.Tensor
+) -> _OneLayerParts | None:
+    """Forward values for ``_one_layer_jacobian``; None unless earth frame, 1 layer, bypass."""
+    spec = net.spec
+    if spec.body_frame or spec.hidden_layers != 1 or layout.names != _ONE_LAYER_NAMES:
+        return None
+    params = layout.unflatten(flat)
+    w1, b1, w2 = params['hidden.0.weight'], params['hidden.0.bias'], params['output.weight']
+    rows = x.shape[0]
+    n_out, hidden = w2.shape
+    with torch.no_grad():
+        x_s = _standardized_rows(net, x)
+        tanh = torch.tanh(torch.nn.functional.linear(x_s, w1, b1))
+        y_std = net.y_std
+        g_pre = torch.ops.aten.tanh_backward(
+            (y_std[:, None] * w2)[None].expand(rows, n_out, hidden), tanh[:, None, :])
+    return _OneLayerParts(x_s, tanh, g_pre, y_std)
+
+
 def _one_layer_jacobian(
     net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, x: torch.Tensor
 ) -> torch.Tensor | None:
@@ -592,33 +621,65 @@ def _one_layer_jacobian(
     ramp-invariant network come from ``vmap`` over the rows as in ``jacrev`` (its line fit
     rounds differently over a batch). Returns None for any other network (the caller's vmap).
     """
-    spec = net.spec
-    if spec.body_frame or spec.hidden_layers != 1 or layout.names != _ONE_LAYER_NAMES:
+    parts = _one_layer_parts(net, layout, flat, x)
+    if parts is None:
         return None
-    params = layout.unflatten(flat)
-    w1, b1, w2 = params['hidden.0.weight'], params['hidden.0.bias'], params['output.weight']
-    rows, n_in = x.shape
-    n_out, hidden = w2.shape
-    with torch.no_grad():
-        x_s = _standardized_rows(net, x)
-        tanh = torch.tanh(torch.nn.functional.linear(x_s, w1, b1))
-        y_std = net.y_std
-        g_pre = torch.ops.aten.tanh_backward(
-            (y_std[:, None] * w2)[None].expand(rows, n_out, hidden), tanh[:, None, :])
-        jac = torch.zeros(rows, n_out, flat.numel(), dtype=torch.float64)
-        w1_end = hidden * n_in
-        jac[:, :, :w1_end].view(rows, n_out, hidden, n_in).copy_(
-            g_pre[..., None] * x_s[:, None, None, :])
-        jac[:, :, w1_end:w1_end + hidden] = g_pre
-        w2_start = w1_end + hidden
-        b2_start = w2_start + n_out * hidden
-        wb_start = b2_start + n_out
-        for i in range(n_out):
-            jac[:, i, w2_start + i * hidden:w2_start + (i + 1) * hidden] = y_std[i] * tanh
-            jac[:, i, b2_start + i] = y_std[i]
-            jac[:, i, wb_start + i * n_in:wb_start + (i + 1) * n_in] = y_std[i] * x_s
-        jac += 0.0  # −0 products to +0
+    rows = x.shape[0]
+    n_out = parts.y_std.shape[0]
+    jac = torch.zeros(rows, n_out, flat.numel(), dtype=torch.float64)
+    _fill_one_layer(jac.permute(2, 0, 1), parts)
     return jac
+
+
+def _fill_one_layer(out: torch.Tensor, parts: _OneLayerParts) -> None:
+    """Write the Jacobian into zeroed ``out`` (n_weights, rows, n_out), weights in flat order."""
+    x_s, tanh, g_pre, y_std = parts
+    rows, n_in = x_s.shape
+    n_out, hidden = g_pre.shape[1:]
+    with torch.no_grad():
+        w1_end = hidden * n_in
+        w1 = out[:w1_end].unflatten(0, (hidden, n_in))
+        torch.mul(g_pre.permute(2, 0, 1)[:, None], x_s.T[None, :, :, None], out=w1)
+        w1 += 0.0  # −0 products to +0, as autograd's accumulating products
+        out[w1_end:w1_end + hidden] = g_pre.permute(2, 0, 1) + 0.0
+        w2 = out[w1_end + hidden:w1_end + hidden + n_out * hidden].unflatten(0, (n_out, hidden))
+        b2 = out[w1_end + hidden + n_out * hidden:w1_end + hidden + n_out * (hidden + 1)]
+        wb = out[w1_end + hidden + n_out * (hidden + 1):].unflatten(0, (n_out, n_in))
+        for i in range(n_out):
+            w2[i, :, :, i] = y_std[i] * tanh.T + 0.0
+            b2[i, :, i] = y_std[i]
+            wb[i, :, :, i] = y_std[i] * x_s.T + 0.0
+
+
+def _one_layer_residual_jacobian(
+    net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
+    derivative_weight: float,
+) -> torch.Tensor | None:
+    """``_residual_jacobian(_prediction_jacobian(...))`` of a one-layer earth-frame network.
+
+    Only the MSE residuals (derivative_weight 0): the kept rows' written-out Jacobian is built
+    in the residual Jacobian's own layout (n_weights, n_residuals), and the residual map's
+    element-wise steps run on it in place, so neither the whole window's Jacobian nor a
+    transposing copy is made. The same numbers: see ``_one_layer_jacobian`` and
+    ``_residual_columns``. None when it does not apply.
+    """
+    if derivative_weight > 0.0 or window.body is not None:
+        return None
+    parts = _one_layer_parts(net, layout, flat, window.x_series)
+    if parts is None:
+        return None
+    rows, n_out = window.x_series.shape[0], parts.y_std.shape[0]
+    offset = _data_residuals(torch.zeros(rows, n_out, dtype=torch.float64), window, 0.0)
+    kept = window.keep.nonzero()[:, 0]
+    parts = _OneLayerParts(parts.x_s[kept], parts.tanh[kept], parts.g_pre[kept], parts.y_std)
+    columns = torch.zeros(flat.numel(), kept.numel(), n_out, dtype=torch.float64)
+    _fill_one_layer(columns, parts)
+    columns -= window.target[kept]
+    columns /= window.scale
+    flat_columns = columns.view(flat.numel(), -1)
+    flat_columns /= math.sqrt(kept.numel() * n_out)
+    flat_columns -= offset
+    return flat_columns.T
 
 
 def _standardized_rows(net: NnarmaxNet, x: torch.Tensor) -> torch.Tensor:
@@ -690,6 +751,20 @@ def _residual_columns(
     return torch.cat((mse, derivative))
 
 
+def _lm_jacobian(
+    runner: _WindowPredictor, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
+    parallel: bool, derivative_weight: float,
+) -> torch.Tensor:
+    """Jacobian of the data residuals w.r.t. the weights, (n_residuals, n_weights)."""
+    if not parallel or runner.nfb == 0:
+        direct = _one_layer_residual_jacobian(runner.net, layout, flat, window,
+                                              derivative_weight)
+        if direct is not None:
+            return direct
+    return _residual_jacobian(_prediction_jacobian(runner, layout, flat, window, parallel),
+                              window, derivative_weight)
+
+
 def _levenberg_marquardt(
     runner: _WindowPredictor, window: _Window, parallel: bool, run: _Run
 ) -> str:
@@ -717,11 +792,8 @@ def _levenberg_marquardt(
         if stop is not None:
             reason = stop
             break
-        jacobian = _residual_jacobian(
-            _prediction_jacobian(runner, layout, weights, window, parallel),
-            window,
-            settings.derivative_weight,
-        )
+        jacobian = _lm_jacobian(runner, layout, weights, window, parallel,
+                                settings.derivative_weight)
         gradient = jacobian.T @ residuals + decay * weights  # ½ ∇J
         if float(torch.linalg.vector_norm(2.0 * gradient)) <= settings.min_grad:
             reason = 'min_grad'

@@ -389,7 +389,7 @@ def test_one_layer_jacobian_is_bitwise_vmap_jacrev(ramp_invariant: bool) -> None
     y = x + rng.normal(scale=0.02, size=(n, 3))
     net = NnarmaxNet(spec, seed=24)
     net.set_standardization(u, y)
-    window = training._prepare_window(spec, u, y, x, None)
+    window = training._prepare_window(spec, u, y, x, np.arange(n) % 9 != 4)
     layout = training._FlatParameters.of(net)
     flat = torch.nn.utils.parameters_to_vector(net.parameters()).detach()
     buffers = dict(net.named_buffers())
@@ -406,6 +406,12 @@ def test_one_layer_jacobian_is_bitwise_vmap_jacrev(ramp_invariant: bool) -> None
         actual = training._one_layer_jacobian(net, layout, weights, window.x_series)
         assert actual is not None
         assert torch.equal(actual.view(torch.int64), expected.view(torch.int64))
+        # the LM's residual Jacobian built straight from it (MSE only): same bits and layout
+        runner = training._WindowPredictor(net, training.n_static_regressors(spec), spec.nfb)
+        reference = training._residual_jacobian(expected, window, 0.0)
+        direct = training._lm_jacobian(runner, layout, weights, window, False, 0.0)
+        assert direct.stride() == reference.stride()
+        assert torch.equal(direct.view(torch.int64), reference.view(torch.int64))
     two_layers = NnarmaxNet(NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=3, ny=4, nfb=0,
                                         hidden_units=2, hidden_layers=2), seed=1)
     assert training._one_layer_jacobian(two_layers, training._FlatParameters.of(two_layers),

@@ -671,15 +671,58 @@ def _one_layer_residual_jacobian(
     rows, n_out = window.x_series.shape[0], parts.y_std.shape[0]
     offset = _data_residuals(torch.zeros(rows, n_out, dtype=torch.float64), window, 0.0)
     kept = window.keep.nonzero()[:, 0]
-    parts = _OneLayerParts(parts.x_s[kept], parts.tanh[kept], parts.g_pre[kept], parts.y_std)
-    columns = torch.zeros(flat.numel(), kept.numel(), n_out, dtype=torch.float64)
-    _fill_one_layer(columns, parts)
-    columns -= window.target[kept]
-    columns /= window.scale
-    flat_columns = columns.view(flat.numel(), -1)
-    flat_columns /= math.sqrt(kept.numel() * n_out)
-    flat_columns -= offset
-    return flat_columns.T
+    x_s, tanh, g_pre = parts.x_s[kept], parts.tanh[kept], parts.g_pre[kept]
+    n_keep, (n_in, hidden) = kept.numel(), (x_s.shape[1], tanh.shape[1])
+    residual = _ResidualMap(window.target[kept], window.scale, math.sqrt(n_keep * n_out),
+                            offset.view(n_keep, n_out))
+    # A Jacobian entry that is 0 maps to ((0 − target)/scale)/√n − offset = +0 exactly (the
+    # offset is that same number): only the non-zero blocks are computed.
+    columns = torch.zeros(flat.numel(), n_keep, n_out, dtype=torch.float64)
+    w1_end = hidden * n_in
+    w1 = columns[:w1_end].view(hidden, n_in, n_keep, n_out)
+    torch.mul(g_pre.permute(2, 0, 1)[:, None], x_s.T[None, :, :, None], out=w1)
+    w1 += 0.0  # −0 products to +0, as autograd's accumulating products
+    residual.apply(columns[:w1_end])
+    b1 = columns[w1_end:w1_end + hidden]
+    b1.copy_(g_pre.permute(2, 0, 1))
+    b1 += 0.0
+    residual.apply(b1)
+    w2 = columns[w1_end + hidden:w1_end + hidden + n_out * hidden].view(n_out, hidden, n_keep,
+                                                                         n_out)
+    b2 = columns[w1_end + hidden + n_out * hidden:w1_end + hidden + n_out * (hidden + 1)]
+    wb = columns[w1_end + hidden + n_out * (hidden + 1):].view(n_out, n_in, n_keep, n_out)
+    for i in range(n_out):
+        torch.mul(tanh.T, parts.y_std[i], out=w2[i, :, :, i])
+        w2[i, :, :, i] += 0.0
+        residual.apply(w2[i, :, :, i], i)
+        b2[i, :, i] = parts.y_std[i]
+        residual.apply(b2[i, :, i], i)
+        torch.mul(x_s.T, parts.y_std[i], out=wb[i, :, :, i])
+        wb[i, :, :, i] += 0.0
+        residual.apply(wb[i, :, :, i], i)
+    return columns.view(flat.numel(), -1).T
+
+
+@dataclass(frozen=True)
+class _ResidualMap:
+    """The MSE residual map's element-wise steps ((v − target)/scale)/√n − offset, in place."""
+
+    target: torch.Tensor  # (n_keep, n_out) kept targets
+    scale: torch.Tensor  # (n_out,)
+    root: float  # √(n_keep · n_out)
+    offset: torch.Tensor  # (n_keep, n_out) the map of 0
+
+    def apply(self, values: torch.Tensor, channel: int | None = None) -> None:
+        """``values`` (..., n_keep, n_out), or (..., n_keep) of output ``channel``."""
+        if channel is None:
+            target, scale, offset = self.target, self.scale, self.offset
+        else:
+            target, scale = self.target[:, channel], self.scale[channel]
+            offset = self.offset[:, channel]
+        values -= target
+        values /= scale
+        values /= self.root
+        values -= offset
 
 
 def _standardized_rows(net: NnarmaxNet, x: torch.Tensor) -> torch.Tensor:

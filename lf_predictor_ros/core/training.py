@@ -653,7 +653,7 @@ def _fill_one_layer(out: torch.Tensor, parts: _OneLayerParts) -> None:
 
 def _one_layer_residual_jacobian(
     net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
-    derivative_weight: float,
+    derivative_weight: float, buffer: list[torch.Tensor] | None = None,
 ) -> torch.Tensor | None:
     """``_residual_jacobian(_prediction_jacobian(...))`` of a one-layer earth-frame network.
 
@@ -661,7 +661,9 @@ def _one_layer_residual_jacobian(
     in the residual Jacobian's own layout (n_weights, n_residuals), and the residual map's
     element-wise steps run on it in place, so neither the whole window's Jacobian nor a
     transposing copy is made. The same numbers: see ``_one_layer_jacobian`` and
-    ``_residual_columns``. None when it does not apply.
+    ``_residual_columns``. None when it does not apply. ``buffer``: a list kept by the caller
+    across epochs; the array it holds is reused (its zero blocks stay zero, every other entry
+    is written again), so the returned Jacobian is only valid until the next call.
     """
     if derivative_weight > 0.0 or window.body is not None:
         return None
@@ -677,7 +679,7 @@ def _one_layer_residual_jacobian(
                             offset.view(n_keep, n_out))
     # A Jacobian entry that is 0 maps to ((0 − target)/scale)/√n − offset = +0 exactly (the
     # offset is that same number): only the non-zero blocks are computed.
-    columns = torch.zeros(flat.numel(), n_keep, n_out, dtype=torch.float64)
+    columns = _zeroed(buffer, (flat.numel(), n_keep, n_out))
     w1_end = hidden * n_in
     w1 = columns[:w1_end].view(hidden, n_in, n_keep, n_out)
     torch.mul(g_pre.permute(2, 0, 1)[:, None], x_s.T[None, :, :, None], out=w1)
@@ -701,6 +703,16 @@ def _one_layer_residual_jacobian(
         wb[i, :, :, i] += 0.0
         residual.apply(wb[i, :, :, i], i)
     return columns.view(flat.numel(), -1).T
+
+
+def _zeroed(buffer: list[torch.Tensor] | None, shape: tuple[int, int, int]) -> torch.Tensor:
+    """A zero array of ``shape`` the first time; then the one in ``buffer`` as it was left."""
+    if buffer and buffer[0].shape == shape:
+        return buffer[0]
+    columns = torch.zeros(shape, dtype=torch.float64)
+    if buffer is not None:
+        buffer[:] = [columns]
+    return columns
 
 
 @dataclass(frozen=True)
@@ -796,12 +808,15 @@ def _residual_columns(
 
 def _lm_jacobian(
     runner: _WindowPredictor, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
-    parallel: bool, derivative_weight: float,
+    parallel: bool, derivative_weight: float, buffer: list[torch.Tensor] | None = None,
 ) -> torch.Tensor:
-    """Jacobian of the data residuals w.r.t. the weights, (n_residuals, n_weights)."""
+    """Jacobian of the data residuals w.r.t. the weights, (n_residuals, n_weights).
+
+    ``buffer``: see ``_one_layer_residual_jacobian`` (valid until the next call then).
+    """
     if not parallel or runner.nfb == 0:
         direct = _one_layer_residual_jacobian(runner.net, layout, flat, window,
-                                              derivative_weight)
+                                              derivative_weight, buffer)
         if direct is not None:
             return direct
     return _residual_jacobian(_prediction_jacobian(runner, layout, flat, window, parallel),
@@ -828,6 +843,7 @@ def _levenberg_marquardt(
         residuals = residual_fn(weights)
     objective = objective_of(weights, residuals)
     identity = torch.eye(weights.numel(), dtype=weights.dtype)
+    jacobian_buffer: list[torch.Tensor] = []  # one epoch's Jacobian is dead at the next's
     mu = settings.lm_mu0
     reason = 'max_epochs'
     for _ in range(settings.max_epochs):
@@ -836,7 +852,7 @@ def _levenberg_marquardt(
             reason = stop
             break
         jacobian = _lm_jacobian(runner, layout, weights, window, parallel,
-                                settings.derivative_weight)
+                                settings.derivative_weight, jacobian_buffer)
         gradient = jacobian.T @ residuals + decay * weights  # ½ ∇J
         if float(torch.linalg.vector_norm(2.0 * gradient)) <= settings.min_grad:
             reason = 'min_grad'

@@ -84,7 +84,11 @@ from lf_predictor_ros.bag.mcap_reader import BagError, BagReader
 from lf_predictor_ros.bag.mcap_writer import BagWriter
 from lf_predictor_ros.bag.ros_codec import (
     StampedFields,
+    cdr_text,
+    float64_cdr,
+    odometry_cdr,
     offered_qos_yaml,
+    pose_stamped_cdr,
     serialize,
     stamped_fields,
 )
@@ -102,6 +106,7 @@ from lf_predictor_ros.nodes.conversions import (
     FRAME_EARTH,
     NS_PER_S,
     force_from_fields,
+    odometry_fields,
     odometry_to_msg,
     pose_from_fields,
     pose_to_msg,
@@ -679,7 +684,10 @@ class _Replayer:
             self._write_estimate(odometry, log_time_ns)
         freq = self.predictor.wave_peak_freq
         if freq is not None:
-            self._write(self.wave_channel, log_time_ns, serialize(Float64(data=float(freq))))
+            value = float(freq)
+            data = float64_cdr(value) if math.isfinite(value) else \
+                serialize(Float64(data=value))  # rclpy refuses it, as before
+            self._write(self.wave_channel, log_time_ns, data)
         self._maybe_diagnostics(sample.t, log_time_ns)
 
     def _maybe_diagnostics(self, t: float, log_time_ns: int) -> None:
@@ -695,11 +703,20 @@ class _Replayer:
         """One estimate on the lf and odom topics (same stamp and pose)."""
         stamp = sec_to_stamp(estimate.stamp)
         frame = self.config.frame_id
-        lf_msg = pose_to_msg(estimate.pose, stamp, frame)
-        odom_msg = odometry_to_msg(stamp, estimate.pose, estimate.pose_cov, estimate.twist,
-                                   estimate.twist_cov, frame, FRAME_BODY)
-        self._write(self.lf_channel, log_time_ns, serialize(lf_msg))
-        self._write(self.odom_channel, log_time_ns, serialize(odom_msg))
+        frame_bytes, body_bytes = cdr_text(frame), cdr_text(FRAME_BODY)
+        if frame_bytes is None or body_bytes is None:  # rclpy's encoder for unusual ids
+            lf_data = serialize(pose_to_msg(estimate.pose, stamp, frame))
+            odom_data = serialize(odometry_to_msg(
+                stamp, estimate.pose, estimate.pose_cov, estimate.twist, estimate.twist_cov,
+                frame, FRAME_BODY))
+        else:  # the same numbers written straight to CDR (odometry_fields checks them)
+            pose, pose_cov, twist, twist_cov = odometry_fields(
+                estimate.pose, estimate.pose_cov, estimate.twist, estimate.twist_cov)
+            lf_data = pose_stamped_cdr(stamp.sec, stamp.nanosec, frame_bytes, pose)
+            odom_data = odometry_cdr(stamp.sec, stamp.nanosec, frame_bytes, body_bytes, pose,
+                                     pose_cov, twist, twist_cov)
+        self._write(self.lf_channel, log_time_ns, lf_data)
+        self._write(self.odom_channel, log_time_ns, odom_data)
 
     def _diagnostics(self, t: float, log_time_ns: int, status: EstimatorStatus) -> None:
         extra: dict[str, DiagnosticValue] = {

@@ -120,6 +120,58 @@ def _unpack_stamped(data: bytes, body: struct.Struct) -> StampedFields | None:
     return StampedFields(sec, nanosec, body.unpack_from(data, start))
 
 
+def cdr_text(text: str) -> bytes | None:
+    """The UTF-8 bytes of a string field when the direct writers below can take it, else None."""
+    return text.encode('ascii') if text.isascii() and '\0' not in text else None
+
+
+def pose_stamped_cdr(sec: int, nanosec: int, frame_id: bytes,
+                     values: Sequence[float]) -> bytes:
+    """CDR of a PoseStamped (position x y z, orientation x y z w), as `serialize` (padding 0).
+
+    ``frame_id`` from `cdr_text`.
+    """
+    out = _header_cdr(sec, nanosec, frame_id)
+    _align8(out)
+    out += _POSE.pack(*values)
+    return bytes(out)
+
+
+def odometry_cdr(sec: int, nanosec: int, frame_id: bytes, child_frame_id: bytes,
+                 pose: Sequence[float], pose_covariance: Sequence[float],
+                 twist: Sequence[float], twist_covariance: Sequence[float]) -> bytes:
+    """CDR of a nav_msgs/Odometry, as `serialize` (padding 0); string ids from `cdr_text`."""
+    out = _header_cdr(sec, nanosec, frame_id)
+    out += b'\0' * (-(len(out) - 4) % 4)
+    out += _UINT32.pack(len(child_frame_id) + 1) + child_frame_id + b'\0'
+    _align8(out)
+    out += _ODOMETRY_BODY.pack(*pose, *pose_covariance, *twist, *twist_covariance)
+    return bytes(out)
+
+
+def float64_cdr(value: float) -> bytes:
+    """CDR of a std_msgs/Float64."""
+    return _CDR_LE + _FLOAT64.pack(value)
+
+
+_UINT32 = struct.Struct('<I')
+_POSE = struct.Struct('<7d')
+_FLOAT64 = struct.Struct('<d')
+_ODOMETRY_BODY = struct.Struct('<85d')  # pose 7, covariance 36, twist 6, covariance 36
+
+
+def _header_cdr(sec: int, nanosec: int, frame_id: bytes) -> bytearray:
+    out = bytearray(_CDR_LE)
+    out += _HEADER.pack(sec, nanosec, len(frame_id) + 1)
+    out += frame_id
+    out += b'\0'
+    return out
+
+
+def _align8(out: bytearray) -> None:
+    out += b'\0' * (-(len(out) - 4) % 8)
+
+
 def qos_to_dict(qos: QoSProfile) -> dict[str, Any]:
     """A QoS profile as one rosbag2 v9 `offered_qos_profiles` entry."""
     return qos_profile_dict(

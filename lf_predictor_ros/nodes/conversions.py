@@ -134,15 +134,39 @@ def quaternion_to_yaw(w: float, x: float, y: float, z: float) -> float:
 
 def _fill_pose(target: Pose, pose: NDArray[np.float64]) -> None:
     """Write ``[north, east, yaw]`` into a ``geometry_msgs/Pose`` (z = 0, yaw quaternion)."""
-    north, east, yaw = pose.tolist()
+    x, y, z, qx, qy, qz, qw = pose_fields(pose)
     position, orientation = target.position, target.orientation  # one property read each
-    position.x = north
-    position.y = east
-    position.z = 0.0
-    orientation.w = math.cos(0.5 * yaw)
-    orientation.x = 0.0
-    orientation.y = 0.0
-    orientation.z = math.sin(0.5 * yaw)
+    position.x = x
+    position.y = y
+    position.z = z
+    orientation.w = qw
+    orientation.x = qx
+    orientation.y = qy
+    orientation.z = qz
+
+
+def pose_fields(pose: NDArray[np.float64]) -> tuple[float, float, float, float, float, float,
+                                                    float]:
+    """A checked pose ``[north, east, yaw]`` as the Pose's position x y z, orientation x y z w."""
+    north, east, yaw = pose.tolist()
+    return north, east, 0.0, 0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)
+
+
+def odometry_fields(pose: ArrayLike, pose_cov: ArrayLike, twist: ArrayLike,
+                    twist_cov: ArrayLike) -> tuple[tuple[float, ...], list[float],
+                                                   tuple[float, ...], list[float]]:
+    """The numbers `odometry_to_msg` writes, checked as there (ValueError), in its order.
+
+    Pose (7, as `pose_fields`), pose covariance (36), twist (linear x y z, angular x y z) and
+    twist covariance (36).
+    """
+    pose_array = _vector3(pose, 'pose')
+    twist_array = _vector3(twist, 'twist')
+    pose_values = pose_fields(pose_array)
+    pose_covariance = covariance3_to_6(pose_cov, 'pose_cov')
+    surge, sway, yaw_rate = twist_array.tolist()
+    return (pose_values, pose_covariance, (surge, sway, 0.0, 0.0, 0.0, yaw_rate),
+            covariance3_to_6(twist_cov, 'twist_cov'))
 
 
 def _pose_of(source: Pose) -> NDArray[np.float64]:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 from geometry_msgs.msg import PoseStamped, WrenchStamped
+import numpy as np
 import pytest
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.rosbag2.metadata import parse_qos
@@ -87,3 +88,40 @@ def test_stamped_fields_of_a_truncated_message_raises() -> None:
     data = serialize(PoseStamped())
     with pytest.raises(Exception):  # noqa: B017, PT011 - rclpy raises plain exceptions
         stamped_fields(data[:-8], 'geometry_msgs/msg/PoseStamped')
+
+
+@pytest.mark.parametrize('frame_id', ['', 'map_ned', 'abc'])
+def test_direct_cdr_writers_decode_to_the_messages_of_the_converters(frame_id: str) -> None:
+    # replay writes its estimates with these: rclpy must read back the converters' messages.
+    from std_msgs.msg import Float64
+
+    from lf_predictor_ros.nodes.conversions import (
+        odometry_fields,
+        odometry_to_msg,
+        pose_fields,
+        pose_to_msg,
+        sec_to_stamp,
+    )
+
+    pose, twist = np.array([3.5, -2.25, -3.1]), np.array([0.5, -0.125, 0.01])
+    pose_cov = np.diag([0.25, 0.5, 0.001])
+    pose_cov[0, 1] = pose_cov[1, 0] = -1e-3
+    twist_cov = np.diag([0.4, 0.4, 1e-4])
+    stamp = sec_to_stamp(123.4)
+    text = ros_codec.cdr_text(frame_id)
+    assert text is not None
+    data = ros_codec.pose_stamped_cdr(stamp.sec, stamp.nanosec, text, pose_fields(pose))
+    expected = serialize(pose_to_msg(pose, stamp, frame_id))
+    assert len(data) == len(expected)
+    assert deserialize(data, 'geometry_msgs/msg/PoseStamped') == pose_to_msg(pose, stamp,
+                                                                             frame_id)
+    child = ros_codec.cdr_text('base_link_fsd')
+    assert child is not None
+    data = ros_codec.odometry_cdr(stamp.sec, stamp.nanosec, text, child,
+                                  *odometry_fields(pose, pose_cov, twist, twist_cov))
+    message = odometry_to_msg(stamp, pose, pose_cov, twist, twist_cov, frame_id,
+                              'base_link_fsd')
+    assert len(data) == len(serialize(message))
+    assert deserialize(data, 'nav_msgs/msg/Odometry') == message
+    assert ros_codec.float64_cdr(0.8125) == serialize(Float64(data=0.8125))
+    assert ros_codec.cdr_text('nörd') is None and ros_codec.cdr_text('a\0b') is None

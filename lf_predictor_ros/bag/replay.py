@@ -85,6 +85,7 @@ from lf_predictor_ros.bag.mcap_writer import BagWriter
 from lf_predictor_ros.bag.ros_codec import (
     StampedFields,
     cdr_text,
+    diagnostic_array_cdr,
     float64_cdr,
     odometry_cdr,
     offered_qos_yaml,
@@ -117,6 +118,7 @@ from lf_predictor_ros.nodes.diagnostics import (
     input_values,
     make_diagnostic_array,
     predictor_values,
+    status_fields,
     with_reference_and_odometry,
 )
 from lf_predictor_ros.nodes.lf_odom import OdomDriver, dead_reckoning_silence
@@ -351,6 +353,19 @@ def predictor_diagnostics(status: EstimatorStatus, counters: Mapping[str, int],
     and ``odometry`` (level, message) of the LF odometry raise the level as in the node
     (`nodes.diagnostics.with_reference_and_odometry`).
     """
+    level, message, values = predictor_diagnostics_fields(
+        status, counters, aligner_counters, samples=samples, extra=extra, reference=reference,
+        odometry=odometry)
+    return make_diagnostic_array(name, level, message, values, stamp=stamp)
+
+
+def predictor_diagnostics_fields(
+        status: EstimatorStatus, counters: Mapping[str, int],
+        aligner_counters: Mapping[str, int], *, samples: int,
+        extra: Mapping[str, DiagnosticValue] | None = None,
+        reference: tuple[str, str] = ('OK', ''), odometry: tuple[str, str] = ('OK', ''),
+) -> tuple[str, str, dict[str, DiagnosticValue]]:
+    """(level, message, values) of `predictor_diagnostics`."""
     values: dict[str, DiagnosticValue] = {
         **predictor_values(status, counters),
         **input_values(aligner_counters, samples),
@@ -359,7 +374,7 @@ def predictor_diagnostics(status: EstimatorStatus, counters: Mapping[str, int],
     level = _LEVEL_OF_STATE.get(status.state, 'WARN')
     message = f'{status.state}: {status.message}'
     level, message = with_reference_and_odometry(level, message, reference, odometry)
-    return make_diagnostic_array(name, level, message, values, stamp=stamp)
+    return level, message, values
 
 
 # ------------------------------------------------------------------------------ progress
@@ -728,12 +743,17 @@ class _Replayer:
         extra['ndof'] = self.config.params.ndof
         extra['unfiltered_dofs'] = 'east yaw' if self.config.params.ndof == 1 else 'none'
         extra.update(self.odom.values())
-        array = predictor_diagnostics(status, self.predictor.counters,
-                                      self.aligner.counters.as_dict(), sec_to_stamp(t),
-                                      samples=self.result.estimates, extra=extra,
-                                      reference=self.checker.status(),
-                                      odometry=self.odom.status())
-        self._write(self._diagnostics_channel, log_time_ns, serialize(array))
+        stamp = sec_to_stamp(t)
+        level, message, values = predictor_diagnostics_fields(
+            status, self.predictor.counters, self.aligner.counters.as_dict(),
+            samples=self.result.estimates, extra=extra, reference=self.checker.status(),
+            odometry=self.odom.status())
+        fields = status_fields(DIAGNOSTICS_NAME, level, message, values)
+        data = diagnostic_array_cdr(stamp.sec, stamp.nanosec, '', [fields])
+        if data is None:  # a NUL in a string: rclpy's encoder
+            data = serialize(make_diagnostic_array(DIAGNOSTICS_NAME, level, message, values,
+                                                   stamp=stamp))
+        self._write(self._diagnostics_channel, log_time_ns, data)
 
 
 def replay(options: ReplayOptions, config: ReplayConfig,

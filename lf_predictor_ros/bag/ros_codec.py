@@ -154,6 +154,54 @@ def float64_cdr(value: float) -> bytes:
     return _CDR_LE + _FLOAT64.pack(value)
 
 
+def diagnostic_array_cdr(sec: int, nanosec: int, frame_id: str,
+                         statuses: Sequence[tuple[bytes, str, str, str,
+                                                  Sequence[tuple[str, str]]]]) -> bytes | None:
+    """CDR of a DiagnosticArray, as `serialize` (padding 0); None if a string holds a NUL.
+
+    ``statuses``: (level byte, name, message, hardware_id, [(key, value)]) each, as
+    `nodes.diagnostics.status_fields` gives them. Strings are UTF-8, as rclpy writes them.
+    """
+    out = bytearray(_CDR_LE)
+    out += _STAMP.pack(sec, nanosec)
+    if not _put_string(out, frame_id):
+        return None
+    _align4(out)
+    out += _UINT32.pack(len(statuses))
+    for level, name, message, hardware_id, values in statuses:
+        out += level
+        for text in (name, message, hardware_id):
+            _align4(out)
+            if not _put_string(out, text):
+                return None
+        _align4(out)
+        out += _UINT32.pack(len(values))
+        for key, value in values:
+            _align4(out)
+            if not _put_string(out, key):
+                return None
+            _align4(out)
+            if not _put_string(out, value):
+                return None
+    return bytes(out)
+
+
+def _put_string(out: bytearray, text: str) -> bool:
+    """Append a CDR string (the caller aligned to 4); False for a string with a NUL in it."""
+    if '\0' in text:
+        return False
+    encoded = text.encode('utf-8')
+    out += _UINT32.pack(len(encoded) + 1)
+    out += encoded
+    out += b'\0'
+    return True
+
+
+def _align4(out: bytearray) -> None:
+    out += b'\0' * (-(len(out) - 4) % 4)
+
+
+_STAMP = struct.Struct('<iI')
 _UINT32 = struct.Struct('<I')
 _POSE = struct.Struct('<7d')
 _FLOAT64 = struct.Struct('<d')

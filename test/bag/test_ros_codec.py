@@ -125,3 +125,24 @@ def test_direct_cdr_writers_decode_to_the_messages_of_the_converters(frame_id: s
     assert deserialize(data, 'nav_msgs/msg/Odometry') == message
     assert ros_codec.float64_cdr(0.8125) == serialize(Float64(data=0.8125))
     assert ros_codec.cdr_text('nörd') is None and ros_codec.cdr_text('a\0b') is None
+
+
+def test_diagnostic_array_cdr_decodes_to_make_diagnostic_array() -> None:
+    from builtin_interfaces.msg import Time
+
+    from lf_predictor_ros.nodes.diagnostics import make_diagnostic_array, status_fields
+
+    stamp = Time(sec=360, nanosec=100_000_000)
+    for values in ({}, {'state': 'trained', 'wave_peak_freq': 0.8001, 'ok': True, 'n': 3,
+                        'note': 'ω0 from the fit', 'x': math.nan}):
+        for level, message in (('OK', 'trained: loss 0.0057, ω0 0.800'), ('ERROR', ''),
+                               ('WARN', 'a')):
+            fields = status_fields('replay: lf predictor', level, message, values)
+            data = ros_codec.diagnostic_array_cdr(stamp.sec, stamp.nanosec, '', [fields])
+            assert data is not None
+            expected = make_diagnostic_array('replay: lf predictor', level, message, values,
+                                             stamp=stamp)
+            assert len(data) == len(serialize(expected))
+            assert deserialize(data, 'diagnostic_msgs/msg/DiagnosticArray') == expected
+    nul = status_fields('a', 'OK', 'b\0c')
+    assert ros_codec.diagnostic_array_cdr(0, 0, '', [nul]) is None

@@ -587,8 +587,22 @@ class _OneLayerParts(NamedTuple):
     y_std: torch.Tensor  # (n_out,)
 
 
+@dataclass
+class _LmScratch:
+    """One training's reusable LM Jacobian arrays (what they hold is valid until the next use).
+
+    ``columns``: the residual Jacobian array (its zero blocks stay zero, every other entry is
+    written again); ``x_s``: the standardized regressors, which depend on the window and the
+    network's standardization only, not on the weights.
+    """
+
+    columns: torch.Tensor | None = None
+    x_s: torch.Tensor | None = None
+
+
 def _one_layer_parts(
-    net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, x: torch.Tensor
+    net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, x: torch.Tensor,
+    scratch: _LmScratch | None = None,
 ) -> _OneLayerParts | None:
     """Forward values for ``_one_layer_jacobian``; None unless earth frame, 1 layer, bypass."""
     spec = net.spec
@@ -599,7 +613,10 @@ def _one_layer_parts(
     rows = x.shape[0]
     n_out, hidden = w2.shape
     with torch.no_grad():
-        x_s = _standardized_rows(net, x)
+        x_s = scratch.x_s if scratch is not None and scratch.x_s is not None else \
+            _standardized_rows(net, x)
+        if scratch is not None:
+            scratch.x_s = x_s
         tanh = torch.tanh(torch.nn.functional.linear(x_s, w1, b1))
         y_std = net.y_std
         g_pre = torch.ops.aten.tanh_backward(
@@ -653,7 +670,7 @@ def _fill_one_layer(out: torch.Tensor, parts: _OneLayerParts) -> None:
 
 def _one_layer_residual_jacobian(
     net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
-    derivative_weight: float, buffer: list[torch.Tensor] | None = None,
+    derivative_weight: float, scratch: _LmScratch | None = None,
 ) -> torch.Tensor | None:
     """``_residual_jacobian(_prediction_jacobian(...))`` of a one-layer earth-frame network.
 
@@ -661,13 +678,12 @@ def _one_layer_residual_jacobian(
     in the residual Jacobian's own layout (n_weights, n_residuals), and the residual map's
     element-wise steps run on it in place, so neither the whole window's Jacobian nor a
     transposing copy is made. The same numbers: see ``_one_layer_jacobian`` and
-    ``_residual_columns``. None when it does not apply. ``buffer``: a list kept by the caller
-    across epochs; the array it holds is reused (its zero blocks stay zero, every other entry
-    is written again), so the returned Jacobian is only valid until the next call.
+    ``_residual_columns``. None when it does not apply. With ``scratch`` (one per training)
+    its arrays are reused: the returned Jacobian is then valid until the next call.
     """
     if derivative_weight > 0.0 or window.body is not None:
         return None
-    parts = _one_layer_parts(net, layout, flat, window.x_series)
+    parts = _one_layer_parts(net, layout, flat, window.x_series, scratch)
     if parts is None:
         return None
     rows, n_out = window.x_series.shape[0], parts.y_std.shape[0]
@@ -679,7 +695,7 @@ def _one_layer_residual_jacobian(
                             offset.view(n_keep, n_out))
     # A Jacobian entry that is 0 maps to ((0 − target)/scale)/√n − offset = +0 exactly (the
     # offset is that same number): only the non-zero blocks are computed.
-    columns = _zeroed(buffer, (flat.numel(), n_keep, n_out))
+    columns = _zeroed(scratch, (flat.numel(), n_keep, n_out))
     w1_end = hidden * n_in
     w1 = columns[:w1_end].view(hidden, n_in, n_keep, n_out)
     torch.mul(g_pre.permute(2, 0, 1)[:, None], x_s.T[None, :, :, None], out=w1)
@@ -705,13 +721,13 @@ def _one_layer_residual_jacobian(
     return columns.view(flat.numel(), -1).T
 
 
-def _zeroed(buffer: list[torch.Tensor] | None, shape: tuple[int, int, int]) -> torch.Tensor:
-    """A zero array of ``shape`` the first time; then the one in ``buffer`` as it was left."""
-    if buffer and buffer[0].shape == shape:
-        return buffer[0]
+def _zeroed(scratch: _LmScratch | None, shape: tuple[int, int, int]) -> torch.Tensor:
+    """A zero array of ``shape`` the first time; then the scratch one as it was left."""
+    if scratch is not None and scratch.columns is not None and scratch.columns.shape == shape:
+        return scratch.columns
     columns = torch.zeros(shape, dtype=torch.float64)
-    if buffer is not None:
-        buffer[:] = [columns]
+    if scratch is not None:
+        scratch.columns = columns
     return columns
 
 
@@ -808,15 +824,15 @@ def _residual_columns(
 
 def _lm_jacobian(
     runner: _WindowPredictor, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
-    parallel: bool, derivative_weight: float, buffer: list[torch.Tensor] | None = None,
+    parallel: bool, derivative_weight: float, scratch: _LmScratch | None = None,
 ) -> torch.Tensor:
     """Jacobian of the data residuals w.r.t. the weights, (n_residuals, n_weights).
 
-    ``buffer``: see ``_one_layer_residual_jacobian`` (valid until the next call then).
+    ``scratch``: see ``_one_layer_residual_jacobian`` (valid until the next call then).
     """
     if not parallel or runner.nfb == 0:
         direct = _one_layer_residual_jacobian(runner.net, layout, flat, window,
-                                              derivative_weight, buffer)
+                                              derivative_weight, scratch)
         if direct is not None:
             return direct
     return _residual_jacobian(_prediction_jacobian(runner, layout, flat, window, parallel),
@@ -843,7 +859,7 @@ def _levenberg_marquardt(
         residuals = residual_fn(weights)
     objective = objective_of(weights, residuals)
     identity = torch.eye(weights.numel(), dtype=weights.dtype)
-    jacobian_buffer: list[torch.Tensor] = []  # one epoch's Jacobian is dead at the next's
+    scratch = _LmScratch()  # one epoch's Jacobian is dead at the next's
     mu = settings.lm_mu0
     reason = 'max_epochs'
     for _ in range(settings.max_epochs):
@@ -852,7 +868,7 @@ def _levenberg_marquardt(
             reason = stop
             break
         jacobian = _lm_jacobian(runner, layout, weights, window, parallel,
-                                settings.derivative_weight, jacobian_buffer)
+                                settings.derivative_weight, scratch)
         gradient = jacobian.T @ residuals + decay * weights  # ½ ∇J
         if float(torch.linalg.vector_norm(2.0 * gradient)) <= settings.min_grad:
             reason = 'min_grad'

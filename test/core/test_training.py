@@ -399,7 +399,7 @@ def test_one_layer_jacobian_is_bitwise_vmap_jacrev(ramp_invariant: bool) -> None
                                           (x_row[None, :],))[0]
 
     generator = torch.Generator().manual_seed(25)
-    buffer: list[torch.Tensor] = []  # reused across the two weights, as in the LM epochs
+    scratch = training._LmScratch()  # reused across the two weights, as in the LM epochs
     for weights in (flat, flat + 0.3 * torch.randn(flat.shape, generator=generator,
                                                    dtype=torch.float64)):
         expected = torch.func.vmap(torch.func.jacrev(one_row), in_dims=(None, 0))(
@@ -413,7 +413,7 @@ def test_one_layer_jacobian_is_bitwise_vmap_jacrev(ramp_invariant: bool) -> None
         direct = training._lm_jacobian(runner, layout, weights, window, False, 0.0)
         assert direct.stride() == reference.stride()
         assert torch.equal(direct.view(torch.int64), reference.view(torch.int64))
-        reused = training._lm_jacobian(runner, layout, weights, window, False, 0.0, buffer)
+        reused = training._lm_jacobian(runner, layout, weights, window, False, 0.0, scratch)
         assert torch.equal(reused.view(torch.int64), reference.view(torch.int64))
     two_layers = NnarmaxNet(NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=3, ny=4, nfb=0,
                                         hidden_units=2, hidden_layers=2), seed=1)

@@ -598,6 +598,9 @@ class _LmScratch:
 
     columns: torch.Tensor | None = None
     x_s: torch.Tensor | None = None
+    # the window forward's own (batched) standardized regressors and relative base
+    forward_x_s: torch.Tensor | None = None
+    forward_base: torch.Tensor | None = None
 
 
 def _one_layer_parts(
@@ -822,6 +825,38 @@ def _residual_columns(
     return torch.cat((mse, derivative))
 
 
+def _one_layer_prediction(
+    runner: _WindowPredictor, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
+    parallel: bool, scratch: _LmScratch,
+) -> torch.Tensor | None:
+    """``_window_prediction`` (no grad) of a one-layer earth-frame network, x_s kept in scratch.
+
+    ``NnarmaxNet.forward``'s operations in its order on the weights ``flat``; the standardized
+    regressors and the relative base (weight-free) are computed once per training. None when
+    it does not apply.
+    """
+    net = runner.net
+    spec = net.spec
+    if (parallel and runner.nfb > 0) or spec.body_frame or spec.hidden_layers != 1 or \
+            layout.names != _ONE_LAYER_NAMES:
+        return None
+    if scratch.forward_x_s is None:
+        x = window.x_series
+        if spec.relative:
+            _, shift, scratch.forward_base = _relative_frame_torch(spec, x)
+            x = x - shift
+        x_mean, x_std = net.regressor_standardization()
+        scratch.forward_x_s = (x - x_mean) / x_std
+    x_s = scratch.forward_x_s
+    params = layout.unflatten(flat)
+    linear = torch.nn.functional.linear
+    hidden = torch.tanh(linear(x_s, params['hidden.0.weight'], params['hidden.0.bias']))
+    out = linear(hidden, params['output.weight'], params['output.bias'])
+    out = out + linear(x_s, params['bypass.weight'])
+    prediction = net.y_mean + net.y_std * out
+    return prediction if scratch.forward_base is None else scratch.forward_base + prediction
+
+
 def _lm_jacobian(
     runner: _WindowPredictor, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
     parallel: bool, derivative_weight: float, scratch: _LmScratch | None = None,
@@ -848,18 +883,20 @@ def _levenberg_marquardt(
     decay = decay_vector(runner.net, settings.weight_decay)
 
     def residual_fn(flat: torch.Tensor) -> torch.Tensor:
-        prediction = _window_prediction(runner, layout, flat, window, parallel)
+        prediction = _one_layer_prediction(runner, layout, flat, window, parallel, scratch)
+        if prediction is None:
+            prediction = _window_prediction(runner, layout, flat, window, parallel)
         return _data_residuals(prediction, window, settings.derivative_weight)
 
     def objective_of(flat: torch.Tensor, residuals: torch.Tensor) -> float:
         return float(torch.sum(residuals**2) + torch.sum(decay * flat**2))
 
+    scratch = _LmScratch()  # one epoch's Jacobian is dead at the next's
     with torch.no_grad():
         weights = torch.nn.utils.parameters_to_vector(runner.net.parameters()).detach().clone()
         residuals = residual_fn(weights)
     objective = objective_of(weights, residuals)
     identity = torch.eye(weights.numel(), dtype=weights.dtype)
-    scratch = _LmScratch()  # one epoch's Jacobian is dead at the next's
     mu = settings.lm_mu0
     reason = 'max_epochs'
     for _ in range(settings.max_epochs):

@@ -415,6 +415,12 @@ def test_one_layer_jacobian_is_bitwise_vmap_jacrev(ramp_invariant: bool) -> None
         assert torch.equal(direct.view(torch.int64), reference.view(torch.int64))
         reused = training._lm_jacobian(runner, layout, weights, window, False, 0.0, scratch)
         assert torch.equal(reused.view(torch.int64), reference.view(torch.int64))
+        with torch.no_grad():  # the LM's candidate forward pass, x_s kept in scratch
+            forward = training._window_prediction(runner, layout, weights, window, False)
+            kept = training._one_layer_prediction(runner, layout, weights, window, False,
+                                                  scratch)
+        assert kept is not None
+        assert torch.equal(kept.view(torch.int64), forward.view(torch.int64))
     two_layers = NnarmaxNet(NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=3, ny=4, nfb=0,
                                         hidden_units=2, hidden_layers=2), seed=1)
     assert training._one_layer_jacobian(two_layers, training._FlatParameters.of(two_layers),

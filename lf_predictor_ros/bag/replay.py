@@ -82,7 +82,17 @@ import yaml
 
 from lf_predictor_ros.bag.mcap_reader import BagError, BagReader
 from lf_predictor_ros.bag.mcap_writer import BagWriter
-from lf_predictor_ros.bag.ros_codec import deserialize, offered_qos_yaml, serialize
+from lf_predictor_ros.bag.ros_codec import (
+    StampedFields,
+    cdr_text,
+    diagnostic_array_cdr,
+    float64_cdr,
+    odometry_cdr,
+    offered_qos_yaml,
+    pose_stamped_cdr,
+    serialize,
+    stamped_fields,
+)
 from lf_predictor_ros.core.alignment import AlignedSample, AlignerSettings, InputAligner
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.estimator import EstimatorStatus, wrap_to_pi
@@ -96,18 +106,19 @@ from lf_predictor_ros.nodes.conversions import (
     FRAME_BODY,
     FRAME_EARTH,
     NS_PER_S,
-    msg_to_force,
-    msg_to_pose,
+    force_from_fields,
+    odometry_fields,
     odometry_to_msg,
+    pose_from_fields,
     pose_to_msg,
     sec_to_stamp,
-    stamp_to_ns,
 )
 from lf_predictor_ros.nodes.diagnostics import (
     DiagnosticValue,
     input_values,
     make_diagnostic_array,
     predictor_values,
+    status_fields,
     with_reference_and_odometry,
 )
 from lf_predictor_ros.nodes.lf_odom import OdomDriver, dead_reckoning_silence
@@ -342,6 +353,19 @@ def predictor_diagnostics(status: EstimatorStatus, counters: Mapping[str, int],
     and ``odometry`` (level, message) of the LF odometry raise the level as in the node
     (`nodes.diagnostics.with_reference_and_odometry`).
     """
+    level, message, values = predictor_diagnostics_fields(
+        status, counters, aligner_counters, samples=samples, extra=extra, reference=reference,
+        odometry=odometry)
+    return make_diagnostic_array(name, level, message, values, stamp=stamp)
+
+
+def predictor_diagnostics_fields(
+        status: EstimatorStatus, counters: Mapping[str, int],
+        aligner_counters: Mapping[str, int], *, samples: int,
+        extra: Mapping[str, DiagnosticValue] | None = None,
+        reference: tuple[str, str] = ('OK', ''), odometry: tuple[str, str] = ('OK', ''),
+) -> tuple[str, str, dict[str, DiagnosticValue]]:
+    """(level, message, values) of `predictor_diagnostics`."""
     values: dict[str, DiagnosticValue] = {
         **predictor_values(status, counters),
         **input_values(aligner_counters, samples),
@@ -350,7 +374,7 @@ def predictor_diagnostics(status: EstimatorStatus, counters: Mapping[str, int],
     level = _LEVEL_OF_STATE.get(status.state, 'WARN')
     message = f'{status.state}: {status.message}'
     level, message = with_reference_and_odometry(level, message, reference, odometry)
-    return make_diagnostic_array(name, level, message, values, stamp=stamp)
+    return level, message, values
 
 
 # ------------------------------------------------------------------------------ progress
@@ -464,10 +488,22 @@ class ReplayResult:
         return self.bag_duration / self.wall_time if self.wall_time > 0.0 else math.inf
 
 
-def _stamp_seconds(message: Any, log_time_ns: int) -> float:
+def _stamp_seconds(fields: StampedFields, log_time_ns: int) -> float:
     """Header stamp [s]; the log time when the stamp is unset (zero)."""
-    ns = stamp_to_ns(message.header.stamp)
+    ns = int(fields.sec) * NS_PER_S + int(fields.nanosec)  # nodes.conversions.stamp_to_ns
     return (ns if ns > 0 else log_time_ns) / NS_PER_S
+
+
+def _pose_of(fields: StampedFields) -> FloatArray:
+    """``msg_to_pose`` of the message (ValueError for a non-finite pose or a zero quaternion)."""
+    x, y, _, qx, qy, qz, qw = fields.values
+    return pose_from_fields(x, y, qw, qx, qy, qz)
+
+
+def _force_of(fields: StampedFields) -> FloatArray:
+    """``msg_to_force`` of the message (ValueError for a non-finite force)."""
+    surge, sway, _, _, _, yaw_moment = fields.values
+    return force_from_fields(surge, sway, yaw_moment)
 
 
 def _check_input_topics(reader: BagReader, options: ReplayOptions) -> dict[str, str]:
@@ -570,9 +606,9 @@ class _Replayer:
         self.writer.write(channel, log_time_ns, data, publish_time_ns)
         self.result.messages_out += 1
 
-    def _decode(self, data: bytes, type_name: str, topic: str) -> Any:
+    def _decode(self, data: bytes, type_name: str, topic: str) -> StampedFields:
         try:
-            return deserialize(data, type_name)
+            return stamped_fields(data, type_name)
         except Exception as err:  # rclpy raises plain exceptions on malformed CDR
             raise BagError(f'a message on {topic!r} does not decode as {type_name} ({err}); '
                            'the bag is corrupt') from None
@@ -580,7 +616,7 @@ class _Replayer:
     def _thrust(self, data: bytes, log_time_ns: int) -> None:
         message = self._decode(data, WRENCH_TYPE, self.options.thrust_topic)
         try:
-            force: object = msg_to_force(message)
+            force: object = _force_of(message)
         except ValueError:
             force = np.full(3, np.nan)  # the aligner drops and counts it
         t = _stamp_seconds(message, log_time_ns)
@@ -594,7 +630,7 @@ class _Replayer:
     def _command(self, data: bytes, log_time_ns: int) -> None:
         message = self._decode(data, WRENCH_TYPE, self.options.command_topic)
         try:
-            force = msg_to_force(message)
+            force = _force_of(message)
         except ValueError:
             force = np.full(3, np.nan)  # counted by the driver (commands_invalid)
         self.odom.command(_stamp_seconds(message, log_time_ns), force)
@@ -602,7 +638,7 @@ class _Replayer:
     def _truth(self, data: bytes, log_time_ns: int) -> None:
         message = self._decode(data, POSE_TYPE, self.options.truth_topic)
         try:
-            pose = msg_to_pose(message)
+            pose = _pose_of(message)
         except ValueError:
             return
         self.result.truth_t.append(_stamp_seconds(message, log_time_ns))
@@ -611,7 +647,7 @@ class _Replayer:
     def _pose(self, data: bytes, log_time_ns: int) -> None:
         message = self._decode(data, POSE_TYPE, self.options.pose_topic)
         try:
-            pose: object = msg_to_pose(message)
+            pose: object = _pose_of(message)
         except ValueError:
             pose = np.full(3, np.nan)  # the aligner drops and counts it
         t = _stamp_seconds(message, log_time_ns)
@@ -663,7 +699,10 @@ class _Replayer:
             self._write_estimate(odometry, log_time_ns)
         freq = self.predictor.wave_peak_freq
         if freq is not None:
-            self._write(self.wave_channel, log_time_ns, serialize(Float64(data=float(freq))))
+            value = float(freq)
+            data = float64_cdr(value) if math.isfinite(value) else \
+                serialize(Float64(data=value))  # rclpy refuses it, as before
+            self._write(self.wave_channel, log_time_ns, data)
         self._maybe_diagnostics(sample.t, log_time_ns)
 
     def _maybe_diagnostics(self, t: float, log_time_ns: int) -> None:
@@ -679,11 +718,20 @@ class _Replayer:
         """One estimate on the lf and odom topics (same stamp and pose)."""
         stamp = sec_to_stamp(estimate.stamp)
         frame = self.config.frame_id
-        lf_msg = pose_to_msg(estimate.pose, stamp, frame)
-        odom_msg = odometry_to_msg(stamp, estimate.pose, estimate.pose_cov, estimate.twist,
-                                   estimate.twist_cov, frame, FRAME_BODY)
-        self._write(self.lf_channel, log_time_ns, serialize(lf_msg))
-        self._write(self.odom_channel, log_time_ns, serialize(odom_msg))
+        frame_bytes, body_bytes = cdr_text(frame), cdr_text(FRAME_BODY)
+        if frame_bytes is None or body_bytes is None:  # rclpy's encoder for unusual ids
+            lf_data = serialize(pose_to_msg(estimate.pose, stamp, frame))
+            odom_data = serialize(odometry_to_msg(
+                stamp, estimate.pose, estimate.pose_cov, estimate.twist, estimate.twist_cov,
+                frame, FRAME_BODY))
+        else:  # the same numbers written straight to CDR (odometry_fields checks them)
+            pose, pose_cov, twist, twist_cov = odometry_fields(
+                estimate.pose, estimate.pose_cov, estimate.twist, estimate.twist_cov)
+            lf_data = pose_stamped_cdr(stamp.sec, stamp.nanosec, frame_bytes, pose)
+            odom_data = odometry_cdr(stamp.sec, stamp.nanosec, frame_bytes, body_bytes, pose,
+                                     pose_cov, twist, twist_cov)
+        self._write(self.lf_channel, log_time_ns, lf_data)
+        self._write(self.odom_channel, log_time_ns, odom_data)
 
     def _diagnostics(self, t: float, log_time_ns: int, status: EstimatorStatus) -> None:
         extra: dict[str, DiagnosticValue] = {
@@ -695,12 +743,17 @@ class _Replayer:
         extra['ndof'] = self.config.params.ndof
         extra['unfiltered_dofs'] = 'east yaw' if self.config.params.ndof == 1 else 'none'
         extra.update(self.odom.values())
-        array = predictor_diagnostics(status, self.predictor.counters,
-                                      self.aligner.counters.as_dict(), sec_to_stamp(t),
-                                      samples=self.result.estimates, extra=extra,
-                                      reference=self.checker.status(),
-                                      odometry=self.odom.status())
-        self._write(self._diagnostics_channel, log_time_ns, serialize(array))
+        stamp = sec_to_stamp(t)
+        level, message, values = predictor_diagnostics_fields(
+            status, self.predictor.counters, self.aligner.counters.as_dict(),
+            samples=self.result.estimates, extra=extra, reference=self.checker.status(),
+            odometry=self.odom.status())
+        fields = status_fields(DIAGNOSTICS_NAME, level, message, values)
+        data = diagnostic_array_cdr(stamp.sec, stamp.nanosec, '', [fields])
+        if data is None:  # a NUL in a string: rclpy's encoder
+            data = serialize(make_diagnostic_array(DIAGNOSTICS_NAME, level, message, values,
+                                                   stamp=stamp))
+        self._write(self._diagnostics_channel, log_time_ns, data)
 
 
 def replay(options: ReplayOptions, config: ReplayConfig,

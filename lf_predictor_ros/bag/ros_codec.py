@@ -11,7 +11,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 import importlib
-from typing import Any
+import struct
+from typing import Any, NamedTuple
 
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -64,6 +65,159 @@ def serialize(message: Any) -> bytes:
 def deserialize(data: bytes, type_name: str) -> Any:
     """The ROS message of type `type_name` encoded in CDR `data`."""
     return deserialize_message(data, message_class(type_name))
+
+
+class StampedFields(NamedTuple):
+    """Header stamp and the numbers of a PoseStamped or WrenchStamped (frame_id not kept)."""
+
+    sec: int
+    nanosec: int
+    values: tuple[float, ...]  # pose: position x y z, orientation x y z w; wrench: force, torque
+
+
+POSE_STAMPED = 'geometry_msgs/msg/PoseStamped'
+WRENCH_STAMPED = 'geometry_msgs/msg/WrenchStamped'
+_CDR_LE = b'\x00\x01\x00\x00'  # encapsulation: plain CDR, little endian, no options
+_HEADER = struct.Struct('<iII')  # stamp.sec, stamp.nanosec, frame_id length (NUL included)
+_BODIES = {POSE_STAMPED: struct.Struct('<7d'), WRENCH_STAMPED: struct.Struct('<6d')}
+
+
+def stamped_fields(data: bytes, type_name: str) -> StampedFields:
+    """Stamp and numbers of a PoseStamped / WrenchStamped in CDR ``data``.
+
+    The common encoding (CDR little endian, ASCII frame_id, nothing after the last double) is
+    read directly: the same numbers as ``deserialize`` gives, without building the message
+    objects. Anything else goes through ``deserialize`` (and raises what it raises).
+    """
+    body = _BODIES[type_name]
+    fields = _unpack_stamped(data, body)
+    if fields is not None:
+        return fields
+    message = deserialize(data, type_name)
+    stamp = message.header.stamp
+    values: tuple[float, ...]
+    if type_name == POSE_STAMPED:
+        position, q = message.pose.position, message.pose.orientation
+        values = (position.x, position.y, position.z, q.x, q.y, q.z, q.w)
+    else:
+        force, torque = message.wrench.force, message.wrench.torque
+        values = (force.x, force.y, force.z, torque.x, torque.y, torque.z)
+    return StampedFields(stamp.sec, stamp.nanosec, values)
+
+
+def _unpack_stamped(data: bytes, body: struct.Struct) -> StampedFields | None:
+    """Header + fixed block of doubles from plain little-endian CDR; None for anything else."""
+    if len(data) < 4 + _HEADER.size or data[:4] != _CDR_LE:
+        return None
+    sec, nanosec, length = _HEADER.unpack_from(data, 4)
+    end = 4 + _HEADER.size + length  # after the frame_id's NUL
+    start = 4 + ((end - 4 + 7) & ~7)  # doubles are 8-aligned in the payload
+    if length == 0 or len(data) != start + body.size or data[end - 1] != 0:
+        return None
+    frame_id = data[4 + _HEADER.size:end - 1]
+    if not frame_id.isascii() or 0 in frame_id:
+        return None
+    return StampedFields(sec, nanosec, body.unpack_from(data, start))
+
+
+def cdr_text(text: str) -> bytes | None:
+    """The UTF-8 bytes of a string field when the direct writers below can take it, else None."""
+    return text.encode('ascii') if text.isascii() and '\0' not in text else None
+
+
+def pose_stamped_cdr(sec: int, nanosec: int, frame_id: bytes,
+                     values: Sequence[float]) -> bytes:
+    """CDR of a PoseStamped (position x y z, orientation x y z w), as `serialize` (padding 0).
+
+    ``frame_id`` from `cdr_text`.
+    """
+    out = _header_cdr(sec, nanosec, frame_id)
+    _align8(out)
+    out += _POSE.pack(*values)
+    return bytes(out)
+
+
+def odometry_cdr(sec: int, nanosec: int, frame_id: bytes, child_frame_id: bytes,
+                 pose: Sequence[float], pose_covariance: Sequence[float],
+                 twist: Sequence[float], twist_covariance: Sequence[float]) -> bytes:
+    """CDR of a nav_msgs/Odometry, as `serialize` (padding 0); string ids from `cdr_text`."""
+    out = _header_cdr(sec, nanosec, frame_id)
+    out += b'\0' * (-(len(out) - 4) % 4)
+    out += _UINT32.pack(len(child_frame_id) + 1) + child_frame_id + b'\0'
+    _align8(out)
+    out += _ODOMETRY_BODY.pack(*pose, *pose_covariance, *twist, *twist_covariance)
+    return bytes(out)
+
+
+def float64_cdr(value: float) -> bytes:
+    """CDR of a std_msgs/Float64."""
+    return _CDR_LE + _FLOAT64.pack(value)
+
+
+def diagnostic_array_cdr(sec: int, nanosec: int, frame_id: str,
+                         statuses: Sequence[tuple[bytes, str, str, str,
+                                                  Sequence[tuple[str, str]]]]) -> bytes | None:
+    """CDR of a DiagnosticArray, as `serialize` (padding 0); None if a string holds a NUL.
+
+    ``statuses``: (level byte, name, message, hardware_id, [(key, value)]) each, as
+    `nodes.diagnostics.status_fields` gives them. Strings are UTF-8, as rclpy writes them.
+    """
+    out = bytearray(_CDR_LE)
+    out += _STAMP.pack(sec, nanosec)
+    if not _put_string(out, frame_id):
+        return None
+    _align4(out)
+    out += _UINT32.pack(len(statuses))
+    for level, name, message, hardware_id, values in statuses:
+        out += level
+        for text in (name, message, hardware_id):
+            _align4(out)
+            if not _put_string(out, text):
+                return None
+        _align4(out)
+        out += _UINT32.pack(len(values))
+        for key, value in values:
+            _align4(out)
+            if not _put_string(out, key):
+                return None
+            _align4(out)
+            if not _put_string(out, value):
+                return None
+    return bytes(out)
+
+
+def _put_string(out: bytearray, text: str) -> bool:
+    """Append a CDR string (the caller aligned to 4); False for a string with a NUL in it."""
+    if '\0' in text:
+        return False
+    encoded = text.encode('utf-8')
+    out += _UINT32.pack(len(encoded) + 1)
+    out += encoded
+    out += b'\0'
+    return True
+
+
+def _align4(out: bytearray) -> None:
+    out += b'\0' * (-(len(out) - 4) % 4)
+
+
+_STAMP = struct.Struct('<iI')
+_UINT32 = struct.Struct('<I')
+_POSE = struct.Struct('<7d')
+_FLOAT64 = struct.Struct('<d')
+_ODOMETRY_BODY = struct.Struct('<85d')  # pose 7, covariance 36, twist 6, covariance 36
+
+
+def _header_cdr(sec: int, nanosec: int, frame_id: bytes) -> bytearray:
+    out = bytearray(_CDR_LE)
+    out += _HEADER.pack(sec, nanosec, len(frame_id) + 1)
+    out += frame_id
+    out += b'\0'
+    return out
+
+
+def _align8(out: bytearray) -> None:
+    out += b'\0' * (-(len(out) - 4) % 8)
 
 
 def qos_to_dict(qos: QoSProfile) -> dict[str, Any]:

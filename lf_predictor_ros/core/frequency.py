@@ -35,8 +35,10 @@ Heading must be unwrapped (``heading.unwrap_heading``) before it is passed here.
 """
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 import math
+import threading
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -51,6 +53,12 @@ MIN_BAND_BINS = 3  # Welch bins needed inside the wave band to find and refine a
 FIT_DAMPING_RANGE = (0.005, 1.0)  # λ range [-] allowed in the spectrum fit (thesis eq. 3.10)
 
 _FloatArray = NDArray[np.float64]
+
+# The last few estimates by their exact inputs: with the motion gate on, the twin's retraining
+# estimates ω0 on the very same window right after the holding network's (half of all calls).
+_RECENT_SIZE = 4
+_RECENT: OrderedDict[tuple[object, ...], FrequencyEstimate] = OrderedDict()
+_RECENT_LOCK = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -132,6 +140,26 @@ def estimate_wave_peak_freq(
     """
     data = _as_columns(y)
     _check_parameters(data.shape[0], sample_time, highpass_cutoff, wave_band, min_peak_ratio)
+    # repr is exact for floats (and tells -0.0 from 0.0), so equal keys mean equal inputs
+    key = (data.shape, data.tobytes(), repr(sample_time), repr(highpass_cutoff),
+           repr(wave_band), repr(min_peak_ratio), repr(previous))
+    with _RECENT_LOCK:
+        cached = _RECENT.get(key)
+    if cached is not None:
+        return cached
+    estimate = _estimate(data, sample_time, highpass_cutoff, wave_band, min_peak_ratio,
+                         previous)
+    with _RECENT_LOCK:
+        _RECENT[key] = estimate
+        while len(_RECENT) > _RECENT_SIZE:
+            _RECENT.popitem(last=False)
+    return estimate
+
+
+def _estimate(data: _FloatArray, sample_time: float, highpass_cutoff: float,
+              wave_band: tuple[float, float], min_peak_ratio: float,
+              previous: float | FrequencyEstimate | None) -> FrequencyEstimate:
+    """``estimate_wave_peak_freq`` of checked (n, k) data (no cache)."""
     omega, psd = _compensated_psd(data, sample_time, highpass_cutoff)
     in_band = (omega >= wave_band[0]) & (omega <= wave_band[1])
     per_dof: list[float] = []
@@ -250,16 +278,21 @@ def _fit_peak(omega: _FloatArray, psd: _FloatArray, in_band: NDArray[np.bool_],
         return start_freq, math.nan
     floor = max(float(np.median(band_psd)), start_value * 1e-6)
     low, high = float(band_omega[0]), float(band_omega[-1])
+    band_omega_sq = band_omega ** 2  # hoisted out of the ~400 evaluations of one fit
+    min_damping, max_damping = FIT_DAMPING_RANGE
+    add_reduce = np.add.reduce  # what np.sum of a 1-D array runs, without its dispatch
 
     def negative_log_likelihood(theta: _FloatArray) -> float:
-        wave_freq, log_damping, log_gain, log_floor = (float(v) for v in theta)
+        wave_freq, log_damping, log_gain, log_floor = theta.tolist()
         damping = math.exp(log_damping)
-        if not (low <= wave_freq <= high
-                and FIT_DAMPING_RANGE[0] <= damping <= FIT_DAMPING_RANGE[1]):
+        if not (low <= wave_freq <= high and min_damping <= damping <= max_damping):
             return math.inf
-        model = _wave_spectrum(band_omega, wave_freq, damping) * math.exp(log_gain)
-        model = model + math.exp(log_floor)
-        return float(np.sum(np.log(model) + band_psd / model))
+        model = _wave_spectrum(band_omega, wave_freq, damping, band_omega_sq)
+        model *= math.exp(log_gain)
+        model += math.exp(log_floor)
+        terms = np.log(model)
+        terms += band_psd / model
+        return float(add_reduce(terms))
 
     theta0 = np.array([start_freq, math.log(0.1), math.log(start_value), math.log(floor)])
     # a vertex outside the band scores inf; scipy's convergence test then computes inf − inf
@@ -273,10 +306,16 @@ def _fit_peak(omega: _FloatArray, psd: _FloatArray, in_band: NDArray[np.bool_],
     return fitted, math.exp(float(result.x[1]))
 
 
-def _wave_spectrum(omega: _FloatArray, wave_freq: float, damping: float) -> _FloatArray:
-    """|H(jω)|² / σ² of the shaping filter H(s) = 2λω0σ s / (s² + 2λω0 s + ω0²) (eq. 3.10)."""
+def _wave_spectrum(omega: _FloatArray, wave_freq: float, damping: float,
+                   omega_sq: _FloatArray | None = None) -> _FloatArray:
+    """|H(jω)|² / σ² of the shaping filter H(s) = 2λω0σ s / (s² + 2λω0 s + ω0²) (eq. 3.10).
+
+    ``omega_sq``: ``omega ** 2`` when the caller has it already (the same numbers).
+    """
     damped = (2.0 * damping * wave_freq * omega) ** 2
-    return np.asarray(damped / ((wave_freq ** 2 - omega ** 2) ** 2 + damped), dtype=np.float64)
+    if omega_sq is None:
+        omega_sq = omega ** 2
+    return np.asarray(damped / ((wave_freq ** 2 - omega_sq) ** 2 + damped), dtype=np.float64)
 
 
 def _fallback(previous: float | FrequencyEstimate | None, peak_ratio: float,

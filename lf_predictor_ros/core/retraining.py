@@ -427,11 +427,10 @@ def cascade_loss(params: PredictorParams, y: FloatArray, targets: FloatArray,
     cascade = CascadeFilter(ndof, params.sample_time, wave_peak_freq,
                             notch_zeta=params.fallback_notch_zeta, notch_depth=params.notch_depth,
                             lowpass_offset=params.lowpass_offset)
-    pose = np.zeros(3)
+    poses = np.zeros((len(y), 3))
+    poses[:, :ndof] = y
     out = np.empty_like(y)
-    for k in range(len(y)):
-        pose[:ndof] = y[k]
-        out[k] = cascade.update(k * params.sample_time, pose, np.zeros(3))[:ndof]
+    out[:] = cascade.update_series(poses)[:, :ndof]
     if ndof == 3:  # the cascade wraps yaw; compare on the unwrapped scale of y
         out[:, 2] = y[:, 2] + np.angle(np.exp(1j * (out[:, 2] - y[:, 2])))
     keep = mask.copy()

@@ -55,14 +55,19 @@ from dataclasses import dataclass
 import math
 import threading
 import time
-from typing import Literal, cast
+from typing import Literal, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 import torch
 from torch.func import functional_call, jacrev, vmap
 
-from lf_predictor_ros.core.network import NnarmaxNet, NnarmaxSpec, rotate_blocks_torch
+from lf_predictor_ros.core.network import (
+    NnarmaxNet,
+    NnarmaxSpec,
+    _relative_frame_torch,
+    rotate_blocks_torch,
+)
 from lf_predictor_ros.core.regressors import (
     as_series,
     build_regressors,
@@ -542,6 +547,9 @@ def _prediction_jacobian(
         return out[0]
 
     if not parallel or runner.nfb == 0:
+        written_out = _one_layer_jacobian(net, layout, flat, window.x_series)
+        if written_out is not None:
+            return written_out
         jac_w: torch.Tensor = vmap(jacrev(one_row), in_dims=(None, 0))(flat, window.x_series)
         return jac_w
     nfb, n_out = runner.nfb, window.target.shape[1]
@@ -566,18 +574,304 @@ def _prediction_jacobian(
     return torch.from_numpy(total)
 
 
+_ONE_LAYER_NAMES = ('hidden.0.weight', 'hidden.0.bias', 'output.weight', 'output.bias',
+                    'bypass.weight')
+
+
+class _OneLayerParts(NamedTuple):
+    """The forward values the written-out Jacobian of a one-tanh-layer network is made of."""
+
+    x_s: torch.Tensor  # (rows, n_in) standardized regressors
+    tanh: torch.Tensor  # (rows, hidden) tanh layer output
+    g_pre: torch.Tensor  # (rows, n_out, hidden) tanh_backward(y_std_i · W2_i, tanh)
+    y_std: torch.Tensor  # (n_out,)
+
+
+@dataclass
+class _LmScratch:
+    """One training's reusable LM Jacobian arrays (what they hold is valid until the next use).
+
+    ``columns``: the residual Jacobian array (its zero blocks stay zero, every other entry is
+    written again); ``x_s``: the standardized regressors, which depend on the window and the
+    network's standardization only, not on the weights.
+    """
+
+    columns: torch.Tensor | None = None
+    x_s: torch.Tensor | None = None
+    # the window forward's own (batched) standardized regressors and relative base
+    forward_x_s: torch.Tensor | None = None
+    forward_base: torch.Tensor | None = None
+
+
+def _one_layer_parts(
+    net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, x: torch.Tensor,
+    scratch: _LmScratch | None = None,
+) -> _OneLayerParts | None:
+    """Forward values for ``_one_layer_jacobian``; None unless earth frame, 1 layer, bypass."""
+    spec = net.spec
+    if spec.body_frame or spec.hidden_layers != 1 or layout.names != _ONE_LAYER_NAMES:
+        return None
+    params = layout.unflatten(flat)
+    w1, b1, w2 = params['hidden.0.weight'], params['hidden.0.bias'], params['output.weight']
+    rows = x.shape[0]
+    n_out, hidden = w2.shape
+    with torch.no_grad():
+        x_s = scratch.x_s if scratch is not None and scratch.x_s is not None else \
+            _standardized_rows(net, x)
+        if scratch is not None:
+            scratch.x_s = x_s
+        tanh = torch.tanh(torch.nn.functional.linear(x_s, w1, b1))
+        y_std = net.y_std
+        g_pre = torch.ops.aten.tanh_backward(
+            (y_std[:, None] * w2)[None].expand(rows, n_out, hidden), tanh[:, None, :])
+    return _OneLayerParts(x_s, tanh, g_pre, y_std)
+
+
+def _one_layer_jacobian(
+    net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, x: torch.Tensor
+) -> torch.Tensor | None:
+    """``vmap(jacrev(one_row))`` of an earth-frame network with one tanh layer and a bypass.
+
+    Written out, the backward pass of the basis vector e_i through ŷ = y_mean + y_std ·
+    (W2 tanh(W1 x_s + b1) + b2 + Wb x_s) gives single products only: y_std_i · x_s (Wb row i),
+    y_std_i · tanh (W2 row i), y_std_i (b2), g = tanh_backward(y_std_i · W2_i, tanh) (b1) and
+    g · x_s (W1); every other entry is 0. Computed as such over the whole window, each entry is
+    bit for bit the autograd one (zeros +0, as its accumulating products give them): checked on
+    every Jacobian of a 1800 s replay and by a test. The standardized regressors of a
+    ramp-invariant network come from ``vmap`` over the rows as in ``jacrev`` (its line fit
+    rounds differently over a batch). Returns None for any other network (the caller's vmap).
+    """
+    parts = _one_layer_parts(net, layout, flat, x)
+    if parts is None:
+        return None
+    rows = x.shape[0]
+    n_out = parts.y_std.shape[0]
+    jac = torch.zeros(rows, n_out, flat.numel(), dtype=torch.float64)
+    _fill_one_layer(jac.permute(2, 0, 1), parts)
+    return jac
+
+
+def _fill_one_layer(out: torch.Tensor, parts: _OneLayerParts) -> None:
+    """Write the Jacobian into zeroed ``out`` (n_weights, rows, n_out), weights in flat order."""
+    x_s, tanh, g_pre, y_std = parts
+    rows, n_in = x_s.shape
+    n_out, hidden = g_pre.shape[1:]
+    with torch.no_grad():
+        w1_end = hidden * n_in
+        w1 = out[:w1_end].unflatten(0, (hidden, n_in))
+        torch.mul(g_pre.permute(2, 0, 1)[:, None], x_s.T[None, :, :, None], out=w1)
+        w1 += 0.0  # −0 products to +0, as autograd's accumulating products
+        out[w1_end:w1_end + hidden] = g_pre.permute(2, 0, 1) + 0.0
+        w2 = out[w1_end + hidden:w1_end + hidden + n_out * hidden].unflatten(0, (n_out, hidden))
+        b2 = out[w1_end + hidden + n_out * hidden:w1_end + hidden + n_out * (hidden + 1)]
+        wb = out[w1_end + hidden + n_out * (hidden + 1):].unflatten(0, (n_out, n_in))
+        for i in range(n_out):
+            w2[i, :, :, i] = y_std[i] * tanh.T + 0.0
+            b2[i, :, i] = y_std[i]
+            wb[i, :, :, i] = y_std[i] * x_s.T + 0.0
+
+
+def _one_layer_residual_jacobian(
+    net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
+    derivative_weight: float, scratch: _LmScratch | None = None,
+) -> torch.Tensor | None:
+    """``_residual_jacobian(_prediction_jacobian(...))`` of a one-layer earth-frame network.
+
+    Only the MSE residuals (derivative_weight 0): the kept rows' written-out Jacobian is built
+    in the residual Jacobian's own layout (n_weights, n_residuals), and the residual map's
+    element-wise steps run on it in place, so neither the whole window's Jacobian nor a
+    transposing copy is made. The same numbers: see ``_one_layer_jacobian`` and
+    ``_residual_columns``. None when it does not apply. With ``scratch`` (one per training)
+    its arrays are reused: the returned Jacobian is then valid until the next call.
+    """
+    if derivative_weight > 0.0 or window.body is not None:
+        return None
+    parts = _one_layer_parts(net, layout, flat, window.x_series, scratch)
+    if parts is None:
+        return None
+    rows, n_out = window.x_series.shape[0], parts.y_std.shape[0]
+    offset = _data_residuals(torch.zeros(rows, n_out, dtype=torch.float64), window, 0.0)
+    kept = window.keep.nonzero()[:, 0]
+    x_s, tanh, g_pre = parts.x_s[kept], parts.tanh[kept], parts.g_pre[kept]
+    n_keep, (n_in, hidden) = kept.numel(), (x_s.shape[1], tanh.shape[1])
+    residual = _ResidualMap(window.target[kept], window.scale, math.sqrt(n_keep * n_out),
+                            offset.view(n_keep, n_out))
+    # A Jacobian entry that is 0 maps to ((0 − target)/scale)/√n − offset = +0 exactly (the
+    # offset is that same number): only the non-zero blocks are computed.
+    columns = _zeroed(scratch, (flat.numel(), n_keep, n_out))
+    w1_end = hidden * n_in
+    w1 = columns[:w1_end].view(hidden, n_in, n_keep, n_out)
+    torch.mul(g_pre.permute(2, 0, 1)[:, None], x_s.T[None, :, :, None], out=w1)
+    w1 += 0.0  # −0 products to +0, as autograd's accumulating products
+    residual.apply(columns[:w1_end])
+    b1 = columns[w1_end:w1_end + hidden]
+    b1.copy_(g_pre.permute(2, 0, 1))
+    b1 += 0.0
+    residual.apply(b1)
+    w2 = columns[w1_end + hidden:w1_end + hidden + n_out * hidden].view(n_out, hidden, n_keep,
+                                                                         n_out)
+    b2 = columns[w1_end + hidden + n_out * hidden:w1_end + hidden + n_out * (hidden + 1)]
+    wb = columns[w1_end + hidden + n_out * (hidden + 1):].view(n_out, n_in, n_keep, n_out)
+    for i in range(n_out):
+        torch.mul(tanh.T, parts.y_std[i], out=w2[i, :, :, i])
+        w2[i, :, :, i] += 0.0
+        residual.apply(w2[i, :, :, i], i)
+        b2[i, :, i] = parts.y_std[i]
+        residual.apply(b2[i, :, i], i)
+        torch.mul(x_s.T, parts.y_std[i], out=wb[i, :, :, i])
+        wb[i, :, :, i] += 0.0
+        residual.apply(wb[i, :, :, i], i)
+    return columns.view(flat.numel(), -1).T
+
+
+def _zeroed(scratch: _LmScratch | None, shape: tuple[int, int, int]) -> torch.Tensor:
+    """A zero array of ``shape`` the first time; then the scratch one as it was left."""
+    if scratch is not None and scratch.columns is not None and scratch.columns.shape == shape:
+        return scratch.columns
+    columns = torch.zeros(shape, dtype=torch.float64)
+    if scratch is not None:
+        scratch.columns = columns
+    return columns
+
+
+@dataclass(frozen=True)
+class _ResidualMap:
+    """The MSE residual map's element-wise steps ((v − target)/scale)/√n − offset, in place."""
+
+    target: torch.Tensor  # (n_keep, n_out) kept targets
+    scale: torch.Tensor  # (n_out,)
+    root: float  # √(n_keep · n_out)
+    offset: torch.Tensor  # (n_keep, n_out) the map of 0
+
+    def apply(self, values: torch.Tensor, channel: int | None = None) -> None:
+        """``values`` (..., n_keep, n_out), or (..., n_keep) of output ``channel``."""
+        if channel is None:
+            target, scale, offset = self.target, self.scale, self.offset
+        else:
+            target, scale = self.target[:, channel], self.scale[channel]
+            offset = self.offset[:, channel]
+        values -= target
+        values /= scale
+        values /= self.root
+        values -= offset
+
+
+def _standardized_rows(net: NnarmaxNet, x: torch.Tensor) -> torch.Tensor:
+    """The standardized (relative) regressors x_s the network's first layers see, (rows, n)."""
+    spec = net.spec
+    x_mean, x_std = net.regressor_standardization()
+
+    def one(rows: torch.Tensor) -> torch.Tensor:
+        if spec.relative:
+            rows = rows - _relative_frame_torch(spec, rows)[1]
+        return (rows - x_mean) / x_std
+
+    if spec.ramp_invariant:
+        per_row: torch.Tensor = vmap(lambda row: one(row[None, :])[0])(x)
+        return per_row
+    return one(x)
+
+
 def _residual_jacobian(
     jac_prediction: torch.Tensor, window: _Window, derivative_weight: float
 ) -> torch.Tensor:
-    """Jacobian of the data residuals from that of the predictions (the map is affine)."""
+    """Jacobian of the data residuals from that of the predictions (the map is affine).
+
+    Column j is residuals(dŷ/dw_j) − residuals(0). Earth-frame windows compute all columns at
+    once (``_residual_columns``), element for element as the per-column map; the result is laid
+    out as ``vmap(..., out_dims=1)`` lays it out (transpose of a contiguous (n_weights,
+    n_residuals)), so J^T J sees the same operands.
+    """
     offset = _data_residuals(torch.zeros(jac_prediction.shape[:2], dtype=torch.float64), window,
                              derivative_weight)
+    if window.body is None:
+        columns = _residual_columns(jac_prediction, window, derivative_weight)
+        columns -= offset[:, None]
+        return columns.T.contiguous().T
 
     def linear_part(prediction: torch.Tensor) -> torch.Tensor:
         return _data_residuals(prediction, window, derivative_weight) - offset
 
     jacobian: torch.Tensor = vmap(linear_part, in_dims=2, out_dims=1)(jac_prediction)
     return jacobian
+
+
+def _residual_columns(
+    jac_prediction: torch.Tensor, window: _Window, derivative_weight: float
+) -> torch.Tensor:
+    """``_data_residuals`` of every column jac_prediction[:, :, j] (earth frame), (n_res, n_w).
+
+    The same element-wise operations in the same order as ``_mse_residuals`` and
+    ``_derivative_residuals`` (kept rows picked first, which does not change them), in place
+    on the (rows, n_out, n_weights) array's layout: few new 15 MB buffers per LM epoch.
+    """
+    n_weights = jac_prediction.shape[2]
+    fitted = jac_prediction[:-1]
+    error = fitted[window.keep]
+    error -= window.target[window.keep][:, :, None]
+    error /= window.scale[:, None]
+    mse = error.reshape(-1, n_weights)
+    mse /= math.sqrt(error.shape[0] * error.shape[1])
+    if not derivative_weight > 0.0:
+        return mse
+    step = fitted[1:] - fitted[:-1]
+    step -= (window.target[1:] - window.target[:-1])[:, :, None]
+    step /= window.diff_scale[:, None]
+    kept = step[window.keep_pair]
+    count = kept.shape[0] * kept.shape[1]
+    derivative = kept.reshape(-1, n_weights)
+    if count > 0:
+        derivative *= math.sqrt(derivative_weight / count)
+    return torch.cat((mse, derivative))
+
+
+def _one_layer_prediction(
+    runner: _WindowPredictor, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
+    parallel: bool, scratch: _LmScratch,
+) -> torch.Tensor | None:
+    """``_window_prediction`` (no grad) of a one-layer earth-frame network, x_s kept in scratch.
+
+    ``NnarmaxNet.forward``'s operations in its order on the weights ``flat``; the standardized
+    regressors and the relative base (weight-free) are computed once per training. None when
+    it does not apply.
+    """
+    net = runner.net
+    spec = net.spec
+    if (parallel and runner.nfb > 0) or spec.body_frame or spec.hidden_layers != 1 or \
+            layout.names != _ONE_LAYER_NAMES:
+        return None
+    if scratch.forward_x_s is None:
+        x = window.x_series
+        if spec.relative:
+            _, shift, scratch.forward_base = _relative_frame_torch(spec, x)
+            x = x - shift
+        x_mean, x_std = net.regressor_standardization()
+        scratch.forward_x_s = (x - x_mean) / x_std
+    x_s = scratch.forward_x_s
+    params = layout.unflatten(flat)
+    linear = torch.nn.functional.linear
+    hidden = torch.tanh(linear(x_s, params['hidden.0.weight'], params['hidden.0.bias']))
+    out = linear(hidden, params['output.weight'], params['output.bias'])
+    out = out + linear(x_s, params['bypass.weight'])
+    prediction = net.y_mean + net.y_std * out
+    return prediction if scratch.forward_base is None else scratch.forward_base + prediction
+
+
+def _lm_jacobian(
+    runner: _WindowPredictor, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
+    parallel: bool, derivative_weight: float, scratch: _LmScratch | None = None,
+) -> torch.Tensor:
+    """Jacobian of the data residuals w.r.t. the weights, (n_residuals, n_weights).
+
+    ``scratch``: see ``_one_layer_residual_jacobian`` (valid until the next call then).
+    """
+    if not parallel or runner.nfb == 0:
+        direct = _one_layer_residual_jacobian(runner.net, layout, flat, window,
+                                              derivative_weight, scratch)
+        if direct is not None:
+            return direct
+    return _residual_jacobian(_prediction_jacobian(runner, layout, flat, window, parallel),
+                              window, derivative_weight)
 
 
 def _levenberg_marquardt(
@@ -589,12 +883,15 @@ def _levenberg_marquardt(
     decay = decay_vector(runner.net, settings.weight_decay)
 
     def residual_fn(flat: torch.Tensor) -> torch.Tensor:
-        prediction = _window_prediction(runner, layout, flat, window, parallel)
+        prediction = _one_layer_prediction(runner, layout, flat, window, parallel, scratch)
+        if prediction is None:
+            prediction = _window_prediction(runner, layout, flat, window, parallel)
         return _data_residuals(prediction, window, settings.derivative_weight)
 
     def objective_of(flat: torch.Tensor, residuals: torch.Tensor) -> float:
         return float(torch.sum(residuals**2) + torch.sum(decay * flat**2))
 
+    scratch = _LmScratch()  # one epoch's Jacobian is dead at the next's
     with torch.no_grad():
         weights = torch.nn.utils.parameters_to_vector(runner.net.parameters()).detach().clone()
         residuals = residual_fn(weights)
@@ -607,11 +904,8 @@ def _levenberg_marquardt(
         if stop is not None:
             reason = stop
             break
-        jacobian = _residual_jacobian(
-            _prediction_jacobian(runner, layout, weights, window, parallel),
-            window,
-            settings.derivative_weight,
-        )
+        jacobian = _lm_jacobian(runner, layout, weights, window, parallel,
+                                settings.derivative_weight, scratch)
         gradient = jacobian.T @ residuals + decay * weights  # ½ ∇J
         if float(torch.linalg.vector_norm(2.0 * gradient)) <= settings.min_grad:
             reason = 'min_grad'

@@ -134,23 +134,52 @@ def quaternion_to_yaw(w: float, x: float, y: float, z: float) -> float:
 
 def _fill_pose(target: Pose, pose: NDArray[np.float64]) -> None:
     """Write ``[north, east, yaw]`` into a ``geometry_msgs/Pose`` (z = 0, yaw quaternion)."""
-    north, east, yaw = pose.tolist()
+    x, y, z, qx, qy, qz, qw = pose_fields(pose)
     position, orientation = target.position, target.orientation  # one property read each
-    position.x = north
-    position.y = east
-    position.z = 0.0
-    orientation.w = math.cos(0.5 * yaw)
-    orientation.x = 0.0
-    orientation.y = 0.0
-    orientation.z = math.sin(0.5 * yaw)
+    position.x = x
+    position.y = y
+    position.z = z
+    orientation.w = qw
+    orientation.x = qx
+    orientation.y = qy
+    orientation.z = qz
+
+
+def pose_fields(pose: NDArray[np.float64]) -> tuple[float, float, float, float, float, float,
+                                                    float]:
+    """A checked pose ``[north, east, yaw]`` as the Pose's position x y z, orientation x y z w."""
+    north, east, yaw = pose.tolist()
+    return north, east, 0.0, 0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)
+
+
+def odometry_fields(pose: ArrayLike, pose_cov: ArrayLike, twist: ArrayLike,
+                    twist_cov: ArrayLike) -> tuple[tuple[float, ...], list[float],
+                                                   tuple[float, ...], list[float]]:
+    """The numbers `odometry_to_msg` writes, checked as there (ValueError), in its order.
+
+    Pose (7, as `pose_fields`), pose covariance (36), twist (linear x y z, angular x y z) and
+    twist covariance (36).
+    """
+    pose_array = _vector3(pose, 'pose')
+    twist_array = _vector3(twist, 'twist')
+    pose_values = pose_fields(pose_array)
+    pose_covariance = covariance3_to_6(pose_cov, 'pose_cov')
+    surge, sway, yaw_rate = twist_array.tolist()
+    return (pose_values, pose_covariance, (surge, sway, 0.0, 0.0, 0.0, yaw_rate),
+            covariance3_to_6(twist_cov, 'twist_cov'))
 
 
 def _pose_of(source: Pose) -> NDArray[np.float64]:
     """``geometry_msgs/Pose`` → ``[north, east, yaw]`` with yaw in (−π, π]."""
     q = source.orientation
-    yaw = quaternion_to_yaw(q.w, q.x, q.y, q.z)
-    pose = np.array([source.position.x, source.position.y, yaw], dtype=np.float64)
-    return _vector3(pose, 'pose')
+    return pose_from_fields(source.position.x, source.position.y, q.w, q.x, q.y, q.z)
+
+
+def pose_from_fields(x: float, y: float, qw: float, qx: float, qy: float,
+                     qz: float) -> NDArray[np.float64]:
+    """``[north, east, yaw]`` from a Pose's position x, y and orientation (as ``_pose_of``)."""
+    yaw = quaternion_to_yaw(qw, qx, qy, qz)
+    return _vector3(np.array([x, y, yaw], dtype=np.float64), 'pose')
 
 
 def msg_to_pose(msg: PoseStamped) -> NDArray[np.float64]:
@@ -178,8 +207,12 @@ def wrench_to_msg(
 def msg_to_force(msg: WrenchStamped) -> NDArray[np.float64]:
     """``WrenchStamped`` → force ``[surge N, sway N, yaw N·m]``."""
     wrench = msg.wrench
-    force = np.array([wrench.force.x, wrench.force.y, wrench.torque.z], dtype=np.float64)
-    return _vector3(force, 'force')
+    return force_from_fields(wrench.force.x, wrench.force.y, wrench.torque.z)
+
+
+def force_from_fields(surge: float, sway: float, yaw_moment: float) -> NDArray[np.float64]:
+    """Force ``[surge N, sway N, yaw N·m]`` from a Wrench's force.x, force.y, torque.z."""
+    return _vector3(np.array([surge, sway, yaw_moment], dtype=np.float64), 'force')
 
 
 def _covariance3(values: ArrayLike, what: str) -> NDArray[np.float64]:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 import math
+from typing import NamedTuple
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -90,15 +91,36 @@ def make_status(
     hardware_id: str = '',
 ) -> DiagnosticStatus:
     """One ``DiagnosticStatus`` with its key/value pairs in the mapping's order."""
+    fields = status_fields(name, level, message, values, hardware_id)
     status = DiagnosticStatus()
-    status.level = level_byte(level)
-    status.name = name
-    status.message = message
-    status.hardware_id = hardware_id
-    status.values = [
-        KeyValue(key=str(key), value=format_value(value)) for key, value in (values or {}).items()
-    ]
+    status.level = fields.level
+    status.name = fields.name
+    status.message = fields.message
+    status.hardware_id = fields.hardware_id
+    status.values = [KeyValue(key=key, value=value) for key, value in fields.values]
     return status
+
+
+class StatusFields(NamedTuple):
+    """The fields of a ``DiagnosticStatus`` as `make_status` fills them."""
+
+    level: bytes
+    name: str
+    message: str
+    hardware_id: str
+    values: list[tuple[str, str]]  # (key, formatted value)
+
+
+def status_fields(
+    name: str,
+    level: str | int | bytes,
+    message: str,
+    values: Mapping[str, DiagnosticValue] | None = None,
+    hardware_id: str = '',
+) -> StatusFields:
+    """`make_status`'s fields without the message objects (for a direct CDR writer)."""
+    return StatusFields(level_byte(level), name, message, hardware_id,
+                        [(str(key), format_value(value)) for key, value in (values or {}).items()])
 
 
 def make_diagnostic_array(

@@ -137,6 +137,30 @@ def test_cascade_retune_and_reset() -> None:
         CascadeFilter(2, 0.1, 0.8)
 
 
+@pytest.mark.parametrize('ndof', [1, 3])
+def test_cascade_update_series_is_bitwise_update_per_row(ndof: int) -> None:
+    # cascade_loss (every retraining's validation) runs update_series; it must give update's
+    # bits, and leave the filter where the per-row updates leave it (retune, next sample).
+    rng = np.random.default_rng(3)
+    n = 500
+    heading = np.pi - 0.3 + np.cumsum(rng.normal(scale=0.02, size=n))  # crosses +π
+    poses = np.column_stack([np.cumsum(rng.normal(size=n)), rng.normal(size=n),
+                             np.angle(np.exp(1j * heading))])
+    single, series = CascadeFilter(ndof, 0.1, 0.8), CascadeFilter(ndof, 0.1, 0.8)
+    expected = np.array([single.update(0.0, pose, np.zeros(3)) for pose in poses])
+    actual = series.update_series(poses)
+    assert actual.shape == (n, 3)
+    assert actual.tobytes() == expected.tobytes()
+    for cascade in (single, series):
+        cascade.set_wave_peak_freq(0.6)
+    after = [cascade.update(0.0, poses[7], np.zeros(3)) for cascade in (single, series)]
+    assert after[0].tobytes() == after[1].tobytes()
+    bad = poses.copy()
+    bad[3, 0] = math.nan
+    with pytest.raises(ValueError, match='finite'):
+        CascadeFilter(ndof, 0.1, 0.8).update_series(bad)
+
+
 def test_baselines_implement_the_protocol() -> None:
     t = np.arange(10) * 0.1
     estimators: list[object] = [

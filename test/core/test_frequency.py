@@ -197,3 +197,23 @@ def test_an_unsure_estimate_keeps_the_previous_peak_damping() -> None:
     assert not result.confident
     assert result.wave_peak_freq == 0.55 and result.peak_damping == 0.12
     assert math.isnan(estimate(flat, 1.0).peak_damping)
+
+
+def test_a_repeated_estimate_on_the_same_inputs_is_the_stored_one() -> None:
+    # The motion gate twin estimates on the holding network's window again: served from the
+    # small cache, identical to a fresh computation; any other input is computed afresh.
+    from lf_predictor_ros.core import frequency
+
+    y = measured(31, 0.7, 1200.0, 1.0, 0.05)
+    fresh = frequency._estimate(frequency._as_columns(y), 1.0, HIGHPASS_CUTOFF, WAVE_BAND,
+                                MIN_PEAK_RATIO, None)
+    first = estimate(y, 1.0)
+    assert first == fresh
+    assert estimate(y.copy(), 1.0) is first
+    flat = y.copy()
+    flat[:] = np.linspace(0.0, 1.0, y.size)  # no wave peak: falls back to `previous`
+    assert math.copysign(1.0, estimate(flat, 1.0, previous=0.0).wave_peak_freq) == 1.0
+    assert math.copysign(1.0, estimate(flat, 1.0, previous=-0.0).wave_peak_freq) == -1.0
+    other = y.copy()
+    other[5] = np.nextafter(other[5], np.inf)
+    assert estimate(other, 1.0) is not first

@@ -345,6 +345,88 @@ def test_lm_jacobian_equals_forward_mode_autodiff(mode: str) -> None:
     np.testing.assert_allclose(actual.numpy(), expected.numpy(), rtol=0, atol=1e-10 * scale)
 
 
+@pytest.mark.parametrize('derivative_weight', [0.0, 0.5])
+def test_stacked_residual_jacobian_is_bitwise_the_per_column_map(derivative_weight: float
+                                                                 ) -> None:
+    # The earth-frame fast path of _residual_jacobian must give the vmap'ed per-column map's
+    # bits and memory layout: the LM step (J^T J, solve) and so every replay output depend on it.
+    from lf_predictor_ros.core import training
+
+    spec = NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=2, nfb=0, hidden_units=4)
+    rng = np.random.default_rng(21)
+    n = 90
+    u = rng.normal(size=(n, 3))
+    x = np.cumsum(rng.normal(scale=0.05, size=(n, 3)), axis=0)
+    y = x + rng.normal(scale=0.02, size=(n, 3))
+    mask = (np.arange(n) < n - 10) & (np.arange(n) % 7 != 3)
+    window = training._prepare_window(spec, u, y, x, mask)
+    assert window.body is None
+    jac_prediction = torch.from_numpy(rng.normal(size=(window.target.shape[0] + 1, 3, 40)))
+    offset = training._data_residuals(torch.zeros(jac_prediction.shape[:2], dtype=torch.float64),
+                                      window, derivative_weight)
+
+    def linear_part(prediction: torch.Tensor) -> torch.Tensor:
+        return training._data_residuals(prediction, window, derivative_weight) - offset
+
+    expected = torch.func.vmap(linear_part, in_dims=2, out_dims=1)(jac_prediction)
+    actual = training._residual_jacobian(jac_prediction, window, derivative_weight)
+    assert torch.equal(actual, expected)
+    assert actual.stride() == expected.stride()
+
+
+@pytest.mark.parametrize('ramp_invariant', [False, True])
+def test_one_layer_jacobian_is_bitwise_vmap_jacrev(ramp_invariant: bool) -> None:
+    # The written-out Jacobian of the default network shape (one tanh layer + bypass) must give
+    # vmap(jacrev)'s bits, zero signs included: the LM step and every replay output depend on it.
+    from lf_predictor_ros.core import training
+
+    spec = NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=3, ny=4, nfb=0, hidden_units=2,
+                       relative=True, ramp_invariant=ramp_invariant)
+    rng = np.random.default_rng(23)
+    n = 120
+    u = rng.normal(size=(n, 3))
+    x = np.cumsum(rng.normal(scale=0.05, size=(n, 3)), axis=0)
+    y = x + rng.normal(scale=0.02, size=(n, 3))
+    net = NnarmaxNet(spec, seed=24)
+    net.set_standardization(u, y)
+    window = training._prepare_window(spec, u, y, x, np.arange(n) % 9 != 4)
+    layout = training._FlatParameters.of(net)
+    flat = torch.nn.utils.parameters_to_vector(net.parameters()).detach()
+    buffers = dict(net.named_buffers())
+
+    def one_row(weights: torch.Tensor, x_row: torch.Tensor) -> torch.Tensor:
+        return torch.func.functional_call(net, {**layout.unflatten(weights), **buffers},
+                                          (x_row[None, :],))[0]
+
+    generator = torch.Generator().manual_seed(25)
+    scratch = training._LmScratch()  # reused across the two weights, as in the LM epochs
+    for weights in (flat, flat + 0.3 * torch.randn(flat.shape, generator=generator,
+                                                   dtype=torch.float64)):
+        expected = torch.func.vmap(torch.func.jacrev(one_row), in_dims=(None, 0))(
+            weights, window.x_series)
+        actual = training._one_layer_jacobian(net, layout, weights, window.x_series)
+        assert actual is not None
+        assert torch.equal(actual.view(torch.int64), expected.view(torch.int64))
+        # the LM's residual Jacobian built straight from it (MSE only): same bits and layout
+        runner = training._WindowPredictor(net, training.n_static_regressors(spec), spec.nfb)
+        reference = training._residual_jacobian(expected, window, 0.0)
+        direct = training._lm_jacobian(runner, layout, weights, window, False, 0.0)
+        assert direct.stride() == reference.stride()
+        assert torch.equal(direct.view(torch.int64), reference.view(torch.int64))
+        reused = training._lm_jacobian(runner, layout, weights, window, False, 0.0, scratch)
+        assert torch.equal(reused.view(torch.int64), reference.view(torch.int64))
+        with torch.no_grad():  # the LM's candidate forward pass, x_s kept in scratch
+            forward = training._window_prediction(runner, layout, weights, window, False)
+            kept = training._one_layer_prediction(runner, layout, weights, window, False,
+                                                  scratch)
+        assert kept is not None
+        assert torch.equal(kept.view(torch.int64), forward.view(torch.int64))
+    two_layers = NnarmaxNet(NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=3, ny=4, nfb=0,
+                                        hidden_units=2, hidden_layers=2), seed=1)
+    assert training._one_layer_jacobian(two_layers, training._FlatParameters.of(two_layers),
+                                        flat, window.x_series) is None
+
+
 def test_warm_up_does_the_slow_lazy_imports_up_front() -> None:
     # In a fresh interpreter: torch._dynamo is not loaded by importing the trainer, warm_up()
     # loads it, and the first real training afterwards pays no multi-second import.

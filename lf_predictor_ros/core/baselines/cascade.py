@@ -95,6 +95,30 @@ class CascadeFilter:
             values[_YAW] = wrap_to_pi_scalar(values[_YAW])
         return np.array(values, dtype=np.float64)
 
+    def update_series(self, poses: FloatArray) -> FloatArray:
+        """`update` of every row of ``poses`` (n, 3) in order: the same numbers, as (n, 3).
+
+        A non-finite row raises as `update` does (the rows before it are filtered first).
+        """
+        measured = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        if not np.all(np.isfinite(measured)):
+            return np.array([self.update(0.0, pose, np.zeros(3)) for pose in measured],
+                            dtype=np.float64).reshape(-1, 3)
+        ndof = self.ndof
+        channels = []
+        for row in measured.tolist():
+            values = row[:ndof]
+            if ndof == 3:
+                values[_YAW] = self._continuous_yaw(row[_YAW])
+            channels.append(values)
+        out = []
+        for values in self._filter.filter_rows(channels):
+            values = values + [0.0] * (3 - ndof)
+            if ndof == 3:
+                values[_YAW] = wrap_to_pi_scalar(values[_YAW])
+            out.append(values)
+        return np.array(out, dtype=np.float64).reshape(-1, 3)
+
     def reset(self) -> None:
         """Forget the filter state and heading history."""
         self._filter.reset()

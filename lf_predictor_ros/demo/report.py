@@ -161,8 +161,12 @@ def _ratio(numerator: float, denominator: float) -> float:
 
 
 # -------------------------------------------------------------------------------- figure
-def plot_report(run: RunData, path: Path) -> None:
-    """Write the PNG: per DOF pose, thrust and error; ω0 estimate vs truth across the bottom."""
+def plot_report(run: RunData, path: Path, metrics: Mapping[str, Any] | None = None) -> None:
+    """Write the PNG: per DOF pose, thrust and error; ω0 estimate vs truth across the bottom.
+
+    With ``metrics`` (`compute_metrics`) the thrust titles give its wave-band power ratio, after
+    the warm-up like the report's table; without, the ratio over the whole run.
+    """
     ncol = run.ndof
     fig = plt.figure(figsize=(5.5 * ncol + 1.0, 12.0), layout='constrained')
     grid = fig.add_gridspec(4, ncol)
@@ -186,7 +190,8 @@ def plot_report(run: RunData, path: Path) -> None:
         if predictor is not None:
             ax.plot(predictor.t, predictor.thrust[:, i], color='tab:blue', lw=0.8,
                     label='predictor loop')
-        ax.set_title(f'{name} thrust [{THRUST_UNITS[i]}]' + _ratio_label(run, predictor, raw, i))
+        ax.set_title(f'{name} thrust [{THRUST_UNITS[i]}]'
+                     + thrust_ratio_label(run, predictor, raw, i, metrics))
         ax.legend(loc='upper right', fontsize='small')
         ax = fig.add_subplot(grid[2, i])
         error = estimate[:, i] - truth[:, i]
@@ -216,14 +221,19 @@ def plot_report(run: RunData, path: Path) -> None:
     plt.close(fig)
 
 
-def _ratio_label(run: RunData, predictor: LoopRun | None, raw: LoopRun | None, dof: int) -> str:
+def thrust_ratio_label(run: RunData, predictor: LoopRun | None, raw: LoopRun | None, dof: int,
+                       metrics: Mapping[str, Any] | None = None) -> str:
+    """Title line: wave-band thrust power predictor / raw loop, as in ``metrics`` if given."""
+    if metrics is not None and DOF_NAMES[dof] in metrics.get('thrust_wave_band_power_ratio', {}):
+        ratio = metrics['thrust_wave_band_power_ratio'][DOF_NAMES[dof]]
+        return f"\nwave-band power predictor/raw = {ratio:.3g} (t ≥ {metrics['warmup']:g} s)"
     if predictor is None or raw is None:
         return ''
     sample_time = float(np.median(np.diff(predictor.t)))
     ratio = _ratio(band_power(predictor.thrust[:, dof], sample_time, run.wave_band),
                    band_power(raw.thrust[:, dof], float(np.median(np.diff(raw.t))),
                               run.wave_band))
-    return f'\nwave-band power predictor/raw = {ratio:.3g}'
+    return f'\nwave-band power predictor/raw = {ratio:.3g} (whole run)'
 
 
 # -------------------------------------------------------------------------------- markdown
@@ -277,11 +287,11 @@ def write_report(run: RunData, out_dir: Path, warmup: float) -> ReportPaths:
     metrics = compute_metrics(run, warmup)
     paths.metrics.write_text(json.dumps(metrics, indent=2, allow_nan=True) + '\n',
                              encoding='utf-8')
-    plot_report(run, paths.png)
+    plot_report(run, paths.png, metrics)
     paths.markdown.write_text(markdown_summary(metrics, run.ndof), encoding='utf-8')
     return paths
 
 
 __all__ = ['LoopRun', 'ReportPaths', 'RunData', 'Trace', 'compute_metrics', 'loop_metrics',
            'markdown_summary', 'match_by_stamp', 'plot_report', 'retrain_times_from_diagnostics',
-           'write_report']
+           'thrust_ratio_label', 'write_report']

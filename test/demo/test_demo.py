@@ -23,6 +23,7 @@ from lf_predictor_ros.demo.report import (
     loop_metrics,
     match_by_stamp,
     retrain_times_from_diagnostics,
+    thrust_ratio_label,
     write_report,
 )
 from lf_predictor_ros.nodes.conversions import ns_to_stamp, sec_to_ns, stamp_to_sec, wrench_to_msg
@@ -89,6 +90,18 @@ def test_report_metrics_match_analytic_values_and_files_are_written(tmp_path: Pa
                            'thrust_wave_band_power_ratio'}
     text = paths.markdown.read_text()
     assert '![report](report.png)' in text and '| north | 0.1 |' in text
+
+
+def test_plot_titles_give_the_thrust_ratio_of_the_metrics_after_the_warm_up() -> None:
+    run = _synthetic_run()
+    metrics = compute_metrics(run, warmup=100.0)
+    loops = run.loops
+    label = thrust_ratio_label(run, loops['predictor'], loops['raw_measurement'], 0, metrics)
+    ratio = metrics['thrust_wave_band_power_ratio']['north']
+    assert label == f'\nwave-band power predictor/raw = {ratio:.3g} (t ≥ 100 s)'
+    whole = thrust_ratio_label(run, loops['predictor'], loops['raw_measurement'], 0)
+    assert whole.endswith('(whole run)') and float(whole.split('= ')[1].split()[0]) == \
+        pytest.approx(0.01, rel=0.05)  # the synthetic run's sines: (1e4 / 1e5)²
 
 
 def test_match_by_stamp_and_retrain_times() -> None:

@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import atexit
 from collections import deque
+from collections.abc import Iterator
 import math
 from pathlib import Path
 import queue
@@ -124,6 +125,14 @@ class _NewestRows:
     """
 
     __slots__ = ('_capacity', '_count', '_rows')
+
+    def __len__(self) -> int:
+        """Rows held: those appended, at most the capacity (as a deque with maxlen)."""
+        return min(self._count, self._capacity)
+
+    def __iter__(self) -> Iterator[FloatArray]:
+        """The rows held, oldest first."""
+        return iter(self.newest(len(self)))
 
     def __init__(self, capacity: int) -> None:
         self._capacity = capacity
@@ -319,8 +328,6 @@ class AdaptivePredictor:
         u = self._force_channels(force_arr, pose_arr[2])
         self._u.append(u)
         self._y.append(y)
-        self._u_rows.append(u)
-        self._y_rows.append(y)
         self._k += 1
         lf_now = self._fallback.update(t, pose_arr, force_arr)
         if self._fb_next != self._k:  # no network prediction exists for this sample
@@ -624,11 +631,9 @@ class AdaptivePredictor:
     # ---- internals --------------------------------------------------------------------------
 
     def _start_segment(self) -> None:
-        self._u: deque[FloatArray] = deque(maxlen=self._capacity)
-        self._y: deque[FloatArray] = deque(maxlen=self._capacity)
-        # the same rows in arrays: the regressors' and the snapshots' rows without copying
-        self._u_rows = _NewestRows(self._capacity)
-        self._y_rows = _NewestRows(self._capacity)
+        # thrust and pose rows of the segment: the regressors' and the snapshots' rows are views
+        self._u = _NewestRows(self._capacity)
+        self._y = _NewestRows(self._capacity)
         self._fb: deque[FloatArray] = deque(maxlen=max(1, self.params.nfb))
         self._heading = ContinuousHeading()
         self._gate_offset = np.zeros(self.ndof)
@@ -710,8 +715,8 @@ class AdaptivePredictor:
         p = self.params
         if len(self._y) < p.max_lag or len(self._fb) < p.nfb:
             return None
-        u_hist = self._u_rows.newest(max(p.nu, 1))  # only the rows the regressors need:
-        y_hist = self._y_rows.newest(max(p.ny, 1))  # the buffers hold up to N + ε samples
+        u_hist = self._u.newest(max(p.nu, 1))  # only the rows the regressors need:
+        y_hist = self._y.newest(max(p.ny, 1))  # the buffers hold up to N + ε samples
         fb_hist = _newest(self._fb, max(p.nfb, 1))
         return predict_step(model, u_hist, y_hist, fb_hist)
 
@@ -824,7 +829,7 @@ class AdaptivePredictor:
             return cascade
         prediction = self._predict_with(source)
         if prediction is None or not np.all(np.isfinite(prediction)) or \
-                not self._plausible(prediction, self._y[-1]):
+                not self._plausible(prediction, self._y.newest(1)[0]):
             return None
         return np.asarray(prediction, dtype=np.float64)
 
@@ -960,8 +965,8 @@ class AdaptivePredictor:
             return
         self._retrain_requested = False
         self._last_train_k = self._k
-        snapshot = Snapshot(u=self._u_rows.newest(len(self._u)).copy(),
-                            y=self._y_rows.newest(len(self._y)).copy(), end_index=self._k,
+        snapshot = Snapshot(u=self._u.newest(len(self._u)).copy(),
+                            y=self._y.newest(len(self._y)).copy(), end_index=self._k,
                             segment=self._segment)
         args = (self._generation, snapshot, self._state_dict, self._targets, self._frequency,
                 self._stop)
@@ -983,7 +988,7 @@ class AdaptivePredictor:
         if self._job_running():
             return
         self._last_freq_k = self._k
-        args = (self._generation, self._y_rows.newest(len(self._y)).copy(), self._frequency)
+        args = (self._generation, self._y.newest(len(self._y)).copy(), self._frequency)
         if self.background:
             self._worker = threading.Thread(target=self._frequency_job, args=args,
                                             name='lf-predictor-frequency', daemon=True)

@@ -220,6 +220,21 @@ def _sos_step(sos: FloatArray, state: FloatArray, u: FloatArray) -> tuple[FloatA
     return x, new_state
 
 
+
+def low_pass_step(state: ArrayLike, value: ArrayLike,
+                  weight: float | ArrayLike) -> NDArray[np.float64]:
+    """One first-order low-pass step, state + w·(value − state) entry by entry, a new array.
+
+    ``weight`` w in [0, 1]: one number for every entry, or one per entry. Plain floats: for
+    the few entries of a pose or a twist on the predict path, without numpy's per-call cost.
+    """
+    old = np.asarray(state, dtype=np.float64).tolist()
+    new = np.asarray(value, dtype=np.float64).tolist()
+    weights = [float(weight)] * len(old) if isinstance(weight, (int, float)) else \
+        np.asarray(weight, dtype=np.float64).tolist()
+    return np.array([a + w * (b - a) for a, w, b in zip(old, weights, new, strict=True)],
+                    dtype=np.float64)
+
 def _sos_step_floats(coefficients: list[list[float]], state: FloatArray,
                      u: FloatArray) -> tuple[FloatArray, FloatArray]:
     """`_sos_step` of one sample in plain floats: the same operations in the same order."""

@@ -57,6 +57,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lf_predictor_ros.core.field_meta import field_doc
+from lf_predictor_ros.core.filters import low_pass_step
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_dynamics import (
     DEAD_RECKONERS,
@@ -403,15 +404,11 @@ class LfOdometry:
         accel = self._twist_change(t, twist)
         self._history.append(Published(t, z.copy(), twist, source, accel))
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
-        # the low-passes slow + w·(new − slow), entry by entry (the same operations)
-        self._slow_twist = twist.copy() if self._slow_twist is None else np.array(
-            [a + alpha * (b - a) for a, b in zip(self._slow_twist.tolist(), twist.tolist(),
-                                                 strict=True)], dtype=np.float64)
+        self._slow_twist = twist.copy() if self._slow_twist is None else \
+            low_pass_step(self._slow_twist, twist, alpha)
         applied = clipped[:self.ndof]
-        self._slow_force = applied.copy() if self._slow_force is None else np.array(
-            [a + w * (b - a) for a, w, b in zip(self._slow_force.tolist(),
-                                                self._force_rate().tolist(), applied.tolist(),
-                                                strict=True)], dtype=np.float64)
+        self._slow_force = applied.copy() if self._slow_force is None else \
+            low_pass_step(self._slow_force, applied, self._force_rate())
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
                                             self._pose_covariance(source, z, twist))
         out = OdometryEstimate(
@@ -801,9 +798,8 @@ class LfOdometry:
         else:
             dt = t - last[0]
             alpha = min(1.0, dt / self.params.twist_accel_time)
-            accel = np.array([a + alpha * ((b - c) / dt - a) for a, b, c in zip(
-                last[2].tolist(), twist.tolist(), last[1].tolist(), strict=True)],
-                dtype=np.float64)
+            rate = [(b - c) / dt for b, c in zip(twist.tolist(), last[1].tolist(), strict=True)]
+            accel = low_pass_step(last[2], rate, alpha)
         self._accel = (t, twist, accel)
         return accel
 

@@ -74,6 +74,7 @@ import torch
 
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.estimator import EstimatorState, EstimatorStatus
+from lf_predictor_ros.core.filters import low_pass_step
 from lf_predictor_ros.core.frequency import FrequencyEstimate
 from lf_predictor_ros.core.heading import ContinuousHeading, wrap_angle, wrap_pose
 from lf_predictor_ros.core.motion_gate import (
@@ -873,11 +874,8 @@ class AdaptivePredictor:
             return out
         gain = dead_zoned(self._gate.update(moving), self.params.motion_gate_dead_zone)
         if self._gate_alpha < 1.0:
-            # LP(moving − holding) of core.motion_gate (motion_gate_smoothing), entry by entry
-            alpha = self._gate_alpha
-            self._gate_offset = np.array(
-                [a + alpha * (b - a) for a, b in zip(self._gate_offset.tolist(), offset.tolist(),
-                                                     strict=True)], dtype=np.float64)
+            # LP(moving − holding) of core.motion_gate (motion_gate_smoothing)
+            self._gate_offset = low_pass_step(self._gate_offset, offset, self._gate_alpha)
             offset = self._gate_offset
         if self._gate_yaw_notch is not None:
             offset = self._yaw_notched(t, offset)

@@ -56,6 +56,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lf_predictor_ros.core.field_meta import field_doc
+from lf_predictor_ros.core.filters import low_pass_step
 from lf_predictor_ros.core.heading import wrap_angle
 
 FloatArray = NDArray[np.float64]
@@ -471,11 +472,8 @@ class ReferenceChecker:
         tau = self.settings.drift_time_constant
         if self._drift_mean is None:
             self._drift_mean = np.array(innovation, dtype=np.float64)
-        else:  # mean + w·(innovation − mean), entry by entry
-            weight = min(1.0, dt / tau)
-            self._drift_mean = np.array(
-                [m + weight * (v - m) for m, v in zip(self._drift_mean.tolist(), innovation,
-                                                      strict=True)], dtype=np.float64)
+        else:
+            self._drift_mean = low_pass_step(self._drift_mean, innovation, min(1.0, dt / tau))
         self._drift_time += dt
         if self._drift_time >= tau and any(
                 abs(m) > limit for m, limit in zip(self._drift_mean.tolist(),

@@ -11,6 +11,7 @@ from lf_predictor_ros.core.filters import (
     continuous_wave_filter,
     design_wave_filter,
     frequency_response,
+    low_pass_step,
     settling_samples,
     zero_phase,
 )
@@ -204,3 +205,14 @@ def test_retune_keeps_output_continuous() -> None:
 def test_settling_samples_of_a_single_pole() -> None:
     sos = np.array([[0.5, 0.0, 0.0, 1.0, -0.5, 0.0]])  # pole at z = 0.5
     assert settling_samples(sos, tolerance=1e-3) == 10  # 0.5^10 ≈ 9.8e-4
+
+
+def test_low_pass_step_moves_each_entry_by_its_weight_and_keeps_the_state() -> None:
+    state = np.array([1.0, -2.0, 0.5])
+    out = low_pass_step(state, [3.0, 2.0, 0.5], 0.25)
+    np.testing.assert_array_equal(out, [1.5, -1.0, 0.5])  # 1 + 0.25·2, −2 + 0.25·4, unchanged
+    np.testing.assert_array_equal(low_pass_step(state, [3.0, 2.0, 0.5], [0.0, 1.0, 0.5]),
+                                  [1.0, 2.0, 0.5])  # weight 0 keeps, 1 takes the value
+    np.testing.assert_array_equal(state, [1.0, -2.0, 0.5])  # the input is not modified
+    with pytest.raises(ValueError):
+        low_pass_step(state, [1.0, 2.0], 0.5)  # entries must match

@@ -111,6 +111,7 @@ from lf_predictor_ros.nodes.conversions import (
     odometry_to_msg,
     pose_from_fields,
     pose_to_msg,
+    sec_nanosec_to_ns,
     sec_to_stamp,
 )
 from lf_predictor_ros.nodes.diagnostics import (
@@ -490,7 +491,7 @@ class ReplayResult:
 
 def _stamp_seconds(fields: StampedFields, log_time_ns: int) -> float:
     """Header stamp [s]; the log time when the stamp is unset (zero)."""
-    ns = int(fields.sec) * NS_PER_S + int(fields.nanosec)  # nodes.conversions.stamp_to_ns
+    ns = sec_nanosec_to_ns(fields.sec, fields.nanosec)
     return (ns if ns > 0 else log_time_ns) / NS_PER_S
 
 

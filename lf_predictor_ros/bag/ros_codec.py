@@ -142,7 +142,7 @@ def odometry_cdr(sec: int, nanosec: int, frame_id: bytes, child_frame_id: bytes,
                  twist: Sequence[float], twist_covariance: Sequence[float]) -> bytes:
     """CDR of a nav_msgs/Odometry, as `serialize` (padding 0); string ids from `cdr_text`."""
     out = _header_cdr(sec, nanosec, frame_id)
-    out += b'\0' * (-(len(out) - 4) % 4)
+    _align4(out)
     out += _UINT32.pack(len(child_frame_id) + 1) + child_frame_id + b'\0'
     _align8(out)
     out += _ODOMETRY_BODY.pack(*pose, *pose_covariance, *twist, *twist_covariance)

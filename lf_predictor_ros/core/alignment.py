@@ -129,11 +129,16 @@ def mean_pose(poses: FloatArray) -> FloatArray:
     poses = np.asarray(poses, dtype=np.float64)
     if poses.ndim != 2 or poses.shape[1] != 3 or poses.shape[0] == 0:
         raise ValueError(f'mean_pose needs poses of shape (m ≥ 1, 3), got {poses.shape}')
-    count = poses.shape[0]
-    out = np.add.reduce(poses, axis=0) / count  # poses.mean(axis=0): sum / count
     ref = float(poses[0, 2])
     offset = np.remainder(poses[:, 2] - ref + math.pi, 2.0 * math.pi) - math.pi
-    out[2] = _wrap(ref + float(np.add.reduce(offset)) / count)
+    return _mean_with_offsets(poses, offset)
+
+
+def _mean_with_offsets(poses: FloatArray, offsets: FloatArray) -> FloatArray:
+    """`mean_pose` given each heading's wrapped offset from the first heading (poses.mean)."""
+    count = poses.shape[0]
+    out = np.add.reduce(poses, axis=0) / count  # poses.mean(axis=0): sum / count
+    out[2] = _wrap(float(poses[0, 2]) + float(np.add.reduce(offsets)) / count)
     return np.asarray(out, dtype=np.float64)
 
 
@@ -261,10 +266,7 @@ class InputAligner:
     def _block_mean(self) -> FloatArray:
         """`mean_pose` of the block, value for value, with the offsets made as poses came."""
         count = self._block_size
-        out = np.add.reduce(self._block[:count], axis=0) / count
-        ref = float(self._block[0, 2])
-        out[2] = _wrap(ref + float(np.add.reduce(self._block_offsets[:count])) / count)
-        return np.asarray(out, dtype=np.float64)
+        return _mean_with_offsets(self._block[:count], self._block_offsets[:count])
 
     def _emit_until(self, t0: float, p0: FloatArray, t1: float,
                     p1: FloatArray) -> list[AlignedSample]:

@@ -91,7 +91,12 @@ def sec_to_stamp(sec: float) -> Time:
 
 def stamp_to_ns(stamp: Time) -> int:
     """``builtin_interfaces/Time`` → integer nanoseconds."""
-    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+    return sec_nanosec_to_ns(stamp.sec, stamp.nanosec)
+
+
+def sec_nanosec_to_ns(sec: int, nanosec: int) -> int:
+    """A stamp's ``sec`` and ``nanosec`` fields → integer nanoseconds."""
+    return int(sec) * NS_PER_S + int(nanosec)
 
 
 def stamp_to_sec(stamp: Time) -> float:

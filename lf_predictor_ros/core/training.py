@@ -651,24 +651,42 @@ def _one_layer_jacobian(
     return jac
 
 
-def _fill_one_layer(out: torch.Tensor, parts: _OneLayerParts) -> None:
-    """Write the Jacobian into zeroed ``out`` (n_weights, rows, n_out), weights in flat order."""
+def _fill_one_layer(out: torch.Tensor, parts: _OneLayerParts,
+                    residual: _ResidualMap | None = None) -> None:
+    """Write the Jacobian into zeroed ``out`` (n_weights, rows, n_out), weights in flat order.
+
+    Only the non-zero blocks are written. With ``residual`` each block is then mapped to the
+    residual Jacobian's (``_ResidualMap``): a zero entry maps to +0 exactly, so the zero blocks
+    need no work.
+    """
     x_s, tanh, g_pre, y_std = parts
-    rows, n_in = x_s.shape
+    n_in = x_s.shape[1]
     n_out, hidden = g_pre.shape[1:]
     with torch.no_grad():
         w1_end = hidden * n_in
         w1 = out[:w1_end].unflatten(0, (hidden, n_in))
         torch.mul(g_pre.permute(2, 0, 1)[:, None], x_s.T[None, :, :, None], out=w1)
         w1 += 0.0  # −0 products to +0, as autograd's accumulating products
-        out[w1_end:w1_end + hidden] = g_pre.permute(2, 0, 1) + 0.0
+        if residual is not None:
+            residual.apply(out[:w1_end])
+        b1 = out[w1_end:w1_end + hidden]
+        b1.copy_(g_pre.permute(2, 0, 1))
+        b1 += 0.0
+        if residual is not None:
+            residual.apply(b1)
         w2 = out[w1_end + hidden:w1_end + hidden + n_out * hidden].unflatten(0, (n_out, hidden))
         b2 = out[w1_end + hidden + n_out * hidden:w1_end + hidden + n_out * (hidden + 1)]
         wb = out[w1_end + hidden + n_out * (hidden + 1):].unflatten(0, (n_out, n_in))
         for i in range(n_out):
-            w2[i, :, :, i] = y_std[i] * tanh.T + 0.0
+            torch.mul(tanh.T, y_std[i], out=w2[i, :, :, i])
+            w2[i, :, :, i] += 0.0
             b2[i, :, i] = y_std[i]
-            wb[i, :, :, i] = y_std[i] * x_s.T + 0.0
+            torch.mul(x_s.T, y_std[i], out=wb[i, :, :, i])
+            wb[i, :, :, i] += 0.0
+            if residual is not None:
+                residual.apply(w2[i, :, :, i], i)
+                residual.apply(b2[i, :, i], i)
+                residual.apply(wb[i, :, :, i], i)
 
 
 def _one_layer_residual_jacobian(
@@ -692,35 +710,12 @@ def _one_layer_residual_jacobian(
     rows, n_out = window.x_series.shape[0], parts.y_std.shape[0]
     offset = _data_residuals(torch.zeros(rows, n_out, dtype=torch.float64), window, 0.0)
     kept = window.keep.nonzero()[:, 0]
-    x_s, tanh, g_pre = parts.x_s[kept], parts.tanh[kept], parts.g_pre[kept]
-    n_keep, (n_in, hidden) = kept.numel(), (x_s.shape[1], tanh.shape[1])
+    n_keep = kept.numel()
     residual = _ResidualMap(window.target[kept], window.scale, math.sqrt(n_keep * n_out),
                             offset.view(n_keep, n_out))
-    # A Jacobian entry that is 0 maps to ((0 − target)/scale)/√n − offset = +0 exactly (the
-    # offset is that same number): only the non-zero blocks are computed.
     columns = _zeroed(scratch, (flat.numel(), n_keep, n_out))
-    w1_end = hidden * n_in
-    w1 = columns[:w1_end].view(hidden, n_in, n_keep, n_out)
-    torch.mul(g_pre.permute(2, 0, 1)[:, None], x_s.T[None, :, :, None], out=w1)
-    w1 += 0.0  # −0 products to +0, as autograd's accumulating products
-    residual.apply(columns[:w1_end])
-    b1 = columns[w1_end:w1_end + hidden]
-    b1.copy_(g_pre.permute(2, 0, 1))
-    b1 += 0.0
-    residual.apply(b1)
-    w2 = columns[w1_end + hidden:w1_end + hidden + n_out * hidden].view(n_out, hidden, n_keep,
-                                                                         n_out)
-    b2 = columns[w1_end + hidden + n_out * hidden:w1_end + hidden + n_out * (hidden + 1)]
-    wb = columns[w1_end + hidden + n_out * (hidden + 1):].view(n_out, n_in, n_keep, n_out)
-    for i in range(n_out):
-        torch.mul(tanh.T, parts.y_std[i], out=w2[i, :, :, i])
-        w2[i, :, :, i] += 0.0
-        residual.apply(w2[i, :, :, i], i)
-        b2[i, :, i] = parts.y_std[i]
-        residual.apply(b2[i, :, i], i)
-        torch.mul(x_s.T, parts.y_std[i], out=wb[i, :, :, i])
-        wb[i, :, :, i] += 0.0
-        residual.apply(wb[i, :, :, i], i)
+    _fill_one_layer(columns, _OneLayerParts(parts.x_s[kept], parts.tanh[kept],
+                                            parts.g_pre[kept], parts.y_std), residual)
     return columns.view(flat.numel(), -1).T
 
 

@@ -2,7 +2,7 @@
 
 A learned filter fitted on a window of station keeping is the best filter for holding position,
 but nothing in that window tells it how to follow a setpoint move or a turn: it lags them. The
-ramp-invariant network (``PredictorParams.ramp_invariant``, ``network._relative_frame_numpy``)
+ramp-invariant network (``PredictorParams.ramp_invariant``, ``network._relative_regressors_numpy``)
 follows any constant-velocity motion without lag by construction, and pays for it while the
 vessel holds still (more wave-band motion in its estimate). The motion gate runs both and
 publishes, per DOF,

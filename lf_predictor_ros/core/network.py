@@ -210,7 +210,7 @@ def relative_spread(y: FloatArray, ny: int, body_frame: bool = False,
     The scale of a relative network's position regressors and of its output ŷLF(t + 1) − y(t).
     With ``body_frame`` (3 channels) each difference is first rotated by R(ψ(t))ᵀ, ψ = y[:, 2].
     With ``ramp_invariant`` the differences are those from the least-squares line through the ny
-    newest positions (what such a network sees, ``_relative_frame_numpy``; with ``ramp_order``
+    newest positions (what such a network sees, ``_relative_regressors_numpy``; with ``ramp_order``
     2 the least-squares parabola).
     """
     if ramp_invariant and y.shape[0] > ny:
@@ -676,7 +676,7 @@ def _ramp_powers(ny: int, order: int, constant: bool = False) -> FloatArray:
 
 def _relative_frame_torch(spec: NnarmaxSpec, x: torch.Tensor,
                           ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """(ref, shift, base) of raw regressor rows ``x``: see ``_relative_frame_numpy``."""
+    """(ref, shift, base) of raw regressor rows ``x``: see ``_relative_regressors_numpy``."""
     offset = _position_offset(spec)
     n_out = spec.n_outputs
     ref = x[:, offset:offset + n_out]
@@ -691,29 +691,33 @@ def _relative_frame_torch(spec: NnarmaxSpec, x: torch.Tensor,
     return ref, torch.cat((zeros, line.reshape(x.shape[0], -1)), dim=1), ref + coeffs.sum(dim=1)
 
 
-def _relative_frame_numpy(spec: NnarmaxSpec, x: FloatArray,
-                          ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """(ref, shift, base) of raw regressor rows ``x`` (rows, n_regressors) or one row.
+def _relative_regressors_numpy(spec: NnarmaxSpec, x: FloatArray,
+                               ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(ref, x − shift, base) of raw regressor rows ``x`` (rows, n_regressors) or one row.
 
     ref = y(t), the newest measured position. The network sees ``x − shift`` and its output is
     added to ``base``. Plain relative: shift = ref on every position and feedback block, base =
     ref (translation invariance). ``ramp_invariant``: shift = the least-squares line through the
     ny newest positions (ref − i·v̂ on lag block i, ``ramp_slope_weights``) and base = ref + v̂,
     so a vessel moving at constant velocity is followed without lag for any weights (a ramp
-    leaves only the forces and the constant bias in front of the network).
+    leaves only the forces and the constant bias in front of the network). The shift of the
+    force blocks is 0, so they are passed as they are; the position blocks are shifted block by
+    block (the same numbers as subtracting a whole shift row, without building it).
     """
     offset = _position_offset(spec)
     n_out = spec.n_outputs
     ref = x[..., offset:offset + n_out]
-    zeros = np.zeros(x.shape[:-1] + (spec.nu * spec.n_inputs_u,))
-    if not spec.ramp_invariant:
-        return ref, np.concatenate((zeros, np.tile(ref, spec.ny + spec.nfb)), axis=-1), ref
-    block = x[..., offset:offset + spec.ny * n_out].reshape(x.shape[:-1] + (spec.ny, n_out))
-    coeffs = np.einsum('ki,...io->...ko', ramp_fit_weights(spec.ny, spec.ramp_order), block)
-    line = ref[..., None, :] + np.einsum('ik,...ko->...io', _ramp_powers(spec.ny, spec.ramp_order),
-                                         coeffs)
-    shift = np.concatenate((zeros, line.reshape(x.shape[:-1] + (spec.ny * n_out,))), axis=-1)
-    return ref, shift, ref + coeffs.sum(axis=-2)
+    positions = x[..., offset:].reshape(x.shape[:-1] + (-1, n_out))  # ny (+ nfb) blocks
+    if spec.ramp_invariant:  # nfb = 0 (params rule): the blocks are the ny positions
+        coeffs = np.einsum('ki,...io->...ko', ramp_fit_weights(spec.ny, spec.ramp_order),
+                           positions)
+        line = ref[..., None, :] + np.einsum('ik,...ko->...io',
+                                             _ramp_powers(spec.ny, spec.ramp_order), coeffs)
+        shifted, base = positions - line, ref + coeffs.sum(axis=-2)
+    else:
+        shifted, base = positions - ref[..., None, :], ref
+    relative = np.concatenate((x[..., :offset], shifted.reshape(x.shape[:-1] + (-1,))), axis=-1)
+    return ref, relative, base
 
 
 def rotate_blocks_torch(values: torch.Tensor, cos: torch.Tensor,
@@ -772,32 +776,14 @@ class NumpyNnarmax:
     def forward(self, x: FloatArray) -> FloatArray:
         """ŷLF(t + 1) for regressor rows (rows, n_regressors) or one row (n_regressors,)."""
         spec = self.spec
-        if spec.relative and x.ndim == 1 and not spec.body_frame:
-            # one row: x − shift block by block, without building the shift (its force block
-            # is 0: x − 0 is x, bit for bit); the frame as _relative_frame_numpy makes it
-            offset = _position_offset(spec)
-            n_out = spec.n_outputs
-            ref = x[offset:offset + n_out]
-            positions = x[offset:].reshape(-1, n_out)  # ny (+ nfb) blocks; ramp: nfb = 0
-            if spec.ramp_invariant:
-                coeffs = np.einsum('ki,...io->...ko', ramp_fit_weights(spec.ny, spec.ramp_order),
-                                   positions)
-                line = ref[..., None, :] + np.einsum(
-                    'ik,...ko->...io', _ramp_powers(spec.ny, spec.ramp_order), coeffs)
-                relative = np.concatenate((x[:offset], (positions - line).reshape(-1)))
-                ramp: FloatArray = ref + coeffs.sum(axis=-2) + self._forward_absolute(relative)
-                return ramp
-            relative = np.concatenate((x[:offset], (positions - ref).reshape(-1)))
-            plain: FloatArray = ref + self._forward_absolute(relative)
-            return plain
         if spec.relative:
-            ref, shift, base = _relative_frame_numpy(spec, x)
+            ref, relative, base = _relative_regressors_numpy(spec, x)
             if spec.body_frame:
                 cos, sin = np.cos(ref[..., 2]), np.sin(ref[..., 2])
-                body = self._forward_absolute(rotate_blocks(x - shift, cos, -sin))
+                body = self._forward_absolute(rotate_blocks(relative, cos, -sin))
                 turned: FloatArray = base + rotate_blocks(body, cos, sin)
                 return turned
-            result: FloatArray = base + self._forward_absolute(x - shift)
+            result: FloatArray = base + self._forward_absolute(relative)
             return result
         return self._forward_absolute(x)
 

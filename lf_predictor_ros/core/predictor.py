@@ -887,13 +887,7 @@ class AdaptivePredictor:
         gains = [g * (1.0 if on else 0.0)
                  for g, on in zip(gains, self._gate_valid.tolist(), strict=True)]
         self._gain = np.array(gains, dtype=np.float64)
-        # shifted(out, gain · offset): the first ndof entries moved, the heading wrapped
-        values = np.array(out, dtype=np.float64).tolist()
-        for dof, (g, o) in enumerate(zip(gains, offset.tolist(), strict=True)):
-            values[dof] = values[dof] + g * o
-        if self.ndof == 3:
-            values[2] = wrap_angle(values[2])
-        return np.array(values, dtype=np.float64)
+        return shifted(out, self._gain * offset, self.ndof)
 
     def _yaw_notched(self, t: float, offset: FloatArray) -> FloatArray:
         """The gate's offset with its heading entry through the notch at ω0 (a new array).

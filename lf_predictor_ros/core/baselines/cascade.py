@@ -87,13 +87,9 @@ class CascadeFilter:
         measured = np.asarray(pose, dtype=np.float64)
         if measured.shape != (3,) or not all(map(math.isfinite, measured.tolist())):
             raise ValueError(f'pose must be 3 finite numbers [north, east, yaw], got {pose}')
-        channels = measured[: self.ndof].copy()
-        if self.ndof == 3:
-            channels[_YAW] = self._continuous_yaw(float(measured[_YAW]))
-        values = self._filter.filter(channels).tolist() + [0.0] * (3 - self.ndof)
-        if self.ndof == 3:
-            values[_YAW] = wrap_to_pi_scalar(values[_YAW])
-        return np.array(values, dtype=np.float64)
+        channels = np.array(self._channels(measured.tolist()), dtype=np.float64)
+        return np.array(self._estimate(self._filter.filter(channels).tolist()),
+                        dtype=np.float64)
 
     def update_series(self, poses: FloatArray) -> FloatArray:
         """`update` of every row of ``poses`` (n, 3) in order: the same numbers, as (n, 3).
@@ -104,20 +100,23 @@ class CascadeFilter:
         if not np.all(np.isfinite(measured)):
             return np.array([self.update(0.0, pose, np.zeros(3)) for pose in measured],
                             dtype=np.float64).reshape(-1, 3)
-        ndof = self.ndof
-        channels = []
-        for row in measured.tolist():
-            values = row[:ndof]
-            if ndof == 3:
-                values[_YAW] = self._continuous_yaw(row[_YAW])
-            channels.append(values)
-        out = []
-        for values in self._filter.filter_rows(channels):
-            values = values + [0.0] * (3 - ndof)
-            if ndof == 3:
-                values[_YAW] = wrap_to_pi_scalar(values[_YAW])
-            out.append(values)
+        channels = [self._channels(row) for row in measured.tolist()]
+        out = [self._estimate(values) for values in self._filter.filter_rows(channels)]
         return np.array(out, dtype=np.float64).reshape(-1, 3)
+
+    def _channels(self, pose: list[float]) -> list[float]:
+        """The filter's input from a measured pose: its DOFs, the heading made continuous."""
+        values = pose[: self.ndof]
+        if self.ndof == 3:
+            values[_YAW] = self._continuous_yaw(pose[_YAW])
+        return values
+
+    def _estimate(self, filtered: list[float]) -> list[float]:
+        """The LF pose [north, east, yaw] from the filter's output (wrapped; 0: not estimated)."""
+        values = filtered + [0.0] * (3 - self.ndof)
+        if self.ndof == 3:
+            values[_YAW] = wrap_to_pi_scalar(values[_YAW])
+        return values
 
     def reset(self) -> None:
         """Forget the filter state and heading history."""

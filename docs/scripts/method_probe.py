@@ -12,8 +12,10 @@ trainings without thrust. ``--profile`` adds the error per 60 s block (where it 
 ``--closed-loop`` also puts each variant in its own DP loop (`suite.run_closed_loops`, same seed,
 scored like `benchmark` from the same sample) next to the observer (the recording's own loop),
 oracle_kf and raw loops: position / heading RMSE, largest excursion, wave-band thrust power per
-DOF as a share of the raw loop's, stability. Only the tuning seeds 1 and 2 are accepted; held-out
-seeds are for `benchmark` only.
+DOF as a share of the raw loop's, stability, and the adaptive loop's guard trips and rejected
+trainings. Accepted seeds: the tuning seeds 1 and 2, and the development seeds 3–10 (never used to
+tune the baselines, never reported as results: a wider screen for loop stability, see
+docs/BENCHMARKS.md "Fifteenth session"). The held-out seeds (11 on) are for `benchmark` only.
 """
 from __future__ import annotations
 
@@ -28,6 +30,7 @@ import numpy as np
 import torch
 
 from lf_predictor_ros.benchmark.baseline_tuning import TUNING_SEEDS
+from lf_predictor_ros.benchmark.benchmark import FIRST_HELD_OUT_SEED
 from lf_predictor_ros.benchmark.estimators import predictor_params
 from lf_predictor_ros.benchmark.suite import (
     make_recording,
@@ -40,6 +43,8 @@ from lf_predictor_ros.core.predictor import AdaptivePredictor
 from sim_ros.simulation import load_scenario, simulate
 
 LOOP_REFERENCES = ('observer', 'oracle_kf', 'raw')
+# Neither tuning (baseline_tuning.TUNING_SEEDS) nor held out (benchmark.FIRST_HELD_OUT_SEED on).
+DEVELOPMENT_SEEDS = tuple(range(3, FIRST_HELD_OUT_SEED))
 
 
 def parse_variant(text: str) -> tuple[str, dict[str, Any]]:
@@ -64,7 +69,8 @@ def parse_variant(text: str) -> tuple[str, dict[str, Any]]:
 
 
 def run(scenario_name: str, seed: int, variants: Sequence[tuple[str, dict[str, Any]]],
-        duration: float, profile: bool, closed_loop: bool = False) -> None:
+        duration: float, profile: bool, closed_loop: bool = False,
+        open_loop: bool = True) -> None:
     """Print one line per variant (and the error profile with ``profile``)."""
     scenario = load_scenario(scenario_name)
     base = predictor_params(scenario)
@@ -72,7 +78,7 @@ def run(scenario_name: str, seed: int, variants: Sequence[tuple[str, dict[str, A
     recording = make_recording(scenario, seed, duration, setup)
     data = recording.data()
     t, y, u, truth = data['t'], data['y'], data['u'], data['truth']
-    for name, overrides in variants:
+    for name, overrides in variants if open_loop else ():
         if scenario.ndof == 1:
             overrides = {k: v for k, v in overrides.items() if k != 'regressor_frame'}
         params = predictor_params(scenario, overrides)
@@ -118,7 +124,16 @@ def loops(scenario: Any, seed: int, duration: float, setup: Any, recording: Any,
         print(f"  loop {scenario.name:18s} {seed} {name:20s} position "
               f"{entry['position_rmse']:.4f} m heading {entry.get('heading_rmse', math.nan):.5f} "
               f"rad max {entry['max_excursion']:.2f} m thrust WF % raw {share} stable "
-              f"{entry['stability']['stable']}", flush=True)
+              f"{entry['stability']['stable']}" + _counters(entry), flush=True)
+
+
+def _counters(entry: dict[str, Any]) -> str:
+    """' guard trips H / twin T, rejected R' of an adaptive loop ('' for the references)."""
+    c = entry.get('counters')
+    if not c:
+        return ''
+    return (f" guard trips {c['guard_trips']} / twin {c.get('moving_guard_trips', 0)}, "
+            f"rejected {c['rejected_trainings']} / {c['trainings']}")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -131,14 +146,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--duration', type=float, default=1800.0, help='simulated s')
     parser.add_argument('--profile', action='store_true', help='error per 60 s block')
     parser.add_argument('--closed-loop', action='store_true', help='also run the DP loops')
+    parser.add_argument('--loops-only', action='store_true',
+                        help='with --closed-loop: skip the open-loop replays')
     args = parser.parse_args(argv)
-    if set(args.seeds) - set(TUNING_SEEDS):
-        parser.error(f'only the tuning seeds {TUNING_SEEDS} (held-out seeds: `benchmark`)')
+    if set(args.seeds) - set(TUNING_SEEDS) - set(DEVELOPMENT_SEEDS):
+        parser.error(f'only the tuning seeds {TUNING_SEEDS} and the development seeds '
+                     f'{DEVELOPMENT_SEEDS} (held-out seeds: `benchmark`)')
     torch.set_num_threads(1)
     variants = [parse_variant(v) for v in (args.variant or ['default'])]
     for scenario_name in args.scenarios:
         for seed in args.seeds:
-            run(scenario_name, seed, variants, args.duration, args.profile, args.closed_loop)
+            run(scenario_name, seed, variants, args.duration, args.profile, args.closed_loop,
+                open_loop=not args.loops_only)
     return 0
 
 

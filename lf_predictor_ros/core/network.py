@@ -41,7 +41,7 @@ reference (atomic in Python).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 import functools
 import io
 import json
@@ -755,6 +755,12 @@ class NumpyNnarmax:
     bypass_weight: FloatArray | None
     y_mean: FloatArray
     y_std: FloatArray
+    # (low, high) of every regressor as the network sees it (network frame: relative, rotated)
+    # over its training window; the predict path clips to it. None: no clip (``with_range``).
+    regressor_range: tuple[FloatArray, FloatArray] | None = None
+    # (low, high) of the network's own output (the predicted step of a relative network, before
+    # the base and the rotation) over the same window; the predict path clips to it too.
+    output_range: tuple[FloatArray, FloatArray] | None = None
 
     @classmethod
     def from_module(cls, net: NnarmaxNet) -> NumpyNnarmax:
@@ -773,6 +779,32 @@ class NumpyNnarmax:
             y_std=_frozen(net.y_std),
         )
 
+    def with_range(self, x: FloatArray, widen: float = 1.0) -> NumpyNnarmax:
+        """A copy of this network that clips every regressor to its range over the raw rows ``x``.
+
+        ``x`` (rows, n_regressors): the training window's regressor rows; ``widen`` ≥ 1: each
+        range (regressors and output) widened that many times about its centre, so a wave a
+        little larger than the window's largest is still filtered. The range is taken in
+        the network frame (after the relative shift and the body-frame rotation), so a turn or a
+        move, whose relative positions and forces lie far outside a station-keeping window's,
+        reaches the network as the largest values it was fitted on: the learned filter does not
+        extrapolate its fit (a cross-DOF coefficient fitted on 0.01 rad of wave yaw, applied to
+        0.8 rad of turn, moved the north estimate 6 m; docs/BENCHMARKS.md "Fifteenth
+        session"). Every row of ``x`` itself is predicted exactly as without the clip.
+        """
+        if not widen >= 1.0:
+            raise ValueError(f'with_range: widen must be ≥ 1 (1 = the window range), got {widen}')
+        raw = np.asarray(x, dtype=np.float64)
+        if raw.ndim != 2 or raw.shape[0] == 0 or raw.shape[1] != self.spec.n_regressors or \
+                not np.all(np.isfinite(raw)):
+            raise ValueError(f'with_range needs finite regressor rows (rows ≥ 1, '
+                             f'{self.spec.n_regressors}), got shape {raw.shape}; NaN/inf rows '
+                             'must be dropped first')
+        rows = network_frame_regressors(self.spec, raw)
+        outputs = replace(self, regressor_range=None, output_range=None)._forward_absolute(rows)
+        return replace(self, regressor_range=_column_range(rows, widen),
+                       output_range=_column_range(outputs, widen))
+
     def forward(self, x: FloatArray) -> FloatArray:
         """ŷLF(t + 1) for regressor rows (rows, n_regressors) or one row (n_regressors,)."""
         spec = self.spec
@@ -788,6 +820,8 @@ class NumpyNnarmax:
         return self._forward_absolute(x)
 
     def _forward_absolute(self, x: FloatArray) -> FloatArray:
+        if self.regressor_range is not None:
+            x = np.clip(x, *self.regressor_range)
         x_s = (x - self.x_mean) / self.x_std
         hidden = x_s
         for weight, bias in zip(self.hidden_weights, self.hidden_biases, strict=True):
@@ -796,7 +830,34 @@ class NumpyNnarmax:
         if self.bypass_weight is not None:
             out = out + x_s @ self.bypass_weight.T
         result: FloatArray = self.y_mean + self.y_std * out
+        if self.output_range is not None:
+            result = np.clip(result, *self.output_range)
         return result
+
+
+def _column_range(rows: FloatArray, widen: float) -> tuple[FloatArray, FloatArray]:
+    """Read-only (low, high) of every column of ``rows``: (min, max) widened about the centre."""
+    low, high = np.array(rows.min(axis=0)), np.array(rows.max(axis=0))
+    if widen != 1.0:
+        centre, half = 0.5 * (low + high), 0.5 * widen * (high - low)
+        low, high = centre - half, centre + half
+    low.setflags(write=False)
+    high.setflags(write=False)
+    return low, high
+
+
+def network_frame_regressors(spec: NnarmaxSpec, x: FloatArray) -> FloatArray:
+    """The regressor rows as the network's layers see them (before the standardization).
+
+    Relative networks: the rows shifted by ``_relative_regressors_numpy``, body-frame ones
+    then rotated by the row's newest heading; absolute networks: ``x`` itself.
+    """
+    if not spec.relative:
+        return x
+    ref, relative, _ = _relative_regressors_numpy(spec, x)
+    if spec.body_frame:
+        return rotate_blocks(relative, np.cos(ref[..., 2]), -np.sin(ref[..., 2]))
+    return relative
 
 
 def predict_step(

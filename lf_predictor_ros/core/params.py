@@ -200,6 +200,12 @@ class PredictorParams:
             'motion (an LF model fitted with the thrust must dead-reckon the newest third better '
             'than one fitted without it, core/lf_dynamics.py); if not, the network is trained '
             'without the thrust regressors (their weights 0)'))
+    regressor_clip: float = field(
+        default=0.0, metadata=_doc(
+            'clip every regressor the network sees (relative positions, forces) and its output '
+            'step to their range in the training window, widened this many times about its '
+            'centre: a turn or a move beyond what the window showed reaches the network as the '
+            'largest values it was fitted on, never as an extrapolation; 0 = off, else ≥ 1', ''))
     lf_augmentation: tuple[float, ...] = field(
         default=(0.0, 0.0, 0.0), metadata=_doc(
             'RMS velocity of the synthetic LF motion (below the DP bandwidth) added to the '
@@ -395,6 +401,9 @@ class PredictorParams:
         if any(rate < 0.0 for rate in self.max_output_rate):
             raise ValueError(f'positivity rule: max_output_rate must be ≥ 0 in every DOF (0 = no '
                              f'limit), got {list(self.max_output_rate)!r}')
+        if self.regressor_clip != 0.0 and not self.regressor_clip >= 1.0:
+            raise ValueError(f'regressor_clip must be 0 (off) or ≥ 1 (the training range '
+                             f'widened that many times), got {self.regressor_clip!r}')
         for name in ('nu', 'ny', 'nfb'):
             if getattr(self, name) < 0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0 (number of delays), got '

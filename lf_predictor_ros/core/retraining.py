@@ -45,6 +45,7 @@ from lf_predictor_ros.core.network import (
     without_force_inputs,
 )
 from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.regressors import build_regressors
 from lf_predictor_ros.core.targets import TargetWindow, training_mask
 from lf_predictor_ros.core.training import (
     TrainSettings,
@@ -367,6 +368,8 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
     retire = not accepted and incumbent_loss is not None and incumbent_loss > baseline
     model = NumpyNnarmax.from_module(NnarmaxNet.from_state(spec, result.state_dict)) \
         if accepted else None
+    if model is not None and params.regressor_clip > 0.0:
+        model = model.with_range(build_regressors(u, y, t_values, spec)[0], params.regressor_clip)
     return RetrainResult(segment=snapshot.segment, end_index=snapshot.end_index,
                          frequency=frequency, targets=targets, model=model,
                          state_dict=result.state_dict if accepted else None,

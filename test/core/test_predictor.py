@@ -571,6 +571,29 @@ def test_save_load_round_trip_gives_the_same_network(tmp_path: Path) -> None:
     assert target.status().state in ('trained', 'fallback')
 
 
+def test_regressor_clip_ranges_come_from_the_window_and_travel_in_the_checkpoint(
+        tmp_path: Path) -> None:
+    source = trained_predictor(200, motion_gate=False, regressor_clip=2.0)
+    model = source.model
+    assert model is not None and model.regressor_range is not None
+    assert model.output_range is not None
+    low, high = model.regressor_range
+    assert np.all(high - low >= 0.0) and np.any(high - low > 0.0)
+    # rows 1000× the window's motion: the clip holds the step inside the widened output range
+    rows = np.random.default_rng(33).normal(size=(50, model.spec.n_regressors)) * 1000.0
+    base = rows[:, model.spec.nu * model.spec.n_inputs_u][:, None]  # y(t) (relative network)
+    step = model.forward(rows) - base
+    assert np.all(step >= model.output_range[0] - 1e-9)
+    assert np.all(step <= model.output_range[1] + 1e-9)
+    unclipped = AdaptivePredictor(SMALL.replace(motion_gate=False), background=False)
+    assert trained_predictor(200, motion_gate=False).model.regressor_range is None  # type: ignore[union-attr]
+    path = tmp_path / 'clip.pt'
+    source.save(str(path))
+    unclipped.load(str(path))  # the ranges are the network's, whatever the loader's setting
+    assert unclipped.model is not None
+    np.testing.assert_array_equal(unclipped.model.forward(rows), model.forward(rows))
+
+
 def test_checkpoint_written_after_each_accepted_training(tmp_path: Path) -> None:
     t, pose, force, _ = onedof_record(5, 400.0)
     path = tmp_path / 'auto.pt'

@@ -601,6 +601,8 @@ class _LmScratch:
     # the window forward's own (batched) standardized regressors and relative base
     forward_x_s: torch.Tensor | None = None
     forward_base: torch.Tensor | None = None
+    # the per-output compact residual Jacobian (``_one_layer_compact_jacobian``)
+    compact: torch.Tensor | None = None
 
 
 def _one_layer_parts(
@@ -689,6 +691,26 @@ def _fill_one_layer(out: torch.Tensor, parts: _OneLayerParts,
                 residual.apply(wb[i, :, :, i], i)
 
 
+def _one_layer_kept(
+    net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
+    derivative_weight: float, scratch: _LmScratch | None,
+) -> tuple[_OneLayerParts, _ResidualMap] | None:
+    """The kept rows' forward values and the MSE residual map, or None (see the callers)."""
+    if derivative_weight > 0.0 or window.body is not None:
+        return None
+    parts = _one_layer_parts(net, layout, flat, window.x_series, scratch)
+    if parts is None:
+        return None
+    rows, n_out = window.x_series.shape[0], parts.y_std.shape[0]
+    offset = _data_residuals(torch.zeros(rows, n_out, dtype=torch.float64), window, 0.0)
+    kept = window.keep.nonzero()[:, 0]
+    n_keep = kept.numel()
+    residual = _ResidualMap(window.target[kept], window.scale, math.sqrt(n_keep * n_out),
+                            offset.view(n_keep, n_out))
+    return (_OneLayerParts(parts.x_s[kept], parts.tanh[kept], parts.g_pre[kept], parts.y_std),
+            residual)
+
+
 def _one_layer_residual_jacobian(
     net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
     derivative_weight: float, scratch: _LmScratch | None = None,
@@ -702,21 +724,97 @@ def _one_layer_residual_jacobian(
     ``_residual_columns``. None when it does not apply. With ``scratch`` (one per training)
     its arrays are reused: the returned Jacobian is then valid until the next call.
     """
-    if derivative_weight > 0.0 or window.body is not None:
+    found = _one_layer_kept(net, layout, flat, window, derivative_weight, scratch)
+    if found is None:
         return None
-    parts = _one_layer_parts(net, layout, flat, window.x_series, scratch)
-    if parts is None:
-        return None
-    rows, n_out = window.x_series.shape[0], parts.y_std.shape[0]
-    offset = _data_residuals(torch.zeros(rows, n_out, dtype=torch.float64), window, 0.0)
-    kept = window.keep.nonzero()[:, 0]
-    n_keep = kept.numel()
-    residual = _ResidualMap(window.target[kept], window.scale, math.sqrt(n_keep * n_out),
-                            offset.view(n_keep, n_out))
+    parts, residual = found
+    n_keep, n_out = residual.offset.shape
     columns = _zeroed(scratch, (flat.numel(), n_keep, n_out))
-    _fill_one_layer(columns, _OneLayerParts(parts.x_s[kept], parts.tanh[kept],
-                                            parts.g_pre[kept], parts.y_std), residual)
+    _fill_one_layer(columns, parts, residual)
     return columns.view(flat.numel(), -1).T
+
+
+def _one_layer_compact_jacobian(
+    parts: _OneLayerParts, residual: _ResidualMap, out: torch.Tensor | None = None
+) -> torch.Tensor:
+    """Each output's own residual Jacobian rows without their zero columns, (n_out, n_c, n_keep).
+
+    Row block i holds the transposed Jacobian of output i's residuals (kept row k, output i)
+    with respect to the shared weights (W1, b1; flat order) and then to output i's own weights
+    (W2 row i, b2_i, bypass row i); every other weight's column is zero in those rows. Each
+    entry is bit for bit the one of ``_one_layer_residual_jacobian`` (the same products and
+    the same element-wise residual map, per output). ``out``: an array to write into.
+    """
+    x_s, tanh, g_pre, y_std = parts
+    n_keep, n_in = x_s.shape
+    n_out, hidden = g_pre.shape[1:]
+    w1_end = hidden * n_in
+    shared = w1_end + hidden
+    shape = (n_out, shared + hidden + 1 + n_in, n_keep)
+    if out is None or out.shape != shape:
+        out = torch.empty(shape, dtype=torch.float64)
+    with torch.no_grad():
+        g = g_pre.permute(1, 2, 0)  # (n_out, hidden, n_keep)
+        torch.mul(g[:, :, None, :], x_s.T[None, None], out=out[:, :w1_end].unflatten(
+            1, (hidden, n_in)))
+        out[:, w1_end:shared] = g
+        for i in range(n_out):
+            torch.mul(tanh.T, y_std[i], out=out[i, shared:shared + hidden])
+            out[i, shared + hidden] = y_std[i]
+            torch.mul(x_s.T, y_std[i], out=out[i, shared + hidden + 1:])
+        out += 0.0  # −0 products to +0, as in ``_fill_one_layer``
+        out -= residual.target.T[:, None, :]
+        out /= residual.scale[:, None, None]
+        out /= residual.root
+        out -= residual.offset.T[:, None, :]
+    return out
+
+
+def _one_layer_normal_equations(
+    net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
+    derivative_weight: float, residuals: torch.Tensor, scratch: _LmScratch | None = None,
+) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """(Jᵀ J, Jᵀ r) of ``_one_layer_residual_jacobian``'s J by blocks; None where it is None.
+
+    Rows of output i are zero in the other outputs' own columns (W2 row j, b2_j, bypass row j),
+    so Jᵀ J = Σ_i scatter(J_iᵀ J_i) with J_i output i's rows restricted to the shared and its own
+    columns (``_one_layer_compact_jacobian``): the blocks between two outputs' own columns are
+    zero, and each J_iᵀ J_i is a symmetric product (BLAS syrk through numpy, which computes one
+    triangle and mirrors it, so Jᵀ J is exactly symmetric). About 3 × 2 fewer multiply-adds than
+    the dense ``J.T @ J``; the same sums in another order (last bits).
+    """
+    found = _one_layer_kept(net, layout, flat, window, derivative_weight, scratch)
+    if found is None:
+        return None
+    parts, residual = found
+    compact = _one_layer_compact_jacobian(
+        parts, residual, scratch.compact if scratch is not None else None)
+    if scratch is not None:
+        scratch.compact = compact
+    n_out, n_c, n_keep = compact.shape
+    n_in = parts.x_s.shape[1]
+    hidden = parts.g_pre.shape[2]
+    shared = hidden * (n_in + 1)
+    n_weights = flat.numel()
+    matrix = np.zeros((n_weights, n_weights))
+    gradient = np.zeros(n_weights)
+    per_output = residuals.view(n_keep, n_out).numpy()
+    for i in range(n_out):
+        block = compact[i].numpy()
+        product = block @ block.T  # numpy: syrk for a matrix times its own transpose
+        part = block @ np.ascontiguousarray(per_output[:, i])
+        own = np.concatenate((
+            np.arange(shared + i * hidden, shared + (i + 1) * hidden),
+            [shared + n_out * hidden + i],
+            np.arange(shared + n_out * (hidden + 1) + i * n_in,
+                      shared + n_out * (hidden + 1) + (i + 1) * n_in)))
+        matrix[:shared, :shared] += product[:shared, :shared]
+        matrix[:shared, own] = product[:shared, shared:]
+        matrix[own, :shared] = product[shared:, :shared]
+        matrix[np.ix_(own, own)] = product[shared:, shared:]
+        gradient[:shared] += part[:shared]
+        gradient[own] = part[shared:]
+    return torch.from_numpy(matrix), torch.from_numpy(gradient)
 
 
 def _zeroed(scratch: _LmScratch | None, shape: tuple[int, int, int]) -> torch.Tensor:
@@ -899,13 +997,24 @@ def _levenberg_marquardt(
         if stop is not None:
             reason = stop
             break
-        jacobian = _lm_jacobian(runner, layout, weights, window, parallel,
-                                settings.derivative_weight, scratch)
-        gradient = jacobian.T @ residuals + decay * weights  # ½ ∇J
+        normal = None
+        if not parallel or runner.nfb == 0:
+            normal = _one_layer_normal_equations(runner.net, layout, weights, window,
+                                                 settings.derivative_weight, residuals, scratch)
+        if normal is None:
+            jacobian = _lm_jacobian(runner, layout, weights, window, parallel,
+                                    settings.derivative_weight, scratch)
+            gradient = jacobian.T @ residuals + decay * weights  # ½ ∇J
+        else:
+            jtj, jtr = normal
+            gradient = jtr + decay * weights
         if float(torch.linalg.vector_norm(2.0 * gradient)) <= settings.min_grad:
             reason = 'min_grad'
             break
-        gauss_newton = jacobian.T @ jacobian + torch.diag(decay)
+        if normal is None:
+            gauss_newton = jacobian.T @ jacobian + torch.diag(decay)
+        else:
+            gauss_newton = jtj + torch.diag(decay)
         accepted = False
         while not accepted:
             step = torch.linalg.solve(gauss_newton + mu * identity, gradient)

@@ -817,6 +817,22 @@ def _one_layer_normal_equations(
     return torch.from_numpy(matrix), torch.from_numpy(gradient)
 
 
+def _damped_step(matrix: torch.Tensor, mu: float, gradient: torch.Tensor) -> torch.Tensor:
+    """(matrix + μ I)⁻¹ gradient by Cholesky; LU (``linalg.solve``) if it is not positive definite.
+
+    For μ > 0 the damped Gauss–Newton matrix Jᵀ J + diag(b) + μ I is symmetric positive
+    definite, so the Cholesky factor exists unless rounding breaks it (then LU as before).
+    """
+    damped = matrix.clone()
+    damped.diagonal().add_(mu)
+    factor, info = torch.linalg.cholesky_ex(damped)
+    if int(info) != 0:
+        lu_step: torch.Tensor = torch.linalg.solve(damped, gradient)
+        return lu_step
+    step: torch.Tensor = torch.cholesky_solve(gradient[:, None], factor)[:, 0]
+    return step
+
+
 def _zeroed(scratch: _LmScratch | None, shape: tuple[int, int, int]) -> torch.Tensor:
     """A zero array of ``shape`` the first time; then the scratch one as it was left."""
     if scratch is not None and scratch.columns is not None and scratch.columns.shape == shape:
@@ -1017,7 +1033,10 @@ def _levenberg_marquardt(
             gauss_newton = jtj + torch.diag(decay)
         accepted = False
         while not accepted:
-            step = torch.linalg.solve(gauss_newton + mu * identity, gradient)
+            if normal is None:
+                step = torch.linalg.solve(gauss_newton + mu * identity, gradient)
+            else:
+                step = _damped_step(gauss_newton, mu, gradient)
             candidate = weights - step
             with torch.no_grad():
                 candidate_residuals = residual_fn(candidate)

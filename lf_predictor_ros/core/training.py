@@ -601,7 +601,7 @@ class _LmScratch:
     # the window forward's own (batched) standardized regressors and relative base
     forward_x_s: torch.Tensor | None = None
     forward_base: torch.Tensor | None = None
-    # the per-output compact residual Jacobian (``_one_layer_compact_jacobian``)
+    # the factors of the residual Jacobian's columns (``_one_layer_factors``)
     compact: torch.Tensor | None = None
 
 
@@ -734,39 +734,32 @@ def _one_layer_residual_jacobian(
     return columns.view(flat.numel(), -1).T
 
 
-def _one_layer_compact_jacobian(
-    parts: _OneLayerParts, residual: _ResidualMap, out: torch.Tensor | None = None
-) -> torch.Tensor:
-    """Each output's own residual Jacobian rows without their zero columns, (n_out, n_c, n_keep).
+def _one_layer_factors(parts: _OneLayerParts, out: torch.Tensor | None = None) -> torch.Tensor:
+    """The columns every output's residual Jacobian is a scaling of, transposed: (n_c, n_keep).
 
-    Row block i holds the transposed Jacobian of output i's residuals (kept row k, output i)
-    with respect to the shared weights (W1, b1; flat order) and then to output i's own weights
-    (W2 row i, b2_i, bypass row i); every other weight's column is zero in those rows. Each
-    entry is bit for bit the one of ``_one_layer_residual_jacobian`` (the same products and
-    the same element-wise residual map, per output). ``out``: an array to write into.
+    With d = 1 − tanh², output i's prediction Jacobian in row r is y_std_i · W2_ij · d_rj · x_rk
+    (W1), y_std_i · W2_ij · d_rj (b1), y_std_i · tanh_rj (W2 row i), y_std_i (b2_i) and
+    y_std_i · x_rk (bypass row i), zero elsewhere; the residual map scales output i by
+    c_i = 1/(scale_i · √(n_keep · n_out)). So output i's non-zero columns are the shared
+    factors B = [d_j x_k, d_j] scaled per hidden unit by a_ij = c_i y_std_i W2_ij and the own
+    factors O = [tanh, 1, x] scaled by e_i = c_i y_std_i. Rows: B in flat (W1, b1) order, then O
+    in (W2 row, b2, bypass row) order. ``out``: an array to write into.
     """
-    x_s, tanh, g_pre, y_std = parts
+    x_s, tanh, _, _ = parts
     n_keep, n_in = x_s.shape
-    n_out, hidden = g_pre.shape[1:]
+    hidden = tanh.shape[1]
     w1_end = hidden * n_in
     shared = w1_end + hidden
-    shape = (n_out, shared + hidden + 1 + n_in, n_keep)
+    shape = (shared + hidden + 1 + n_in, n_keep)
     if out is None or out.shape != shape:
         out = torch.empty(shape, dtype=torch.float64)
     with torch.no_grad():
-        g = g_pre.permute(1, 2, 0)  # (n_out, hidden, n_keep)
-        torch.mul(g[:, :, None, :], x_s.T[None, None], out=out[:, :w1_end].unflatten(
-            1, (hidden, n_in)))
-        out[:, w1_end:shared] = g
-        for i in range(n_out):
-            torch.mul(tanh.T, y_std[i], out=out[i, shared:shared + hidden])
-            out[i, shared + hidden] = y_std[i]
-            torch.mul(x_s.T, y_std[i], out=out[i, shared + hidden + 1:])
-        out += 0.0  # −0 products to +0, as in ``_fill_one_layer``
-        out -= residual.target.T[:, None, :]
-        out /= residual.scale[:, None, None]
-        out /= residual.root
-        out -= residual.offset.T[:, None, :]
+        slope = 1.0 - tanh.T * tanh.T  # (hidden, n_keep)
+        torch.mul(slope[:, None, :], x_s.T[None], out=out[:w1_end].unflatten(0, (hidden, n_in)))
+        out[w1_end:shared] = slope
+        out[shared:shared + hidden] = tanh.T
+        out[shared + hidden] = 1.0
+        out[shared + hidden + 1:] = x_s.T
     return out
 
 
@@ -774,46 +767,59 @@ def _one_layer_normal_equations(
     net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
     derivative_weight: float, residuals: torch.Tensor, scratch: _LmScratch | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor] | None:
-    """(Jᵀ J, Jᵀ r) of ``_one_layer_residual_jacobian``'s J by blocks; None where it is None.
+    """(Jᵀ J, Jᵀ r) of ``_one_layer_residual_jacobian``'s J by factors; None where it is None.
 
-    Rows of output i are zero in the other outputs' own columns (W2 row j, b2_j, bypass row j),
-    so Jᵀ J = Σ_i scatter(J_iᵀ J_i) with J_i output i's rows restricted to the shared and its own
-    columns (``_one_layer_compact_jacobian``): the blocks between two outputs' own columns are
-    zero, and each J_iᵀ J_i is a symmetric product (BLAS syrk through numpy, which computes one
-    triangle and mirrors it, so Jᵀ J is exactly symmetric). About 3 × 2 fewer multiply-adds than
-    the dense ``J.T @ J``; the same sums in another order (last bits).
+    Output i's rows of J are [B diag(â_i), e_i O] in its non-zero columns
+    (``_one_layer_factors``; â_i is a_i repeated over each hidden unit's columns), so with
+    G = [B O]ᵀ [B O] (one symmetric product, BLAS syrk through numpy) and P = [B O]ᵀ R
+    (R: the residuals, one column per output):
+
+        shared × shared  G_BB ∘ Σ_i â_i â_iᵀ      shared × own_i  diag(â_i) G_BO e_i
+        own_i × own_i    e_i² G_OO                 own_i × own_j   0 (i ≠ j)
+        Jᵀ r: shared Σ_i â_i ∘ P_B,i,  own_i e_i P_O,i.
+
+    The same matrix in exact arithmetic, about n_out × 2 × (n_weights/n_c)² fewer multiply-adds
+    than the dense ``J.T @ J``; it differs in the last bits (and in the rounding of the residual
+    map's subtract-and-divide, which this skips). Exactly symmetric.
     """
     found = _one_layer_kept(net, layout, flat, window, derivative_weight, scratch)
     if found is None:
         return None
     parts, residual = found
-    compact = _one_layer_compact_jacobian(
-        parts, residual, scratch.compact if scratch is not None else None)
+    factors = _one_layer_factors(parts, scratch.compact if scratch is not None else None)
     if scratch is not None:
-        scratch.compact = compact
-    n_out, n_c, n_keep = compact.shape
+        scratch.compact = factors
+    n_c, n_keep = factors.shape
     n_in = parts.x_s.shape[1]
-    hidden = parts.g_pre.shape[2]
+    n_out, hidden = parts.g_pre.shape[1:]
     shared = hidden * (n_in + 1)
+    block = factors.numpy()
+    gram = block @ block.T  # numpy: syrk for a matrix times its own transpose
+    per_output = np.ascontiguousarray(residuals.view(n_keep, n_out).numpy())
+    projected = block @ per_output  # (n_c, n_out)
+    w2 = layout.unflatten(flat)['output.weight'].detach().numpy()  # (n_out, hidden)
+    own_scale = (parts.y_std / (residual.scale * residual.root)).numpy()  # e_i
+    unit_scale = own_scale[:, None] * w2  # a_ij
+    # â_i: W1 columns (j, k) then b1 columns j
+    shared_scale = np.concatenate((np.repeat(unit_scale, n_in, axis=1), unit_scale), axis=1)
     n_weights = flat.numel()
     matrix = np.zeros((n_weights, n_weights))
     gradient = np.zeros(n_weights)
-    per_output = residuals.view(n_keep, n_out).numpy()
+    # Σ_i â_i â_iᵀ by outer products: exactly symmetric, as G
+    outer = sum(np.multiply.outer(scale_i, scale_i) for scale_i in shared_scale)
+    matrix[:shared, :shared] = gram[:shared, :shared] * outer
+    gradient[:shared] = np.sum(shared_scale.T * projected[:shared], axis=1)
     for i in range(n_out):
-        block = compact[i].numpy()
-        product = block @ block.T  # numpy: syrk for a matrix times its own transpose
-        part = block @ np.ascontiguousarray(per_output[:, i])
         own = np.concatenate((
             np.arange(shared + i * hidden, shared + (i + 1) * hidden),
             [shared + n_out * hidden + i],
             np.arange(shared + n_out * (hidden + 1) + i * n_in,
                       shared + n_out * (hidden + 1) + (i + 1) * n_in)))
-        matrix[:shared, :shared] += product[:shared, :shared]
-        matrix[:shared, own] = product[:shared, shared:]
-        matrix[own, :shared] = product[shared:, :shared]
-        matrix[np.ix_(own, own)] = product[shared:, shared:]
-        gradient[:shared] += part[:shared]
-        gradient[own] = part[shared:]
+        cross = gram[:shared, shared:] * (shared_scale[i][:, None] * own_scale[i])
+        matrix[:shared, own] = cross
+        matrix[own, :shared] = cross.T
+        matrix[np.ix_(own, own)] = gram[shared:, shared:] * own_scale[i] ** 2
+        gradient[own] = own_scale[i] * projected[shared:, i]
     return torch.from_numpy(matrix), torch.from_numpy(gradient)
 
 

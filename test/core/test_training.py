@@ -505,8 +505,8 @@ def one_layer_case(seed: int) -> tuple[NnarmaxSpec, NnarmaxNet, np.ndarray, np.n
 
 
 def test_blockwise_normal_equations_equal_the_dense_products() -> None:
-    # The LM's fast path builds Jᵀ J and Jᵀ r from each output's compact Jacobian; they must be
-    # the dense products of the residual Jacobian (up to summation order), exactly symmetric,
+    # The LM's fast path builds Jᵀ J and Jᵀ r from the factors of the Jacobian's columns; they
+    # must be the dense products of the residual Jacobian (up to rounding), exactly symmetric,
     # with exact zeros between two outputs' own columns.
     from lf_predictor_ros.core import training
 
@@ -536,16 +536,24 @@ def test_blockwise_normal_equations_equal_the_dense_products() -> None:
         shared = 2 * (n_in + 1)  # W1 (2 × n_in), b1
         assert torch.all(matrix[shared:shared + 2, shared + 2:shared + 4] == 0.0)
         assert torch.all(expected[shared:shared + 2, shared + 2:shared + 4] == 0.0)
-        # the compact Jacobian's entries are the dense ones, bit for bit
-        compact = scratch.compact
-        assert compact is not None
+        # output i's rows of J: its non-zero columns are the factors times e_i or â_i
+        factors = scratch.compact
+        assert factors is not None
         by_output = dense.view(-1, 3, flat.numel())
+        w2 = layout.unflatten(weights)['output.weight']
         for i in range(3):
+            e_i = net.y_std[i] / (window.scale[i] * np.sqrt(by_output.shape[0] * 3))
+            a_i = e_i * w2[i]
             # W2 row i (3 × 2), b2_i, bypass row i (3 × n_in)
             own = list(range(shared + 2 * i, shared + 2 * i + 2)) + [shared + 6 + i] + list(
                 range(shared + 9 + i * n_in, shared + 9 + (i + 1) * n_in))
-            columns = by_output[:, i, list(range(shared)) + own].T
-            assert torch.equal(compact[i], columns)
+            scale = torch.cat((a_i.repeat_interleave(n_in), a_i, e_i.repeat(len(own))))
+            expected_rows = by_output[:, i, list(range(shared)) + own]
+            actual_rows = (factors * scale[:, None]).T
+            np.testing.assert_allclose(actual_rows.numpy(), expected_rows.numpy(), rtol=0,
+                                       atol=1e-13 * float(expected_rows.abs().max()))
+            others = [c for c in range(flat.numel()) if c >= shared and c not in own]
+            assert torch.all(by_output[:, i, others] == 0.0)
     two_layers = NnarmaxNet(NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=3, ny=4, nfb=0,
                                         hidden_units=2, hidden_layers=2), seed=1)
     assert training._one_layer_normal_equations(

@@ -518,7 +518,9 @@ def test_blockwise_normal_equations_equal_the_dense_products() -> None:
     scratch = training._LmScratch()  # reused across the weights, as in the LM epochs
     for weights in (flat, flat + 0.3 * torch.randn(flat.shape, generator=generator,
                                                    dtype=torch.float64)):
-        dense = training._one_layer_residual_jacobian(net, layout, weights, window, 0.0).clone()
+        jacobian = training._one_layer_residual_jacobian(net, layout, weights, window, 0.0)
+        assert jacobian is not None
+        dense = jacobian.clone()
         residuals = torch.randn(dense.shape[0], generator=generator, dtype=torch.float64)
         found = training._one_layer_normal_equations(net, layout, weights, window, 0.0,
                                                      residuals, scratch)
@@ -571,6 +573,7 @@ def test_cholesky_step_equals_the_lu_step() -> None:
     layout = training._FlatParameters.of(net)
     flat = torch.nn.utils.parameters_to_vector(net.parameters()).detach()
     dense = training._one_layer_residual_jacobian(net, layout, flat, window, 0.0)
+    assert dense is not None
     matrix = dense.T @ dense
     matrix = 0.5 * (matrix + matrix.T)
     gradient = torch.from_numpy(np.random.default_rng(34).normal(size=flat.numel()))

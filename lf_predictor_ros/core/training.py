@@ -602,7 +602,7 @@ class _LmScratch:
     forward_x_s: torch.Tensor | None = None
     forward_base: torch.Tensor | None = None
     # the factors of the residual Jacobian's columns (``_one_layer_factors``)
-    compact: torch.Tensor | None = None
+    factors: torch.Tensor | None = None
 
 
 def _one_layer_parts(
@@ -786,9 +786,9 @@ def _one_layer_normal_equations(
     if found is None:
         return None
     parts, residual = found
-    factors = _one_layer_factors(parts, scratch.compact if scratch is not None else None)
+    factors = _one_layer_factors(parts, scratch.factors if scratch is not None else None)
     if scratch is not None:
-        scratch.compact = factors
+        scratch.factors = factors
     n_c, n_keep = factors.shape
     n_in = parts.x_s.shape[1]
     n_out, hidden = parts.g_pre.shape[1:]

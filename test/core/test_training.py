@@ -539,7 +539,7 @@ def test_blockwise_normal_equations_equal_the_dense_products() -> None:
         assert torch.all(matrix[shared:shared + 2, shared + 2:shared + 4] == 0.0)
         assert torch.all(expected[shared:shared + 2, shared + 2:shared + 4] == 0.0)
         # output i's rows of J: its non-zero columns are the factors times e_i or â_i
-        factors = scratch.compact
+        factors = scratch.factors
         assert factors is not None
         by_output = dense.view(-1, 3, flat.numel())
         w2 = layout.unflatten(weights)['output.weight']

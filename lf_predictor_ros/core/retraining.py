@@ -196,11 +196,19 @@ def sea_state_estimate(params: PredictorParams, y: FloatArray,
     after a change of sea state (a swell arriving, the wind turning): on the thesis Fig. 4.1 steps
     the estimate switched 600–900 s late, and every target in between was filtered at the wrong
     ω0. So ω0 is also estimated on the newest ``change_samples`` (max(α, γ/4)); when that estimate
-    is confident and more than ``SEA_CHANGE_RATIO`` away from the γ-window one, it wins.
+    is confident and more than ``SEA_CHANGE_RATIO`` away from the γ-window one, it wins. With
+    ``sea_change_holding_only`` only if the short window shows no manoeuvre: its 300 s hold a
+    turn's LF motion as a peak near the wave band's lower edge (rao_swell development seed 5:
+    0.335 rad/s against the sea's 0.48 after the +90° turn, the training window restarted on
+    targets notched at the wrong ω0 and the loop left 5 m; docs/BENCHMARKS.md "Fifteenth
+    session"). A change of sea during a manoeuvre is then seen once the manoeuvre has left the
+    short window, or by the γ window.
     """
     long = estimate_frequency(params, y, previous)
     short_len = change_samples(params)
     if len(y) < 2 * short_len:
+        return long
+    if params.sea_change_holding_only and manoeuvring(y[-short_len:], params.sample_time):
         return long
     short = estimate_frequency(params, y, None, samples=short_len)
     if (short.confident and _band_interior(params, short.wave_peak_freq)

@@ -52,7 +52,7 @@ _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
-                'sea_change_holding_only')
+                'sea_change_confirm')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -158,11 +158,12 @@ class PredictorParams:
             'with notch_zeta_broadband: the broadband width only for a training window of '
             'station keeping; a window with a setpoint move or a turn (core/manoeuvre.py) keeps '
             'notch_zeta'))
-    sea_change_holding_only: bool = field(
+    sea_change_confirm: bool = field(
         default=False, metadata=_doc(
-            'the short window that detects a change of sea state (a new ω0 that restarts the '
-            'training window) is believed only when it shows no setpoint move or turn '
-            "(core/manoeuvre.py): a turn's LF motion in it looks like a new, lower wave peak"))
+            'a change of sea state (a new ω0 from the short window that restarts the training '
+            'window) must also be seen by the short window one retrain period earlier, within '
+            'the same ratio: a passing disturbance (the LF motion of a turn) is not a new sea; a '
+            'real change is seen one retrain period later'))
     notch_lower_edge: float = field(
         default=0.23, metadata=_doc(
             'with notch_zeta_broadband: the broadband notch is no wider than the width whose '

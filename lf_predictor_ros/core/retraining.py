@@ -197,24 +197,36 @@ def sea_state_estimate(params: PredictorParams, y: FloatArray,
     the estimate switched 600–900 s late, and every target in between was filtered at the wrong
     ω0. So ω0 is also estimated on the newest ``change_samples`` (max(α, γ/4)); when that estimate
     is confident and more than ``SEA_CHANGE_RATIO`` away from the γ-window one, it wins. With
-    ``sea_change_holding_only`` only if the short window shows no manoeuvre: its 300 s hold a
-    turn's LF motion as a peak near the wave band's lower edge (rao_swell development seed 5:
-    0.335 rad/s against the sea's 0.48 after the +90° turn, the training window restarted on
-    targets notched at the wrong ω0 and the loop left 5 m; docs/BENCHMARKS.md "Fifteenth
-    session"). A change of sea during a manoeuvre is then seen once the manoeuvre has left the
-    short window, or by the γ window.
+    ``sea_change_confirm`` only if the short window ending one retrain period Δ earlier says the
+    same (also a change, within ``SEA_CHANGE_RATIO`` of the newest): on rao_swell development
+    seed 5 one short window held the LF motion of a +90° turn as a peak at 0.335 rad/s (sea:
+    0.48), the training window restarted on targets notched there and the loop left 5 m; the
+    windows Δ before and after it did not see that peak (docs/BENCHMARKS.md "Fifteenth
+    session"). A real change is then taken one Δ later.
     """
     long = estimate_frequency(params, y, previous)
     short_len = change_samples(params)
     if len(y) < 2 * short_len:
         return long
-    if params.sea_change_holding_only and manoeuvring(y[-short_len:], params.sample_time):
-        return long
     short = estimate_frequency(params, y, None, samples=short_len)
-    if (short.confident and _band_interior(params, short.wave_peak_freq)
-            and _relative_change(short.wave_peak_freq, long.wave_peak_freq) > SEA_CHANGE_RATIO):
-        return short
-    return long
+    if not _sea_changed_from(params, short, long):
+        return long
+    if params.sea_change_confirm:
+        earlier_y = y[:-params.retrain_samples]
+        if len(earlier_y) < 2 * short_len:
+            return long
+        earlier = estimate_frequency(params, earlier_y, None, samples=short_len)
+        if not (_sea_changed_from(params, earlier, long) and _relative_change(
+                short.wave_peak_freq, earlier.wave_peak_freq) <= SEA_CHANGE_RATIO):
+            return long
+    return short
+
+
+def _sea_changed_from(params: PredictorParams, short: FrequencyEstimate,
+                      long: FrequencyEstimate) -> bool:
+    """The short window's ω0 is confident, inside the band and far from the γ window's."""
+    return (short.confident and _band_interior(params, short.wave_peak_freq)
+            and _relative_change(short.wave_peak_freq, long.wave_peak_freq) > SEA_CHANGE_RATIO)
 
 
 def change_samples(params: PredictorParams) -> int:

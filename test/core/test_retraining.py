@@ -412,6 +412,35 @@ def test_a_new_sea_is_seen_on_the_short_window_and_restarts_the_training_window(
     assert result.targets.end_index == snapshot.end_index
 
 
+def test_sea_change_confirm_takes_a_real_change_one_period_later_and_ignores_a_burst() -> None:
+    """sea_change_confirm: the short window Δ earlier must see the change too.
+
+    The step 1.25 → 0.3 rad/s is taken 200 s after the step without it and 260 s (one Δ = 60 s
+    later) with it; 4 m of LF motion at 0.4 rad/s over the newest 100 s of a steady sea (the
+    way a turn shows in the short window) is taken as a new sea without it and ignored with it.
+    """
+    params = PredictorParams(ndof=1)
+    confirm = params.replace(sea_change_confirm=True)
+    assert params.retrain_samples == 60
+    y_all = omega_step_snapshot(260.0).y  # 1 s samples; the step at sample 3600
+    for cut, plain_freq, confirmed_freq in ((3800, 0.3, 1.25), (3860, 0.3, 0.3)):
+        y = y_all[:cut]
+        assert retraining.sea_state_estimate(params, y, 1.25).wave_peak_freq == \
+            pytest.approx(plain_freq, rel=0.05)
+        assert retraining.sea_state_estimate(confirm, y, 1.25).wave_peak_freq == \
+            pytest.approx(confirmed_freq, rel=0.05)
+    steady = np.array(y_all[:3000])
+    t = np.arange(steady.shape[0], dtype=float)
+    age = t - t[-1] + 100.0  # [s] into the burst
+    burst = np.where(age > 0.0, 4.0 * np.sin(0.4 * age) * np.sin(math.pi * age / 100.0) ** 2, 0.0)
+    disturbed = steady + burst[:, None]
+    assert retraining.sea_state_estimate(params, steady, 1.25).wave_peak_freq == \
+        pytest.approx(1.25, rel=0.02)
+    assert retraining.sea_state_estimate(params, disturbed, 1.25).wave_peak_freq < 0.5
+    assert retraining.sea_state_estimate(confirm, disturbed, 1.25).wave_peak_freq == \
+        pytest.approx(1.25, rel=0.02)
+
+
 def test_a_steady_sea_keeps_the_long_window_estimate() -> None:
     """Long before the step only the 1.25 rad/s sea is there: both windows agree."""
     params = PredictorParams(ndof=1)

@@ -61,3 +61,19 @@ def manoeuvring(y: FloatArray, sample_time: float) -> bool:
     limit = np.asarray(MANOEUVRE_STEP[:means.shape[1]], dtype=np.float64)
     with np.errstate(invalid='ignore'):
         return bool(np.any(steps > limit))
+
+
+def turning(heading: FloatArray, sample_time: float) -> bool:
+    """True when two consecutive block means of ``heading`` differ by more than 2° (a turn).
+
+    ``heading`` (n,): the unwrapped heading [rad]; the step is ``MANOEUVRE_STEP``'s heading
+    entry, whatever the positions do. Fewer than two whole blocks: False.
+    """
+    column = np.asarray(heading, dtype=np.float64)
+    if column.ndim != 1:
+        raise ValueError(f'heading must have shape (n,), got {column.shape}')
+    means = block_means(column[:, None], sample_time)[:, 0]
+    if means.shape[0] < 2:
+        return False
+    with np.errstate(invalid='ignore'):
+        return bool(np.any(np.abs(np.diff(means)) > MANOEUVRE_STEP[2]))

@@ -35,6 +35,7 @@ from lf_predictor_ros.core.regressors import RAMP_ORDERS
 TRAINERS = ('lm', 'lbfgs', 'adam')
 TRAINING_MODES = ('series_parallel', 'parallel')
 REGRESSOR_FRAMES = ('earth', 'body')
+SEA_CHANGE_CONFIRMS = ('off', 'turns', 'always')
 NDOF_VALUES = (1, 3)
 # γ rule: the Welch bin must be at most this fraction of the wave band width, so the band holds
 # at least 20 bins and the peak refinement has several bins per peak.
@@ -49,10 +50,9 @@ _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'tra
                   'filter_window', 'append_length')
 _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed',
                'motion_gate_ny', 'ramp_order')
-_STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame')
+_STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
-                'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
-                'sea_change_confirm')
+                'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -158,12 +158,13 @@ class PredictorParams:
             'with notch_zeta_broadband: the broadband width only for a training window of '
             'station keeping; a window with a setpoint move or a turn (core/manoeuvre.py) keeps '
             'notch_zeta'))
-    sea_change_confirm: bool = field(
-        default=False, metadata=_doc(
-            'a change of sea state (a new ω0 from the short window that restarts the training '
-            'window) must also be seen by the short window one retrain period earlier, within '
-            'the same ratio: a passing disturbance (the LF motion of a turn) is not a new sea; a '
-            'real change is seen one retrain period later'))
+    sea_change_confirm: str = field(
+        default='off', metadata=_doc(
+            'off, turns or always: a change of sea state (a new ω0 from the short window that '
+            'restarts the training window) must also be seen by the short window one retrain '
+            'period earlier, within the same ratio; always: every time (a real change is then '
+            'taken one retrain period later), turns: only when the short window shows a turn '
+            '(ndof 3; the LF motion of a turn looks like a new, lower wave peak)'))
     notch_lower_edge: float = field(
         default=0.23, metadata=_doc(
             'with notch_zeta_broadband: the broadband notch is no wider than the width whose '
@@ -442,6 +443,9 @@ class PredictorParams:
         if self.training_mode not in TRAINING_MODES:
             raise ValueError(f'training mode rule: training_mode must be one of '
                              f'{TRAINING_MODES}, got {self.training_mode!r}')
+        if self.sea_change_confirm not in SEA_CHANGE_CONFIRMS:
+            raise ValueError(f'sea change rule: sea_change_confirm must be one of '
+                             f'{SEA_CHANGE_CONFIRMS}, got {self.sea_change_confirm!r}')
         self._check_regressor_frame()
         self._check_ramp()
         if self.max_train_seconds > self.retrain_period:

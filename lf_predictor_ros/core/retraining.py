@@ -37,7 +37,7 @@ from lf_predictor_ros.core.lf_dynamics import (
     earth_to_body,
     thrust_improves_dead_reckoning,
 )
-from lf_predictor_ros.core.manoeuvre import manoeuvring
+from lf_predictor_ros.core.manoeuvre import manoeuvring, turning
 from lf_predictor_ros.core.network import (
     NnarmaxNet,
     NnarmaxSpec,
@@ -197,12 +197,15 @@ def sea_state_estimate(params: PredictorParams, y: FloatArray,
     the estimate switched 600–900 s late, and every target in between was filtered at the wrong
     ω0. So ω0 is also estimated on the newest ``change_samples`` (max(α, γ/4)); when that estimate
     is confident and more than ``SEA_CHANGE_RATIO`` away from the γ-window one, it wins. With
-    ``sea_change_confirm`` only if the short window ending one retrain period Δ earlier says the
-    same (also a change, within ``SEA_CHANGE_RATIO`` of the newest): on rao_swell development
+    ``sea_change_confirm`` always (or turns, and the short window shows a turn) only if the short
+    window ending one retrain period Δ earlier says the same (also a change, within
+    ``SEA_CHANGE_RATIO`` of the newest): on rao_swell development
     seed 5 one short window held the LF motion of a +90° turn as a peak at 0.335 rad/s (sea:
     0.48), the training window restarted on targets notched there and the loop left 5 m; the
     windows Δ before and after it did not see that peak (docs/BENCHMARKS.md "Fifteenth
-    session"). A real change is then taken one Δ later.
+    session"). A real change is then taken one Δ later (omega_steps development seed 3: the
+    estimate recovered 477 s after the 1.25 → 0.3 rad/s step instead of 252 s), which is why
+    ``turns`` asks for it only where a turn is in the window.
     """
     long = estimate_frequency(params, y, previous)
     short_len = change_samples(params)
@@ -211,7 +214,7 @@ def sea_state_estimate(params: PredictorParams, y: FloatArray,
     short = estimate_frequency(params, y, None, samples=short_len)
     if not _sea_changed_from(params, short, long):
         return long
-    if params.sea_change_confirm:
+    if _confirm_needed(params, y[-short_len:]):
         earlier_y = y[:-params.retrain_samples]
         if len(earlier_y) < 2 * short_len:
             return long
@@ -220,6 +223,15 @@ def sea_state_estimate(params: PredictorParams, y: FloatArray,
                 short.wave_peak_freq, earlier.wave_peak_freq) <= SEA_CHANGE_RATIO):
             return long
     return short
+
+
+def _confirm_needed(params: PredictorParams, short_y: FloatArray) -> bool:
+    """Must a sea change seen on ``short_y`` be confirmed (``sea_change_confirm``)?"""
+    if params.sea_change_confirm == 'always':
+        return True
+    if params.sea_change_confirm == 'turns' and short_y.shape[1] == 3:
+        return turning(short_y[:, 2], params.sample_time)
+    return False
 
 
 def _sea_changed_from(params: PredictorParams, short: FrequencyEstimate,

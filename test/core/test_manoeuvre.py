@@ -9,6 +9,7 @@ from lf_predictor_ros.core.manoeuvre import (
     MANOEUVRE_STEP,
     block_means,
     manoeuvring,
+    turning,
 )
 
 
@@ -54,3 +55,19 @@ def test_a_move_or_a_turn_is_a_manoeuvre_and_a_smaller_step_is_not(dof: int) -> 
 
 def test_non_finite_block_means_are_no_evidence() -> None:
     assert not manoeuvring(np.full((600, 3), np.nan), 1.0)
+
+
+def test_a_turn_is_turning_and_a_move_is_not() -> None:
+    """Turning looks at the heading alone: a 1.5 × step per block turns, a 10 m move does not."""
+    n = 600
+    ramp = np.clip(np.arange(n) - 300.0, 0.0, 180.0)  # 3 blocks of ramp
+    heading = holding(n)[:, 2]
+    assert not turning(heading, 1.0)
+    assert turning(heading + ramp * 1.5 * MANOEUVRE_STEP[2] / MANOEUVRE_BLOCK, 1.0)
+    assert not turning(heading + ramp * 0.5 * MANOEUVRE_STEP[2] / MANOEUVRE_BLOCK, 1.0)
+    moved = holding(n)
+    moved[:, 0] += ramp * 10.0 / 180.0
+    assert manoeuvring(moved, 1.0) and not turning(moved[:, 2], 1.0)
+    assert not turning(heading[:100], 1.0)  # one block: no evidence
+    with pytest.raises(ValueError, match='shape'):
+        turning(holding(n), 1.0)

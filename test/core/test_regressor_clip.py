@@ -136,7 +136,8 @@ def test_body_frame_clip_keeps_the_rotation_invariance() -> None:
 def test_widen_scales_each_range_about_its_centre() -> None:
     net = _linear_net([2.0, 0.0, 1.0]).with_range(_window_rows(), widen=3.0)
     assert net.regressor_range is not None and net.output_range is not None
-    # u [−1, 1] → [−3, 3]; y(t−1) − y(t) [−0.1, 0.2] → centre 0.05, half 0.45; step [−2.1, 2.2] → [−6.4, 6.5]
+    # u [−1, 1] → [−3, 3]; y(t−1) − y(t) [−0.1, 0.2] → centre 0.05, half 0.45;
+    # the step [−2.1, 2.2] → [−6.4, 6.5]
     np.testing.assert_allclose(net.regressor_range[0], [-3.0, 0.0, -0.4], atol=1e-12)
     np.testing.assert_allclose(net.regressor_range[1], [3.0, 0.0, 0.5], atol=1e-12)
     np.testing.assert_allclose([net.output_range[0][0], net.output_range[1][0]], [-6.4, 6.5],

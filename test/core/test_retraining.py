@@ -420,11 +420,15 @@ def test_sea_change_confirm_takes_a_real_change_one_period_later_and_ignores_a_b
     way a turn shows in the short window) is taken as a new sea without it and ignored with it.
     """
     params = PredictorParams(ndof=1)
-    confirm = params.replace(sea_change_confirm=True)
+    confirm = params.replace(sea_change_confirm='always')
     assert params.retrain_samples == 60
     y_all = omega_step_snapshot(260.0).y  # 1 s samples; the step at sample 3600
+    turns = params.replace(sea_change_confirm='turns')
     for cut, plain_freq, confirmed_freq in ((3800, 0.3, 1.25), (3860, 0.3, 0.3)):
         y = y_all[:cut]
+        # 'turns' on a vessel without a heading never asks for confirmation
+        assert retraining.sea_state_estimate(turns, y, 1.25).wave_peak_freq == \
+            pytest.approx(plain_freq, rel=0.05)
         assert retraining.sea_state_estimate(params, y, 1.25).wave_peak_freq == \
             pytest.approx(plain_freq, rel=0.05)
         assert retraining.sea_state_estimate(confirm, y, 1.25).wave_peak_freq == \
@@ -439,6 +443,8 @@ def test_sea_change_confirm_takes_a_real_change_one_period_later_and_ignores_a_b
     assert retraining.sea_state_estimate(params, disturbed, 1.25).wave_peak_freq < 0.5
     assert retraining.sea_state_estimate(confirm, disturbed, 1.25).wave_peak_freq == \
         pytest.approx(1.25, rel=0.02)
+    with pytest.raises(ValueError, match='sea_change_confirm must be one of'):
+        params.replace(sea_change_confirm='yes')
 
 
 def test_a_steady_sea_keeps_the_long_window_estimate() -> None:

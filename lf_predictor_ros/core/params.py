@@ -159,7 +159,7 @@ class PredictorParams:
             'station keeping; a window with a setpoint move or a turn (core/manoeuvre.py) keeps '
             'notch_zeta'))
     sea_change_confirm: str = field(
-        default='off', metadata=_doc(
+        default='turns', metadata=_doc(
             'off, turns or always: a change of sea state (a new ω0 from the short window that '
             'restarts the training window) must also be seen by the short window one retrain '
             'period earlier, within the same ratio; always: every time (a real change is then '

@@ -35,7 +35,8 @@ from lf_predictor_ros.core.regressors import RAMP_ORDERS
 TRAINERS = ('lm', 'lbfgs', 'adam')
 TRAINING_MODES = ('series_parallel', 'parallel')
 REGRESSOR_FRAMES = ('earth', 'body')
-SEA_CHANGE_CONFIRMS = ('off', 'turns', 'always')
+# ('off' would read as a YAML boolean in a parameter file: 'never')
+SEA_CHANGE_CONFIRMS = ('never', 'turns', 'always')
 NDOF_VALUES = (1, 3)
 # γ rule: the Welch bin must be at most this fraction of the wave band width, so the band holds
 # at least 20 bins and the peak refinement has several bins per peak.
@@ -160,7 +161,7 @@ class PredictorParams:
             'notch_zeta'))
     sea_change_confirm: str = field(
         default='turns', metadata=_doc(
-            'off, turns or always: a change of sea state (a new ω0 from the short window that '
+            'never, turns or always: a change of sea state (a new ω0 from the short window that '
             'restarts the training window) must also be seen by the short window one retrain '
             'period earlier, within the same ratio; always: every time (a real change is then '
             'taken one retrain period later), turns: only when the short window shows a turn '

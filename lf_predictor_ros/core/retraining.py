@@ -196,16 +196,16 @@ def sea_state_estimate(params: PredictorParams, y: FloatArray,
     after a change of sea state (a swell arriving, the wind turning): on the thesis Fig. 4.1 steps
     the estimate switched 600–900 s late, and every target in between was filtered at the wrong
     ω0. So ω0 is also estimated on the newest ``change_samples`` (max(α, γ/4)); when that estimate
-    is confident and more than ``SEA_CHANGE_RATIO`` away from the γ-window one, it wins. With
-    ``sea_change_confirm`` always (or turns, and the short window shows a turn) only if the short
-    window ending one retrain period Δ earlier says the same (also a change, within
-    ``SEA_CHANGE_RATIO`` of the newest): on rao_swell development
-    seed 5 one short window held the LF motion of a +90° turn as a peak at 0.335 rad/s (sea:
-    0.48), the training window restarted on targets notched there and the loop left 5 m; the
-    windows Δ before and after it did not see that peak (docs/BENCHMARKS.md "Fifteenth
-    session"). A real change is then taken one Δ later (omega_steps development seed 3: the
-    estimate recovered 477 s after the 1.25 → 0.3 rad/s step instead of 252 s), which is why
-    ``turns`` asks for it only where a turn is in the window.
+    is confident and more than ``SEA_CHANGE_RATIO`` away from the γ-window one, it wins.
+
+    ``sea_change_confirm`` always (or turns, and the short window shows a turn): it wins only if
+    the short window ending one retrain period Δ earlier says the same (a change too, within
+    ``SEA_CHANGE_RATIO`` of the newest). On rao_swell development seed 5 one short window held
+    the LF motion of a +90° turn as a peak at 0.335 rad/s (sea: 0.48), the training window
+    restarted on targets notched there and the loop left 5 m; the windows Δ before and after it
+    reported no change (docs/BENCHMARKS.md "Fifteenth session"). A real change is then taken one
+    Δ later (omega_steps development seed 3: the estimate recovered 477 s after the 1.25 → 0.3
+    rad/s step instead of 252 s), which is why ``turns`` asks only where a turn is in the window.
     """
     long = estimate_frequency(params, y, previous)
     short_len = change_samples(params)

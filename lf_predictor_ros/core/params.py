@@ -214,7 +214,8 @@ class PredictorParams:
             'clip every regressor the network sees (relative positions, forces) and its output '
             'step to their range in the training window, widened this many times about its '
             'centre: a turn or a move beyond what the window showed reaches the network as the '
-            'largest values it was fitted on, never as an extrapolation; 0 = off, else ≥ 1', ''))
+            'largest values it was fitted on, never as an extrapolation; 0 = off, else ≥ 1 (off '
+            'by default: better open loop, more wave-band thrust in the loop)', ''))
     lf_augmentation: tuple[float, ...] = field(
         default=(0.0, 0.0, 0.0), metadata=_doc(
             'RMS velocity of the synthetic LF motion (below the DP bandwidth) added to the '

@@ -989,6 +989,20 @@ def _lm_jacobian(
                               window, derivative_weight)
 
 
+def _lm_normal_equations(
+    runner: _WindowPredictor, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
+    parallel: bool, derivative_weight: float, residuals: torch.Tensor, scratch: _LmScratch,
+) -> tuple[torch.Tensor, torch.Tensor, bool]:
+    """(Jᵀ J, Jᵀ r, by_factors): by factors for the default network, else from the dense J."""
+    if not parallel or runner.nfb == 0:
+        normal = _one_layer_normal_equations(runner.net, layout, flat, window,
+                                             derivative_weight, residuals, scratch)
+        if normal is not None:
+            return normal[0], normal[1], True
+    jacobian = _lm_jacobian(runner, layout, flat, window, parallel, derivative_weight, scratch)
+    return jacobian.T @ jacobian, jacobian.T @ residuals, False
+
+
 def _levenberg_marquardt(
     runner: _WindowPredictor, window: _Window, parallel: bool, run: _Run
 ) -> str:
@@ -1019,30 +1033,20 @@ def _levenberg_marquardt(
         if stop is not None:
             reason = stop
             break
-        normal = None
-        if not parallel or runner.nfb == 0:
-            normal = _one_layer_normal_equations(runner.net, layout, weights, window,
-                                                 settings.derivative_weight, residuals, scratch)
-        if normal is None:
-            jacobian = _lm_jacobian(runner, layout, weights, window, parallel,
-                                    settings.derivative_weight, scratch)
-            gradient = jacobian.T @ residuals + decay * weights  # ½ ∇J
-        else:
-            jtj, jtr = normal
-            gradient = jtr + decay * weights
+        jtj, jtr, by_factors = _lm_normal_equations(runner, layout, weights, window, parallel,
+                                                    settings.derivative_weight, residuals,
+                                                    scratch)
+        gradient = jtr + decay * weights  # ½ ∇J
         if float(torch.linalg.vector_norm(2.0 * gradient)) <= settings.min_grad:
             reason = 'min_grad'
             break
-        if normal is None:
-            gauss_newton = jacobian.T @ jacobian + torch.diag(decay)
-        else:
-            gauss_newton = jtj + torch.diag(decay)
+        gauss_newton = jtj + torch.diag(decay)
         accepted = False
         while not accepted:
-            if normal is None:
-                step = torch.linalg.solve(gauss_newton + mu * identity, gradient)
-            else:
+            if by_factors:
                 step = _damped_step(gauss_newton, mu, gradient)
+            else:
+                step = torch.linalg.solve(gauss_newton + mu * identity, gradient)
             candidate = weights - step
             with torch.no_grad():
                 candidate_residuals = residual_fn(candidate)

@@ -56,13 +56,8 @@ def manoeuvring(y: FloatArray, sample_time: float) -> bool:
     ``y`` (n, ndof): positions [m] and, for 3 DOF, the unwrapped heading [rad]. Fewer than two
     whole blocks, or non-finite block means: False (no evidence of a manoeuvre).
     """
-    means = block_means(y, sample_time)
-    if means.shape[0] < 2:
-        return False
-    steps = np.abs(np.diff(means, axis=0))
-    limit = np.asarray(MANOEUVRE_STEP[:means.shape[1]], dtype=np.float64)
-    with np.errstate(invalid='ignore'):
-        return bool(np.any(steps > limit))
+    data = np.asarray(y, dtype=np.float64)
+    return _steps_exceed(block_means(data, sample_time), MANOEUVRE_STEP[:data.shape[-1]])
 
 
 def turning(heading: FloatArray, sample_time: float) -> bool:
@@ -74,8 +69,16 @@ def turning(heading: FloatArray, sample_time: float) -> bool:
     column = np.asarray(heading, dtype=np.float64)
     if column.ndim != 1:
         raise ValueError(f'heading must have shape (n,), got {column.shape}')
-    means = block_means(column[:, None], sample_time)[:, 0]
+    return _steps_exceed(block_means(column[:, None], sample_time), MANOEUVRE_STEP[2:])
+
+
+def _steps_exceed(means: FloatArray, limit: tuple[float, ...]) -> bool:
+    """Two consecutive rows of ``means`` (blocks, k) apart by more than ``limit`` (k,) anywhere.
+
+    Fewer than two blocks, or non-finite block means: False (no evidence of a manoeuvre).
+    """
     if means.shape[0] < 2:
         return False
+    steps = np.abs(np.diff(means, axis=0))
     with np.errstate(invalid='ignore'):
-        return bool(np.any(np.abs(np.diff(means)) > MANOEUVRE_STEP[2]))
+        return bool(np.any(steps > np.asarray(limit, dtype=np.float64)))

@@ -807,17 +807,14 @@ class NumpyNnarmax:
 
     def forward(self, x: FloatArray) -> FloatArray:
         """ŷLF(t + 1) for regressor rows (rows, n_regressors) or one row (n_regressors,)."""
-        spec = self.spec
-        if spec.relative:
-            ref, relative, base = _relative_regressors_numpy(spec, x)
-            if spec.body_frame:
-                cos, sin = np.cos(ref[..., 2]), np.sin(ref[..., 2])
-                body = self._forward_absolute(rotate_blocks(relative, cos, -sin))
-                turned: FloatArray = base + rotate_blocks(body, cos, sin)
-                return turned
-            result: FloatArray = base + self._forward_absolute(relative)
-            return result
-        return self._forward_absolute(x)
+        if not self.spec.relative:
+            return self._forward_absolute(x)
+        rows, base, turn = _network_frame(self.spec, x)
+        out = self._forward_absolute(rows)
+        if turn is not None:
+            out = rotate_blocks(out, *turn)
+        result: FloatArray = base + out
+        return result
 
     def _forward_absolute(self, x: FloatArray) -> FloatArray:
         if self.regressor_range is not None:
@@ -852,12 +849,21 @@ def network_frame_regressors(spec: NnarmaxSpec, x: FloatArray) -> FloatArray:
     Relative networks: the rows shifted by ``_relative_regressors_numpy``, body-frame ones
     then rotated by the row's newest heading; absolute networks: ``x`` itself.
     """
-    if not spec.relative:
-        return x
-    ref, relative, _ = _relative_regressors_numpy(spec, x)
-    if spec.body_frame:
-        return rotate_blocks(relative, np.cos(ref[..., 2]), -np.sin(ref[..., 2]))
-    return relative
+    return _network_frame(spec, x)[0] if spec.relative else x
+
+
+def _network_frame(spec: NnarmaxSpec, x: FloatArray,
+                   ) -> tuple[FloatArray, FloatArray, tuple[FloatArray, FloatArray] | None]:
+    """(rows, base, turn) of a relative network's raw rows ``x``.
+
+    ``rows``: what its layers see; its output is rotated by ``turn`` = (cos ψ, sin ψ) of the
+    row's newest heading (body frame; None in the earth frame) and added to ``base``.
+    """
+    ref, relative, base = _relative_regressors_numpy(spec, x)
+    if not spec.body_frame:
+        return relative, base, None
+    cos, sin = np.cos(ref[..., 2]), np.sin(ref[..., 2])
+    return rotate_blocks(relative, cos, -sin), base, (cos, sin)
 
 
 def predict_step(

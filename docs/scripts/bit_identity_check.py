@@ -6,9 +6,9 @@
 
 Runs `LfStateEstimator` inline with the shipped defaults (predictor, the motion gate's
 ramp-invariant twin, LM trainings, the odometry) on fair recordings of rao_supply and
-supply_closed_loop (tuning seed 3 is not used by anything else: 1500 s, h = 1 s), and the
-position-reference checks and the averaging aligner on 600 s of 10 Hz poses; saves every output
-(lf_pose, odometry pose, twist and covariances; aligned samples). ``--compare`` prints, per
+supply_closed_loop (seed 3, a development seed since the fifteenth session: 1500 s, h = 1 s),
+and the position-reference checks and the averaging aligner on 600 s of 10 Hz poses; saves every
+output (lf_pose, odometry pose, twist and covariances; aligned samples). ``--compare`` prints, per
 array, whether the two files are equal bit for bit (NaN equal to NaN). Bit-identity holds on one
 machine only: another CPU rounds differently (`docs/BENCHMARKS.md`, fourteenth session).
 """

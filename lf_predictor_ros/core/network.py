@@ -805,6 +805,34 @@ class NumpyNnarmax:
         return replace(self, regressor_range=_column_range(rows, widen),
                        output_range=_column_range(outputs, widen))
 
+    def range_meta(self) -> dict[str, list[list[float]]]:
+        """The clip ranges as checkpoint meta entries (``with_saved_ranges``); {} without."""
+        if self.regressor_range is None or self.output_range is None:
+            return {}
+        return {'regressor_range': [a.tolist() for a in self.regressor_range],
+                'output_range': [a.tolist() for a in self.output_range]}
+
+    def with_saved_ranges(self, meta: Mapping[str, Any]) -> NumpyNnarmax:
+        """A copy with the clip ranges a checkpoint's meta carries (``range_meta``).
+
+        A checkpoint without them, or with ranges that do not fit the network, gives the network
+        unclipped (as a predictor without regressor_clip saved it).
+        """
+        ranges = []
+        for key, width in (('regressor_range', self.spec.n_regressors),
+                           ('output_range', self.spec.n_outputs)):
+            try:
+                low, high = (np.array(v, dtype=np.float64) for v in meta[key])
+            except (KeyError, TypeError, ValueError):
+                return self
+            if low.shape != (width,) or high.shape != (width,) or \
+                    not (np.all(np.isfinite(low)) and np.all(low <= high)):
+                return self
+            low.setflags(write=False)
+            high.setflags(write=False)
+            ranges.append((low, high))
+        return replace(self, regressor_range=ranges[0], output_range=ranges[1])
+
     def forward(self, x: FloatArray) -> FloatArray:
         """ŷLF(t + 1) for regressor rows (rows, n_regressors) or one row (n_regressors,)."""
         if not self.spec.relative:

@@ -60,7 +60,6 @@ from __future__ import annotations
 import atexit
 from collections import deque
 from collections.abc import Iterator
-from dataclasses import replace
 import math
 from pathlib import Path
 import queue
@@ -621,8 +620,8 @@ class AdaptivePredictor:
         """Put a checked checkpoint's network in service (its ω0 and loss with it)."""
         spec, state, meta = checkpoint
         self._state_dict = state
-        self._model = with_saved_ranges(
-            NumpyNnarmax.from_module(NnarmaxNet.from_state(spec, state)), meta)
+        self._model = NumpyNnarmax.from_module(
+            NnarmaxNet.from_state(spec, state)).with_saved_ranges(meta)
         self._model_time = None
         freq = meta.get('wave_peak_freq')
         if isinstance(freq, (int, float)) and freq > 0:
@@ -1077,33 +1076,9 @@ class AdaptivePredictor:
         meta['wave_peak_freq'] = freq
         meta['loss'] = result.loss if result else self._last_loss
         model = result.model if result else self._model
-        if model is not None and model.regressor_range is not None and \
-                model.output_range is not None:  # regressor_clip: the ranges travel with it
-            meta['regressor_range'] = [a.tolist() for a in model.regressor_range]
-            meta['output_range'] = [a.tolist() for a in model.output_range]
+        if model is not None:  # regressor_clip: the ranges travel with the network
+            meta.update(model.range_meta())
         return meta
-
-
-def with_saved_ranges(model: NumpyNnarmax, meta: dict[str, Any]) -> NumpyNnarmax:
-    """``model`` with the clip ranges a checkpoint's meta carries (regressor_clip), if any.
-
-    A checkpoint without them, or with ranges that do not fit the network, gives the network
-    unclipped (as it was saved by a predictor without regressor_clip).
-    """
-    ranges = []
-    for key, width in (('regressor_range', model.spec.n_regressors),
-                       ('output_range', model.spec.n_outputs)):
-        try:
-            low, high = (np.array(v, dtype=np.float64) for v in meta[key])
-        except (KeyError, TypeError, ValueError):
-            return model
-        if low.shape != (width,) or high.shape != (width,) or \
-                not (np.all(np.isfinite(low)) and np.all(low <= high)):
-            return model
-        low.setflags(write=False)
-        high.setflags(write=False)
-        ranges.append((low, high))
-    return replace(model, regressor_range=ranges[0], output_range=ranges[1])
 
 
 def _newest(rows: deque[FloatArray], count: int) -> FloatArray:

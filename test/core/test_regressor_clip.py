@@ -154,3 +154,17 @@ def test_regressor_clip_is_off_or_at_least_one() -> None:
     for bad in (0.5, -1.0, 0.999):
         with pytest.raises(ValueError, match='regressor_clip must be 0'):
             PredictorParams(regressor_clip=bad)
+
+
+def test_the_ranges_round_trip_through_checkpoint_meta_and_a_misfit_is_dropped() -> None:
+    clipped = _linear_net([2.0, 0.0, 1.0]).with_range(_window_rows())
+    meta = clipped.range_meta()
+    restored = _linear_net([2.0, 0.0, 1.0]).with_saved_ranges(meta)
+    assert restored.regressor_range is not None and restored.output_range is not None
+    for a, b in zip(restored.regressor_range + restored.output_range,
+                    clipped.regressor_range + clipped.output_range, strict=True):  # type: ignore[operator]
+        np.testing.assert_array_equal(a, b)
+    assert _linear_net([2.0, 0.0, 1.0]).range_meta() == {}
+    for bad in ({}, {**meta, 'output_range': [[0.0, 1.0], [1.0, 2.0]]},
+                {**meta, 'regressor_range': [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]}):
+        assert _linear_net([2.0, 0.0, 1.0]).with_saved_ranges(bad).regressor_range is None

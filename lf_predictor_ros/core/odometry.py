@@ -16,7 +16,9 @@ thrust, and gives an ``OdometryEstimate``:
   separately for samples from the network and from the fallback. Pose: the error of each DOF i
   is a holding part plus a lag part proportional to the LF rate w_i the odometry publishes (N/E:
   the earth-frame velocity R(ψ)[u, v], yaw: r), E[e_i²] = σ²_hold,i + T_i² w_i²; σ²_hold,i and
-  T_i² are fitted by least squares of e_i² on w_i² over the window (``fit_error_model``: T_i² ≥
+  T_i² are fitted by least squares of e_i² on w_i² over the window (with ``pose_lag_memory`` > 0
+  w_i² is held at its recent peak, decaying over that time: errors outlast the motion that made
+  them; 0: the current rate) (``fit_error_model``: T_i² ≥
   0, shrunk towards ``pose_lag_prior`` by the evidence the window has, σ²_hold,i ≥
   ``HOLD_FLOOR_FRACTION`` of the mean e_i²; T_i from every source of the window, which has more
   motion to fit it, σ²_hold,i per source). The published pose covariance is
@@ -109,6 +111,11 @@ class OdometryParams:
         'multiplied by this inside pose_cov_scale (the errors against the targets show less lag '
         'than against the truth; chosen on tuning seeds 1–2 where the spread of the per-DOF NEES '
         'stops falling, docs/BENCHMARKS.md "State-dependent covariance")', ''))
+    pose_lag_memory: float = field(default=0.0, metadata=field_doc(
+        'the lag part of the pose error model grows with the largest recent LF rate, not only '
+        'the current one: w_i² is held at its peak and decays by exp(−Δt / this time) (errors '
+        'outlast the motion that made them: the settling after a turn or a setpoint move); '
+        '0 = the current rate (issue 14)', 's'))
     pose_lag_prior: float = field(default=1.2, metadata=field_doc(
         'lag time T assumed for every DOF where a calibration window has no motion to fit it '
         '(prior of the least-squares fit, with a standard deviation of T² equal to T²; '
@@ -191,6 +198,9 @@ class OdometryParams:
         if not (math.isfinite(self.pose_lag_scale) and self.pose_lag_scale >= 0.0):
             raise ValueError(f'pose_lag_scale must be a finite number >= 0, got '
                              f'{self.pose_lag_scale}')
+        if not (math.isfinite(self.pose_lag_memory) and self.pose_lag_memory >= 0.0):
+            raise ValueError(f'pose_lag_memory must be a finite number >= 0 s (0: no memory), '
+                             f'got {self.pose_lag_memory}')
         if not (math.isfinite(self.pose_lag_prior) and self.pose_lag_prior >= 0.0):
             raise ValueError(f'pose_lag_prior must be a finite number >= 0 s, got '
                              f'{self.pose_lag_prior}')
@@ -290,6 +300,7 @@ class Published:
     twist: FloatArray
     source: EstimateSource
     accel: FloatArray  # the twist's low-passed change per second (twist error model regressor)
+    lag: FloatArray  # the pose error model's regressor w (`lag_rates`, held by pose_lag_memory)
 
 
 class LfOdometry:
@@ -316,6 +327,7 @@ class LfOdometry:
         self._pose_cov: dict[str, ErrorModel] = {}
         self._twist_cov: dict[str, ErrorModel] = {}
         self._accel: tuple[float, FloatArray, FloatArray] | None = None  # (t, twist, accel)
+        self._lag_peak: tuple[float, FloatArray] | None = None  # (t, held w²), pose_lag_memory
         self._history: deque[Published] = deque(maxlen=HISTORY_SAMPLES)
         self._x: FloatArray | None = None
         self._p = np.zeros((2 * n, 2 * n))
@@ -402,7 +414,8 @@ class LfOdometry:
         x = self._require_state()
         twist = x[self.ndof:].copy()
         accel = self._twist_change(t, twist)
-        self._history.append(Published(t, z.copy(), twist, source, accel))
+        lag = self._lag_regressor(t, z, twist)
+        self._history.append(Published(t, z.copy(), twist, source, accel, lag))
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
         self._slow_twist = twist.copy() if self._slow_twist is None else \
             low_pass_step(self._slow_twist, twist, alpha)
@@ -410,7 +423,7 @@ class LfOdometry:
         self._slow_force = applied.copy() if self._slow_force is None else \
             low_pass_step(self._slow_force, applied, self._force_rate())
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
-                                            self._pose_covariance(source, z, twist))
+                                            self._pose_covariance(source, lag))
         out = OdometryEstimate(
             stamp=t, pose=published, pose_cov=pose_cov, twist=self._full(twist),
             twist_cov=self._twist_covariance(source, accel), mode='tracking',
@@ -772,20 +785,34 @@ class LfOdometry:
 
     # ---- covariance calibration ------------------------------------------------------------
 
-    def _pose_covariance(self, source: EstimateSource, pose: FloatArray, twist: FloatArray
-                         ) -> FloatArray:
-        """The pose error model of ``source`` at the published pose and twist (ndof each)."""
+    def _lag_regressor(self, t: float, pose: FloatArray, twist: FloatArray) -> FloatArray:
+        """The pose error model's regressor at the published pose and twist (ndof each).
+
+        `lag_rates` of this sample; with ``pose_lag_memory`` T > 0 the square held at its peak,
+        decaying by exp(−Δt / T) (O(n)).
+        """
+        if self.ndof == 3:  # lag_rates of one sample, without the array overhead
+            c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+            u, v = float(twist[0]), float(twist[1])
+            rates = np.array([c * u - s * v, s * u + c * v, float(twist[2])])
+        else:
+            rates = twist.copy()
+        memory = self.params.pose_lag_memory
+        if memory <= 0.0:
+            return rates
+        square = rates * rates
+        last = self._lag_peak
+        if last is not None and t > last[0]:
+            square = np.maximum(square, last[1] * math.exp(-(t - last[0]) / memory))
+        self._lag_peak = (t, square)
+        return np.asarray(np.sqrt(square), dtype=np.float64)
+
+    def _pose_covariance(self, source: EstimateSource, lag: FloatArray) -> FloatArray:
+        """The pose error model of ``source`` at the regressor ``lag`` (`_lag_regressor`)."""
         n = self.ndof
         if self._pose_cov:
             model = self._pose_cov.get(source, self._pose_cov['all'])
-            if n == 3:  # lag_rates of one sample, without the array overhead
-                c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
-                u, v = float(twist[0]), float(twist[1])
-                rates = np.array([c * u - s * v, s * u + c * v, float(twist[2])])
-            else:
-                rates = twist
-            inner = self.params.pose_cov_scale * model.covariance(rates,
-                                                                  self.params.pose_lag_scale)
+            inner = self.params.pose_cov_scale * model.covariance(lag, self.params.pose_lag_scale)
         else:
             inner = np.diag(np.array(self.params.prior_pose_std[:n]) ** 2)
         return self._embed(inner)
@@ -846,8 +873,9 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
     Every published estimate whose stamp is a target instant (not the first or last) is
     compared with the target and with the targets' differentiated body velocity: per source
     ('network', 'fallback': only with ``min_samples`` matches) and over all, the pose error
-    model (`fit_error_model`, prior lag time ``lag_prior`` [s]) and the twist error's second
-    moment (bias included). None when nothing matches. Pure: runs on a worker.
+    model (`fit_error_model` on each estimate's regressor ``Published.lag``, prior lag time
+    ``lag_prior`` [s]) and the twist error's second moment (bias included). None when nothing
+    matches. Pure: runs on a worker.
     """
     stamps = np.asarray(times, dtype=np.float64)
     values = np.array(targets, dtype=np.float64).reshape(stamps.shape[0], -1)
@@ -870,7 +898,7 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
         pose_err[:, 2] = wrap_angle(pose_err[:, 2])
     twists = np.array([p.twist for p in rows])
     twist_err = twists - velocity[idx]
-    rates = lag_rates(np.array([p.pose for p in rows]), twists)
+    rates = np.array([p.lag for p in rows])
     sources = np.array([p.source for p in rows])
     pooled = fit_error_model(pose_err, rates, lag_prior)
     pose_cov: dict[str, ErrorModel] = {'all': pooled}

@@ -99,7 +99,8 @@ def _published_pd_loop(m: int, t0: float = 0.0) -> tuple[list[Published], np.nda
         x[k] = a * x[k - 1] + (1 - a) * rng.standard_normal() * 5.0
     v = np.gradient(x)
     stamps = t0 + np.arange(m, dtype=np.float64)
-    published = [Published(float(s), np.array([p]), np.array([w]), 'network', np.zeros(1))
+    published = [Published(float(s), np.array([p]), np.array([w]), 'network', np.zeros(1),
+                           np.array([w]))
                  for s, p, w in zip(stamps, x, v, strict=True)]
     return published, stamps, (-2.0e4 * x - 3.0e5 * v)[:, None]
 

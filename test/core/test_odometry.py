@@ -144,6 +144,32 @@ def test_published_pose_covariance_grows_with_the_lf_velocity() -> None:
     assert out.pose_cov[0, 0] == pytest.approx(2.0 * (0.01 + 27.0 * 0.12), rel=0.01)
 
 
+def test_pose_lag_memory_holds_the_peak_rate_and_lets_it_decay() -> None:
+    """pose_lag_memory T: after the motion stops, w² is the peak decayed by exp(−Δt / T)."""
+    params = OdometryParams(pose_cov_scale=2.0, pose_lag_scale=3.0, pose_lag_memory=100.0)
+    odo = LfOdometry(3, H, params)
+    hold = np.diag([0.01, 0.04, 1e-4])
+    model = ErrorModel(moment=hold, hold=hold, gain=np.array([9.0, 4.0, 16.0]))
+    twist_model = ErrorModel(moment=np.eye(3), hold=np.eye(3), gain=np.zeros(3))
+    odo.apply_learned(None, ({'all': model}, {'all': twist_model}))
+    _track_line(odo, 0.4, 0.0, 300)  # north at 0.4 m/s, then still at the last pose
+    stop = 0.4 * 299
+    outs = [odo.track(float(t), [stop, 0.0, 0.0], np.zeros(3)) for t in range(300, 361)]
+    last = outs[-1]
+    assert last is not None and abs(last.twist[0]) < 1e-3  # the velocity itself is gone
+    held = 0.4 ** 2 * math.exp(-60.0 / 100.0)  # the peak (≈ at t = 299) decayed over 60 s
+    assert last.pose_cov[0, 0] == pytest.approx(2.0 * (0.01 + 27.0 * held), rel=0.02)
+    lags = [p.lag[0] for p in odo.published()]
+    assert lags[-1] == pytest.approx(math.sqrt(held), rel=0.01)
+    assert all(b <= a for a, b in zip(lags[300:], lags[301:], strict=False))  # decaying
+    # without the memory the same track publishes the holding variance again
+    plain = LfOdometry(3, H, OdometryParams(pose_cov_scale=2.0, pose_lag_scale=3.0))
+    plain.apply_learned(None, ({'all': model}, {'all': twist_model}))
+    _track_line(plain, 0.4, 0.0, 300)
+    out = [plain.track(float(t), [stop, 0.0, 0.0], np.zeros(3)) for t in range(300, 361)][-1]
+    assert out is not None and out.pose_cov[0, 0] == pytest.approx(0.02, rel=1e-3)
+
+
 def test_published_twist_covariance_grows_with_the_acceleration() -> None:
     """Known twist model: P = twist_cov_scale · (Σ_hold + K² a²), a the low-passed twist change.
 
@@ -322,6 +348,8 @@ def test_bad_input_is_refused_with_a_message() -> None:
         OdometryParams(dead_reckoning_timeout=0.0)
     with pytest.raises(ValueError, match='prior_pose_std'):
         OdometryParams(prior_pose_std=(1.0, 1.0))
+    with pytest.raises(ValueError, match='pose_lag_memory'):
+        OdometryParams(pose_lag_memory=-1.0)
     assert odo.coast(6.0, np.zeros(3)) is not None
     assert LfOdometry(3, H).coast(0.0, np.zeros(3)) is None  # never fixed: nothing to publish
 

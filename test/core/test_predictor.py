@@ -20,12 +20,13 @@ import pytest
 import torch
 
 from lf_predictor_ros.core import predictor as predictor_module
+from lf_predictor_ros.core import retraining
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.network import NumpyNnarmax, predict_step
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
 from lf_predictor_ros.core.regressors import regressor_vector
-from lf_predictor_ros.core.retraining import first_training_samples
+from lf_predictor_ros.core.retraining import Snapshot, first_training_samples
 from sim_ros.simulation import load_scenario, simulate
 
 # torch loads its forward-AD decompositions once per process via the deprecated torch.jit.script
@@ -475,6 +476,27 @@ def test_restart_segment_keeps_the_network_and_no_regressor_spans_the_restart() 
 def crash(*_args: object, **_kwargs: object) -> None:
     """A run_retraining stand-in that fails."""
     raise RuntimeError('simulated training crash')
+
+
+def test_snapshots_carry_the_segments_first_training(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every retraining's snapshot names the first training's sample (frequency_window)."""
+    seen: list[tuple[int, int | None]] = []
+    real = retraining.run_retraining
+
+    def spy(params: PredictorParams, snapshot: Snapshot, *args: object) -> object:
+        seen.append((snapshot.end_index, snapshot.service_start))
+        return real(params, snapshot, *args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(predictor_module, 'run_retraining', spy)
+    predictor = trained_predictor(FIRST_TRAINING + 2 * DELTA + 1)
+    first = seen[0][0]
+    # the motion gate's twin retrains on the same snapshot: each entry twice
+    assert list(dict.fromkeys(seen)) == [(first, first), (first + DELTA, first),
+                                         (first + 2 * DELTA, first)]
+    predictor.restart_segment()  # a new segment: its own first training
+    t, pose, force, _ = onedof_record(5, 400.0)
+    feed(predictor, t, pose, force, 200, 200 + FIRST_TRAINING + 1)
+    assert seen[-1][1] == seen[-1][0]
 
 
 def test_worker_exception_keeps_the_network_in_service(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -50,7 +50,7 @@ BROADBAND_PEAK_DAMPING = 0.05
 _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'transient_length',
                   'filter_window', 'append_length')
 _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed',
-               'motion_gate_ny', 'ramp_order')
+               'motion_gate_ny', 'ramp_order', 'ensemble_size')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
@@ -167,6 +167,12 @@ class PredictorParams:
             'period earlier, within the same ratio; always: every time (a real change is then '
             'taken one retrain period later), turns: only when the short window shows a turn '
             '(ndof 3; the LF motion of a turn looks like a new, lower wave peak)'))
+    ensemble_size: int = field(
+        default=1, metadata=_doc(
+            'the prediction is the mean of the newest this many accepted networks (one per '
+            'retraining; all are dropped when the sea state changes or the network in service '
+            "is retired): one window's fit varies from window to window, the mean less; 1 = "
+            'the newest network alone (issue 13)'))
     frequency_after_startup: bool = field(
         default=False, metadata=_doc(
             'once the first training of a segment is followed by at least the short sea-change '
@@ -413,6 +419,9 @@ class PredictorParams:
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')
+        if self.ensemble_size < 1:
+            raise ValueError(f'positivity rule: ensemble_size must be ≥ 1 (1 = the newest '
+                             f'network alone), got {self.ensemble_size!r}')
         if any(speed < 0.0 for speed in self.lf_augmentation):
             raise ValueError(f'positivity rule: lf_augmentation must be ≥ 0 in every DOF (0 = '
                              f'off), got {list(self.lf_augmentation)!r}')

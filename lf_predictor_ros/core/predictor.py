@@ -100,6 +100,7 @@ from lf_predictor_ros.core.retraining import (
     first_training_samples,
     network_spec,
     run_retraining,
+    sea_state_changed,
 )
 from lf_predictor_ros.core.targets import TargetWindow
 from lf_predictor_ros.core.training import warm_up
@@ -250,6 +251,8 @@ class AdaptivePredictor:
         self._worker: threading.Thread | None = None
         self._generation = 0
         self._model: NumpyNnarmax | None = None
+        # the newest accepted networks, oldest first, the last one _model (ensemble_size)
+        self._ensemble: deque[NumpyNnarmax] = deque(maxlen=params.ensemble_size)
         self._state_dict: dict[str, torch.Tensor] | None = None
         self._frequency: FrequencyEstimate | float | None = params.wave_peak_prior
         self._trainings = 0
@@ -368,6 +371,7 @@ class AdaptivePredictor:
         self._stop = threading.Event()
         self._worker = None
         self._model = None
+        self._ensemble.clear()
         self._state_dict = None
         self._frequency = self.params.wave_peak_prior
         self._trainings = self._rejected = 0
@@ -622,6 +626,8 @@ class AdaptivePredictor:
         self._state_dict = state
         self._model = NumpyNnarmax.from_module(
             NnarmaxNet.from_state(spec, state)).with_saved_ranges(meta)
+        self._ensemble.clear()
+        self._ensemble.append(self._model)
         self._model_time = None
         freq = meta.get('wave_peak_freq')
         if isinstance(freq, (int, float)) and freq > 0:
@@ -708,6 +714,10 @@ class AdaptivePredictor:
         prediction = self._predict_with(model)
         if prediction is None:
             return None
+        if len(self._ensemble) > 1:  # ensemble_size: the mean over the newest networks
+            others = [self._predict_with(m) for m in self._ensemble if m is not model]
+            prediction = (prediction + sum(o for o in others if o is not None)) / (
+                1 + sum(o is not None for o in others))
         if not _all_finite(prediction):
             self._message = 'network output not finite: cascade fallback'
             return None
@@ -1050,10 +1060,13 @@ class AdaptivePredictor:
             self._targets = result.targets
             self._targets_damping = result.targets_peak_damping
             self._narrow_reference = result.narrow_reference
+        if sea_state_changed(self._frequency, result.frequency):
+            self._ensemble.clear()  # networks of the old sea
         self._frequency = result.frequency
         self._tune_wave_filters(result.frequency.wave_peak_freq)
         if result.accepted and result.model is not None:
             self._model, self._state_dict = result.model, result.state_dict
+            self._ensemble.append(result.model)
             self._no_thrust += 0 if result.thrust_used else 1
             self._wave_spread = result.wave_spread
             self._model_time = t
@@ -1067,6 +1080,7 @@ class AdaptivePredictor:
             self._message = f'training rejected: {result.reason}'
             if result.retire_incumbent and self._model is not None:
                 self._model = None  # weights stay as the next warm start
+                self._ensemble.clear()
                 self._message += '; network in service is worse than the cascade: retired'
         if outcome.saved_error:
             self._message += f'; {outcome.saved_error}'

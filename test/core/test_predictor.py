@@ -499,6 +499,27 @@ def test_snapshots_carry_the_segments_first_training(monkeypatch: pytest.MonkeyP
     assert seen[-1][1] == seen[-1][0]
 
 
+def test_ensemble_predicts_the_mean_of_the_newest_networks() -> None:
+    """ensemble_size 2: the prediction is the mean of the two newest accepted networks."""
+    predictor = trained_predictor(FIRST_TRAINING + 2 * DELTA + 1, ensemble_size=2,
+                                  motion_gate=False)
+    ensemble = list(predictor._ensemble)
+    assert len(ensemble) == 2 and ensemble[-1] is predictor.model
+    each = [predictor._predict_with(m) for m in ensemble]
+    assert each[0] is not None and each[1] is not None
+    assert not np.allclose(each[0], each[1])  # two different fits
+    mean = predictor._predict()
+    assert mean is not None
+    np.testing.assert_allclose(mean, 0.5 * (each[0] + each[1]), rtol=0, atol=1e-12)
+    single = trained_predictor(FIRST_TRAINING + 2 * DELTA + 1, motion_gate=False)
+    assert len(single._ensemble) == 1  # the default: the newest network alone
+    alone = single._predict()
+    assert alone is not None
+    np.testing.assert_allclose(alone, each[1], rtol=0, atol=1e-12)
+    predictor.reset()
+    assert len(predictor._ensemble) == 0
+
+
 def test_worker_exception_keeps_the_network_in_service(monkeypatch: pytest.MonkeyPatch) -> None:
     t, pose, force, _ = onedof_record(5, 400.0)
     predictor = trained_predictor(150)

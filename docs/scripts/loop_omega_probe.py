@@ -7,7 +7,10 @@ Runs the adaptive predictor (shipped defaults, inline training) in the scenario'
 first training on it prints the ω0 in use and `retraining.estimate_frequency` (the γ-window
 estimate of Algorithm 4.1) on: all samples so far (what the predictor does), the samples after
 360 s or 480 s (the start-up, when the loop runs on the fallback, left out), and the newest
-300 s. A '?' marks an estimate without a clear peak. Tuning and development seeds only (1–10).
+300 s; then on all samples of y − ŷ (ŷ the predictor's estimate for that sample, made one
+step before) and of y − LP(ŷ) (ŷ through a 2nd-order Butterworth low-pass at 0.15 rad/s, below
+the wave band): the LF motion removed instead of the start-up. A '?' marks an estimate without a
+clear peak. Tuning and development seeds only (1–10).
 Diagnostic for issue 13 (docs/BENCHMARKS.md, sixteenth session).
 """
 from __future__ import annotations
@@ -17,6 +20,7 @@ from collections.abc import Sequence
 import sys
 
 import numpy as np
+from scipy import signal
 import torch
 
 from lf_predictor_ros.benchmark.benchmark import FIRST_HELD_OUT_SEED
@@ -43,27 +47,36 @@ def main(argv: Sequence[str] | None = None) -> int:
     params = predictor_params(scenario)
     predictor = AdaptivePredictor(params, background=False)
     poses: list[FloatArray] = []
+    outputs: list[FloatArray] = []
     in_use: list[float] = []
 
     def step(t: float, pose: FloatArray, force: FloatArray, true_omega: float) -> FloatArray:
         out = predictor.update(t, pose, force)
         poses.append(np.array(pose, dtype=np.float64))
+        outputs.append(np.array(out, dtype=np.float64))
         in_use.append(predictor.wave_peak_freq or 0.0)
         return out
 
     run_loop(scenario, args.seed, 1800.0, params.sample_time, step)
     y = np.array(poses)
     y[:, 2] = np.unwrap(y[:, 2])
+    estimates = np.array(outputs)
+    estimates[:, 2] = np.unwrap(estimates[:, 2])
+    y_hat = np.vstack([y[:1], estimates[:-1]])  # the estimate for sample k was made at k − 1
+    lowpass = signal.butter(2, 0.15, fs=2.0 * np.pi / params.sample_time, output='sos')
+    y_hat_lf = signal.sosfilt(lowpass, y_hat - y_hat[0], axis=0) + y_hat[0]
+    series = {'y': y, 'y − ŷ': y - y_hat, 'y − LP(ŷ)': y - y_hat_lf}
     print(f'{args.scenario} seed {args.seed}: generator peak {scenario.waves.peak_freq(0.0):.3f} '
           f'rad/s, γ = {params.estimation_samples} samples')
     for k in range(360, y.shape[0] + 1, 120):
         cells = []
-        for name, start in (('all', 0), ('after 360 s', 360), ('after 480 s', 480),
-                            ('newest 300 s', k - 300)):
+        for name, data, start in (('all', 'y', 0), ('after 360 s', 'y', 360),
+                                  ('after 480 s', 'y', 480), ('newest 300 s', 'y', k - 300),
+                                  ('y − ŷ', 'y − ŷ', 0), ('y − LP(ŷ)', 'y − LP(ŷ)', 0)):
             if k - start < 180:
                 cells.append(f'{name} –')
                 continue
-            est = estimate_frequency(params, y[start:k], None)
+            est = estimate_frequency(params, series[data][start:k], None)
             cells.append(f'{name} {est.wave_peak_freq:.3f}{"" if est.confident else "?"}')
         print(f'{k:5d} s: in use {in_use[k - 1]:.3f} | ' + ' | '.join(cells), flush=True)
     return 0

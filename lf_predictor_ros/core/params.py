@@ -54,7 +54,7 @@ _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
-                'frequency_after_startup')
+                'frequency_after_startup', 'turn_bypass_position')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -167,6 +167,18 @@ class PredictorParams:
             'period earlier, within the same ratio; always: every time (a real change is then '
             'taken one retrain period later), turns: only when the short window shows a turn '
             '(ndof 3; the LF motion of a turn looks like a new, lower wave peak)'))
+    turn_bypass_rate: float = field(
+        default=0.0, metadata=_doc(
+            'ndof 3: while the measured heading turns faster than this over the last '
+            'TURN_RATE_WINDOW (20 s), the published heading is the measured one extrapolated by '
+            'that rate over h (blended in and out over TURN_BLEND_TIME, 5 s): in a turn the '
+            "network's heading lags 2-5x the measurement's wave yaw (development seeds, issue "
+            '13); 0 = off', 'rad/s'))
+    turn_bypass_position: bool = field(
+        default=False, metadata=_doc(
+            'with turn_bypass_rate: north and east come from the cascade fallback during the '
+            'bypass too (a pure turn moves the vessel little, the network extrapolates the '
+            'turn into north/east)'))
     ensemble_size: int = field(
         default=1, metadata=_doc(
             'the prediction is the mean of the newest this many accepted networks (one per '
@@ -419,6 +431,12 @@ class PredictorParams:
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')
+        if self.turn_bypass_rate < 0.0:
+            raise ValueError(f'positivity rule: turn_bypass_rate must be ≥ 0 rad/s (0 = off), '
+                             f'got {self.turn_bypass_rate!r}')
+        if self.turn_bypass_rate > 0.0 and self.ndof != 3:
+            raise ValueError('positivity rule: turn_bypass_rate needs ndof 3 (a heading to '
+                             'follow); set it to 0 for ndof 1')
         if self.ensemble_size < 1:
             raise ValueError(f'positivity rule: ensemble_size must be ≥ 1 (1 = the newest '
                              f'network alone), got {self.ensemble_size!r}')

@@ -117,6 +117,10 @@ _NO_FORCE = np.zeros(3)
 _NO_FORCE.flags.writeable = False
 
 FloatArray = NDArray[np.float64]
+# turn_bypass_rate: the heading rate is measured over this window [s] and the bypass is blended
+# in and out with this first-order time constant [s]
+TURN_RATE_WINDOW = 20.0
+TURN_BLEND_TIME = 5.0
 
 
 class _NewestRows:
@@ -282,6 +286,8 @@ class AdaptivePredictor:
         # (the wave spread it was made from, the guard's bound per DOF), see _plausible
         self._guard_bound: tuple[FloatArray, list[float]] | None = None
         self._guard_trips = 0
+        self._turn_weight = 0.0  # turn_bypass_rate: weight of the bypass
+        self._turns_bypassed = 0  # outputs with a bypass weight > 0
         self._no_thrust = 0  # accepted trainings whose thrust test failed (thrust_validation)
         self._smoothing = params.switch_blend_time > 0.0 or any(
             rate > 0.0 for rate in params.max_output_rate[:params.ndof])
@@ -292,7 +298,9 @@ class AdaptivePredictor:
         if params.motion_gate:
             self._moving = AdaptivePredictor(
                 params.replace(motion_gate=False, ramp_invariant=True,
-                               ny=params.motion_gate_ny or params.ny), background=background,
+                               ny=params.motion_gate_ny or params.ny,
+                               turn_bypass_rate=0.0),  # the bypass acts on the final output
+                background=background,
                 checkpoint_path=twin_checkpoint_path(checkpoint_path) if checkpoint_path else None,
                 max_trainings=max_trainings, training_lock=self._training_lock)
             self._gate = MotionGate(params.ndof, params.sample_time,
@@ -357,8 +365,40 @@ class AdaptivePredictor:
             estimate = self._bumpless(t, estimate, model if prediction is not None else None,
                                       self._position(lf_now, update_heading=False))
         self._maybe_retrain(t)
-        return self._notched(t, self._gated(t, self._output(estimate, pose_arr), pose_arr,
-                                            force_arr))
+        out = self._notched(t, self._gated(t, self._output(estimate, pose_arr), pose_arr,
+                                           force_arr))
+        if self.params.turn_bypass_rate > 0.0:
+            return self._turn_bypassed(out, lf_now)
+        return out
+
+    def _turn_bypassed(self, out: FloatArray, lf_now: FloatArray) -> FloatArray:
+        """``turn_bypass_rate``: in a turn, the measured heading extrapolated over h.
+
+        The rate is the unwrapped measured heading's change over ``TURN_RATE_WINDOW``; the
+        weight w of the bypass follows 1 (turning) or 0 with time constant ``TURN_BLEND_TIME``;
+        heading ← heading + w · wrap(measured + rate · h − heading), and with
+        ``turn_bypass_position`` north/east ← (1 − w) · output + w · cascade fallback.
+        """
+        h = self.sample_time
+        lag = max(1, int(round(TURN_RATE_WINDOW / h)))
+        rows = self._y.newest(lag + 1)
+        if rows.shape[0] < lag + 1 or not np.all(np.isfinite(out)):
+            self._turn_weight = 0.0
+            return out
+        yaw_now = float(rows[-1, 2])
+        rate = (yaw_now - float(rows[0, 2])) / (lag * h)
+        target = 1.0 if abs(rate) > self.params.turn_bypass_rate else 0.0
+        self._turn_weight += min(1.0, h / TURN_BLEND_TIME) * (target - self._turn_weight)
+        w = self._turn_weight
+        if w < 1e-6:
+            return out
+        bypassed = np.array(out, dtype=np.float64)
+        follow = yaw_now + rate * h
+        bypassed[2] = wrap_angle(float(out[2]) + w * wrap_angle(follow - float(out[2])))
+        if self.params.turn_bypass_position:
+            bypassed[:2] = (1.0 - w) * bypassed[:2] + w * np.asarray(lf_now[:2])
+        self._turns_bypassed += 1
+        return bypassed
 
     def reset(self) -> None:
         """Forget everything learned and collected (parameters stay); a running job is dropped."""
@@ -529,6 +569,7 @@ class AdaptivePredictor:
         counts = {'trainings': self._trainings, 'rejected_trainings': self._rejected,
                   'overruns': self._overruns, 'training_errors': self._errors,
                   'guard_trips': self._guard_trips,
+                  'turn_bypassed': self._turns_bypassed,
                   'segments': self._segment, 'trainings_without_thrust': self._no_thrust}
         if self._moving is not None:
             counts.update({f'moving_{key}': value for key, value in

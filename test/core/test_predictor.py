@@ -520,6 +520,36 @@ def test_ensemble_predicts_the_mean_of_the_newest_networks() -> None:
     assert len(predictor._ensemble) == 0
 
 
+def _turn_record(n: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(t, pose, force): holding heading 0.3 rad, then a 0.02 rad/s turn from t = 100 s on."""
+    t = np.arange(n, dtype=float)
+    pose = np.zeros((n, 3))
+    pose[:, 0] = 2.0 * np.sin(2.0 * math.pi * t / 97.0)  # [m]
+    pose[:, 2] = 0.3 + 0.02 * np.clip(t - 100.0, 0.0, None)  # [rad]
+    return t, pose, np.zeros((n, 3))
+
+
+def test_turn_bypass_publishes_the_measured_heading_extrapolated_in_a_turn() -> None:
+    """turn_bypass_rate: in a 0.02 rad/s turn the heading is the measured one + rate · h."""
+    t, pose, force = _turn_record(260)
+    bypass = AdaptivePredictor(PredictorParams(turn_bypass_rate=0.005), background=False)
+    out = feed(bypass, t, pose, force, 0, 260)
+    # 150 s into the turn the bypass weight is 1 − 0.8^150: the output is ψ(t) + 0.02 · 1 s,
+    # the true heading at t + h, to rounding
+    assert abs(wrap(out[250, 2] - (pose[250, 2] + 0.02))) < 1e-9  # (published wrapped)
+    assert bypass.counters['turn_bypassed'] > 100
+    plain = AdaptivePredictor(PredictorParams(), background=False)
+    lagging = feed(plain, t, pose, force, 0, 260)
+    assert abs(wrap(lagging[250, 2] - (pose[250, 2] + 0.02))) > 0.01  # the cascade lags
+    assert plain.counters['turn_bypassed'] == 0
+    np.testing.assert_array_equal(out[:100], lagging[:100])  # holding: untouched
+    with_position = AdaptivePredictor(
+        PredictorParams(turn_bypass_rate=0.005, turn_bypass_position=True), background=False)
+    moved = feed(with_position, t, pose, force, 0, 260)
+    np.testing.assert_array_equal(moved[:, 2], out[:, 2])
+    np.testing.assert_array_equal(moved[:100], out[:100])
+
+
 def test_worker_exception_keeps_the_network_in_service(monkeypatch: pytest.MonkeyPatch) -> None:
     t, pose, force, _ = onedof_record(5, 400.0)
     predictor = trained_predictor(150)

@@ -287,6 +287,13 @@ class AdaptivePredictor:
         self._guard_bound: tuple[FloatArray, list[float]] | None = None
         self._guard_trips = 0
         self._turn_weight = 0.0  # turn_bypass_rate: weight of the bypass
+        # turn_bypass_notch_zeta: the measured heading through a notch at ω0 (1 channel)
+        self._turn_notch: CascadeFilter | None = None
+        if params.turn_bypass_rate > 0.0 and params.turn_bypass_notch_zeta > 0.0:
+            self._turn_notch = CascadeFilter(1, params.sample_time, self._fallback_freq(),
+                                             notch_zeta=params.turn_bypass_notch_zeta,
+                                             notch_depth=params.notch_depth,
+                                             lowpass_offset=None)
         self._turns_bypassed = 0  # outputs with a bypass weight > 0
         self._no_thrust = 0  # accepted trainings whose thrust test failed (thrust_validation)
         self._smoothing = params.switch_blend_time > 0.0 or any(
@@ -368,25 +375,29 @@ class AdaptivePredictor:
         out = self._notched(t, self._gated(t, self._output(estimate, pose_arr), pose_arr,
                                            force_arr))
         if self.params.turn_bypass_rate > 0.0:
-            return self._turn_bypassed(out, lf_now)
+            return self._turn_bypassed(t, out, lf_now)
         return out
 
-    def _turn_bypassed(self, out: FloatArray, lf_now: FloatArray) -> FloatArray:
+    def _turn_bypassed(self, t: float, out: FloatArray, lf_now: FloatArray) -> FloatArray:
         """``turn_bypass_rate``: in a turn, the measured heading extrapolated over h.
 
         The rate is the unwrapped measured heading's change over ``TURN_RATE_WINDOW``; the
         weight w of the bypass follows 1 (turning) or 0 with time constant ``TURN_BLEND_TIME``;
-        heading ← heading + w · wrap(measured + rate · h − heading), and with
+        heading ← heading + w · wrap(measured + rate · h − heading) (the measured heading
+        through the notch of ``turn_bypass_notch_zeta`` first), and with
         ``turn_bypass_position`` north/east ← (1 − w) · output + w · cascade fallback.
         """
         h = self.sample_time
         lag = max(1, int(round(TURN_RATE_WINDOW / h)))
         rows = self._y.newest(lag + 1)
+        measured = float(rows[-1, 2]) if rows.shape[0] else math.nan
+        if self._turn_notch is not None and math.isfinite(measured):
+            measured = self._turn_notch.update(t, np.array([measured, 0.0, 0.0]), _NO_FORCE)[0]
         if rows.shape[0] < lag + 1 or not np.all(np.isfinite(out)):
             self._turn_weight = 0.0
             return out
-        yaw_now = float(rows[-1, 2])
-        rate = (yaw_now - float(rows[0, 2])) / (lag * h)
+        yaw_now = float(measured)
+        rate = (float(rows[-1, 2]) - float(rows[0, 2])) / (lag * h)
         target = 1.0 if abs(rate) > self.params.turn_bypass_rate else 0.0
         self._turn_weight += min(1.0, h / TURN_BLEND_TIME) * (target - self._turn_weight)
         w = self._turn_weight
@@ -707,6 +718,8 @@ class AdaptivePredictor:
             self._output_notch.set_wave_peak_freq(wave_peak_freq)
         if self._gate_yaw_notch is not None:
             self._gate_yaw_notch.set_wave_peak_freq(wave_peak_freq)
+        if self._turn_notch is not None:
+            self._turn_notch.set_wave_peak_freq(wave_peak_freq)
 
     def _notched(self, t: float, out: FloatArray) -> FloatArray:
         """The published pose through the output notch (``output_notch_zeta``; off: ``out``).

@@ -543,6 +543,15 @@ def test_turn_bypass_publishes_the_measured_heading_extrapolated_in_a_turn() -> 
     assert abs(wrap(lagging[250, 2] - (pose[250, 2] + 0.02))) > 0.01  # the cascade lags
     assert plain.counters['turn_bypassed'] == 0
     np.testing.assert_array_equal(out[:100], lagging[:100])  # holding: untouched
+    notched = AdaptivePredictor(
+        PredictorParams(turn_bypass_rate=0.005, turn_bypass_notch_zeta=0.1), background=False)
+    through_notch = feed(notched, t, pose, force, 0, 260)
+    # a notch (ζ_p 0.1, ζ_z = depth · ζ_p) passes a ramp with the lag 2 (ζ_p − ζ_z) / ω0 · rate
+    omega = notched.wave_peak_freq or math.sqrt(0.25 * 1.4)  # before an estimate: band centre
+    lag = 2.0 * 0.1 * (1.0 - PredictorParams().notch_depth) / omega * 0.02
+    # (continuous-time value; the discrete notch at ω0 h ≈ 0.28 gives 5 % less)
+    assert wrap(pose[250, 2] + 0.02 - through_notch[250, 2]) == pytest.approx(lag, rel=0.1)
+    np.testing.assert_array_equal(through_notch[:100], lagging[:100])
     with_position = AdaptivePredictor(
         PredictorParams(turn_bypass_rate=0.005, turn_bypass_position=True), background=False)
     moved = feed(with_position, t, pose, force, 0, 260)

@@ -1,0 +1,112 @@
+"""Where the adaptive DP loop's LF estimate errs in turns: the published output, the cascade, raw.
+
+    python docs/scripts/turn_error_probe.py rao_supply 2 3
+
+Runs the adaptive predictor (shipped defaults, inline training) in the scenario's DP loop
+(`recordings.run_loop`, 1800 s) and records, per grid sample, its published output (valid at
+t + h), its own cascade fallback's estimate and the measured pose (both at t). For each setpoint
+event before 1700 s it prints the horizontal (north/east) and heading RMSE of the three against
+the true LF pose over the 120 s after the event, then the same over every sample after 481 s
+whose true yaw rate exceeds 0.005 rad/s (the turns). Tuning and development seeds only (1–10).
+Diagnostic for issue 13 (docs/BENCHMARKS.md, sixteenth session).
+"""
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+import math
+import sys
+
+import numpy as np
+import torch
+
+from lf_predictor_ros.benchmark.benchmark import FIRST_HELD_OUT_SEED
+from lf_predictor_ros.benchmark.estimators import predictor_params
+from lf_predictor_ros.benchmark.recordings import run_loop
+from lf_predictor_ros.core.heading import wrap_angle
+from lf_predictor_ros.core.predictor import AdaptivePredictor
+from sim_ros.simulation import load_scenario
+
+FloatArray = np.ndarray
+TURN_RATE = 0.005  # [rad/s] a sample counts as turning above this true yaw rate
+EVENT_WINDOW = 120.0  # [s] scored after each setpoint event
+SCORED_FROM = 481.0  # [s] the benchmark's first scored sample
+
+
+def _rms(error: FloatArray, rows: FloatArray, columns: list[int]) -> float:
+    return math.sqrt(float(np.mean(np.sum(error[rows][:, columns] ** 2, axis=1))))
+
+
+def probe(scenario_name: str, seed: int) -> None:
+    """One loop; print the event and turn tables (module docstring)."""
+    scenario = load_scenario(scenario_name)
+    params = predictor_params(scenario)
+    predictor = AdaptivePredictor(params, background=False)
+    cascade: list[FloatArray] = []
+    fallback_update = predictor._fallback.update  # noqa: SLF001 - diagnostic: log its output
+
+    def logged_fallback(t: float, pose: FloatArray, force: FloatArray) -> FloatArray:
+        out = fallback_update(t, pose, force)
+        cascade.append(np.array(out, dtype=np.float64))
+        return out
+
+    predictor._fallback.update = logged_fallback  # type: ignore[method-assign]  # noqa: SLF001
+    stamps: list[float] = []
+    outputs: list[FloatArray] = []
+    measured: list[FloatArray] = []
+
+    def step(t: float, pose: FloatArray, force: FloatArray, true_omega: float) -> FloatArray:
+        out = predictor.update(t, pose, force)
+        stamps.append(t)
+        outputs.append(np.array(out, dtype=np.float64))
+        measured.append(np.array(pose, dtype=np.float64))
+        return out
+
+    record = run_loop(scenario, seed, 1800.0, params.sample_time, step).record
+    t = np.array(stamps)
+
+    def truth(at: FloatArray) -> FloatArray:
+        return np.column_stack([np.interp(at, record.t, record.truth_lf_pose[:, i])
+                                for i in range(3)])
+
+    errors = {}
+    for name, values, at in (('output', outputs, t + params.sample_time),
+                             ('cascade', cascade, t), ('raw', measured, t)):
+        error = np.array(values) - truth(at)
+        error[:, 2] = wrap_angle(error[:, 2])
+        errors[name] = error
+    true_now = truth(t)
+    rate = np.abs(np.gradient(np.unwrap(true_now[:, 2]), t))
+    for row in scenario.controller.setpoint_schedule:
+        start = float(row[0])
+        if start > 1700.0:
+            continue
+        rows = (t >= start) & (t < start + EVENT_WINDOW)
+        cells = ' '.join(f'{n} {_rms(e, rows, [0, 1]):.3f}' for n, e in errors.items())
+        yaw = ' '.join(f'{n} {_rms(e, rows, [2]):.4f}' for n, e in errors.items())
+        print(f'{scenario_name} {seed} event {start:.0f} s (largest true yaw rate '
+              f'{rate[rows].max():.4f} rad/s): north/east [m] {cells} | heading [rad] {yaw}')
+    rows = (rate > TURN_RATE) & (t >= SCORED_FROM)
+    cells = ' '.join(f'{n} {_rms(e, rows, [0, 1]):.3f}' for n, e in errors.items())
+    yaw = ' '.join(f'{n} {_rms(e, rows, [2]):.4f}' for n, e in errors.items())
+    print(f'  turning ({100 * rows.mean():.1f} % of the samples): north/east [m] {cells} | '
+          f'heading [rad] {yaw}', flush=True)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """CLI (module docstring)."""
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('scenario')
+    parser.add_argument('seeds', nargs='+', type=int)
+    args = parser.parse_args(argv)
+    if any(not 1 <= s < FIRST_HELD_OUT_SEED for s in args.seeds):
+        parser.error('tuning and development seeds only (1-10)')
+    torch.set_num_threads(1)
+    for seed in args.seeds:
+        probe(args.scenario, seed)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -4,11 +4,14 @@
 
 Runs the adaptive predictor (shipped defaults, inline training) in the scenario's DP loop
 (`recordings.run_loop`, 1800 s) and records, per grid sample, its published output (valid at
-t + h), its own cascade fallback's estimate and the measured pose (both at t). For each setpoint
-event before 1700 s it prints the horizontal (north/east) and heading RMSE of the three against
-the true LF pose over the 120 s after the event, then the same over every sample after 481 s
-whose true yaw rate exceeds 0.005 rad/s (the turns). Tuning and development seeds only (1–10).
-Diagnostic for issue 13 (docs/BENCHMARKS.md, sixteenth session).
+t + h), its own cascade fallback's estimate and the measured pose (both at t), and where the
+output came from (the holding network alone, with the motion gate open, or the fallback). For
+each setpoint event before 1700 s it prints the horizontal (north/east) and heading RMSE of the
+three against the true LF pose over the 120 s after the event and the event's share of the
+output's squared horizontal error after 481 s; then the same over every sample after 481 s whose
+true yaw rate exceeds 0.005 rad/s (the turns); then per source and window (holding / the 200 s
+after an event) the share of the time, the RMSE and the share of the squared error. Tuning and
+development seeds only (1–10). Diagnostic for issue 13 (docs/BENCHMARKS.md, sixteenth session).
 """
 from __future__ import annotations
 
@@ -30,6 +33,7 @@ from sim_ros.simulation import load_scenario
 FloatArray = np.ndarray
 TURN_RATE = 0.005  # [rad/s] a sample counts as turning above this true yaw rate
 EVENT_WINDOW = 120.0  # [s] scored after each setpoint event
+AFTER_EVENT = 200.0  # [s] the sources' 'after an event' window
 SCORED_FROM = 481.0  # [s] the benchmark's first scored sample
 
 
@@ -54,9 +58,13 @@ def probe(scenario_name: str, seed: int) -> None:
     stamps: list[float] = []
     outputs: list[FloatArray] = []
     measured: list[FloatArray] = []
+    sources: list[str] = []
 
     def step(t: float, pose: FloatArray, force: FloatArray, true_omega: float) -> FloatArray:
         out = predictor.update(t, pose, force)
+        gate = np.asarray(predictor._gain)  # noqa: SLF001 - diagnostic: the gate's gains
+        sources.append('fallback' if not predictor.using_network else
+                       'gate open' if np.any(gate > 0.0) else 'network')
         stamps.append(t)
         outputs.append(np.array(out, dtype=np.float64))
         measured.append(np.array(pose, dtype=np.float64))
@@ -77,20 +85,35 @@ def probe(scenario_name: str, seed: int) -> None:
         errors[name] = error
     true_now = truth(t)
     rate = np.abs(np.gradient(np.unwrap(true_now[:, 2]), t))
-    for row in scenario.controller.setpoint_schedule:
-        start = float(row[0])
-        if start > 1700.0:
-            continue
+    scored = t + params.sample_time >= SCORED_FROM
+    squared = np.sum(errors['output'][:, :2] ** 2, axis=1)
+    total = float(squared[scored].sum())
+    events = [float(row[0]) for row in scenario.controller.setpoint_schedule
+              if float(row[0]) <= 1700.0]
+    after = np.zeros(t.shape, dtype=bool)
+    for start in events:
         rows = (t >= start) & (t < start + EVENT_WINDOW)
+        after |= (t >= start) & (t < start + AFTER_EVENT)
         cells = ' '.join(f'{n} {_rms(e, rows, [0, 1]):.3f}' for n, e in errors.items())
         yaw = ' '.join(f'{n} {_rms(e, rows, [2]):.4f}' for n, e in errors.items())
+        share = 100.0 * float(squared[rows & scored].sum()) / total
         print(f'{scenario_name} {seed} event {start:.0f} s (largest true yaw rate '
-              f'{rate[rows].max():.4f} rad/s): north/east [m] {cells} | heading [rad] {yaw}')
+              f'{rate[rows].max():.4f} rad/s): north/east [m] {cells} | heading [rad] {yaw} | '
+              f'{share:.1f} % of the squared error')
     rows = (rate > TURN_RATE) & (t >= SCORED_FROM)
     cells = ' '.join(f'{n} {_rms(e, rows, [0, 1]):.3f}' for n, e in errors.items())
     yaw = ' '.join(f'{n} {_rms(e, rows, [2]):.4f}' for n, e in errors.items())
     print(f'  turning ({100 * rows.mean():.1f} % of the samples): north/east [m] {cells} | '
-          f'heading [rad] {yaw}', flush=True)
+          f'heading [rad] {yaw}')
+    origin = np.array(sources)
+    for source in ('network', 'gate open', 'fallback'):
+        for window, mask in (('holding', ~after), ('after an event', after)):
+            rows = scored & (origin == source) & mask
+            if rows.any():
+                print(f'  {source:9s} {window:14s}: {100 * rows.sum() / scored.sum():5.1f} % of '
+                      f'the time, {_rms(errors["output"], rows, [0, 1]):.3f} m, '
+                      f'{100 * float(squared[rows].sum()) / total:5.1f} % of the squared error')
+    print(f'  guard trips {predictor.counters["guard_trips"]}', flush=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

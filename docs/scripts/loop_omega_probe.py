@@ -1,6 +1,6 @@
 """The predictor's ω0 in its own DP loop against ω0 estimated on parts of the same loop's data.
 
-    python docs/scripts/loop_omega_probe.py rao_swell 3
+    python docs/scripts/loop_omega_probe.py rao_swell 3 [--open-loop]
 
 Runs the adaptive predictor (shipped defaults, inline training) in the scenario's DP loop
 (`recordings.run_loop`, 1800 s) and logs the measured poses it was fed. Every 120 s from the
@@ -10,8 +10,9 @@ estimate of Algorithm 4.1) on: all samples so far (what the predictor does), the
 300 s; then on all samples of y − ŷ (ŷ the predictor's estimate for that sample, made one
 step before) and of y − LP(ŷ) (ŷ through a 2nd-order Butterworth low-pass at 0.15 rad/s, below
 the wave band): the LF motion removed instead of the start-up. A '?' marks an estimate without a
-clear peak. Tuning and development seeds only (1–10).
-Diagnostic for issue 13 (docs/BENCHMARKS.md, sixteenth session).
+clear peak. ``--open-loop``: the same predictor over the fair recording instead (the DP loop
+closed on the tuned observer, `suite.make_recording`), no loop of its own. Tuning and
+development seeds only (1–10). Diagnostic for issue 13 (docs/BENCHMARKS.md, sixteenth session).
 """
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ import numpy as np
 from scipy import signal
 import torch
 
+from lf_predictor_ros.benchmark import suite
 from lf_predictor_ros.benchmark.benchmark import FIRST_HELD_OUT_SEED
 from lf_predictor_ros.benchmark.estimators import predictor_params
 from lf_predictor_ros.benchmark.recordings import run_loop
@@ -39,6 +41,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('scenario')
     parser.add_argument('seed', type=int)
+    parser.add_argument('--open-loop', action='store_true',
+                        help='over the fair recording (loop on the tuned observer)')
     args = parser.parse_args(argv)
     if not 1 <= args.seed < FIRST_HELD_OUT_SEED:
         parser.error('tuning and development seeds only (1-10)')
@@ -57,7 +61,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         in_use.append(predictor.wave_peak_freq or 0.0)
         return out
 
-    run_loop(scenario, args.seed, 1800.0, params.sample_time, step)
+    if args.open_loop:
+        recording = suite.make_recording(scenario, args.seed, 1800.0,
+                                         suite.make_setup(scenario, args.seed, params))
+        for k in range(recording.t.shape[0]):
+            step(float(recording.t[k]), recording.y[k], recording.u[k], 0.0)
+    else:
+        run_loop(scenario, args.seed, 1800.0, params.sample_time, step)
     y = np.array(poses)
     y[:, 2] = np.unwrap(y[:, 2])
     estimates = np.array(outputs)

@@ -10,8 +10,11 @@ each setpoint event before 1700 s it prints the horizontal (north/east) and head
 three against the true LF pose over the 120 s after the event and the event's share of the
 output's squared horizontal error after 481 s; then the same over every sample after 481 s whose
 true yaw rate exceeds 0.005 rad/s (the turns); then per source and window (holding / the 200 s
-after an event) the share of the time, the RMSE and the share of the squared error. Tuning and
-development seeds only (1–10). Diagnostic for issue 13 (docs/BENCHMARKS.md, sixteenth session).
+after an event) the share of the time, the RMSE and the share of the squared error; last, where
+the motion gate acts on north/east, the horizontal RMSE of the holding network's output before
+the gate, of the gated output and of the gate's twin alone (and over all scored samples).
+Tuning and development seeds only (1–10). Diagnostic for issue 13 (docs/BENCHMARKS.md,
+sixteenth session).
 """
 from __future__ import annotations
 
@@ -59,6 +62,26 @@ def probe(scenario_name: str, seed: int) -> None:
     outputs: list[FloatArray] = []
     measured: list[FloatArray] = []
     sources: list[str] = []
+    holding: list[FloatArray] = []  # the output before the motion gate
+    twin: list[FloatArray] = []  # the gate's twin's own output
+    gate = predictor._gated  # noqa: SLF001 - diagnostic: log the gate's input
+    moving = predictor._moving  # noqa: SLF001
+    if moving is not None:
+        twin_update = moving.update
+
+        def logged_twin(t: float, pose: FloatArray, force: FloatArray) -> FloatArray:
+            out = twin_update(t, pose, force)
+            twin.append(np.array(out, dtype=np.float64))
+            return out
+
+        moving.update = logged_twin  # type: ignore[method-assign]
+
+    def logged_gate(t: float, out: FloatArray, pose: FloatArray, force: FloatArray
+                    ) -> FloatArray:
+        holding.append(np.array(out, dtype=np.float64))
+        return gate(t, out, pose, force)
+
+    predictor._gated = logged_gate  # type: ignore[method-assign]  # noqa: SLF001
 
     def step(t: float, pose: FloatArray, force: FloatArray, true_omega: float) -> FloatArray:
         out = predictor.update(t, pose, force)
@@ -114,6 +137,18 @@ def probe(scenario_name: str, seed: int) -> None:
                       f'the time, {_rms(errors["output"], rows, [0, 1]):.3f} m, '
                       f'{100 * float(squared[rows].sum()) / total:5.1f} % of the squared error')
     print(f'  guard trips {predictor.counters["guard_trips"]}', flush=True)
+    if len(twin) != len(t) or len(holding) != len(t):
+        return
+    at = t + params.sample_time
+    before = np.array(holding)[:, :2] - truth(at)[:, :2]
+    alone = np.array(twin)[:, :2] - truth(at)[:, :2]
+    gated = errors['output'][:, :2]
+    acting = scored & np.any(np.abs(np.array(outputs)[:, :2] - np.array(holding)[:, :2]) > 1e-9,
+                             axis=1)
+    for name, rows in (('where the gate acts', acting), ('all scored samples', scored)):
+        print(f'  {name} ({100 * rows.sum() / scored.sum():.1f} %): holding '
+              f'{_rms(before, rows, [0, 1]):.3f} m, gated {_rms(gated, rows, [0, 1]):.3f} m, '
+              f'twin alone {_rms(alone, rows, [0, 1]):.3f} m', flush=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -557,6 +557,13 @@ def test_turn_bypass_publishes_the_measured_heading_extrapolated_in_a_turn() -> 
     moved = feed(with_position, t, pose, force, 0, 260)
     np.testing.assert_array_equal(moved[:, 2], out[:, 2])
     np.testing.assert_array_equal(moved[:100], out[:100])
+    # (before the first training the output is the cascade itself): north/east of the
+    # bypass are the cascade's, weighted by w ≈ 1 after 150 s of turning
+    stepped = with_position._turn_bypassed(260.0, np.array([1.0, 2.0, 0.0]),
+                                            np.array([5.0, 6.0, 0.0]))
+    np.testing.assert_allclose(stepped[:2], [5.0, 6.0], rtol=0, atol=1e-9)
+    untouched = bypass._turn_bypassed(260.0, np.array([1.0, 2.0, 0.0]), np.array([5.0, 6.0, 0.0]))
+    np.testing.assert_array_equal(untouched[:2], [1.0, 2.0])  # heading only
 
 
 def test_worker_exception_keeps_the_network_in_service(monkeypatch: pytest.MonkeyPatch) -> None:

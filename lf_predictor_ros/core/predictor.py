@@ -287,6 +287,7 @@ class AdaptivePredictor:
         self._guard_bound: tuple[FloatArray, list[float]] | None = None
         self._guard_trips = 0
         self._turn_weight = 0.0  # turn_bypass_rate: weight of the bypass
+        self._turn_correction = 0.0  # turn_bypass_lowpass: the low-passed heading correction
         # turn_bypass_notch_zeta: the measured heading through a notch at ω0 (1 channel)
         self._turn_notch: CascadeFilter | None = None
         if params.turn_bypass_rate > 0.0 and params.turn_bypass_notch_zeta > 0.0:
@@ -384,7 +385,8 @@ class AdaptivePredictor:
         The rate is the unwrapped measured heading's change over ``TURN_RATE_WINDOW``; the
         weight w of the bypass follows 1 (turning) or 0 with time constant ``TURN_BLEND_TIME``;
         heading ← heading + w · wrap(measured + rate · h − heading) (the measured heading
-        through the notch of ``turn_bypass_notch_zeta`` first), and with
+        through the notch of ``turn_bypass_notch_zeta`` first; the correction wrap(…) through a
+        first-order low-pass of ``turn_bypass_lowpass`` while it runs), and with
         ``turn_bypass_position`` north/east ← (1 − w) · output + w · cascade fallback.
         """
         h = self.sample_time
@@ -394,18 +396,26 @@ class AdaptivePredictor:
         if self._turn_notch is not None and math.isfinite(measured):
             measured = self._turn_notch.update(t, np.array([measured, 0.0, 0.0]), _NO_FORCE)[0]
         if rows.shape[0] < lag + 1 or not np.all(np.isfinite(out)):
-            self._turn_weight = 0.0
+            self._turn_weight = self._turn_correction = 0.0
             return out
         yaw_now = float(measured)
         rate = (float(rows[-1, 2]) - float(rows[0, 2])) / (lag * h)
         target = 1.0 if abs(rate) > self.params.turn_bypass_rate else 0.0
         self._turn_weight += min(1.0, h / TURN_BLEND_TIME) * (target - self._turn_weight)
         w = self._turn_weight
+        correction = wrap_angle(yaw_now + rate * h - float(out[2]))
+        smoothing = self.params.turn_bypass_lowpass
+        if smoothing > 0.0:  # starts from 0 with each bypass: no old correction carried in
+            if w < 1e-6:
+                self._turn_correction = 0.0
+            else:
+                self._turn_correction += min(1.0, h / smoothing) * (
+                    correction - self._turn_correction)
+                correction = self._turn_correction
         if w < 1e-6:
             return out
         bypassed = np.array(out, dtype=np.float64)
-        follow = yaw_now + rate * h
-        bypassed[2] = wrap_angle(float(out[2]) + w * wrap_angle(follow - float(out[2])))
+        bypassed[2] = wrap_angle(float(out[2]) + w * correction)
         if self.params.turn_bypass_position:
             bypassed[:2] = (1.0 - w) * bypassed[:2] + w * np.asarray(lf_now[:2])
         self._turns_bypassed += 1

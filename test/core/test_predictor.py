@@ -552,6 +552,24 @@ def test_turn_bypass_publishes_the_measured_heading_extrapolated_in_a_turn() -> 
     # (continuous-time value; the discrete notch at ω0 h ≈ 0.28 gives 5 % less)
     assert wrap(pose[250, 2] + 0.02 - through_notch[250, 2]) == pytest.approx(lag, rel=0.1)
     np.testing.assert_array_equal(through_notch[:100], lagging[:100])
+    smoothed = AdaptivePredictor(
+        PredictorParams(turn_bypass_rate=0.005, turn_bypass_lowpass=10.0), background=False)
+    through_lowpass = feed(smoothed, t, pose, force, 0, 260)
+    # the bypass acts on the output only: heading = lagging + w · s, s the correction
+    # c = wrap(ψ(t) + rate · h − lagging) low-passed (α = h / 10 s) from the bypass's start,
+    # w → 1 with α = h / 5 s while the 20 s heading rate exceeds 0.005 rad/s
+    weight = smooth = 0.0
+    expected = lagging[:, 2].copy()
+    for k in range(20, 260):
+        rate = (pose[k, 2] - pose[k - 20, 2]) / 20.0
+        weight += 0.2 * ((1.0 if abs(rate) > 0.005 else 0.0) - weight)
+        correction = wrap(pose[k, 2] + rate - lagging[k, 2])
+        smooth = 0.0 if weight < 1e-6 else smooth + 0.1 * (correction - smooth)
+        if weight >= 1e-6:
+            expected[k] = wrap(lagging[k, 2] + weight * smooth)
+    np.testing.assert_allclose(through_lowpass[:, 2], expected, rtol=0, atol=1e-12)
+    assert abs(wrap(through_lowpass[250, 2] - (pose[250, 2] + 0.02))) < abs(
+        wrap(lagging[250, 2] - (pose[250, 2] + 0.02)))  # closer than without the bypass
     with_position = AdaptivePredictor(
         PredictorParams(turn_bypass_rate=0.005, turn_bypass_position=True), background=False)
     moved = feed(with_position, t, pose, force, 0, 260)

@@ -274,11 +274,7 @@ class AdaptivePredictor:
                                        lowpass_offset=params.lowpass_offset)
         self._output_notch: CascadeFilter | None = None  # output_notch_zeta > 0
         if params.output_notch_zeta > 0.0:
-            self._output_notch = CascadeFilter(params.ndof, params.sample_time,
-                                               self._fallback_freq(),
-                                               notch_zeta=params.output_notch_zeta,
-                                               notch_depth=params.notch_depth,
-                                               lowpass_offset=None)
+            self._output_notch = self._wave_notch(params.ndof, params.output_notch_zeta)
         self._now: float | None = None
         self._segment = 0
         self._fb_next: int = -1
@@ -291,10 +287,7 @@ class AdaptivePredictor:
         # turn_bypass_notch_zeta: the measured heading through a notch at ω0 (1 channel)
         self._turn_notch: CascadeFilter | None = None
         if params.turn_bypass_rate > 0.0 and params.turn_bypass_notch_zeta > 0.0:
-            self._turn_notch = CascadeFilter(1, params.sample_time, self._fallback_freq(),
-                                             notch_zeta=params.turn_bypass_notch_zeta,
-                                             notch_depth=params.notch_depth,
-                                             lowpass_offset=None)
+            self._turn_notch = self._wave_notch(1, params.turn_bypass_notch_zeta)
         self._turns_bypassed = 0  # outputs with a bypass weight > 0
         self._no_thrust = 0  # accepted trainings whose thrust test failed (thrust_validation)
         self._smoothing = params.switch_blend_time > 0.0 or any(
@@ -325,10 +318,7 @@ class AdaptivePredictor:
         self._gate_yaw_notch: CascadeFilter | None = None
         if params.motion_gate and params.motion_gate_yaw and params.ndof == 3 and \
                 params.motion_gate_yaw_notch > 0.0:
-            self._gate_yaw_notch = CascadeFilter(1, params.sample_time, self._fallback_freq(),
-                                                 notch_zeta=params.motion_gate_yaw_notch,
-                                                 notch_depth=params.notch_depth,
-                                                 lowpass_offset=None)
+            self._gate_yaw_notch = self._wave_notch(1, params.motion_gate_yaw_notch)
         self._clear_output_state()
         self._start_segment()
         if background:
@@ -394,7 +384,7 @@ class AdaptivePredictor:
         rows = self._y.newest(lag + 1)
         measured = float(rows[-1, 2]) if rows.shape[0] else math.nan
         if self._turn_notch is not None and math.isfinite(measured):
-            measured = self._turn_notch.update(t, np.array([measured, 0.0, 0.0]), _NO_FORCE)[0]
+            measured = _notch_one(self._turn_notch, t, measured)
         if rows.shape[0] < lag + 1 or not np.all(np.isfinite(out)):
             self._turn_weight = self._turn_correction = 0.0
             return out
@@ -724,12 +714,15 @@ class AdaptivePredictor:
     def _tune_wave_filters(self, wave_peak_freq: float) -> None:
         """Retune the cascade fallback and the output notch to ω0 [rad/s] (outputs continuous)."""
         self._fallback.set_wave_peak_freq(wave_peak_freq)
-        if self._output_notch is not None:
-            self._output_notch.set_wave_peak_freq(wave_peak_freq)
-        if self._gate_yaw_notch is not None:
-            self._gate_yaw_notch.set_wave_peak_freq(wave_peak_freq)
-        if self._turn_notch is not None:
-            self._turn_notch.set_wave_peak_freq(wave_peak_freq)
+        for notch in (self._output_notch, self._gate_yaw_notch, self._turn_notch):
+            if notch is not None:
+                notch.set_wave_peak_freq(wave_peak_freq)
+
+    def _wave_notch(self, channels: int, notch_zeta: float) -> CascadeFilter:
+        """A causal notch at ω0 (width ``notch_zeta``, depth notch_depth, no low-pass)."""
+        return CascadeFilter(channels, self.params.sample_time, self._fallback_freq(),
+                             notch_zeta=notch_zeta, notch_depth=self.params.notch_depth,
+                             lowpass_offset=None)
 
     def _notched(self, t: float, out: FloatArray) -> FloatArray:
         """The published pose through the output notch (``output_notch_zeta``; off: ``out``).
@@ -973,8 +966,7 @@ class AdaptivePredictor:
         """
         assert self._gate_yaw_notch is not None
         notched = np.array(offset, dtype=np.float64)
-        notched[2] = self._gate_yaw_notch.update(t, np.array([offset[2], 0.0, 0.0]),
-                                                 _NO_FORCE)[0]
+        notched[2] = _notch_one(self._gate_yaw_notch, t, float(offset[2]))
         return notched
 
     def _validate_gate(self, holding: FloatArray, gated: FloatArray) -> None:
@@ -1160,6 +1152,11 @@ class AdaptivePredictor:
         if model is not None:  # regressor_clip: the ranges travel with the network
             meta.update(model.range_meta())
         return meta
+
+
+def _notch_one(notch: CascadeFilter, t: float, value: float) -> float:
+    """One value through a one-channel notch (`AdaptivePredictor._wave_notch`)."""
+    return float(notch.update(t, np.array([value, 0.0, 0.0]), _NO_FORCE)[0])
 
 
 def _newest(rows: deque[FloatArray], count: int) -> FloatArray:

@@ -270,7 +270,8 @@ class ErrorModel:
     """Pose or twist error of one source against the targets (see the module docstring).
 
     E[e eᵀ] = hold + diag(gain ∘ w²) for the regressor w: for the pose the LF rates of
-    `lag_rates`, for the twist the low-passed change of the twist ``twist_accel_time``.
+    `LfOdometry._lag_regressor`, for the twist the low-passed change of the twist
+    ``twist_accel_time``.
 
     Attributes:
         moment: mean e eᵀ over the window, ndof × ndof (pose [m², m·rad, rad²]: the Kalman
@@ -300,7 +301,7 @@ class Published:
     twist: FloatArray
     source: EstimateSource
     accel: FloatArray  # the twist's low-passed change per second (twist error model regressor)
-    lag: FloatArray  # the pose error model's regressor w (`lag_rates`, held by pose_lag_memory)
+    lag: FloatArray  # the pose error model's regressor w (`LfOdometry._lag_regressor`)
 
 
 class LfOdometry:
@@ -788,10 +789,11 @@ class LfOdometry:
     def _lag_regressor(self, t: float, pose: FloatArray, twist: FloatArray) -> FloatArray:
         """The pose error model's regressor at the published pose and twist (ndof each).
 
-        `lag_rates` of this sample; with ``pose_lag_memory`` T > 0 the square held at its peak,
+        The LF rates w: for 3 DOF the earth-frame velocity R(ψ) [u, v] [m/s] and the yaw rate r
+        [rad/s], for 1 DOF u; with ``pose_lag_memory`` T > 0 the square held at its peak,
         decaying by exp(−Δt / T) (O(n)).
         """
-        if self.ndof == 3:  # lag_rates of one sample, without the array overhead
+        if self.ndof == 3:  # plain floats: one sample, without the array overhead
             c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
             u, v = float(twist[0]), float(twist[1])
             rates = np.array([c * u - s * v, s * u + c * v, float(twist[2])])
@@ -911,18 +913,6 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
             pose_cov[source] = fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain)
             twist_cov[source] = fit_error_model(twist_err[mask], accel[mask])
     return pose_cov, twist_cov
-
-
-def lag_rates(poses: FloatArray, twists: FloatArray) -> FloatArray:
-    """The LF rates of the pose error model: (m, ndof) poses and body twists → (m, ndof).
-
-    3 DOF: the earth-frame velocity R(ψ) [u, v] [m/s] and the yaw rate r [rad/s]; 1 DOF: u.
-    """
-    if twists.shape[1] == 1:
-        return np.array(twists, dtype=np.float64)
-    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    return np.column_stack([c * twists[:, 0] - s * twists[:, 1],
-                            s * twists[:, 0] + c * twists[:, 1], twists[:, 2]])
 
 
 def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,

@@ -15,7 +15,6 @@ from lf_predictor_ros.core.odometry import (
     LfOdometry,
     OdometryParams,
     fit_error_model,
-    lag_rates,
     normalized_error_squared,
 )
 
@@ -136,7 +135,9 @@ def test_published_pose_covariance_grows_with_the_lf_velocity() -> None:
     out = odo.track(300.0, [0.4 * 300 * math.cos(heading), 0.4 * 300 * math.sin(heading),
                             heading], np.zeros(3))
     assert out is not None and out.calibrated
-    rates = lag_rates(out.pose[None, :], out.twist[None, :])[0]
+    c, s = math.cos(out.pose[2]), math.sin(out.pose[2])  # w = [R(ψ) [u, v], r]
+    rates = np.array([c * out.twist[0] - s * out.twist[1], s * out.twist[0] + c * out.twist[1],
+                      out.twist[2]])
     np.testing.assert_allclose(rates[:2], [0.4 * math.cos(heading), 0.4 * math.sin(heading)],
                                atol=2e-3)
     expected = 2.0 * (hold + 3.0 * np.diag(model.gain * rates ** 2))

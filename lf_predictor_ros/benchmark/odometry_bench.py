@@ -20,7 +20,10 @@ unwrapped, central differences).
    interval. Note: for Gaussian x the variance of the mean of x² involves Σρ², not Σρ; with
    ρ of x (as stated here) the bounds are up to √2 wider than that Gaussian value for slowly
    decaying positive correlation (narrower where ρ oscillates); ``inside_rho2`` reports the
-   verdict with N_eff from ρ² as well.
+   verdict with N_eff from ρ² as well. The same test is also reported against the LF truth a
+   filter of the measurement can see (quantities ``pose_seen``, ``twist_seen``:
+   `seen_truth.seen_lf_truth`, the twin plus the slow part of the first-order wave motion,
+   which only force-superposition scenarios have).
 2. **Twist accuracy** (same run): RMSE per DOF of the published twist against the true LF body
    velocity, next to the zero estimate (RMS of the true velocity) and the PID's own velocity:
    the filtered finite difference (T_v = ``VELOCITY_FILTER_TIME`` = 1 s, one step per h, earth
@@ -87,6 +90,7 @@ import yaml
 from lf_predictor_ros.benchmark.estimators import make_estimator, predictor_params
 from lf_predictor_ros.benchmark.recordings import run_loop
 from lf_predictor_ros.benchmark.scoring import fmt_number, interval
+from lf_predictor_ros.benchmark.seen_truth import seen_lf_truth
 from lf_predictor_ros.benchmark.stability import pose_offset
 from lf_predictor_ros.benchmark.suite import (
     _loop_reference,
@@ -230,8 +234,9 @@ def _true_twist(truth: FloatArray, sample_time: float, ndof: int) -> FloatArray:
 
 
 def _tracking_run(params: PredictorParams, odometry: OdometryParams,
-                  data: dict[str, FloatArray], begin: int) -> dict[str, Any]:
-    """Items 1 and 2 of the module docstring."""
+                  data: dict[str, FloatArray], begin: int,
+                  seen_truth: FloatArray | None = None) -> dict[str, Any]:
+    """Items 1 and 2 of the module docstring; with ``seen_truth`` item 1 against it too."""
     n, h = params.ndof, params.sample_time
     est = LfStateEstimator(params, odometry, background=False)
     outs: list[OdometryEstimate | None] = []
@@ -263,7 +268,14 @@ def _tracking_run(params: PredictorParams, odometry: OdometryParams,
     def rms(values: FloatArray) -> list[float]:
         return [float(v) for v in np.sqrt(np.nanmean(values**2, axis=0))]
 
-    return {'samples': len(keep), 'calibrated_fraction': float(np.mean([o.calibrated
+    seen: dict[str, Any] = {}
+    if seen_truth is not None:
+        seen_pose_err = _wrap_error(pose, seen_truth[idx], n)
+        seen_twist_err = twist - _true_twist(seen_truth, h, n)[idx]
+        seen = {'pose_seen': consistency(seen_pose_err, pose_cov),
+                'twist_seen': consistency(seen_twist_err, twist_cov),
+                'pose_seen_rmse': rms(seen_pose_err), 'twist_seen_rmse': rms(seen_twist_err)}
+    return {**seen, 'samples': len(keep), 'calibrated_fraction': float(np.mean([o.calibrated
                                                                           for o in odoms])),
             'reckoner': reckoner,
             'pose': consistency(pose_err, pose_cov), 'twist': consistency(twist_err, twist_cov),
@@ -540,7 +552,9 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                            'dead_reckoning_timeout': odometry.dead_reckoning_timeout,
                            'recording': recording.provenance.to_dict()}
     if tracking:
-        out['tracking'] = _tracking_run(params, odometry, data, begin)
+        seen = (None if recording.wave is None else seen_lf_truth(
+            data['truth'], recording.wave, params.sample_time, float(np.min(data['omega']))))
+        out['tracking'] = _tracking_run(params, odometry, data, begin, seen)
     if dead_reckoning:
         out['dead_reckoning'] = _dropout_run(params, odometry, data, dropouts, setup)
     if loops and scenario.controller.enabled:
@@ -671,8 +685,10 @@ def nees_table(cases: Sequence[dict[str, Any]]) -> str:
              '|---|---|---|---|---|---|---|---|']
     for scenario, group in _by_scenario(cases, 'tracking').items():
         n = group[0]['ndof']
-        for kind in ('pose', 'twist'):
-            names = (DOFS if kind == 'pose' else TWIST_DOFS)[:n]
+        kinds = [k for k in ('pose', 'twist', 'pose_seen', 'twist_seen')
+                 if all(k in c['tracking'] for c in group)]
+        for kind in kinds:
+            names = (DOFS if kind.startswith('pose') else TWIST_DOFS)[:n]
             for j, name in enumerate([*names, 'joint']):
                 rows = [c['tracking'][kind]['dof'][j] if name != 'joint'
                         else c['tracking'][kind]['joint'] for c in group]

@@ -110,6 +110,9 @@ class Recording:
     omega: FloatArray  # true wave peak frequency ω0 [rad/s]
     # the full-rate run of an 'estimator' recording: it *is* that estimator's closed loop
     loop_run: ClosedLoopRun | None = field(default=None, repr=False, compare=False)
+    # first-order wave motion η_w = true pose − true LF pose of the grid instant [m, m, rad]
+    # (heading wrapped); None where unknown. For `seen_truth`, not an estimator input.
+    wave: FloatArray | None = field(default=None, repr=False, compare=False)
 
     def data(self) -> dict[str, FloatArray]:
         """The arrays as the dict the estimators' runners take (t, y, u, truth, omega)."""
@@ -123,7 +126,14 @@ def decimate(record: SimRecord, stride: int) -> dict[str, FloatArray]:
     sl = slice(stride - 1, None, stride)
     return {'t': record.t[sl], 'y': block_mean_poses(record.measured_pose, stride),
             'u': record.thrust[sl], 'truth': record.truth_lf_pose[sl],
-            'omega': record.wave_peak_freq[sl]}
+            'omega': record.wave_peak_freq[sl], 'wave': wave_motion(record)[sl]}
+
+
+def wave_motion(record: SimRecord) -> FloatArray:
+    """η_w = truth_pose − truth_lf_pose per sample [m, m, rad], the heading difference wrapped."""
+    out = np.array(record.truth_pose - record.truth_lf_pose, dtype=np.float64)
+    out[:, 2] = wrap_to_pi(out[:, 2])
+    return out
 
 
 def grid_stride(scenario: Scenario, sample_time: float) -> int:
@@ -231,7 +241,7 @@ def record(scenario: Scenario, seed: int, duration: float | None, sample_time: f
 def _recording(provenance: Provenance, grid: dict[str, FloatArray],
                run: ClosedLoopRun | None = None) -> Recording:
     return Recording(provenance, grid['t'], grid['y'], grid['u'], grid['truth'], grid['omega'],
-                     run)
+                     run, grid.get('wave'))
 
 
 def check_scorable(recording: Recording, scenario: str | None = None,

@@ -22,6 +22,10 @@ their estimate at t). The loop `ideal` (PID on the true LF pose) only sets the s
 and is shown for reference. Scores: `core.evaluation.loop_metrics` after the open-loop warm-up,
 the estimate's own wave-band power, and `benchmark.stability`.
 
+**Seen truth** (reported, not a verdict): the open-loop scores again against the LF truth a
+filter of the measurement can see, the twin plus the slow part of the first-order wave motion
+(`seen_truth`; the shaping-filter wave models put wave motion below the wave band).
+
 **Adaptation** (scenarios whose ω0 schedule changes inside the scored record): `benchmark.
 adaptation` on the open-loop errors of `adaptive` and `frozen`, window Δ = retrain_period.
 """
@@ -69,7 +73,9 @@ from lf_predictor_ros.benchmark.recordings import (
     require_fair,
     run_loop,
 )
+from lf_predictor_ros.benchmark.seen_truth import seen_lf_truth
 from lf_predictor_ros.core.baselines.smoother import smooth_poses
+from lf_predictor_ros.core.estimator import wrap_to_pi
 from lf_predictor_ros.core.evaluation import (
     DEFAULT_WAVE_BAND,
     DOF_NAMES,
@@ -135,6 +141,10 @@ class CaseResult:
     leak: dict[str, Any] = field(default_factory=dict)  # recordings.LeakReport.to_dict()
     loop_series: dict[str, LoopSeries] = field(default_factory=dict, repr=False, compare=False)
     adaptation_series: AdaptationSeries | None = field(default=None, repr=False, compare=False)
+    # the same scores against the LF truth a filter of the measurement can see
+    # (`seen_truth.seen_lf_truth`; reported, not a verdict); linear_limit is left out (fitted
+    # on the twin truth)
+    seen_metrics: dict[str, Metrics] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (the figure series are left out)."""
@@ -145,6 +155,8 @@ class CaseResult:
                'leak': self.leak}
         if self.adaptation is not None:
             out['adaptation'] = [event.to_dict() for event in self.adaptation]
+        if self.seen_metrics:
+            out['seen_metrics'] = {k: v.to_dict() for k, v in self.seen_metrics.items()}
         return out
 
 
@@ -428,6 +440,7 @@ def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
     truth = data['truth'][begin:]
     metrics = {name: score(data['t'][begin:], out[begin:], truth, params.ndof)
                for name, out in outputs.items()}
+    seen_metrics = _seen_metrics(recording, data, outputs, params, begin, info)
     leak = _leak_report(recording, metrics, setup, begin)
     if leak is not None:
         require_fair(recording, leak)
@@ -457,7 +470,26 @@ def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
                       provenance=recording.provenance.to_dict(),
                       leak={} if leak is None else leak.to_dict(),
                       loop_series=series,
-                      adaptation_series=None if adaptation is None else adaptation[1])
+                      adaptation_series=None if adaptation is None else adaptation[1],
+                      seen_metrics=seen_metrics)
+
+
+def _seen_metrics(recording: Recording, data: dict[str, FloatArray],
+                  outputs: dict[str, FloatArray], params: PredictorParams, begin: int,
+                  info: dict[str, Any]) -> dict[str, Metrics]:
+    """Scores against `seen_truth.seen_lf_truth` (empty without the recording's wave motion).
+
+    Also puts the RMS of the slow wave motion (seen − twin) per DOF into ``info``.
+    """
+    if recording.wave is None:
+        return {}
+    seen = seen_lf_truth(data['truth'], recording.wave, params.sample_time,
+                         float(np.min(data['omega'])))[begin:]
+    slow = seen - data['truth'][begin:]
+    slow[:, 2] = wrap_to_pi(slow[:, 2])
+    info['slow_wave_rms'] = [float(v) for v in np.sqrt(np.mean(slow**2, axis=0))[:params.ndof]]
+    return {name: score(data['t'][begin:], out[begin:], seen, params.ndof)
+            for name, out in outputs.items() if name != 'linear_limit'}
 
 
 __all__ = ['CAUSAL', 'DEFAULT_RECORDING_LOOP', 'ESTIMATORS', 'LIMITS', 'LOOP_ESTIMATORS',

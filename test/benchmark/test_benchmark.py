@@ -52,6 +52,16 @@ def test_fast_suite_writes_results_page_json_and_figures(tmp_path: Path) -> None
     assert case['provenance']['loop'] == 'estimator' and not case['leak']['leaking']
     for metrics in case['metrics'].values():
         assert np.isfinite(metrics['north']['rmse'])
+    # scores against the seen LF truth (twin + slow wave motion): every estimator but the limit
+    # fitted on the twin; by the triangle inequality they differ from the twin scores by at
+    # most the RMS of the slow wave motion
+    assert '#### open loop against the LF truth the measurement carries' in text
+    assert set(case['seen_metrics']) == set(ESTIMATORS) - {'linear_limit'}
+    (slow,) = case['info']['slow_wave_rms']
+    assert 0.0 < slow < 0.5
+    for name, seen in case['seen_metrics'].items():
+        gap = abs(seen['north']['rmse'] - case['metrics'][name]['north']['rmse'])
+        assert gap <= slow + 1e-12, name
     # The learned filter trained and is far better than no filter at all (open loop).
     assert case['info']['adaptive_counters']['trainings'] >= 2
     raw_rmse = case['metrics']['raw']['north']['rmse']

@@ -122,6 +122,7 @@ def test_decimate_averages_the_poses_of_each_interval() -> None:
     assert grid['t'].tolist() == pytest.approx([1.0, 2.0, 3.0, 4.0, 5.0])
     assert grid['y'][0, 0] == pytest.approx(np.mean(rec.measured_pose[:10, 0]))
     assert np.array_equal(grid['u'][0], rec.thrust[9])
+    assert np.allclose(grid['wave'][0], rec.truth_pose[9] - rec.truth_lf_pose[9], atol=1e-12)
     with pytest.raises(ValueError, match='stride'):
         decimate(rec, 0)
 

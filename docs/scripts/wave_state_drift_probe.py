@@ -1,0 +1,104 @@
+"""How much of the force-superposition 'LF truth' can no filter of the measurement see?
+
+    python docs/scripts/wave_state_drift_probe.py SCENARIO SEED [SEED ...]   # not 11-20
+
+Under force superposition (`sim_ros.physics.vessels`, `wave_rates_fn`) the wave-frequency state
+x_WF is a mass-damper driven by the first-order wave force, with no restoring force, and the
+true LF pose is the twin's (`truth_lf_pose`). The force's shaping filter K s² / (s² + 2λω0 s +
+ω0²)³ (thesis eq. 5.2-5.4) has a power spectrum ∝ ω⁴ below the wave band, and the free mass
+turns force into position with 1 / ω² (above its damping, ≤ 1/294 s): the WF *position* has a
+flat spectrum there, i.e. a slow wander below the wave band that is in the measured pose but not
+in the truth. A filter of the measurement (notch + low-pass, the learned filter, a smoother)
+passes it as LF motion; only a filter that knows the model, the thrust and the initial state
+(the oracle) can split it off.
+
+Per seed: the fair recording (`suite.make_recording`, the loop on the scenario's recording
+estimator), the WF motion η_w = truth_pose - truth_lf_pose, its part below the wave band
+(`benchmark.seen_truth.slow_wave_motion`: zero-phase Butterworth below 0.25 x the run's lowest ω0),
+and the RMSE after the benchmark's scored start of some estimators against the twin (the truth
+the benchmark scores) and against twin + that slow part of η_w (what a filter of the
+measurement can at best see); with ``--nees``, also the lf_odom pose NEES (shipped
+`OdometryParams`, `odometry_bench`'s consistency test) against both. Tuning seeds 1-2 and
+development seeds 3-10 only.
+"""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lf_predictor_ros.benchmark.estimators import predictor_params
+from lf_predictor_ros.benchmark.odometry_bench import _tracking_run
+from lf_predictor_ros.benchmark.seen_truth import slow_wave_motion
+from lf_predictor_ros.benchmark.suite import (
+    make_recording,
+    make_setup,
+    run_open_loop,
+    scored_start,
+)
+from lf_predictor_ros.core.odometry import OdometryParams
+from sim_ros.simulation import load_scenario
+
+FloatArray = NDArray[np.float64]
+ESTIMATORS = ('adaptive', 'cascade', 'observer', 'oracle_kf', 'smoother_tuned')
+HELD_OUT = range(11, 21)
+DURATION = 1800.0  # s, the benchmark's (`benchmark.SUITE`)
+
+
+def rmse(estimate: FloatArray, truth: FloatArray) -> FloatArray:
+    """Per-DOF RMSE; a third column (heading) is wrapped to (-π, π]."""
+    error = estimate - truth
+    if error.shape[1] == 3:
+        error[:, 2] = np.angle(np.exp(1j * error[:, 2]))
+    return np.asarray(np.sqrt(np.mean(error ** 2, axis=0)), dtype=np.float64)
+
+
+def pose_nees(params: object, data: dict[str, FloatArray], truth: FloatArray,
+              begin: int) -> str:
+    """Per-DOF and joint mean pose NEES of lf_odom against ``truth`` (inside its bounds?)."""
+    run = _tracking_run(params, OdometryParams(), {**data, 'truth': truth}, begin)  # type: ignore[arg-type]
+    dofs = ' / '.join(f"{d['mean_nees']:.2f}{'' if d['inside'] else '*'}"
+                      for d in run['pose']['dof'])
+    return f"{dofs}; joint {run['pose']['joint']['mean_nees']:.2f} (* outside its bounds)"
+
+
+def probe(name: str, seed: int, nees: bool) -> None:
+    scenario = load_scenario(name)
+    params = predictor_params(scenario, None)
+    setup = make_setup(scenario, seed, params)
+    recording = make_recording(scenario, seed, DURATION, setup)
+    n = params.ndof
+    assert recording.wave is not None
+    wave_motion = recording.wave[:, :n]
+    slow = slow_wave_motion(wave_motion, params.sample_time, float(np.min(recording.omega)))
+    begin = scored_start(params, len(recording.t))
+    data = recording.data()
+    outputs = run_open_loop(data, setup, ESTIMATORS, {}, begin)
+    truth = data['truth'][begin:, :n]
+    seen = truth + slow[begin:]
+    print(f'{name} seed {seed}: slow wave motion RMS {np.sqrt(np.mean(slow[begin:] ** 2, 0))} '
+          f'mean {slow[begin:].mean(0)}')
+    for est in ESTIMATORS:
+        out = outputs[est][begin:, :n]
+        print(f'  {est:15s} RMSE vs twin {rmse(out, truth)}  vs twin + slow η_w {rmse(out, seen)}')
+    if nees:
+        full_seen = data['truth'].copy()
+        full_seen[:, :n] += slow
+        print(f'  lf_odom pose NEES vs twin {pose_nees(params, data, data["truth"], begin)}')
+        seen_nees = pose_nees(params, data, full_seen, begin)
+        print(f'  lf_odom pose NEES vs twin + slow η_w {seen_nees}')
+
+
+def main(argv: list[str]) -> None:
+    nees = '--nees' in argv
+    argv = [a for a in argv if a != '--nees']
+    name, seeds = argv[0], [int(s) for s in argv[1:]]
+    if any(s in HELD_OUT for s in seeds):
+        raise SystemExit('seeds 11-20 are held out: reporting only, not for probes')
+    for seed in seeds:
+        probe(name, seed, nees)
+
+
+if __name__ == '__main__':
+    main(sys.argv[1:])

@@ -1,0 +1,67 @@
+"""The LF truth a filter of the measurement can see, next to the simulator's twin truth.
+
+Under force superposition (`sim_ros.physics.vessels`, ``wave_rates_fn``; the thesis vessels'
+scenarios, ``waves.model: force``) the true LF pose is the *twin*'s: the vessel driven by
+everything but the first-order wave force. The wave-frequency state η_w is the vessel's
+response to that force, and it has no restoring force: the force's shaping filter
+K s² / (s² + 2λω0 s + ω0²)³ (thesis eq. 5.2–5.4) leaves a spectrum ∝ ω⁴ below the wave band,
+which the free mass turns into position with 1/ω², so η_w has a flat spectrum below the wave
+band (down to its damping, time constant ≤ 294 s): a slow wander of a few centimetres (0.01–0.19
+m RMS on the 1-DOF scenarios, tuning and development seeds, `docs/BENCHMARKS.md`, "Seventeenth
+session"). It is in the measured pose and not in the twin, so every filter of the measurement —
+notch + low-pass, the learned filter, a zero-phase smoother — passes it as LF motion and is
+scored as if it had erred; only the oracle, which knows the model, the thrust and the initial
+state, can split it off. A DP controller would have to hold against it like any other slow
+motion.
+
+``seen_lf_truth`` = twin + the part of η_w below ``SLOW_WAVE_FRACTION`` · ω0 (zero-phase
+Butterworth of order ``SLOW_WAVE_ORDER``, forward and backward: the truth may look ahead). Under
+motion superposition and RAOs η_w has nothing there (the shaping filter 2λω0σ s / (…) and the
+JONSWAP components from 0.5 ω_p up), and the seen truth equals the twin to within the filter's
+edge effects. This is a reported second truth, not a replacement: the benchmark's verdicts stay
+on the twin.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import signal
+
+from lf_predictor_ros.core.estimator import wrap_to_pi
+
+FloatArray = NDArray[np.float64]
+SLOW_WAVE_FRACTION = 0.25  # × the lowest ω0: the force spectrum's wave band starts near 0.5 ω0
+SLOW_WAVE_ORDER = 4
+
+
+def slow_wave_motion(wave_motion: FloatArray, sample_time: float,
+                     wave_peak_freq: float) -> FloatArray:
+    """The part of η_w (m, k) below SLOW_WAVE_FRACTION · ω0 [rad/s], zero-phase, per column.
+
+    ``wave_motion``: η_w = total true pose − twin pose on a uniform grid of ``sample_time`` s,
+    heading column already wrapped. Raises ValueError for a record too short to filter or a cutoff
+    at or above the Nyquist frequency.
+    """
+    motion = np.asarray(wave_motion, dtype=np.float64)
+    if motion.ndim != 2 or not np.all(np.isfinite(motion)):
+        raise ValueError('wave_motion must be a finite (samples, dof) array')
+    if not (sample_time > 0.0 and wave_peak_freq > 0.0):
+        raise ValueError(f'sample_time {sample_time} s and wave_peak_freq {wave_peak_freq} rad/s '
+                         'must be positive')
+    cutoff = SLOW_WAVE_FRACTION * wave_peak_freq / (np.pi / sample_time)
+    if cutoff >= 1.0:
+        raise ValueError(f'the slow-wave cutoff {SLOW_WAVE_FRACTION} × ω0 is above the Nyquist '
+                         f'frequency of h = {sample_time} s: use a finer grid')
+    sos = signal.butter(SLOW_WAVE_ORDER, cutoff, output='sos')
+    if motion.shape[0] <= 3 * (2 * len(sos) + 1):
+        raise ValueError(f'{motion.shape[0]} samples are too few to filter the wave motion')
+    return np.asarray(signal.sosfiltfilt(sos, motion, axis=0), dtype=np.float64)
+
+
+def seen_lf_truth(truth: FloatArray, wave_motion: FloatArray, sample_time: float,
+                  wave_peak_freq: float) -> FloatArray:
+    """Twin truth (m, 3) + the slow part of η_w (m, 3); heading wrapped. Inputs unchanged."""
+    out = np.array(truth, dtype=np.float64, copy=True)
+    out += slow_wave_motion(wave_motion, sample_time, wave_peak_freq)
+    out[:, 2] = wrap_to_pi(out[:, 2])
+    return out

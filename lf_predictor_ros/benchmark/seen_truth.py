@@ -15,7 +15,11 @@ state, can split it off. A DP controller would have to hold against it like any 
 motion.
 
 ``seen_lf_truth`` = twin + the part of η_w below ``SLOW_WAVE_FRACTION`` · ω0 (zero-phase
-Butterworth of order ``SLOW_WAVE_ORDER``, forward and backward: the truth may look ahead). Under
+Butterworth of order ``SLOW_WAVE_ORDER``, forward and backward: the truth may look ahead). The
+record's ends use Gustafsson's initial conditions (`scipy.signal.filtfilt`, ``method='gust'``):
+odd-extension padding reflects the last instantaneous wave value into a step (measured on
+supply_closed_loop seed 1, 1800 s against the same filter on a 2400 s record: up to 1.3 m error in
+the last 200 s with odd padding, ≤ 0.05 m with Gustafsson's). Under
 motion superposition and RAOs η_w has nothing there (the shaping filter 2λω0σ s / (…) and the
 JONSWAP components from 0.5 ω_p up), and the seen truth equals the twin to within the filter's
 edge effects. This is a reported second truth, not a replacement: the benchmark's verdicts stay
@@ -32,6 +36,7 @@ from lf_predictor_ros.core.estimator import wrap_to_pi
 FloatArray = NDArray[np.float64]
 SLOW_WAVE_FRACTION = 0.25  # × the lowest ω0: the force spectrum's wave band starts near 0.5 ω0
 SLOW_WAVE_ORDER = 4
+MIN_SAMPLES = 30
 
 
 def slow_wave_motion(wave_motion: FloatArray, sample_time: float,
@@ -52,10 +57,11 @@ def slow_wave_motion(wave_motion: FloatArray, sample_time: float,
     if cutoff >= 1.0:
         raise ValueError(f'the slow-wave cutoff {SLOW_WAVE_FRACTION} × ω0 is above the Nyquist '
                          f'frequency of h = {sample_time} s: use a finer grid')
-    sos = signal.butter(SLOW_WAVE_ORDER, cutoff, output='sos')
-    if motion.shape[0] <= 3 * (2 * len(sos) + 1):
-        raise ValueError(f'{motion.shape[0]} samples are too few to filter the wave motion')
-    return np.asarray(signal.sosfiltfilt(sos, motion, axis=0), dtype=np.float64)
+    if motion.shape[0] < MIN_SAMPLES:
+        raise ValueError(f'{motion.shape[0]} samples are too few to filter the wave motion '
+                         f'(at least {MIN_SAMPLES})')
+    b, a = signal.butter(SLOW_WAVE_ORDER, cutoff)
+    return np.asarray(signal.filtfilt(b, a, motion, axis=0, method='gust'), dtype=np.float64)
 
 
 def seen_lf_truth(truth: FloatArray, wave_motion: FloatArray, sample_time: float,

@@ -54,3 +54,11 @@ def test_bad_input_is_refused_with_a_reason(motion: np.ndarray, sample_time: flo
                                             omega: float, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         slow_wave_motion(motion, sample_time, omega)
+
+
+def test_the_record_ends_do_not_turn_the_last_wave_into_a_slow_step() -> None:
+    """A wave ending at its crest: odd-extension padding would make a 0.40 m step of it."""
+    t = _grid(1000)
+    wave = 0.5 * np.cos(OMEGA * (t - t[-1]))
+    out = slow_wave_motion(np.column_stack([wave, wave, wave]), H, OMEGA)
+    assert np.max(np.abs(out)) < 0.1  # Gustafsson's initial conditions: 0.046 m

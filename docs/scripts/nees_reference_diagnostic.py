@@ -8,7 +8,10 @@ targets) and prints, per DOF, averaged over the later two thirds of the windows 
 the benchmark's warm-up): var(estimate − truth), var(estimate − reference), var(reference −
 truth), cov(estimate − reference, reference − truth), var_r_hat (the removed wave motion and
 noise, y − reference, filtered once more with the targets' zero-phase filter: the part of it the
-reference lets through), the published pose variance, and the mean errors.
+reference lets through; by linearity also the reference's own distortion of the LF motion,
+reference minus reference filtered once more), the published pose variance, and the mean errors.
+"The truth" is the LF truth the measurement carries (`benchmark.seen_truth`: the twin plus the
+wave motion below the wave band, which the thesis vessels have; seventeenth session on).
 """
 from __future__ import annotations
 
@@ -25,6 +28,7 @@ from lf_predictor_ros.benchmark.odometry_bench import (
     predictor_params,
     scored_start,
 )
+from lf_predictor_ros.benchmark.seen_truth import seen_lf_truth
 from lf_predictor_ros.core.filters import zero_phase
 from lf_predictor_ros.core.lf_state import LfStateEstimator
 from lf_predictor_ros.core.odometry import OdometryParams
@@ -41,7 +45,11 @@ def collect(name: str, seed: int, duration: float) -> tuple[Any, dict[str, Float
     """(params, data, published poses, published variances, target windows) of one run."""
     scenario = load_scenario(name)
     params = predictor_params(scenario, None)
-    data = make_recording(scenario, seed, duration, make_setup(scenario, seed, params)).data()
+    recording = make_recording(scenario, seed, duration, make_setup(scenario, seed, params))
+    data = recording.data()
+    if recording.wave is not None:  # score against the LF truth the measurement carries
+        data['truth'] = seen_lf_truth(data['truth'], recording.wave, params.sample_time,
+                                      float(np.min(data['omega'])))
     n, t = params.ndof, data['t']
     pub = np.full((len(t), n), np.nan)
     pvar = np.full((len(t), n), np.nan)

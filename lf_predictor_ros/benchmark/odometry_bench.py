@@ -636,7 +636,9 @@ def calibrate(cases: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
     The pose also reports ``pose_log_spread``: the standard deviation over runs and DOFs of
     log(per-DOF mean NEES) (unchanged by the scale: what a better covariance model lowers).
-    Cases of several ``pose_lag_scale`` values: one such result per value, keyed by it.
+    Cases of several ``pose_lag_scale`` values: one such result per value, keyed by it. The NEES
+    is the one against the seen LF truth (``pose_seen``, ``twist_seen``) where a case has it
+    (seventeenth session on), else against the twin.
     """
     lags = sorted({case.get('pose_lag_scale', 0.0) for case in cases})
     if len(lags) > 1:
@@ -647,7 +649,7 @@ def calibrate(cases: Sequence[dict[str, Any]]) -> dict[str, Any]:
     for kind in ('pose', 'twist'):
         logs = [math.log(dof['mean_nees']) + math.log(case[f'{kind}_cov_scale'])
                 for case in cases if 'tracking' in case
-                for dof in case['tracking'][kind]['dof']]
+                for dof in case['tracking'].get(f'{kind}_seen', case['tracking'][kind])['dof']]
         out[f'{kind}_cov_scale'] = math.exp(float(np.mean(logs)))
         out[f'{kind}_log_spread'] = float(np.std(logs))
     return out

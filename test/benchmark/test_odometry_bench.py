@@ -72,6 +72,10 @@ def test_calibrate_is_geometric_mean_times_scale() -> None:
     per_value = calibrate(lagged)  # type: ignore[arg-type]
     assert sorted(per_value) == ['pose_lag_scale 1', 'pose_lag_scale 8']
     assert math.isclose(per_value['pose_lag_scale 8']['pose_cov_scale'], 2.0)
+    # against the seen LF truth where a run has it
+    seen = case([2.0, 8.0], [1.0], 2.0)
+    seen['tracking']['pose_seen'] = {'dof': [{'mean_nees': 1.0}, {'mean_nees': 1.0}]}  # type: ignore[index]
+    assert math.isclose(calibrate([seen])['pose_cov_scale'], 2.0)  # type: ignore[list-item]
 
 
 def test_pid_velocity_of_a_ramp() -> None:

@@ -120,10 +120,6 @@ class OdometryParams:
         'lag time T assumed for every DOF where a calibration window has no motion to fit it '
         '(prior of the least-squares fit, with a standard deviation of T² equal to T²; '
         '0 = no prior)', 's'))
-    pose_lag_per_source: bool = field(default=False, metadata=field_doc(
-        'fit the lag time T of the pose error model per source (network, fallback) instead of '
-        'on every source of the target window together (issue 14; off: the fallback\'s lag '
-        'behind a moving vessel also sets the network\'s)'))
     twist_cov_scale: float = field(default=0.61, metadata=field_doc(
         'published twist covariance = this × (holding part + K² a²) of the twist error model '
         'fitted against the target velocity (a: the twist change, twist_accel_time; '
@@ -489,8 +485,7 @@ class LfOdometry:
         self.apply_learned(memory, calibrate(self.published(), times, targets, self.ndof,
                                              self.sample_time,
                                              self.params.min_calibration_samples,
-                                             self.params.pose_lag_prior,
-                                             self.params.pose_lag_per_source))
+                                             self.params.pose_lag_prior))
 
     def published(self) -> list[Published]:
         """A copy of the published history the covariances are calibrated on (oldest first)."""
@@ -873,17 +868,16 @@ class LfOdometry:
 
 
 def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike, ndof: int,
-              sample_time: float, min_samples: int, lag_prior: float = 0.0,
-              lag_per_source: bool = False) -> Covariances | None:
+              sample_time: float, min_samples: int, lag_prior: float = 0.0
+              ) -> Covariances | None:
     """Pose error models and twist covariances against the targets (module docstring).
 
     Every published estimate whose stamp is a target instant (not the first or last) is
     compared with the target and with the targets' differentiated body velocity: per source
     ('network', 'fallback': only with ``min_samples`` matches) and over all, the pose error
     model (`fit_error_model` on each estimate's regressor ``Published.lag``, prior lag time
-    ``lag_prior`` [s]) and the twist error's second moment (bias included); the lag time is
-    fitted on every source together unless ``lag_per_source``. None when nothing matches. Pure:
-    runs on a worker.
+    ``lag_prior`` [s]) and the twist error's second moment (bias included). None when nothing
+    matches. Pure: runs on a worker.
     """
     stamps = np.asarray(times, dtype=np.float64)
     values = np.array(targets, dtype=np.float64).reshape(stamps.shape[0], -1)
@@ -915,12 +909,8 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
     for source in SOURCES:
         mask = sources == source
         if np.count_nonzero(mask) >= min_samples:
-            # the lag time from every source (more motion to fit it), the holding part per
-            # source; or both per source (a fallback that lags a moving vessel does not lend its
-            # lag to a network that follows it)
-            pose_cov[source] = fit_error_model(pose_err[mask], rates[mask], lag_prior) \
-                if lag_per_source else \
-                fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain)
+            # the lag time from every source (more motion to fit it), the holding part per source
+            pose_cov[source] = fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain)
             twist_cov[source] = fit_error_model(twist_err[mask], accel[mask])
     return pose_cov, twist_cov
 

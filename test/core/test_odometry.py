@@ -14,8 +14,6 @@ from lf_predictor_ros.core.odometry import (
     ErrorModel,
     LfOdometry,
     OdometryParams,
-    Published,
-    calibrate,
     fit_error_model,
     normalized_error_squared,
 )
@@ -121,28 +119,6 @@ def test_pose_error_model_of_a_still_window_is_the_prior() -> None:
     model = fit_error_model(errors, rates, 0.0)
     assert model.gain[0] == 0.0
     assert model.hold[0, 0] == pytest.approx(np.mean(errors ** 2))
-
-
-def test_lag_time_pooled_or_per_source() -> None:
-    """A fallback lagging a moving vessel (e = 3 s · w) and a network following it (e = noise).
-
-    Pooled (default) the network gets the lag time fitted on both; per source its own, ≈ 0.
-    """
-    rng = np.random.default_rng(5)
-    m = 4000
-    times = np.arange(m, dtype=np.float64)
-    targets = np.zeros((m, 1))
-    rates = rng.uniform(-0.2, 0.2, size=(m, 1))
-    fallback = np.arange(m) % 2 == 0
-    errors = np.where(fallback[:, None], 3.0 * rates, 0.0) + 0.02 * rng.normal(size=(m, 1))
-    history = [Published(float(t), e, np.zeros(1), 'fallback' if f else 'network', np.zeros(1),
-                         w) for t, e, f, w in zip(times, errors, fallback, rates, strict=True)]
-    pooled = calibrate(history, times, targets, 1, 1.0, 50)
-    per_source = calibrate(history, times, targets, 1, 1.0, 50, lag_per_source=True)
-    assert pooled is not None and per_source is not None
-    assert pooled[0]['network'].gain[0] == pooled[0]['fallback'].gain[0] > 2.0  # (3 s)² / 2 + …
-    assert per_source[0]['network'].gain[0] < 0.05
-    assert per_source[0]['fallback'].gain[0] == pytest.approx(9.0, rel=0.1)
 
 
 def test_published_pose_covariance_grows_with_the_lf_velocity() -> None:

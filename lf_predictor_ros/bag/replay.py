@@ -95,8 +95,9 @@ from lf_predictor_ros.bag.ros_codec import (
 )
 from lf_predictor_ros.core.alignment import AlignedSample, AlignerSettings, InputAligner
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
-from lf_predictor_ros.core.estimator import EstimatorStatus, wrap_to_pi
+from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.evaluation import DEFAULT_WAVE_BAND, Metrics, format_table, score
+from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_state import LfStateEstimator
 from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
@@ -830,7 +831,7 @@ def _interpolate_pose(t_query: FloatArray, t: FloatArray, poses: FloatArray) -> 
     for column in range(3):
         values = np.unwrap(p_sorted[:, column]) if column == 2 else p_sorted[:, column]
         out[:, column] = np.interp(t_query, t_sorted, values)
-    out[:, 2] = wrap_to_pi(out[:, 2])
+    out[:, 2] = wrap_angle(out[:, 2])
     return out
 
 

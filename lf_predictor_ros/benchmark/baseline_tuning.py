@@ -96,7 +96,6 @@ from lf_predictor_ros.benchmark.recordings import check_scorable, grid_stride, r
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.baselines.observer import PassiveObserver
 from lf_predictor_ros.core.baselines.smoother import smooth_poses
-from lf_predictor_ros.core.estimator import wrap_to_pi
 from lf_predictor_ros.core.evaluation import DEFAULT_WAVE_BAND, DOF_NAMES, LoopRun, loop_metrics
 from lf_predictor_ros.core.filters import (
     DEFAULT_LOWPASS_OFFSET,
@@ -105,6 +104,7 @@ from lf_predictor_ros.core.filters import (
     DEFAULT_NOTCH_ZETA,
     design_wave_filter,
 )
+from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.retraining import first_training_samples
 from sim_ros.physics.vessels import GRAVITY, SUPPLY_LENGTH, LinearModel
@@ -478,7 +478,7 @@ def tuning_duration(scenario: Scenario, duration: float | None) -> float:
 def _errors(estimate: FloatArray, truth: FloatArray, ndof: int) -> FloatArray:
     err = np.asarray(estimate[:, :ndof] - truth[:, :ndof], dtype=np.float64)
     if ndof == 3:
-        err[:, 2] = wrap_to_pi(err[:, 2])
+        err[:, 2] = wrap_angle(err[:, 2])
     return err
 
 
@@ -552,7 +552,7 @@ def cascade_outputs(y: FloatArray, ndof: int, sample_time: float, wave_peak_freq
     out = np.zeros_like(np.asarray(y, dtype=np.float64))
     out[:, :ndof] = filtered
     if ndof == 3:
-        out[:, 2] = wrap_to_pi(out[:, 2])
+        out[:, 2] = wrap_angle(out[:, 2])
     return out
 
 

@@ -17,7 +17,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from lf_predictor_ros.core.estimator import check_ndof, wrap_to_pi
+from lf_predictor_ros.core.estimator import check_ndof
+from lf_predictor_ros.core.heading import wrap_angle
 
 FloatArray = NDArray[np.float64]
 
@@ -62,7 +63,7 @@ def linear_limit(y: FloatArray, u: FloatArray, truth: FloatArray, ndof: int, nu:
     design = np.hstack(blocks)
     target = _continuous(truth, ndof)[rows] - newest
     if ndof == 3:  # truth and measurement unwrapped separately: keep the offset in (−π, π]
-        target[:, 2] = wrap_to_pi(target[:, 2])
+        target[:, 2] = wrap_angle(target[:, 2])
     scale = np.std(design, axis=0)
     scale[scale == 0.0] = 1.0
     coef, *_ = np.linalg.lstsq(design / scale, target, rcond=None)
@@ -70,7 +71,7 @@ def linear_limit(y: FloatArray, u: FloatArray, truth: FloatArray, ndof: int, nu:
     out[:, ndof:] = 0.0
     fitted = newest + (design / scale) @ coef
     if ndof == 3:
-        fitted[:, 2] = wrap_to_pi(fitted[:, 2])
+        fitted[:, 2] = wrap_angle(fitted[:, 2])
     out[rows, :ndof] = fitted
     return out
 

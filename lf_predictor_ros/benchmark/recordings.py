@@ -36,7 +36,7 @@ from scipy import signal
 
 from lf_predictor_ros.benchmark.stability import ABORT_EXCURSION
 from lf_predictor_ros.core.alignment import block_mean_poses, mean_pose
-from lf_predictor_ros.core.estimator import wrap_to_pi
+from lf_predictor_ros.core.heading import wrap_angle
 from sim_ros.simulation import (
     ClosedLoopRun,
     Scenario,
@@ -132,7 +132,7 @@ def decimate(record: SimRecord, stride: int) -> dict[str, FloatArray]:
 def wave_motion(record: SimRecord) -> FloatArray:
     """η_w = truth_pose − truth_lf_pose per sample [m, m, rad], the heading difference wrapped."""
     out = np.array(record.truth_pose - record.truth_lf_pose, dtype=np.float64)
-    out[:, 2] = wrap_to_pi(out[:, 2])
+    out[:, 2] = wrap_angle(out[:, 2])
     return out
 
 
@@ -308,7 +308,7 @@ def thrust_only_rmse(u: FloatArray, truth: FloatArray, ndof: int, sample_time: f
     coef, *_ = np.linalg.lstsq(design, target, rcond=None)
     err = design @ coef - target
     if ndof == 3:
-        err[:, 2] = wrap_to_pi(err[:, 2])
+        err[:, 2] = wrap_angle(err[:, 2])
     return np.asarray(np.sqrt(np.mean(err**2, axis=0)), dtype=np.float64)
 
 

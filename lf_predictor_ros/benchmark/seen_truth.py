@@ -31,8 +31,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
-from lf_predictor_ros.core.estimator import wrap_to_pi
 from lf_predictor_ros.core.filters import zero_phase
+from lf_predictor_ros.core.heading import wrap_angle
 
 FloatArray = NDArray[np.float64]
 SLOW_WAVE_FRACTION = 0.25  # × the lowest ω0: the force spectrum's wave band starts near 0.5 ω0
@@ -69,5 +69,5 @@ def seen_lf_truth(truth: FloatArray, wave_motion: FloatArray, sample_time: float
     """Twin truth (m, 3) + the slow part of η_w (m, 3); heading wrapped. Inputs unchanged."""
     out = np.array(truth, dtype=np.float64, copy=True)
     out += slow_wave_motion(wave_motion, sample_time, wave_peak_freq)
-    out[:, 2] = wrap_to_pi(out[:, 2])
+    out[:, 2] = wrap_angle(out[:, 2])
     return out

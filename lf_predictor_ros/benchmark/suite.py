@@ -75,7 +75,6 @@ from lf_predictor_ros.benchmark.recordings import (
 )
 from lf_predictor_ros.benchmark.seen_truth import seen_lf_truth
 from lf_predictor_ros.core.baselines.smoother import smooth_poses
-from lf_predictor_ros.core.estimator import wrap_to_pi
 from lf_predictor_ros.core.evaluation import (
     DEFAULT_WAVE_BAND,
     DOF_NAMES,
@@ -86,6 +85,7 @@ from lf_predictor_ros.core.evaluation import (
     loop_metrics,
     score,
 )
+from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.retraining import first_training_samples
 from sim_ros.simulation import (
@@ -486,7 +486,7 @@ def _seen_metrics(recording: Recording, data: dict[str, FloatArray],
     seen = seen_lf_truth(data['truth'], recording.wave, params.sample_time,
                          float(np.min(data['omega'])))[begin:]
     slow = seen - data['truth'][begin:]
-    slow[:, 2] = wrap_to_pi(slow[:, 2])
+    slow[:, 2] = wrap_angle(slow[:, 2])
     info['slow_wave_rms'] = [float(v) for v in np.sqrt(np.mean(slow**2, axis=0))[:params.ndof]]
     return {name: score(data['t'][begin:], out[begin:], seen, params.ndof)
             for name, out in outputs.items() if name != 'linear_limit'}

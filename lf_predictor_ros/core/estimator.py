@@ -90,25 +90,3 @@ def check_ndof(ndof: int) -> int:
     if ndof not in (1, 3):
         raise ValueError(f'ndof must be 1 (surge only) or 3 (surge, sway, yaw), got {ndof}')
     return ndof
-
-
-def wrap_to_pi(angle: NDArray[np.float64] | float) -> NDArray[np.float64]:
-    """Wrap angles [rad] to (−π, π].
-
-    Private stand-in for `lf_predictor_ros.core.heading.wrap_angle` (being written in parallel);
-    to be deduplicated.
-    """
-    wrapped = np.asarray(np.angle(np.exp(1j * np.asarray(angle, dtype=np.float64))))
-    # np.angle returns [-π, π]; map -π to +π for the half-open interval (−π, π].
-    return np.where(wrapped <= -np.pi, wrapped + 2.0 * np.pi, wrapped).astype(np.float64)
-
-
-def wrap_to_pi_scalar(angle: float) -> float:
-    """`wrap_to_pi` of one angle [rad], value for value, without the array overhead.
-
-    The same numpy operations (complex exponential, arctan2) on one number: numpy's may differ
-    from the math module's in the last bit, so this is not ``math.atan2(sin, cos)``.
-    """
-    unit = np.exp(1j * float(angle))
-    wrapped = float(np.arctan2(unit.imag, unit.real))
-    return wrapped + 2.0 * np.pi if wrapped <= -np.pi else wrapped

@@ -31,7 +31,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import signal
 
-from lf_predictor_ros.core.estimator import LfEstimator, check_ndof, wrap_to_pi
+from lf_predictor_ros.core.estimator import LfEstimator, check_ndof
+from lf_predictor_ros.core.heading import wrap_angle
 
 FloatArray = NDArray[np.float64]
 DOF_NAMES = ('north', 'east', 'yaw')
@@ -108,7 +109,7 @@ def _errors(estimate: FloatArray, truth: FloatArray, ndof: int) -> FloatArray:
     """Return estimate − truth on the first ndof columns, heading wrapped."""
     err = estimate[:, :ndof] - truth[:, :ndof]
     if ndof == 3:
-        err[:, _YAW] = wrap_to_pi(err[:, _YAW])
+        err[:, _YAW] = wrap_angle(err[:, _YAW])
     return err
 
 

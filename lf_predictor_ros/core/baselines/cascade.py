@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from lf_predictor_ros.core.estimator import EstimatorStatus, check_ndof, wrap_to_pi_scalar
+from lf_predictor_ros.core.estimator import EstimatorStatus, check_ndof
 from lf_predictor_ros.core.filters import (
     DEFAULT_LOWPASS_OFFSET,
     DEFAULT_LOWPASS_ORDER,
@@ -22,6 +22,7 @@ from lf_predictor_ros.core.filters import (
     CausalFilter,
     design_wave_filter,
 )
+from lf_predictor_ros.core.heading import wrap_angle
 
 FloatArray = NDArray[np.float64]
 _YAW = 2  # index of heading in a pose
@@ -78,7 +79,7 @@ class CascadeFilter:
         if self._last_yaw is None:
             self._unwrapped_yaw = yaw
         else:
-            self._unwrapped_yaw += wrap_to_pi_scalar(yaw - self._last_yaw)
+            self._unwrapped_yaw += wrap_angle(float(yaw - self._last_yaw))
         self._last_yaw = yaw
         return self._unwrapped_yaw
 
@@ -115,7 +116,7 @@ class CascadeFilter:
         """The LF pose [north, east, yaw] from the filter's output (wrapped; 0: not estimated)."""
         values = filtered + [0.0] * (3 - self.ndof)
         if self.ndof == 3:
-            values[_YAW] = wrap_to_pi_scalar(values[_YAW])
+            values[_YAW] = wrap_angle(float(values[_YAW]))
         return values
 
     def reset(self) -> None:

@@ -36,7 +36,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import expm
 
-from lf_predictor_ros.core.estimator import EstimatorStatus, check_ndof, wrap_to_pi
+from lf_predictor_ros.core.estimator import EstimatorStatus, check_ndof
+from lf_predictor_ros.core.heading import wrap_angle
 
 FloatArray = NDArray[np.float64]
 GRAVITY = 9.81  # [m/s²]
@@ -385,7 +386,7 @@ class PassiveObserver:
         step = round(step / 1e-9) * 1e-9  # stable cache key for a jittery clock
         if n == 3:
             predicted = self._state[2 * n + _YAW] + self._state[n + _YAW]
-            measured[_YAW] = predicted + float(wrap_to_pi(measured[_YAW] - predicted))
+            measured[_YAW] = predicted + wrap_angle(float(measured[_YAW] - predicted))
         self._state = self._step(self._state, np.concatenate([measured, tau]), heading, step)
         self._last_t = float(t)
         return self.estimate()
@@ -416,7 +417,7 @@ class PassiveObserver:
         """η̂ (3,) with yaw wrapped to (−π, π]."""
         eta = self._block(2)
         if self.ndof == 3:
-            eta[_YAW] = float(wrap_to_pi(eta[_YAW]))
+            eta[_YAW] = wrap_angle(float(eta[_YAW]))
         return eta
 
     def reset(self) -> None:

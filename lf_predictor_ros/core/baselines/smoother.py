@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lf_predictor_ros.core.estimator import EstimatorStatus, check_ndof, wrap_to_pi
+from lf_predictor_ros.core.estimator import EstimatorStatus, check_ndof
 from lf_predictor_ros.core.filters import (
     DEFAULT_LOWPASS_OFFSET,
     DEFAULT_LOWPASS_ORDER,
@@ -21,6 +21,7 @@ from lf_predictor_ros.core.filters import (
     design_wave_filter,
     zero_phase,
 )
+from lf_predictor_ros.core.heading import wrap_angle
 
 FloatArray = NDArray[np.float64]
 _YAW = 2  # index of heading in a pose
@@ -60,7 +61,7 @@ def smooth_poses(
     out = np.zeros_like(series)
     out[:, :ndof] = zero_phase(channels, sos)
     if ndof == 3:
-        out[:, _YAW] = wrap_to_pi(out[:, _YAW])
+        out[:, _YAW] = wrap_angle(out[:, _YAW])
     return out
 
 

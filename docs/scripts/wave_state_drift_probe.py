@@ -30,14 +30,16 @@ from numpy.typing import NDArray
 
 from lf_predictor_ros.benchmark.estimators import predictor_params
 from lf_predictor_ros.benchmark.odometry_bench import _tracking_run
-from lf_predictor_ros.benchmark.seen_truth import slow_wave_motion
+from lf_predictor_ros.benchmark.seen_truth import seen_lf_truth, slow_wave_motion
 from lf_predictor_ros.benchmark.suite import (
     make_recording,
     make_setup,
     run_open_loop,
     scored_start,
 )
+from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.odometry import OdometryParams
+from lf_predictor_ros.core.params import PredictorParams
 from sim_ros.simulation import load_scenario
 
 FloatArray = NDArray[np.float64]
@@ -50,14 +52,14 @@ def rmse(estimate: FloatArray, truth: FloatArray) -> FloatArray:
     """Per-DOF RMSE; a third column (heading) is wrapped to (-π, π]."""
     error = estimate - truth
     if error.shape[1] == 3:
-        error[:, 2] = np.angle(np.exp(1j * error[:, 2]))
+        error[:, 2] = wrap_angle(error[:, 2])
     return np.asarray(np.sqrt(np.mean(error ** 2, axis=0)), dtype=np.float64)
 
 
-def pose_nees(params: object, data: dict[str, FloatArray], truth: FloatArray,
+def pose_nees(params: PredictorParams, data: dict[str, FloatArray], truth: FloatArray,
               begin: int) -> str:
     """Per-DOF and joint mean pose NEES of lf_odom against ``truth`` (inside its bounds?)."""
-    run = _tracking_run(params, OdometryParams(), {**data, 'truth': truth}, begin)  # type: ignore[arg-type]
+    run = _tracking_run(params, OdometryParams(), {**data, 'truth': truth}, begin)
     dofs = ' / '.join(f"{d['mean_nees']:.2f}{'' if d['inside'] else '*'}"
                       for d in run['pose']['dof'])
     return f"{dofs}; joint {run['pose']['joint']['mean_nees']:.2f} (* outside its bounds)"
@@ -83,8 +85,8 @@ def probe(name: str, seed: int, nees: bool) -> None:
         out = outputs[est][begin:, :n]
         print(f'  {est:15s} RMSE vs twin {rmse(out, truth)}  vs twin + slow η_w {rmse(out, seen)}')
     if nees:
-        full_seen = data['truth'].copy()
-        full_seen[:, :n] += slow
+        full_seen = seen_lf_truth(data['truth'], recording.wave, params.sample_time,
+                                  float(np.min(recording.omega)))
         print(f'  lf_odom pose NEES vs twin {pose_nees(params, data, data["truth"], begin)}')
         seen_nees = pose_nees(params, data, full_seen, begin)
         print(f'  lf_odom pose NEES vs twin + slow η_w {seen_nees}')

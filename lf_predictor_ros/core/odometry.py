@@ -105,7 +105,9 @@ class OdometryParams:
         'published pose covariance = this × (Σ_hold + pose_lag_scale · diag(T_i² w_i²)), the '
         'pose error model fitted against the targets (calibrated against the truth on tuning '
         'seeds 1–2 of four vessels so that the geometric mean of the per-DOF mean NEES is 1; '
-        'docs/BENCHMARKS.md "State-dependent covariance", issue 14)', ''))
+        'docs/BENCHMARKS.md "State-dependent covariance", issue 14; that was against the twin '
+        'truth: against the LF truth the measurement carries the same runs give 0.50, '
+        '"Seventeenth session")', ''))
     pose_lag_scale: float = field(default=8.0, metadata=field_doc(
         'the lag part T_i² w_i² of the pose error model (fitted against the targets) is '
         'multiplied by this inside pose_cov_scale (the errors against the targets show less lag '

@@ -54,7 +54,7 @@ _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
-                'frequency_after_startup', 'turn_bypass_position', 'sea_memory')
+                'frequency_after_startup', 'turn_bypass_position')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -203,13 +203,6 @@ class PredictorParams:
             'the start-up before it, when a DP loop runs on the fallback, can hold a loop '
             'oscillation as a wave peak for the whole γ window (rao_swell: 0.33–0.44 rad/s '
             'against 0.48 for 20 min; issue 13)'))
-    sea_memory: bool = field(
-        default=False, metadata=_doc(
-            'remember the network in service when the sea state changes (with its ω0, if it '
-            'was trained on at least half a training window) and, when a later change brings '
-            'back a sea within SEA_RECALL_RATIO (10 %) of a remembered ω0, put that network in '
-            'service again for half a training window of samples: until then the training '
-            'windows hold the old sea filtered at the new ω0 (issue 13, the ω0-step target)'))
     notch_lower_edge: float = field(
         default=0.23, metadata=_doc(
             'with notch_zeta_broadband: the broadband notch is no wider than the width whose '

@@ -60,7 +60,6 @@ from __future__ import annotations
 import atexit
 from collections import deque
 from collections.abc import Iterator
-from dataclasses import dataclass
 import math
 from pathlib import Path
 import queue
@@ -122,20 +121,6 @@ FloatArray = NDArray[np.float64]
 # in and out with this first-order time constant [s]
 TURN_RATE_WINDOW = 20.0
 TURN_BLEND_TIME = 5.0
-# sea_memory: a remembered network is recalled for a new ω0 within this relative distance of
-# its own; at most SEA_MEMORY_SIZE seas are kept (the oldest is forgotten first)
-SEA_RECALL_RATIO = 0.1
-SEA_MEMORY_SIZE = 8
-
-
-@dataclass(frozen=True)
-class _RememberedSea:
-    """A network that was in service when its sea ended (`PredictorParams.sea_memory`)."""
-
-    wave_peak_freq: float  # [rad/s] the ω0 it was trained at
-    model: NumpyNnarmax
-    state_dict: dict[str, torch.Tensor]
-    wave_spread: FloatArray | None
 
 
 class _NewestRows:
@@ -294,12 +279,6 @@ class AdaptivePredictor:
         self._segment = 0
         self._fb_next: int = -1
         self._wave_spread: FloatArray | None = None
-        # sea_memory: the remembered seas, the window the network in service was trained on
-        # [samples], the sample index of the last recall and the number of recalls
-        self._seas: deque[_RememberedSea] = deque(maxlen=SEA_MEMORY_SIZE)
-        self._model_window = 0
-        self._recalled_at = -1  # sample index of the last recall; -1: none held
-        self._recalls = 0
         # (the wave spread it was made from, the guard's bound per DOF), see _plausible
         self._guard_bound: tuple[FloatArray, list[float]] | None = None
         self._guard_trips = 0
@@ -450,9 +429,6 @@ class AdaptivePredictor:
         self._last_loss = self._train_seconds = self._model_time = None
         self._last_error = None
         self._wave_spread = None
-        self._seas.clear()
-        self._model_window = 0
-        self._recalled_at = -1
         self._message = 'reset: collecting data'
         self._tune_wave_filters(self._fallback_freq())
         self._clear_output_state()
@@ -1140,21 +1116,11 @@ class AdaptivePredictor:
             self._targets = result.targets
             self._targets_damping = result.targets_peak_damping
             self._narrow_reference = result.narrow_reference
-        recalled = False
         if sea_state_changed(self._frequency, result.frequency):
             self._ensemble.clear()  # networks of the old sea
-            if self.params.sea_memory:
-                recalled = self._change_sea(result.frequency.wave_peak_freq, result.end_index)
         self._frequency = result.frequency
         self._tune_wave_filters(result.frequency.wave_peak_freq)
-        since = result.end_index - self._recalled_at
-        if recalled or (self._recalled_at >= 0 and since < self.params.training_samples // 2):
-            self._message = (f'network of a remembered sea (ω0 {self.wave_peak_freq:.3f}) in '
-                             f'service for half a training window after the change ({since} of '
-                             f'{self.params.training_samples // 2} samples)')
-        elif result.accepted and result.model is not None:
-            self._recalled_at = -1
-            self._model_window = len(result.targets)
+        if result.accepted and result.model is not None:
             self._model, self._state_dict = result.model, result.state_dict
             self._ensemble.append(result.model)
             self._no_thrust += 0 if result.thrust_used else 1
@@ -1174,38 +1140,6 @@ class AdaptivePredictor:
                 self._message += '; network in service is worse than the cascade: retired'
         if outcome.saved_error:
             self._message += f'; {outcome.saved_error}'
-
-    def _change_sea(self, wave_peak_freq: float, index: int) -> bool:
-        """sea_memory at a sea change to ω0 [rad/s] seen at sample ``index``.
-
-        The network in service is remembered with the old ω0 if it was trained on at least half
-        a training window (a remembered sea near that ω0 is replaced). A remembered network
-        within SEA_RECALL_RATIO of the new ω0 is put in service and kept for half a training
-        window of samples from ``index`` on (the windows until then hold the old sea, filtered
-        at the new ω0). True when one was recalled.
-        """
-        old = self.wave_peak_freq
-        half = self.params.training_samples // 2
-        if self._model is not None and self._state_dict is not None and old is not None \
-                and self._model_window >= half:
-            for sea in [x for x in self._seas
-                        if abs(x.wave_peak_freq - old) <= SEA_RECALL_RATIO * old]:
-                self._seas.remove(sea)
-            self._seas.append(_RememberedSea(old, self._model, self._state_dict,
-                                             self._wave_spread))
-        near = [x for x in self._seas
-                if abs(x.wave_peak_freq - wave_peak_freq) <= SEA_RECALL_RATIO * wave_peak_freq]
-        if not near:
-            self._recalled_at = -1
-            return False
-        sea = min(near, key=lambda x: abs(x.wave_peak_freq - wave_peak_freq))
-        self._model, self._state_dict = sea.model, sea.state_dict
-        self._ensemble.append(sea.model)
-        self._wave_spread = sea.wave_spread
-        self._model_window = half
-        self._recalled_at = index
-        self._recalls += 1
-        return True
 
     def _meta(self, result: RetrainResult | None = None) -> dict[str, Any]:
         meta: dict[str, Any] = {'sample_time': self.sample_time, 'ndof': self.ndof,

@@ -520,39 +520,6 @@ def test_ensemble_predicts_the_mean_of_the_newest_networks() -> None:
     assert len(predictor._ensemble) == 0
 
 
-def test_sea_memory_remembers_a_sea_and_recalls_it_when_it_returns() -> None:
-    """sea_memory: the network of a sea is remembered at its end and recalled on its return.
-
-    Networks stand in as sentinels (the bookkeeping does not look inside them). One trained on
-    less than half a window is not remembered; a recalled one is kept for half a window of
-    samples after the change, then candidates are accepted again.
-    """
-    predictor = AdaptivePredictor(PredictorParams(ndof=1, sea_memory=True), background=False)
-    half = predictor.params.training_samples // 2
-    net_a, net_b = object(), object()
-    state_a, state_b = {'w': torch.zeros(1)}, {'w': torch.ones(1)}
-    predictor._model, predictor._state_dict = net_a, state_a  # type: ignore[assignment]
-    predictor._frequency, predictor._model_window = 1.25, 2 * half
-    assert not predictor._change_sea(0.30, 5000)  # nothing known near 0.30 rad/s yet
-    assert predictor._model is net_a  # the caller installs the new sea's candidate
-    assert [sea.wave_peak_freq for sea in predictor._seas] == [1.25]
-    predictor._model, predictor._state_dict = net_b, state_b  # type: ignore[assignment]
-    predictor._frequency, predictor._model_window = 0.30, 2 * half
-    assert predictor._change_sea(1.20, 9000)  # within SEA_RECALL_RATIO of 1.25
-    assert predictor._model is net_a and predictor._state_dict is state_a
-    assert predictor._recalled_at == 9000 and predictor._model_window == half
-    assert sorted(sea.wave_peak_freq for sea in predictor._seas) == [0.30, 1.25]
-    # a network of a short window is not remembered, and 0.8 rad/s recalls nothing
-    predictor._frequency, predictor._model_window = 1.20, half - 1
-    assert not predictor._change_sea(0.80, 9500)
-    assert sorted(sea.wave_peak_freq for sea in predictor._seas) == [0.30, 1.25]
-    assert predictor._recalled_at == -1
-    off = AdaptivePredictor(PredictorParams(ndof=1), background=False)
-    assert len(off._seas) == 0 and off._recalled_at == -1  # default: no memory
-    predictor.reset()
-    assert len(predictor._seas) == 0
-
-
 def _turn_record(n: int) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(t, pose, force): holding heading 0.3 rad, then a 0.02 rad/s turn from t = 100 s on."""
     t = np.arange(n, dtype=float)

@@ -3,14 +3,12 @@
     python docs/scripts/wave_state_drift_probe.py SCENARIO SEED [SEED ...]   # not 11-20
 
 Under force superposition (`sim_ros.physics.vessels`, `wave_rates_fn`) the wave-frequency state
-x_WF is a mass-damper driven by the first-order wave force, with no restoring force, and the
-true LF pose is the twin's (`truth_lf_pose`). The force's shaping filter K s² / (s² + 2λω0 s +
-ω0²)³ (thesis eq. 5.2-5.4) has a power spectrum ∝ ω⁴ below the wave band, and the free mass
-turns force into position with 1 / ω² (above its damping, ≤ 1/294 s): the WF *position* has a
-flat spectrum there, i.e. a slow wander below the wave band that is in the measured pose but not
-in the truth. A filter of the measurement (notch + low-pass, the learned filter, a smoother)
-passes it as LF motion; only a filter that knows the model, the thrust and the initial state
-(the oracle) can split it off.
+x_WF is a mass-damper driven by the first-order wave force, with no restoring force and a
+damping that follows the LF velocity above u0 = 0.1 m/s, and the true LF pose is the twin's
+(`truth_lf_pose`). When the damping changes, the WF position's mean level moves and stays: a slow
+component that is in the measured pose but not in the truth. A filter of the measurement (notch
++ low-pass, the learned filter, a smoother) passes it as LF motion; only a filter that knows the
+model, the thrust and the initial state (the oracle) can split it off.
 
 Per seed: the fair recording (`suite.make_recording`, the loop on the scenario's recording
 estimator), the WF motion η_w = truth_pose - truth_lf_pose, its part below the wave band

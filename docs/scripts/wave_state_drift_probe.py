@@ -12,7 +12,7 @@ model, the thrust and the initial state (the oracle) can split it off.
 
 Per seed: the fair recording (`suite.make_recording`, the loop on the scenario's recording
 estimator), the WF motion η_w = truth_pose - truth_lf_pose, its part below the wave band
-(`benchmark.seen_truth.slow_wave_motion`: zero-phase Butterworth below 0.25 x the run's lowest ω0),
+(`benchmark.seen_truth.seen_lf_truth`: zero-phase Butterworth below 0.25 x the run's lowest ω0),
 and the RMSE after the benchmark's scored start of some estimators against the twin (the truth
 the benchmark scores) and against twin + that slow part of η_w (what a filter of the
 measurement can at best see); with ``--nees``, also the lf_odom pose NEES (shipped
@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 
 from lf_predictor_ros.benchmark.estimators import predictor_params
 from lf_predictor_ros.benchmark.odometry_bench import _tracking_run
-from lf_predictor_ros.benchmark.seen_truth import seen_lf_truth, slow_wave_motion
+from lf_predictor_ros.benchmark.seen_truth import seen_lf_truth
 from lf_predictor_ros.benchmark.suite import (
     make_recording,
     make_setup,
@@ -70,25 +70,24 @@ def probe(name: str, seed: int, nees: bool) -> None:
     recording = make_recording(scenario, seed, DURATION, setup)
     n = params.ndof
     assert recording.wave is not None
-    wave_motion = recording.wave[:, :n]
-    slow = slow_wave_motion(wave_motion, params.sample_time, float(np.min(recording.omega)))
-    begin = scored_start(params, len(recording.t))
     data = recording.data()
+    full_seen = seen_lf_truth(data['truth'], recording.wave, params.sample_time,
+                              float(np.min(recording.omega)))
+    slow = full_seen - data['truth']
+    slow[:, 2] = wrap_angle(slow[:, 2])
+    slow = slow[:, :n]
+    begin = scored_start(params, len(recording.t))
     outputs = run_open_loop(data, setup, ESTIMATORS, {}, begin)
-    truth = data['truth'][begin:, :n]
-    seen = truth + slow[begin:]
+    truth, seen = data['truth'][begin:, :n], full_seen[begin:, :n]
     print(f'{name} seed {seed}: slow wave motion RMS {np.sqrt(np.mean(slow[begin:] ** 2, 0))} '
           f'mean {slow[begin:].mean(0)}')
     for est in ESTIMATORS:
         out = outputs[est][begin:, :n]
         print(f'  {est:15s} RMSE vs twin {rmse(out, truth)}  vs twin + slow η_w {rmse(out, seen)}')
     if nees:
-        full_seen = seen_lf_truth(data['truth'], recording.wave, params.sample_time,
-                                  float(np.min(recording.omega)))
         print(f'  lf_odom pose NEES vs twin {pose_nees(params, data, data["truth"], begin)}')
         seen_nees = pose_nees(params, data, full_seen, begin)
         print(f'  lf_odom pose NEES vs twin + slow η_w {seen_nees}')
-
 
 def main(argv: list[str]) -> None:
     nees = '--nees' in argv

@@ -315,11 +315,10 @@ def _seen_truth_table(name: str, cases: list[CaseResult]) -> list[str]:
         cells = [interval([c.seen_metrics[est].rmse[i] for c in cases]).cell(
             partial(_fmt_dof, dof=d)) for i, d in enumerate(dofs)]
         lines.append(f'| {est} | ' + ' | '.join(cells) + ' |')
-    ratio = [interval(ratios([c.seen_metrics['adaptive'].rmse[i] for c in cases],
-                             [c.seen_metrics['oracle_kf'].rmse[i] for c in cases]))
-             for i in range(len(dofs))] if all(
-        'adaptive' in c.seen_metrics and 'oracle_kf' in c.seen_metrics for c in cases) else []
-    if ratio:
+    if all('adaptive' in c.seen_metrics and 'oracle_kf' in c.seen_metrics for c in cases):
+        ratio = [interval(ratios([c.seen_metrics['adaptive'].rmse[i] for c in cases],
+                                 [c.seen_metrics['oracle_kf'].rmse[i] for c in cases]))
+                 for i in range(len(dofs))]
         lines += ['', 'adaptive / oracle_kf against this truth: '
                   + ' / '.join(iv.cell(fmt_number) for iv in ratio) + '.']
     return lines + ['']

@@ -13,11 +13,14 @@ Ground truth:
   it is the pose of the *LF twin*: the vessel model driven by the same applied thrust and the
   same LF environment (current, wind, drift) but no first-order wave force. The first-order
   wave force drives a wave-frequency state integrated alongside (same RK4 step), the response
-  of the vessel model linearized about the twin's state (`vessels.*.wave_rates_fn`), and the
-  total pose is twin + WF motion. For the linear supply vessel this equals integrating a second
-  vessel with the wave force inside; for the thesis vessels with quadratic damping it drops the
-  rectified (second-order) mean force that would otherwise make vessel and twin drift apart
-  (see the vessels module docstring); slowly varying drift is modelled by the drift bias.
+  of the vessel model linearized once, at the run's operating point (`vessels.*.wave_rates_fn`;
+  thesis vessels: `vessels.wave_operating_speed` of the initial state and mean current, so the
+  WF motion stays zero-mean while the vessel speeds up), and the total pose is twin + WF motion.
+  For the linear supply vessel this equals integrating a second vessel with the wave force
+  inside; for the thesis vessels with quadratic damping it drops the rectified (second-order)
+  effects: the mean force that would otherwise make vessel and twin drift apart (see the vessels
+  module docstring) and the shift of the WF mean a velocity-dependent WF damping would make;
+  slowly varying drift is modelled by the drift bias.
   With **motion superposition** (Fossen 2011 §8.2.1) η = η_LF + η_w: the vessel is the LF
   motion and truth_lf_pose is η_LF itself. Without waves (or σ = 0) the two truths coincide.
 - `waves.model: rao` is motion superposition too, with η_w from motion RAOs over a JONSWAP
@@ -44,7 +47,7 @@ from sim_ros.physics import excitation as exc
 from sim_ros.physics import schedule as sched
 from sim_ros.physics.environment import EnvironmentConfig, EnvironmentGenerator, MarkovBias
 from sim_ros.physics.integrate import RatesFn, rk4_step
-from sim_ros.physics.kinematics import FloatArray, earth_to_body, rotation, wrap_angle
+from sim_ros.physics.kinematics import FloatArray, rotation, wrap_angle
 from sim_ros.physics.rao import RaoParams, motion_basis, motion_from_basis
 from sim_ros.physics.sea_spectrum import (
     DEFAULT_FREQ_RANGE,
@@ -56,12 +59,12 @@ from sim_ros.physics.sea_spectrum import (
 from sim_ros.physics.sensors import SensorConfig, check_sensor_rate, sensor_errors
 from sim_ros.physics.thrusters import ThrusterConfig, allocate, generalized_thrust
 from sim_ros.physics.vessels import (
-    THESIS_OPERATING_SPEED,
     LinearModel,
     SupplyVessel,
     ThesisVessel,
     WaveRatesFn,
     make_vessel,
+    wave_operating_speed,
 )
 from sim_ros.physics.waves import (
     WAVE_MODELS,
@@ -543,7 +546,11 @@ class Simulator:
         self._wave_initial = np.zeros(3) if self._waves is None else self._waves.output.copy()
         self._wf: list[float] | None = [0.0] * 6 if self._wave_model == 'force' else None
         if self._wf is not None and self._waves is not None:
-            self._rates = _with_wave_motion(self._rates, self.vessel.wave_rates_fn())
+            if isinstance(self.vessel, ThesisVessel):
+                wave_rates = self.vessel.wave_rates_fn(self._wave_operating_speed())
+            else:
+                wave_rates = self.vessel.wave_rates_fn()
+            self._rates = _with_wave_motion(self._rates, wave_rates)
             self._wf = _initial_wave_motion(self._wave_linear_model(), self._state[2],
                                             self._waves, streams[7])
             self._state = [*self._state, *self._wf]
@@ -628,14 +635,16 @@ class Simulator:
         return self.sample
 
     # ------------------------------------------------------------------ internals
+    def _wave_operating_speed(self) -> tuple[float, float, float]:
+        """Operating point of a thesis vessel's WF dynamics: initial state and mean current."""
+        current = self.scenario.environment.mean_current()
+        return wave_operating_speed(self._state[2], self._state[3:6],
+                                    (float(current[0]), float(current[1])))
+
     def _wave_linear_model(self) -> LinearModel:
-        """(M, D) of the WF dynamics at t = 0 (thesis vessels: slope at the initial speed)."""
+        """(M, D) of the WF dynamics (thesis vessels: linearized at `_wave_operating_speed`)."""
         if isinstance(self.vessel, ThesisVessel):
-            current = self.scenario.environment.mean_current()
-            rel = np.asarray(self._state[3:6]) - earth_to_body(
-                self._state[2], np.array([current[0], current[1], 0.0]))
-            speed = np.maximum(np.abs(rel), THESIS_OPERATING_SPEED)
-            return self.vessel.linearize(speed.tolist())
+            return self.vessel.linearize(self._wave_operating_speed())
         return self.vessel.linearize()
 
     def _build_excitation(self, rng: np.random.Generator) -> exc.Excitation:

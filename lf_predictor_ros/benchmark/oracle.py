@@ -6,7 +6,8 @@
 Fossen 2011 §11.3):
 
 - vessel (`sim_ros.physics.vessels`): thesis vessels M = diag(1/b), D = 0, quadratic damping a
-  (eq. 5.6–5.8) and the WF linearization floor THESIS_OPERATING_SPEED; the supply vessel M, D;
+  (eq. 5.6–5.8) and the WF dynamics' operating point (`vessels.wave_operating_speed` of the
+  initial state and mean current, as the simulator); the supply vessel M, D;
 - waves: model (force or motion superposition), λ, σ per DOF, ω0 of the schedule at t = 0 (the
   benchmark retunes it to the true ω0 of each sample) and the generator's ω0 rounding;
 - environment: wind and drift Gauss–Markov forces (mean, std, T), mean current and its
@@ -38,7 +39,7 @@ import numpy as np
 
 from lf_predictor_ros.core.baselines.kalman import GaussMarkov, KalmanEstimator, OracleModel
 from sim_ros.physics.environment import MarkovBias
-from sim_ros.physics.vessels import THESIS_OPERATING_SPEED, SupplyVessel, ThesisVessel, make_vessel
+from sim_ros.physics.vessels import SupplyVessel, ThesisVessel, make_vessel, wave_operating_speed
 from sim_ros.simulation import Scenario
 
 ORACLE_WAVE_MODELS = ('force', 'motion', 'none')
@@ -76,25 +77,26 @@ def oracle_model(scenario: Scenario, sample_time: float) -> OracleModel:
                          f'sensor period {scenario.sample_time} s')
     vessel = make_vessel(scenario.vessel)
     ndof = scenario.ndof
+    env = scenario.environment
+    mean_current = env.mean_current()
     if isinstance(vessel, ThesisVessel):
         gains = [b if b > 0 else vessel.input_gain[0] for b in vessel.input_gain]
         mass = np.diag([1.0 / b for b in gains])  # kg (b = 1/m_equivalent)
         damping = np.zeros((3, 3))
         quad = tuple(vessel.quad_damping)
-        floor = tuple(THESIS_OPERATING_SPEED)
+        speed = wave_operating_speed(scenario.initial_pose[2], scenario.initial_velocity,
+                                     (float(mean_current[0]), float(mean_current[1])))
         hold = 'last' if round(ratio) == 1 else 'linear'
     elif isinstance(vessel, SupplyVessel):
         mass, damping = vessel.mass.copy(), vessel.damping.copy()
-        quad, floor, hold = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 'linear'
+        quad, speed, hold = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 'linear'
     else:  # pragma: no cover - make_vessel returns one of the two
         raise ValueError(f'no oracle model for vessel {scenario.vessel!r}')
     sigma = tuple(waves.sigma) if ndof == 3 else (waves.sigma[0], 0.0, 0.0)
     model = waves.model if any(s > 0 for s in sigma[:ndof]) else 'none'
-    env = scenario.environment
-    mean_current = env.mean_current()
     return OracleModel(
         ndof=ndof, sample_time=float(sample_time), sensor_period=scenario.sample_time,
-        mass=mass, damping=damping, quad_damping=quad, wave_speed_floor=floor,
+        mass=mass, damping=damping, quad_damping=quad, wave_operating_speed=speed,
         wave_model=model, wave_damping=waves.damping, wave_sigma=sigma,
         wave_peak_freq=float(waves.peak_freq(0.0)),
         peak_freq_resolution=waves.peak_freq_resolution,

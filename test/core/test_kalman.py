@@ -117,7 +117,7 @@ def test_heading_wrap_and_nan_input() -> None:
 def test_one_dof_components_beyond_ndof_are_zero() -> None:
     model = OracleModel(ndof=1, sample_time=1.0, sensor_period=1.0, mass=np.eye(3) * 1471.0,
                         damping=np.zeros((3, 3)), quad_damping=(-0.017, 0.0, 0.0),
-                        wave_speed_floor=(0.1, 0.1, 0.02), wave_model='force',
+                        wave_operating_speed=(0.1, 0.1, 0.02), wave_model='force',
                         wave_sigma=(85.0, 0.0, 0.0), position_std=0.05, input_hold='last')
     est = KalmanEstimator(model)
     out = est.update(1.0, np.array([2.0, 7.0, 1.0]), np.array([5.0, 1.0, 1.0]))

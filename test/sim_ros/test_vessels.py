@@ -127,3 +127,33 @@ def test_thrust_allocation_saturation_and_shaft_lag() -> None:
     for _ in range(50):
         sample = sim.step(np.array([1e8, -1e8, 1e10]))
     assert np.all(np.abs(sample.thrust) <= f_max * (1 + 1e-9))
+
+
+@pytest.mark.parametrize('lf_speed', [0.0, 0.05, 0.6])
+def test_wave_motion_free_decay_does_not_depend_on_lf_speed(lf_speed: float) -> None:
+    """WF free decay: η_w(∞) = η_w(0) + ν_w(0) / (2|a| u_w), whatever the LF vessel does.
+
+    M ν̇_w + D_w ν_w = 0 with D_w = 2|a| u_w / b: ν_w decays with time constant 1/(2|a| u_w)
+    and η_w travels ν_w(0) / (2|a| u_w). With u_w = 0.1 m/s that is 0.5 / 0.0034 = 147 m for
+    ν_w(0) = 0.5 m/s. A damping that followed |ν_LF| (the old model) gave 147 m at rest and
+    24.5 m at 0.6 m/s: the WF mean would depend on how fast the vessel moved.
+    """
+    rates = vessels.ONEDOF.wave_rates_fn((0.1, 0.1, 0.02))
+    lf = [0.0, 0.0, 0.0, lf_speed, 0.0, 0.0]
+    inp = [0.0] * 11
+    x = [0.0, 0.0, 0.0, 0.5, 0.0, 0.0]
+    step = 1.0
+    for _ in range(int(20 * 294 / step)):  # 20 time constants
+        x = rk4_step(lambda s, i: rates(lf, s, i), x, step, inp, inp, inp)
+    assert x[0] == pytest.approx(0.5 / (2 * 0.017 * 0.1), rel=1e-6)
+    assert abs(x[3]) < 1e-8
+
+
+def test_wave_operating_speed_floors_and_uses_relative_velocity() -> None:
+    """u_w = max(|ν − R(ψ)ᵀ v_c|, u0): 0.1 m/s at rest, the current's speed through the water."""
+    assert vessels.wave_operating_speed(0.0, (0.0, 0.0, 0.0)) == (0.1, 0.1, 0.02)
+    # heading 90° (east), current 0.5 m/s towards north: all of it is sway through the water
+    speed = vessels.wave_operating_speed(math.pi / 2, (0.0, 0.0, 0.05), (0.5, 0.0))
+    assert speed == pytest.approx((0.1, 0.5, 0.05))
+    with pytest.raises(ValueError, match='operating_speed'):
+        vessels.ONEDOF.wave_rates_fn((0.1, 0.0, 0.02))

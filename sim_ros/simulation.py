@@ -678,14 +678,16 @@ class Simulator:
             self._wave_motion, _ = self._waves.next_block(BLOCK)
         if self._waves is not None and self._wave_model == 'force':
             start = self._waves.output.copy()
-            forces, _ = self._waves.next_block(BLOCK * self._substeps)
-            # exact samples at the sub-step boundaries; RK4 stages use their linear interpolation
-            # (first-order hold). A zero-order hold would delay the force by h/2 and leave a
+            forces, impulses, _ = self._waves.next_block_with_impulses(BLOCK * self._substeps)
+            # exact samples at the sub-step boundaries; the RK4 mid stages get the value that
+            # makes the step's Simpson impulse h (τ0 + 4 τm + τ1)/6 the exact ∫τ dt (= τ at the
+            # midpoint to O(h⁴)). A zero-order hold would delay the force by h/2 and leave a
             # constant WF velocity error b·τ(0)·h/2 that the weakly damped vessel turns into a
-            # metre-size position offset.
+            # metre-size position offset; the linear interpolation's O(h³) impulse error per
+            # step made the WF mean random-walk (`WaveGenerator.next_block_with_impulses`).
             bounds = np.vstack([start[None, :], forces])
-            self._wave_force = np.stack([bounds[:-1], 0.5 * (bounds[:-1] + bounds[1:]),
-                                         bounds[1:]], axis=1).tolist()
+            mid = (6.0 * impulses / self._h - bounds[:-1] - bounds[1:]) / 4.0
+            self._wave_force = np.stack([bounds[:-1], mid, bounds[1:]], axis=1).tolist()
         self._blocks_left = BLOCK
 
     def _actuate(self, command: FloatArray) -> list[list[float]]:

@@ -3,10 +3,11 @@
     python docs/scripts/wave_state_drift_probe.py SCENARIO SEED [SEED ...]   # not 11-20
 
 Under force superposition (`sim_ros.physics.vessels`, `wave_rates_fn`) the wave-frequency state
-x_WF is a mass-damper driven by the first-order wave force, with no restoring force and a
-damping that follows the LF velocity above u0 = 0.1 m/s, and the true LF pose is the twin's
-(`truth_lf_pose`). When the damping changes, the WF position's mean level moves and stays: a slow
-component that is in the measured pose but not in the truth. A filter of the measurement (notch
+x_WF is a mass-damper driven by the first-order wave force, with no restoring force, and the
+true LF pose is the twin's (`truth_lf_pose`). Any slow part of the WF position is in the measured
+pose but not in the truth. (Until the eighteenth session the WF damping followed the LF velocity
+above u0 = 0.1 m/s and the RK4 stages missed part of each step's force impulse, so the WF mean
+moved; both are fixed, and this probe measures what is left.) A filter of the measurement (notch
 + low-pass, the learned filter, a smoother) passes it as LF motion; only a filter that knows the
 model, the thrust and the initial state (the oracle) can split it off.
 

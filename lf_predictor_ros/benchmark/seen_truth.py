@@ -3,18 +3,16 @@
 Under force superposition (`sim_ros.physics.vessels`, ``wave_rates_fn``; the thesis vessels'
 scenarios, ``waves.model: force``) the true LF pose is the *twin*'s: the vessel driven by
 everything but the first-order wave force. The wave-frequency state η_w is the vessel's
-response to that force, linearized about the LF state, and it has no restoring force: M ν_w +
-D η_w − K ẋ3 is conserved only while its damping D is constant, and D = 2|a| max(|ν_r,LF|, u0)
-/ b follows the LF velocity. Whenever the vessel moves faster than u0 (0.1 m/s) the mean level of
-η_w shifts and stays: on onedof_feedback (seeds 1–10) the three runs whose approach from 5 m
-passed 0.1 m/s (for 4–11 s) carry the three largest slow parts, 0.06–0.19 m RMS, the others
-0.007–0.035 m; the shaping filter's own tail below the wave band gives only ≈ 0.006 m RMS there
-(analytically, at constant damping). It is in the
-measured pose and not in the twin, so every filter of the measurement — notch + low-pass, the
+response to that force, and it has no restoring force, so any slow part of η_w is in the
+measured pose and not in the twin: every filter of the measurement — notch + low-pass, the
 learned filter, a zero-phase smoother — passes it as LF motion and is scored as if it had erred;
-only the oracle, which knows the model, the thrust and the initial state, can split it off. The
-vessel really is there: a DP controller would have to hold against it like any other slow
-motion (`docs/BENCHMARKS.md`, "Seventeenth session").
+only the oracle, which knows the model, the thrust and the initial state, can split it off.
+Until the eighteenth session the simulator made such a part: its WF damping followed the LF
+velocity (the mean of η_w shifted whenever the vessel passed u0 = 0.1 m/s: 0.06–0.19 m RMS on
+onedof_feedback) and the RK4 stages' interpolated wave force missed each step's impulse by
+O(h³) (a random walk of the mean: 0.025 m RMS at h = 0.05 s). Both are fixed; what is left is
+the shaping filter's own tail below the wave band, ≈ 0.005 m RMS (`docs/BENCHMARKS.md`,
+"Seventeenth session" and "Eighteenth session").
 
 ``seen_lf_truth`` = twin + the part of η_w below ``SLOW_WAVE_FRACTION`` · ω0 (zero-phase
 Butterworth of order ``SLOW_WAVE_ORDER``, forward and backward: the truth may look ahead). The

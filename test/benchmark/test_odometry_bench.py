@@ -101,10 +101,10 @@ def test_smoke_short_onedof_run() -> None:
     assert math.isfinite(tracking['pose']['joint']['mean_nees'])
     assert math.isfinite(tracking['twist']['joint']['mean_nees'])
     assert all(math.isfinite(v) for v in tracking['twist_rmse'] + tracking['twist_pid_fd_rmse'])
-    # seed 1 carries a slow first-order wave offset (0.1-0.18 m) that no filter of the
-    # measurement can see (`seen_truth`): against the seen truth the errors are smaller
-    assert tracking['pose_seen_rmse'][0] < 0.8 * tracking['pose_rmse'][0]
-    assert tracking['pose_seen']['joint']['mean_nees'] < tracking['pose']['joint']['mean_nees']
+    # the seen truth differs from the twin by the shaping filter's tail below the wave band
+    # (≈ 0.005 m RMS). Before the eighteenth session's WF fixes seed 1 carried a slow wave
+    # offset of 0.1-0.18 m there and the pose RMSE against the seen truth was < 0.8 × the twin's
+    assert abs(tracking['pose_seen_rmse'][0] - tracking['pose_rmse'][0]) < 0.01
     (drop,) = case['dead_reckoning']['dropouts']
     assert set(drop['times']) == {str(w) for w in DRIFT_TIMES}
     for when in DRIFT_TIMES:

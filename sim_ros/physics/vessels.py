@@ -140,15 +140,16 @@ class ThesisVessel:
 
         ν̇_w,i = −2|a_i| u_w,i ν_w,i + b_i (R(ψ_LF)ᵀ f_w)_i, η̇_w = R(ψ_LF) ν_w, with u_w the
         operating speed [m/s, m/s, rad/s] (`wave_operating_speed`: the initial relative velocity
-        floored at THESIS_OPERATING_SPEED). The damping is constant for the run, so
-        M ν_w + D_w η_w − ∫R(ψ)ᵀ f_w dt is conserved and η_w keeps the zero mean it is drawn with
-        (a damping that followed |ν_r,LF| moved that mean whenever the vessel sped up: a
-        rectified, second-order wave effect without restoring force; the drift bias of
-        `environment` is where second-order effects belong).
+        floored at THESIS_OPERATING_SPEED). The damping is constant for the run, so (at constant
+        heading exactly) M ν_w + D_w η_w − ∫R(ψ)ᵀ f_w dt is conserved and η_w keeps the zero
+        mean it is drawn with (a damping that followed |ν_r,LF| moved that mean whenever the
+        vessel sped up: a rectified, second-order wave effect without restoring force; the drift
+        bias of `environment` is where second-order effects belong).
         """
         speeds = [float(v) for v in operating_speed]
         if len(speeds) != 3 or not all(math.isfinite(v) and v > 0.0 for v in speeds):
-            raise ValueError(f'operating_speed must be 3 finite speeds > 0, got {operating_speed}')
+            raise ValueError(f'operating_speed must be 3 finite speeds > 0 [m/s, m/s, rad/s] '
+                             f'(use wave_operating_speed), got {operating_speed}')
         d_u, d_v, d_r = (2.0 * a * v for a, v in zip(self.quad_damping, speeds, strict=True))
         b_u, b_v, b_r = self.input_gain
         cos, sin = math.cos, math.sin

@@ -283,9 +283,10 @@ class PredictorParams:
     roughness_guard_time: float = field(
         default=0.0, metadata=_doc(
             "roughness guard (core/roughness.py): while the network prediction's squared second "
-            "differences, averaged over this time, exceed 50× (ROUGHNESS_RATIO) the measured pose's in any DOF, the "
-            'prediction is no LF estimate (a limit cycle through the thrust regressors in a DP '
-            'loop) and the cascade fallback serves; 0 = off, else > sample_time', 's'))
+            "differences, averaged over this time, exceed 50× (ROUGHNESS_RATIO) the measured "
+            "pose's in any DOF, the prediction is no LF estimate (a limit cycle through the "
+            'thrust regressors in a DP loop) and the cascade fallback serves; 0 = off, else > '
+            'sample_time', 's'))
 
     def __post_init__(self) -> None:
         """Coerce numbers to their field types and check every rule (raises ValueError)."""

@@ -102,7 +102,6 @@ from lf_predictor_ros.core.retraining import (
     run_retraining,
     sea_state_changed,
 )
-from lf_predictor_ros.core.roughness import RoughnessGuard
 from lf_predictor_ros.core.targets import TargetWindow
 from lf_predictor_ros.core.training import warm_up
 
@@ -301,16 +300,12 @@ class AdaptivePredictor:
             self._moving = AdaptivePredictor(
                 params.replace(motion_gate=False, ramp_invariant=True,
                                ny=params.motion_gate_ny or params.ny,
-                               turn_bypass_rate=0.0,  # the bypass acts on the final output
-                               roughness_guard_time=0.0),  # the guard: holding network only
+                               turn_bypass_rate=0.0),  # the bypass acts on the final output
                 background=background,
                 checkpoint_path=twin_checkpoint_path(checkpoint_path) if checkpoint_path else None,
                 max_trainings=max_trainings, training_lock=self._training_lock)
             self._gate = MotionGate(params.ndof, params.sample_time,
                                     window=params.training_window)
-        self._roughness = (RoughnessGuard(params.ndof, params.sample_time,
-                                          params.roughness_guard_time)
-                           if params.roughness_guard_time > 0.0 else None)
         self._gain = np.zeros(params.ndof)
         smoothing = params.motion_gate_smoothing
         self._gate_alpha = 1.0 if smoothing <= 0.0 else min(1.0, params.sample_time / smoothing)
@@ -349,16 +344,9 @@ class AdaptivePredictor:
             self._fb.append(self._position(lf_now, update_heading=False))
         model = self._model
         prediction = self._predict()
-        rough = self._roughness is not None and self._roughness.update(y, prediction)
         if prediction is not None and not self._plausible(prediction, y):
             self._guard_trips += 1
             self._message = 'network prediction implausible: cascade fallback'
-            prediction = None
-            self._fb.clear()
-            self._fb.append(self._position(lf_now, update_heading=False))
-        if prediction is not None and rough:
-            self._guard_trips += 1
-            self._message = 'network prediction rougher than the measurement: cascade fallback'
             prediction = None
             self._fb.clear()
             self._fb.append(self._position(lf_now, update_heading=False))
@@ -429,8 +417,6 @@ class AdaptivePredictor:
             self._moving.reset()
             self._gate.reset()
         self._gate_valid = np.full(self.ndof, not self.params.motion_gate_validation)
-        if self._roughness is not None:
-            self._roughness.reset()
         self._stop.set()
         self._generation += 1
         self._stop = threading.Event()

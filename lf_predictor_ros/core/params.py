@@ -174,17 +174,6 @@ class PredictorParams:
             'that rate over h (blended in and out over TURN_BLEND_TIME, 5 s): in a turn the '
             "network's heading lags 2-5x the measurement's wave yaw (development seeds, issue "
             '13); 0 = off', 'rad/s'))
-    turn_bypass_notch_zeta: float = field(
-        default=0.0, metadata=_doc(
-            'with turn_bypass_rate: the measured heading of the bypass passes a notch at ω0 of '
-            'this width first (no low-pass: little lag), so the wave yaw does not reach the '
-            'thrust during a turn; 0 = the measured heading itself'))
-    turn_bypass_lowpass: float = field(
-        default=0.0, metadata=_doc(
-            'with turn_bypass_rate: the correction of the heading (measured and extrapolated '
-            "minus the network's) passes a first-order low-pass of this time constant before "
-            'it is applied: the lag of a turn is slow and passes, the wave yaw is cut; 0 = no '
-            'low-pass', 's'))
     turn_bypass_position: bool = field(
         default=False, metadata=_doc(
             'with turn_bypass_rate: north and east come from the cascade fallback during the '
@@ -438,8 +427,7 @@ class PredictorParams:
         for name in ('weight_decay', 'derivative_weight', 'initial_wave_peak_freq',
                      'wave_augmentation', 'switch_blend_time', 'motion_gate_smoothing',
                      'output_notch_zeta', 'notch_lower_edge', 'notch_zeta_broadband',
-                     'motion_gate_yaw_notch', 'turn_bypass_notch_zeta',
-                     'turn_bypass_lowpass'):
+                     'motion_gate_yaw_notch'):
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')

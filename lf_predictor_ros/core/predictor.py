@@ -283,11 +283,6 @@ class AdaptivePredictor:
         self._guard_bound: tuple[FloatArray, list[float]] | None = None
         self._guard_trips = 0
         self._turn_weight = 0.0  # turn_bypass_rate: weight of the bypass
-        self._turn_correction = 0.0  # turn_bypass_lowpass: the low-passed heading correction
-        # turn_bypass_notch_zeta: the measured heading through a notch at ω0 (1 channel)
-        self._turn_notch: CascadeFilter | None = None
-        if params.turn_bypass_rate > 0.0 and params.turn_bypass_notch_zeta > 0.0:
-            self._turn_notch = self._wave_notch(1, params.turn_bypass_notch_zeta)
         self._turns_bypassed = 0  # outputs with a bypass weight > 0
         self._no_thrust = 0  # accepted trainings whose thrust test failed (thrust_validation)
         self._smoothing = params.switch_blend_time > 0.0 or any(
@@ -366,46 +361,33 @@ class AdaptivePredictor:
         out = self._notched(t, self._gated(t, self._output(estimate, pose_arr), pose_arr,
                                            force_arr))
         if self.params.turn_bypass_rate > 0.0:
-            return self._turn_bypassed(t, out, lf_now)
+            return self._turn_bypassed(out, lf_now)
         return out
 
-    def _turn_bypassed(self, t: float, out: FloatArray, lf_now: FloatArray) -> FloatArray:
+    def _turn_bypassed(self, out: FloatArray, lf_now: FloatArray) -> FloatArray:
         """``turn_bypass_rate``: in a turn, the measured heading extrapolated over h.
 
         The rate is the unwrapped measured heading's change over ``TURN_RATE_WINDOW``; the
         weight w of the bypass follows 1 (turning) or 0 with time constant ``TURN_BLEND_TIME``;
-        heading ← heading + w · wrap(measured + rate · h − heading) (the measured heading
-        through the notch of ``turn_bypass_notch_zeta`` first; the correction wrap(…) through a
-        first-order low-pass of ``turn_bypass_lowpass`` while it runs), and with
+        heading ← heading + w · wrap(measured + rate · h − heading), and with
         ``turn_bypass_position`` north/east ← (1 − w) · output + w · cascade fallback.
         """
         h = self.sample_time
         lag = max(1, int(round(TURN_RATE_WINDOW / h)))
         rows = self._y.newest(lag + 1)
-        measured = float(rows[-1, 2]) if rows.shape[0] else math.nan
-        if self._turn_notch is not None and math.isfinite(measured):
-            measured = _notch_one(self._turn_notch, t, measured)
         if rows.shape[0] < lag + 1 or not np.all(np.isfinite(out)):
-            self._turn_weight = self._turn_correction = 0.0
+            self._turn_weight = 0.0
             return out
-        yaw_now = float(measured)
-        rate = (float(rows[-1, 2]) - float(rows[0, 2])) / (lag * h)
+        yaw_now = float(rows[-1, 2])
+        rate = (yaw_now - float(rows[0, 2])) / (lag * h)
         target = 1.0 if abs(rate) > self.params.turn_bypass_rate else 0.0
         self._turn_weight += min(1.0, h / TURN_BLEND_TIME) * (target - self._turn_weight)
         w = self._turn_weight
-        correction = wrap_angle(yaw_now + rate * h - float(out[2]))
-        smoothing = self.params.turn_bypass_lowpass
-        if smoothing > 0.0:  # starts from 0 with each bypass: no old correction carried in
-            if w < 1e-6:
-                self._turn_correction = 0.0
-            else:
-                self._turn_correction += min(1.0, h / smoothing) * (
-                    correction - self._turn_correction)
-                correction = self._turn_correction
         if w < 1e-6:
             return out
         bypassed = np.array(out, dtype=np.float64)
-        bypassed[2] = wrap_angle(float(out[2]) + w * correction)
+        follow = yaw_now + rate * h
+        bypassed[2] = wrap_angle(float(out[2]) + w * wrap_angle(follow - float(out[2])))
         if self.params.turn_bypass_position:
             bypassed[:2] = (1.0 - w) * bypassed[:2] + w * np.asarray(lf_now[:2])
         self._turns_bypassed += 1
@@ -714,7 +696,7 @@ class AdaptivePredictor:
     def _tune_wave_filters(self, wave_peak_freq: float) -> None:
         """Retune the cascade fallback and the output notch to ω0 [rad/s] (outputs continuous)."""
         self._fallback.set_wave_peak_freq(wave_peak_freq)
-        for notch in (self._output_notch, self._gate_yaw_notch, self._turn_notch):
+        for notch in (self._output_notch, self._gate_yaw_notch):
             if notch is not None:
                 notch.set_wave_peak_freq(wave_peak_freq)
 
@@ -966,7 +948,8 @@ class AdaptivePredictor:
         """
         assert self._gate_yaw_notch is not None
         notched = np.array(offset, dtype=np.float64)
-        notched[2] = _notch_one(self._gate_yaw_notch, t, float(offset[2]))
+        notched[2] = self._gate_yaw_notch.update(t, np.array([offset[2], 0.0, 0.0]),
+                                                 _NO_FORCE)[0]
         return notched
 
     def _validate_gate(self, holding: FloatArray, gated: FloatArray) -> None:
@@ -1152,11 +1135,6 @@ class AdaptivePredictor:
         if model is not None:  # regressor_clip: the ranges travel with the network
             meta.update(model.range_meta())
         return meta
-
-
-def _notch_one(notch: CascadeFilter, t: float, value: float) -> float:
-    """One value through a one-channel notch (`AdaptivePredictor._wave_notch`)."""
-    return float(notch.update(t, np.array([value, 0.0, 0.0]), _NO_FORCE)[0])
 
 
 def _newest(rows: deque[FloatArray], count: int) -> FloatArray:

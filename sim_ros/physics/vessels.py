@@ -44,7 +44,7 @@ import math
 import numpy as np
 
 from sim_ros.physics.integrate import RatesFn, State
-from sim_ros.physics.kinematics import FloatArray
+from sim_ros.physics.kinematics import FloatArray, earth_to_body
 
 # --- thesis models, eq. 5.6-5.7 ---------------------------------------------------------------
 ONEDOF_A = -0.017  # 1/m, quadratic damping coefficient a (eq. 5.6)
@@ -173,9 +173,8 @@ def wave_operating_speed(heading: float, velocity: Sequence[float],
     max(|ν − R(ψ)ᵀ [v_c; 0]|, THESIS_OPERATING_SPEED) per DOF, for the body velocity ν
     (surge, sway, yaw rate) and the earth-fixed mean current v_c (north, east) at the run's start.
     """
-    c, s = math.cos(heading), math.sin(heading)
-    rel = (velocity[0] - (c * current[0] + s * current[1]),
-           velocity[1] - (-s * current[0] + c * current[1]), velocity[2])
+    rel = np.asarray(velocity, dtype=np.float64) - earth_to_body(
+        heading, np.array([current[0], current[1], 0.0]))
     u, v, r = (max(abs(float(x)), floor) for x, floor in zip(rel, THESIS_OPERATING_SPEED,
                                                               strict=True))
     return (u, v, r)

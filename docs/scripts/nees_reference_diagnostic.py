@@ -28,7 +28,7 @@ from lf_predictor_ros.benchmark.odometry_bench import (
     predictor_params,
     scored_start,
 )
-from lf_predictor_ros.benchmark.seen_truth import seen_lf_truth
+from lf_predictor_ros.benchmark.seen_truth import recording_seen_truth
 from lf_predictor_ros.core.filters import zero_phase
 from lf_predictor_ros.core.lf_state import LfStateEstimator
 from lf_predictor_ros.core.odometry import OdometryParams
@@ -47,9 +47,9 @@ def collect(name: str, seed: int, duration: float) -> tuple[Any, dict[str, Float
     params = predictor_params(scenario, None)
     recording = make_recording(scenario, seed, duration, make_setup(scenario, seed, params))
     data = recording.data()
-    if recording.wave is not None:  # score against the LF truth the measurement carries
-        data['truth'] = seen_lf_truth(data['truth'], recording.wave, params.sample_time,
-                                      float(np.min(data['omega'])))
+    seen_truth = recording_seen_truth(recording, params.sample_time)
+    if seen_truth is not None:  # score against the LF truth the measurement carries
+        data['truth'] = seen_truth
     n, t = params.ndof, data['t']
     pub = np.full((len(t), n), np.nan)
     pvar = np.full((len(t), n), np.nan)

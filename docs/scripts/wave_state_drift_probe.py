@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from lf_predictor_ros.benchmark.estimators import predictor_params
 from lf_predictor_ros.benchmark.odometry_bench import _tracking_run
-from lf_predictor_ros.benchmark.seen_truth import seen_lf_truth
+from lf_predictor_ros.benchmark.seen_truth import recording_seen_truth
 from lf_predictor_ros.benchmark.suite import (
     make_recording,
     make_setup,
@@ -70,10 +70,9 @@ def probe(name: str, seed: int, nees: bool) -> None:
     setup = make_setup(scenario, seed, params)
     recording = make_recording(scenario, seed, DURATION, setup)
     n = params.ndof
-    assert recording.wave is not None
+    full_seen = recording_seen_truth(recording, params.sample_time)
+    assert full_seen is not None
     data = recording.data()
-    full_seen = seen_lf_truth(data['truth'], recording.wave, params.sample_time,
-                              float(np.min(recording.omega)))
     slow = full_seen - data['truth']
     slow[:, 2] = wrap_angle(slow[:, 2])
     slow = slow[:, :n]

@@ -90,7 +90,7 @@ import yaml
 from lf_predictor_ros.benchmark.estimators import make_estimator, predictor_params
 from lf_predictor_ros.benchmark.recordings import run_loop
 from lf_predictor_ros.benchmark.scoring import fmt_number, interval
-from lf_predictor_ros.benchmark.seen_truth import seen_lf_truth
+from lf_predictor_ros.benchmark.seen_truth import recording_seen_truth
 from lf_predictor_ros.benchmark.stability import pose_offset
 from lf_predictor_ros.benchmark.suite import (
     _loop_reference,
@@ -552,8 +552,7 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                            'dead_reckoning_timeout': odometry.dead_reckoning_timeout,
                            'recording': recording.provenance.to_dict()}
     if tracking:
-        seen = (None if recording.wave is None else seen_lf_truth(
-            data['truth'], recording.wave, params.sample_time, float(np.min(data['omega']))))
+        seen = recording_seen_truth(recording, params.sample_time)
         out['tracking'] = _tracking_run(params, odometry, data, begin, seen)
     if dead_reckoning:
         out['dead_reckoning'] = _dropout_run(params, odometry, data, dropouts, setup)

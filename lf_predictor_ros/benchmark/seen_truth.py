@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
+from lf_predictor_ros.benchmark.recordings import Recording
 from lf_predictor_ros.core.filters import zero_phase
 from lf_predictor_ros.core.heading import wrap_angle
 
@@ -71,3 +72,14 @@ def seen_lf_truth(truth: FloatArray, wave_motion: FloatArray, sample_time: float
     out += slow_wave_motion(wave_motion, sample_time, wave_peak_freq)
     out[:, 2] = wrap_angle(out[:, 2])
     return out
+
+
+def recording_seen_truth(recording: Recording, sample_time: float) -> FloatArray | None:
+    """`seen_lf_truth` of a recording on its grid of ``sample_time`` s, at its lowest true ω0.
+
+    None when the recording does not carry its wave motion (``Recording.wave``).
+    """
+    if recording.wave is None:
+        return None
+    return seen_lf_truth(recording.truth, recording.wave, sample_time,
+                         float(np.min(recording.omega)))

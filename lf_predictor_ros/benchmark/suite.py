@@ -73,7 +73,7 @@ from lf_predictor_ros.benchmark.recordings import (
     require_fair,
     run_loop,
 )
-from lf_predictor_ros.benchmark.seen_truth import seen_lf_truth
+from lf_predictor_ros.benchmark.seen_truth import recording_seen_truth
 from lf_predictor_ros.core.baselines.smoother import smooth_poses
 from lf_predictor_ros.core.evaluation import (
     DEFAULT_WAVE_BAND,
@@ -477,14 +477,14 @@ def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
 def _seen_metrics(recording: Recording, data: dict[str, FloatArray],
                   outputs: dict[str, FloatArray], params: PredictorParams, begin: int,
                   info: dict[str, Any]) -> dict[str, Metrics]:
-    """Scores against `seen_truth.seen_lf_truth` (empty without the recording's wave motion).
+    """Scores against `seen_truth.recording_seen_truth` (empty without the wave motion).
 
     Also puts the RMS of the slow wave motion (seen − twin) per DOF into ``info``.
     """
-    if recording.wave is None:
+    full = recording_seen_truth(recording, params.sample_time)
+    if full is None:
         return {}
-    seen = seen_lf_truth(data['truth'], recording.wave, params.sample_time,
-                         float(np.min(data['omega'])))[begin:]
+    seen = full[begin:]
     slow = seen - data['truth'][begin:]
     slow[:, 2] = wrap_angle(slow[:, 2])
     info['slow_wave_rms'] = [float(v) for v in np.sqrt(np.mean(slow**2, axis=0))[:params.ndof]]

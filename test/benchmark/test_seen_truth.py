@@ -1,11 +1,15 @@
 """The LF truth a filter of the measurement can see (`benchmark.seen_truth`)."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
+from lf_predictor_ros.benchmark.recordings import Provenance, Recording
 from lf_predictor_ros.benchmark.seen_truth import (
     SLOW_WAVE_FRACTION,
+    recording_seen_truth,
     seen_lf_truth,
     slow_wave_motion,
 )
@@ -62,3 +66,16 @@ def test_the_record_ends_do_not_turn_the_last_wave_into_a_slow_step() -> None:
     wave = 0.5 * np.cos(OMEGA * (t - t[-1]))
     out = slow_wave_motion(np.column_stack([wave, wave, wave]), H, OMEGA)
     assert np.max(np.abs(out)) < 0.1  # Gustafsson's initial conditions: 0.046 m
+
+
+def test_a_recordings_seen_truth_uses_its_lowest_peak_frequency() -> None:
+    """`recording_seen_truth`: the recording's twin and wave motion at its lowest true ω0."""
+    t = _grid()
+    motion = np.column_stack([0.05 + 0.5 * np.sin(OMEGA * t), np.zeros((t.size, 2))])
+    truth = np.column_stack([0.01 * t, np.zeros(t.size), np.full(t.size, 0.2)])
+    omega = np.where(t < 2000.0, OMEGA, 2.0 * OMEGA)
+    provenance = Provenance('x', 1, float(t[-1]), H, 'open')
+    rec = Recording(provenance, t, truth, np.zeros_like(truth), truth, omega, wave=motion)
+    np.testing.assert_array_equal(recording_seen_truth(rec, H),
+                                  seen_lf_truth(truth, motion, H, OMEGA))
+    assert recording_seen_truth(replace(rec, wave=None), H) is None

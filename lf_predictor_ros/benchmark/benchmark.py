@@ -304,10 +304,10 @@ def _seen_truth_table(name: str, cases: list[CaseResult]) -> list[str]:
             for i, d in enumerate(dofs)]
     lines = ['#### open loop against the LF truth the measurement carries (reported, no verdict)',
              '', 'The twin truth above leaves out the first-order wave motion below the wave '
-             'band, which the shaping-filter wave models produce and no filter of the '
-             'measurement can tell from LF motion (`benchmark/seen_truth.py`). RMS of that '
-             'slow wave motion: ' + ' / '.join(slow) + '. RMSE against the twin plus it '
-             '(linear_limit left out: fitted on the twin):', '',
+             "band (the shaping filter's own tail, and what the grid aliases down), which no "
+             'filter of the measurement can tell from LF motion (`benchmark/seen_truth.py`). '
+             'RMS of that slow wave motion: ' + ' / '.join(slow) + '. RMSE against the twin '
+             'plus it (linear_limit left out: fitted on the twin):', '',
              '| estimator | ' + ' | '.join(dofs) + ' |', '|---|' + '---|' * len(dofs)]
     for est in ESTIMATORS:
         if not all(est in c.seen_metrics for c in cases):

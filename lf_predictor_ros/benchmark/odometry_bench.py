@@ -22,8 +22,9 @@ unwrapped, central differences).
    decaying positive correlation (narrower where ρ oscillates); ``inside_rho2`` reports the
    verdict with N_eff from ρ² as well. The same test is also reported against the LF truth a
    filter of the measurement can see (quantities ``pose_seen``, ``twist_seen``:
-   `seen_truth.seen_lf_truth`, the twin plus the part of the first-order wave motion below the
-   wave band, which the shaping-filter wave models have, the force-superposition ones most).
+   `seen_truth.recording_seen_truth`, the twin plus the part of the first-order wave motion
+   below the wave band: the shaping filter's tail and aliasing, a few mm since the simulator's
+   force-superposition fixes of the eighteenth session).
 2. **Twist accuracy** (same run): RMSE per DOF of the published twist against the true LF body
    velocity, next to the zero estimate (RMS of the true velocity) and the PID's own velocity:
    the filtered finite difference (T_v = ``VELOCITY_FILTER_TIME`` = 1 s, one step per h, earth

@@ -132,8 +132,9 @@ def _counters(entry: dict[str, Any]) -> str:
     c = entry.get('counters')
     if not c:
         return ''
+    rough = f", rough retirements {c['rough_retirements']}" if c.get('rough_retirements') else ''
     return (f" guard trips {c['guard_trips']} / twin {c.get('moving_guard_trips', 0)}, "
-            f"rejected {c['rejected_trainings']} / {c['trainings']}")
+            f"rejected {c['rejected_trainings']} / {c['trainings']}" + rough)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

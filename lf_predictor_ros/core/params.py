@@ -269,6 +269,14 @@ class PredictorParams:
         default=(0.0, 0.0, 0.0), metadata=_doc(
             'largest rate of change of the published estimate (north, east, yaw); set it above '
             'the fastest LF motion; 0 = no limit on that DOF', 'm/s, m/s, rad/s'))
+    roughness_guard_time: float = field(
+        default=0.0, metadata=_doc(
+            "roughness guard (core/roughness.py): while the network prediction's squared second "
+            "differences, averaged over this time, exceed 50× (ROUGHNESS_RATIO) the measured "
+            "pose's in any DOF, the network in service is no LF filter (a limit cycle through "
+            'the thrust regressors in a DP loop): it is retired and the network before it '
+            'serves (a second trip: the cascade fallback) until the next accepted training; '
+            '0 = off, else > sample_time', 's'))
 
     def __post_init__(self) -> None:
         """Coerce numbers to their field types and check every rule (raises ValueError)."""
@@ -443,6 +451,10 @@ class PredictorParams:
         if any(speed < 0.0 for speed in self.lf_augmentation):
             raise ValueError(f'positivity rule: lf_augmentation must be ≥ 0 in every DOF (0 = '
                              f'off), got {list(self.lf_augmentation)!r}')
+        if self.roughness_guard_time != 0.0 and not self.roughness_guard_time > self.sample_time:
+            raise ValueError(f'positivity rule: roughness_guard_time must be 0 (off) or > '
+                             f'sample_time {self.sample_time} s, got '
+                             f'{self.roughness_guard_time!r}')
         if any(rate < 0.0 for rate in self.max_output_rate):
             raise ValueError(f'positivity rule: max_output_rate must be ≥ 0 in every DOF (0 = no '
                              f'limit), got {list(self.max_output_rate)!r}')

@@ -102,6 +102,7 @@ from lf_predictor_ros.core.retraining import (
     run_retraining,
     sea_state_changed,
 )
+from lf_predictor_ros.core.roughness import RoughnessGuard
 from lf_predictor_ros.core.targets import TargetWindow
 from lf_predictor_ros.core.training import warm_up
 
@@ -295,12 +296,18 @@ class AdaptivePredictor:
             self._moving = AdaptivePredictor(
                 params.replace(motion_gate=False, ramp_invariant=True,
                                ny=params.motion_gate_ny or params.ny,
-                               turn_bypass_rate=0.0),  # the bypass acts on the final output
+                               turn_bypass_rate=0.0,  # the bypass acts on the final output
+                               roughness_guard_time=0.0),  # the guard: holding network only
                 background=background,
                 checkpoint_path=twin_checkpoint_path(checkpoint_path) if checkpoint_path else None,
                 max_trainings=max_trainings, training_lock=self._training_lock)
             self._gate = MotionGate(params.ndof, params.sample_time,
                                     window=params.training_window)
+        self._roughness = (RoughnessGuard(params.ndof, params.sample_time,
+                                          params.roughness_guard_time)
+                           if params.roughness_guard_time > 0.0 else None)
+        self._previous_model: NumpyNnarmax | None = None  # the network before _model
+        self._rough_retirements = 0
         self._gain = np.zeros(params.ndof)
         smoothing = params.motion_gate_smoothing
         self._gate_alpha = 1.0 if smoothing <= 0.0 else min(1.0, params.sample_time / smoothing)
@@ -337,8 +344,10 @@ class AdaptivePredictor:
         lf_now = self._fallback.update(t, pose_arr, force_arr)
         if self._fb_next != self._k:  # no network prediction exists for this sample
             self._fb.append(self._position(lf_now, update_heading=False))
-        model = self._model
         prediction = self._predict()
+        if self._roughness is not None and self._roughness.update(y, prediction):
+            prediction = self._retire_rough_network()
+        model = self._model
         if prediction is not None and not self._plausible(prediction, y):
             self._guard_trips += 1
             self._message = 'network prediction implausible: cascade fallback'
@@ -363,6 +372,27 @@ class AdaptivePredictor:
         if self.params.turn_bypass_rate > 0.0:
             return self._turn_bypassed(out, lf_now)
         return out
+
+    def _retire_rough_network(self) -> FloatArray | None:
+        """``roughness_guard_time``: the network in service makes the loop oscillate: retire it.
+
+        The network before it serves again (if there is one; a second trip retires that one too),
+        else the cascade fallback, until the next accepted training; its weights stay the next
+        warm start, as for a network retired by a training. Returns the new source's prediction.
+        """
+        self._rough_retirements += 1
+        self._guard_trips += 1
+        self._model, self._previous_model = self._previous_model, None
+        self._ensemble.clear()
+        if self._model is not None:
+            self._ensemble.append(self._model)
+        self._fb.clear()
+        assert self._roughness is not None
+        self._roughness.reset()
+        self._message = ('network rougher than the measurement (a limit cycle in the loop?): '
+                         'retired, ' + ('the network before it serves' if self._model is not None
+                                        else 'cascade fallback'))
+        return self._predict()
 
     def _turn_bypassed(self, out: FloatArray, lf_now: FloatArray) -> FloatArray:
         """``turn_bypass_rate``: in a turn, the measured heading extrapolated over h.
@@ -403,7 +433,7 @@ class AdaptivePredictor:
         self._generation += 1
         self._stop = threading.Event()
         self._worker = None
-        self._model = None
+        self._model = self._previous_model = None
         self._ensemble.clear()
         self._state_dict = None
         self._frequency = self.params.wave_peak_prior
@@ -562,6 +592,7 @@ class AdaptivePredictor:
         counts = {'trainings': self._trainings, 'rejected_trainings': self._rejected,
                   'overruns': self._overruns, 'training_errors': self._errors,
                   'guard_trips': self._guard_trips,
+                  'rough_retirements': self._rough_retirements,
                   'turn_bypassed': self._turns_bypassed,
                   'segments': self._segment, 'trainings_without_thrust': self._no_thrust}
         if self._moving is not None:
@@ -658,6 +689,7 @@ class AdaptivePredictor:
         """Put a checked checkpoint's network in service (its ω0 and loss with it)."""
         spec, state, meta = checkpoint
         self._state_dict = state
+        self._previous_model = None  # a loaded network has no predecessor to fall back to
         self._model = NumpyNnarmax.from_module(
             NnarmaxNet.from_state(spec, state)).with_saved_ranges(meta)
         self._ensemble.clear()
@@ -692,6 +724,8 @@ class AdaptivePredictor:
         self._narrow_reference: FloatArray | None = None  # narrow_reference of ``_targets``
         self._retrain_requested = False
         self._used_network = False
+        if self._roughness is not None:  # second differences never span a segment restart
+            self._roughness.reset()
 
     def _tune_wave_filters(self, wave_peak_freq: float) -> None:
         """Retune the cascade fallback and the output notch to ω0 [rad/s] (outputs continuous)."""
@@ -1104,6 +1138,7 @@ class AdaptivePredictor:
         self._frequency = result.frequency
         self._tune_wave_filters(result.frequency.wave_peak_freq)
         if result.accepted and result.model is not None:
+            self._previous_model = self._model
             self._model, self._state_dict = result.model, result.state_dict
             self._ensemble.append(result.model)
             self._no_thrust += 0 if result.thrust_used else 1

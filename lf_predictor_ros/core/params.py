@@ -270,7 +270,7 @@ class PredictorParams:
             'largest rate of change of the published estimate (north, east, yaw); set it above '
             'the fastest LF motion; 0 = no limit on that DOF', 'm/s, m/s, rad/s'))
     roughness_guard_time: float = field(
-        default=0.0, metadata=_doc(
+        default=30.0, metadata=_doc(
             "roughness guard (core/roughness.py): while the network prediction's squared second "
             "differences, averaged over this time, exceed 50× (ROUGHNESS_RATIO) the measured "
             "pose's in any DOF, the network in service is no LF filter (a limit cycle through "

@@ -158,6 +158,7 @@ def predictor_values(status: EstimatorStatus,
         'overruns': int(counters.get('overruns', 0)),
         'training_errors': int(counters.get('training_errors', 0)),
         'guard_trips': int(counters.get('guard_trips', 0)),
+        'rough_retirements': int(counters.get('rough_retirements', 0)),
         'segments': int(counters.get('segments', 0)),
         'trainings_without_thrust': int(counters.get('trainings_without_thrust', 0)),
     }

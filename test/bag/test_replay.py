@@ -249,8 +249,8 @@ def test_diagnostics_every_second_with_the_node_keys(first_run: dict[str, Any]) 
     assert len(records) == int(DURATION / SAMPLE_TIME)
     keys = {'state', 'wave_peak_freq', 'last_loss', 'train_seconds', 'model_age',
             'buffer_fill', 'trainings', 'rejected_trainings', 'overruns', 'training_errors',
-            'guard_trips', 'segments', 'samples', 'dropped', 'invalid', 'out_of_order',
-            'outliers', 'gaps', 'resets', 'stale_thrust', 'warm_start', 'partial',
+            'guard_trips', 'rough_retirements', 'segments', 'samples', 'dropped', 'invalid',
+            'out_of_order', 'outliers', 'gaps', 'resets', 'stale_thrust', 'warm_start', 'partial',
             'poses_accepted', 'forces_accepted'}
     assert all(keys <= set(values) for _, _, values in records)
     before = [v for t, _, v in records if t < FIRST_TRAINING]

@@ -48,6 +48,7 @@ SMALL: dict[str, Any] = {'ndof': 1, 'sample_time': 1.0, 'nu': 4, 'ny': 12, 'nfb'
 FIRST_TRAINING = first_training_samples(PredictorParams(**SMALL))  # [samples] 120
 DIAGNOSTIC_KEYS = {'state', 'wave_peak_freq', 'last_loss', 'train_seconds', 'model_age',
                    'buffer_fill', 'trainings', 'rejected_trainings', 'overruns', 'guard_trips',
+                   'rough_retirements',
                    'dropped', 'invalid', 'out_of_order', 'outliers', 'gaps', 'resets',
                    'stale_thrust', 'unexpected_frame', 'callback_errors',
                    'poses_accepted', 'forces_accepted'}

@@ -35,6 +35,16 @@ fast the published estimate moves. Both act on the published output only: the re
 feedback history and trainings see exactly what they see with both off, and with both off the
 output is bit-identical to the plain switch.
 
+Roughness guard (on by default, ``roughness_guard_time`` T = 30 s; `core.roughness`): a
+network whose prediction has, over T, ``ROUGHNESS_RATIO`` (50) times the mean-square second
+difference of the measured pose in any DOF is no LF filter in this loop (in a DP loop a network
+with the thrust among its regressors can close a limit cycle with the controller's D term,
+docs/BENCHMARKS.md "Eighteenth session"). It is retired: the network in service before it serves
+again (a second trip retires that one too, then the cascade fallback serves) until the next
+accepted training (which starts from the retired weights, as after a network a training
+retires).
+Counted in ``counters['rough_retirements']``; the motion gate's twin runs without it.
+
 Output notch (off by default, issue 13): with ``output_notch_zeta`` ζ > 0 the published estimate
 (after the motion gate, if on) runs through a causal notch at the current ω0 estimate (depth
 ``notch_depth``; `baselines.cascade.CascadeFilter` without its low-pass, retuned with the output

@@ -282,7 +282,9 @@ def _open_loop_table(name: str, cases: list[CaseResult]) -> list[str]:
              + _provenance_line(cases) + ' ' + _leak_line(cases) + ' RMSE of the LF estimate '
              'vs the true LF pose [m, m, rad], mean [95 % interval]; *limit* rows know the true '
              'model (oracle_kf) or are fitted on the truth (linear_limit); smoothers are '
-             'non-causal.' + (RAO_ORACLE_NOTE if rao else '') + _untuned_note(cases), '',
+             'non-causal. adaptive and frozen are scored at t + h (what they publish is the LF '
+             'pose predicted for the next sample), every other row at t.'
+             + (RAO_ORACLE_NOTE if rao else '') + _untuned_note(cases), '',
              '| estimator | ' + ' | '.join(dofs) + ' |', '|---|' + '---|' * ndof]
     for est in ESTIMATORS:
         if not any(est in c.metrics for c in cases):

@@ -3,8 +3,8 @@
     OMP_NUM_THREADS=1 python docs/scripts/target_fit_probe.py --scenarios supply_closed_loop \
         rao_supply --seeds 1 2
 
-A diagnostic, tuning seeds only. Per (scenario, seed), on the fair recording (`suite`, 1800 s), RMSE per
-DOF against the true LF pose from the benchmark's first scored sample, of:
+A diagnostic, tuning seeds only. Per (scenario, seed), on the fair recording (`suite`, 1800 s),
+RMSE per DOF against the true LF pose from the benchmark's first scored sample, of:
 
 - ``targets narrow`` / ``wide``: the predictor's own zero-phase target filter (`smooth_poses`
   with its notch and low-pass settings at the scenario's true ω0; the notch ``notch_zeta`` or, as
@@ -19,6 +19,8 @@ DOF against the true LF pose from the benchmark's first scored sample, of:
   and applied causally over the next Δ: a linear ARX with the method's windows;
 - ``lin sliding wide +h``: the same with the wide notch, fitted and scored one step ahead (the LF
   pose at k + 1 from the data up to k), as the predictor predicts;
+- ``lin growing wide``: the same at t, refitted every Δ on all the data so far (targets of the
+  whole past, filtered at once): what a memory of every past manoeuvre would give;
 - ``adaptive``: the shipped predictor (one step ahead, as the benchmark scores it).
 
 The gaps between the rows split the adaptive filter's error into the targets', the window's and
@@ -59,13 +61,16 @@ def _design(y: FloatArray, u: FloatArray, rows: NDArray[np.intp], ndof: int, nu:
 
 
 def sliding(y: FloatArray, u: FloatArray, params: PredictorParams, omega: float,
-            settings: dict[str, object], ahead: int = 0) -> FloatArray:
+            settings: dict[str, object], ahead: int = 0, growing: bool = False) -> FloatArray:
     """Causal estimate (n, ndof): a linear ARX refitted every Δ on the window's own targets.
 
-    Row k estimates the LF pose at k + ``ahead`` from the data up to k.
+    Row k estimates the LF pose at k + ``ahead`` from the data up to k. ``growing``: the window
+    is all the data so far (a memory of every past manoeuvre) instead of the training window.
     """
     n, ndof, nu, ny = y.shape[0], params.ndof, params.nu, params.ny
     window, delta, eps = params.training_samples, params.retrain_samples, params.transient_samples
+    if growing:
+        window = n
     out = np.array(y[:, :ndof], dtype=np.float64)
     for k0 in range(first_training_samples(params), n, delta):
         first = max(0, k0 - window - eps)  # the window grows to its length, as the predictor's
@@ -117,6 +122,8 @@ def run(scenario_name: str, seed: int) -> None:
                                             ndof, start)
     ahead = sliding(y_c, u, params, omega, wide, ahead=1)
     rows['lin sliding wide +h'] = rmse(ahead[:-1], truth_c[1:], ndof, start)
+    rows['lin growing wide'] = rmse(sliding(y_c, u, params, omega, wide, growing=True), truth_c,
+                                    ndof, start)
     predictor = AdaptivePredictor(params, background=False)
     estimate = np.array([predictor.update(t[k], y[k], u[k]) for k in range(len(t))])
     rows['adaptive'] = rmse(estimate[:-1], truth[1:], ndof, start)

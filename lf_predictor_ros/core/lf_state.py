@@ -254,7 +254,7 @@ class LfStateEstimator:
                 odometry.params.pose_lag_prior,
                 _input_gain(odometry.params.vessel_inertia, self.ndof), commands,
                 self._controller_read if reading else None, self.predictor.targets_peak_damping,
-                reference, odometry.params.pose_lag_baseline)
+                reference)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -284,8 +284,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            min_samples: int, lag_prior: float, input_gain: FloatArray | None = None,
            commands: tuple[FloatArray, FloatArray] | None = None,
            remembered: ControllerRead | None = None,
-           peak_damping: float = math.nan, reference: FloatArray | None = None,
-           lag_baseline: bool = False) -> Learned:
+           peak_damping: float = math.nan, reference: FloatArray | None = None) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -331,8 +330,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                          dp_controlled=in_force is not None,
                          message=f'{memory.message}; {note}' if note else memory.message)
     return memory, calibrate(published, times, values if reference is None else reference,
-                             params.ndof, params.sample_time, min_samples, lag_prior,
-                             lag_baseline), in_force
+                             params.ndof, params.sample_time, min_samples, lag_prior), in_force
 
 
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,

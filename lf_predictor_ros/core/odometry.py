@@ -118,11 +118,6 @@ class OdometryParams:
         'the current one: w_i² is held at its peak and decays by exp(−Δt / this time) (errors '
         'outlast the motion that made them: the settling after a turn or a setpoint move); '
         '0 = the current rate (issue 14)', 's'))
-    pose_lag_baseline: bool = field(default=False, metadata=field_doc(
-        "the lag part counts only motion beyond the calibration window's usual rate: w_i² → "
-        "max(0, w_i² − the median of w_i² over the window's matched estimates), in the fit and "
-        'in the published covariance (motion the networks were trained on is part of the '
-        'holding error; issue 14)', ''))
     pose_lag_prior: float = field(default=1.2, metadata=field_doc(
         'lag time T assumed for every DOF where a calibration window has no motion to fit it '
         '(prior of the least-squares fit, with a standard deviation of T² equal to T²; '
@@ -286,20 +281,16 @@ class ErrorModel:
         hold: holding part Σ_hold, ndof × ndof (the correlation of ``moment``, diagonal σ²_hold).
         gain: T_i² per DOF [s²]: variance added per squared regressor w_i² (pose: N/E
             earth-frame velocity [m/s], yaw rate [rad/s]; twist: acceleration [m/s², rad/s²]).
-        baseline: w_i² the window counted as usual (``pose_lag_baseline``; None: 0): the lag
-            part grows with max(0, w_i² − baseline_i) only.
     """
 
     moment: FloatArray
     hold: FloatArray
     gain: FloatArray
-    baseline: FloatArray | None = None
 
     def covariance(self, rates: FloatArray, lag_scale: float) -> FloatArray:
         """Σ_hold + lag_scale · diag(T_i² w_i²) for the regressor w (ndof,)."""
         cov = self.hold.copy()
-        cov.flat[::cov.shape[0] + 1] += lag_scale * self.gain * _unusual(rates * rates,
-                                                                         self.baseline)
+        cov.flat[::cov.shape[0] + 1] += lag_scale * self.gain * rates * rates
         return cov
 
 
@@ -496,8 +487,7 @@ class LfOdometry:
         self.apply_learned(memory, calibrate(self.published(), times, targets, self.ndof,
                                              self.sample_time,
                                              self.params.min_calibration_samples,
-                                             self.params.pose_lag_prior,
-                                             self.params.pose_lag_baseline))
+                                             self.params.pose_lag_prior))
 
     def published(self) -> list[Published]:
         """A copy of the published history the covariances are calibrated on (oldest first)."""
@@ -880,17 +870,16 @@ class LfOdometry:
 
 
 def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike, ndof: int,
-              sample_time: float, min_samples: int, lag_prior: float = 0.0,
-              lag_baseline: bool = False) -> Covariances | None:
+              sample_time: float, min_samples: int, lag_prior: float = 0.0
+              ) -> Covariances | None:
     """Pose error models and twist covariances against the targets (module docstring).
 
     Every published estimate whose stamp is a target instant (not the first or last) is
     compared with the target and with the targets' differentiated body velocity: per source
     ('network', 'fallback': only with ``min_samples`` matches) and over all, the pose error
     model (`fit_error_model` on each estimate's regressor ``Published.lag``, prior lag time
-    ``lag_prior`` [s]; with ``lag_baseline`` the median w² of the matches is the baseline of the
-    lag part, ``OdometryParams.pose_lag_baseline``) and the twist error's second moment (bias
-    included). None when nothing matches. Pure: runs on a worker.
+    ``lag_prior`` [s]) and the twist error's second moment (bias included). None when nothing
+    matches. Pure: runs on a worker.
     """
     stamps = np.asarray(times, dtype=np.float64)
     values = np.array(targets, dtype=np.float64).reshape(stamps.shape[0], -1)
@@ -915,8 +904,7 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
     twist_err = twists - velocity[idx]
     rates = np.array([p.lag for p in rows])
     sources = np.array([p.source for p in rows])
-    baseline = np.median(rates ** 2, axis=0) if lag_baseline else None
-    pooled = fit_error_model(pose_err, rates, lag_prior, baseline=baseline)
+    pooled = fit_error_model(pose_err, rates, lag_prior)
     pose_cov: dict[str, ErrorModel] = {'all': pooled}
     accel = np.array([p.accel for p in rows])
     twist_cov: dict[str, ErrorModel] = {'all': fit_error_model(twist_err, accel)}
@@ -924,15 +912,13 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
         mask = sources == source
         if np.count_nonzero(mask) >= min_samples:
             # the lag time from every source (more motion to fit it), the holding part per source
-            pose_cov[source] = fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain,
-                                               baseline=baseline)
+            pose_cov[source] = fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain)
             twist_cov[source] = fit_error_model(twist_err[mask], accel[mask])
     return pose_cov, twist_cov
 
 
 def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,
-                    gain: FloatArray | None = None,
-                    baseline: FloatArray | None = None) -> ErrorModel:
+                    gain: FloatArray | None = None) -> ErrorModel:
     """Fit E[e_i²] = σ²_hold,i + T_i² w_i² per DOF (module docstring); errors, regressor (m, n).
 
     T_i² = the least-squares slope of e_i² on w_i² (clipped at 0), shrunk towards the prior
@@ -941,15 +927,14 @@ def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,
     gives the prior and a window with motion its own fit. σ²_hold,i = mean e_i² − T_i² mean w_i²,
     at least ``HOLD_FLOOR_FRACTION`` · mean e_i². Σ_hold keeps the correlations of the mean e eᵀ.
     A given ``gain`` (T_i² [s²], e.g. fitted on every source) is used as it is: only σ²_hold is
-    fitted. A ``baseline`` (n,) replaces w_i² by max(0, w_i² − baseline_i) and is kept in the
-    model (`ErrorModel.covariance` applies it too).
+    fitted.
     """
     e = np.asarray(errors, dtype=np.float64)
     w = np.asarray(rates, dtype=np.float64)
     if e.ndim != 2 or w.shape != e.shape or e.shape[0] < 1:
         raise ValueError(f'errors and rates must be (m >= 1, n), got {e.shape} and {w.shape}')
     moment = _second_moment(e)
-    e2, w2 = e ** 2, _unusual(w ** 2, baseline)
+    e2, w2 = e ** 2, w ** 2
     mean_e2, mean_w2 = e2.mean(axis=0), w2.mean(axis=0)
     dw2 = w2 - mean_w2
     sxx = np.sum(dw2 ** 2, axis=0)
@@ -972,15 +957,7 @@ def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,
         corr = np.where(np.outer(diag, diag) > 0.0, moment / np.outer(diag, diag), 0.0)
     np.fill_diagonal(corr, 1.0)
     std = np.sqrt(hold)
-    return ErrorModel(moment=moment, hold=np.asarray(corr * np.outer(std, std)), gain=gains,
-                      baseline=None if baseline is None else np.array(baseline, dtype=np.float64))
-
-
-def _unusual(squares: FloatArray, baseline: FloatArray | None) -> FloatArray:
-    """max(0, w² − baseline) (``pose_lag_baseline``); the squares themselves without one."""
-    if baseline is None:
-        return squares
-    return np.maximum(squares - baseline, 0.0)
+    return ErrorModel(moment=moment, hold=np.asarray(corr * np.outer(std, std)), gain=gains)
 
 
 def _lag_gain(sxx: float, sxy: float, mean_e2: float, mean_w2: float, floor: float,

@@ -467,28 +467,3 @@ def test_twist_model_option_uses_a_given_or_implied_gain() -> None:
     odo = LfOdometry(3, H, OdometryParams(twist_model=True))
     odo._memory = dataclasses.replace(memory, known_gain='')  # noqa: SLF001 - fitted gain
     assert odo._transition(x, tau, 1.0)[1][3] == 0.0  # noqa: SLF001
-
-
-def test_a_lag_baseline_moves_the_usual_motion_into_the_holding_part() -> None:
-    """pose_lag_baseline: E[e²] = σ²_hold + T² · max(0, w² − b), fitted and applied alike.
-
-    Errors with exactly these second moments (± signs alternating): σ²_hold = 0.05 m², T² = 4 s²,
-    the usual rate² b = 0.04 m²/s² and rate² up to b + 0.05. Without the baseline the same data
-    fit the slope T² = 4 too, but the usual motion then sits in the lag part: σ²_hold = mean e² −
-    T² mean w² = 0.15 − 0.26 < 0 is floored at 0.1 · 0.15, and the covariance at the usual rate
-    is 0.015 + 4 · 0.04 = 0.175 m² instead of 0.05 m².
-    """
-    excess = np.tile(np.linspace(0.0, 0.05, 11), 20)  # w² − b
-    rates = np.sqrt(0.04 + excess)[:, None]
-    sign = np.where(np.arange(excess.size) % 2 == 0, 1.0, -1.0)
-    errors = (sign * np.sqrt(0.05 + 4.0 * excess))[:, None]
-    model = fit_error_model(errors, rates, baseline=np.array([0.04]))
-    assert model.gain[0] == pytest.approx(4.0, rel=1e-9)
-    assert model.hold[0, 0] == pytest.approx(0.05, rel=1e-9)
-    assert model.covariance(np.array([0.2]), 1.0)[0, 0] == pytest.approx(0.05, rel=1e-9)
-    assert model.covariance(np.array([0.1]), 1.0)[0, 0] == pytest.approx(0.05, rel=1e-9)
-    assert model.covariance(np.array([0.3]), 2.0)[0, 0] == pytest.approx(0.05 + 2 * 4 * 0.05)
-    plain = fit_error_model(errors, rates)
-    assert plain.baseline is None and plain.gain[0] == pytest.approx(4.0, rel=1e-9)
-    assert plain.hold[0, 0] == pytest.approx(HOLD_FLOOR_FRACTION * 0.15, rel=1e-9)
-    assert plain.covariance(np.array([0.2]), 1.0)[0, 0] == pytest.approx(0.175, rel=1e-9)

@@ -50,11 +50,10 @@ BROADBAND_PEAK_DAMPING = 0.05
 _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'transient_length',
                   'filter_window', 'append_length')
 _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed',
-               'motion_gate_ny', 'ramp_order', 'ensemble_size')
+               'motion_gate_ny', 'ramp_order')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
-                'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
-                'frequency_after_startup', 'turn_bypass_position')
+                'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -167,31 +166,6 @@ class PredictorParams:
             'period earlier, within the same ratio; always: every time (a real change is then '
             'taken one retrain period later), turns: only when the short window shows a turn '
             '(ndof 3; the LF motion of a turn looks like a new, lower wave peak)'))
-    turn_bypass_rate: float = field(
-        default=0.0, metadata=_doc(
-            'ndof 3: while the measured heading turns faster than this over the last '
-            'TURN_RATE_WINDOW (20 s), the published heading is the measured one extrapolated by '
-            'that rate over h (blended in and out over TURN_BLEND_TIME, 5 s): in a turn the '
-            "network's heading lags 2-5x the measurement's wave yaw (development seeds, issue "
-            '13); 0 = off', 'rad/s'))
-    turn_bypass_position: bool = field(
-        default=False, metadata=_doc(
-            'with turn_bypass_rate: north and east come from the cascade fallback during the '
-            'bypass too (a pure turn moves the vessel little, the network extrapolates the '
-            'turn into north/east)'))
-    ensemble_size: int = field(
-        default=1, metadata=_doc(
-            'the prediction is the mean of the newest this many accepted networks (one per '
-            'retraining; all are dropped when the sea state changes or the network in service '
-            "is retired): one window's fit varies from window to window, the mean less; 1 = "
-            'the newest network alone (issue 13)'))
-    frequency_after_startup: bool = field(
-        default=False, metadata=_doc(
-            'once the first training of a segment is followed by at least the short sea-change '
-            'window (max(α, γ/4)), ω0 is estimated only on the samples since that training: '
-            'the start-up before it, when a DP loop runs on the fallback, can hold a loop '
-            'oscillation as a wave peak for the whole γ window (rao_swell: 0.33–0.44 rad/s '
-            'against 0.48 for 20 min; issue 13)'))
     notch_lower_edge: float = field(
         default=0.23, metadata=_doc(
             'with notch_zeta_broadband: the broadband notch is no wider than the width whose '
@@ -439,15 +413,6 @@ class PredictorParams:
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')
-        if self.turn_bypass_rate < 0.0:
-            raise ValueError(f'positivity rule: turn_bypass_rate must be ≥ 0 rad/s (0 = off), '
-                             f'got {self.turn_bypass_rate!r}')
-        if self.turn_bypass_rate > 0.0 and self.ndof != 3:
-            raise ValueError('positivity rule: turn_bypass_rate needs ndof 3 (a heading to '
-                             'follow); set it to 0 for ndof 1')
-        if self.ensemble_size < 1:
-            raise ValueError(f'positivity rule: ensemble_size must be ≥ 1 (1 = the newest '
-                             f'network alone), got {self.ensemble_size!r}')
         if any(speed < 0.0 for speed in self.lf_augmentation):
             raise ValueError(f'positivity rule: lf_augmentation must be ≥ 0 in every DOF (0 = '
                              f'off), got {list(self.lf_augmentation)!r}')

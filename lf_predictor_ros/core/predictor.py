@@ -110,7 +110,6 @@ from lf_predictor_ros.core.retraining import (
     first_training_samples,
     network_spec,
     run_retraining,
-    sea_state_changed,
 )
 from lf_predictor_ros.core.roughness import RoughnessGuard
 from lf_predictor_ros.core.targets import TargetWindow
@@ -128,10 +127,6 @@ _NO_FORCE = np.zeros(3)
 _NO_FORCE.flags.writeable = False
 
 FloatArray = NDArray[np.float64]
-# turn_bypass_rate: the heading rate is measured over this window [s] and the bypass is blended
-# in and out with this first-order time constant [s]
-TURN_RATE_WINDOW = 20.0
-TURN_BLEND_TIME = 5.0
 
 
 class _NewestRows:
@@ -266,8 +261,6 @@ class AdaptivePredictor:
         self._worker: threading.Thread | None = None
         self._generation = 0
         self._model: NumpyNnarmax | None = None
-        # the newest accepted networks, oldest first, the last one _model (ensemble_size)
-        self._ensemble: deque[NumpyNnarmax] = deque(maxlen=params.ensemble_size)
         self._state_dict: dict[str, torch.Tensor] | None = None
         self._frequency: FrequencyEstimate | float | None = params.wave_peak_prior
         self._trainings = 0
@@ -293,8 +286,6 @@ class AdaptivePredictor:
         # (the wave spread it was made from, the guard's bound per DOF), see _plausible
         self._guard_bound: tuple[FloatArray, list[float]] | None = None
         self._guard_trips = 0
-        self._turn_weight = 0.0  # turn_bypass_rate: weight of the bypass
-        self._turns_bypassed = 0  # outputs with a bypass weight > 0
         self._no_thrust = 0  # accepted trainings whose thrust test failed (thrust_validation)
         self._smoothing = params.switch_blend_time > 0.0 or any(
             rate > 0.0 for rate in params.max_output_rate[:params.ndof])
@@ -306,7 +297,6 @@ class AdaptivePredictor:
             self._moving = AdaptivePredictor(
                 params.replace(motion_gate=False, ramp_invariant=True,
                                ny=params.motion_gate_ny or params.ny,
-                               turn_bypass_rate=0.0,  # the bypass acts on the final output
                                roughness_guard_time=0.0),  # the guard: holding network only
                 background=background,
                 checkpoint_path=twin_checkpoint_path(checkpoint_path) if checkpoint_path else None,
@@ -377,11 +367,8 @@ class AdaptivePredictor:
             estimate = self._bumpless(t, estimate, model if prediction is not None else None,
                                       self._position(lf_now, update_heading=False))
         self._maybe_retrain(t)
-        out = self._notched(t, self._gated(t, self._output(estimate, pose_arr), pose_arr,
-                                           force_arr))
-        if self.params.turn_bypass_rate > 0.0:
-            return self._turn_bypassed(out, lf_now)
-        return out
+        return self._notched(t, self._gated(t, self._output(estimate, pose_arr), pose_arr,
+                                            force_arr))
 
     def _retire_rough_network(self) -> FloatArray | None:
         """``roughness_guard_time``: the network in service makes the loop oscillate: retire it.
@@ -393,9 +380,6 @@ class AdaptivePredictor:
         self._rough_retirements += 1
         self._guard_trips += 1
         self._model, self._previous_model = self._previous_model, None
-        self._ensemble.clear()
-        if self._model is not None:
-            self._ensemble.append(self._model)
         self._fb.clear()
         assert self._roughness is not None
         self._roughness.reset()
@@ -403,35 +387,6 @@ class AdaptivePredictor:
                          'retired, ' + ('the network before it serves' if self._model is not None
                                         else 'cascade fallback'))
         return self._predict()
-
-    def _turn_bypassed(self, out: FloatArray, lf_now: FloatArray) -> FloatArray:
-        """``turn_bypass_rate``: in a turn, the measured heading extrapolated over h.
-
-        The rate is the unwrapped measured heading's change over ``TURN_RATE_WINDOW``; the
-        weight w of the bypass follows 1 (turning) or 0 with time constant ``TURN_BLEND_TIME``;
-        heading ← heading + w · wrap(measured + rate · h − heading), and with
-        ``turn_bypass_position`` north/east ← (1 − w) · output + w · cascade fallback.
-        """
-        h = self.sample_time
-        lag = max(1, int(round(TURN_RATE_WINDOW / h)))
-        rows = self._y.newest(lag + 1)
-        if rows.shape[0] < lag + 1 or not np.all(np.isfinite(out)):
-            self._turn_weight = 0.0
-            return out
-        yaw_now = float(rows[-1, 2])
-        rate = (yaw_now - float(rows[0, 2])) / (lag * h)
-        target = 1.0 if abs(rate) > self.params.turn_bypass_rate else 0.0
-        self._turn_weight += min(1.0, h / TURN_BLEND_TIME) * (target - self._turn_weight)
-        w = self._turn_weight
-        if w < 1e-6:
-            return out
-        bypassed = np.array(out, dtype=np.float64)
-        follow = yaw_now + rate * h
-        bypassed[2] = wrap_angle(float(out[2]) + w * wrap_angle(follow - float(out[2])))
-        if self.params.turn_bypass_position:
-            bypassed[:2] = (1.0 - w) * bypassed[:2] + w * np.asarray(lf_now[:2])
-        self._turns_bypassed += 1
-        return bypassed
 
     def reset(self) -> None:
         """Forget everything learned and collected (parameters stay); a running job is dropped."""
@@ -444,7 +399,6 @@ class AdaptivePredictor:
         self._stop = threading.Event()
         self._worker = None
         self._model = self._previous_model = None
-        self._ensemble.clear()
         self._state_dict = None
         self._frequency = self.params.wave_peak_prior
         self._trainings = self._rejected = 0
@@ -603,7 +557,6 @@ class AdaptivePredictor:
                   'overruns': self._overruns, 'training_errors': self._errors,
                   'guard_trips': self._guard_trips,
                   'rough_retirements': self._rough_retirements,
-                  'turn_bypassed': self._turns_bypassed,
                   'segments': self._segment, 'trainings_without_thrust': self._no_thrust}
         if self._moving is not None:
             counts.update({f'moving_{key}': value for key, value in
@@ -702,8 +655,6 @@ class AdaptivePredictor:
         self._previous_model = None  # a loaded network has no predecessor to fall back to
         self._model = NumpyNnarmax.from_module(
             NnarmaxNet.from_state(spec, state)).with_saved_ranges(meta)
-        self._ensemble.clear()
-        self._ensemble.append(self._model)
         self._model_time = None
         freq = meta.get('wave_peak_freq')
         if isinstance(freq, (int, float)) and freq > 0:
@@ -727,7 +678,6 @@ class AdaptivePredictor:
         self._k = -1
         self._fb_next = -1
         self._last_train_k: int | None = None
-        self._service_start: int | None = None  # _k at the segment's first training
         self._last_freq_k: int | None = None
         self._targets: TargetWindow | None = None
         self._targets_damping = math.nan  # targets_peak_damping of ``_targets``
@@ -797,10 +747,6 @@ class AdaptivePredictor:
         prediction = self._predict_with(model)
         if prediction is None:
             return None
-        if len(self._ensemble) > 1:  # ensemble_size: the mean over the newest networks
-            others = [self._predict_with(m) for m in self._ensemble if m is not model]
-            prediction = (prediction + sum(o for o in others if o is not None)) / (
-                1 + sum(o is not None for o in others))
         if not _all_finite(prediction):
             self._message = 'network output not finite: cascade fallback'
             return None
@@ -1052,11 +998,9 @@ class AdaptivePredictor:
             return
         self._retrain_requested = False
         self._last_train_k = self._k
-        if self._service_start is None:
-            self._service_start = self._k
         snapshot = Snapshot(u=self._u.newest(len(self._u)).copy(),
                             y=self._y.newest(len(self._y)).copy(), end_index=self._k,
-                            segment=self._segment, service_start=self._service_start)
+                            segment=self._segment)
         args = (self._generation, snapshot, self._state_dict, self._targets, self._frequency,
                 self._stop)
         if self.background:
@@ -1143,14 +1087,11 @@ class AdaptivePredictor:
             self._targets = result.targets
             self._targets_damping = result.targets_peak_damping
             self._narrow_reference = result.narrow_reference
-        if sea_state_changed(self._frequency, result.frequency):
-            self._ensemble.clear()  # networks of the old sea
         self._frequency = result.frequency
         self._tune_wave_filters(result.frequency.wave_peak_freq)
         if result.accepted and result.model is not None:
             self._previous_model = self._model
             self._model, self._state_dict = result.model, result.state_dict
-            self._ensemble.append(result.model)
             self._no_thrust += 0 if result.thrust_used else 1
             self._wave_spread = result.wave_spread
             self._model_time = t
@@ -1164,7 +1105,6 @@ class AdaptivePredictor:
             self._message = f'training rejected: {result.reason}'
             if result.retire_incumbent and self._model is not None:
                 self._model = None  # weights stay as the next warm start
-                self._ensemble.clear()
                 self._message += '; network in service is worse than the cascade: retired'
         if outcome.saved_error:
             self._message += f'; {outcome.saved_error}'

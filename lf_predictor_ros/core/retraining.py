@@ -72,16 +72,13 @@ class Snapshot:
     """Copies of the predictor's data at the retraining instant.
 
     ``u`` (n, n_inputs_u) forces, ``y`` (n, ndof) positions with unwrapped heading, newest last;
-    ``end_index`` is the sample index (since the segment started) of the newest row;
-    ``service_start`` the ``end_index`` of the segment's first training (None: this is it, or
-    unknown), for ``frequency_after_startup``.
+    ``end_index`` is the sample index (since the segment started) of the newest row.
     """
 
     u: FloatArray
     y: FloatArray
     end_index: int
     segment: int
-    service_start: int | None = None
 
 
 @dataclass(frozen=True)
@@ -244,22 +241,6 @@ def _sea_changed_from(params: PredictorParams, short: FrequencyEstimate,
             and _relative_change(short.wave_peak_freq, long.wave_peak_freq) > SEA_CHANGE_RATIO)
 
 
-def frequency_window(params: PredictorParams, snapshot: Snapshot) -> FloatArray:
-    """The positions the ω0 estimate sees (``snapshot.y`` or its newest part).
-
-    With ``frequency_after_startup``: only the samples after the segment's first training, once
-    there are at least `change_samples` of them (the γ window then never reaches into the
-    start-up); else all of ``snapshot.y``.
-    """
-    y = snapshot.y
-    if not params.frequency_after_startup or snapshot.service_start is None:
-        return y
-    since = snapshot.end_index - snapshot.service_start
-    if since < change_samples(params) or since >= y.shape[0]:
-        return y
-    return y[-since:]
-
-
 def change_samples(params: PredictorParams) -> int:
     """Samples of the short window that detects a change of sea state: max(α, γ/4)."""
     return max(params.filter_samples, params.estimation_samples // 4)
@@ -371,8 +352,7 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
                    stop_event: threading.Event | None = None) -> RetrainResult:
     """One full retraining (see module docstring); never modifies its arguments."""
     start = time.monotonic()
-    frequency = sea_state_estimate(params, frequency_window(params, snapshot),
-                                   previous_frequency)
+    frequency = sea_state_estimate(params, snapshot.y, previous_frequency)
     damping = targets_peak_damping(params, snapshot, frequency)
     # a window flagged as a manoeuvre in a broadband sea: its targets are filtered afresh, so
     # the wide-notch targets of earlier station-keeping windows do not stay appended in it

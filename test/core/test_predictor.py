@@ -26,7 +26,7 @@ from lf_predictor_ros.core.network import NumpyNnarmax, predict_step
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
 from lf_predictor_ros.core.regressors import regressor_vector
-from lf_predictor_ros.core.retraining import Snapshot, first_training_samples
+from lf_predictor_ros.core.retraining import first_training_samples
 from sim_ros.simulation import load_scenario, simulate
 
 # torch loads its forward-AD decompositions once per process via the deprecated torch.jit.script
@@ -478,84 +478,6 @@ def crash(*_args: object, **_kwargs: object) -> None:
     raise RuntimeError('simulated training crash')
 
 
-def test_snapshots_carry_the_segments_first_training(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Every retraining's snapshot names the first training's sample (frequency_window)."""
-    seen: list[tuple[int, int | None]] = []
-    real = retraining.run_retraining
-
-    def spy(params: PredictorParams, snapshot: Snapshot, *args: object) -> object:
-        seen.append((snapshot.end_index, snapshot.service_start))
-        return real(params, snapshot, *args)  # type: ignore[arg-type]
-
-    monkeypatch.setattr(predictor_module, 'run_retraining', spy)
-    predictor = trained_predictor(FIRST_TRAINING + 2 * DELTA + 1)
-    first = seen[0][0]
-    # the motion gate's twin retrains on the same snapshot: each entry twice
-    assert list(dict.fromkeys(seen)) == [(first, first), (first + DELTA, first),
-                                         (first + 2 * DELTA, first)]
-    predictor.restart_segment()  # a new segment: its own first training
-    t, pose, force, _ = onedof_record(5, 400.0)
-    feed(predictor, t, pose, force, 200, 200 + FIRST_TRAINING + 1)
-    assert seen[-1][1] == seen[-1][0]
-
-
-def test_ensemble_predicts_the_mean_of_the_newest_networks() -> None:
-    """ensemble_size 2: the prediction is the mean of the two newest accepted networks."""
-    predictor = trained_predictor(FIRST_TRAINING + 2 * DELTA + 1, ensemble_size=2,
-                                  motion_gate=False)
-    ensemble = list(predictor._ensemble)
-    assert len(ensemble) == 2 and ensemble[-1] is predictor.model
-    each = [predictor._predict_with(m) for m in ensemble]
-    assert each[0] is not None and each[1] is not None
-    assert not np.allclose(each[0], each[1])  # two different fits
-    mean = predictor._predict()
-    assert mean is not None
-    np.testing.assert_allclose(mean, 0.5 * (each[0] + each[1]), rtol=0, atol=1e-12)
-    single = trained_predictor(FIRST_TRAINING + 2 * DELTA + 1, motion_gate=False)
-    assert len(single._ensemble) == 1  # the default: the newest network alone
-    alone = single._predict()
-    assert alone is not None
-    np.testing.assert_allclose(alone, each[1], rtol=0, atol=1e-12)
-    predictor.reset()
-    assert len(predictor._ensemble) == 0
-
-
-def _turn_record(n: int) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """(t, pose, force): holding heading 0.3 rad, then a 0.02 rad/s turn from t = 100 s on."""
-    t = np.arange(n, dtype=float)
-    pose = np.zeros((n, 3))
-    pose[:, 0] = 2.0 * np.sin(2.0 * math.pi * t / 97.0)  # [m]
-    pose[:, 2] = 0.3 + 0.02 * np.clip(t - 100.0, 0.0, None)  # [rad]
-    return t, pose, np.zeros((n, 3))
-
-
-def test_turn_bypass_publishes_the_measured_heading_extrapolated_in_a_turn() -> None:
-    """turn_bypass_rate: in a 0.02 rad/s turn the heading is the measured one + rate · h."""
-    t, pose, force = _turn_record(260)
-    bypass = AdaptivePredictor(PredictorParams(turn_bypass_rate=0.005), background=False)
-    out = feed(bypass, t, pose, force, 0, 260)
-    # 150 s into the turn the bypass weight is 1 − 0.8^150: the output is ψ(t) + 0.02 · 1 s,
-    # the true heading at t + h, to rounding
-    assert abs(wrap(out[250, 2] - (pose[250, 2] + 0.02))) < 1e-9  # (published wrapped)
-    assert bypass.counters['turn_bypassed'] > 100
-    plain = AdaptivePredictor(PredictorParams(), background=False)
-    lagging = feed(plain, t, pose, force, 0, 260)
-    assert abs(wrap(lagging[250, 2] - (pose[250, 2] + 0.02))) > 0.01  # the cascade lags
-    assert plain.counters['turn_bypassed'] == 0
-    np.testing.assert_array_equal(out[:100], lagging[:100])  # holding: untouched
-    with_position = AdaptivePredictor(
-        PredictorParams(turn_bypass_rate=0.005, turn_bypass_position=True), background=False)
-    moved = feed(with_position, t, pose, force, 0, 260)
-    np.testing.assert_array_equal(moved[:, 2], out[:, 2])
-    np.testing.assert_array_equal(moved[:100], out[:100])
-    # (before the first training the output is the cascade itself): north/east of the
-    # bypass are the cascade's, weighted by w ≈ 1 after 150 s of turning
-    stepped = with_position._turn_bypassed(np.array([1.0, 2.0, 0.0]), np.array([5.0, 6.0, 0.0]))
-    np.testing.assert_allclose(stepped[:2], [5.0, 6.0], rtol=0, atol=1e-9)
-    untouched = bypass._turn_bypassed(np.array([1.0, 2.0, 0.0]), np.array([5.0, 6.0, 0.0]))
-    np.testing.assert_array_equal(untouched[:2], [1.0, 2.0])  # heading only
-
-
 def test_worker_exception_keeps_the_network_in_service(monkeypatch: pytest.MonkeyPatch) -> None:
     t, pose, force, _ = onedof_record(5, 400.0)
     predictor = trained_predictor(150)
@@ -599,7 +521,6 @@ def test_worker_exception_before_any_network_reports_error(
 
 
 def test_rejected_candidate_keeps_the_incumbent(monkeypatch: pytest.MonkeyPatch) -> None:
-    from lf_predictor_ros.core import retraining
     from lf_predictor_ros.core.training import TrainResult
 
     t, pose, force, _ = onedof_record(5, 400.0)

@@ -543,24 +543,3 @@ def test_the_narrow_reference_is_the_targets_window_filtered_with_the_narrow_not
         narrow_reference(params, y[:50], N_TRAIN, WAVE_PEAK_FREQ, 0.1)
 
 
-def test_frequency_window_leaves_out_the_start_up_once_enough_follows() -> None:
-    """frequency_after_startup: y after the first training, once ≥ max(α, γ/4) samples exist."""
-    params = PredictorParams(frequency_after_startup=True)
-    short = retraining.change_samples(params)
-    y = np.arange(2000.0)[:, None] * np.ones((1, 3))
-
-    def window(end: int, start: int | None) -> np.ndarray:
-        rows = y[:end + 1]
-        return retraining.frequency_window(
-            params, Snapshot(u=np.zeros_like(rows), y=rows, end_index=end, segment=0,
-                             service_start=start))
-
-    assert window(1500, 360).shape[0] == 1140  # 1140 samples since the first training
-    np.testing.assert_array_equal(window(1500, 360)[0], y[361])  # the newest 1140 rows
-    assert window(360 + short - 1, 360).shape[0] == 360 + short  # too few since: all of y
-    assert window(360 + short, 360).shape[0] == short
-    assert window(1500, None).shape[0] == 1501  # the first training itself: all of y
-    off = PredictorParams()  # the default: all of y
-    rows = y[:1501]
-    assert retraining.frequency_window(off, Snapshot(u=rows, y=rows, end_index=1500, segment=0,
-                                                     service_start=360)).shape[0] == 1501

@@ -13,6 +13,10 @@ Metrics (anchors §6), per DOF:
   every shift compares equally long, fully overlapping series), refined by a parabola through
   the peak; positive when the estimate lags the truth. The fixed window avoids the bias toward
   zero shift that a plain full cross-correlation has on non-stationary LF motion (DP moves).
+- largest_step_ratio: the largest one-sample change of the estimate over the largest one-sample
+  change of the truth (heading unwrapped) [-]: an LF estimate should never move much faster than
+  the LF motion it estimates (issue 13: no output step larger than 3× the true LF motion over
+  the same interval). inf if the truth never moves and the estimate does.
 
 Closed-loop metrics (`loop_metrics`, anchors §6), of one DP loop over t ≥ start, from the true LF
 pose and the applied thrust: ``position_rmse`` = √mean(Δn² + Δe²) [m] from the setpoint,
@@ -52,17 +56,21 @@ class Metrics:
     derivative_rmse: tuple[float, ...]
     wave_band_power: tuple[float, ...]
     lag: tuple[float, ...]
+    largest_step_ratio: tuple[float, ...] = ()
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready dict: {'ndof', 'samples', 'north': {'rmse': …, …}, …}."""
         out: dict[str, object] = {'ndof': self.ndof, 'samples': self.samples}
         for i, name in enumerate(DOF_NAMES[: self.ndof]):
-            out[name] = {
+            dof: dict[str, float] = {
                 'rmse': self.rmse[i],
                 'derivative_rmse': self.derivative_rmse[i],
                 'wave_band_power': self.wave_band_power[i],
                 'lag': self.lag[i],
             }
+            if self.largest_step_ratio:
+                dof['largest_step_ratio'] = self.largest_step_ratio[i]
+            out[name] = dof
         return out
 
 
@@ -206,7 +214,17 @@ def score(
         lag=tuple(
             estimate_lag(est_c[:, i], tru_c[:, i], sample_time, max_lag) for i in range(ndof)
         ),
+        largest_step_ratio=tuple(_step_ratio(est_c[:, i], tru_c[:, i]) for i in range(ndof)),
     )
+
+
+def _step_ratio(estimate: FloatArray, truth: FloatArray) -> float:
+    """Largest |Δ estimate| over largest |Δ truth| of one DOF (module docstring)."""
+    own = float(np.max(np.abs(np.diff(estimate))))
+    true = float(np.max(np.abs(np.diff(truth))))
+    if true > 0.0:
+        return own / true
+    return 0.0 if own == 0.0 else float('inf')
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ from lf_predictor_ros.benchmark.suite import (
     predictor_params,
     run_case,
     score_adaptation,
+    scored_start,
 )
 from lf_predictor_ros.core.alignment import mean_pose
 from lf_predictor_ros.core.evaluation import DEFAULT_WAVE_BAND, LoopRun, Metrics, loop_metrics
@@ -315,3 +316,19 @@ def test_untuned_baselines_are_said_on_the_page() -> None:
     assert 'UNTUNED' not in render([case], 'b', 1.0, 'here')
     case.info['baselines'] = 'untuned defaults'
     assert 'The classical baselines here run UNTUNED defaults' in render([case], 'b', 1.0, 'here')
+
+
+def test_every_fast_case_scores_enough_samples_for_the_linear_limit() -> None:
+    """Every FAST_SUITE case leaves the linear limit 4 samples per coefficient after the warm-up.
+
+    `benchmark --fast` runs them all; a 600 s 3-DOF case had 300 for 106 and raised.
+    """
+    from lf_predictor_ros.benchmark.benchmark import FAST_OVERRIDES, FAST_SUITE
+
+    for name, duration in FAST_SUITE.items():
+        scenario = load_scenario(name)
+        params = predictor_params(scenario, FAST_OVERRIDES)
+        samples = int(round((duration or scenario.duration) / params.sample_time))
+        scored = samples - scored_start(params, samples)
+        coefficients = params.ndof * (params.nu + params.ny - 1) + 1
+        assert scored >= 4 * coefficients, (name, scored, coefficients)

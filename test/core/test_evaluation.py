@@ -136,6 +136,30 @@ def test_run_estimator_aligns_and_shifts() -> None:
         run_estimator(_Echo(), t, pose[:3], force)
 
 
+def test_largest_step_ratio_of_a_ramp_with_one_jump_and_across_the_heading_wrap() -> None:
+    """Truth ramps 0.1 / sample (north), 0.02 rad / sample across ±π (yaw), east holds.
+
+    The estimate follows with one 0.5 m jump in north (a step of 0.6 m: ratio 6), its heading
+    wrapped as the truth's (no jump: ratio 1); east: an estimate that moves 0.01 m once against a
+    truth that never moves is inf, one that never moves either 0.
+    """
+    n = 200
+    t = np.arange(n, dtype=np.float64)
+    truth = np.zeros((n, 3))
+    truth[:, 0] = 0.1 * t
+    truth[:, 2] = np.angle(np.exp(1j * (np.pi - 2.0 + 0.02 * t)))  # crosses ±π near k = 100
+    estimate = truth.copy()
+    estimate[120:, 0] += 0.5
+    estimate[50:, 1] += 0.01
+    metrics = score(t, estimate, truth, 3)
+    assert metrics.largest_step_ratio[0] == pytest.approx(6.0, rel=1e-9)
+    assert metrics.largest_step_ratio[1] == math.inf
+    assert metrics.largest_step_ratio[2] == pytest.approx(1.0, rel=1e-9)
+    assert score(t, truth, truth, 3).largest_step_ratio[1] == 0.0
+    assert json.loads(json.dumps(metrics.to_dict()))['north']['largest_step_ratio'] == \
+        pytest.approx(6.0, rel=1e-9)
+
+
 def test_to_dict_is_json_and_table_is_aligned() -> None:
     metrics = Metrics(ndof=3, samples=100, rmse=(0.1, 0.25, 0.004),
                       derivative_rmse=(0.01, 0.02, 0.001), wave_band_power=(1e-3, 2e-3, 1e-6),

@@ -21,12 +21,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 import torch
 
-from lf_predictor_ros.benchmark.estimators import predictor_params
-from lf_predictor_ros.benchmark.suite import make_recording, make_setup, scored_start
+from lf_predictor_ros.benchmark.suite import scored_start
 from lf_predictor_ros.core import training
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.predictor import AdaptivePredictor
-from sim_ros.simulation import load_scenario
 
 sys.path.insert(0, str(Path(__file__).parent))
 import method_probe  # noqa: E402  (the sibling script)
@@ -46,10 +44,7 @@ def _targets_at_t(spec: Any, u: ArrayLike, y: ArrayLike, targets: ArrayLike,
 
 
 def run(scenario_name: str, seed: int) -> None:
-    scenario = load_scenario(scenario_name)
-    params = predictor_params(scenario)
-    setup = make_setup(scenario, seed, params)
-    recording = make_recording(scenario, seed, DURATION, setup)
+    scenario, params, setup, recording = method_probe.fair_case(scenario_name, seed, DURATION)
     data = recording.data()
     t, y, u, truth = data['t'], data['y'], data['u'], data['truth']
     predictor = AdaptivePredictor(params, background=False)

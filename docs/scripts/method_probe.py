@@ -68,14 +68,19 @@ def parse_variant(text: str) -> tuple[str, dict[str, Any]]:
     return name, overrides
 
 
+def fair_case(scenario_name: str, seed: int, duration: float) -> tuple[Any, Any, Any, Any]:
+    """(scenario, shipped predictor params, estimator setup, fair recording) of one case."""
+    scenario = load_scenario(scenario_name)
+    params = predictor_params(scenario)
+    setup = make_setup(scenario, seed, params)
+    return scenario, params, setup, make_recording(scenario, seed, duration, setup)
+
+
 def run(scenario_name: str, seed: int, variants: Sequence[tuple[str, dict[str, Any]]],
         duration: float, profile: bool, closed_loop: bool = False,
         open_loop: bool = True) -> None:
     """Print one line per variant (and the error profile with ``profile``)."""
-    scenario = load_scenario(scenario_name)
-    base = predictor_params(scenario)
-    setup = make_setup(scenario, seed, base)
-    recording = make_recording(scenario, seed, duration, setup)
+    scenario, base, setup, recording = fair_case(scenario_name, seed, duration)
     data = recording.data()
     t, y, u, truth = data['t'], data['y'], data['u'], data['truth']
     for name, overrides in variants if open_loop else ():

@@ -7,8 +7,10 @@
 Per (scenario, seed): the fair recording (`suite.make_recording`: DP loop closed on the tuned
 observer, 1800 s), then the adaptive predictor with each variant's `PredictorParams` overrides
 (inline training, deterministic) over the same grid arrays; RMSE per DOF against the true LF pose
-from the benchmark's first scored sample (`suite.scored_start`), trainings accepted / rejected and
-trainings without thrust. ``--profile`` adds the error per 60 s block (where it is made).
+from the benchmark's first scored sample (`suite.scored_start`), trainings accepted / rejected,
+trainings without thrust and the largest output step over the largest true LF step per DOF
+(`evaluation.Metrics.largest_step_ratio`). ``--profile`` adds the error per 60 s block (where
+it is made).
 ``--closed-loop`` also puts each variant in its own DP loop (`suite.run_closed_loops`, same seed,
 scored like `benchmark` from the same sample) next to the observer (the recording's own loop),
 oracle_kf and raw loops: position / heading RMSE, largest excursion, wave-band thrust power per
@@ -38,6 +40,7 @@ from lf_predictor_ros.benchmark.suite import (
     run_closed_loops,
     scored_start,
 )
+from lf_predictor_ros.core.evaluation import score
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.predictor import AdaptivePredictor
 from sim_ros.simulation import load_scenario, simulate
@@ -94,10 +97,12 @@ def run(scenario_name: str, seed: int, variants: Sequence[tuple[str, dict[str, A
         error[:, 2] = wrap_angle(error[:, 2])
         start = scored_start(params, len(t))
         rmse = np.sqrt(np.mean(error[start:, :n] ** 2, axis=0))
+        steps = score(t[start + 1:], estimate[start:], truth[start + 1:], n).largest_step_ratio
         c = predictor.counters
         print(f'{scenario_name:20s} {seed} {name:12s} ' + ' '.join(f'{v:.4f}' for v in rmse) +
               f"  accepted {c['trainings']} rejected {c['rejected_trainings']} without thrust "
-              f"{c['trainings_without_thrust']}", flush=True)
+              f"{c['trainings_without_thrust']} largest step ratio "
+              + ' / '.join(f'{v:.2f}' for v in steps), flush=True)
         if profile:
             for a in range(start, len(error), 60):
                 block = np.sqrt(np.mean(error[a:a + 60, :n] ** 2, axis=0))

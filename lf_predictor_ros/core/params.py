@@ -53,8 +53,7 @@ _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_
                'motion_gate_ny', 'ramp_order')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
-                'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
-                'switch_blend_offset')
+                'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -234,11 +233,6 @@ class PredictorParams:
                                    "old source's value to the new one's over this time, "
                                    'smoothly, both running; 0 = off (the output switches at '
                                    'once)', 's'))
-    switch_blend_offset: bool = field(
-        default=False, metadata=_doc(
-            'with switch_blend_time: the jump at a switch is held as an offset to the new source '
-            'and faded out over that time instead of running the old source on, so the output '
-            'moves with the new source from the first sample (no lag of the old one)'))
     output_notch_zeta: float = field(
         default=0.0, metadata=_doc(
             'width (relative damping of the poles) of a causal notch at the estimated wave peak '

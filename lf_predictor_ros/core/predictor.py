@@ -812,10 +812,6 @@ class AdaptivePredictor:
     def _begin_transfer(self, t: float, value: FloatArray, source: NumpyNnarmax | None,
                         cascade: FloatArray) -> None:
         """Start blending from what the output was about to be to ``source``."""
-        if self.params.switch_blend_offset:  # the jump as a fading offset to the new source
-            assert self._last_out is not None  # a switch needs an earlier output
-            self._transfer = _Transfer(None, self._difference(self._last_out, value), t)
-            return
         previous, running = self._last_source, self._transfer
         previous_value = self._source_value(previous, cascade)
         if running is None and previous_value is not None:

@@ -216,26 +216,3 @@ def test_new_fields_round_trip_through_a_dict() -> None:
     assert params.switch_blend_time == 10.0 and params.max_output_rate == (0.5, 0.5, 0.02)
     assert params.to_dict()['max_output_rate'] == [0.5, 0.5, 0.02]
     assert PredictorParams.from_dict(params.to_dict()) == params
-
-
-def test_offset_blend_moves_with_the_new_source_from_the_first_sample() -> None:
-    """switch_blend_offset: the jump fades as an offset; the new source's motion shows at once.
-
-    After each switch output − plain = jump · (1 − smoothstep), exactly: the first sample repeats
-    the last output, then the output moves with the new source. The forced switches of the test
-    above (cascade → network at the first training, network → cascade → network by the guard),
-    T = 10 s; the plain run is each new source alone.
-    """
-    blend = 10.0
-    plain, _ = run()
-    faded, predictor = run(switch_blend_time=blend, switch_blend_offset=True)
-    assert predictor.source_switches == 3
-    for k in (FIRST_TRAINING, *GUARD_WINDOW):
-        jump = faded[k - 1] - plain[k]  # the published output just before, minus the new source
-        for j in range(int(blend)):
-            s = j / blend
-            weight = 1.0 - (3.0 * s * s - 2.0 * s * s * s)
-            assert faded[k + j] == pytest.approx(plain[k + j] + weight * jump, abs=1e-9)
-        assert faded[k] == pytest.approx(faded[k - 1], abs=1e-9)  # no step at the switch
-    after = slice(GUARD_WINDOW[1] + int(blend), N_SAMPLES)
-    assert np.array_equal(faded[after], plain[after])

@@ -227,11 +227,6 @@ class PredictorParams:
     seed: int = field(default=0, metadata=_doc('seed of the network initialization'))
     initial_wave_peak_freq: float = field(
         default=0.0, metadata=_doc('prior ω0 before the first estimate; 0 = none', 'rad/s'))
-    guard_spreads: float = field(
-        default=6.0, metadata=_doc(
-            'distance guard: a network prediction farther from the newest measurement than this '
-            'many RMS of the wave motion seen in training (plus GUARD_FLOOR) is not believed and '
-            'the cascade fallback stands in for that sample', ''))
     switch_blend_time: float = field(
         default=0.0, metadata=_doc('bumpless transfer: when the output changes source (cascade '
                                    'fallback ↔ network, old → new network) it moves from the '
@@ -407,7 +402,7 @@ class PredictorParams:
     def _check_positive(self) -> None:
         for name in ('sample_time', *_WINDOW_FIELDS, 'highpass_cutoff', 'notch_zeta',
                      'fallback_notch_zeta',
-                     'lowpass_offset', 'max_train_seconds', 'guard_spreads'):
+                     'lowpass_offset', 'max_train_seconds'):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f'positivity rule: {name} must be > 0, got '
                                  f'{getattr(self, name)!r}: give a positive value')

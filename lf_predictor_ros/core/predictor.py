@@ -115,9 +115,10 @@ from lf_predictor_ros.core.roughness import RoughnessGuard
 from lf_predictor_ros.core.targets import TargetWindow
 from lf_predictor_ros.core.training import warm_up
 
-# Sanity guard: a prediction farther from the newest measurement than guard_spreads RMS of the
-# wave-frequency motion seen in training (plus this floor) is not believed; the cascade stands in
+# Sanity guard: a prediction farther from the newest measurement than this many RMS of the
+# wave-frequency motion seen in training (plus a floor) is not believed; the cascade stands in
 # and the feedback history is re-seeded from it (stops a free-running recursion from running away).
+GUARD_SPREADS = 6.0
 GUARD_FLOOR = np.array([0.5, 0.5, 0.02])  # [m, m, rad]
 # Appended to a checkpoint's path to name the motion gate twin's checkpoint beside it.
 TWIN_SUFFIX = '.twin'
@@ -768,7 +769,7 @@ class AdaptivePredictor:
         guard = self._guard_bound
         if guard is None or guard[0] is not spread:  # a new network's spread: a new bound
             guard = self._guard_bound = (
-                spread, (self.params.guard_spreads * spread + GUARD_FLOOR[:self.ndof]).tolist())
+                spread, (GUARD_SPREADS * spread + GUARD_FLOOR[:self.ndof]).tolist())
         bound = guard[1]
         predicted, measured = np.asarray(prediction).tolist(), np.asarray(y).tolist()
         if not (isinstance(bound, list) and isinstance(predicted, list) and

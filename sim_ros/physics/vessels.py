@@ -134,8 +134,7 @@ class ThesisVessel:
 
         return rates
 
-    def wave_rates_fn(self, operating_speed: Sequence[float] = THESIS_OPERATING_SPEED
-                      ) -> WaveRatesFn:
+    def wave_rates_fn(self, operating_speed: Sequence[float]) -> WaveRatesFn:
         """First-order wave motion of the model linearized at the run's operating point.
 
         ν̇_w,i = −2|a_i| u_w,i ν_w,i + b_i (R(ψ_LF)ᵀ f_w)_i, η̇_w = R(ψ_LF) ν_w, with u_w the

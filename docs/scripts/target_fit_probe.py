@@ -38,7 +38,11 @@ import torch
 
 from lf_predictor_ros.benchmark.baseline_tuning import TUNING_SEEDS, smoother_settings
 from lf_predictor_ros.benchmark.estimators import predictor_params
-from lf_predictor_ros.benchmark.linear_limit import linear_limit
+from lf_predictor_ros.benchmark.linear_limit import (
+    linear_limit,
+    regressor_design,
+    scaled_least_squares,
+)
 from lf_predictor_ros.benchmark.suite import make_recording, make_setup, scored_start
 from lf_predictor_ros.core.baselines.smoother import smooth_poses
 from lf_predictor_ros.core.heading import wrap_angle
@@ -48,16 +52,6 @@ from lf_predictor_ros.core.retraining import first_training_samples
 from sim_ros.simulation import load_scenario
 
 FloatArray = NDArray[np.float64]
-
-
-def _design(y: FloatArray, u: FloatArray, rows: NDArray[np.intp], ndof: int, nu: int,
-            ny: int) -> tuple[FloatArray, FloatArray]:
-    """(regressors, newest pose) of `linear_limit` at ``rows`` (heading already continuous)."""
-    newest = y[rows, :ndof]
-    lagged_u = u[rows[:, None] - np.arange(nu)[None, :], :ndof].reshape(rows.size, -1)
-    lagged_y = (y[rows[:, None] - np.arange(1, ny)[None, :], :ndof]
-                - newest[:, None, :]).reshape(rows.size, -1)
-    return np.hstack([lagged_u, lagged_y, np.ones((rows.size, 1))]), newest
 
 
 def sliding(y: FloatArray, u: FloatArray, params: PredictorParams, omega: float,
@@ -76,15 +70,13 @@ def sliding(y: FloatArray, u: FloatArray, params: PredictorParams, omega: float,
         first = max(0, k0 - window - eps)  # the window grows to its length, as the predictor's
         targets = smooth_poses(y[first:k0], params.sample_time, omega, ndof, **settings)
         rows = np.arange(first + max(nu, ny), k0 - eps - ahead)
-        design, newest = _design(y, u, rows, ndof, nu, ny)
+        design, newest = regressor_design(y, u, rows, ndof, nu, ny)
         goal = targets[rows + ahead - first, :ndof] - newest
         if ndof == 3:  # targets come wrapped, the poses here are continuous
             goal[:, 2] = wrap_angle(goal[:, 2])
-        scale = np.std(design, axis=0)
-        scale[scale == 0.0] = 1.0
-        coef, *_ = np.linalg.lstsq(design / scale, goal, rcond=None)
+        coef, scale = scaled_least_squares(design, goal)
         apply = np.arange(k0, min(k0 + delta, n))
-        design, newest = _design(y, u, apply, ndof, nu, ny)
+        design, newest = regressor_design(y, u, apply, ndof, nu, ny)
         out[apply] = newest + (design / scale) @ coef
     return out
 

@@ -35,6 +35,30 @@ def _lagged(series: FloatArray, rows: NDArray[np.intp], lags: range) -> FloatArr
     return np.asarray(series[index].reshape(rows.size, -1), dtype=np.float64)
 
 
+def regressor_design(positions: FloatArray, u: FloatArray, rows: NDArray[np.intp], ndof: int,
+                     nu: int, ny: int) -> tuple[FloatArray, FloatArray]:
+    """(design, newest pose) of the regressors at grid ``rows`` (module docstring).
+
+    ``positions`` (n, ≥ ndof) with the heading continuous, ``u`` (n, ≥ ndof); each row k holds
+    u[k], …, u[k − nu + 1], y[k − j] − y[k] for j = 1 … ny − 1 and a constant; rows must be
+    ≥ max(nu, ny) − 1. The newest pose y[k] is returned with it (the fit's target is relative).
+    """
+    y_c = positions[:, :ndof]
+    newest = y_c[rows]
+    blocks = [_lagged(u[:, :ndof], rows, range(nu)),
+              _lagged(y_c, rows, range(1, ny)) - np.tile(newest, ny - 1),
+              np.ones((rows.size, 1))]
+    return np.hstack(blocks), newest
+
+
+def scaled_least_squares(design: FloatArray, target: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(coef, scale): least squares on unit-std columns; the fit is design / scale @ coef."""
+    scale = np.std(design, axis=0)
+    scale[scale == 0.0] = 1.0
+    coef, *_ = np.linalg.lstsq(design / scale, target, rcond=None)
+    return coef, scale
+
+
 def linear_limit(y: FloatArray, u: FloatArray, truth: FloatArray, ndof: int, nu: int, ny: int,
                  begin: int) -> FloatArray:
     """In-sample least-squares estimate (n, 3) of the LF pose; rows before the fit repeat y.
@@ -55,18 +79,11 @@ def linear_limit(y: FloatArray, u: FloatArray, truth: FloatArray, ndof: int, nu:
     if rows.size < 4 * columns:
         raise ValueError(f'the linear limit needs >= {4 * columns} samples to fit {columns} '
                          f'coefficients, got {rows.size}: record longer')
-    y_c = _continuous(y, ndof)
-    newest = y_c[rows]
-    blocks = [_lagged(u[:, :ndof], rows, range(nu)),
-              _lagged(y_c, rows, range(1, ny)) - np.tile(newest, ny - 1),
-              np.ones((rows.size, 1))]
-    design = np.hstack(blocks)
+    design, newest = regressor_design(_continuous(y, ndof), u, rows, ndof, nu, ny)
     target = _continuous(truth, ndof)[rows] - newest
     if ndof == 3:  # truth and measurement unwrapped separately: keep the offset in (−π, π]
         target[:, 2] = wrap_angle(target[:, 2])
-    scale = np.std(design, axis=0)
-    scale[scale == 0.0] = 1.0
-    coef, *_ = np.linalg.lstsq(design / scale, target, rcond=None)
+    coef, scale = scaled_least_squares(design, target)
     out = np.array(y, dtype=np.float64)
     out[:, ndof:] = 0.0
     fitted = newest + (design / scale) @ coef
@@ -76,4 +93,4 @@ def linear_limit(y: FloatArray, u: FloatArray, truth: FloatArray, ndof: int, nu:
     return out
 
 
-__all__ = ['linear_limit']
+__all__ = ['linear_limit', 'regressor_design', 'scaled_least_squares']

@@ -331,6 +331,22 @@ def narrow_reference(params: PredictorParams, y: FloatArray, count: int, wave_pe
     return reference
 
 
+def fresh_span(params: PredictorParams, snapshot: Snapshot, previous: TargetWindow) -> int:
+    """Samples of ``snapshot`` to filter afresh: back to the previous targets' oldest, plus ε.
+
+    Targets filtered afresh (a manoeuvre in a broadband sea, `targets_peak_damping`) cover the
+    window the previous targets covered and the samples since, never more: after a change of
+    sea state the window restarts on the newest samples (`run_retraining`), and the older ones
+    hold the old sea's waves, which the new ω0's filter passes into the targets (a swell below a
+    new, higher ω0 is not notched). Filtering the whole N again undid that restart at the next
+    manoeuvre, and the old waves stayed in the targets for N (docs/BENCHMARKS.md, twentieth
+    session). ε older samples carry the filter's start transient, which `TargetWindow.start`
+    drops. At most the whole snapshot.
+    """
+    span = snapshot.end_index - previous.start_index + 1 + params.transient_samples
+    return int(min(max(span, 1), snapshot.y.shape[0]))
+
+
 def training_window(params: PredictorParams, snapshot: Snapshot,
                     targets: TargetWindow) -> tuple[FloatArray, FloatArray, FloatArray,
                                                     NDArray[np.bool_]]:
@@ -365,7 +381,9 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
                                None, damping)
     else:
         measured = snapshot.y
-        targets = make_targets(params, snapshot.y, snapshot.end_index, frequency.wave_peak_freq,
+        if narrowed and previous_targets is not None:
+            measured = snapshot.y[-fresh_span(params, snapshot, previous_targets):]
+        targets = make_targets(params, measured, snapshot.end_index, frequency.wave_peak_freq,
                                None if narrowed else previous_targets, damping)
     reference = narrow_reference(params, measured, len(targets), frequency.wave_peak_freq,
                                  damping)

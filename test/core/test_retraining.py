@@ -516,6 +516,47 @@ def test_a_manoeuvring_window_in_a_broadband_sea_filters_its_targets_afresh(
     np.testing.assert_array_equal(first.narrow_reference, narrow.values)
 
 
+def test_a_fresh_filter_keeps_a_window_restarted_by_a_sea_change(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """`fresh_span`: targets filtered afresh reach back no further than the previous targets.
+
+    A sea change restarts the window on the newest samples; filtering the whole N afresh at the
+    next manoeuvre put the old sea's samples back in, with targets filtered at the new ω0
+    (docs/BENCHMARKS.md, twentieth session). The restarted window must only grow by the shift.
+    """
+    from lf_predictor_ros.core.frequency import FrequencyEstimate
+    from lf_predictor_ros.core.retraining import fresh_span
+
+    broadband = FrequencyEstimate(WAVE_PEAK_FREQ, True, 50.0, (WAVE_PEAK_FREQ,), 0.1)
+    monkeypatch.setattr(retraining, 'sea_state_estimate', lambda *args: broadband)
+    params = RETRAIN.replace(max_epochs=2, notch_zeta_broadband=1.3,
+                             notch_broadband_holding_only=True)
+    eps, n_train = params.transient_samples, params.training_samples
+    rng = np.random.default_rng(7)
+    n = 700
+    t = np.arange(float(n))
+    y = (0.3 * np.sin(WAVE_PEAK_FREQ * t) + rng.normal(0.0, 0.05, n))[:, None]
+    y[675:, 0] += np.clip(np.arange(25.0), 0.0, 5.0) * 1.6  # a move: the window is flagged
+    u = rng.normal(0.0, 1.0, (n, 1))
+    restart = 100  # [samples] the window a sea change restarted, 20 samples before the end
+    restarted = make_targets(params, y[680 - restart:680], 679, WAVE_PEAK_FREQ, None)
+    assert len(restarted) == restart - eps and restarted.start_index == 580 + eps
+    snapshot = Snapshot(u=u, y=y, end_index=n - 1, segment=1)
+    assert fresh_span(params, snapshot, restarted) == restart - eps + 20 + eps
+    result = run_retraining(params, snapshot, None, restarted, broadband)
+    assert math.isnan(result.targets_peak_damping)  # filtered afresh, narrow
+    assert len(result.targets) == restart - eps + 20  # grown by the shift, not back to N
+    assert result.targets.start_index == restarted.start_index
+    fresh = make_targets(params, y[-(restart + 20):], n - 1, WAVE_PEAK_FREQ, None)
+    np.testing.assert_array_equal(result.targets.values, fresh.values)
+    # a full previous window: the whole N + ε as before (and never more than the snapshot)
+    full = make_targets(params, y[:680], 679, WAVE_PEAK_FREQ, None)
+    assert len(full) == n_train
+    assert fresh_span(params, snapshot, full) == n_train + 20 + eps
+    short = Snapshot(u=u[-50:], y=y[-50:], end_index=n - 1, segment=1)
+    assert fresh_span(params, short, full) == 50
+
+
 def test_the_narrow_reference_is_the_targets_window_filtered_with_the_narrow_notch() -> None:
     """`narrow_reference`: None for narrow targets, else one narrow zero-phase pass (issue 14)."""
     from lf_predictor_ros.core.retraining import narrow_reference, target_filter

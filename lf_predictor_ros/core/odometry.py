@@ -118,11 +118,6 @@ class OdometryParams:
         'the current one: w_i² is held at its peak and decays by exp(−Δt / this time) (errors '
         'outlast the motion that made them: the settling after a turn or a setpoint move); '
         '0 = the current rate (issue 14)', 's'))
-    pose_lag_horizontal: bool = field(default=False, metadata=field_doc(
-        'ndof 3: the lag part of north and east both grow with the horizontal speed '
-        '√(u² + v²), not each with its own earth-frame rate (a learned filter errs in every '
-        'horizontal DOF when the vessel moves in one: a north setpoint move gave an east error '
-        'the per-DOF rate could not cover; issue 14)', ''))
     pose_lag_prior: float = field(default=1.2, metadata=field_doc(
         'lag time T assumed for every DOF where a calibration window has no motion to fit it '
         '(prior of the least-squares fit, with a standard deviation of T² equal to T²; '
@@ -796,15 +791,11 @@ class LfOdometry:
     def _lag_regressor(self, t: float, pose: FloatArray, twist: FloatArray) -> FloatArray:
         """The pose error model's regressor at the published pose and twist (ndof each).
 
-        The LF rates w: for 3 DOF the earth-frame velocity R(ψ) [u, v] [m/s] (with
-        ``pose_lag_horizontal`` the speed √(u² + v²) for both) and the yaw rate r [rad/s], for
-        1 DOF u; with ``pose_lag_memory`` T > 0 the square held at its peak,
+        The LF rates w: for 3 DOF the earth-frame velocity R(ψ) [u, v] [m/s] and the yaw rate r
+        [rad/s], for 1 DOF u; with ``pose_lag_memory`` T > 0 the square held at its peak,
         decaying by exp(−Δt / T) (O(n)).
         """
-        if self.ndof == 3 and self.params.pose_lag_horizontal:
-            speed = math.hypot(float(twist[0]), float(twist[1]))
-            rates = np.array([speed, speed, float(twist[2])])
-        elif self.ndof == 3:  # plain floats: one sample, without the array overhead
+        if self.ndof == 3:  # plain floats: one sample, without the array overhead
             c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
             u, v = float(twist[0]), float(twist[1])
             rates = np.array([c * u - s * v, s * u + c * v, float(twist[2])])

@@ -467,31 +467,3 @@ def test_twist_model_option_uses_a_given_or_implied_gain() -> None:
     odo = LfOdometry(3, H, OdometryParams(twist_model=True))
     odo._memory = dataclasses.replace(memory, known_gain='')  # noqa: SLF001 - fitted gain
     assert odo._transition(x, tau, 1.0)[1][3] == 0.0  # noqa: SLF001
-
-
-def test_pose_lag_horizontal_gives_north_and_east_the_horizontal_speed() -> None:
-    """pose_lag_horizontal: a move due north grows the east lag part too (T_E² · speed²).
-
-    A straight line at 0.4 m/s along a heading of 0°: per DOF the earth-frame rates are
-    (0.4, 0, 0), so the plain model publishes the east holding variance; with the option both
-    north and east carry 0.4² in their lag part: P_EE = 2 · (0.04 + 3 · 4 · 0.16).
-    """
-    hold = np.diag([0.01, 0.04, 1e-4])
-    model = ErrorModel(moment=hold, hold=hold, gain=np.array([9.0, 4.0, 16.0]))
-    twist_model = ErrorModel(moment=np.eye(3), hold=np.eye(3), gain=np.zeros(3))
-    covs = {}
-    for horizontal in (False, True):
-        odo = LfOdometry(3, H, OdometryParams(pose_cov_scale=2.0, pose_lag_scale=3.0,
-                                              pose_lag_horizontal=horizontal))
-        odo.apply_learned(None, ({'all': model}, {'all': twist_model}))
-        _track_line(odo, 0.4, 0.0, 300)
-        out = odo.track(300.0, [0.4 * 300, 0.0, 0.0], np.zeros(3))
-        assert out is not None and out.twist[0] == pytest.approx(0.4, rel=1e-3)
-        covs[horizontal] = out.pose_cov
-        lag = odo.published()[-1].lag
-        assert lag[0] == pytest.approx(0.4, rel=1e-3)
-        assert lag[1] == pytest.approx(0.4 if horizontal else 0.0, abs=1e-3)
-    for cov in covs.values():  # north the same either way
-        assert cov[0, 0] == pytest.approx(2.0 * (0.01 + 27.0 * 0.16), rel=1e-2)
-    assert covs[False][1, 1] == pytest.approx(2.0 * 0.04, rel=1e-2)
-    assert covs[True][1, 1] == pytest.approx(2.0 * (0.04 + 12.0 * 0.16), rel=1e-2)

@@ -53,8 +53,7 @@ _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_
                'motion_gate_ny', 'ramp_order')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
-                'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
-                'sea_change_keep_window')
+                'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -167,13 +166,6 @@ class PredictorParams:
             'period earlier, within the same ratio; always: every time (a real change is then '
             'taken one retrain period later), turns: only when the short window shows a turn '
             '(ndof 3; the LF motion of a turn looks like a new, lower wave peak)'))
-    sea_change_keep_window: bool = field(
-        default=False, metadata=_doc(
-            "on a change of sea state whose new targets' filter removes the old sea's waves "
-            '(zero-phase gain ≤ notch_depth at the old ω0: a sea moving to lower frequencies), '
-            'keep the whole training window, filtered afresh at the new ω0, instead of '
-            'restarting it on the newest samples (a short window overfits); a sea moving up '
-            'restarts as before'))
     notch_lower_edge: float = field(
         default=0.23, metadata=_doc(
             'with notch_zeta_broadband: the broadband notch is no wider than the width whose '

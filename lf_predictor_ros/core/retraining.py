@@ -31,7 +31,7 @@ from lf_predictor_ros.core.augmentation import (
     periodic_zero_phase,
 )
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
-from lf_predictor_ros.core.filters import design_wave_filter, frequency_response, zero_phase
+from lf_predictor_ros.core.filters import design_wave_filter, zero_phase
 from lf_predictor_ros.core.frequency import FrequencyEstimate, estimate_wave_peak_freq
 from lf_predictor_ros.core.lf_dynamics import (
     earth_to_body,
@@ -331,25 +331,6 @@ def narrow_reference(params: PredictorParams, y: FloatArray, count: int, wave_pe
     return reference
 
 
-def old_sea_filtered_out(params: PredictorParams,
-                         previous: FrequencyEstimate | float | None, wave_peak_freq: float,
-                         peak_damping: float = math.nan) -> bool:
-    """True when the new targets' filter removes the old sea's waves (``sea_change_keep_window``).
-
-    `target_filter` at the new ``wave_peak_freq`` applied forward and backward has the amplitude
-    gain |H(jω)|²; at the old ω0 it must be at most ``notch_depth``, the gain one pass of the
-    notch gives the new sea's own peak. A sea moving to lower frequencies is removed by the new
-    low-pass (1.25 → 0.3 rad/s: 0.013 at 1.25 rad/s, the low-pass at 0.5 rad/s); one moving up
-    is not (0.3 → 1.25 rad/s: 0.89 at 0.3 rad/s, the swell passes the low-pass at 1.45 rad/s).
-    """
-    old = previous.wave_peak_freq if isinstance(previous, FrequencyEstimate) else previous
-    if old is None:
-        return False
-    response = frequency_response(target_filter(params, wave_peak_freq, peak_damping),
-                                  float(old), params.sample_time)
-    return float(np.abs(response[0]) ** 2) <= params.notch_depth
-
-
 def fresh_span(params: PredictorParams, snapshot: Snapshot, previous: TargetWindow) -> int:
     """Samples of ``snapshot`` to filter afresh: back to the previous targets' oldest, plus ε.
 
@@ -392,15 +373,7 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
     # a window flagged as a manoeuvre in a broadband sea: its targets are filtered afresh, so
     # the wide-notch targets of earlier station-keeping windows do not stay appended in it
     narrowed = math.isnan(damping) and not math.isnan(frequency.peak_damping)
-    changed = sea_state_changed(previous_frequency, frequency)
-    if changed and params.sea_change_keep_window and old_sea_filtered_out(
-            params, previous_frequency, frequency.wave_peak_freq, damping):
-        # a new sea whose targets' filter removes the old sea's waves: the whole window stays,
-        # filtered afresh at the new ω0 (the samples since the change had the old ω0's targets)
-        measured = snapshot.y
-        targets = make_targets(params, measured, snapshot.end_index, frequency.wave_peak_freq,
-                               None, damping)
-    elif changed:
+    if sea_state_changed(previous_frequency, frequency):
         # a new sea: the old targets were filtered at the old ω0 and the old data shows the old
         # waves, so the training window restarts on the newest samples and grows back to N
         measured = snapshot.y[-change_samples(params):]

@@ -412,33 +412,6 @@ def test_a_new_sea_is_seen_on_the_short_window_and_restarts_the_training_window(
     assert result.targets.end_index == snapshot.end_index
 
 
-def test_a_sea_moving_down_keeps_the_window_with_sea_change_keep_window() -> None:
-    """sea_change_keep_window: 1.25 → 0.3 rad/s keeps N, refiltered at 0.3; 0.3 → 1.25 not.
-
-    The new targets' filter at 0.3 rad/s (low-pass at 0.5 rad/s) removes the old 1.25 rad/s
-    waves (zero-phase gain 0.013 ≤ notch_depth 0.05); the one at 1.25 rad/s passes a 0.3 rad/s
-    swell (0.89), and at 0.3 rad/s a 0.8 rad/s sea is not removed enough (0.078).
-    """
-    params = PredictorParams(ndof=1)
-    assert retraining.old_sea_filtered_out(params, 1.25, 0.3)
-    assert not retraining.old_sea_filtered_out(params, 0.3, 1.25)
-    assert not retraining.old_sea_filtered_out(params, None, 0.3)
-    assert not retraining.old_sea_filtered_out(params, 0.8, 0.3)
-    gains = [abs(retraining.frequency_response(retraining.target_filter(params, new), old,
-                                               1.0)[0]) ** 2
-             for new, old in ((0.3, 1.25), (1.25, 0.3), (0.3, 0.8))]
-    np.testing.assert_allclose(gains, [0.013, 0.89, 0.078], rtol=0.02)
-    snapshot = omega_step_snapshot(400.0)
-    old = make_targets(params, snapshot.y[:-60], snapshot.end_index - 60, 1.25, None)
-    keep = params.replace(max_epochs=2, sea_change_keep_window=True)
-    result = run_retraining(keep, snapshot, None, old, 1.25)
-    assert result.frequency.wave_peak_freq == pytest.approx(0.3, rel=0.1)
-    whole = make_targets(keep, snapshot.y, snapshot.end_index, result.frequency.wave_peak_freq,
-                         None, result.targets_peak_damping)
-    assert len(result.targets) == params.training_samples
-    np.testing.assert_array_equal(result.targets.values, whole.values)
-
-
 def test_sea_change_confirm_takes_a_real_change_one_period_later_and_ignores_a_burst() -> None:
     """sea_change_confirm: the short window Δ earlier must see the change too.
 

@@ -231,6 +231,8 @@ def _confirm_needed(params: PredictorParams, short_y: FloatArray) -> bool:
         return True
     if params.sea_change_confirm == 'turns' and short_y.shape[1] == 3:
         return turning(short_y[:, 2], params.sample_time)
+    if params.sea_change_confirm == 'manoeuvres' and short_y.shape[1] == 3:
+        return manoeuvring(short_y, params.sample_time)
     return False
 
 

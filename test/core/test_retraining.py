@@ -447,6 +447,28 @@ def test_sea_change_confirm_takes_a_real_change_one_period_later_and_ignores_a_b
         params.replace(sea_change_confirm='yes')
 
 
+def test_sea_change_confirm_manoeuvres_asks_after_a_setpoint_move_too() -> None:
+    """'manoeuvres': a 15 m north move without a turn asks for confirmation, 'turns' does not.
+
+    Holding, neither asks; 1 DOF, neither asks (no heading to tell a turn, the block test of a
+    1-DOF vessel is its excitation).
+    """
+    rng = np.random.default_rng(3)
+    n = 300
+    t = np.arange(float(n))
+    holding = np.c_[0.3 * np.sin(0.6 * t), 0.3 * np.cos(0.6 * t), 0.005 * np.sin(0.6 * t)]
+    holding += rng.normal(0.0, 0.05, (n, 3)) * np.array([1.0, 1.0, 0.001])
+    moved = holding.copy()
+    moved[:, 0] += 15.0 * np.clip((t - 150.0) / 100.0, 0.0, 1.0)  # 15 m north in 100 s
+    for rule, expected_moved in (('turns', False), ('manoeuvres', True), ('never', False),
+                                 ('always', True)):
+        params = PredictorParams(ndof=3, sea_change_confirm=rule)
+        assert retraining._confirm_needed(params, moved) is expected_moved  # noqa: SLF001
+        assert retraining._confirm_needed(params, holding) is (rule == 'always')  # noqa: SLF001
+        one = PredictorParams(ndof=1, sea_change_confirm=rule)
+        assert retraining._confirm_needed(one, moved[:, :1]) is (rule == 'always')  # noqa: SLF001
+
+
 def test_a_steady_sea_keeps_the_long_window_estimate() -> None:
     """Long before the step only the 1.25 rad/s sea is there: both windows agree."""
     params = PredictorParams(ndof=1)

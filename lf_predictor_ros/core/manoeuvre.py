@@ -5,9 +5,10 @@ vessel holding position is slow and small, a setpoint move or a turn puts LF mot
 controller's bandwidth. ``PredictorParams.notch_broadband_holding_only`` uses this test to give
 the targets' wide broadband notch only to windows of station keeping (issue 13; docs/
 BENCHMARKS.md, eleventh session: the wide notch helps the supply vessel's loops and hurts
-rao_supply's, whose windows hold its setpoint moves and turns). ``turning``, the heading part of
-the same test, makes ``PredictorParams.sea_change_confirm: turns`` ask for a confirmed change of
-sea state when a turn is in the short window (fifteenth session).
+rao_supply's, whose windows hold its setpoint moves and turns). The same test makes
+``PredictorParams.sea_change_confirm: manoeuvres`` (the default since the twentieth session) ask
+for a confirmed change of sea state when a move or a turn is in the short window; ``turning``,
+its heading part, does so for ``turns`` (fifteenth session).
 
 The test needs no model: the positions are averaged over consecutive blocks of
 ``MANOEUVRE_BLOCK`` seconds (wave periods of 5–20 s average out), and the window shows a

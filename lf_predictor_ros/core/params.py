@@ -160,7 +160,7 @@ class PredictorParams:
             'station keeping; a window with a setpoint move or a turn (core/manoeuvre.py) keeps '
             'notch_zeta'))
     sea_change_confirm: str = field(
-        default='turns', metadata=_doc(
+        default='manoeuvres', metadata=_doc(
             'never, turns, manoeuvres or always: a change of sea state (a new ω0 from the short '
             'window that restarts the training window) must also be seen by the short window one '
             'retrain period earlier, within the same ratio; always: every time (a real change is '

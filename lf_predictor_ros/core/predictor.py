@@ -110,6 +110,7 @@ from lf_predictor_ros.core.retraining import (
     first_training_samples,
     network_spec,
     run_retraining,
+    sea_state_changed,
 )
 from lf_predictor_ros.core.roughness import RoughnessGuard
 from lf_predictor_ros.core.targets import TargetWindow
@@ -1083,14 +1084,19 @@ class AdaptivePredictor:
             return
         result = outcome.result
         self._train_seconds = result.seconds
+        new_sea = sea_state_changed(self._frequency, result.frequency)
         if result.segment == self._segment:
             self._targets = result.targets
             self._targets_damping = result.targets_peak_damping
             self._narrow_reference = result.narrow_reference
         self._frequency = result.frequency
         self._tune_wave_filters(result.frequency.wave_peak_freq)
+        if new_sea:
+            # the network before is the old sea's: a retirement falls back to the cascade, tuned
+            # to the new ω0, not to a network trained on waves that are gone
+            self._previous_model = None
         if result.accepted and result.model is not None:
-            self._previous_model = self._model
+            self._previous_model = None if new_sea else self._model
             self._model, self._state_dict = result.model, result.state_dict
             self._no_thrust += 0 if result.thrust_used else 1
             self._wave_spread = result.wave_spread

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from lf_predictor_ros.core import predictor as predictor_module
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
 from lf_predictor_ros.core.roughness import RoughnessGuard
@@ -107,11 +108,13 @@ def test_the_default_ratio_passes_a_rough_estimate_and_trips_a_limit_cycle() -> 
 
 # ---- the predictor: a rough network is retired (core/predictor.py) ------------------------
 
-def _forced_rough_run(trip_at: tuple[int, ...]) -> tuple[list[object], list[str],
-                                                          AdaptivePredictor]:
+def _forced_rough_run(trip_at: tuple[int, ...], sea_change_at: int | None = None,
+                      monkeypatch: pytest.MonkeyPatch | None = None,
+                      ) -> tuple[list[object], list[str], AdaptivePredictor]:
     """Per sample the network in service and the state, with the guard forced at ``trip_at``.
 
-    An inline adaptive predictor with small windows on onedof_excited seed 5 at h = 1 s.
+    An inline adaptive predictor with small windows on onedof_excited seed 5 at h = 1 s. With
+    ``sea_change_at`` the training applied at that sample reports a change of sea state.
     """
     record = simulate(load_scenario('onedof_excited'), 5, 300.0)
     params = PredictorParams(ndof=1, sample_time=1.0, retrain_period=20.0, training_window=200.0,
@@ -128,6 +131,9 @@ def _forced_rough_run(trip_at: tuple[int, ...]) -> tuple[list[object], list[str]
         return real(measured, predicted) or (sample['k'] in trip_at and predicted is not None)
 
     guard.update = forced  # type: ignore[method-assign]
+    if monkeypatch is not None:
+        monkeypatch.setattr(predictor_module, 'sea_state_changed',
+                            lambda *_: sample['k'] == sea_change_at)
     models: list[object] = []
     states: list[str] = []
     for k in range(len(record.t)):
@@ -158,3 +164,19 @@ def test_a_rough_network_is_retired_for_the_one_before_then_the_cascade() -> Non
     assert all(models[k] is models[k - 1] for k in range(180, 199))
     assert predictor.counters['rough_retirements'] == 2
     assert predictor.counters['guard_trips'] >= 2
+
+
+@pytest.mark.filterwarnings('ignore:`torch.jit.script` is deprecated:DeprecationWarning')
+def test_after_a_sea_change_a_rough_network_is_retired_for_the_cascade(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The network before a sea change is the old sea's: a trip then brings the cascade.
+
+    The same run as above, the training at 159 reporting a new sea: the trip at 165 retires
+    the 159 network for the cascade (tuned to the new ω0), not for the 139 one.
+    """
+    models, states, predictor = _forced_rough_run((165,), sea_change_at=159,
+                                                  monkeypatch=monkeypatch)
+    assert models[164] is not None and models[150] is not None
+    assert models[165] is None and states[165] == 'fallback'
+    assert models[179] is not None
+    assert predictor.counters['rough_retirements'] == 1

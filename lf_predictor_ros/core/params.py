@@ -36,7 +36,7 @@ TRAINERS = ('lm', 'lbfgs', 'adam')
 TRAINING_MODES = ('series_parallel', 'parallel')
 REGRESSOR_FRAMES = ('earth', 'body')
 # ('off' would read as a YAML boolean in a parameter file: 'never')
-SEA_CHANGE_CONFIRMS = ('never', 'turns', 'manoeuvres', 'drops', 'always')
+SEA_CHANGE_CONFIRMS = ('never', 'turns', 'manoeuvres', 'always')
 NDOF_VALUES = (1, 3)
 # γ rule: the Welch bin must be at most this fraction of the wave band width, so the band holds
 # at least 20 bins and the peak refinement has several bins per peak.
@@ -161,14 +161,12 @@ class PredictorParams:
             'notch_zeta'))
     sea_change_confirm: str = field(
         default='manoeuvres', metadata=_doc(
-            'never, turns, manoeuvres, drops or always: a change of sea state (a new ω0 from the '
-            'short window that restarts the training window) must also be seen by the short '
-            'window one retrain period earlier, within the same ratio; always: every time (a real '
-            'change is then taken one retrain period later), turns: only when the short window '
-            'shows a turn, manoeuvres: a turn or a setpoint move (ndof 3; the LF motion of a '
-            'manoeuvre looks like a new, lower wave peak); drops: a change to a lower ω0 is not '
-            'taken at all while the short window shows a turn or a setpoint move (ndof 3; a '
-            'manoeuvre cannot fake a higher peak), others need no confirmation'))
+            'never, turns, manoeuvres or always: a change of sea state (a new ω0 from the short '
+            'window that restarts the training window) must also be seen by the short window one '
+            'retrain period earlier, within the same ratio; always: every time (a real change is '
+            'then taken one retrain period later), turns: only when the short window shows a '
+            'turn, manoeuvres: a turn or a setpoint move (ndof 3; the LF motion of a manoeuvre '
+            'looks like a new, lower wave peak)'))
     notch_lower_edge: float = field(
         default=0.23, metadata=_doc(
             'with notch_zeta_broadband: the broadband notch is no wider than the width whose '

@@ -217,11 +217,6 @@ def sea_state_estimate(params: PredictorParams, y: FloatArray,
     short = estimate_frequency(params, y, None, samples=short_len)
     if not _sea_changed_from(params, short, long):
         return long
-    if params.sea_change_confirm == 'drops' and y.shape[1] == 3:
-        if short.wave_peak_freq < long.wave_peak_freq and \
-                manoeuvring(y[-short_len:], params.sample_time):
-            return long  # a lower peak while manoeuvring: the manoeuvre's own LF motion
-        return short
     if _confirm_needed(params, y[-short_len:]):
         earlier_y = y[:-params.retrain_samples]
         if len(earlier_y) < 2 * short_len:

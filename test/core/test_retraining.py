@@ -469,38 +469,6 @@ def test_sea_change_confirm_manoeuvres_asks_after_a_setpoint_move_too() -> None:
         assert retraining._confirm_needed(one, moved[:, :1]) is (rule == 'always')  # noqa: SLF001
 
 
-def test_sea_change_confirm_drops_ignores_a_lower_peak_while_manoeuvring(
-        monkeypatch: pytest.MonkeyPatch) -> None:
-    """'drops': a lower short-window ω0 with a move in the window is not taken; others are.
-
-    The long window says 0.6 rad/s; the short one 0.27 (lower) or 0.9 (higher). With a 15 m
-    north move in the short window the lower one is the move's LF motion and is ignored; the
-    higher one is taken at once, and so is a lower one while holding. 1 DOF: never ignored.
-    """
-    from lf_predictor_ros.core.frequency import FrequencyEstimate
-
-    n = 1200
-    t = np.arange(float(n))
-    holding = np.c_[0.3 * np.sin(0.6 * t), 0.3 * np.cos(0.6 * t), 0.005 * np.sin(0.6 * t)]
-    moved = holding.copy()
-    moved[:, 0] += 15.0 * np.clip((t - 1050.0) / 100.0, 0.0, 1.0)  # in the newest 300 s
-    for short_freq in (0.27, 0.9):
-        def fake(params: PredictorParams, y: np.ndarray, previous: object,
-                 samples: int | None = None, short_freq: float = short_freq
-                 ) -> FrequencyEstimate:
-            freq = 0.6 if samples is None else short_freq
-            return FrequencyEstimate(freq, True, 50.0, (freq,), 0.1)
-
-        monkeypatch.setattr(retraining, 'estimate_frequency', fake)
-        drops = PredictorParams(ndof=3, sea_change_confirm='drops')
-        expected = 0.6 if short_freq < 0.6 else short_freq
-        assert retraining.sea_state_estimate(drops, moved, 0.6).wave_peak_freq == expected
-        assert retraining.sea_state_estimate(drops, holding, 0.6).wave_peak_freq == short_freq
-        one = PredictorParams(ndof=1, sea_change_confirm='drops')
-        assert retraining.sea_state_estimate(one, moved[:, :1], 0.6).wave_peak_freq == \
-            short_freq
-
-
 def test_a_steady_sea_keeps_the_long_window_estimate() -> None:
     """Long before the step only the 1.25 rad/s sea is there: both windows agree."""
     params = PredictorParams(ndof=1)

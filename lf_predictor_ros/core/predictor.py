@@ -1096,7 +1096,8 @@ class AdaptivePredictor:
             # to the new ω0, not to a network trained on waves that are gone
             self._previous_model = None
         if result.accepted and result.model is not None:
-            self._previous_model = None if new_sea else self._model
+            if not new_sea:
+                self._previous_model = self._model
             self._model, self._state_dict = result.model, result.state_dict
             self._no_thrust += 0 if result.thrust_used else 1
             self._wave_spread = result.wave_spread

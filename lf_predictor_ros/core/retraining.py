@@ -201,14 +201,15 @@ def sea_state_estimate(params: PredictorParams, y: FloatArray,
     ``sea_change_confirm`` always (or, ndof 3, manoeuvres and the short window shows a setpoint
     move or a turn, or turns and it shows a turn): it wins only if the short window ending one
     retrain period Δ earlier says the same (a change too, within ``SEA_CHANGE_RATIO`` of the
-    newest). On rao_swell development seed 5 one short window held
-    the LF motion of a +90° turn as a peak at 0.335 rad/s (sea: 0.48), the training window
-    restarted on targets notched there and the loop left 5 m; the windows Δ before and after it
-    reported no change (docs/BENCHMARKS.md "Fifteenth session"). A real change is then taken one
-    Δ later (omega_steps development seed 3: the estimate recovered 477 s after the 1.25 → 0.3
-    rad/s step instead of 252 s), which is why ``turns`` asks only where a turn is in the window.
-    In the RAO vessels' DP loops the setpoint moves do the same (ω0 0.62 → 0.27 rad/s and back
-    by two restarts), hence the default ``manoeuvres`` (docs/BENCHMARKS.md, twentieth session).
+    newest). On rao_swell development seed 5 one short window held the LF motion of a +90° turn
+    as a peak at 0.335 rad/s (sea: 0.48), the training window restarted on targets notched there
+    and the loop left 5 m; the windows Δ before and after it reported no change
+    (docs/BENCHMARKS.md "Fifteenth session"). A real change is then taken one Δ later
+    (omega_steps development seed 3: the estimate recovered 477 s after the 1.25 → 0.3 rad/s step
+    instead of 252 s), which is why the confirmation is asked only where a manoeuvre is in the
+    window. ``manoeuvres`` (the default since the twentieth session) asks after setpoint moves
+    too: with the restart no longer undone (`fresh_span`), a false restart on rao_swell
+    development seed 6 took that loop out (docs/BENCHMARKS.md, twentieth session).
     """
     long = estimate_frequency(params, y, previous)
     short_len = change_samples(params)

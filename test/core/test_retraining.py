@@ -450,8 +450,8 @@ def test_sea_change_confirm_takes_a_real_change_one_period_later_and_ignores_a_b
 def test_sea_change_confirm_manoeuvres_asks_after_a_setpoint_move_too() -> None:
     """'manoeuvres': a 15 m north move without a turn asks for confirmation, 'turns' does not.
 
-    Holding, neither asks; 1 DOF, neither asks (no heading to tell a turn, the block test of a
-    1-DOF vessel is its excitation).
+    Holding, only 'always' asks; 1 DOF too (the block test of a 1-DOF vessel would see its
+    excitation, so 'turns' and 'manoeuvres' apply to 3 DOF only).
     """
     rng = np.random.default_rng(3)
     n = 300

@@ -53,7 +53,8 @@ _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_
                'motion_gate_ny', 'ramp_order')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
-                'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only')
+                'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
+                'sea_change_revert')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -167,6 +168,12 @@ class PredictorParams:
             'then taken one retrain period later), turns: only when the short window shows a '
             'turn, manoeuvres: a turn or a setpoint move (ndof 3; the LF motion of a manoeuvre '
             'looks like a new, lower wave peak)'))
+    sea_change_revert: bool = field(
+        default=False, metadata=_doc(
+            'a change of sea state whose ω0 comes back within two retrain periods (within the '
+            'same ratio of the ω0 before it) was not one: the targets before that restart are '
+            'taken up again instead of restarting the window once more (the LF motion of a '
+            'start-up or a manoeuvre briefly looks like a lower wave peak)'))
     notch_lower_edge: float = field(
         default=0.23, metadata=_doc(
             'with notch_zeta_broadband: the broadband notch is no wider than the width whose '

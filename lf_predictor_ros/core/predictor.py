@@ -681,6 +681,8 @@ class AdaptivePredictor:
         self._last_train_k: int | None = None
         self._last_freq_k: int | None = None
         self._targets: TargetWindow | None = None
+        # sea_change_revert: (ω0, targets) in service before the newest restart, and its index
+        self._before_restart: tuple[float, TargetWindow, int] | None = None
         self._targets_damping = math.nan  # targets_peak_damping of ``_targets``
         self._narrow_reference: FloatArray | None = None  # narrow_reference of ``_targets``
         self._retrain_requested = False
@@ -1003,7 +1005,7 @@ class AdaptivePredictor:
                             y=self._y.newest(len(self._y)).copy(), end_index=self._k,
                             segment=self._segment)
         args = (self._generation, snapshot, self._state_dict, self._targets, self._frequency,
-                self._stop)
+                self._stop, self._revertible())
         if self.background:
             self._worker = threading.Thread(target=self._job, args=args,
                                             name='lf-predictor-training', daemon=True)
@@ -1011,6 +1013,14 @@ class AdaptivePredictor:
         else:
             self._job(*args)
             self._collect_outcomes(t)
+
+    def _revertible(self) -> tuple[float, TargetWindow] | None:
+        """``sea_change_revert``: what a restart at most 2Δ ago replaced, else None."""
+        before = self._before_restart
+        if before is None or self._k - before[2] > 2 * self.params.retrain_samples:
+            self._before_restart = None
+            return None
+        return before[0], before[1]
 
     def _maybe_estimate_frequency(self, n: int) -> None:
         """Before the first training: estimate ω0 early (every Δ) to tune the fallback cascade."""
@@ -1040,12 +1050,13 @@ class AdaptivePredictor:
 
     def _job(self, generation: int, snapshot: Snapshot,
              incumbent: dict[str, torch.Tensor] | None, targets: TargetWindow | None,
-             frequency: FrequencyEstimate | float | None, stop: threading.Event) -> None:
+             frequency: FrequencyEstimate | float | None, stop: threading.Event,
+             before_restart: tuple[float, TargetWindow] | None = None) -> None:
         """Worker body: never raises; the outcome goes through the queue."""
         try:
             with self._training_lock:  # one training at a time per lock (the gate's twin)
                 result = run_retraining(self.params, snapshot, incumbent, targets, frequency,
-                                        stop)
+                                        stop, before_restart)
         except Exception as exc:  # noqa: BLE001 - any failure must keep the node alive
             self._outcomes.put(_JobOutcome(generation, None, exc))
             return
@@ -1086,6 +1097,7 @@ class AdaptivePredictor:
         self._train_seconds = result.seconds
         new_sea = sea_state_changed(self._frequency, result.frequency)
         if result.segment == self._segment:
+            self._remember_restart(result)
             self._targets = result.targets
             self._targets_damping = result.targets_peak_damping
             self._narrow_reference = result.narrow_reference
@@ -1115,6 +1127,16 @@ class AdaptivePredictor:
                 self._message += '; network in service is worse than the cascade: retired'
         if outcome.saved_error:
             self._message += f'; {outcome.saved_error}'
+
+    def _remember_restart(self, result: RetrainResult) -> None:
+        """``sea_change_revert``: keep what a restart replaces; forget it once reverted."""
+        if result.reverted:
+            self._before_restart = None
+        elif result.restarted and self.params.sea_change_revert and \
+                self._targets is not None and self._frequency is not None:
+            old = self._frequency
+            freq = old.wave_peak_freq if isinstance(old, FrequencyEstimate) else float(old)
+            self._before_restart = (freq, self._targets, result.end_index)
 
     def _meta(self, result: RetrainResult | None = None) -> dict[str, Any]:
         meta: dict[str, Any] = {'sample_time': self.sample_time, 'ndof': self.ndof,

@@ -106,6 +106,11 @@ class RetrainResult:
     # the targets' samples filtered with the narrow notch_zeta (`narrow_reference`; None: the
     # targets' notch is that narrow one)
     narrow_reference: FloatArray | None = None
+    # the training window was restarted by a change of sea state (`sea_state_changed`)
+    restarted: bool = False
+    # ``sea_change_revert``: ω0 came back to its value before a recent restart, whose targets
+    # were taken up again instead of restarting once more
+    reverted: bool = False
 
 
 # Dead-reckoning horizon of the thrust test of ``thrust_validation`` [s] (the dead-reckoning
@@ -371,15 +376,28 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
                    incumbent: dict[str, torch.Tensor] | None,
                    previous_targets: TargetWindow | None,
                    previous_frequency: FrequencyEstimate | float | None,
-                   stop_event: threading.Event | None = None) -> RetrainResult:
-    """One full retraining (see module docstring); never modifies its arguments."""
+                   stop_event: threading.Event | None = None,
+                   before_restart: tuple[float, TargetWindow] | None = None) -> RetrainResult:
+    """One full retraining (see module docstring); never modifies its arguments.
+
+    ``before_restart`` (``sea_change_revert``): the ω0 and the targets in service before a
+    restart of the window at most 2Δ ago. When this retraining's ω0 is a change from the
+    previous one but not from that ω0, the restart was not a sea change: those targets are
+    taken up again (appended to, or filtered afresh) instead of restarting once more.
+    """
     start = time.monotonic()
     frequency = sea_state_estimate(params, snapshot.y, previous_frequency)
     damping = targets_peak_damping(params, snapshot, frequency)
     # a window flagged as a manoeuvre in a broadband sea: its targets are filtered afresh, so
     # the wide-notch targets of earlier station-keeping windows do not stay appended in it
     narrowed = math.isnan(damping) and not math.isnan(frequency.peak_damping)
-    if sea_state_changed(previous_frequency, frequency):
+    changed = sea_state_changed(previous_frequency, frequency)
+    reverted = changed and before_restart is not None and \
+        not sea_state_changed(before_restart[0], frequency)
+    if reverted:
+        assert before_restart is not None
+        changed, previous_targets = False, before_restart[1]
+    if changed:
         # a new sea: the old targets were filtered at the old ω0 and the old data shows the old
         # waves, so the training window restarts on the newest samples and grows back to N
         measured = snapshot.y[-change_samples(params):]
@@ -433,7 +451,8 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
                          reason=reason, seconds=time.monotonic() - start, epochs=result.epochs,
                          wave_spread=spread, baseline_loss=baseline,
                          retire_incumbent=retire, thrust_used=thrust_used,
-                         targets_peak_damping=damping, narrow_reference=reference)
+                         targets_peak_damping=damping, narrow_reference=reference,
+                         restarted=changed, reverted=reverted)
 
 
 def training_data(params: PredictorParams, snapshot: Snapshot, u: FloatArray, y: FloatArray,

@@ -579,6 +579,43 @@ def test_a_fresh_filter_keeps_a_window_restarted_by_a_sea_change(
     assert fresh_span(params, short, full) == 50
 
 
+def test_a_restart_undone_within_two_periods_takes_the_old_targets_up_again(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``before_restart``: ω0 back at its value before a recent restart → those targets again.
+
+    The window was restarted 20 samples ago from ω0 0.8 to 0.4 rad/s; this retraining says
+    0.8 again. With the targets before the restart it appends to them (not a new restart, not
+    the restarted window); a third ω0 (0.4 → 1.2, far from both) restarts as before.
+    """
+    from lf_predictor_ros.core.frequency import FrequencyEstimate
+
+    params = RETRAIN.replace(max_epochs=2)
+    y, _ = synthetic_positions(700, 3)
+    u = np.zeros((700, 1))
+    before = make_targets(params, y[:660], 659, WAVE_PEAK_FREQ, None)  # in service until 680
+    restarted = make_targets(params, y[680 - 100:680], 679, 0.4, None)  # the restart at 680
+    snapshot = Snapshot(u=u, y=y, end_index=699, segment=1)
+    for freq, expect_revert in ((WAVE_PEAK_FREQ, True), (1.2, False)):
+        estimate = FrequencyEstimate(freq, True, 50.0, (freq,), math.nan)
+        monkeypatch.setattr(retraining, 'sea_state_estimate', lambda *args, e=estimate: e)
+        result = run_retraining(params, snapshot, None, restarted, 0.4,
+                                before_restart=(WAVE_PEAK_FREQ, before))
+        assert result.reverted is expect_revert and result.restarted is not expect_revert
+        if expect_revert:  # appended to the old targets: shift 40 = β
+            expected = make_targets(params, y, 699, freq, before)
+            assert len(result.targets) == min(len(before) + 40, params.training_samples)
+        else:  # a real new sea: restarted on the newest change samples
+            expected = make_targets(params, y[-retraining.change_samples(params):], 699, freq,
+                                    None)
+        np.testing.assert_array_equal(result.targets.values, expected.values)
+    # without before_restart the same return to 0.8 is a restart of its own
+    estimate = FrequencyEstimate(WAVE_PEAK_FREQ, True, 50.0, (WAVE_PEAK_FREQ,), math.nan)
+    monkeypatch.setattr(retraining, 'sea_state_estimate', lambda *args: estimate)
+    plain = run_retraining(params, snapshot, None, restarted, 0.4)
+    assert plain.restarted and not plain.reverted
+    assert len(plain.targets) == retraining.change_samples(params) - params.transient_samples
+
+
 def test_the_narrow_reference_is_the_targets_window_filtered_with_the_narrow_notch() -> None:
     """`narrow_reference`: None for narrow targets, else one narrow zero-phase pass (issue 14)."""
     from lf_predictor_ros.core.retraining import narrow_reference, target_filter

@@ -169,7 +169,7 @@ class PredictorParams:
             'turn, manoeuvres: a turn or a setpoint move (ndof 3; the LF motion of a manoeuvre '
             'looks like a new, lower wave peak)'))
     sea_change_revert: bool = field(
-        default=False, metadata=_doc(
+        default=True, metadata=_doc(
             'a change of sea state whose ω0 comes back within two retrain periods (within the '
             'same ratio of the ω0 before it) was not one: the targets before that restart are '
             'taken up again instead of restarting the window once more (the LF motion of a '

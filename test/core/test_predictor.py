@@ -809,3 +809,54 @@ def test_one_dof_passes_the_measured_east_and_yaw_through_never_zero() -> None:
     assert out[1] == 2.0 and out[2] == pytest.approx(3.1)
     out = predictor.update(2.0, np.array([1.0, -5.0, -3.5]), np.zeros(3))
     assert out[1] == -5.0 and out[2] == pytest.approx(-3.5 + 2 * math.pi)  # wrapped
+
+
+def test_a_restart_undone_within_two_periods_hands_the_old_targets_back(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """sea_change_revert: the predictor keeps what a restart replaced and offers it for 2Δ.
+
+    ω0 is forced to 0.8 rad/s, then 0.4 at the training at sample 179 (a restart), then 0.8
+    again at 199: that training gets the ω0 and targets of before the restart and reverts. With
+    the option off it gets nothing, and the return to 0.8 is a restart of its own.
+    """
+    from lf_predictor_ros.core.frequency import FrequencyEstimate
+
+    t, pose, force, _ = onedof_record(5, 400.0)
+    real = predictor_module.run_retraining
+    for enabled in (True, False):
+        calls: list[tuple[int, object]] = []
+
+        def spy(params: PredictorParams, snapshot: retraining.Snapshot, *args: object,
+                calls: list[tuple[int, object]] = calls) -> retraining.RetrainResult:
+            freq = 0.4 if snapshot.end_index == 179 else WAVE_PEAK_FREQ
+            estimate = FrequencyEstimate(freq, True, 50.0, (freq,), math.nan)
+            with pytest.MonkeyPatch.context() as patch:
+                patch.setattr(retraining, 'sea_state_estimate', lambda *_: estimate)
+                result = real(params, snapshot, *args)  # type: ignore[arg-type]
+            calls.append((snapshot.end_index, args[-1]))
+            return result
+
+        monkeypatch.setattr(predictor_module, 'run_retraining', spy)
+        predictor = AdaptivePredictor(SMALL.replace(sea_change_revert=enabled),
+                                      background=False)
+        before = None
+        results = {}
+        for k in range(len(t[:260])):
+            predictor.update(float(t[k]), pose[k], force[k])
+            if k == 159:
+                before = predictor.targets
+            if k in (179, 199, 219):
+                results[k] = predictor.targets
+        offered = dict(calls)
+        assert offered[179] is None  # nothing restarted yet
+        if enabled:
+            assert offered[199] is not None
+            freq, targets = offered[199]  # type: ignore[misc]
+            assert freq == pytest.approx(WAVE_PEAK_FREQ)
+            assert before is not None and targets.end_index == before.end_index == 159
+            np.testing.assert_array_equal(targets.values, before.values)
+            assert offered[219] is None  # reverted: nothing left to offer
+            assert len(results[199]) > len(results[179])  # the old window, grown
+        else:
+            assert offered[199] is None
+            assert len(results[199]) == len(results[179])  # restarted again

@@ -20,7 +20,6 @@ Nothing is tuned here; the printed numbers are in docs/BENCHMARKS.md (twentieth 
 """
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 from pathlib import Path
 import sys
@@ -28,14 +27,12 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from target_fit_probe import rmse  # noqa: E402 - the sibling script
+from target_fit_probe import rmse, tuning_seed_cli  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.benchmark.baseline_tuning import (  # noqa: E402
-    TUNING_SEEDS,
     smoother_settings,
 )
 from lf_predictor_ros.benchmark.estimators import predictor_params  # noqa: E402
@@ -130,18 +127,7 @@ def run(scenario_name: str, seed: int) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--scenarios', nargs='+', required=True)
-    parser.add_argument('--seeds', nargs='+', type=int, default=list(TUNING_SEEDS))
-    args = parser.parse_args(argv)
-    if set(args.seeds) - set(TUNING_SEEDS):
-        parser.error(f'a diagnostic on the tuning seeds {TUNING_SEEDS} only')
-    torch.set_num_threads(1)
-    for scenario_name in args.scenarios:
-        for seed in args.seeds:
-            run(scenario_name, seed)
-    return 0
+    return tuning_seed_cli(__doc__, run, argv)
 
 
 if __name__ == '__main__':

@@ -29,7 +29,7 @@ the fit's. Nothing is tuned here.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 import sys
 
 import numpy as np
@@ -132,8 +132,10 @@ def _wrapped(targets: FloatArray, y: FloatArray) -> FloatArray:
     return out
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__,
+def tuning_seed_cli(description: str | None, case: Callable[[str, int], None],
+                    argv: Sequence[str] | None = None) -> int:
+    """``--scenarios … --seeds …`` (tuning seeds only): ``case(scenario, seed)`` for each."""
+    parser = argparse.ArgumentParser(description=description,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--scenarios', nargs='+', required=True)
     parser.add_argument('--seeds', nargs='+', type=int, default=list(TUNING_SEEDS))
@@ -143,8 +145,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     torch.set_num_threads(1)
     for scenario_name in args.scenarios:
         for seed in args.seeds:
-            run(scenario_name, seed)
+            case(scenario_name, seed)
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return tuning_seed_cli(__doc__, run, argv)
 
 
 if __name__ == '__main__':

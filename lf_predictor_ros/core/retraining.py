@@ -391,12 +391,10 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
     # a window flagged as a manoeuvre in a broadband sea: its targets are filtered afresh, so
     # the wide-notch targets of earlier station-keeping windows do not stay appended in it
     narrowed = math.isnan(damping) and not math.isnan(frequency.peak_damping)
-    changed = sea_state_changed(previous_frequency, frequency)
-    reverted = changed and before_restart is not None and \
-        not sea_state_changed(before_restart[0], frequency)
-    if reverted:
-        assert before_restart is not None
-        changed, previous_targets = False, before_restart[1]
+    changed, reverted = sea_state_changed(previous_frequency, frequency), False
+    if changed and before_restart is not None and \
+            not sea_state_changed(before_restart[0], frequency):
+        changed, reverted, previous_targets = False, True, before_restart[1]
     if changed:
         # a new sea: the old targets were filtered at the old ω0 and the old data shows the old
         # waves, so the training window restarts on the newest samples and grows back to N

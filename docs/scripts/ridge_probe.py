@@ -23,29 +23,23 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 import sys
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from target_fit_probe import rmse, tuning_seed_cli  # noqa: E402 - the sibling script
+from target_fit_probe import Fit, rmse, sliding, tuning_seed_cli  # noqa: E402 - sibling
 
 from lf_predictor_ros.benchmark.baseline_tuning import (  # noqa: E402
     smoother_settings,
 )
 from lf_predictor_ros.benchmark.estimators import predictor_params  # noqa: E402
-from lf_predictor_ros.benchmark.linear_limit import regressor_design  # noqa: E402
 from lf_predictor_ros.benchmark.suite import (  # noqa: E402
     make_recording,
     make_setup,
     scored_start,
 )
-from lf_predictor_ros.core.baselines.smoother import smooth_poses  # noqa: E402
-from lf_predictor_ros.core.heading import wrap_angle  # noqa: E402
-from lf_predictor_ros.core.params import PredictorParams  # noqa: E402
-from lf_predictor_ros.core.retraining import first_training_samples  # noqa: E402
 from sim_ros.simulation import load_scenario  # noqa: E402
 
 FloatArray = NDArray[np.float64]
@@ -73,35 +67,25 @@ def penalized_fit(design: FloatArray, goal: FloatArray, alpha: float,
     return np.asarray(coef / scale[:, None], dtype=np.float64)
 
 
-def sliding(y: FloatArray, u: FloatArray, params: PredictorParams, omega: float,
-            settings: dict[str, Any], mode: str, alpha: float) -> FloatArray:
-    """One-step-ahead causal estimate (n, ndof) of the regularized sliding ARX (docstring)."""
-    n, ndof, nu, ny = y.shape[0], params.ndof, params.nu, params.ny
-    window, delta, eps = params.training_samples, params.retrain_samples, params.transient_samples
-    out = np.array(y[:, :ndof], dtype=np.float64)
-    previous: FloatArray | None = None
-    for k0 in range(first_training_samples(params), n, delta):
-        first = max(0, k0 - window - eps)
-        targets = smooth_poses(y[first:k0], params.sample_time, omega, ndof, **settings)
-        rows = np.arange(first + max(nu, ny), k0 - eps - 1)
-        design, newest = regressor_design(y, u, rows, ndof, nu, ny)
-        goal = targets[rows + 1 - first, :ndof] - newest
-        if ndof == 3:
-            goal[:, 2] = wrap_angle(goal[:, 2])
+def window_fit(mode: str, alpha: float) -> Fit:
+    """The per-window fit of one variant (module docstring), for `target_fit_probe.sliding`."""
+    previous: list[FloatArray] = []  # the last window's coefficients (mode 'prior')
+
+    def fit(design: FloatArray, goal: FloatArray) -> FloatArray:
+        penalty = alpha
         if mode == 'cv':
-            split = int(0.8 * len(rows))
+            split = int(0.8 * design.shape[0])
             errors = [float(np.mean((design[split:] @ penalized_fit(design[:split], goal[:split],
                                                                     a) - goal[split:]) ** 2))
                       for a in CV_GRID]
-            alpha = CV_GRID[int(np.argmin(errors))]
-        prior = previous if mode == 'prior' else None
-        coef = penalized_fit(design, goal, alpha if mode != 'prior' or prior is not None
+            penalty = CV_GRID[int(np.argmin(errors))]
+        prior = previous[-1] if mode == 'prior' and previous else None
+        coef = penalized_fit(design, goal, penalty if mode != 'prior' or prior is not None
                              else 0.0, prior)
-        previous = coef
-        apply = np.arange(k0, min(k0 + delta, n))
-        design, newest = regressor_design(y, u, apply, ndof, nu, ny)
-        out[apply] = newest + design @ coef
-    return out
+        previous[:] = [coef]
+        return coef
+
+    return fit
 
 
 def run(scenario_name: str, seed: int) -> None:
@@ -118,7 +102,8 @@ def run(scenario_name: str, seed: int) -> None:
                     notch_zeta=params.notch_zeta_broadband)
     base: list[float] | None = None
     for mode, alpha in VARIANTS:
-        estimate = sliding(y_c, u, params, setup.wave_peak_freq, settings, mode, alpha)
+        estimate = sliding(y_c, u, params, setup.wave_peak_freq, settings, ahead=1,
+                           fit=window_fit(mode, alpha))
         values = rmse(estimate[:-1], truth_c[1:], params.ndof, start)
         base = values if base is None else base
         print(f'{scenario_name:20s} {seed} {mode:6s} {alpha:<7g} '

@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable, Sequence
 import sys
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -54,12 +55,24 @@ from sim_ros.simulation import load_scenario
 FloatArray = NDArray[np.float64]
 
 
+Fit = Callable[[FloatArray, FloatArray], FloatArray]
+
+
+def least_squares_fit(design: FloatArray, goal: FloatArray) -> FloatArray:
+    """Coefficients c of goal ≈ design @ c, least squares on unit-std columns."""
+    coef, scale = scaled_least_squares(design, goal)
+    return np.asarray(coef / scale[:, None], dtype=np.float64)
+
+
 def sliding(y: FloatArray, u: FloatArray, params: PredictorParams, omega: float,
-            settings: dict[str, object], ahead: int = 0, growing: bool = False) -> FloatArray:
+            settings: dict[str, Any], ahead: int = 0, growing: bool = False,
+            fit: Fit = least_squares_fit) -> FloatArray:
     """Causal estimate (n, ndof): a linear ARX refitted every Δ on the window's own targets.
 
     Row k estimates the LF pose at k + ``ahead`` from the data up to k. ``growing``: the window
     is all the data so far (a memory of every past manoeuvre) instead of the training window.
+    ``fit(design, goal)`` gives each window's coefficients (least squares; `ridge_probe.py`
+    passes penalized fits).
     """
     n, ndof, nu, ny = y.shape[0], params.ndof, params.nu, params.ny
     window, delta, eps = params.training_samples, params.retrain_samples, params.transient_samples
@@ -74,10 +87,10 @@ def sliding(y: FloatArray, u: FloatArray, params: PredictorParams, omega: float,
         goal = targets[rows + ahead - first, :ndof] - newest
         if ndof == 3:  # targets come wrapped, the poses here are continuous
             goal[:, 2] = wrap_angle(goal[:, 2])
-        coef, scale = scaled_least_squares(design, goal)
+        coef = fit(design, goal)
         apply = np.arange(k0, min(k0 + delta, n))
         design, newest = regressor_design(y, u, apply, ndof, nu, ny)
-        out[apply] = newest + (design / scale) @ coef
+        out[apply] = newest + design @ coef
     return out
 
 
@@ -85,7 +98,7 @@ def rmse(estimate: FloatArray, truth: FloatArray, ndof: int, start: int) -> list
     error = np.array(estimate[:, :ndof] - truth[:, :ndof], dtype=np.float64)
     if ndof == 3:
         error[:, 2] = wrap_angle(error[:, 2])
-    return np.sqrt(np.mean(error[start:] ** 2, axis=0)).tolist()
+    return [float(v) for v in np.sqrt(np.mean(error[start:] ** 2, axis=0))]
 
 
 def run(scenario_name: str, seed: int) -> None:

@@ -110,7 +110,6 @@ from lf_predictor_ros.core.retraining import (
     first_training_samples,
     network_spec,
     run_retraining,
-    sea_state_changed,
 )
 from lf_predictor_ros.core.roughness import RoughnessGuard
 from lf_predictor_ros.core.targets import TargetWindow
@@ -1095,7 +1094,6 @@ class AdaptivePredictor:
             return
         result = outcome.result
         self._train_seconds = result.seconds
-        new_sea = sea_state_changed(self._frequency, result.frequency)
         if result.segment == self._segment:
             self._remember_restart(result)
             self._targets = result.targets
@@ -1103,12 +1101,12 @@ class AdaptivePredictor:
             self._narrow_reference = result.narrow_reference
         self._frequency = result.frequency
         self._tune_wave_filters(result.frequency.wave_peak_freq)
-        if new_sea:
+        if result.restarted:
             # the network before is the old sea's: a retirement falls back to the cascade, tuned
             # to the new ω0, not to a network trained on waves that are gone
             self._previous_model = None
         if result.accepted and result.model is not None:
-            if not new_sea:
+            if not result.restarted:
                 self._previous_model = self._model
             self._model, self._state_dict = result.model, result.state_dict
             self._no_thrust += 0 if result.thrust_used else 1

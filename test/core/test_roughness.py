@@ -1,7 +1,9 @@
 """Roughness guard: an LF estimate is smoother than the measurement (core/roughness.py)."""
 from __future__ import annotations
 
+import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -132,8 +134,13 @@ def _forced_rough_run(trip_at: tuple[int, ...], sea_change_at: int | None = None
 
     guard.update = forced  # type: ignore[method-assign]
     if monkeypatch is not None:
-        monkeypatch.setattr(predictor_module, 'sea_state_changed',
-                            lambda *_: sample['k'] == sea_change_at)
+        retrain = predictor_module.run_retraining
+
+        def restarting(*args: Any) -> Any:
+            result = retrain(*args)
+            return dataclasses.replace(result, restarted=sample['k'] == sea_change_at)
+
+        monkeypatch.setattr(predictor_module, 'run_retraining', restarting)
     models: list[object] = []
     states: list[str] = []
     for k in range(len(record.t)):

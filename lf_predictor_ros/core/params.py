@@ -85,8 +85,8 @@ class PredictorParams:
             'issue 13, hypothesis 3)'))
     dof_coupling: str = field(
         default='full', metadata=_doc(
-            'which regressors the linear part of each DOF\'s output may use: full (every '
-            'DOF\'s positions and forces), positions (its own DOF\'s positions, every force) or '
+            "which regressors the linear part of each DOF's output may use: full (every "
+            "DOF's positions and forces), positions (its own DOF's positions, every force) or "
             'none (its own positions and force); a coefficient fitted on station keeping across '
             'DOFs (0.01 rad of wave yaw) extrapolates badly in turns (issue 13). ndof 3 only'))
     ramp_invariant: bool = field(

@@ -916,10 +916,6 @@ class AdaptivePredictor:
             self._validate_gate(out, out)
             return out
         gain = dead_zoned(self._gate.update(moving), self.params.motion_gate_dead_zone)
-        if self.params.motion_gate_shared and self.ndof == 3:
-            # a turn or a move on one DOF opens north and east alike (the heading keeps its own)
-            shared = float(np.max(gain))
-            gain = np.array([shared, shared, gain[2]])
         if self._gate_alpha < 1.0:
             # LP(moving − holding) of core.motion_gate (motion_gate_smoothing)
             self._gate_offset = low_pass_step(self._gate_offset, offset, self._gate_alpha)

@@ -916,9 +916,6 @@ class AdaptivePredictor:
             self._validate_gate(out, out)
             return out
         gain = dead_zoned(self._gate.update(moving), self.params.motion_gate_dead_zone)
-        if self.params.motion_gate_turns and self.ndof == 3:
-            # a turn opens north and east too (the heading keeps its own gain)
-            gain = np.array([max(gain[0], gain[2]), max(gain[1], gain[2]), gain[2]])
         if self._gate_alpha < 1.0:
             # LP(moving − holding) of core.motion_gate (motion_gate_smoothing)
             self._gate_offset = low_pass_step(self._gate_offset, offset, self._gate_alpha)

@@ -224,27 +224,6 @@ def test_without_yaw_the_gate_blends_north_and_east_and_keeps_the_holding_headin
     assert np.max(np.abs(gated.out[:, 2] - holding.out[:, 2])) > 1e-3  # and that shows
 
 
-def test_a_turn_opens_the_gate_on_north_and_east_with_motion_gate_turns(
-        trace: Callable[[PredictorParams], Trace]) -> None:
-    """motion_gate_turns: N and E take max(own gain, g_ψ); the output is the blend.
-
-    The run moves north and turns, east does not move: its own gain stays shut where the turn
-    opens it, and the published east is then the twin's, not the holding network's.
-    """
-    shared = trace(SMALL.replace(motion_gate=True, motion_gate_turns=True))
-    own = trace(SMALL.replace(motion_gate=True))
-    holding = trace(SMALL)
-    moving = trace(SMALL.replace(ramp_invariant=True))
-    assert np.array_equal(shared.gain[:, 0], np.maximum(own.gain[:, 0], own.gain[:, 2]))
-    assert np.array_equal(shared.gain[:, 1], np.maximum(own.gain[:, 1], own.gain[:, 2]))
-    assert np.array_equal(shared.gain[:, 2], own.gain[:, 2])
-    assert np.count_nonzero(shared.gain[:, 1] > own.gain[:, 1] + 0.5) > 20
-    for k in range(shared.out.shape[0]):
-        if moving.using_network[k]:
-            assert shared.out[k] == pytest.approx(
-                blend(holding.out[k], moving.out[k], shared.gain[k], 3), abs=1e-9)
-
-
 def test_the_usual_velocity_is_measured_on_the_twins_network_alone(
         trace: Callable[[PredictorParams], Trace]) -> None:
     """Shut until GATE_MIN_FILL of a training window of the twin's network outputs is seen.

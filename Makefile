@@ -17,7 +17,7 @@ test: venv
 	@$(MAKE) --no-print-directory lint typecheck pytest
 
 lint:
-	@$(ACT) echo '[lint] ruff' && ruff check lf_predictor_ros sim_ros test setup.py
+	@$(ACT) echo '[lint] ruff' && ruff check lf_predictor_ros sim_ros test docs/scripts setup.py
 
 typecheck:
 	@$(ACT) echo '[typecheck] mypy' && mypy

@@ -20,7 +20,8 @@ import numpy as np
 from numpy.typing import NDArray
 import torch
 
-from lf_predictor_ros.benchmark.odometry_bench import make_recording, make_setup, predictor_params
+from lf_predictor_ros.benchmark.estimators import predictor_params
+from lf_predictor_ros.benchmark.suite import make_recording, make_setup
 from lf_predictor_ros.core.alignment import AlignerSettings, InputAligner
 from lf_predictor_ros.core.lf_state import LfStateEstimator
 from lf_predictor_ros.core.odometry import OdometryParams
@@ -78,7 +79,7 @@ def main() -> None:
     torch.set_num_threads(1)
     arrays = {name: estimator_outputs(name) for name in ('rao_supply', 'supply_closed_loop')}
     arrays['aligner'] = aligner_outputs()
-    np.savez(args.output, **arrays)
+    np.savez(args.output, **arrays)  # type: ignore[arg-type]  # numpy's stub: allow_pickle
     print({key: value.shape for key, value in arrays.items()})
 
 

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lf_predictor_ros.benchmark.baseline_tuning import TUNING_SEEDS
+from lf_predictor_ros.benchmark.estimators import EstimatorSetup
 from lf_predictor_ros.benchmark.recordings import check_scorable
 from lf_predictor_ros.benchmark.suite import (
     make_recording,
@@ -79,7 +80,8 @@ def probe(name: str, seed: int, duration: float, closed_loop: bool, turn_rate: f
     result: dict[str, Any] = {'scenario': name, 'seed': seed, 'scored_from': float(t[0]),
                               'samples': int(t.size), 'turning_samples': int(turning.sum()),
                               'open_loop': {}, 'closed_loop': {}}
-    runs = [(frame, replace(setup, params=params[frame]), ('adaptive',)) for frame in FRAMES]
+    runs: list[tuple[str, EstimatorSetup, tuple[str, ...]]] = [
+        (frame, replace(setup, params=params[frame]), ('adaptive',)) for frame in FRAMES]
     runs.append(('reference', setup, REFERENCES))
     for label, frame_setup, names in runs:
         info: dict[str, Any] = {}

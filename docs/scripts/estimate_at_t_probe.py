@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 import torch
 
+from lf_predictor_ros.benchmark.baseline_tuning import TUNING_SEEDS
 from lf_predictor_ros.benchmark.suite import scored_start
 from lf_predictor_ros.core import training
 from lf_predictor_ros.core.heading import wrap_angle
@@ -67,10 +68,10 @@ def main(argv: list[str]) -> int:
         print(__doc__)
         return 2
     seeds = [int(s) for s in argv[1:]]
-    if set(seeds) - set(method_probe.TUNING_SEEDS) - set(method_probe.DEVELOPMENT_SEEDS):
+    if set(seeds) - set(TUNING_SEEDS) - set(method_probe.DEVELOPMENT_SEEDS):
         print('tuning and development seeds only (held-out seeds: `benchmark`)')
         return 2
-    training._prepare_window = _targets_at_t  # type: ignore[assignment]
+    training._prepare_window = _targets_at_t
     torch.set_num_threads(1)
     for seed in seeds:
         run(argv[0], seed)

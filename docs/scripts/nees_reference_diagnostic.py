@@ -15,20 +15,17 @@ wave motion below the wave band, which the thesis vessels have; seventeenth sess
 """
 from __future__ import annotations
 
+import math
 import sys
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from lf_predictor_ros.benchmark.odometry_bench import (
-    _wrap_error,
-    make_recording,
-    make_setup,
-    predictor_params,
-    scored_start,
-)
+from lf_predictor_ros.benchmark.estimators import predictor_params
+from lf_predictor_ros.benchmark.odometry_bench import _wrap_error
 from lf_predictor_ros.benchmark.seen_truth import recording_seen_truth
+from lf_predictor_ros.benchmark.suite import make_recording, make_setup, scored_start
 from lf_predictor_ros.core.filters import zero_phase
 from lf_predictor_ros.core.lf_state import LfStateEstimator
 from lf_predictor_ros.core.odometry import OdometryParams
@@ -70,8 +67,9 @@ def collect(name: str, seed: int, duration: float) -> tuple[Any, dict[str, Float
             narrow = est.predictor.narrow_reference
             ref = values if narrow is None else np.array(narrow).reshape(len(targets), -1)
             usable = max(3, values.shape[0] - params.transient_samples)
+            omega = est.predictor.wave_peak_freq
             windows.append((targets.indices()[:usable].copy(), ref[:usable].copy(),
-                            float(est.predictor.wave_peak_freq)))
+                            math.nan if omega is None else float(omega)))
     finally:
         est.close()
     return params, data, pub, pvar, windows

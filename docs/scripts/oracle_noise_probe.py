@@ -48,7 +48,7 @@ def scores(name: str, seed: int, multipliers: list[float]) -> dict[float, list[f
         error = out[begin:, :n] - truth
         if n == 3:
             error[:, 2] = wrap_angle(error[:, 2])
-        return np.sqrt(np.mean(error ** 2, axis=0))
+        return np.asarray(np.sqrt(np.mean(error ** 2, axis=0)))
 
     raw = rmse(run_open_loop(data, setup, ['raw'], {})['raw'])
     out: dict[float, list[float]] = {}

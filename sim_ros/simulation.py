@@ -34,7 +34,7 @@ Ground truth:
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 import math
 import os
 from pathlib import Path
@@ -204,6 +204,21 @@ class ControllerConfig:
                          dtype=np.float64)
         starts = np.array([row[0] for row in self.setpoint_schedule], dtype=np.float64)
         return np.asarray(table[np.searchsorted(starts, t, side='right')], dtype=np.float64)
+
+
+def with_schedule_shift(controller: ControllerConfig, shift: float) -> ControllerConfig:
+    """The controller with every `setpoint_schedule` time ``shift`` [s] later (a new object).
+
+    The setpoints and everything else are unchanged; without a schedule the controller itself
+    is returned. Used by the benchmark to move the manoeuvres against the estimator's own
+    timing (docs/BENCHMARKS.md, twenty-first session).
+    """
+    if not (math.isfinite(shift) and shift >= 0.0):
+        raise ValueError(f'a schedule shift must be finite and >= 0 s, got {shift!r}')
+    if shift == 0.0 or not controller.setpoint_schedule:
+        return controller
+    rows = tuple((row[0] + shift, row[1], row[2], row[3]) for row in controller.setpoint_schedule)
+    return replace(controller, setpoint_schedule=rows)
 
 
 @dataclass(frozen=True)

@@ -6,13 +6,12 @@
 Every held-out seed of `benchmark` has the same setpoint event times, and the predictor retrains
 at the same instants (first training + k·Δ) in every run, so the benchmark's intervals do not
 cover the phase between trainings and manoeuvres (docs/BENCHMARKS.md, twenty-first session).
-This script copies ``config/scenarios/<scenario>.yaml`` to a temporary directory under the same
-file name (so the scenario's tuned baselines are found) with ``shift`` seconds added to every
-``controller.setpoint_schedule`` time, runs `suite.run_case` on it for each seed (the benchmark's
-own case: fair recording, open-loop scores, every closed loop), prints one line per seed
+This script runs `suite.run_case` (the benchmark's own case: fair recording, open-loop scores,
+every closed loop) with ``schedule_shift`` = ``shift`` for each seed, prints one line per seed
 (adaptive and observer loop position RMSE) and writes the cases as the benchmark's JSON
-(``{'command': ..., 'cases': [...]}``, gzip if the name ends in .gz). Reporting only: nothing is
-chosen from held-out seeds.
+(``{'command': ..., 'cases': [...]}``, gzip if the name ends in .gz). `benchmark
+--schedule-spread S` draws a shift per seed instead. Reporting only: nothing is chosen from
+held-out seeds.
 """
 from __future__ import annotations
 
@@ -22,30 +21,8 @@ import gzip
 import json
 from pathlib import Path
 import sys
-import tempfile
-from typing import Any
-
-import yaml
 
 from lf_predictor_ros.benchmark.suite import run_case
-from sim_ros.simulation import scenario_search_dirs
-
-
-def shifted_scenario(name: str, shift: float, directory: Path) -> Path:
-    """Write ``name``'s scenario with every setpoint event ``shift`` s later; return its path."""
-    source = next((d / f'{name}.yaml' for d in scenario_search_dirs()
-                   if (d / f'{name}.yaml').is_file()), None)
-    if source is None:
-        raise SystemExit(f'scenario {name!r} not found in {scenario_search_dirs()}')
-    data: dict[str, Any] = yaml.safe_load(source.read_text(encoding='utf-8'))
-    schedule = data.get('controller', {}).get('setpoint_schedule') or []
-    if not schedule:
-        raise SystemExit(f'scenario {name!r} has no setpoint_schedule: nothing to shift')
-    data['controller']['setpoint_schedule'] = [[float(row[0]) + shift, *row[1:]]
-                                               for row in schedule]
-    path = directory / f'{name}.yaml'
-    path.write_text(yaml.safe_dump(data), encoding='utf-8')
-    return path
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -57,14 +34,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('-o', '--output', required=True, help='JSON (.json or .json.gz)')
     args = parser.parse_args(argv)
     cases = []
-    with tempfile.TemporaryDirectory() as tmp:
-        path = shifted_scenario(args.scenario, args.shift, Path(tmp))
-        for seed in args.seeds:
-            case = run_case(str(path), seed).to_dict()
-            cases.append(case)
-            loops = case['closed_loop']
-            print(f"{args.scenario} {seed} adaptive {loops['adaptive']['position_rmse']:.4f} m "
-                  f"observer {loops['observer']['position_rmse']:.4f} m", flush=True)
+    for seed in args.seeds:
+        case = run_case(args.scenario, seed, schedule_shift=args.shift).to_dict()
+        cases.append(case)
+        loops = case['closed_loop']
+        print(f"{args.scenario} {seed} adaptive {loops['adaptive']['position_rmse']:.4f} m "
+              f"observer {loops['observer']['position_rmse']:.4f} m", flush=True)
     command = 'python docs/scripts/phase_shift_probe.py ' + ' '.join(sys.argv[1:] if argv is None
                                                                     else argv)
     text = json.dumps({'command': command, 'cases': cases})

@@ -44,6 +44,7 @@ from lf_predictor_ros.benchmark.suite import (
     LIMITS,
     LOOP_ESTIMATORS,
     CaseResult,
+    schedule_shift_for_seed,
 )
 from lf_predictor_ros.core.evaluation import DOF_NAMES
 from lf_predictor_ros.core.params import PredictorParams
@@ -98,12 +99,19 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument('--workers', type=int, help='LocalCluster workers (default: cores)')
     parser.add_argument('-o', '--output', default='docs/RESULTS.md', help='results page')
     parser.add_argument('--json', help='raw results (default runs/benchmark-<time>.json)')
+    parser.add_argument('--schedule-spread', type=float, default=0.0, metavar='SECONDS',
+                        help='delay every setpoint event of a case by U(0, SECONDS) drawn from '
+                        'its seed, so that the held-out seeds sample the phase between the '
+                        "predictor's trainings and the manoeuvres (default 0: the scenarios as "
+                        'written, as on docs/RESULTS.md)')
     parser.add_argument('--param', action='append', default=[], metavar='FIELD=VALUE',
                         help='run the predictor with this PredictorParams value instead of '
                         'the shipped default (YAML value; repeatable), e.g. motion_gate=true')
     args = parser.parse_args(argv)
     if args.seeds < 1:
         parser.error('need --seeds >= 1 held-out seed')
+    if not (math.isfinite(args.schedule_spread) and args.schedule_spread >= 0.0):
+        parser.error(f'--schedule-spread must be finite and >= 0 s, got {args.schedule_spread}')
     try:
         args.param = param_overrides(args.param)
     except ValueError as exc:
@@ -175,6 +183,15 @@ def _pct(value: float) -> str:
 
 
 # ------------------------------------------------------------------------------ tables
+def _shift_note(cases: list[CaseResult]) -> str:
+    """' Setpoint events delayed by …' when cases ran with a schedule shift (else '')."""
+    shifts = [float(c.info.get('schedule_shift', 0.0)) for c in cases]
+    if not any(shifts):
+        return ''
+    return (' Setpoint events delayed per seed (`--schedule-spread`) by ' +
+            ', '.join(f'{s:.1f}' for s in shifts) + ' s.')
+
+
 def _reference_text(scenario: str) -> str:
     if load_scenario(scenario).controller.setpoint_schedule:
         return ("the ideal loop's LF track (setpoint moves and turns; the ideal loop's own "
@@ -480,7 +497,7 @@ def render(results: list[CaseResult], command: str, wall: float, where: str,
         by_scenario.setdefault(case.scenario, []).append(case)
     for name, cases in by_scenario.items():
         lines += [f'### {name}', '', f'{len(cases)} held-out seed(s): '
-                  f'{", ".join(str(c.seed) for c in cases)}.', '']
+                  f'{", ".join(str(c.seed) for c in cases)}.' + _shift_note(cases), '']
         if any(c.closed_loop for c in cases):
             lines += _closed_loop_table(cases)
         lines += _open_loop_table(name, cases)
@@ -499,7 +516,9 @@ def _specs(args: argparse.Namespace) -> list[CaseSpec]:
                                                            args.first_seed + args.seeds))
     overrides = {**(FAST_OVERRIDES if args.fast else {}), **args.param}
     return [CaseSpec(name, seed, args.duration or suite.get(name, SUITE.get(name)), overrides,
-                     args.recording_loop) for name in names for seed in seeds]
+                     args.recording_loop,
+                     schedule_shift=schedule_shift_for_seed(seed, args.schedule_spread))
+            for name in names for seed in seeds]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -38,6 +38,7 @@ class CaseSpec:
     recording_loop: str = 'observer'
     estimators: tuple[str, ...] | None = None  # None: every estimator
     loop_estimators: tuple[str, ...] | None = None  # None: every loop if the scenario has a PID
+    schedule_shift: float = 0.0  # s, every setpoint event that much later (suite.run_case)
 
     @property
     def key(self) -> str:
@@ -48,7 +49,7 @@ class CaseSpec:
         """Hash of the printable fields (dicts are not hashable)."""
         return hash((self.scenario, self.seed, self.duration,
                      tuple(sorted(self.params_overrides.items())), self.recording_loop,
-                     self.estimators, self.loop_estimators))
+                     self.estimators, self.loop_estimators, self.schedule_shift))
 
 
 def run_case_task(spec: CaseSpec) -> CaseResult:
@@ -60,6 +61,8 @@ def run_case_task(spec: CaseSpec) -> CaseResult:
                               'params_overrides': dict(spec.params_overrides) or None,
                               'loop_estimators': spec.loop_estimators,
                               'recording_loop': spec.recording_loop}
+    if spec.schedule_shift:
+        kwargs['schedule_shift'] = spec.schedule_shift
     if spec.estimators is not None:
         kwargs['estimators'] = spec.estimators
     return run_case(spec.scenario, spec.seed, **kwargs)

@@ -95,10 +95,13 @@ from sim_ros.simulation import (
     Simulator,
     load_scenario,
     simulate,
+    with_schedule_shift,
 )
 
 FloatArray = NDArray[np.float64]
 DEFAULT_RECORDING_LOOP = 'observer'
+# Stream key of `schedule_shift_for_seed`'s generator, apart from the simulator's seed streams.
+SCHEDULE_SHIFT_STREAM = 0x5C4ED
 LEAK_REFERENCE = 'oracle_kf'  # always in the leak check's set of causal estimators
 
 
@@ -407,22 +410,43 @@ def scored_start(params: PredictorParams, samples: int) -> int:
     return min(first_training_samples(params) + 2 * params.retrain_samples, samples // 2)
 
 
+def schedule_shift_for_seed(seed: int, spread: float) -> float:
+    """The setpoint schedule's delay [s] for ``seed``: U(0, ``spread``), 0 when spread is 0.
+
+    Drawn from its own stream (``SCHEDULE_SHIFT_STREAM``), so the sea, the noise and every other
+    draw of the seed are unchanged. Every held-out seed has the same event times otherwise, and
+    the predictor retrains at the same instants in every run: the benchmark's intervals would
+    not cover the phase between trainings and manoeuvres (docs/BENCHMARKS.md, twenty-first
+    session).
+    """
+    if not (math.isfinite(spread) and spread >= 0.0):
+        raise ValueError(f'the schedule shift spread must be finite and >= 0 s, got {spread!r}')
+    if spread == 0.0:
+        return 0.0
+    return float(np.random.default_rng((seed, SCHEDULE_SHIFT_STREAM)).uniform(0.0, spread))
+
+
 def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
              params_overrides: dict[str, Any] | None = None,
              estimators: Sequence[str] = ESTIMATORS,
              loop_estimators: Sequence[str] | None = None,
              recording_loop: str = DEFAULT_RECORDING_LOOP,
-             recording: Recording | None = None) -> CaseResult:
+             recording: Recording | None = None,
+             schedule_shift: float = 0.0) -> CaseResult:
     """Record ``scenario_name`` with ``seed`` fairly and score the estimators (module docstring).
 
     ``loop_estimators``: closed loops to run (None: `LOOP_ESTIMATORS` when the scenario has its
     controller enabled, else none; () for none). ``recording``: score this one instead of
     recording anew (its provenance must match and pass; a truth-fed one raises `LeakError`).
+    ``schedule_shift`` [s]: every setpoint event that much later (`with_schedule_shift`; 0: the
+    scenario as written), for every loop and the recording alike.
     """
     unknown = [n for n in estimators if n not in ESTIMATORS]
     if unknown:
         raise ValueError(f'unknown estimator(s) {unknown}; choose from {ESTIMATORS}')
     scenario = load_scenario(scenario_name)
+    scenario = replace(scenario, controller=with_schedule_shift(scenario.controller,
+                                                                schedule_shift))
     params = predictor_params(scenario, params_overrides)
     setup = make_setup(scenario, seed, params)
     if recording is None:
@@ -435,6 +459,8 @@ def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
     info: dict[str, Any] = {'sample_time': setup.sample_time, 'params': params.to_dict(),
                             'baselines': 'untuned defaults' if tuning.get('source') == 'defaults'
                             else 'config/baselines'}
+    if schedule_shift:
+        info['schedule_shift'] = schedule_shift
     begin = scored_start(params, len(data['t']))
     outputs = run_open_loop(data, setup, estimators, info, begin)
     truth = data['truth'][begin:]

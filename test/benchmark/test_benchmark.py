@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 
 from lf_predictor_ros.benchmark.adaptation import AdaptationEvent
-from lf_predictor_ros.benchmark.benchmark import main, param_overrides, render, write_figures
+from lf_predictor_ros.benchmark.benchmark import (
+    _parse,
+    _specs,
+    main,
+    param_overrides,
+    render,
+    write_figures,
+)
 from lf_predictor_ros.benchmark.recordings import LeakError, record
 from lf_predictor_ros.benchmark.suite import (
     CAUSAL,
@@ -22,6 +29,7 @@ from lf_predictor_ros.benchmark.suite import (
     make_setup,
     predictor_params,
     run_case,
+    schedule_shift_for_seed,
     score_adaptation,
     scored_start,
 )
@@ -332,3 +340,21 @@ def test_every_fast_case_scores_enough_samples_for_the_linear_limit() -> None:
         scored = samples - scored_start(params, samples)
         coefficients = params.ndof * (params.nu + params.ny - 1) + 1
         assert scored >= 4 * coefficients, (name, scored, coefficients)
+
+
+def test_schedule_spread_gives_each_seed_its_own_shift(capsys: pytest.CaptureFixture[str],
+                                                       ) -> None:
+    """--schedule-spread S: case k gets U(0, S) from its seed, the same every run; 0: none."""
+    shifts = [schedule_shift_for_seed(seed, 60.0) for seed in range(11, 31)]
+    assert shifts == [schedule_shift_for_seed(seed, 60.0) for seed in range(11, 31)]
+    assert all(0.0 <= s < 60.0 for s in shifts) and len(set(shifts)) == len(shifts)
+    assert max(shifts) - min(shifts) > 30.0  # they spread over the interval
+    assert schedule_shift_for_seed(11, 0.0) == 0.0
+    specs = _specs(_parse(['--scenarios', 'rao_supply', '--seeds', '3', '--schedule-spread',
+                           '60']))
+    assert [(s.seed, s.schedule_shift) for s in specs] == \
+        [(seed, schedule_shift_for_seed(seed, 60.0)) for seed in (11, 12, 13)]
+    assert all(s.schedule_shift == 0.0 for s in _specs(_parse(['--seeds', '2'])))
+    with pytest.raises(SystemExit):
+        main(['--schedule-spread', '-5'])
+    assert '--schedule-spread must be finite and >= 0' in capsys.readouterr().err

@@ -19,6 +19,7 @@ from sim_ros.simulation import (
     load_scenario,
     scenario_from_dict,
     simulate,
+    with_schedule_shift,
 )
 
 SCENARIOS = ['onedof_reference', 'onedof_excited', 'onedof_no_excitation', 'onedof_feedback',
@@ -172,3 +173,22 @@ def test_wave_peak_freq_follows_schedule_and_true_model() -> None:
     assert onedof.true_model().mass[0, 0] == pytest.approx(1 / 0.00068)
     with pytest.raises(ValueError, match='tau_command'):
         sim.step(np.zeros(2))
+
+
+def test_a_schedule_shift_moves_every_event_and_nothing_else() -> None:
+    """rao_supply's events 30 s later: the setpoint at t + 30 is the old one at t, inputs kept."""
+    controller = load_scenario('rao_supply').controller
+    rows = controller.setpoint_schedule
+    moved = with_schedule_shift(controller, 30.0)
+    assert [row[0] for row in moved.setpoint_schedule] == [row[0] + 30.0 for row in rows]
+    assert [row[1:] for row in moved.setpoint_schedule] == [row[1:] for row in rows]
+    assert replace(moved, setpoint_schedule=rows) == controller  # nothing else changed
+    assert controller.setpoint_schedule == rows  # the input is not modified
+    times = np.arange(0.0, 3500.0, 7.0)
+    assert np.array_equal(moved.setpoint_series(times + 30.0), controller.setpoint_series(times))
+    assert with_schedule_shift(controller, 0.0) is controller
+    still = load_scenario('supply_closed_loop').controller  # station keeping: no schedule
+    assert with_schedule_shift(still, 30.0) is still
+    for bad in (-1.0, math.nan, math.inf):
+        with pytest.raises(ValueError, match='schedule shift must be finite and >= 0'):
+            with_schedule_shift(controller, bad)

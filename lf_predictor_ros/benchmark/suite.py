@@ -445,8 +445,9 @@ def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
     if unknown:
         raise ValueError(f'unknown estimator(s) {unknown}; choose from {ESTIMATORS}')
     scenario = load_scenario(scenario_name)
-    scenario = replace(scenario, controller=with_schedule_shift(scenario.controller,
-                                                                schedule_shift))
+    if schedule_shift:
+        scenario = replace(scenario, controller=with_schedule_shift(scenario.controller,
+                                                                    schedule_shift))
     params = predictor_params(scenario, params_overrides)
     setup = make_setup(scenario, seed, params)
     if recording is None:
@@ -459,7 +460,7 @@ def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
     info: dict[str, Any] = {'sample_time': setup.sample_time, 'params': params.to_dict(),
                             'baselines': 'untuned defaults' if tuning.get('source') == 'defaults'
                             else 'config/baselines'}
-    if schedule_shift:
+    if schedule_shift and scenario.controller.setpoint_schedule:  # else nothing was moved
         info['schedule_shift'] = schedule_shift
     begin = scored_start(params, len(data['t']))
     outputs = run_open_loop(data, setup, estimators, info, begin)

@@ -54,7 +54,7 @@ _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
-                'sea_change_revert', 'motion_gate_guard_gated')
+                'sea_change_revert')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -127,12 +127,6 @@ class PredictorParams:
             'with motion_gate and 3 DOF: the gate acts on the heading too; false: north and '
             "east only, the heading is the holding network's (the twin lets more of a swell's "
             'yaw motion through in turns)'))
-    motion_gate_guard_gated: bool = field(
-        default=False, metadata=_doc(
-            "with motion_gate: the twin's plausibility guard checks only the DOFs the gate acts "
-            'on (north and east unless motion_gate_yaw): a heading the gate never publishes '
-            "does not send the twin to its fallback, which shuts the gate on north and east "
-            '(in turns; issue 13)'))
     motion_gate_yaw_notch: float = field(
         default=0.0, metadata=_doc(
             'with motion_gate and motion_gate_yaw: width ζ of a causal notch at the estimated '

@@ -293,8 +293,6 @@ class AdaptivePredictor:
         # core.motion_gate when the vessel moves faster than it usually does.
         self._moving: AdaptivePredictor | None = None
         self._gate: MotionGate | None = None
-        # the DOFs the plausibility guard checks (None: all; motion_gate_guard_gated on a twin)
-        self._guard_dofs: list[bool] | None = None
         if params.motion_gate:
             self._moving = AdaptivePredictor(
                 params.replace(motion_gate=False, ramp_invariant=True,
@@ -305,8 +303,6 @@ class AdaptivePredictor:
                 max_trainings=max_trainings, training_lock=self._training_lock)
             self._gate = MotionGate(params.ndof, params.sample_time,
                                     window=params.training_window)
-            if params.motion_gate_guard_gated:  # the twin answers only for what the gate uses
-                self._moving._guard_dofs = [True, True, params.motion_gate_yaw][:params.ndof]
         self._roughness = (RoughnessGuard(params.ndof, params.sample_time,
                                           params.roughness_guard_time)
                            if params.roughness_guard_time > 0.0 else None)
@@ -778,14 +774,11 @@ class AdaptivePredictor:
                 spread, (GUARD_SPREADS * spread + GUARD_FLOOR[:self.ndof]).tolist())
         bound = guard[1]
         predicted, measured = np.asarray(prediction).tolist(), np.asarray(y).tolist()
-        checked = self._guard_dofs
         if not (isinstance(bound, list) and isinstance(predicted, list) and
                 isinstance(measured, list) and len(bound) == len(predicted) == len(measured)):
-            within = np.abs(prediction - y) <= bound  # not one pose: broadcast
-            return bool(np.all(within if checked is None else within[..., checked]))
+            return bool(np.all(np.abs(prediction - y) <= bound))  # not one pose: broadcast
         # np.all(|prediction − y| <= bound) of one pose (NaN is not plausible)
-        return all(abs(a - b) <= c for a, b, c, on in zip(
-            predicted, measured, bound, checked or [True] * len(bound), strict=True) if on)
+        return all(abs(a - b) <= c for a, b, c in zip(predicted, measured, bound, strict=True))
 
     # ---- bumpless transfer and rate limit (output only; off with the defaults) ---------------
 

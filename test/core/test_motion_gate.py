@@ -641,31 +641,3 @@ def test_with_the_yaw_notch_the_gate_changes_the_heading_only(
     opened = gated.gain[:, 2] > 0.5
     assert np.count_nonzero(opened) > 20
     assert np.max(np.abs(notched.out[opened, 2] - gated.out[opened, 2])) > 1e-5
-
-
-def test_the_twins_guard_checks_only_the_dofs_the_gate_publishes() -> None:
-    """motion_gate_guard_gated: a twin heading far off (never published) is no trip; north is.
-
-    The holding network's guard and a twin without the option check every DOF.
-    """
-    params = SMALL.replace(motion_gate=True, motion_gate_yaw=False)
-    gated = AdaptivePredictor(params.replace(motion_gate_guard_gated=True), background=False)
-    plain = AdaptivePredictor(params, background=False)
-    spread = np.array([0.1, 0.1, 0.01])
-    measured = np.array([5.0, -3.0, 0.2])
-    heading_off = measured + np.array([0.0, 0.0, 1.0])  # 1 rad: far beyond any bound
-    north_off = measured + np.array([100.0, 0.0, 0.0])
-    verdicts = {}
-    for name, predictor in (('gated', gated), ('plain', plain)):
-        for who in (predictor, predictor._moving):
-            assert who is not None
-            who._wave_spread = spread
-        twin = predictor._moving
-        assert twin is not None
-        verdicts[name] = (twin._plausible(heading_off, measured),
-                          twin._plausible(north_off, measured),
-                          predictor._plausible(heading_off, measured))
-    assert verdicts['gated'] == (True, False, False)
-    assert verdicts['plain'] == (False, False, False)
-    for predictor in (gated, plain):
-        predictor.close()

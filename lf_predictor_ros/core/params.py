@@ -54,7 +54,7 @@ _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
-                'sea_change_revert', 'motion_gate_on_trip')
+                'sea_change_revert')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -127,11 +127,6 @@ class PredictorParams:
             'with motion_gate and 3 DOF: the gate acts on the heading too; false: north and '
             "east only, the heading is the holding network's (the twin lets more of a swell's "
             'yaw motion through in turns)'))
-    motion_gate_on_trip: bool = field(
-        default=False, metadata=_doc(
-            "with motion_gate: while the holding network's guard trips, north and east come "
-            "from the twin (gate fully open) instead of the cascade fallback, as long as the "
-            'twin itself is on its network (a turn the holding network extrapolates; issue 13)'))
     motion_gate_yaw_notch: float = field(
         default=0.0, metadata=_doc(
             'with motion_gate and motion_gate_yaw: width ζ of a causal notch at the estimated '

@@ -293,7 +293,6 @@ class AdaptivePredictor:
         # core.motion_gate when the vessel moves faster than it usually does.
         self._moving: AdaptivePredictor | None = None
         self._gate: MotionGate | None = None
-        self._tripped = False  # the holding network's guard tripped on this sample
         if params.motion_gate:
             self._moving = AdaptivePredictor(
                 params.replace(motion_gate=False, ramp_invariant=True,
@@ -349,9 +348,7 @@ class AdaptivePredictor:
         if self._roughness is not None and self._roughness.update(y, prediction):
             prediction = self._retire_rough_network()
         model = self._model
-        self._tripped = False
         if prediction is not None and not self._plausible(prediction, y):
-            self._tripped = True
             self._guard_trips += 1
             self._message = 'network prediction implausible: cascade fallback'
             prediction = None
@@ -919,11 +916,6 @@ class AdaptivePredictor:
             self._validate_gate(out, out)
             return out
         gain = dead_zoned(self._gate.update(moving), self.params.motion_gate_dead_zone)
-        if self._tripped and self.params.motion_gate_on_trip:
-            # the holding network left its plausible range (a turn it extrapolates): the twin,
-            # on its network and plausible, serves north and east instead of the cascade
-            gain = np.array(gain, dtype=np.float64)
-            gain[:min(2, self.ndof)] = 1.0
         if self._gate_alpha < 1.0:
             # LP(moving − holding) of core.motion_gate (motion_gate_smoothing)
             self._gate_offset = low_pass_step(self._gate_offset, offset, self._gate_alpha)

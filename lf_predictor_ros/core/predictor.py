@@ -1014,10 +1014,12 @@ class AdaptivePredictor:
             self._collect_outcomes(t)
 
     def _revertible(self) -> tuple[float, TargetWindow] | None:
-        """``sea_change_revert``: what a restart at most 2Δ ago replaced, else None."""
+        """``sea_change_revert``: what a restart at most 2Δ ago replaced, else None.
+
+        A query: an older entry is only ignored here, the next restart replaces it.
+        """
         before = self._before_restart
         if before is None or self._k - before[2] > 2 * self.params.retrain_samples:
-            self._before_restart = None
             return None
         return before[0], before[1]
 

@@ -11,6 +11,9 @@ from the benchmark's first scored sample (`suite.scored_start`), trainings accep
 trainings without thrust and the largest output step over the largest true LF step per DOF
 (`evaluation.Metrics.largest_step_ratio`). ``--profile`` adds the error per 60 s block (where
 it is made).
+``--schedule-spread`` (default: one retraining period, as `benchmark`) delays each seed's
+setpoint events by its own draw, so that a screen samples the phase between trainings and
+manoeuvres (docs/BENCHMARKS.md, twenty-first and twenty-second sessions).
 ``--closed-loop`` also puts each variant in its own DP loop (`suite.run_closed_loops`, same seed,
 scored like `benchmark` from the same sample) next to the observer (the recording's own loop),
 oracle_kf and raw loops: position / heading RMSE, largest excursion, wave-band thrust power per
@@ -32,18 +35,19 @@ import numpy as np
 import torch
 
 from lf_predictor_ros.benchmark.baseline_tuning import TUNING_SEEDS
-from lf_predictor_ros.benchmark.benchmark import FIRST_HELD_OUT_SEED
+from lf_predictor_ros.benchmark.benchmark import FIRST_HELD_OUT_SEED, SCHEDULE_SPREAD
 from lf_predictor_ros.benchmark.estimators import predictor_params
 from lf_predictor_ros.benchmark.suite import (
     make_recording,
     make_setup,
     run_closed_loops,
+    schedule_shift_for_seed,
     scored_start,
 )
 from lf_predictor_ros.core.evaluation import score
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.predictor import AdaptivePredictor
-from sim_ros.simulation import load_scenario, simulate
+from sim_ros.simulation import load_scenario, simulate, with_schedule_shift
 
 LOOP_REFERENCES = ('observer', 'oracle_kf', 'raw')
 # Neither tuning (baseline_tuning.TUNING_SEEDS) nor held out (benchmark.FIRST_HELD_OUT_SEED on).
@@ -71,9 +75,18 @@ def parse_variant(text: str) -> tuple[str, dict[str, Any]]:
     return name, overrides
 
 
-def fair_case(scenario_name: str, seed: int, duration: float) -> tuple[Any, Any, Any, Any]:
-    """(scenario, shipped predictor params, estimator setup, fair recording) of one case."""
+def fair_case(scenario_name: str, seed: int, duration: float,
+              schedule_spread: float = 0.0) -> tuple[Any, Any, Any, Any]:
+    """(scenario, shipped predictor params, estimator setup, fair recording) of one case.
+
+    ``schedule_spread`` [s]: setpoint events delayed by the seed's U(0, spread) draw, as
+    `benchmark --schedule-spread` does.
+    """
     scenario = load_scenario(scenario_name)
+    shift = schedule_shift_for_seed(seed, schedule_spread)
+    if shift and scenario.controller.setpoint_schedule:
+        scenario = replace(scenario, controller=with_schedule_shift(scenario.controller, shift))
+        print(f'{scenario_name:20s} {seed} setpoint events delayed {shift:.1f} s', flush=True)
     params = predictor_params(scenario)
     setup = make_setup(scenario, seed, params)
     return scenario, params, setup, make_recording(scenario, seed, duration, setup)
@@ -81,9 +94,9 @@ def fair_case(scenario_name: str, seed: int, duration: float) -> tuple[Any, Any,
 
 def run(scenario_name: str, seed: int, variants: Sequence[tuple[str, dict[str, Any]]],
         duration: float, profile: bool, closed_loop: bool = False,
-        open_loop: bool = True) -> None:
+        open_loop: bool = True, schedule_spread: float = 0.0) -> None:
     """Print one line per variant (and the error profile with ``profile``)."""
-    scenario, base, setup, recording = fair_case(scenario_name, seed, duration)
+    scenario, base, setup, recording = fair_case(scenario_name, seed, duration, schedule_spread)
     data = recording.data()
     t, y, u, truth = data['t'], data['y'], data['u'], data['truth']
     for name, overrides in variants if open_loop else ():
@@ -159,6 +172,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--closed-loop', action='store_true', help='also run the DP loops')
     parser.add_argument('--loops-only', action='store_true',
                         help='with --closed-loop: skip the open-loop replays')
+    parser.add_argument('--schedule-spread', type=float, default=SCHEDULE_SPREAD,
+                        metavar='SECONDS', help="delay the setpoint events by the seed's "
+                        f'U(0, SECONDS) draw, as benchmark does (default {SCHEDULE_SPREAD:g}; '
+                        '0: the scenario as written, as every screen before the twenty-second '
+                        'session)')
     args = parser.parse_args(argv)
     if set(args.seeds) - set(TUNING_SEEDS) - set(DEVELOPMENT_SEEDS):
         parser.error(f'only the tuning seeds {TUNING_SEEDS} and the development seeds '
@@ -168,7 +186,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for scenario_name in args.scenarios:
         for seed in args.seeds:
             run(scenario_name, seed, variants, args.duration, args.profile, args.closed_loop,
-                open_loop=not args.loops_only)
+                open_loop=not args.loops_only, schedule_spread=args.schedule_spread)
     return 0
 
 

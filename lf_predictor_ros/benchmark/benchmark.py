@@ -78,6 +78,9 @@ FIGURE_DIR = 'results'  # next to the results page
 RAO_ORACLE_NOTE = (' Here oracle_kf knows the vessel, environment and noise but models the RAO '
                    'sea by a 2nd-order filter fitted to its peak and variance: a strong '
                    'baseline, not a limit.')
+# [s] default --schedule-spread: one retraining period, so the held-out seeds draw the phase
+# between trainings and setpoint events (docs/BENCHMARKS.md, twenty-second session)
+SCHEDULE_SPREAD = PredictorParams().retrain_period
 EPS_TIME = 1e-6  # [s] 'just before' a change time (schedules are right-continuous at steps)
 
 
@@ -99,11 +102,13 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument('--workers', type=int, help='LocalCluster workers (default: cores)')
     parser.add_argument('-o', '--output', default='docs/RESULTS.md', help='results page')
     parser.add_argument('--json', help='raw results (default runs/benchmark-<time>.json)')
-    parser.add_argument('--schedule-spread', type=float, default=0.0, metavar='SECONDS',
+    parser.add_argument('--schedule-spread', type=float, default=SCHEDULE_SPREAD,
+                        metavar='SECONDS',
                         help='delay every setpoint event of a case by U(0, SECONDS) drawn from '
                         'its seed, so that the held-out seeds sample the phase between the '
-                        "predictor's trainings and the manoeuvres (default 0: the scenarios as "
-                        'written, as on docs/RESULTS.md)')
+                        "predictor's trainings and the manoeuvres (default "
+                        f'{SCHEDULE_SPREAD:g} s, the retraining period, as on docs/RESULTS.md; '
+                        '0: the scenarios as written)')
     parser.add_argument('--param', action='append', default=[], metavar='FIELD=VALUE',
                         help='run the predictor with this PredictorParams value instead of '
                         'the shipped default (YAML value; repeatable), e.g. motion_gate=true')

@@ -10,6 +10,7 @@ import pytest
 
 from lf_predictor_ros.benchmark.adaptation import AdaptationEvent
 from lf_predictor_ros.benchmark.benchmark import (
+    SCHEDULE_SPREAD,
     _parse,
     _specs,
     main,
@@ -35,6 +36,7 @@ from lf_predictor_ros.benchmark.suite import (
 )
 from lf_predictor_ros.core.alignment import mean_pose
 from lf_predictor_ros.core.evaluation import DEFAULT_WAVE_BAND, LoopRun, Metrics, loop_metrics
+from lf_predictor_ros.core.params import PredictorParams
 from sim_ros.simulation import load_scenario, simulate, simulate_in_loop
 
 
@@ -344,7 +346,7 @@ def test_every_fast_case_scores_enough_samples_for_the_linear_limit() -> None:
 
 def test_schedule_spread_gives_each_seed_its_own_shift(capsys: pytest.CaptureFixture[str],
                                                        ) -> None:
-    """--schedule-spread S: case k gets U(0, S) from its seed, the same every run; 0: none."""
+    """--schedule-spread S: case k gets U(0, S) from its seed (default S = Δ); 0: none."""
     shifts = [schedule_shift_for_seed(seed, 60.0) for seed in range(11, 31)]
     assert shifts == [schedule_shift_for_seed(seed, 60.0) for seed in range(11, 31)]
     assert all(0.0 <= s < 60.0 for s in shifts) and len(set(shifts)) == len(shifts)
@@ -354,7 +356,12 @@ def test_schedule_spread_gives_each_seed_its_own_shift(capsys: pytest.CaptureFix
                            '60']))
     assert [(s.seed, s.schedule_shift) for s in specs] == \
         [(seed, schedule_shift_for_seed(seed, 60.0)) for seed in (11, 12, 13)]
-    assert all(s.schedule_shift == 0.0 for s in _specs(_parse(['--seeds', '2'])))
+    assert SCHEDULE_SPREAD == PredictorParams().retrain_period == 60.0
+    assert [s.schedule_shift for s in _specs(_parse(['--scenarios', 'rao_swell', '--seeds',
+                                                      '2']))] == \
+        [schedule_shift_for_seed(seed, SCHEDULE_SPREAD) for seed in (11, 12)]  # the default
+    assert all(s.schedule_shift == 0.0 for s in _specs(_parse(['--seeds', '2',
+                                                                '--schedule-spread', '0'])))
     with pytest.raises(SystemExit):
         main(['--schedule-spread', '-5'])
     assert '--schedule-spread must be finite and >= 0' in capsys.readouterr().err

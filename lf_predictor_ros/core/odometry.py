@@ -191,9 +191,10 @@ class OdometryParams:
         'against them do not scale to the errors against the truth (retraining.narrow_reference; '
         'false: the training targets themselves)', ''))
     twist_shrinkage_time: float = field(default=0.0, metadata=field_doc(
-        'publish each twist DOF shrunk towards zero by k = max(0, 1 − σ²/m): σ² the calibrated '
-        "error variance of the Kalman filter's twist (twist_cov_scale × its own error model), m "
-        'its mean square low-passed over this time. The Wiener gain with the signal power '
+        'publish each twist DOF shrunk towards zero by k = max(0, 1 − σ²/m): σ² the error '
+        "variance of the Kalman filter's twist against the targets (its own error model, not "
+        'scaled: twist_cov_scale is calibrated for what is published), m its mean square '
+        'low-passed over this time. The Wiener gain with the signal power '
         'estimated as m − σ²: where the LF velocity is smaller than the twist error (station '
         'keeping: residual wave motion, differentiated) the twist goes towards zero, in a '
         'manoeuvre it passes. The published twist covariance is calibrated on the shrunk twist '
@@ -873,7 +874,7 @@ class LfOdometry:
         model = self._twist_cov.get(KALMAN_TWIST)
         if model is None:
             return twist.copy()
-        noise = self.params.twist_cov_scale * np.diag(model.covariance(accel, 1.0))
+        noise = np.diag(model.covariance(accel, 1.0))  # against the targets, not scaled
         with np.errstate(divide='ignore', invalid='ignore'):
             gain = np.clip(1.0 - noise / self._twist_power, 0.0, 1.0)
         return np.where(np.isfinite(gain), gain, 0.0) * twist

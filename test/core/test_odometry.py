@@ -198,14 +198,15 @@ def test_published_twist_covariance_grows_with_the_acceleration() -> None:
 @pytest.mark.parametrize(('speed', 'expected'), [(0.02, 0.015), (0.005, 0.0), (0.2, 0.1995)])
 def test_twist_shrinkage_is_the_wiener_gain_of_the_kalman_twist(speed: float,
                                                                  expected: float) -> None:
-    """Gain k = max(0, 1 − σ²/m), σ² = twist_cov_scale · Kalman twist model, m its mean square.
+    """Gain k = max(0, 1 − σ²/m), σ² the Kalman twist's model (unscaled), m its mean square.
 
-    Straight north at constant speed: the Kalman twist → speed, m → speed². With σ² = 0.5 ·
-    2e-4 = 1e-4 m²/s²: 0.02 m/s → k = 1 − 1e-4/4e-4 = 0.75 (0.015 m/s); 0.005 m/s, slower than
-    the error → 0; 0.2 m/s → k = 0.9975. Sway and yaw rate (0, below any error) stay 0.
+    Straight north at constant speed: the Kalman twist → speed, m → speed². With σ² = 1e-4
+    m²/s² (twist_cov_scale does not enter): 0.02 m/s → k = 1 − 1e-4/4e-4 = 0.75 (0.015 m/s);
+    0.005 m/s, slower than the error → 0; 0.2 m/s → k = 0.9975. Sway and yaw rate (0, below
+    any error) stay 0.
     """
     params = OdometryParams(twist_cov_scale=0.5, twist_shrinkage_time=30.0)
-    hold = 2e-4 * np.eye(3)
+    hold = 1e-4 * np.eye(3)
     model = ErrorModel(moment=hold, hold=hold, gain=np.zeros(3))
     odo = LfOdometry(3, H, params)
     odo.apply_learned(None, ({'all': model}, {'all': model, KALMAN_TWIST: model}))

@@ -368,7 +368,7 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     rows = np.concatenate([np.arange(a, b) for a, b in runs])
     starts = np.cumsum([b - a for a, b in runs])[:-1].tolist()
     poses = np.array([published[k].pose for k in rows])
-    twists = np.array([published[k].kalman_twist for k in rows])  # not shrunk
+    twists = np.array([published[k].twist for k in rows])
     try:
         gains = fit_controller_gains(poses, twists, forces[index[rows]], sample_time,
                                      run_starts=starts)

@@ -78,9 +78,6 @@ EstimateSource = Literal['network', 'fallback']
 # (pose error model, twist error model) per source ('network', 'fallback', 'all')
 Covariances = tuple[dict[str, 'ErrorModel'], dict[str, 'ErrorModel']]
 SOURCES: tuple[EstimateSource, ...] = ('network', 'fallback')
-# Key of the unshrunk Kalman twist's error model among the twist error models (pooled over the
-# sources; only with ``twist_shrinkage_time``: its gain needs the unshrunk twist's error).
-KALMAN_TWIST = 'kalman_twist'
 
 # Variance published for a pose/twist entry that is not estimated (ndof 1: east, yaw) [m², rad²].
 UNESTIMATED_VARIANCE = 1e6
@@ -190,16 +187,6 @@ class OdometryParams:
         'notch targets are smoother than the truth by a sea-dependent amount, so errors measured '
         'against them do not scale to the errors against the truth (retraining.narrow_reference; '
         'false: the training targets themselves)', ''))
-    twist_shrinkage_time: float = field(default=0.0, metadata=field_doc(
-        'publish each twist DOF shrunk towards zero by k = max(0, 1 − σ²/m): σ² the error '
-        "variance of the Kalman filter's twist against the targets (its own error model, not "
-        'scaled: twist_cov_scale is calibrated for what is published), m its mean square '
-        'low-passed over this time. The Wiener gain with the signal power '
-        'estimated as m − σ²: where the LF velocity is smaller than the twist error (station '
-        'keeping: residual wave motion, differentiated) the twist goes towards zero, in a '
-        'manoeuvre it passes. The published twist covariance is calibrated on the shrunk twist '
-        'itself; dead reckoning and the controller read keep the unshrunk twist. 0 = off '
-        '(issue 14)', 's'))
     min_calibration_samples: int = field(default=60, metadata=field_doc(
         'fewest matched samples of one source for its own covariance (else all sources)', ''))
 
@@ -223,8 +210,7 @@ class OdometryParams:
                 self.dead_reckoning_velocity_time > 0.0):
             raise ValueError('dead_reckoning_velocity_time must be a positive number of seconds, '
                              f'got {self.dead_reckoning_velocity_time}')
-        for name in ('reacquire_time', 'reacquire_blend_time', 'twist_bandwidth',
-                     'twist_shrinkage_time'):
+        for name in ('reacquire_time', 'reacquire_blend_time', 'twist_bandwidth'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f'{name} must be a finite number >= 0 s, got {value}')
@@ -318,13 +304,6 @@ class Published:
     source: EstimateSource
     accel: FloatArray  # the twist's low-passed change per second (twist error model regressor)
     lag: FloatArray  # the pose error model's regressor w (`LfOdometry._lag_regressor`)
-    # the Kalman filter's twist before ``twist_shrinkage_time`` shrank it (None: not shrunk)
-    raw_twist: FloatArray | None = None
-
-    @property
-    def kalman_twist(self) -> FloatArray:
-        """The Kalman filter's twist (``raw_twist`` when shrunk, else ``twist``)."""
-        return self.twist if self.raw_twist is None else self.raw_twist
 
 
 class LfOdometry:
@@ -351,7 +330,6 @@ class LfOdometry:
         self._pose_cov: dict[str, ErrorModel] = {}
         self._twist_cov: dict[str, ErrorModel] = {}
         self._accel: tuple[float, FloatArray, FloatArray] | None = None  # (t, twist, accel)
-        self._twist_power: FloatArray | None = None  # low-passed ν_i², twist_shrinkage_time
         self._lag_peak: tuple[float, FloatArray] | None = None  # (t, held w²), pose_lag_memory
         self._history: deque[Published] = deque(maxlen=HISTORY_SAMPLES)
         self._x: FloatArray | None = None
@@ -440,9 +418,7 @@ class LfOdometry:
         twist = x[self.ndof:].copy()
         accel = self._twist_change(t, twist)
         lag = self._lag_regressor(t, z, twist)
-        shrunk = self._shrunk_twist(twist, accel)
-        self._history.append(Published(t, z.copy(), twist if shrunk is None else shrunk, source,
-                                       accel, lag, None if shrunk is None else twist))
+        self._history.append(Published(t, z.copy(), twist, source, accel, lag))
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
         self._slow_twist = twist.copy() if self._slow_twist is None else \
             low_pass_step(self._slow_twist, twist, alpha)
@@ -452,8 +428,7 @@ class LfOdometry:
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
                                             self._pose_covariance(source, lag))
         out = OdometryEstimate(
-            stamp=t, pose=published, pose_cov=pose_cov,
-            twist=self._full(twist if shrunk is None else shrunk),
+            stamp=t, pose=published, pose_cov=pose_cov, twist=self._full(twist),
             twist_cov=self._twist_covariance(source, accel), mode='tracking',
             dead_reckoning_time=0.0,
             calibrated=self.calibrated, reckoner=self.reckoner)
@@ -859,26 +834,6 @@ class LfOdometry:
         self._accel = (t, twist, accel)
         return accel
 
-    def _shrunk_twist(self, twist: FloatArray, accel: FloatArray) -> FloatArray | None:
-        """The twist shrunk by ``twist_shrinkage_time``'s gain, or None when off (O(n)).
-
-        Before the first calibration with the unshrunk twist's model the gain is 1.
-        """
-        time = self.params.twist_shrinkage_time
-        if time <= 0.0:
-            return None
-        power = twist * twist
-        alpha = min(1.0, self.sample_time / time)
-        self._twist_power = power if self._twist_power is None else \
-            low_pass_step(self._twist_power, power, alpha)
-        model = self._twist_cov.get(KALMAN_TWIST)
-        if model is None:
-            return twist.copy()
-        noise = np.diag(model.covariance(accel, 1.0))  # against the targets, not scaled
-        with np.errstate(divide='ignore', invalid='ignore'):
-            gain = np.clip(1.0 - noise / self._twist_power, 0.0, 1.0)
-        return np.where(np.isfinite(gain), gain, 0.0) * twist
-
     def _twist_covariance(self, source: EstimateSource, accel: FloatArray) -> FloatArray:
         n = self.ndof
         if self._twist_cov:
@@ -953,9 +908,6 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
     pose_cov: dict[str, ErrorModel] = {'all': pooled}
     accel = np.array([p.accel for p in rows])
     twist_cov: dict[str, ErrorModel] = {'all': fit_error_model(twist_err, accel)}
-    if all(p.raw_twist is not None for p in rows):  # twist_shrinkage_time: the unshrunk one too
-        kalman_err = np.array([p.kalman_twist for p in rows]) - velocity[idx]
-        twist_cov[KALMAN_TWIST] = fit_error_model(kalman_err, accel)
     for source in SOURCES:
         mask = sources == source
         if np.count_nonzero(mask) >= min_samples:

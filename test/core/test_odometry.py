@@ -10,7 +10,6 @@ import pytest
 from lf_predictor_ros.core.lf_dynamics import DriftCurve, LfDynamics, VesselMemory
 from lf_predictor_ros.core.odometry import (
     HOLD_FLOOR_FRACTION,
-    KALMAN_TWIST,
     UNESTIMATED_VARIANCE,
     ErrorModel,
     LfOdometry,
@@ -193,59 +192,6 @@ def test_published_twist_covariance_grows_with_the_acceleration() -> None:
         assert out is not None and out.calibrated
         assert out.twist_cov[0, 0] == pytest.approx(expected, rel=0.03)
         assert out.twist_cov[1, 1] == pytest.approx(0.5e-4, rel=1e-6)
-
-
-@pytest.mark.parametrize(('speed', 'expected'), [(0.02, 0.015), (0.005, 0.0), (0.2, 0.1995)])
-def test_twist_shrinkage_is_the_wiener_gain_of_the_kalman_twist(speed: float,
-                                                                 expected: float) -> None:
-    """Gain k = max(0, 1 − σ²/m), σ² the Kalman twist's model (unscaled), m its mean square.
-
-    Straight north at constant speed: the Kalman twist → speed, m → speed². With σ² = 1e-4
-    m²/s² (twist_cov_scale does not enter): 0.02 m/s → k = 1 − 1e-4/4e-4 = 0.75 (0.015 m/s);
-    0.005 m/s, slower than the error → 0; 0.2 m/s → k = 0.9975. Sway and yaw rate (0, below
-    any error) stay 0.
-    """
-    params = OdometryParams(twist_cov_scale=0.5, twist_shrinkage_time=30.0)
-    hold = 1e-4 * np.eye(3)
-    model = ErrorModel(moment=hold, hold=hold, gain=np.zeros(3))
-    odo = LfOdometry(3, H, params)
-    odo.apply_learned(None, ({'all': model}, {'all': model, KALMAN_TWIST: model}))
-    out = None
-    for k in range(901):
-        out = odo.track(float(k), [speed * k, 0.0, 0.0], np.zeros(3))
-    assert out is not None
-    assert out.twist[0] == pytest.approx(expected, abs=2e-4)
-    assert out.twist[1:] == pytest.approx([0.0, 0.0], abs=1e-9)
-    kalman = odo.published()[-1].kalman_twist
-    assert kalman[0] == pytest.approx(speed, rel=1e-3)  # the unshrunk twist is kept
-    assert odo.published()[-1].twist[0] == out.twist[0]
-
-
-def test_twist_shrinkage_calibrates_both_twists_and_is_off_by_default() -> None:
-    """Still vessel, pose noise: the published (shrunk) twist errs less than the Kalman twist.
-
-    The calibration fits the published twist's model (its covariance) and, only with the
-    shrinkage on, the Kalman twist's (its gain); off, nothing changes.
-    """
-    times = np.arange(600.0)
-    targets = np.zeros((600, 3))
-    models = {}
-    for shrink in (0.0, 30.0):
-        odo = LfOdometry(3, H, OdometryParams(twist_cov_scale=1.0, twist_shrinkage_time=shrink))
-        rng = np.random.default_rng(3)
-        for k in range(600):
-            odo.track(times[k], [*(0.05 * rng.standard_normal(2)), 0.0], np.zeros(3))
-        odo.learn(times, targets, None)  # first calibration: nothing shrunk yet
-        for k in range(600):
-            odo.track(600.0 + k, [*(0.05 * rng.standard_normal(2)), 0.0], np.zeros(3))
-        odo.learn(600.0 + times, targets, None)
-        models[shrink] = odo._twist_cov
-    assert KALMAN_TWIST not in models[0.0]
-    published, kalman = models[30.0]['all'].hold, models[30.0][KALMAN_TWIST].hold
-    assert kalman[0, 0] == pytest.approx(models[0.0]['all'].hold[0, 0], rel=0.3)
-    assert published[0, 0] < 0.5 * kalman[0, 0] and published[1, 1] < 0.5 * kalman[1, 1]
-    with pytest.raises(ValueError, match='twist_shrinkage_time'):
-        OdometryParams(twist_shrinkage_time=-1.0)
 
 
 def test_one_dof_marks_the_other_entries_unestimated() -> None:

@@ -252,17 +252,12 @@ def test_lf_odom_twist_beats_the_pid_finite_difference_against_the_true_lf_veloc
     assert np.all(twist_rmse < fd_rmse), (twist_rmse, fd_rmse)
     # the premise: the vessel really moves (the true LF velocity is not ~0)
     assert np.all(true_rms > np.array([0.01, 0.005, 2e-4])), true_rms
-
-
-@pytest.mark.dds
-@pytest.mark.xfail(strict=True, reason=(
-    'measured (seed 21, twist_bandwidth 1.0, small test windows, the defaults of 68c004c): twist '
-    'RMSE 0.111 / 0.062 m/s / 1.27e-3 rad/s against a true LF velocity RMS of 0.022 / 0.014 m/s '
-    '/ 5.5e-4 rad/s (5.0 / 4.4 / 2.3 ×; with the narrow notch before 5.2 / 5.1 / 2.7 '
-    '×): on this DP run the twist is far worse than publishing zero (at the old, slow twist 1.2 '
-    '/ 1.6 / 1.2 ×; held-out default windows: 1.5-2.4 ×, docs/BENCHMARKS.md)'))
-def test_lf_odom_twist_is_of_the_size_of_the_lf_velocity(scored: Scored) -> None:
-    assert np.all(_rms(scored.twist_err) < 1.7 * _rms(scored.true_twist))
+    # Not asserted: a twist RMSE below the true velocity's RMS (on this run it is 5.0 / 4.4 /
+    # 2.3 × it; a strict xfail said so until the twenty-second session). A twist shrunk towards
+    # zero where it is below its own error meets that, and fed to the PID's D term it takes the
+    # loop's damping away (supply 1.7 × the position error, rao_supply loops unstable;
+    # docs/BENCHMARKS.md "Twenty-second session"): the D term needs the finite difference's
+    # timeliness, which is what the assertion above holds the twist to.
 
 
 def _nees_line(result: dict[str, Any]) -> str:

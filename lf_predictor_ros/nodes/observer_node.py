@@ -22,8 +22,21 @@ change above ``RETUNE_TOLERANCE`` retunes the filter (state kept).
 and the east and heading of ``lf_pose`` are the measured ones passed through unfiltered (never a
 made-up 0), as in the predictor node.
 
+Position-reference checks: the predictor node's (``core.reference_checks``, the same
+``ReferenceCheckSettings`` parameters and defaults), so that an A/B test of the two nodes sees
+the same reference. A rejected pose never reaches the aligner or the estimator (no ``lf_pose``
+for it); a fault found after the fact (frozen, no wave motion, step, drift) restarts the data
+segment and the estimator; a dropout is never bridged. The drift test compares each sample with
+the estimator's previous output (a baseline estimates the LF pose now, so its last output is its
+prediction for the next sample). Faults raise the ``/diagnostics`` level (WARN or ERROR with the
+reason) and are counted (``ref_frozen``, ``ref_no_wave_motion``, ``ref_jump``, ``ref_step``,
+``ref_drift``, ``ref_dropout``, ``ref_rejected``, ``ref_faults``). The cascade has no model to
+coast on: after a rejected sample it continues with the next accepted one. A latched drift is
+cleared by the service ``~/clear_reference_faults`` (std_srvs/Trigger), as on the predictor.
+
 Runtime parameter changes are validated (the reason of a rejection is returned); an accepted
-change re-creates the estimator and the aligner (its state restarts from the next pose).
+change re-creates the estimator and the aligner (its state restarts from the next pose); a change
+of the reference checks restarts their statistics (counters kept).
 Exceptions in callbacks are caught, counted (``callback_errors``) and reported in diagnostics.
 A re-offered sample (the stamp and values of the pose whose ``lf_pose`` was published last: a
 lockstep simulator's first sample) is answered with the same ``lf_pose`` (``reoffers_answered``),
@@ -50,16 +63,23 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64
+from std_srvs.srv import Trigger
 
 from lf_predictor_ros.core.alignment import AlignedSample, AlignerSettings, InputAligner
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.baselines.observer import PassiveObserver, bias_gains
+from lf_predictor_ros.core.reference_checks import ReferenceChecker, ReferenceCheckSettings
 from lf_predictor_ros.nodes.conversions import (
     FRAME_EARTH,
     pose_to_msg,
     sec_to_stamp,
 )
-from lf_predictor_ros.nodes.diagnostics import DiagnosticValue, input_values, make_diagnostic_array
+from lf_predictor_ros.nodes.diagnostics import (
+    DiagnosticValue,
+    input_values,
+    make_diagnostic_array,
+    worse,
+)
 from lf_predictor_ros.nodes.health import InputHealth, ReofferAnswers
 from lf_predictor_ros.nodes.params import (
     declare_and_load,
@@ -176,6 +196,9 @@ class ObserverNode(InputHealth, Node):
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__(NODE_NAME, **node_kwargs)
         self._config: ObserverConfig = declare_and_load(self, ObserverConfig)
+        self._checks = declare_and_load(self, ReferenceCheckSettings)
+        self._checker = ReferenceChecker(self._checks, self._config.ndof)
+        self._predicted: tuple[float, FloatArray] | None = None  # (t + h, last output)
         self._wave_peak_freq = self._config.initial_wave_peak_freq()
         self._wave_source = 'parameter' if self._config.wave_peak_freq > 0.0 else 'default'
         self._estimator = make_estimator(self._config, self._wave_peak_freq)
@@ -192,6 +215,8 @@ class ObserverNode(InputHealth, Node):
         self.create_subscription(Float64, 'wave_peak_frequency', self.on_wave_peak_frequency,
                                  sensor_qos())
         self.create_timer(self._config.diagnostics_period, self.publish_diagnostics)
+        self._services = [self.create_service(Trigger, '~/clear_reference_faults',
+                                              self._on_clear_faults)]
         self.get_logger().info(
             f'{self._config.method}, {self._config.ndof}-DOF, sample time '
             f'{self._config.sample_time} s, ω0 {self._wave_peak_freq:.3f} rad/s '
@@ -201,6 +226,11 @@ class ObserverNode(InputHealth, Node):
     def config(self) -> ObserverConfig:
         """The parameters in use."""
         return self._config
+
+    @property
+    def checker(self) -> ReferenceChecker:
+        """The position-reference checks in use."""
+        return self._checker
 
     @property
     def estimator(self) -> CascadeFilter | PassiveObserver:
@@ -218,6 +248,11 @@ class ObserverNode(InputHealth, Node):
         config, reason = validated_update(self._config, parameters)
         if config is None:
             return SetParametersResult(successful=False, reason=reason)
+        checks, reason = validated_update(self._checks, parameters)
+        if checks is None:
+            return SetParametersResult(successful=False, reason=reason)
+        if checks != self._checks or config.ndof != self._config.ndof:
+            self._replace_checker(checks, config.ndof)
         if config is self._config:
             return SetParametersResult(successful=True, reason='')
         freq = self._wave_peak_freq
@@ -235,8 +270,18 @@ class ObserverNode(InputHealth, Node):
         self._wave_peak_freq, self._wave_source = freq, source
         self._aligner = InputAligner(config.aligner_settings())
         self._reoffers.forget()
+        self._predicted = None
         self.get_logger().info(f'parameters changed: {config.method} re-created, state restarts')
         return SetParametersResult(successful=True, reason='')
+
+    def _replace_checker(self, checks: ReferenceCheckSettings, ndof: int) -> None:
+        """New reference checks (statistics restart, counters kept)."""
+        old = self._checker
+        self._checker = ReferenceChecker(checks, ndof)
+        self._checker.counters = dict(old.counters)
+        self._checker.rejected = old.rejected
+        self._checks = checks
+        self.get_logger().info('reference checks changed: statistics restart')
 
     # ---- data path -----------------------------------------------------------------------
 
@@ -261,21 +306,61 @@ class ObserverNode(InputHealth, Node):
     def on_pose(self, msg: PoseStamped) -> None:
         """Align a measured pose; estimate and publish for every completed grid sample."""
         self._feed_pose(msg, self._aligner, self._config.frame_id, self._process,
-                        accept=self._unless_reoffer)
+                        accept=self._check_pose)
 
-    def _unless_reoffer(self, t: float, pose: FloatArray) -> bool:
-        """False after answering a re-offered sample with its lf_pose again."""
+    def _check_pose(self, t: float, pose: FloatArray) -> bool:
+        """Position-reference checks of one pose (before the aligner); False: rejected.
+
+        A re-offered sample is answered with its lf_pose again (and not checked twice).
+        """
+        checker = self._checker
+        checker.seen(self._clock_seconds())
         answer = self._reoffers.answer(t, pose)
         if answer is not None:
             self._lf_pub.publish(answer)
             return False
-        return True
+        verdict = checker.check_pose(t, pose, self._wave_peak_freq)
+        if verdict.restart:
+            self._restart_data()
+        elif verdict.gap:
+            self._aligner.reset()  # a dropout is never bridged
+        if verdict.fault is not None:
+            self._log_fault()
+        return verdict.accepted
+
+    def _clock_seconds(self) -> float:
+        return float(self.get_clock().now().nanoseconds) / 1e9
+
+    def _restart_data(self) -> None:
+        """A fault found after the fact: the next sample starts a new segment (estimator reset)."""
+        self._aligner.reset()
+        self._predicted = None
+
+    def _log_fault(self) -> None:
+        level, reason = self._checker.status()
+        text = f'position reference: {reason or self._checker.last_reason}'
+        if level == 'ERROR':  # rclpy: one severity per call site
+            self.get_logger().error(text, throttle_duration_sec=5.0)
+        else:
+            self.get_logger().warning(text, throttle_duration_sec=5.0)
 
     def _process(self, sample: AlignedSample) -> None:
         if sample.segment_start:
             self._estimator.reset()  # never filter across a gap or a time jump
+            self._predicted = None
+        predicted = self._predicted
+        verdict = self._checker.check_sample(
+            sample.t, sample.pose,
+            predicted[1] if predicted is not None and abs(predicted[0] - sample.t) < 1e-6
+            else None)
+        if not verdict.accepted:
+            if verdict.restart:
+                self._restart_data()
+            self._log_fault()
+            return
         lf_pose = np.array(self._estimator.update(sample.t, sample.pose, sample.force),
                            dtype=np.float64)
+        self._predicted = (sample.t + self._config.sample_time, lf_pose.copy())
         if self._config.ndof == 1:  # east and yaw are not estimated: pass the measurement
             lf_pose[1:] = sample.pose[1:]  # through, never a made-up 0 (as the predictor does)
         self._samples += 1
@@ -283,12 +368,30 @@ class ObserverNode(InputHealth, Node):
         self._lf_pub.publish(msg)
         self._reoffers.published(msg)
 
+    def _on_clear_faults(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        """Clear the reference faults (a latched drift: the operator re-selected the reference)."""
+        try:
+            faults = ' '.join(self._checker.faults) or 'none'
+            self._checker.reset()
+            response.success = True
+            response.message = (f'reference faults cleared (were: {faults}); checks restart '
+                                'their statistics, the estimator stays')
+            self.get_logger().info(response.message)
+        except Exception as error:  # noqa: BLE001
+            self._count_error('~/clear_reference_faults', error)
+            response.success, response.message = False, f'clear failed: {error}'
+        return response
+
     # ---- diagnostics ---------------------------------------------------------------------
 
     def diagnostic_values(self) -> tuple[str, str, dict[str, DiagnosticValue]]:
         """(level, message, key values) of the current state, as published."""
         status = self._estimator.status()
         level, message = 'OK', f'{status.state}: {status.message}'
+        self._checker.silent_for(self._clock_seconds())  # flags and counts a dropout
+        ref_level, ref_reason = self._checker.status()
+        level, message = worse(level, message, ref_level,
+                               f'position reference {ref_reason}; {message}')
         if self._callback_errors > self._errors_reported:
             level, message = 'ERROR', f'callback error: {self._last_error}'
         values: dict[str, DiagnosticValue] = {
@@ -302,6 +405,7 @@ class ObserverNode(InputHealth, Node):
             'callback_errors': self._callback_errors,
             'last_error': self._last_error,
             'reoffers_answered': self._reoffers.answered,
+            **self._checker.values(),
         }
         return level, message, values
 
@@ -327,7 +431,8 @@ def _parse_cli(argv: Sequence[str]) -> None:
                     'wave_peak_frequency; publishes lf_pose (stamped t) and /diagnostics.',
         epilog='ROS arguments: --ros-args -p method:=cascade --params-file config/observer.yaml'
                '\n\nParameters (name, default, description [unit]); a run-time change '
-               're-creates the estimator:\n' + parameter_table([ObserverConfig]))
+               're-creates the estimator:\n' + parameter_table([ObserverConfig,
+                                                                 ReferenceCheckSettings]))
     parser.parse_args(list(remove_ros_args(list(argv)))[1:])
 
 

@@ -24,6 +24,7 @@ import yaml
 from lf_predictor_ros.core.alignment import AlignedSample
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.baselines.observer import PassiveObserver
+from lf_predictor_ros.core.reference_checks import ReferenceCheckSettings
 from lf_predictor_ros.nodes import observer_node
 from lf_predictor_ros.nodes.conversions import msg_to_pose, pose_to_msg, stamp_to_ns, wrench_to_msg
 from lf_predictor_ros.nodes.observer_node import ObserverConfig, ObserverNode, make_estimator
@@ -170,7 +171,9 @@ def test_parameters_are_validated_at_start_and_at_run_time(ros_context: Context)
 def test_params_file_and_shipped_yaml_hold_every_default(
         ros_context: Context, tmp_path: Path) -> None:
     shipped = yaml.safe_load((REPO / 'config' / 'observer.yaml').read_text())
-    assert shipped['/**']['ros__parameters'] == dataclasses.asdict(ObserverConfig())
+    checks = {k: list(v) if isinstance(v, tuple) else v
+              for k, v in dataclasses.asdict(ReferenceCheckSettings()).items()}
+    assert shipped['/**']['ros__parameters'] == {**dataclasses.asdict(ObserverConfig()), **checks}
     assert ObserverConfig().mass_matrix == SUPPLY_M.reshape(-1).tolist()
     assert ObserverConfig().damping_matrix == SUPPLY_D.reshape(-1).tolist()
     params_file = tmp_path / 'observer.yaml'
@@ -188,6 +191,69 @@ def test_params_file_and_shipped_yaml_hold_every_default(
         '--ros-args', '--params-file', str(REPO / 'config' / 'observer.yaml')])
     try:
         assert node.config == ObserverConfig()
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.parametrize('method', ['passive_observer', 'cascade'])
+def test_reference_faults_are_flagged_counted_and_kept_out_of_the_estimator(
+        ros_context: Context, method: str) -> None:
+    """A 3 m spike and a 10 s freeze: rejected before the estimator, counted, level raised.
+
+    The same checks as the predictor node's (an A/B test sees the same reference). The freeze
+    is found after `frozen_time` (3 s): the samples before that are taken, then the segment
+    restarts, so the estimator never filters across the fault; the output stays finite.
+    """
+    node = _make(ros_context, method=method, wave_peak_freq=WAVE_PEAK_FREQ)
+    try:
+        fed: list[np.ndarray] = []
+        update = node.estimator.update
+
+        def spy(t: float, pose: np.ndarray, force: np.ndarray) -> np.ndarray:
+            fed.append(np.array(pose))
+            return update(t, pose, force)
+
+        node.estimator.update = spy  # type: ignore[method-assign]
+        t, poses = _poses()
+        poses[150, 0] += 3.0  # a 3 m spike (the aligner's speed limit alone passes 10 m)
+        poses[200:220] = poses[199]  # frozen for 10 s
+        published = []
+        node._lf_pub.publish = published.append  # type: ignore[method-assign]
+        for k in range(N_SAMPLES):
+            node.on_thrust(wrench_to_msg(np.zeros(3), float(t[k])))
+            node.on_pose(pose_to_msg(poses[k], float(t[k])))
+        level, message, values = node.diagnostic_values()
+        assert values['ref_jump'] == 1 and values['ref_frozen'] == 1, values
+        # the pose of 99.5 s repeated from 100 s: identical for 3 s at 102.5 s (the 6th repeat),
+        # rejected from there to the end of the freeze (15 samples)
+        assert values['ref_rejected'] == 1 + 15, values
+        assert not any(np.allclose(p, poses[150]) for p in fed)  # the spike never got in
+        assert sum(np.allclose(p, poses[199]) for p in fed) == 1 + 5  # then the restart
+        assert values['poses_accepted'] == N_SAMPLES - values['ref_rejected']
+        # one lf_pose per grid sample: the spike's slot is bridged by the aligner (a gap of one
+        # sample), the freeze's is not (the restart)
+        assert len(published) == len(fed) == values['samples'] == values['poses_accepted'] + 1
+        assert all(np.all(np.isfinite(msg_to_pose(m))) for m in published)
+        assert values['callback_errors'] == 0 and values['ref_faults'] == 'none'
+        assert level == 'OK', message  # the freeze ended: the reference is good again
+        # while frozen the level was ERROR with the reason
+        node.on_pose(pose_to_msg(poses[-1], float(t[-1]) + SAMPLE_TIME))
+        for k in range(1, 8):
+            node.on_pose(pose_to_msg(poses[-1], float(t[-1]) + (k + 1) * SAMPLE_TIME))
+        level, message, values = node.diagnostic_values()
+        assert level == 'ERROR' and 'frozen' in message and values['ref_frozen'] == 2
+    finally:
+        node.destroy_node()
+
+
+def test_reference_checks_follow_run_time_parameters(ros_context: Context) -> None:
+    node = _make(ros_context)
+    try:
+        results = node.set_parameters([Parameter('jump_gate', value=8.0)])
+        assert results[0].successful and node.checker.settings.jump_gate == 8.0
+        results = node.set_parameters([Parameter('jump_gate', value=-1.0)])
+        assert not results[0].successful and 'jump_gate' in results[0].reason
+        assert node.checker.settings.jump_gate == 8.0
     finally:
         node.destroy_node()
 

@@ -51,7 +51,7 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 import math
 from typing import Literal, cast
 
@@ -93,13 +93,6 @@ CHI2_3DOF_999 = 16.27  # χ²(3) 99.9 % quantile [-]
 # squared error of the window [-] (a lag fit must not claim that a still vessel is exact; on the
 # tuning seeds 0.05–0.5 change the calibrated NEES by < 10 %).
 HOLD_FLOOR_FRACTION = 0.1
-# ``pose_manoeuvre_hold``: the vessel manoeuvres while its twist low-passed over
-# ``dead_reckoning_velocity_time`` exceeds this horizontal speed [m/s] or yaw rate [rad/s]
-# (station keeping: a few cm/s of LF speed; a setpoint move 0.1–0.3 m/s, a 45° turn ≈ 0.01 rad/s).
-MANOEUVRE_SPEED = 0.05
-MANOEUVRE_YAW_RATE = 0.002
-# Samples with and without the manoeuvre flag a window needs before its excess is fitted [-].
-MIN_MANOEUVRE_SAMPLES = 30
 
 
 @dataclass(frozen=True)
@@ -194,12 +187,6 @@ class OdometryParams:
         'notch targets are smoother than the truth by a sea-dependent amount, so errors measured '
         'against them do not scale to the errors against the truth (retraining.narrow_reference; '
         'false: the training targets themselves)', ''))
-    pose_manoeuvre_hold: float = field(default=0.0, metadata=field_doc(
-        'the pose error model gets a manoeuvre part: while the vessel manoeuvres (its low-passed '
-        'twist above MANOEUVRE_SPEED or MANOEUVRE_YAW_RATE in any DOF) and for this long after, '
-        'every DOF adds the excess squared error the window showed in such samples over the '
-        'holding and lag parts (a north move errs in east too; the settling outlasts the '
-        'motion); 0 = off (issue 14)', 's'))
     min_calibration_samples: int = field(default=60, metadata=field_doc(
         'fewest matched samples of one source for its own covariance (else all sources)', ''))
 
@@ -223,8 +210,7 @@ class OdometryParams:
                 self.dead_reckoning_velocity_time > 0.0):
             raise ValueError('dead_reckoning_velocity_time must be a positive number of seconds, '
                              f'got {self.dead_reckoning_velocity_time}')
-        for name in ('reacquire_time', 'reacquire_blend_time', 'twist_bandwidth',
-                     'pose_manoeuvre_hold'):
+        for name in ('reacquire_time', 'reacquire_blend_time', 'twist_bandwidth'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f'{name} must be a finite number >= 0 s, got {value}')
@@ -300,16 +286,11 @@ class ErrorModel:
     moment: FloatArray
     hold: FloatArray
     gain: FloatArray
-    # excess e_i² per DOF while manoeuvring (``pose_manoeuvre_hold``; None: no manoeuvre part)
-    manoeuvre: FloatArray | None = None
 
-    def covariance(self, rates: FloatArray, lag_scale: float,
-                   manoeuvring: bool = False) -> FloatArray:
-        """Σ_hold + lag_scale · diag(T_i² w_i²) (+ diag(manoeuvre) when ``manoeuvring``)."""
+    def covariance(self, rates: FloatArray, lag_scale: float) -> FloatArray:
+        """Σ_hold + lag_scale · diag(T_i² w_i²) for the regressor w (ndof,)."""
         cov = self.hold.copy()
         cov.flat[::cov.shape[0] + 1] += lag_scale * self.gain * rates * rates
-        if manoeuvring and self.manoeuvre is not None:
-            cov.flat[::cov.shape[0] + 1] += self.manoeuvre
         return cov
 
 
@@ -323,7 +304,6 @@ class Published:
     source: EstimateSource
     accel: FloatArray  # the twist's low-passed change per second (twist error model regressor)
     lag: FloatArray  # the pose error model's regressor w (`LfOdometry._lag_regressor`)
-    manoeuvring: bool | None = None  # the manoeuvre flag (None: ``pose_manoeuvre_hold`` off)
 
 
 class LfOdometry:
@@ -351,7 +331,6 @@ class LfOdometry:
         self._twist_cov: dict[str, ErrorModel] = {}
         self._accel: tuple[float, FloatArray, FloatArray] | None = None  # (t, twist, accel)
         self._lag_peak: tuple[float, FloatArray] | None = None  # (t, held w²), pose_lag_memory
-        self._manoeuvre_until = -math.inf  # [s] pose_manoeuvre_hold: flagged until then
         self._history: deque[Published] = deque(maxlen=HISTORY_SAMPLES)
         self._x: FloatArray | None = None
         self._p = np.zeros((2 * n, 2 * n))
@@ -439,17 +418,15 @@ class LfOdometry:
         twist = x[self.ndof:].copy()
         accel = self._twist_change(t, twist)
         lag = self._lag_regressor(t, z, twist)
+        self._history.append(Published(t, z.copy(), twist, source, accel, lag))
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
         self._slow_twist = twist.copy() if self._slow_twist is None else \
             low_pass_step(self._slow_twist, twist, alpha)
-        manoeuvring = self._manoeuvring(t, self._slow_twist)
-        self._history.append(Published(t, z.copy(), twist, source, accel, lag, manoeuvring))
         applied = clipped[:self.ndof]
         self._slow_force = applied.copy() if self._slow_force is None else \
             low_pass_step(self._slow_force, applied, self._force_rate())
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
-                                            self._pose_covariance(source, lag,
-                                                                  bool(manoeuvring)))
+                                            self._pose_covariance(source, lag))
         out = OdometryEstimate(
             stamp=t, pose=published, pose_cov=pose_cov, twist=self._full(twist),
             twist_cov=self._twist_covariance(source, accel), mode='tracking',
@@ -834,25 +811,12 @@ class LfOdometry:
         self._lag_peak = (t, square)
         return np.asarray(np.sqrt(square), dtype=np.float64)
 
-    def _manoeuvring(self, t: float, slow_twist: FloatArray) -> bool | None:
-        """The manoeuvre flag at t (None when ``pose_manoeuvre_hold`` is off; O(n))."""
-        hold = self.params.pose_manoeuvre_hold
-        if hold <= 0.0:
-            return None
-        speed = math.hypot(*slow_twist[:2].tolist()) if self.ndof == 3 else abs(slow_twist[0])
-        if speed > MANOEUVRE_SPEED or (self.ndof == 3 and
-                                       abs(float(slow_twist[2])) > MANOEUVRE_YAW_RATE):
-            self._manoeuvre_until = t + hold
-        return t <= self._manoeuvre_until
-
-    def _pose_covariance(self, source: EstimateSource, lag: FloatArray,
-                         manoeuvring: bool = False) -> FloatArray:
+    def _pose_covariance(self, source: EstimateSource, lag: FloatArray) -> FloatArray:
         """The pose error model of ``source`` at the regressor ``lag`` (`_lag_regressor`)."""
         n = self.ndof
         if self._pose_cov:
             model = self._pose_cov.get(source, self._pose_cov['all'])
-            inner = self.params.pose_cov_scale * model.covariance(lag, self.params.pose_lag_scale,
-                                                                  manoeuvring)
+            inner = self.params.pose_cov_scale * model.covariance(lag, self.params.pose_lag_scale)
         else:
             inner = np.diag(np.array(self.params.prior_pose_std[:n]) ** 2)
         return self._embed(inner)
@@ -940,10 +904,7 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
     twist_err = twists - velocity[idx]
     rates = np.array([p.lag for p in rows])
     sources = np.array([p.source for p in rows])
-    flags = None if any(p.manoeuvring is None for p in rows) else \
-        np.array([bool(p.manoeuvring) for p in rows])
-    pooled = with_manoeuvre_part(fit_error_model(pose_err, rates, lag_prior), pose_err, rates,
-                                 flags)
+    pooled = fit_error_model(pose_err, rates, lag_prior)
     pose_cov: dict[str, ErrorModel] = {'all': pooled}
     accel = np.array([p.accel for p in rows])
     twist_cov: dict[str, ErrorModel] = {'all': fit_error_model(twist_err, accel)}
@@ -951,35 +912,9 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
         mask = sources == source
         if np.count_nonzero(mask) >= min_samples:
             # the lag time from every source (more motion to fit it), the holding part per source
-            model = fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain)
-            pose_cov[source] = with_manoeuvre_part(
-                model, pose_err[mask], rates[mask], None if flags is None else flags[mask],
-                pooled.manoeuvre)
+            pose_cov[source] = fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain)
             twist_cov[source] = fit_error_model(twist_err[mask], accel[mask])
     return pose_cov, twist_cov
-
-
-def with_manoeuvre_part(model: ErrorModel, errors: FloatArray, rates: FloatArray,
-                        flags: NDArray[np.bool_] | None,
-                        fallback: FloatArray | None = None) -> ErrorModel:
-    """``model`` with its manoeuvre part, fitted on the flagged samples (``pose_manoeuvre_hold``).
-
-    The part is the mean excess e_i² over the holding and lag parts (lag scale 1, as fitted) in
-    the flagged samples, clipped at 0. None flags: the model as it is. Fewer than
-    ``MIN_MANOEUVRE_SAMPLES`` flagged or unflagged samples: ``fallback`` (e.g. the pooled
-    sources' part), else none (zeros).
-    """
-    if flags is None:
-        return model
-    n = model.gain.shape[0]
-    flagged = int(np.count_nonzero(flags))
-    if min(flagged, flags.shape[0] - flagged) < MIN_MANOEUVRE_SAMPLES:
-        part = np.zeros(n) if fallback is None else fallback
-        return replace(model, manoeuvre=part)
-    e2 = np.asarray(errors, dtype=np.float64)[flags] ** 2
-    w2 = np.asarray(rates, dtype=np.float64)[flags] ** 2
-    excess = e2 - np.diag(model.hold)[None, :] - model.gain[None, :] * w2
-    return replace(model, manoeuvre=np.maximum(excess.mean(axis=0), 0.0))
 
 
 def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,

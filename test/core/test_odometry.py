@@ -16,7 +16,6 @@ from lf_predictor_ros.core.odometry import (
     OdometryParams,
     fit_error_model,
     normalized_error_squared,
-    with_manoeuvre_part,
 )
 
 H = 1.0
@@ -193,69 +192,6 @@ def test_published_twist_covariance_grows_with_the_acceleration() -> None:
         assert out is not None and out.calibrated
         assert out.twist_cov[0, 0] == pytest.approx(expected, rel=0.03)
         assert out.twist_cov[1, 1] == pytest.approx(0.5e-4, rel=1e-6)
-
-
-def test_manoeuvre_part_is_the_mean_excess_of_the_flagged_samples() -> None:
-    """Errors σ·noise everywhere, + 0.3 m in north and 0.2 m in east where flagged.
-
-    The holding part (fitted on all samples, no lag: rates 0) is the mean e² over all, σ² =
-    0.0025 plus the flagged quarter's excess; the manoeuvre part is the flagged samples' mean
-    e² above it: north 0.75 · (0.09 − 0.0025) = 0.065625, east 0.75 · (0.04 − 0.0025) =
-    0.028125, yaw 0 (clipped). Too few flagged samples: the fallback.
-    """
-    rng = np.random.default_rng(4)
-    m = 4000
-    flags = np.zeros(m, dtype=bool)
-    flags[:m // 4] = True
-    errors = 0.05 * rng.choice([-1.0, 1.0], size=(m, 3))
-    errors[:, 2] *= 0.01
-    errors[flags, 0] = 0.3 * np.sign(errors[flags, 0])
-    errors[flags, 1] = 0.2 * np.sign(errors[flags, 1])
-    rates = np.zeros((m, 3))
-    model = with_manoeuvre_part(fit_error_model(errors, rates), errors, rates, flags)
-    assert model.manoeuvre is not None
-    np.testing.assert_allclose(model.manoeuvre, [0.065625, 0.028125, 0.0], atol=1e-12)
-    cov = model.covariance(np.zeros(3), 8.0, manoeuvring=True)
-    np.testing.assert_allclose(np.diag(cov), np.diag(model.hold) + model.manoeuvre)
-    np.testing.assert_allclose(model.covariance(np.zeros(3), 8.0), model.hold)
-    few = np.zeros(m, dtype=bool)
-    few[:10] = True
-    fallback = np.array([1.0, 2.0, 3.0])
-    assert with_manoeuvre_part(model, errors, rates, few, fallback).manoeuvre is fallback
-    assert np.all(with_manoeuvre_part(model, errors, rates, few).manoeuvre == 0.0)
-    assert with_manoeuvre_part(model, errors, rates, None) is model
-
-
-def test_pose_manoeuvre_hold_flags_a_move_and_holds_the_flag() -> None:
-    """Still 300 s, 0.2 m/s north for 100 s, still again: the flag and its hold time.
-
-    The manoeuvre part is published from when the 30 s low-passed speed passes 0.05 m/s until
-    60 s after it falls below again; off: never.
-    """
-    hold = 1e-2 * np.eye(3)
-    part = np.array([0.5, 0.3, 1e-4])
-    model = ErrorModel(moment=hold, hold=hold, gain=np.zeros(3), manoeuvre=part)
-    for setting, expect_part in ((60.0, True), (0.0, False)):
-        odo = LfOdometry(3, H, OdometryParams(pose_cov_scale=1.0, pose_manoeuvre_hold=setting))
-        odo.apply_learned(None, ({'all': model}, {'all': model}))
-        north, published = 0.0, []
-        for k in range(700):
-            north += 0.2 if 300 <= k < 400 else 0.0
-            out = odo.track(float(k), [north, 0.0, 0.0], np.zeros(3))
-            assert out is not None
-            published.append(out.pose_cov[0, 0])
-        flagged = np.isclose(published, 1e-2 + 0.5)
-        assert not flagged[:300].any()
-        if expect_part:
-            first, last = np.flatnonzero(flagged)[[0, -1]]
-            assert 300 < first < 320  # the low-passed speed passes 0.05 m/s within ~9 s
-            assert 450 < last < 520  # 60 s after it falls below again
-            assert flagged[first:last + 1].all()
-            assert [p.manoeuvring for p in odo.published()][first] is True
-        else:
-            assert not flagged.any() and odo.published()[-1].manoeuvring is None
-    with pytest.raises(ValueError, match='pose_manoeuvre_hold'):
-        OdometryParams(pose_manoeuvre_hold=-1.0)
 
 
 def test_one_dof_marks_the_other_entries_unestimated() -> None:

@@ -47,7 +47,12 @@ from lf_predictor_ros.benchmark.suite import (
 from lf_predictor_ros.core.evaluation import score
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.predictor import AdaptivePredictor
-from sim_ros.simulation import load_scenario, simulate, with_schedule_shift
+from sim_ros.simulation import (
+    has_scheduled_events,
+    load_scenario,
+    scenario_with_schedule_shift,
+    simulate,
+)
 
 LOOP_REFERENCES = ('observer', 'oracle_kf', 'raw')
 # Neither tuning (baseline_tuning.TUNING_SEEDS) nor held out (benchmark.FIRST_HELD_OUT_SEED on).
@@ -79,14 +84,14 @@ def fair_case(scenario_name: str, seed: int, duration: float,
               schedule_spread: float = 0.0) -> tuple[Any, Any, Any, Any]:
     """(scenario, shipped predictor params, estimator setup, fair recording) of one case.
 
-    ``schedule_spread`` [s]: setpoint events delayed by the seed's U(0, spread) draw, as
-    `benchmark --schedule-spread` does.
+    ``schedule_spread`` [s]: setpoint events and wave peak frequency steps delayed by the seed's
+    U(0, spread) draw, as `benchmark --schedule-spread` does.
     """
     scenario = load_scenario(scenario_name)
     shift = schedule_shift_for_seed(seed, schedule_spread)
-    if shift and scenario.controller.setpoint_schedule:
-        scenario = replace(scenario, controller=with_schedule_shift(scenario.controller, shift))
-        print(f'{scenario_name:20s} {seed} setpoint events delayed {shift:.1f} s', flush=True)
+    if shift and has_scheduled_events(scenario):
+        scenario = scenario_with_schedule_shift(scenario, shift)
+        print(f'{scenario_name:20s} {seed} scheduled events delayed {shift:.1f} s', flush=True)
     params = predictor_params(scenario)
     setup = make_setup(scenario, seed, params)
     return scenario, params, setup, make_recording(scenario, seed, duration, setup)

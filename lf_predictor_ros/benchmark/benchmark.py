@@ -48,6 +48,7 @@ from lf_predictor_ros.benchmark.suite import (
 )
 from lf_predictor_ros.core.evaluation import DOF_NAMES
 from lf_predictor_ros.core.params import PredictorParams
+from sim_ros.physics.schedule import delayed
 from sim_ros.simulation import available_scenarios, load_scenario
 
 # scenario → simulated duration [s] (None = the scenario's own). 1800 s: the first training and
@@ -104,9 +105,10 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument('--json', help='raw results (default runs/benchmark-<time>.json)')
     parser.add_argument('--schedule-spread', type=float, default=SCHEDULE_SPREAD,
                         metavar='SECONDS',
-                        help='delay every setpoint event of a case by U(0, SECONDS) drawn from '
-                        'its seed, so that the held-out seeds sample the phase between the '
-                        "predictor's trainings and the manoeuvres (default "
+                        help='delay every scheduled event of a case (setpoint moves and turns, '
+                        'wave peak frequency steps) by U(0, SECONDS) drawn from its seed, so '
+                        "that the held-out seeds sample the phase between the predictor's "
+                        'trainings and the events (default '
                         f'{SCHEDULE_SPREAD:g} s, the retraining period, as on docs/RESULTS.md; '
                         '0: the scenarios as written)')
     parser.add_argument('--param', action='append', default=[], metavar='FIELD=VALUE',
@@ -193,7 +195,8 @@ def _shift_note(cases: list[CaseResult]) -> str:
     shifts = [float(c.info.get('schedule_shift', 0.0)) for c in cases]
     if not any(shifts):
         return ''
-    return (' Setpoint events delayed per seed (`--schedule-spread`) by ' +
+    return (' Scheduled events (setpoint moves and turns, ω0 steps) delayed per seed '
+            '(`--schedule-spread`) by ' +
             ', '.join(f'{s:.1f}' for s in shifts) + ' s.')
 
 
@@ -384,7 +387,7 @@ def _open_loop_targets(name: str, cases: list[CaseResult], dofs: Sequence[str]) 
 
 def _adaptation_table(cases: list[CaseResult]) -> list[str]:
     window = float(cases[0].info['params']['retrain_period'])
-    schedule = load_scenario(cases[0].scenario).waves.peak_freq
+    written = load_scenario(cases[0].scenario).waves.peak_freq
     limit = RECOVERY_WINDOWS * window
     lines = ['#### adaptation to ω0 changes', '',
              f'Rolling RMSE over Δ = {window:g} s of the open-loop LF error. Steady = median of '
@@ -402,6 +405,8 @@ def _adaptation_table(cases: list[CaseResult]) -> list[str]:
     ratios: list[float] = []
     for case in cases:
         events = case.adaptation or []
+        # the case's own schedule (its events delayed by --schedule-spread's draw)
+        schedule = delayed(written, float(case.info.get('schedule_shift', 0.0)))
         for i, event in enumerate(events):
             following = events[i + 1].time if i + 1 < len(events) else case.duration
             before, after = schedule(event.time - EPS_TIME), schedule(following - EPS_TIME)

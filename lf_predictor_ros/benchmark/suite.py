@@ -93,9 +93,10 @@ from sim_ros.simulation import (
     Scenario,
     SimRecord,
     Simulator,
+    has_scheduled_events,
     load_scenario,
+    scenario_with_schedule_shift,
     simulate,
-    with_schedule_shift,
 )
 
 FloatArray = NDArray[np.float64]
@@ -438,16 +439,16 @@ def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
     ``loop_estimators``: closed loops to run (None: `LOOP_ESTIMATORS` when the scenario has its
     controller enabled, else none; () for none). ``recording``: score this one instead of
     recording anew (its provenance must match and pass; a truth-fed one raises `LeakError`).
-    ``schedule_shift`` [s]: every setpoint event that much later (`with_schedule_shift`; 0: the
-    scenario as written), for every loop and the recording alike.
+    ``schedule_shift`` [s]: every scheduled event that much later, setpoint moves and turns and
+    wave peak frequency steps (`scenario_with_schedule_shift`; 0: the scenario as written), for
+    every loop and the recording alike.
     """
     unknown = [n for n in estimators if n not in ESTIMATORS]
     if unknown:
         raise ValueError(f'unknown estimator(s) {unknown}; choose from {ESTIMATORS}')
     scenario = load_scenario(scenario_name)
     if schedule_shift:
-        scenario = replace(scenario, controller=with_schedule_shift(scenario.controller,
-                                                                    schedule_shift))
+        scenario = scenario_with_schedule_shift(scenario, schedule_shift)
     params = predictor_params(scenario, params_overrides)
     setup = make_setup(scenario, seed, params)
     if recording is None:
@@ -460,7 +461,7 @@ def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
     info: dict[str, Any] = {'sample_time': setup.sample_time, 'params': params.to_dict(),
                             'baselines': 'untuned defaults' if tuning.get('source') == 'defaults'
                             else 'config/baselines'}
-    if schedule_shift and scenario.controller.setpoint_schedule:  # else nothing was moved
+    if schedule_shift and has_scheduled_events(scenario):  # else nothing was moved
         info['schedule_shift'] = schedule_shift
     begin = scored_start(params, len(data['t']))
     outputs = run_open_loop(data, setup, estimators, info, begin)

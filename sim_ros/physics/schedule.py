@@ -72,6 +72,22 @@ def steps(initial: float, changes: Sequence[tuple[float, float]]) -> PeakFreqSch
     return PeakFreqSchedule(tuple(times), tuple(values))
 
 
+def delayed(schedule: PeakFreqSchedule, delay: float) -> PeakFreqSchedule:
+    """``schedule`` with every point after t = 0 ``delay`` [s] later (a new object).
+
+    The value at t = 0 holds until the first moved point, so a step or a ramp corner at t comes
+    at t + delay and the values are unchanged; a constant schedule is returned as it is. Used to
+    draw the phase of a sea change against an estimator's own timing (the benchmark's
+    ``--schedule-spread``).
+    """
+    if not (math.isfinite(delay) and delay >= 0.0):
+        raise ValueError(f'a schedule delay must be finite and >= 0 s, got {delay!r}')
+    if delay == 0.0 or all(t <= 0.0 for t in schedule.times):
+        return schedule
+    return PeakFreqSchedule(tuple(t + delay if t > 0.0 else t for t in schedule.times),
+                            schedule.values)
+
+
 def ramp(t_start: float, t_end: float, start: float, end: float) -> PeakFreqSchedule:
     """ω0 = `start` until t_start, linear to `end` at t_end, then constant."""
     if t_end < t_start:

@@ -1,6 +1,7 @@
 """The benchmark suite: fair recordings, every estimator, closed loops first, the results page."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -265,6 +266,13 @@ def test_adaptation_targets_on_the_page_and_figures(tmp_path: Path) -> None:
         in page
     assert '![omega_schedule](results/omega_schedule_adaptation.png)' in page
     assert case.to_dict()['adaptation'][1]['recovery_time'] == math.inf
+    # a case whose events were delayed (--schedule-spread): ω0 read from its own schedule
+    late = dataclasses.replace(
+        case, seed=13, info={'params': {'retrain_period': 60.0}, 'schedule_shift': 45.0},
+        adaptation=[dataclasses.replace(e, time=e.time + 45.0) for e in events])
+    page = render([late], 'b', 1.0, 'here', {})
+    assert '| 13 | 3645 | 1.25 → 0.30 |' in page and '| 13 | 10845 | 0.30 → 0.56 |' in page
+    assert 'delayed per seed (`--schedule-spread`) by 45.0 s' in page
 
 
 def test_score_adaptation_on_the_thesis_schedule_grid() -> None:

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sim_ros.physics import schedule
 from sim_ros.physics.kinematics import wrap_angles
 from sim_ros.physics.sensors import SensorConfig
 from sim_ros.physics.waves import WaveGenerator
@@ -16,8 +17,10 @@ from sim_ros.simulation import (
     Simulator,
     WaveConfig,
     available_scenarios,
+    has_scheduled_events,
     load_scenario,
     scenario_from_dict,
+    scenario_with_schedule_shift,
     simulate,
     with_schedule_shift,
 )
@@ -192,3 +195,29 @@ def test_a_schedule_shift_moves_every_event_and_nothing_else() -> None:
     for bad in (-1.0, math.nan, math.inf):
         with pytest.raises(ValueError, match='schedule shift must be finite and >= 0'):
             with_schedule_shift(controller, bad)
+
+
+def test_a_scenario_shift_moves_the_wave_peak_frequency_steps_too() -> None:
+    """omega_steps' ω0 steps (3600 s, 7200 s) 45 s later; ω0(t + 45) = the old ω0(t) after 0."""
+    scenario = load_scenario('omega_steps')
+    moved = scenario_with_schedule_shift(scenario, 45.0)
+    old, new = scenario.waves.peak_freq, moved.waves.peak_freq
+    assert new.values == old.values
+    assert new.times == tuple(t + 45.0 if t > 0.0 else t for t in old.times)
+    times = np.arange(0.0, 10800.0, 5.0)
+    assert np.array_equal(new.sample(times + 45.0), old.sample(times))
+    assert new.sample(np.array([3600.0, 3644.9, 3645.0])).tolist() == [1.25, 1.25, 0.3]
+    assert replace(moved, waves=scenario.waves) == scenario  # nothing else changed
+    assert has_scheduled_events(scenario) and has_scheduled_events(load_scenario('rao_supply'))
+    # setpoint events move as with_schedule_shift moves them; a constant sea stays the object
+    rao = load_scenario('rao_supply')
+    moved_rao = scenario_with_schedule_shift(rao, 45.0)
+    assert moved_rao.controller == with_schedule_shift(rao.controller, 45.0)
+    assert moved_rao.waves is rao.waves
+    still = load_scenario('supply_closed_loop')  # no setpoint events, constant ω0
+    assert not has_scheduled_events(still)
+    assert scenario_with_schedule_shift(still, 45.0) is still
+    assert scenario_with_schedule_shift(scenario, 0.0) is scenario
+    with pytest.raises(ValueError, match='delay must be finite and >= 0'):
+        schedule.delayed(old, -1.0)
+    assert schedule.delayed(schedule.constant(0.8), 45.0) == schedule.constant(0.8)

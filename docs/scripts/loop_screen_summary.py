@@ -1,0 +1,105 @@
+"""Per-variant summary of `method_probe.py --closed-loop` output: the numbers screen rules use.
+
+    python docs/scripts/loop_screen_summary.py \
+        docs/results/method_probe/spread60_retrain_period_*.txt
+
+For each scenario (seeds with a default row): the default loop's position RMSE over the
+observer loop's (mean, median) and its stable count; for each other variant, per seed, its
+position RMSE over the default's (mean, median, range, seeds better), over the observer's
+(mean), the mean of the per-seed wave-band thrust share ratios to the default per DOF, and the
+stable count. Every earlier session rewrote this in /tmp; the screens' rules ("mean per-seed
+position ratio ≤ 0.97, thrust ≤ 1.05 per DOF, all stable") read these columns.
+"""
+from __future__ import annotations
+
+import argparse
+from collections import defaultdict
+from collections.abc import Sequence
+from dataclasses import dataclass
+import re
+import statistics
+import sys
+
+LINE = re.compile(
+    r'loop (?P<scenario>\S+)\s+(?P<seed>\d+) (?P<name>.+?)\s+position (?P<position>[\d.]+) m '
+    r'heading \S+ rad max (?P<excursion>[\d.]+) m thrust WF % raw (?P<thrust>[\d.]+(?: / '
+    r'[\d.]+)*) stable (?P<stable>True|False)')
+DEFAULT = 'adaptive default'
+
+
+@dataclass(frozen=True)
+class Loop:
+    """One loop line of method_probe's output."""
+
+    position: float  # [m] position RMSE
+    thrust: tuple[float, ...]  # wave-band thrust share of the raw loop's per DOF [%]
+    stable: bool
+
+
+def parse(lines: Sequence[str]) -> dict[tuple[str, int], dict[str, Loop]]:
+    """{(scenario, seed): {loop name: Loop}} of every loop line."""
+    rows: dict[tuple[str, int], dict[str, Loop]] = defaultdict(dict)
+    for line in lines:
+        match = LINE.search(line)
+        if match is None:
+            continue
+        thrust = tuple(float(v) for v in match['thrust'].split(' / '))
+        rows[(match['scenario'], int(match['seed']))][match['name'].strip()] = Loop(
+            float(match['position']), thrust, match['stable'] == 'True')
+    return rows
+
+
+def summary(rows: dict[tuple[str, int], dict[str, Loop]]) -> list[str]:
+    """The report lines (module docstring)."""
+    out: list[str] = []
+    for scenario in sorted({key[0] for key in rows}):
+        seeds = sorted(seed for (name, seed), loops in rows.items()
+                       if name == scenario and DEFAULT in loops and 'observer' in loops)
+        if not seeds:
+            continue
+        default = [rows[(scenario, s)][DEFAULT] for s in seeds]
+        observer = [rows[(scenario, s)]['observer'].position for s in seeds]
+        versus = [d.position / o for d, o in zip(default, observer, strict=True)]
+        out.append(f'{scenario}: {len(seeds)} seeds; default / observer mean '
+                   f'{statistics.mean(versus):.3f} median {statistics.median(versus):.3f}; '
+                   f'stable {sum(d.stable for d in default)}/{len(default)}')
+        names = sorted({n for s in seeds for n in rows[(scenario, s)]
+                        if n.startswith('adaptive') and n != DEFAULT})
+        for name in names:
+            loops = [rows[(scenario, s)].get(name) for s in seeds]
+            if any(loop is None for loop in loops):
+                out.append(f'  {name}: not on every seed, skipped')
+                continue
+            ratio = [v.position / d.position for v, d in zip(loops, default, strict=True)
+                     if v is not None]
+            thrust = [statistics.mean(v.thrust[i] / d.thrust[i]
+                                      for v, d in zip(loops, default, strict=True)
+                                      if v is not None)
+                      for i in range(len(default[0].thrust))]
+            over_observer = statistics.mean(v.position / o for v, o in
+                                            zip(loops, observer, strict=True) if v is not None)
+            out.append(
+                f'  {name}: position / default mean {statistics.mean(ratio):.3f} median '
+                f'{statistics.median(ratio):.3f} range {min(ratio):.2f}–{max(ratio):.2f}, '
+                f'better on {sum(r < 1.0 for r in ratio)}/{len(ratio)}; / observer '
+                f'{over_observer:.3f}; thrust / default ' +
+                ' / '.join(f'{t:.3f}' for t in thrust) +
+                f'; stable {sum(v.stable for v in loops if v is not None)}/{len(loops)}')
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """CLI (module docstring)."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('files', nargs='+', help='method_probe outputs')
+    args = parser.parse_args(argv)
+    lines: list[str] = []
+    for name in args.files:
+        with open(name, encoding='utf-8') as handle:
+            lines += handle.readlines()
+    print('\n'.join(summary(parse(lines))))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -10,6 +10,7 @@ import contextlib
 import time
 from typing import Any
 
+import numpy as np
 from rclpy import init
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -55,3 +56,19 @@ def own_executor() -> Iterator[tuple[Context, SingleThreadedExecutor]]:
             node.destroy_node()
         executor.shutdown()
         try_shutdown(context=context)
+
+
+def poses_fed_to(estimator: Any) -> list[Any]:
+    """Record every pose ``estimator.update(t, pose, force)`` is called with (a copy each).
+
+    The node tests wrap a node's estimator with it to see what got past the reference checks.
+    """
+    fed: list[Any] = []
+    update = estimator.update
+
+    def spy(t: float, pose: Any, force: Any) -> Any:
+        fed.append(np.array(pose))
+        return update(t, pose, force)
+
+    estimator.update = spy
+    return fed

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 import traceback
-from typing import TYPE_CHECKING, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 import numpy as np
@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from rclpy.impl.rcutils_logger import RcutilsLogger
 
 from lf_predictor_ros.core.alignment import AlignedSample, InputAligner
+from lf_predictor_ros.core.reference_checks import ReferenceChecker
 from lf_predictor_ros.nodes.conversions import FRAME_BODY, msg_to_force, msg_to_pose, stamp_to_sec
 
 FloatArray = NDArray[np.float64]
@@ -107,6 +108,36 @@ class InputHealth:
             return
         self.get_logger().error(f'callback failed ({self._last_error})',
                                 throttle_duration_sec=5.0)
+
+    def _log_reference_fault(self, checker: ReferenceChecker) -> None:
+        """Log the reference's status after a fault: ERROR or WARN, throttled."""
+        level, reason = checker.status()
+        text = f'position reference: {reason or checker.last_reason}'
+        if level == 'ERROR':  # rclpy: one severity per call site
+            self.get_logger().error(text, throttle_duration_sec=5.0)
+        else:
+            self.get_logger().warning(text, throttle_duration_sec=5.0)
+
+    def _clear_reference_faults(self, checker: ReferenceChecker | None, response: Any,
+                                stays: str) -> Any:
+        """Answer ``~/clear_reference_faults`` (std_srvs/Trigger): the checks start afresh.
+
+        ``stays``: what the estimator keeps (said in the answer); None checker: not configured.
+        """
+        try:
+            if checker is None:
+                response.success, response.message = False, 'estimator not configured'
+                return response
+            faults = ' '.join(checker.faults) or 'none'
+            checker.reset()
+            response.success = True
+            response.message = (f'reference faults cleared (were: {faults}); checks restart '
+                                f'their statistics, {stays}')
+            self.get_logger().info(response.message)
+        except Exception as error:  # noqa: BLE001 - a service must never kill the node
+            self._count_error('~/clear_reference_faults', error)
+            response.success, response.message = False, f'clear failed: {error}'
+        return response
 
     def _feed_thrust(self, msg: WrenchStamped,
                      aligner: InputAligner) -> tuple[float, FloatArray] | None:

@@ -325,7 +325,7 @@ class ObserverNode(InputHealth, Node):
         elif verdict.gap:
             self._aligner.reset()  # a dropout is never bridged
         if verdict.fault is not None:
-            self._log_fault()
+            self._log_reference_fault(self._checker)
         return verdict.accepted
 
     def _clock_seconds(self) -> float:
@@ -335,14 +335,6 @@ class ObserverNode(InputHealth, Node):
         """A fault found after the fact: the next sample starts a new segment (estimator reset)."""
         self._aligner.reset()
         self._predicted = None
-
-    def _log_fault(self) -> None:
-        level, reason = self._checker.status()
-        text = f'position reference: {reason or self._checker.last_reason}'
-        if level == 'ERROR':  # rclpy: one severity per call site
-            self.get_logger().error(text, throttle_duration_sec=5.0)
-        else:
-            self.get_logger().warning(text, throttle_duration_sec=5.0)
 
     def _process(self, sample: AlignedSample) -> None:
         if sample.segment_start:
@@ -356,7 +348,7 @@ class ObserverNode(InputHealth, Node):
         if not verdict.accepted:
             if verdict.restart:
                 self._restart_data()
-            self._log_fault()
+            self._log_reference_fault(self._checker)
             return
         lf_pose = np.array(self._estimator.update(sample.t, sample.pose, sample.force),
                            dtype=np.float64)
@@ -370,17 +362,7 @@ class ObserverNode(InputHealth, Node):
 
     def _on_clear_faults(self, request: Trigger.Request, response: Trigger.Response) -> Any:
         """Clear the reference faults (a latched drift: the operator re-selected the reference)."""
-        try:
-            faults = ' '.join(self._checker.faults) or 'none'
-            self._checker.reset()
-            response.success = True
-            response.message = (f'reference faults cleared (were: {faults}); checks restart '
-                                'their statistics, the estimator stays')
-            self.get_logger().info(response.message)
-        except Exception as error:  # noqa: BLE001
-            self._count_error('~/clear_reference_faults', error)
-            response.success, response.message = False, f'clear failed: {error}'
-        return response
+        return self._clear_reference_faults(self._checker, response, 'the estimator stays')
 
     # ---- diagnostics ---------------------------------------------------------------------
 

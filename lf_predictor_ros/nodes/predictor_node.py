@@ -608,16 +608,8 @@ class PredictorNode(InputHealth, LifecycleNode):
         elif verdict.gap and self._aligner is not None:
             self._aligner.reset()  # a dropout is never bridged: no made-up sample is trained on
         if verdict.fault is not None:
-            self._log_fault(checker)
+            self._log_reference_fault(checker)
         return verdict.accepted
-
-    def _log_fault(self, checker: ReferenceChecker) -> None:
-        level, reason = checker.status()
-        text = f'position reference: {reason or checker.last_reason}'
-        if level == 'ERROR':  # rclpy: one severity per call site
-            self.get_logger().error(text, throttle_duration_sec=5.0)
-        else:
-            self.get_logger().warning(text, throttle_duration_sec=5.0)
 
     def _restart_data(self) -> None:
         """A fault was found after the fact: drop the buffered data and a running training."""
@@ -641,7 +633,7 @@ class PredictorNode(InputHealth, LifecycleNode):
         if not verdict.accepted:
             if verdict.restart:
                 self._restart_data()
-            self._log_fault(checker)
+            self._log_reference_fault(checker)
             return
         lf_pose, estimate = driver.update(sample.t, sample.pose, sample.force,
                                           sample.segment_start)
@@ -714,20 +706,7 @@ class PredictorNode(InputHealth, LifecycleNode):
         return response
 
     def _on_clear_faults(self, request: Trigger.Request, response: Trigger.Response) -> Any:
-        try:
-            if self._checker is None:
-                response.success, response.message = False, 'predictor not configured'
-                return response
-            faults = ' '.join(self._checker.faults) or 'none'
-            self._checker.reset()
-            response.success = True
-            response.message = (f'reference faults cleared (were: {faults}); checks restart '
-                                'their statistics, the network stays')
-            self.get_logger().info(response.message)
-        except Exception as error:  # noqa: BLE001
-            self._count_error('~/clear_reference_faults', error)
-            response.success, response.message = False, f'clear failed: {error}'
-        return response
+        return self._clear_reference_faults(self._checker, response, 'the network stays')
 
     # ---- diagnostics ---------------------------------------------------------------------
 

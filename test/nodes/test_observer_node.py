@@ -9,6 +9,7 @@ from pathlib import Path
 import time
 from typing import Any
 
+from dds_helpers import poses_fed_to
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 import numpy as np
@@ -206,14 +207,7 @@ def test_reference_faults_are_flagged_counted_and_kept_out_of_the_estimator(
     """
     node = _make(ros_context, method=method, wave_peak_freq=WAVE_PEAK_FREQ)
     try:
-        fed: list[np.ndarray] = []
-        update = node.estimator.update
-
-        def spy(t: float, pose: np.ndarray, force: np.ndarray) -> np.ndarray:
-            fed.append(np.array(pose))
-            return update(t, pose, force)
-
-        node.estimator.update = spy  # type: ignore[method-assign]
+        fed = poses_fed_to(node.estimator)
         t, poses = _poses()
         poses[150, 0] += 3.0  # a 3 m spike (the aligner's speed limit alone passes 10 m)
         poses[200:220] = poses[199]  # frozen for 10 s

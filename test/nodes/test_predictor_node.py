@@ -11,6 +11,7 @@ import sys
 import time
 from typing import Any
 
+from dds_helpers import poses_fed_to
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 import numpy as np
@@ -474,14 +475,7 @@ def test_reference_faults_are_flagged_counted_and_kept_out_of_the_predictor(
     node = _make(ros_context)
     try:
         assert node.predictor is not None
-        fed: list[np.ndarray] = []
-        update = node.predictor.update
-
-        def spy(t: float, pose: np.ndarray, force: np.ndarray) -> np.ndarray:
-            fed.append(np.array(pose))
-            return update(t, pose, force)
-
-        node.predictor.update = spy  # type: ignore[method-assign]
+        fed = poses_fed_to(node.predictor)
         poses = record.measured_pose.copy()
         poses[100, 0] += 15.0  # a 15 m spike (under the aligner's 21 m speed limit at 1 Hz)
         poses[140:150] = poses[139]  # frozen for 10 s

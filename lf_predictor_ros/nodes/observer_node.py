@@ -248,24 +248,24 @@ class ObserverNode(InputHealth, Node):
         config, reason = validated_update(self._config, parameters)
         if config is None:
             return SetParametersResult(successful=False, reason=reason)
+        freq, source = self._wave_peak_freq, self._wave_source
+        estimator = self._estimator
+        if config is not self._config:  # everything is checked before anything is applied
+            if config.wave_peak_freq > 0.0:
+                freq, source = config.wave_peak_freq, 'parameter'
+            elif self._wave_source != 'topic':
+                freq, source = config.default_wave_peak_freq, 'default'
+            try:
+                estimator = make_estimator(config, freq)
+            except ValueError as error:
+                return SetParametersResult(successful=False, reason=str(error))
         checks, reason = validated_update(self._checks, parameters)
         if checks is None:
             return SetParametersResult(successful=False, reason=reason)
         if checks != self._checks or config.ndof != self._config.ndof:
-            self._replace_checker(checks, config.ndof)
+            self._replace_checker(checks, config.ndof)  # nothing below can fail any more
         if config is self._config:
             return SetParametersResult(successful=True, reason='')
-        freq = self._wave_peak_freq
-        if config.wave_peak_freq > 0.0:
-            freq, source = config.wave_peak_freq, 'parameter'
-        elif self._wave_source == 'topic':
-            source = 'topic'
-        else:
-            freq, source = config.default_wave_peak_freq, 'default'
-        try:
-            estimator = make_estimator(config, freq)
-        except ValueError as error:
-            return SetParametersResult(successful=False, reason=str(error))
         self._config, self._estimator = config, estimator
         self._wave_peak_freq, self._wave_source = freq, source
         self._aligner = InputAligner(config.aligner_settings())

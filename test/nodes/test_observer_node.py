@@ -248,6 +248,13 @@ def test_reference_checks_follow_run_time_parameters(ros_context: Context) -> No
         results = node.set_parameters([Parameter('jump_gate', value=-1.0)])
         assert not results[0].successful and 'jump_gate' in results[0].reason
         assert node.checker.settings.jump_gate == 8.0
+        # a change the estimator refuses (a singular inertia) applies nothing, not even the
+        # valid reference-check change that came with it
+        result = node.set_parameters_atomically([Parameter('jump_gate', value=9.0),
+                                                 Parameter('mass_matrix', value=[0.0] * 9)])
+        assert not result.successful, result.reason
+        assert node.checker.settings.jump_gate == 8.0
+        assert node.config.mass_matrix == ObserverConfig().mass_matrix
     finally:
         node.destroy_node()
 

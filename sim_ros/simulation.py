@@ -222,7 +222,7 @@ def with_schedule_shift(controller: ControllerConfig, shift: float) -> Controlle
 
 
 def scenario_with_schedule_shift(scenario: Scenario, shift: float) -> Scenario:
-    """The scenario with its scheduled events ``shift`` [s] later (a new object).
+    """The scenario with its scheduled events ``shift`` [s] later (pure).
 
     The events: setpoint moves and turns (`with_schedule_shift`) and the wave peak frequency's
     steps and ramps (`schedule.delayed`). Nothing else changes (seeds, sea, sensors); without

@@ -12,8 +12,9 @@ trainings without thrust and the largest output step over the largest true LF st
 (`evaluation.Metrics.largest_step_ratio`). ``--profile`` adds the error per 60 s block (where
 it is made).
 ``--schedule-spread`` (default: one retraining period, as `benchmark`) delays each seed's
-setpoint events by its own draw, so that a screen samples the phase between trainings and
-manoeuvres (docs/BENCHMARKS.md, twenty-first and twenty-second sessions).
+scheduled events (setpoint moves and turns, ω0 steps) by its own draw, so that a screen samples
+the phase between trainings and events (docs/BENCHMARKS.md, twenty-first and twenty-second
+sessions).
 ``--closed-loop`` also puts each variant in its own DP loop (`suite.run_closed_loops`, same seed,
 scored like `benchmark` from the same sample) next to the observer (the recording's own loop),
 oracle_kf and raw loops: position / heading RMSE, largest excursion, wave-band thrust power per
@@ -178,7 +179,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--loops-only', action='store_true',
                         help='with --closed-loop: skip the open-loop replays')
     parser.add_argument('--schedule-spread', type=float, default=SCHEDULE_SPREAD,
-                        metavar='SECONDS', help="delay the setpoint events by the seed's "
+                        metavar='SECONDS', help="delay the scheduled events by the seed's "
                         f'U(0, SECONDS) draw, as benchmark does (default {SCHEDULE_SPREAD:g}; '
                         '0: the scenario as written, as every screen before the twenty-second '
                         'session)')

@@ -80,7 +80,7 @@ RAO_ORACLE_NOTE = (' Here oracle_kf knows the vessel, environment and noise but 
                    'sea by a 2nd-order filter fitted to its peak and variance: a strong '
                    'baseline, not a limit.')
 # [s] default --schedule-spread: one retraining period, so the held-out seeds draw the phase
-# between trainings and setpoint events (docs/BENCHMARKS.md, twenty-second session)
+# between trainings and scheduled events (docs/BENCHMARKS.md, twenty-second session)
 SCHEDULE_SPREAD = PredictorParams().retrain_period
 EPS_TIME = 1e-6  # [s] 'just before' a change time (schedules are right-continuous at steps)
 

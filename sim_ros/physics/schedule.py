@@ -73,7 +73,7 @@ def steps(initial: float, changes: Sequence[tuple[float, float]]) -> PeakFreqSch
 
 
 def delayed(schedule: PeakFreqSchedule, delay: float) -> PeakFreqSchedule:
-    """``schedule`` with every point after t = 0 ``delay`` [s] later (a new object).
+    """``schedule`` with every point after t = 0 ``delay`` [s] later (pure).
 
     The value at t = 0 holds until the first moved point, so a step or a ramp corner at t comes
     at t + delay and the values are unchanged; a constant schedule is returned as it is. Used to

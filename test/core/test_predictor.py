@@ -860,3 +860,43 @@ def test_a_restart_undone_within_two_periods_hands_the_old_targets_back(
         else:
             assert offered[199] is None
             assert len(results[199]) == len(results[179])  # restarted again
+
+
+@pytest.mark.parametrize('motion_over_at', [None, 10])
+def test_install_defer_time_holds_a_new_network_back_while_the_vessel_manoeuvres(
+        motion_over_at: int | None) -> None:
+    """The second network is ready while the gate says 'manoeuvring' (raw gain 0.9 > 0.5).
+
+    (The first is installed at once: the twin has no network yet, so the gate is not measuring.)
+    It is put in service at the first update after the gate fell to 0.1 (the gate of the last
+    sample decides: 10 + 1 samples), or, with the motion never over, install_defer_time = 30 s
+    after it was ready; off, at once.
+    """
+    t, pose, force = synthetic_onedof(FIRST_TRAINING + 120, 3)
+    waited = {}
+    for defer in (0.0, 30.0):
+        predictor = AdaptivePredictor(SMALL.replace(motion_gate=True, install_defer_time=defer),
+                                      background=False)
+        assert predictor._gate is not None
+        moving = {'gain': 0.9}
+        predictor._gate.update = functools.partial(  # type: ignore[method-assign]
+            lambda state, _pose: np.full(1, state['gain']), moving)
+        first_model, ready = None, None
+        for k in range(len(t)):
+            if motion_over_at is not None and ready is not None and k >= ready + motion_over_at:
+                moving['gain'] = 0.1
+            trainings = predictor.counters['trainings']
+            predictor.update(float(t[k]), pose[k], force[k])
+            if first_model is None:
+                first_model = predictor.model
+                continue
+            if ready is None and (predictor.deferred_installs or
+                                  predictor.counters['trainings'] > trainings):
+                ready = k  # the sample the second network was collected at
+            if predictor.model is not first_model:
+                waited[defer] = k - (ready if ready is not None else k)
+                break
+        assert ready is not None and defer in waited
+        assert predictor.deferred_installs == (1 if defer else 0)
+    assert waited[0.0] == 0
+    assert waited[30.0] == (motion_over_at + 1 if motion_over_at is not None else 30)

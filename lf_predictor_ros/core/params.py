@@ -251,14 +251,6 @@ class PredictorParams:
         default=(0.0, 0.0, 0.0), metadata=_doc(
             'largest rate of change of the published estimate (north, east, yaw); set it above '
             'the fastest LF motion; 0 = no limit on that DOF', 'm/s, m/s, rad/s'))
-    install_defer_time: float = field(
-        default=0.0, metadata=_doc(
-            'with the motion gate: a newly trained holding network is not put in service while '
-            'the gate says the vessel moves faster than it usually does (raw gate gain > 0.5 in '
-            'any DOF; a setpoint move or a turn), but when the motion is over or this long after '
-            'it was ready, whichever comes first (a network trained on a window that ends inside '
-            'a manoeuvre is not swapped in while the manoeuvre lasts; a newer one replaces it); '
-            '0 = off (install at once)', 's'))
     roughness_guard_time: float = field(
         default=30.0, metadata=_doc(
             "roughness guard (core/roughness.py): while the network prediction's squared second "
@@ -424,7 +416,6 @@ class PredictorParams:
                                  f'{getattr(self, name)!r}: give a positive value')
         for name in ('weight_decay', 'derivative_weight', 'initial_wave_peak_freq',
                      'wave_augmentation', 'switch_blend_time', 'motion_gate_smoothing',
-                     'install_defer_time',
                      'output_notch_zeta', 'notch_lower_edge', 'notch_zeta_broadband',
                      'motion_gate_yaw_notch'):
             if getattr(self, name) < 0.0:

@@ -122,9 +122,6 @@ GUARD_SPREADS = 6.0
 GUARD_FLOOR = np.array([0.5, 0.5, 0.02])  # [m, m, rad]
 # Appended to a checkpoint's path to name the motion gate twin's checkpoint beside it.
 TWIN_SUFFIX = '.twin'
-# install_defer_time: the vessel manoeuvres while the motion gate's raw gain (before the dead
-# zone) exceeds this in any DOF: the gate half open, s² above GATE_RATIO × the usual s² [-].
-DEFER_GATE_GAIN = 0.5
 # The force argument of the output notch's `CascadeFilter.update` (it ignores the force).
 _NO_FORCE = np.zeros(3)
 _NO_FORCE.flags.writeable = False
@@ -312,10 +309,6 @@ class AdaptivePredictor:
         self._previous_model: NumpyNnarmax | None = None  # the network before _model
         self._rough_retirements = 0
         self._gain = np.zeros(params.ndof)
-        self._gate_raw = 0.0  # largest raw gate gain of the last sample (install_defer_time)
-        # install_defer_time: a finished training's outcome held back, and when it was ready
-        self._deferred: tuple[_JobOutcome, float] | None = None
-        self.deferred_installs = 0  # outcomes held back at least one sample
         smoothing = params.motion_gate_smoothing
         self._gate_alpha = 1.0 if smoothing <= 0.0 else min(1.0, params.sample_time / smoothing)
         self._gate_offset = np.zeros(params.ndof)  # LP(moving − holding) (motion_gate_smoothing)
@@ -343,8 +336,6 @@ class AdaptivePredictor:
             raise ValueError(f'sample time stamp must be finite, got {t}')
         self._now = t
         self._collect_outcomes(t)
-        if self._deferred is not None:
-            self._install_deferred(t)
         y = self._position(pose_arr)
         u = self._force_channels(force_arr, pose_arr[2])
         self._u.append(u)
@@ -919,15 +910,12 @@ class AdaptivePredictor:
             # fallback is another filter's, and the step where the source switches is no motion.
             self._gate.restart()
             self._gain = np.zeros(self.ndof)
-            self._gate_raw = 0.0
             self._gate_offset = np.zeros(self.ndof)
             if self._gate_yaw_notch is not None:
                 self._gate_yaw_notch.reset()
             self._validate_gate(out, out)
             return out
-        raw = self._gate.update(moving)
-        self._gate_raw = max(raw.tolist())
-        gain = dead_zoned(raw, self.params.motion_gate_dead_zone)
+        gain = dead_zoned(self._gate.update(moving), self.params.motion_gate_dead_zone)
         if self._gate_alpha < 1.0:
             # LP(moving − holding) of core.motion_gate (motion_gate_smoothing)
             self._gate_offset = low_pass_step(self._gate_offset, offset, self._gate_alpha)
@@ -1091,37 +1079,7 @@ class AdaptivePredictor:
             except queue.Empty:
                 return
             if outcome.generation == self._generation:
-                if self._defers(outcome):  # a newer network replaces a held-back one
-                    if self._deferred is None:
-                        self.deferred_installs += 1
-                    self._deferred = (outcome, t if self._deferred is None else
-                                      self._deferred[1])
-                    continue
-                if self._deferred is not None:  # outcomes are applied in their order
-                    self._apply(self._deferred[0], t)
-                    self._deferred = None
                 self._apply(outcome, t)
-
-    def _defers(self, outcome: _JobOutcome) -> bool:
-        """``install_defer_time``: hold back an accepted network while the vessel manoeuvres."""
-        result = outcome.result
-        return (self.params.install_defer_time > 0.0 and self._gate is not None and
-                outcome.frequency is None and result is not None and result.accepted and
-                result.segment == self._segment and self._gate_raw > DEFER_GATE_GAIN)
-
-    def _install_deferred(self, t: float) -> None:
-        """Put a held-back network in service once the motion is over or it waited too long."""
-        deferred = self._deferred
-        if deferred is None:
-            return
-        outcome, ready = deferred
-        if outcome.generation != self._generation or outcome.result is None or \
-                outcome.result.segment != self._segment:
-            self._deferred = None  # a restart since: its window is gone
-            return
-        if self._gate_raw <= DEFER_GATE_GAIN or t - ready >= self.params.install_defer_time:
-            self._deferred = None
-            self._apply(outcome, t)
 
     def _apply(self, outcome: _JobOutcome, t: float) -> None:
         if outcome.frequency is not None:

@@ -6,9 +6,12 @@
 For each scenario (seeds with a default row): the default loop's position RMSE over the
 observer loop's (mean, median) and its stable count; for each other variant, per seed, its
 position RMSE over the default's (mean, median, range, seeds better), over the observer's
-(mean), the mean of the per-seed wave-band thrust share ratios to the default per DOF, and the
-stable count. Every earlier session rewrote this in /tmp; the screens' rules ("mean per-seed
-position ratio ≤ 0.97, thrust ≤ 1.05 per DOF, all stable") read these columns.
+(mean), the paired statistic of the per-seed log ratios (mean ± its standard error, as a
+ratio, and t = mean / standard error: on rao_swell a change that should not matter has a
+per-seed SD of 0.17 in log, so a bare mean over ten seeds decides nothing; docs/BENCHMARKS.md,
+twenty-second session), the mean of the per-seed wave-band thrust share ratios to the default per
+DOF, and the stable count. Every earlier session rewrote this in /tmp; the screens' rules
+("mean per-seed position ratio ≤ 0.97, thrust ≤ 1.05 per DOF, all stable") read these columns.
 """
 from __future__ import annotations
 
@@ -16,6 +19,7 @@ import argparse
 from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass
+import math
 import re
 import statistics
 import sys
@@ -78,10 +82,15 @@ def summary(rows: dict[tuple[str, int], dict[str, Loop]]) -> list[str]:
                       for i in range(len(default[0].thrust))]
             over_observer = statistics.mean(v.position / o for v, o in
                                             zip(loops, observer, strict=True) if v is not None)
+            logs = [math.log(r) for r in ratio]
+            error = statistics.stdev(logs) / math.sqrt(len(logs)) if len(logs) > 1 else math.inf
+            paired = (f'paired {math.exp(statistics.mean(logs)):.3f} '
+                      f'×/÷ {math.exp(error):.3f}, t {statistics.mean(logs) / error:+.1f}'
+                      if error > 0.0 else 'paired: identical')
             out.append(
                 f'  {name}: position / default mean {statistics.mean(ratio):.3f} median '
                 f'{statistics.median(ratio):.3f} range {min(ratio):.2f}–{max(ratio):.2f}, '
-                f'better on {sum(r < 1.0 for r in ratio)}/{len(ratio)}; / observer '
+                f'better on {sum(r < 1.0 for r in ratio)}/{len(ratio)}, {paired}; / observer '
                 f'{over_observer:.3f}; thrust / default ' +
                 ' / '.join(f'{t:.3f}' for t in thrust) +
                 f'; stable {sum(v.stable for v in loops if v is not None)}/{len(loops)}')

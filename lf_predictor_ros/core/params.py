@@ -54,7 +54,6 @@ _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
-                'frequency_after_startup',
                 'sea_change_revert')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
@@ -175,13 +174,6 @@ class PredictorParams:
             'same ratio of the ω0 before it) was not one: the targets before that restart are '
             'taken up again instead of restarting the window once more (the LF motion of a '
             'start-up or a manoeuvre briefly looks like a lower wave peak)'))
-    frequency_after_startup: bool = field(
-        default=False, metadata=_doc(
-            'once the first training of a segment is followed by at least the short sea-change '
-            'window (max(α, γ/4)), ω0 is estimated only on the samples since that training: '
-            'the start-up before it, when a DP loop runs on the fallback, can hold a loop '
-            'oscillation as a wave peak for the whole γ window (rao_swell: 0.30–0.44 rad/s '
-            'against 0.48 for 20 min; issue 13, sixteenth and twenty-second sessions)'))
     notch_lower_edge: float = field(
         default=0.23, metadata=_doc(
             'with notch_zeta_broadband: the broadband notch is no wider than the width whose '

@@ -678,7 +678,6 @@ class AdaptivePredictor:
         self._k = -1
         self._fb_next = -1
         self._last_train_k: int | None = None
-        self._service_start: int | None = None  # _k at the segment's first training
         self._last_freq_k: int | None = None
         self._targets: TargetWindow | None = None
         # sea_change_revert: (ω0, targets) in service before the newest restart, and its index
@@ -1001,11 +1000,9 @@ class AdaptivePredictor:
             return
         self._retrain_requested = False
         self._last_train_k = self._k
-        if self._service_start is None:
-            self._service_start = self._k
         snapshot = Snapshot(u=self._u.newest(len(self._u)).copy(),
                             y=self._y.newest(len(self._y)).copy(), end_index=self._k,
-                            segment=self._segment, service_start=self._service_start)
+                            segment=self._segment)
         args = (self._generation, snapshot, self._state_dict, self._targets, self._frequency,
                 self._stop, self._revertible())
         if self.background:

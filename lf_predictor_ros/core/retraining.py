@@ -79,7 +79,6 @@ class Snapshot:
     y: FloatArray
     end_index: int
     segment: int
-    service_start: int | None = None  # end_index of the segment's first training
 
 
 @dataclass(frozen=True)
@@ -373,22 +372,6 @@ def training_window(params: PredictorParams, snapshot: Snapshot,
     return u, y, np.asarray(targets.values).reshape(n_t, -1), mask
 
 
-def frequency_window(params: PredictorParams, snapshot: Snapshot) -> FloatArray:
-    """The positions the ω0 estimate sees (``snapshot.y`` or its newest part).
-
-    With ``frequency_after_startup``: only the samples after the segment's first training, once
-    there are at least `change_samples` of them (the γ window then never reaches into the
-    start-up); else all of ``snapshot.y``.
-    """
-    y = snapshot.y
-    if not params.frequency_after_startup or snapshot.service_start is None:
-        return y
-    since = snapshot.end_index - snapshot.service_start
-    if since < change_samples(params) or since >= y.shape[0]:
-        return y
-    return y[-since:]
-
-
 def run_retraining(params: PredictorParams, snapshot: Snapshot,
                    incumbent: dict[str, torch.Tensor] | None,
                    previous_targets: TargetWindow | None,
@@ -403,8 +386,7 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
     taken up again (appended to, or filtered afresh) instead of restarting once more.
     """
     start = time.monotonic()
-    frequency = sea_state_estimate(params, frequency_window(params, snapshot),
-                                   previous_frequency)
+    frequency = sea_state_estimate(params, snapshot.y, previous_frequency)
     damping = targets_peak_damping(params, snapshot, frequency)
     # a window flagged as a manoeuvre in a broadband sea: its targets are filtered afresh, so
     # the wide-notch targets of earlier station-keeping windows do not stay appended in it

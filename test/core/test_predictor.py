@@ -860,18 +860,3 @@ def test_a_restart_undone_within_two_periods_hands_the_old_targets_back(
         else:
             assert offered[199] is None
             assert len(results[199]) == len(results[179])  # restarted again
-
-
-def test_the_first_training_of_a_segment_marks_the_service_start() -> None:
-    """frequency_after_startup's reference: _k at the segment's first training, per segment."""
-    t, pose, force = synthetic_onedof(FIRST_TRAINING + 30, 4)
-    predictor = AdaptivePredictor(SMALL.replace(frequency_after_startup=True), background=False)
-    for k in range(FIRST_TRAINING + 30):
-        predictor.update(float(t[k]), pose[k], force[k])
-    assert predictor._service_start is not None
-    assert predictor._last_train_k is not None
-    assert predictor._service_start < predictor._last_train_k  # later trainings keep it
-    first = predictor._service_start
-    assert FIRST_TRAINING - 2 <= first <= FIRST_TRAINING  # _k counts from 0
-    predictor.restart_segment()
-    assert predictor._service_start is None

@@ -23,8 +23,6 @@ from lf_predictor_ros.core.regressors import build_regressors
 from lf_predictor_ros.core.retraining import (
     ACCEPT_LOSS_RATIO,
     Snapshot,
-    change_samples,
-    frequency_window,
     make_targets,
     network_spec,
     run_retraining,
@@ -399,7 +397,7 @@ def test_a_new_sea_is_seen_on_the_short_window_and_restarts_the_training_window(
     one, and the training window restarts on those samples.
     """
     params = PredictorParams(ndof=1)  # γ = 1200 s: the short window is 300 s
-    assert change_samples(params) == 300
+    assert retraining.change_samples(params) == 300
     snapshot = omega_step_snapshot(400.0)
     long = retraining.estimate_frequency(params, snapshot.y, 1.25)
     assert long.wave_peak_freq == pytest.approx(1.25, rel=0.05)  # the old sea still dominates
@@ -607,7 +605,7 @@ def test_a_restart_undone_within_two_periods_takes_the_old_targets_up_again(
             expected = make_targets(params, y, 699, freq, before)
             assert len(result.targets) == min(len(before) + 40, params.training_samples)
         else:  # a real new sea: restarted on the newest change samples
-            expected = make_targets(params, y[-change_samples(params):], 699, freq,
+            expected = make_targets(params, y[-retraining.change_samples(params):], 699, freq,
                                     None)
         np.testing.assert_array_equal(result.targets.values, expected.values)
     # without before_restart the same return to 0.8 is a restart of its own
@@ -615,7 +613,7 @@ def test_a_restart_undone_within_two_periods_takes_the_old_targets_up_again(
     monkeypatch.setattr(retraining, 'sea_state_estimate', lambda *args: estimate)
     plain = run_retraining(params, snapshot, None, restarted, 0.4)
     assert plain.restarted and not plain.reverted
-    assert len(plain.targets) == change_samples(params) - params.transient_samples
+    assert len(plain.targets) == retraining.change_samples(params) - params.transient_samples
 
 
 def test_the_narrow_reference_is_the_targets_window_filtered_with_the_narrow_notch() -> None:
@@ -645,26 +643,3 @@ def test_the_narrow_reference_is_the_targets_window_filtered_with_the_narrow_not
         narrow_reference(params, y[:50], N_TRAIN, WAVE_PEAK_FREQ, 0.1)
 
 
-
-
-def test_frequency_window_leaves_out_the_start_up_once_enough_follows() -> None:
-    """frequency_after_startup: y after the first training, once ≥ max(α, γ/4) samples exist."""
-    params = PredictorParams(frequency_after_startup=True)
-    short = change_samples(params)
-    y = np.arange(2000.0)[:, None] * np.ones((1, 3))
-
-    def window(end: int, start: int | None) -> np.ndarray:
-        rows = y[:end + 1]
-        return frequency_window(
-            params, Snapshot(u=np.zeros_like(rows), y=rows, end_index=end, segment=0,
-                             service_start=start))
-
-    assert window(1500, 360).shape[0] == 1140  # 1140 samples since the first training
-    np.testing.assert_array_equal(window(1500, 360)[0], y[361])  # the newest 1140 rows
-    assert window(360 + short - 1, 360).shape[0] == 360 + short  # too few since: all of y
-    assert window(360 + short, 360).shape[0] == short
-    assert window(1500, None).shape[0] == 1501  # the first training itself: all of y
-    off = PredictorParams()  # the default: all of y
-    rows = y[:1501]
-    assert frequency_window(off, Snapshot(u=rows, y=rows, end_index=1500, segment=0,
-                                                     service_start=360)).shape[0] == 1501

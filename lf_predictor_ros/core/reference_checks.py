@@ -182,6 +182,13 @@ class ReferenceChecker:
 
     # ---- state ------------------------------------------------------------------------------
 
+    def renewed(self, settings: ReferenceCheckSettings, ndof: int) -> ReferenceChecker:
+        """A checker with other settings (or ndof): statistics restart, counters carry on."""
+        checker = ReferenceChecker(settings, ndof)
+        checker.counters = dict(self.counters)
+        checker.rejected = self.rejected
+        return checker
+
     def reset(self) -> None:
         """Clear every fault and learned statistic (counters are kept): a fresh reference."""
         # accepted (stamp, estimated DOFs as floats), oldest first

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any, Generic, TypeVar
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 import numpy as np
 from numpy.typing import NDArray
+from rclpy.clock import Clock
 from rclpy.impl.rcutils_logger import RcutilsLogger
 
 from lf_predictor_ros.core.alignment import AlignedSample, InputAligner
@@ -77,6 +78,8 @@ class InputHealth:
     if TYPE_CHECKING:  # provided by rclpy's Node; declared here for the type checker only
         def get_logger(self) -> RcutilsLogger: ...
 
+        def get_clock(self) -> Clock: ...
+
     def _init_input_health(self) -> None:
         self._invalid_messages = 0  # failed conversions (bad quaternion, negative stamp)
         self._unexpected_frame = 0
@@ -108,6 +111,10 @@ class InputHealth:
             return
         self.get_logger().error(f'callback failed ({self._last_error})',
                                 throttle_duration_sec=5.0)
+
+    def _clock_seconds(self) -> float:
+        """The node clock now [s] (the reference checks' dropout watch)."""
+        return float(self.get_clock().now().nanoseconds) / 1e9
 
     def _log_reference_fault(self, checker: ReferenceChecker) -> None:
         """Log the reference's status after a fault: ERROR or WARN, throttled."""

@@ -276,10 +276,7 @@ class ObserverNode(InputHealth, Node):
 
     def _replace_checker(self, checks: ReferenceCheckSettings, ndof: int) -> None:
         """New reference checks (statistics restart, counters kept)."""
-        old = self._checker
-        self._checker = ReferenceChecker(checks, ndof)
-        self._checker.counters = dict(old.counters)
-        self._checker.rejected = old.rejected
+        self._checker = self._checker.renewed(checks, ndof)
         self._checks = checks
         self.get_logger().info('reference checks changed: statistics restart')
 
@@ -327,9 +324,6 @@ class ObserverNode(InputHealth, Node):
         if verdict.fault is not None:
             self._log_reference_fault(self._checker)
         return verdict.accepted
-
-    def _clock_seconds(self) -> float:
-        return float(self.get_clock().now().nanoseconds) / 1e9
 
     def _restart_data(self) -> None:
         """A fault found after the fact: the next sample starts a new segment (estimator reset)."""

@@ -537,9 +537,7 @@ class PredictorNode(InputHealth, LifecycleNode):
             self.get_logger().info('aligner settings changed: new data segment')
         old = self._checker
         if old is not None and (checks != self._checks or params.ndof != self._params.ndof):
-            self._checker = ReferenceChecker(checks, params.ndof)
-            self._checker.counters = dict(old.counters)
-            self._checker.rejected = old.rejected
+            self._checker = old.renewed(checks, params.ndof)
             self.get_logger().info('reference checks changed: statistics restart')
         if params.ndof != self._params.ndof:
             self._passthrough_moving = False
@@ -589,9 +587,6 @@ class PredictorNode(InputHealth, LifecycleNode):
         if self._active and self._aligner is not None:
             self._feed_pose(msg, self._aligner, self._settings.frame_id, self._process,
                             accept=self._check_pose)
-
-    def _clock_seconds(self) -> float:
-        return float(self.get_clock().now().nanoseconds) / 1e9
 
     def _check_pose(self, t: float, pose: FloatArray) -> bool:
         """Position-reference checks of one pose (before the aligner); False: rejected."""

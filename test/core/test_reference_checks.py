@@ -253,3 +253,18 @@ def test_a_backward_stamp_restarts_the_local_tests_and_the_checks_go_on() -> Non
     assert not verdicts[900].accepted and verdicts[900].fault == 'jump'
     assert sum(not v.accepted for v in verdicts) == 1
     assert checker.counters['jump'] == 2 and checker.counters['dropout'] == 0
+
+
+def test_renewed_checks_restart_their_statistics_and_keep_the_counters() -> None:
+    """Other settings or ndof (a run-time parameter change): counters carry on, faults do not."""
+    checker = ReferenceChecker(ReferenceCheckSettings(frozen_time=2.0), 3)
+    pose = np.array([1.0, 2.0, 0.1])
+    verdicts = [checker.check_pose(float(t), pose) for t in range(6)]
+    assert not verdicts[-1].accepted and checker.counters['frozen'] == 1
+    rejected = checker.rejected
+    renewed = checker.renewed(ReferenceCheckSettings(frozen_time=4.0), 1)
+    assert renewed.settings.frozen_time == 4.0 and renewed.ndof == 1
+    assert renewed.counters == checker.counters and renewed.counters is not checker.counters
+    assert renewed.rejected == rejected >= 1
+    assert not renewed.faults  # a fresh reference: no active fault
+    assert renewed.check_pose(6.0, pose).accepted  # the freeze is not carried over

@@ -226,9 +226,10 @@ def scenario_with_schedule_shift(scenario: Scenario, shift: float) -> Scenario:
 
     The events: setpoint moves and turns (`with_schedule_shift`) and the wave peak frequency's
     steps and ramps (`schedule.delayed`). Nothing else changes (seeds, sea, sensors); without
-    events the scenario itself is returned. The benchmark draws the shift per seed so that its
-    held-out seeds sample the phase between the predictor's trainings and the events
-    (docs/BENCHMARKS.md, twenty-first and twenty-second sessions).
+    events the scenario itself is returned (the test for "nothing to move"). The benchmark
+    draws the shift per seed so that its held-out seeds sample the phase between the
+    predictor's trainings and the events (docs/BENCHMARKS.md, twenty-first and twenty-second
+    sessions).
     """
     controller = with_schedule_shift(scenario.controller, shift)
     waves = scenario.waves
@@ -238,12 +239,6 @@ def scenario_with_schedule_shift(scenario: Scenario, shift: float) -> Scenario:
     if controller is scenario.controller and waves is scenario.waves:
         return scenario
     return replace(scenario, controller=controller, waves=waves)
-
-
-def has_scheduled_events(scenario: Scenario) -> bool:
-    """True if the scenario has setpoint events or a wave peak frequency that changes."""
-    return bool(scenario.controller.setpoint_schedule) or \
-        any(t > 0.0 for t in scenario.waves.peak_freq.times)
 
 
 @dataclass(frozen=True)

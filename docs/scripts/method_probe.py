@@ -51,7 +51,6 @@ from lf_predictor_ros.core.evaluation import score
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.predictor import AdaptivePredictor
 from sim_ros.simulation import (
-    has_scheduled_events,
     load_scenario,
     scenario_with_schedule_shift,
     simulate,
@@ -94,10 +93,10 @@ def fair_case(scenario_name: str, seed: int, duration: float,
     ``schedule_spread`` [s]: setpoint events and wave peak frequency steps delayed by the seed's
     U(0, spread) draw, as `benchmark --schedule-spread` does.
     """
-    scenario = load_scenario(scenario_name)
+    written = load_scenario(scenario_name)
     shift = schedule_shift_for_seed(seed, schedule_spread)
-    if shift and has_scheduled_events(scenario):
-        scenario = scenario_with_schedule_shift(scenario, shift)
+    scenario = scenario_with_schedule_shift(written, shift)
+    if scenario is not written:
         print(f'{scenario_name:20s} {seed} scheduled events delayed {shift:.1f} s', flush=True)
     params = predictor_params(scenario)
     setup = make_setup(scenario, seed, params)

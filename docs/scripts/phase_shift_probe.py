@@ -1,4 +1,4 @@
-"""The benchmark's cases with every setpoint event of the scenario moved by a fixed time.
+"""The benchmark's cases with every scheduled event of the scenario moved by a fixed time.
 
     OMP_NUM_THREADS=1 python docs/scripts/phase_shift_probe.py rao_supply --shift 30 \
         --seeds 11 12 13 14 15 16 17 18 19 20 -o phase_shift30_rao_supply.json.gz

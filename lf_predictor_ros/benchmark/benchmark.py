@@ -191,7 +191,7 @@ def _pct(value: float) -> str:
 
 # ------------------------------------------------------------------------------ tables
 def _shift_note(cases: list[CaseResult]) -> str:
-    """' Setpoint events delayed by …' when cases ran with a schedule shift (else '')."""
+    """' Scheduled events … delayed by …' when cases ran with a schedule shift (else '')."""
     shifts = [float(c.info.get('schedule_shift', 0.0)) for c in cases]
     if not any(shifts):
         return ''

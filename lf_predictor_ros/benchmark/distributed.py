@@ -38,7 +38,7 @@ class CaseSpec:
     recording_loop: str = 'observer'
     estimators: tuple[str, ...] | None = None  # None: every estimator
     loop_estimators: tuple[str, ...] | None = None  # None: every loop if the scenario has a PID
-    schedule_shift: float = 0.0  # s, every setpoint event that much later (suite.run_case)
+    schedule_shift: float = 0.0  # s, every scheduled event that much later (suite.run_case)
 
     @property
     def key(self) -> str:

@@ -93,7 +93,6 @@ from sim_ros.simulation import (
     Scenario,
     SimRecord,
     Simulator,
-    has_scheduled_events,
     load_scenario,
     scenario_with_schedule_shift,
     simulate,
@@ -412,7 +411,7 @@ def scored_start(params: PredictorParams, samples: int) -> int:
 
 
 def schedule_shift_for_seed(seed: int, spread: float) -> float:
-    """The setpoint schedule's delay [s] for ``seed``: U(0, ``spread``), 0 when spread is 0.
+    """The scheduled events' delay [s] for ``seed``: U(0, ``spread``), 0 when spread is 0.
 
     Drawn from its own stream (``SCHEDULE_SHIFT_STREAM``), so the sea, the noise and every other
     draw of the seed are unchanged. Every held-out seed has the same event times otherwise, and
@@ -446,9 +445,8 @@ def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
     unknown = [n for n in estimators if n not in ESTIMATORS]
     if unknown:
         raise ValueError(f'unknown estimator(s) {unknown}; choose from {ESTIMATORS}')
-    scenario = load_scenario(scenario_name)
-    if schedule_shift:
-        scenario = scenario_with_schedule_shift(scenario, schedule_shift)
+    written = load_scenario(scenario_name)
+    scenario = scenario_with_schedule_shift(written, schedule_shift)
     params = predictor_params(scenario, params_overrides)
     setup = make_setup(scenario, seed, params)
     if recording is None:
@@ -461,7 +459,7 @@ def run_case(scenario_name: str, seed: int, *, duration: float | None = None,
     info: dict[str, Any] = {'sample_time': setup.sample_time, 'params': params.to_dict(),
                             'baselines': 'untuned defaults' if tuning.get('source') == 'defaults'
                             else 'config/baselines'}
-    if schedule_shift and has_scheduled_events(scenario):  # else nothing was moved
+    if scenario is not written:  # else the scenario has no events to move
         info['schedule_shift'] = schedule_shift
     begin = scored_start(params, len(data['t']))
     outputs = run_open_loop(data, setup, estimators, info, begin)

@@ -188,14 +188,6 @@ class PredictorParams:
     lowpass_offset: float = field(
         default=0.2, metadata=_doc('low-pass cutoff above the notch, ωLP = ω0 + offset '
                                    '(thesis Fig. 4.8)', 'rad/s'))
-    target_advance: float = field(
-        default=0.0, metadata=_doc(
-            'the targets are read this much later than their grid stamp (linear interpolation '
-            'of the filtered series): a grid pose that is the mean of the poses in (t − h, t] '
-            '(InputAligner, average_poses) describes the vessel about (h − input period) / 2 '
-            'earlier than t, and targets filtered from it carry that delay into the network; '
-            'negative: earlier (a smoother, later estimate); 0 = the targets at their stamps; '
-            'within ± sample_time', 's'))
     wave_band: tuple[float, ...] = field(
         default=(0.25, 1.4), metadata=_doc('(low, high) band searched for ω0; thesis eq. 3.9 '
                                            'is 0.3–1.3, widened so edge peaks are interior',
@@ -439,9 +431,6 @@ class PredictorParams:
         if any(rate < 0.0 for rate in self.max_output_rate):
             raise ValueError(f'positivity rule: max_output_rate must be ≥ 0 in every DOF (0 = no '
                              f'limit), got {list(self.max_output_rate)!r}')
-        if not abs(self.target_advance) < self.sample_time:
-            raise ValueError(f'target_advance must lie within ± sample_time {self.sample_time} '
-                             f's (a fraction of one grid step), got {self.target_advance!r}')
         if self.regressor_clip != 0.0 and not self.regressor_clip >= 1.0:
             raise ValueError(f'regressor_clip must be 0 (off) or ≥ 1 (the training range '
                              f'widened that many times), got {self.regressor_clip!r}')

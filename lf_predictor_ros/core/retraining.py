@@ -46,7 +46,7 @@ from lf_predictor_ros.core.network import (
 )
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.regressors import build_regressors
-from lf_predictor_ros.core.targets import TargetWindow, advance, training_mask
+from lf_predictor_ros.core.targets import TargetWindow, training_mask
 from lf_predictor_ros.core.training import (
     TrainSettings,
     evaluate_loss,
@@ -314,15 +314,10 @@ def make_targets(params: PredictorParams, y: FloatArray, end_index: int,
     if previous is not None:
         shift = end_index - previous.end_index
         if 0 < shift <= beta and len(previous) >= beta - shift:
-            filtered = _filtered_targets(params, y[-params.filter_samples:], sos)
+            filtered = zero_phase(y[-params.filter_samples:], sos)
             return previous.append(filtered, end_index, beta, max_len=params.training_samples)
     span = min(len(y), params.training_samples + eps)
-    return TargetWindow.start(_filtered_targets(params, y[-span:], sos), end_index, eps)
-
-
-def _filtered_targets(params: PredictorParams, y: FloatArray, sos: FloatArray) -> FloatArray:
-    """``y`` filtered zero-phase with ``sos`` and read ``target_advance`` later (`advance`)."""
-    return advance(zero_phase(y, sos), params.target_advance / params.sample_time)
+    return TargetWindow.start(zero_phase(y[-span:], sos), end_index, eps)
 
 
 def narrow_reference(params: PredictorParams, y: FloatArray, count: int, wave_peak_freq: float,
@@ -342,8 +337,7 @@ def narrow_reference(params: PredictorParams, y: FloatArray, count: int, wave_pe
     if count < 1 or count > y.shape[0]:
         raise ValueError(f'count must lie in [1, {y.shape[0]}] samples, got {count}')
     span = min(y.shape[0], count + params.transient_samples)
-    reference = _filtered_targets(params, y[-span:], target_filter(params, wave_peak_freq))[
-        -count:]
+    reference = zero_phase(y[-span:], target_filter(params, wave_peak_freq))[-count:]
     reference.setflags(write=False)  # handed to the odometry's worker
     return reference
 

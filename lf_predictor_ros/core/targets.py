@@ -71,32 +71,6 @@ def append_targets(old_targets: ArrayLike | None, filtered: ArrayLike, retrain_e
     return np.concatenate([kept, new[new.shape[0] - append_len:]], axis=0)  # line 33
 
 
-def advance(filtered: ArrayLike, fraction: float) -> _FloatArray:
-    """The filtered series read ``fraction`` of a sample later than its stamps (−1 < fraction < 1).
-
-    For a ≥ 0 sample i becomes (1 − a)·y[i] + a·y[i + 1] (linear interpolation; the series is
-    smooth, it is the zero-phase filtered window) and the newest one, which has no later
-    neighbour, is extrapolated along the last step (it lies in the ε transient that training
-    leaves out); a < 0 reads earlier, (1 − |a|)·y[i] + |a|·y[i − 1], the oldest sample
-    extrapolated back. Used for ``PredictorParams.target_advance``. A new array; ``fraction`` 0
-    returns a copy.
-    """
-    y = np.array(filtered, dtype=np.float64)  # copy
-    if not -1.0 < fraction < 1.0:
-        raise ValueError(f'fraction must lie in (-1, 1) of a sample, got {fraction}')
-    if fraction == 0.0 or y.shape[0] < 2:
-        return y
-    out = y.copy()
-    if fraction > 0.0:
-        out[:-1] += fraction * (y[1:] - y[:-1])
-        out[-1] += fraction * (y[-1] - y[-2])
-    else:
-        a = -fraction
-        out[1:] += a * (y[:-1] - y[1:])
-        out[0] += a * (y[0] - y[1])
-    return out
-
-
 def training_mask(n_samples: int, transient_len: int) -> NDArray[np.bool_]:
     """Boolean mask over ``n_samples`` targets: False for the newest ``transient_len`` ones.
 

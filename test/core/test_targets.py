@@ -11,7 +11,6 @@ from scipy import signal
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.targets import (
     TargetWindow,
-    advance,
     append_targets,
     start_targets,
     training_mask,
@@ -152,29 +151,3 @@ def test_appended_targets_equal_whole_signal_filtering_away_from_transients() ->
                                                                       params.transient_samples)]]))
                   for w in bad]
     assert max(bad_errors) > 10 * worst
-
-
-def test_advance_reads_a_ramp_later_and_leaves_the_input() -> None:
-    ramp = np.column_stack([np.arange(10.0) * 0.3, 5.0 - np.arange(10.0) * 0.1])
-    before = ramp.copy()
-    out = advance(ramp, 0.45)
-    # a ramp read 0.45 samples later, the newest sample extrapolated along the last step
-    assert np.allclose(out, ramp + 0.45 * np.array([0.3, -0.1]), atol=1e-12)
-    assert np.array_equal(ramp, before)
-    assert np.array_equal(advance(ramp, 0.0), ramp)
-    # read earlier: the oldest sample extrapolated back along the first step
-    assert np.allclose(advance(ramp, -0.45), ramp - 0.45 * np.array([0.3, -0.1]), atol=1e-12)
-
-
-def test_advance_interpolates_a_curve_between_its_samples() -> None:
-    t = np.arange(50.0)
-    out = advance(np.sin(0.1 * t), 0.5)
-    # linear interpolation of a slow sine: within a(1 − a)/2 · max|y″| = 0.125 · 0.01 of the
-    # value half a step on
-    assert np.max(np.abs(out[:-1] - np.sin(0.1 * (t[:-1] + 0.5)))) < 1.26e-3
-
-
-@pytest.mark.parametrize('fraction', [-1.0, 1.0, math.nan])
-def test_advance_rejects_a_fraction_outside_one_step(fraction: float) -> None:
-    with pytest.raises(ValueError, match='fraction'):
-        advance(np.zeros(5), fraction)

@@ -54,7 +54,7 @@ _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
-                'sea_change_revert')
+                'sea_change_revert', 'frequency_yaw')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -194,6 +194,12 @@ class PredictorParams:
                                            'rad/s'))
     min_peak_ratio: float = field(
         default=5.0, metadata=_doc('peak PSD over median in-band PSD for a clear peak', ''))
+    frequency_yaw: bool = field(
+        default=True, metadata=_doc(
+            "ndof 3: the heading's spectrum takes part in the ω0 estimate; false: north and "
+            "east only (a DP heading loop's bandwidth is typically twice the position loops', "
+            'so its own closed-loop motion reaches the lower end of the wave band and can pass '
+            'for a wave peak)'))
     hidden_units: int = field(default=2, metadata=_doc('neurons per hidden layer'))
     hidden_layers: int = field(default=1, metadata=_doc('hidden layers'))
     max_epochs: int = field(default=10, metadata=_doc('epochs per training'))

@@ -173,8 +173,13 @@ def first_training_samples(params: PredictorParams) -> int:
 def estimate_frequency(params: PredictorParams, y: FloatArray,
                        previous: FrequencyEstimate | float | None,
                        samples: int | None = None) -> FrequencyEstimate:
-    """Algorithm 4.1 lines 19–23 on the last γ samples (or the last ``samples``)."""
+    """Algorithm 4.1 lines 19–23 on the last γ samples (or the last ``samples``).
+
+    With ``frequency_yaw`` false (ndof 3) the heading column is left out of the spectrum.
+    """
     window = y[-(params.estimation_samples if samples is None else samples):]
+    if params.ndof == 3 and not params.frequency_yaw:
+        window = window[:, :2]
     estimate = estimate_wave_peak_freq(window, params.sample_time,
                                        highpass_cutoff=params.highpass_cutoff,
                                        wave_band=(params.wave_band[0], params.wave_band[1]),

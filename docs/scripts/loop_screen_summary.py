@@ -10,8 +10,10 @@ position RMSE over the default's (mean, median, range, seeds better), over the o
 ratio, and t = mean / standard error: on rao_swell a change that should not matter has a
 per-seed SD of 0.17 in log, so a bare mean over ten seeds decides nothing; docs/BENCHMARKS.md,
 twenty-second session), the mean of the per-seed wave-band thrust share ratios to the default per
-DOF, and the stable count. Every earlier session rewrote this in /tmp; the screens' rules
-("mean per-seed position ratio ≤ 0.97, thrust ≤ 1.05 per DOF, all stable") read these columns.
+DOF (and its paired form, the exponential of the mean per-seed log ratio, which one seed's
+2.5× cannot carry), and the stable count. Every earlier session rewrote this in /tmp; the
+screens' rules ("mean per-seed position ratio ≤ 0.97, thrust ≤ 1.05 per DOF, all stable") read
+these columns.
 """
 from __future__ import annotations
 
@@ -80,6 +82,9 @@ def summary(rows: dict[tuple[str, int], dict[str, Loop]]) -> list[str]:
                                       for v, d in zip(loops, default, strict=True)
                                       if v is not None)
                       for i in range(len(default[0].thrust))]
+            thrust_paired = [math.exp(statistics.mean(
+                math.log(v.thrust[i] / d.thrust[i]) for v, d in zip(loops, default, strict=True)
+                if v is not None)) for i in range(len(default[0].thrust))]
             over_observer = statistics.mean(v.position / o for v, o in
                                             zip(loops, observer, strict=True) if v is not None)
             logs = [math.log(r) for r in ratio]
@@ -93,6 +98,7 @@ def summary(rows: dict[tuple[str, int], dict[str, Loop]]) -> list[str]:
                 f'better on {sum(r < 1.0 for r in ratio)}/{len(ratio)}, {paired}; / observer '
                 f'{over_observer:.3f}; thrust / default ' +
                 ' / '.join(f'{t:.3f}' for t in thrust) +
+                ' (paired ' + ' / '.join(f'{t:.3f}' for t in thrust_paired) + ')' +
                 f'; stable {sum(v.stable for v in loops if v is not None)}/{len(loops)}')
     return out
 

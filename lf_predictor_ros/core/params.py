@@ -195,11 +195,13 @@ class PredictorParams:
     min_peak_ratio: float = field(
         default=5.0, metadata=_doc('peak PSD over median in-band PSD for a clear peak', ''))
     frequency_yaw: bool = field(
-        default=True, metadata=_doc(
+        default=False, metadata=_doc(
             "ndof 3: the heading's spectrum takes part in the ω0 estimate; false: north and "
             "east only (a DP heading loop's bandwidth is typically twice the position loops', "
-            'so its own closed-loop motion reaches the lower end of the wave band and can pass '
-            'for a wave peak)'))
+            'so its own closed-loop motion reaches the lower end of the wave band and passes '
+            "for a wave peak: in the RAO loops ω0 was 0.25–0.44 against the sea's 0.48–0.63; "
+            'false holds position 9–17 % better with less wave-band thrust, development seeds, '
+            'docs/BENCHMARKS.md "Twenty-third session")'))
     hidden_units: int = field(default=2, metadata=_doc('neurons per hidden layer'))
     hidden_layers: int = field(default=1, metadata=_doc('hidden layers'))
     max_epochs: int = field(default=10, metadata=_doc('epochs per training'))

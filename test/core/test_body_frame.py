@@ -58,9 +58,15 @@ EARTH_TOLERANCE = 1e-6  # [m, m, rad] the stored run on another CPU (5.4e-9 m me
 
 
 def reference() -> tuple[PredictorParams, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """(params, t, pose, force, output) of the stored earth-frame run."""
+    """(params, t, pose, force, output) of the stored earth-frame run.
+
+    The run predates ``frequency_yaw`` (its ω0 spectrum had the heading in), so that is pinned
+    here; left to the default, the quarter-turn test below would also see the N + E spectrum
+    summed in another order, a rounding difference that 15 LM trainings amplify to 2e-5 m.
+    """
     data = np.load(REFERENCE)
-    params = PredictorParams.from_dict(ast.literal_eval(str(data['params'])))
+    params = PredictorParams.from_dict(ast.literal_eval(str(data['params']))).replace(
+        frequency_yaw=True)
     return params, data['t'], data['pose'], data['force'], data['output']
 
 

@@ -662,7 +662,7 @@ def test_frequency_yaw_false_leaves_a_heading_loop_oscillation_out_of_omega0() -
 
     y = np.column_stack([narrow_band(0.6, 0.3), narrow_band(0.6, 0.3),
                          narrow_band(0.3, 0.05)]) + 0.01 * rng.standard_normal((t.shape[0], 3))
-    with_yaw = retraining.estimate_frequency(params, y, None)
+    with_yaw = retraining.estimate_frequency(params.replace(frequency_yaw=True), y, None)
     without = retraining.estimate_frequency(
         PredictorParams(sample_time=1.0, frequency_yaw=False), y, None)
     assert abs(without.wave_peak_freq - 0.6) < 0.05

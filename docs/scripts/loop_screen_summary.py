@@ -72,21 +72,20 @@ def summary(rows: dict[tuple[str, int], dict[str, Loop]]) -> list[str]:
         names = sorted({n for s in seeds for n in rows[(scenario, s)]
                         if n.startswith('adaptive') and n != DEFAULT})
         for name in names:
-            loops = [rows[(scenario, s)].get(name) for s in seeds]
-            if any(loop is None for loop in loops):
+            found = [rows[(scenario, s)].get(name) for s in seeds]
+            loops = [loop for loop in found if loop is not None]
+            if len(loops) < len(found):
                 out.append(f'  {name}: not on every seed, skipped')
                 continue
-            ratio = [v.position / d.position for v, d in zip(loops, default, strict=True)
-                     if v is not None]
-            thrust = [statistics.mean(v.thrust[i] / d.thrust[i]
-                                      for v, d in zip(loops, default, strict=True)
-                                      if v is not None)
-                      for i in range(len(default[0].thrust))]
-            thrust_paired = [math.exp(statistics.mean(
-                math.log(v.thrust[i] / d.thrust[i]) for v, d in zip(loops, default, strict=True)
-                if v is not None)) for i in range(len(default[0].thrust))]
+            ratio = [v.position / d.position for v, d in zip(loops, default, strict=True)]
+            # per DOF, the per-seed wave-band thrust ratios: their mean and their paired form
+            thrust_ratios = [[v.thrust[i] / d.thrust[i] for v, d in zip(loops, default,
+                                                                          strict=True)]
+                             for i in range(len(default[0].thrust))]
+            thrust = [statistics.mean(r) for r in thrust_ratios]
+            thrust_paired = [statistics.geometric_mean(r) for r in thrust_ratios]
             over_observer = statistics.mean(v.position / o for v, o in
-                                            zip(loops, observer, strict=True) if v is not None)
+                                            zip(loops, observer, strict=True))
             logs = [math.log(r) for r in ratio]
             error = statistics.stdev(logs) / math.sqrt(len(logs)) if len(logs) > 1 else math.inf
             paired = (f'paired {math.exp(statistics.mean(logs)):.3f} '
@@ -99,7 +98,7 @@ def summary(rows: dict[tuple[str, int], dict[str, Loop]]) -> list[str]:
                 f'{over_observer:.3f}; thrust / default ' +
                 ' / '.join(f'{t:.3f}' for t in thrust) +
                 ' (paired ' + ' / '.join(f'{t:.3f}' for t in thrust_paired) + ')' +
-                f'; stable {sum(v.stable for v in loops if v is not None)}/{len(loops)}')
+                f'; stable {sum(v.stable for v in loops)}/{len(loops)}')
     return out
 
 

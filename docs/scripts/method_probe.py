@@ -23,8 +23,8 @@ trainings. Accepted seeds: the tuning seeds 1 and 2, and the development seeds 3
 101–230 (never used to tune the baselines, never reported as results: a wider screen for loop
 stability, see docs/BENCHMARKS.md "Fifteenth session"; 101–190 since the twenty-second session
 and 191–230 since the twenty-third, for screens that need more than ten seeds to resolve a few
-per cent). The held-out seeds (11–20,
-and on to 30 with `benchmark --seeds 20`) are for `benchmark` only.
+per cent). The held-out seeds (11–20, and on to 30 with `benchmark --seeds 20`) are for
+`benchmark` only.
 """
 from __future__ import annotations
 

@@ -418,12 +418,16 @@ def dropout_deviation(run: ClosedLoopRun, reference: FloatArray, ndof: int,
     """Item 5: per dropout, the largest distance of the true LF pose from ``reference``.
 
     ``reference``: per sample of ``run.record`` (n, 3). Returns per dropout the horizontal
-    distance [m] and (3 DOF) the heading difference [rad] maxima during [a, a + L) and
-    [a + L, a + L + after); NaN for a window the run did not reach (aborted).
+    distance [m], (3 DOF) the heading difference [rad] and the applied thrust's horizontal
+    magnitude [N] (1 DOF: |surge force|; ``_thrust``: what a quick correction costs) maxima
+    during [a, a + L) and [a + L, a + L + after); NaN for a window the run did not reach
+    (aborted).
     """
     rec = run.record
     offset = pose_offset(rec.truth_lf_pose, reference[:rec.t.size], ndof)
     distance = np.hypot(offset[:, 0], offset[:, 1]) if ndof == 3 else np.abs(offset[:, 0])
+    thrust = (np.hypot(rec.thrust[:, 0], rec.thrust[:, 1]) if ndof == 3
+              else np.abs(rec.thrust[:, 0]))
     out = []
     for start, length in dropouts:
         row: dict[str, Any] = {'start': start, 'length': length}
@@ -432,6 +436,8 @@ def dropout_deviation(run: ClosedLoopRun, reference: FloatArray, ndof: int,
             keep = (rec.t >= a) & (rec.t < b)
             reached = bool(rec.t.size) and float(rec.t[-1]) >= b - 1.0
             row[label] = float(distance[keep].max()) if reached and keep.any() else math.nan
+            row[f'{label}_thrust'] = (float(thrust[keep].max()) if reached and keep.any()
+                                      else math.nan)
             if ndof == 3:
                 row[f'{label}_heading'] = (float(np.abs(offset[keep, 2]).max())
                                            if reached and keep.any() else math.nan)

@@ -118,9 +118,10 @@ def test_smoke_short_onedof_run() -> None:
     assert 'Dead-reckoning drift' in report([case]) and '| pose_seen |' in report([case])
 
 
-def _run_on(t: np.ndarray, truth: np.ndarray) -> ClosedLoopRun:
+def _run_on(t: np.ndarray, truth: np.ndarray, thrust: np.ndarray | None = None) -> ClosedLoopRun:
     zeros = np.zeros_like(truth)
-    record = SimRecord(t, zeros, np.ones(t.size), truth, truth, zeros, zeros, np.ones(t.size))
+    thrust = zeros if thrust is None else thrust
+    record = SimRecord(t, zeros, np.ones(t.size), truth, truth, thrust, zeros, np.ones(t.size))
     return ClosedLoopRun(record, t, truth, 0, None, 0)
 
 
@@ -132,19 +133,30 @@ def test_dropout_deviation_is_the_worst_distance_per_window() -> None:
     truth[moving, 1] = 0.1 * (t[moving] - 100.0)
     truth[moving, 2] = 1e-3 * (t[moving] - 100.0)
     reference = np.zeros((t.size, 3))
-    (row,) = dropout_deviation(_run_on(t, truth), reference, 3, [(100.0, 60.0)], after=120.0)
+    # thrust: a 3-4-5 kick of 5e5 N at 170 s (after), a surge ramp to 2e5 N in the dropout
+    thrust = np.zeros((t.size, 3))
+    thrust[:, 0] = np.where(t < 160.0, 2e5 * np.clip((t - 100.0) / 60.0, 0.0, 1.0), 0.0)
+    thrust[t == 170.0, :] = [3e5, -4e5, 1e9]  # the yaw moment is not a horizontal force
+    (row,) = dropout_deviation(_run_on(t, truth, thrust), reference, 3, [(100.0, 60.0)],
+                               after=120.0)
     assert row['during'] == pytest.approx(0.1 * 59.5)  # last sample before 160 s
     assert row['after'] == pytest.approx(0.1 * 179.5)
     assert row['during_heading'] == pytest.approx(1e-3 * 59.5)
+    assert row['during_thrust'] == pytest.approx(2e5 * 59.5 / 60.0)
+    assert row['after_thrust'] == pytest.approx(5e5)
     # a run that stopped (aborted) before the end of a window: NaN, not a short maximum
     short = _run_on(t[t < 200.0], truth[t < 200.0])
     (cut,) = dropout_deviation(short, reference, 3, [(100.0, 60.0)], after=120.0)
     assert cut['during'] == pytest.approx(0.1 * 59.5) and math.isnan(cut['after'])
+    assert math.isnan(cut['after_thrust'])
     # one DOF: the north offset only
     north = np.zeros((t.size, 3))
     north[:, 0] = -np.where(moving, 0.2, 0.0)
-    (one,) = dropout_deviation(_run_on(t, north), reference, 1, [(100.0, 60.0)])
+    surge = np.zeros((t.size, 3))
+    surge[:, 0], surge[:, 1] = -3e4, 9e9  # 1 DOF: |surge force| only
+    (one,) = dropout_deviation(_run_on(t, north, surge), reference, 1, [(100.0, 60.0)])
     assert one['during'] == pytest.approx(0.2) and 'during_heading' not in one
+    assert one['during_thrust'] == pytest.approx(3e4)
 
 
 def test_dropout_coverage_counts_the_truth_inside_the_published_ellipse() -> None:

@@ -22,10 +22,8 @@ thrust, and gives an ``OdometryEstimate``:
   0, shrunk towards ``pose_lag_prior`` by the evidence the window has, σ²_hold,i ≥
   ``HOLD_FLOOR_FRACTION`` of the mean e_i²; T_i from every source of the window, which has more
   motion to fit it, σ²_hold,i per source). The published pose covariance is
-  ``pose_cov_scale`` · (Σ_hold + ``pose_lag_scale`` · diag(T_i² w_i²) + ``pose_twin_weight`` ·
-  diag(d_i²)) with w the current twist and d the predictor's twin disagreement (its motion
-  gate twin minus its output, known at once; 0 by default) (Σ_hold: the correlation of the
-  mean e eᵀ with the σ²_hold diagonal; O(n²) per sample).
+  ``pose_cov_scale`` · (Σ_hold + ``pose_lag_scale`` · diag(T_i² w_i²)) with w the current
+  twist (Σ_hold: the correlation of the mean e eᵀ with the σ²_hold diagonal; O(n²) per sample).
   Twist: the same model with the twist's change per second, low-passed over
   ``twist_accel_time``, as regressor (no prior), times ``twist_cov_scale``. The scales are
   calibrated on simulations against the truth (the targets are not the truth). Before the
@@ -115,12 +113,6 @@ class OdometryParams:
         'multiplied by this inside pose_cov_scale (the errors against the targets show less lag '
         'than against the truth; chosen on tuning seeds 1–2 where the spread of the per-DOF NEES '
         'stops falling, docs/BENCHMARKS.md "State-dependent covariance")', ''))
-    pose_twin_weight: float = field(default=0.0, metadata=field_doc(
-        'the pose covariance adds this times the squared disagreement between the motion gate '
-        "twin's prediction and the published one, per DOF, inside pose_cov_scale "
-        '(AdaptivePredictor.twin_disagreement: where the holding network extrapolates a '
-        'manoeuvre the twin follows, the output is uncertain by about that much, at once, before '
-        'any calibration window has seen a manoeuvre); 0 = off', ''))
     pose_lag_memory: float = field(default=0.0, metadata=field_doc(
         'the lag part of the pose error model grows with the largest recent LF rate, not only '
         'the current one: w_i² is held at its peak and decays by exp(−Δt / this time) (errors '
@@ -205,9 +197,6 @@ class OdometryParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'{name} must be a positive finite number, got {value}')
-        if not (math.isfinite(self.pose_twin_weight) and self.pose_twin_weight >= 0.0):
-            raise ValueError('pose_twin_weight must be a finite number >= 0 (0 = off), got '
-                             f'{self.pose_twin_weight}')
         if not (math.isfinite(self.pose_lag_scale) and self.pose_lag_scale >= 0.0):
             raise ValueError(f'pose_lag_scale must be a finite number >= 0, got '
                              f'{self.pose_lag_scale}')
@@ -394,18 +383,14 @@ class LfOdometry:
         return max(0.0, t - self._last_fix)
 
     def track(self, t: float, lf_pose: ArrayLike, force: ArrayLike,
-              source: EstimateSource = 'network',
-              disagreement: ArrayLike | None = None) -> OdometryEstimate | None:
+              source: EstimateSource = 'network') -> OdometryEstimate | None:
         """A new LF pose (valid at t) with the thrust applied; returns the estimate for t.
 
         While dead reckoning, a fix is first checked for plausibility (module docstring); a fix
-        held back returns the dead-reckoned estimate (or None once lost). ``disagreement``: the
-        predictor's twin minus its output per estimated DOF (``pose_twin_weight``; None: zeros).
+        held back returns the dead-reckoned estimate (or None once lost).
         """
         pose = _vector(lf_pose, 3, 'lf_pose')
         tau = _vector(force, 3, 'force')
-        spread = (np.zeros(self.ndof) if disagreement is None
-                  else _vector(disagreement, self.ndof, 'disagreement'))
         if not math.isfinite(t):
             raise ValueError(f'stamp must be finite, got {t}')
         if source not in SOURCES:
@@ -441,7 +426,7 @@ class LfOdometry:
         self._slow_force = applied.copy() if self._slow_force is None else \
             low_pass_step(self._slow_force, applied, self._force_rate())
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
-                                            self._pose_covariance(source, lag, spread))
+                                            self._pose_covariance(source, lag))
         out = OdometryEstimate(
             stamp=t, pose=published, pose_cov=pose_cov, twist=self._full(twist),
             twist_cov=self._twist_covariance(source, accel), mode='tracking',
@@ -826,21 +811,14 @@ class LfOdometry:
         self._lag_peak = (t, square)
         return np.asarray(np.sqrt(square), dtype=np.float64)
 
-    def _pose_covariance(self, source: EstimateSource, lag: FloatArray,
-                         disagreement: FloatArray) -> FloatArray:
-        """The pose error model of ``source`` at the regressor ``lag`` (`_lag_regressor`).
-
-        Plus ``pose_twin_weight`` · diag(disagreement²), inside ``pose_cov_scale`` once
-        calibrated.
-        """
+    def _pose_covariance(self, source: EstimateSource, lag: FloatArray) -> FloatArray:
+        """The pose error model of ``source`` at the regressor ``lag`` (`_lag_regressor`)."""
         n = self.ndof
-        twin = self.params.pose_twin_weight * np.diag(disagreement ** 2)
         if self._pose_cov:
             model = self._pose_cov.get(source, self._pose_cov['all'])
-            inner = self.params.pose_cov_scale * (
-                model.covariance(lag, self.params.pose_lag_scale) + twin)
+            inner = self.params.pose_cov_scale * model.covariance(lag, self.params.pose_lag_scale)
         else:
-            inner = np.diag(np.array(self.params.prior_pose_std[:n]) ** 2) + twin
+            inner = np.diag(np.array(self.params.prior_pose_std[:n]) ** 2)
         return self._embed(inner)
 
     def _twist_change(self, t: float, twist: FloatArray) -> FloatArray:

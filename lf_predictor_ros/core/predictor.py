@@ -309,8 +309,6 @@ class AdaptivePredictor:
         self._previous_model: NumpyNnarmax | None = None  # the network before _model
         self._rough_retirements = 0
         self._gain = np.zeros(params.ndof)
-        # twin − published output at the last sample (zeros: gate off or twin not on its network)
-        self._twin_disagreement = np.zeros(params.ndof)
         smoothing = params.motion_gate_smoothing
         self._gate_alpha = 1.0 if smoothing <= 0.0 else min(1.0, params.sample_time / smoothing)
         self._gate_offset = np.zeros(params.ndof)  # LP(moving − holding) (motion_gate_smoothing)
@@ -574,17 +572,6 @@ class AdaptivePredictor:
     def motion_gain(self) -> FloatArray:
         """The motion gate's gain g per DOF at the last sample (zeros when the gate is off)."""
         return self._gain.copy()
-
-    @property
-    def twin_disagreement(self) -> FloatArray:
-        """The motion gate twin's prediction minus the published one at the last sample, per DOF.
-
-        Where the holding network and the ramp-invariant twin disagree (a manoeuvre the holding
-        network extrapolates, the twin follows), the output is uncertain by about that much;
-        lf_odom's pose covariance can take it in (``OdometryParams.pose_twin_weight``). Zeros
-        when the gate is off or the twin is not on its own network; yaw wrapped.
-        """
-        return self._twin_disagreement.copy()
 
     @property
     def motion_gate_valid(self) -> NDArray[np.bool_]:
@@ -923,7 +910,6 @@ class AdaptivePredictor:
             # fallback is another filter's, and the step where the source switches is no motion.
             self._gate.restart()
             self._gain = np.zeros(self.ndof)
-            self._twin_disagreement = np.zeros(self.ndof)
             self._gate_offset = np.zeros(self.ndof)
             if self._gate_yaw_notch is not None:
                 self._gate_yaw_notch.reset()
@@ -944,9 +930,7 @@ class AdaptivePredictor:
         gains = [g * (1.0 if on else 0.0)
                  for g, on in zip(gains, self._gate_valid.tolist(), strict=True)]
         self._gain = np.array(gains, dtype=np.float64)
-        gated = shifted(out, self._gain * offset, self.ndof)
-        self._twin_disagreement = moving_offset(gated, moving, self.ndof)
-        return gated
+        return shifted(out, self._gain * offset, self.ndof)
 
     def _yaw_notched(self, t: float, offset: FloatArray) -> FloatArray:
         """The gate's offset with its heading entry through the notch at ω0 (a new array).

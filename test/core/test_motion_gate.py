@@ -527,7 +527,7 @@ def test_save_and_load_round_trip_the_twin_and_the_gated_output(
     moving = AdaptivePredictor(SMALL.replace(ramp_invariant=True), background=False)
     moving.load(twin_checkpoint_path(str(path)))
     t, pose, force = moving_run(RUN, 6)
-    opened = disagreed = 0
+    opened = 0
     for k in range(SAVED_AT, RUN):
         out = loaded.update(t[k], pose[k], force[k])
         a = holding.update(t[k], pose[k], force[k])
@@ -535,13 +535,8 @@ def test_save_and_load_round_trip_the_twin_and_the_gated_output(
         assert moving.using_network == (k - SAVED_AT + 1 >= GATED.max_lag)
         assert out == pytest.approx(blend(a, b, loaded.motion_gain, 3), abs=1e-9), k
         opened += int(np.any(loaded.motion_gain > 0.5))
-        # the twin's disagreement with the published output (lf_odom's pose_twin_weight)
-        expected = moving_offset(out, b, 3) if moving.using_network else np.zeros(3)
-        assert loaded.twin_disagreement == pytest.approx(expected, abs=1e-9), k
-        disagreed += int(np.abs(expected[0]) > 0.01)
     assert loaded.counters['moving_trainings'] == loaded.counters['trainings'] == 0
     assert opened > 20  # the move opened the gate on the loaded twin
-    assert disagreed > 20  # and before it opened, the twin disagreed by more than 1 cm
     assert loaded.twin_model is not None
     twin = loaded._moving
     assert twin is not None

@@ -145,36 +145,6 @@ def test_published_pose_covariance_grows_with_the_lf_velocity() -> None:
     assert out.pose_cov[0, 0] == pytest.approx(2.0 * (0.01 + 27.0 * 0.12), rel=0.01)
 
 
-def test_pose_twin_weight_adds_the_squared_disagreement_inside_the_scale() -> None:
-    """P = pose_cov_scale · (Σ_hold + k · diag(d²)) on a still vessel; k = 0: d is ignored."""
-    hold = np.diag([0.01, 0.04, 1e-4])
-    model = ErrorModel(moment=hold, hold=hold, gain=np.zeros(3))
-    twist_model = ErrorModel(moment=np.eye(3), hold=np.eye(3), gain=np.zeros(3))
-    disagreement = np.array([0.5, -0.2, 0.01])
-    covariances = {}
-    for weight in (0.0, 0.25):
-        odo = LfOdometry(3, H, OdometryParams(pose_cov_scale=2.0, pose_twin_weight=weight))
-        odo.apply_learned(None, ({'all': model}, {'all': twist_model}))
-        _track_line(odo, 0.0, 0.0, 10)
-        out = odo.track(10.0, np.zeros(3), np.zeros(3), 'network', disagreement)
-        assert out is not None and out.calibrated
-        covariances[weight] = out.pose_cov
-    np.testing.assert_allclose(covariances[0.0], 2.0 * hold, rtol=1e-12, atol=1e-15)
-    np.testing.assert_allclose(covariances[0.25],
-                               2.0 * (hold + 0.25 * np.diag([0.25, 0.04, 1e-4])),
-                               rtol=1e-12, atol=1e-15)
-    # before any calibration: the prior plus k · d², no scale
-    odo = LfOdometry(3, H, OdometryParams(pose_twin_weight=0.25, prior_pose_std=(1.0, 2.0, 0.1)))
-    out = odo.track(0.0, np.zeros(3), np.zeros(3), 'network', disagreement)
-    assert out is not None and not out.calibrated
-    np.testing.assert_allclose(np.diag(out.pose_cov)[:3],
-                               [1.0 + 0.0625, 4.0 + 0.01, 0.01 + 0.25e-4], rtol=1e-12)
-    with pytest.raises(ValueError, match='disagreement'):
-        odo.track(1.0, np.zeros(3), np.zeros(3), 'network', [0.1, np.nan, 0.0])
-    with pytest.raises(ValueError, match='pose_twin_weight'):
-        OdometryParams(pose_twin_weight=-0.1)
-
-
 def test_pose_lag_memory_holds_the_peak_rate_and_lets_it_decay() -> None:
     """pose_lag_memory T: after the motion stops, w² is the peak decayed by exp(−Δt / T)."""
     params = OdometryParams(pose_cov_scale=2.0, pose_lag_scale=3.0, pose_lag_memory=100.0)

@@ -313,3 +313,77 @@ def test_fit_linear_bypass_recovers_a_linear_arx_system_exactly(relative: bool) 
     with torch.no_grad():
         error = net(x_t) - target
     assert float(error.abs().max()) < 1e-8
+
+
+def test_coupling_mask_keeps_each_output_on_its_own_dof() -> None:
+    """Layout [u(t), u(t−1), y(t), y(t−1)], 3 channels: own positions; forces all or own."""
+    spec = NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=2, nfb=0, hidden_units=2,
+                       relative=True, dof_coupling='positions')
+    mask = spec.bypass_mask
+    assert mask is not None and mask.shape == (3, 12)
+    forces, positions = mask[:, :6], mask[:, 6:]
+    assert forces.all()
+    assert positions.tolist() == [[c % 3 == i for c in range(6)] for i in range(3)]
+    none = NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=2, nfb=0, hidden_units=2,
+                       relative=True, dof_coupling='none').bypass_mask
+    assert none is not None
+    assert none.tolist() == [[c % 3 == i for c in range(12)] for i in range(3)]
+    heading = NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=2, nfb=0, hidden_units=2,
+                          relative=True, dof_coupling='heading').bypass_mask
+    assert heading is not None and heading[:, :6].all()  # every force
+    horizontal = [c % 3 < 2 for c in range(6)]  # north and east see both, never the heading
+    assert heading[:, 6:].tolist() == [horizontal, horizontal, [c % 3 == 2 for c in range(6)]]
+    assert NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=2, nfb=0,
+                       hidden_units=2).bypass_mask is None
+    assert NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=2, ny=2, nfb=0, hidden_units=2,
+                       dof_coupling='none').bypass_mask is None
+    # the spec writes the field only when it is not the default, and reads it back
+    assert 'dof_coupling' not in NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=2, nfb=0,
+                                             hidden_units=2).to_dict()
+    assert NnarmaxSpec.from_dict(spec.to_dict()) == spec
+    with pytest.raises(ValueError, match='dof_coupling must be one of'):
+        NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=2, nfb=0, hidden_units=2,
+                    dof_coupling='diagonal')
+
+
+def test_fit_linear_bypass_with_a_coupling_fits_each_output_on_its_columns_alone() -> None:
+    """North depends on east's past (full coupling recovers it exactly, 'positions' cannot).
+
+    Noise-free 3-channel system: n(t+1) = n(t) + 0.5 (e(t) − e(t−1)), e and ψ random walks.
+    The coupled fit is exact; the decoupled one has zero cross weights and its north is the
+    least-squares fit on north's own columns and the forces (checked against numpy).
+    """
+    rng = np.random.default_rng(11)
+    n = 300
+    u = rng.normal(size=(n, 3))
+    y = np.zeros((n, 3))
+    y[:, 1:] = np.cumsum(rng.normal(scale=0.1, size=(n, 2)), axis=0)
+    for t in range(1, n - 1):
+        y[t + 1, 0] = y[t, 0] + 0.5 * (y[t, 1] - y[t - 1, 1])
+    errors = {}
+    for coupling in ('full', 'positions'):
+        spec = NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=1, ny=2, nfb=0, hidden_units=2,
+                           relative=True, dof_coupling=coupling)
+        net = NnarmaxNet(spec, seed=1)
+        net.set_standardization(u, y)
+        x, first = build_regressors(u, y, y, spec)
+        x_t = torch.from_numpy(x[:-1])
+        target = torch.from_numpy(y[first + 1:])
+        keep = torch.ones(len(target), dtype=torch.bool)
+        net.fit_linear_bypass(x_t, target, keep, ridge=0.0)
+        with torch.no_grad():
+            errors[coupling] = (net(x_t) - target).numpy()
+        if coupling == 'positions':
+            mask = spec.bypass_mask
+            assert mask is not None
+            assert np.all(net.bypass.weight.detach().numpy()[~mask] == 0.0)  # type: ignore
+            # north: the best it can do on [u(t) (3), n(t) − n(t), n(t−1) − n(t)] + bias
+            rel = x[:-1, 3:] - np.tile(x[:-1, 3:6], 2)
+            design = np.column_stack([x[:-1, :3], rel[:, [0, 3]], np.ones(len(rel))])
+            wanted = y[first + 1:, 0] - y[first:-1, 0]
+            coef = np.linalg.lstsq(design, wanted, rcond=None)[0]
+            best = design @ coef - wanted
+            assert np.sqrt(np.mean(errors[coupling][:, 0] ** 2)) == pytest.approx(
+                np.sqrt(np.mean(best ** 2)), rel=1e-6)
+    assert np.abs(errors['full'][:, 0]).max() < 1e-8  # east and yaw: random walks
+    assert np.sqrt(np.mean(errors['positions'][:, 0] ** 2)) > 0.01  # east's step, not seen

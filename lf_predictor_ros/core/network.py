@@ -55,11 +55,9 @@ from numpy.typing import ArrayLike, NDArray
 import torch
 
 from lf_predictor_ros.core.regressors import (
-    DOF_COUPLINGS,
     RAMP_ORDERS,
     as_series,
     build_regressors,
-    coupling_mask,
     first_index,
     n_regressors,
     regressor_vector,
@@ -103,10 +101,7 @@ class NnarmaxSpec:
     path (see module docstring); ``relative``: position regressors and the output are taken
     relative to the newest measured position y(t) (translation invariance, see module docstring);
     ``body_frame``: with ``relative`` and 3 DOF, regressors and output step in the body frame of
-    the newest heading (rotation invariance, see module docstring); ``dof_coupling``: which
-    regressors each output's linear bypass may use (``regressors.coupling_mask``: 'full' all,
-    'positions' its own DOF's positions and every force, 'none' its own forces too); the tanh
-    part stays shared.
+    the newest heading (rotation invariance, see module docstring).
     """
 
     n_outputs: int
@@ -121,7 +116,6 @@ class NnarmaxSpec:
     body_frame: bool = False
     ramp_invariant: bool = False
     ramp_order: int = 1
-    dof_coupling: str = 'full'
 
     def __post_init__(self) -> None:
         """Validate the spec; raise ValueError naming the broken rule."""
@@ -168,9 +162,6 @@ class NnarmaxSpec:
         if self.ramp_invariant and self.ny < self.ramp_order + 1:
             raise ValueError(f'NnarmaxSpec.ramp_order {self.ramp_order} fits a polynomial of that '
                              f'order and needs ny ≥ {self.ramp_order + 1}, got ny {self.ny}')
-        if self.dof_coupling not in DOF_COUPLINGS:
-            raise ValueError(f'NnarmaxSpec.dof_coupling must be one of {DOF_COUPLINGS}, got '
-                             f'{self.dof_coupling!r}')
 
     @property
     def n_regressors(self) -> int:
@@ -182,26 +173,19 @@ class NnarmaxSpec:
         """First sample index with a full regressor history, max(nu, ny, nfb) − 1."""
         return first_index(self)
 
-    @property
-    def bypass_mask(self) -> NDArray[np.bool_] | None:
-        """Columns each output's bypass may use (``regressors.coupling_mask``; None: all)."""
-        return coupling_mask(self, self.dof_coupling)
-
-    def to_dict(self) -> dict[str, int | bool | str]:
+    def to_dict(self) -> dict[str, int | bool]:
         """Plain dict (for checkpoints, logs); optional fields only when not at their default.
 
         ``body_frame`` and ``ramp_invariant`` are written only when True, ``ramp_order`` only
-        when not 1, ``dof_coupling`` only when not 'full': a spec without them writes the same
-        dict (and checkpoint) as before the fields existed.
+        when not 1: a spec without them writes the same dict (and checkpoint) as before the
+        fields existed.
         """
-        values: dict[str, int | bool | str] = dict(asdict(self))
+        values: dict[str, int | bool] = dict(asdict(self))
         for name in ('body_frame', 'ramp_invariant'):
             if not values[name]:
                 del values[name]
         if values['ramp_order'] == 1:
             del values['ramp_order']
-        if values['dof_coupling'] == 'full':
-            del values['dof_coupling']
         return values
 
     @classmethod
@@ -381,31 +365,15 @@ class NnarmaxNet(torch.nn.Module):
                 hidden = torch.tanh(layer(hidden))
             wanted = (step[keep] - self.y_mean) / self.y_std
             residual = wanted - (hidden @ self.output.weight.T)
-            mask = self.spec.bypass_mask
-            if mask is None:
-                weight, bias = _ridge_solution(x_s, residual, ridge)
-            else:  # one least-squares problem per output, on the columns it may use
-                weight = torch.zeros_like(self.bypass.weight)
-                bias = torch.zeros_like(self.output.bias)
-                for channel, allowed in enumerate(torch.from_numpy(mask)):
-                    w, b = _ridge_solution(x_s[:, allowed], residual[:, channel:channel + 1],
-                                           ridge)
-                    weight[channel, allowed] = w[0]
-                    bias[channel] = b[0]
-            self.bypass.weight.copy_(weight)
-            self.output.bias.copy_(bias)
-
-    def zero_uncoupled(self) -> None:
-        """Zero the bypass weights ``NnarmaxSpec.dof_coupling`` leaves out, in place.
-
-        A warm start from a network with another coupling, or a persistence start, may hold
-        them; the trainer keeps them at zero from here on (``training``).
-        """
-        mask = self.spec.bypass_mask
-        if self.bypass is None or mask is None:
-            return
-        with torch.no_grad():
-            self.bypass.weight.mul_(torch.from_numpy(mask).to(self.bypass.weight.dtype))
+            design = torch.cat((x_s, torch.ones(x_s.shape[0], 1, dtype=x_s.dtype)), dim=1)
+            penalty = ridge * design.shape[0] * torch.eye(design.shape[1], dtype=x_s.dtype)
+            penalty[-1, -1] = 0.0  # the bias is not penalized
+            # lstsq (minimum norm) rather than solve: in relative mode the y(t) − y(t) column
+            # is identically 0, so without a ridge the normal matrix is singular
+            solution = torch.linalg.lstsq(design.T @ design + penalty, design.T @ residual,
+                                          driver='gelsd').solution
+            self.bypass.weight.copy_(solution[:-1].T)
+            self.output.bias.copy_(solution[-1])
 
     def free_run(
         self, x_static: torch.Tensor, fb_init: torch.Tensor, *, differentiable: bool = True
@@ -637,19 +605,6 @@ def _detached(tensor: torch.Tensor) -> FloatArray:
 def _uniform(shape: torch.Size, bound: float, generator: torch.Generator) -> torch.Tensor:
     """U(−bound, bound) samples in float64 from an explicit generator."""
     return (torch.rand(shape, generator=generator, dtype=torch.float64) * 2.0 - 1.0) * bound
-
-
-def _ridge_solution(x_s: torch.Tensor, residual: torch.Tensor, ridge: float
-                    ) -> tuple[torch.Tensor, torch.Tensor]:
-    """(weight (outputs, columns), bias (outputs,)) of ``fit_linear_bypass``'s ridge problem."""
-    design = torch.cat((x_s, torch.ones(x_s.shape[0], 1, dtype=x_s.dtype)), dim=1)
-    penalty = ridge * design.shape[0] * torch.eye(design.shape[1], dtype=x_s.dtype)
-    penalty[-1, -1] = 0.0  # the bias is not penalized
-    # lstsq (minimum norm) rather than solve: in relative mode the y(t) − y(t) column
-    # is identically 0, so without a ridge the normal matrix is singular
-    solution = torch.linalg.lstsq(design.T @ design + penalty, design.T @ residual,
-                                  driver='gelsd').solution
-    return solution[:-1].T, solution[-1]
 
 
 def _persistence_matrix(spec: NnarmaxSpec) -> torch.Tensor:

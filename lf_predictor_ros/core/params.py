@@ -30,7 +30,7 @@ from typing import Any
 
 from lf_predictor_ros.core.field_meta import field_doc
 from lf_predictor_ros.core.frequency import welch_resolution
-from lf_predictor_ros.core.regressors import DOF_COUPLINGS, RAMP_ORDERS
+from lf_predictor_ros.core.regressors import RAMP_ORDERS
 
 TRAINERS = ('lm', 'lbfgs', 'adam')
 TRAINING_MODES = ('series_parallel', 'parallel')
@@ -51,7 +51,7 @@ _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'tra
                   'filter_window', 'append_length')
 _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed',
                'motion_gate_ny', 'ramp_order')
-_STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'dof_coupling', 'sea_change_confirm')
+_STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
                 'sea_change_revert', 'frequency_yaw')
@@ -83,14 +83,6 @@ class PredictorParams:
             'the newest position, forces rotated to north/east) or body (the same rotated into '
             'the body frame of the newest heading of each row: rotation invariant; ndof 3 only; '
             'issue 13, hypothesis 3)'))
-    dof_coupling: str = field(
-        default='full', metadata=_doc(
-            "which regressors the linear part of each DOF's output may use: full (every "
-            "DOF's positions and forces), positions (its own DOF's positions, every force), "
-            'none (its own positions and force) or heading (north and east on both horizontal '
-            "DOFs' positions, the heading on its own; every force); a coefficient fitted on "
-            'station keeping across DOFs (0.01 rad of wave yaw) extrapolates badly in turns '
-            '(issue 13). ndof 3 only'))
     ramp_invariant: bool = field(
         default=False, metadata=_doc(
             'positions relative to the least-squares line (ramp_order 2: parabola) through the '
@@ -485,9 +477,6 @@ class PredictorParams:
             raise ValueError(f'sea change rule: sea_change_confirm must be one of '
                              f'{SEA_CHANGE_CONFIRMS}, got {self.sea_change_confirm!r}')
         self._check_regressor_frame()
-        if self.dof_coupling not in DOF_COUPLINGS:
-            raise ValueError(f'coupling rule: dof_coupling must be one of {DOF_COUPLINGS}, got '
-                             f'{self.dof_coupling!r}')
         self._check_ramp()
         if self.max_train_seconds > self.retrain_period:
             raise ValueError(

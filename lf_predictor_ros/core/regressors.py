@@ -39,13 +39,6 @@ from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 
-# How the linear part of a network couples the DOFs (``network.NnarmaxSpec.dof_coupling``,
-# `coupling_mask`): full (every output sees every regressor), positions (each output sees only
-# its own DOF's positions and feedback, and every force), none (only its own DOF's forces too),
-# heading (north and east see each other's positions but not the heading's, the heading only
-# its own; every force).
-DOF_COUPLINGS = ('full', 'positions', 'none', 'heading')
-
 # Polynomial orders of the ramp-invariant frame (``network.ramp_fit_weights``): 1 a line
 # (constant velocity), 2 a parabola (constant acceleration).
 RAMP_ORDERS = (1, 2)
@@ -93,32 +86,6 @@ def n_regressors(lags: RegressorLags) -> int:
 def n_static_regressors(lags: RegressorLags) -> int:
     """Number of leading columns that do not depend on the feedback (force and position blocks)."""
     return lags.nu * lags.n_inputs_u + lags.ny * lags.n_outputs
-
-
-def coupling_mask(lags: RegressorLags, coupling: str) -> NDArray[np.bool_] | None:
-    """Which regressor columns each output's linear part may use, (n_outputs, n_regressors).
-
-    None when every output may use every column (``coupling`` 'full', or one output). A position
-    or feedback column belongs to the channel (lag-major layout above: column index minus the
-    force blocks, modulo n_outputs); a force column to its force channel, which only 'none'
-    restricts (and only with as many force channels as outputs). 'heading' groups the channels
-    as {north, east} and {heading}: a position column is an output's if it is in its group.
-    """
-    if coupling not in DOF_COUPLINGS:
-        raise ValueError(f'dof_coupling must be one of {DOF_COUPLINGS}, got {coupling!r}')
-    if coupling == 'full' or lags.n_outputs == 1:
-        return None
-    force_columns = lags.nu * lags.n_inputs_u
-    column = np.arange(n_regressors(lags))
-    output = np.arange(lags.n_outputs)[:, np.newaxis]
-    channel = (column - force_columns) % lags.n_outputs
-    if coupling == 'heading':  # groups: the horizontal DOFs {0, 1}, the heading {2}
-        channel, output = np.minimum(channel // 2, 1), np.minimum(output // 2, 1)
-    own_position = (column >= force_columns) & (channel == output)
-    force = column < force_columns
-    if coupling == 'none' and lags.n_inputs_u == lags.n_outputs:
-        force = force & (column % lags.n_inputs_u == output)
-    return np.asarray(own_position | force, dtype=np.bool_)
 
 
 def as_series(values: ArrayLike, channels: int, name: str) -> FloatArray:

@@ -151,8 +151,7 @@ def network_spec(params: PredictorParams) -> NnarmaxSpec:
                        ramp_invariant=params.ramp_invariant,
                        # the order matters only to a ramp-invariant network: a plain one keeps
                        # the spec (and checkpoint) it always had
-                       ramp_order=params.ramp_order if params.ramp_invariant else 1,
-                       dof_coupling=params.dof_coupling)
+                       ramp_order=params.ramp_order if params.ramp_invariant else 1)
 
 
 def train_settings(params: PredictorParams) -> TrainSettings:

@@ -423,7 +423,6 @@ def _train(
         model.set_standardization(u, y, preserve_function=True)
     if settings.linear_init:
         model.fit_linear_bypass(window.x_series[:-1], window.target, window.keep)
-    model.zero_uncoupled()
     runner = _WindowPredictor(model, n_static_regressors(spec), spec.nfb)
     parallel = settings.mode == 'parallel'
     with torch.no_grad():
@@ -1022,7 +1021,6 @@ def _levenberg_marquardt(
         return float(torch.sum(residuals**2) + torch.sum(decay * flat**2))
 
     scratch = _LmScratch()  # one epoch's Jacobian is dead at the next's
-    fixed = _uncoupled_flat(runner.net, layout)
     with torch.no_grad():
         weights = torch.nn.utils.parameters_to_vector(runner.net.parameters()).detach().clone()
         residuals = residual_fn(weights)
@@ -1038,11 +1036,6 @@ def _levenberg_marquardt(
         jtj, jtr, by_factors = _lm_normal_equations(runner, layout, weights, window, parallel,
                                                     settings.derivative_weight, residuals,
                                                     scratch)
-        if fixed is not None:  # dof_coupling: those weights stay 0 (zero gradient, no coupling)
-            jtj, jtr = jtj.clone(), jtr.clone()  # may be the scratch buffers
-            jtj[fixed, :] = 0.0
-            jtj[:, fixed] = 0.0
-            jtr[fixed] = 0.0
         gradient = jtr + decay * weights  # ½ ∇J
         if float(torch.linalg.vector_norm(2.0 * gradient)) <= settings.min_grad:
             reason = 'min_grad'
@@ -1082,22 +1075,6 @@ def _levenberg_marquardt(
     return reason
 
 
-def _uncoupled_flat(net: NnarmaxNet, layout: _FlatParameters) -> torch.Tensor | None:
-    """Flat bool vector (``parameters()`` order) of the bypass weights dof_coupling leaves out.
-
-    None when there are none. The trainers keep them at 0 (`NnarmaxNet.zero_uncoupled` sets
-    them): Levenberg–Marquardt by zero rows and columns of its normal equations and a zero
-    gradient (so the damped step is 0 there), Adam and L-BFGS by a zero gradient.
-    """
-    mask = net.spec.bypass_mask
-    if mask is None or net.bypass is None:
-        return None
-    parts = [torch.from_numpy(~mask).reshape(-1) if name == 'bypass.weight'
-             else torch.zeros(size, dtype=torch.bool)
-             for name, size in zip(layout.names, layout.sizes, strict=True)]
-    return torch.cat(parts)
-
-
 def _mse_residuals_from(residuals: torch.Tensor, window: _Window) -> torch.Tensor:
     """The MSE block at the head of a data-residual vector."""
     n_mse = int(window.keep.sum()) * window.target.shape[1]
@@ -1118,17 +1095,11 @@ def _gradient_descent(
     start, are restored at the end.
     """
     settings = run.settings
-    mask = runner.net.spec.bypass_mask
-    bypass = runner.net.bypass
-    allowed = None if mask is None or bypass is None else \
-        torch.from_numpy(mask).to(bypass.weight.dtype)
 
     def closure() -> torch.Tensor:
         optimizer.zero_grad()
         objective, _ = _objective(runner, window, parallel, settings)
         objective.backward()
-        if allowed is not None and bypass is not None and bypass.weight.grad is not None:
-            bypass.weight.grad.mul_(allowed)  # dof_coupling: the left-out weights stay 0
         return objective
 
     def evaluate() -> tuple[float, float]:

@@ -169,7 +169,7 @@ if TYPE_CHECKING:  # torch is imported on configure, so --help and bad parameter
 NODE_NAME = 'predictor'
 # PredictorParams fields that change the network (or its time base): a change starts cold.
 STRUCTURE_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'sample_time',
-                    'regressor_frame', 'ramp_invariant', 'ramp_order', 'dof_coupling')
+                    'regressor_frame', 'ramp_invariant', 'ramp_order')
 NOTE_STRUCTURE = ' (run-time change: re-creates the predictor cold, data restarts)'
 NOTE_TUNING = (' (run-time change: re-creates the predictor keeping the trained network, '
                'data restarts)')

@@ -207,16 +207,3 @@ def test_the_targets_notch_widens_only_in_a_broadband_sea() -> None:
     assert wide.target_notch_zeta(0.4, peak_damping=0.1) == 0.8
     assert PredictorParams(notch_zeta_broadband=1.3, notch_lower_edge=0.0).target_notch_zeta(
         0.4, peak_damping=0.1) == 1.3  # no edge: no limit
-
-
-def test_dof_coupling_reaches_the_network_spec_and_bad_values_are_named() -> None:
-    """The predictor's (and the motion gate twin's) networks take the coupling asked for."""
-    from lf_predictor_ros.core.retraining import network_spec
-    assert PredictorParams().dof_coupling == 'full'
-    assert network_spec(PredictorParams()).bypass_mask is None
-    assert network_spec(PredictorParams(dof_coupling='none')).dof_coupling == 'none'
-    twin = PredictorParams(dof_coupling='positions').replace(motion_gate=False,
-                                                             ramp_invariant=True)
-    assert network_spec(twin).dof_coupling == 'positions'
-    with pytest.raises(ValueError, match='coupling rule: dof_coupling must be one of'):
-        PredictorParams(dof_coupling='diagonal')

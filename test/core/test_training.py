@@ -616,31 +616,3 @@ def test_lm_fast_path_trains_to_the_dense_paths_loss(monkeypatch: pytest.MonkeyP
     assert fast.epochs == dense.epochs
     assert fast.loss == pytest.approx(dense.loss, rel=1e-9)
     np.testing.assert_allclose(fast.loss_history, dense.loss_history, rtol=1e-9)
-
-
-@pytest.mark.parametrize('algorithm', ['lm', 'lbfgs', 'adam'])
-@pytest.mark.parametrize('coupling', ['positions', 'none'])
-def test_every_trainer_keeps_the_left_out_weights_at_zero(algorithm: Algorithm,
-                                                          coupling: str) -> None:
-    """dof_coupling: a warm start with cross weights trains to exact zeros there, and learns.
-
-    The warm start is a coupled network's random bypass (every weight non-zero): training must
-    zero what the coupling leaves out and keep it zero through every epoch.
-    """
-    _, _, u, y, x, keep = one_layer_case(5)
-    spec = NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=3, ny=4, nfb=0, hidden_units=2,
-                       relative=True, dof_coupling=coupling)
-    warm = NnarmaxNet(spec, seed=2)
-    with torch.no_grad():
-        assert warm.bypass is not None
-        warm.bypass.weight.copy_(0.01 * torch.randn(warm.bypass.weight.shape,
-                                                    generator=torch.Generator().manual_seed(3),
-                                                    dtype=torch.float64))
-    settings = TrainSettings(algorithm=algorithm, max_epochs=5, linear_init=algorithm == 'lm')
-    result = train(warm, u, y, x, keep, settings)
-    mask = spec.bypass_mask
-    assert mask is not None
-    bypass = result.state_dict['bypass.weight'].numpy()
-    assert np.all(bypass[~mask] == 0.0)
-    assert np.count_nonzero(bypass[mask]) > 0.9 * mask.sum()
-    assert result.loss < result.initial_loss

@@ -54,7 +54,7 @@ _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
-                'sea_change_revert', 'frequency_yaw', 'guard_retire')
+                'sea_change_revert', 'frequency_yaw')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -259,14 +259,6 @@ class PredictorParams:
         default=(0.0, 0.0, 0.0), metadata=_doc(
             'largest rate of change of the published estimate (north, east, yaw); set it above '
             'the fastest LF motion; 0 = no limit on that DOF', 'm/s, m/s, rad/s'))
-    guard_retire: bool = field(
-        default=False, metadata=_doc(
-            'a distance-guard trip (a network prediction farther from the measurement than '
-            'the wave motion explains) retires the network in service: the cascade fallback '
-            'serves until the next accepted training (its weights stay the warm start), '
-            'instead of the network returning at the next plausible sample; in a turn the '
-            'holding network drifts in and out of the bound with the waves and the output '
-            'flips between network and cascade (issue 13)'))
     roughness_guard_time: float = field(
         default=30.0, metadata=_doc(
             "roughness guard (core/roughness.py): while the network prediction's squared second "

@@ -297,8 +297,7 @@ class AdaptivePredictor:
             self._moving = AdaptivePredictor(
                 params.replace(motion_gate=False, ramp_invariant=True,
                                ny=params.motion_gate_ny or params.ny,
-                               roughness_guard_time=0.0,  # the guards: holding network only
-                               guard_retire=False),
+                               roughness_guard_time=0.0),  # the guard: holding network only
                 background=background,
                 checkpoint_path=twin_checkpoint_path(checkpoint_path) if checkpoint_path else None,
                 max_trainings=max_trainings, training_lock=self._training_lock)
@@ -353,9 +352,6 @@ class AdaptivePredictor:
             self._guard_trips += 1
             self._message = 'network prediction implausible: cascade fallback'
             prediction = None
-            if self.params.guard_retire:  # until the next accepted training
-                self._model = self._previous_model = None
-                self._message += ' until the next training (network retired)'
             self._fb.clear()
             self._fb.append(self._position(lf_now, update_heading=False))
         if prediction is None:

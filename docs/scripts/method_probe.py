@@ -19,11 +19,13 @@ sessions).
 scored like `benchmark` from the same sample) next to the observer (the recording's own loop),
 oracle_kf and raw loops: position / heading RMSE, largest excursion, wave-band thrust power per
 DOF as a share of the raw loop's, stability, and the adaptive loop's guard trips and rejected
-trainings. Accepted seeds: the tuning seeds 1 and 2, and the development seeds 3–10 and
-101–230 (never used to tune the baselines, never reported as results: a wider screen for loop
-stability, see docs/BENCHMARKS.md "Fifteenth session"; 101–190 since the twenty-second session
-and 191–230 since the twenty-third, for screens that need more than ten seeds to resolve a few
-per cent). The held-out seeds (11–20, and on to 30 with `benchmark --seeds 20`) are for
+trainings, and the RMSE of the estimate each loop acted on against the true LF pose
+(`suite._estimate_rmse`: whether a variant's estimate is better in its own loop). Accepted
+seeds: the tuning seeds 1 and 2, and the development seeds 3–10 and 101–230 (never used to
+tune the baselines, never reported as results: a wider screen for loop stability, see
+docs/BENCHMARKS.md "Fifteenth session"; 101–190 since the twenty-second session and 191–230
+since the twenty-third, for screens that need more than ten seeds to resolve a few per
+cent). The held-out seeds (11–20, and on to 30 with `benchmark --seeds 20`) are for
 `benchmark` only.
 """
 from __future__ import annotations
@@ -160,7 +162,15 @@ def loops(scenario: Any, seed: int, duration: float, setup: Any, recording: Any,
         print(f"  loop {scenario.name:18s} {seed} {name:20s} position "
               f"{entry['position_rmse']:.4f} m heading {entry.get('heading_rmse', math.nan):.5f} "
               f"rad max {entry['max_excursion']:.2f} m thrust WF % raw {share} stable "
-              f"{entry['stability']['stable']}" + _counters(entry), flush=True)
+              f"{entry['stability']['stable']}" + _counters(entry) + _estimate(entry), flush=True)
+
+
+def _estimate(entry: dict[str, Any]) -> str:
+    """'; estimate N / E / yaw' RMSE of the estimate the loop acted on ('' for the ideal)."""
+    rmse = entry.get('estimate_rmse')
+    if not rmse:
+        return ''
+    return '; estimate ' + ' / '.join(f'{v:.4g}' for v in rmse.values())
 
 
 def _counters(entry: dict[str, Any]) -> str:

@@ -266,6 +266,32 @@ def _estimate_wave_power(outcome: _LoopOutcome, ndof: int, start: float,
             for i in range(ndof)}
 
 
+def _estimate_rmse(outcome: _LoopOutcome, ndof: int, start: float) -> dict[str, float]:
+    """RMSE of the estimate the PID was fed against the true LF pose when it was fed, per DOF.
+
+    Estimate j, returned at ``estimate_t[j]``, is held by the PID from that instant (the
+    adaptive predictor's LF pose predicted for t + h included: it is what the loop acts on), so
+    it is compared with the truth at that sample. Heading error wrapped; samples from ``start``;
+    NaN with fewer than 3 finite pairs (an aborted or empty loop). Shows whether a variant's
+    estimate is better *in its own loop*, where the thrust it regresses on answers its own
+    output, which the open loop on the fair recordings cannot show.
+    """
+    rec = outcome.record
+    keep = outcome.estimate_t >= start
+    times, est = outcome.estimate_t[keep], outcome.estimates[keep, :ndof]
+    index = np.searchsorted(rec.t, times - 1e-9)
+    on_grid = index < rec.t.size
+    on_grid[on_grid] = np.abs(rec.t[index[on_grid]] - times[on_grid]) <= 1e-6
+    error = est[on_grid] - rec.truth_lf_pose[index[on_grid], :ndof]
+    if ndof == 3:
+        error[:, 2] = wrap_angle(error[:, 2])
+    finite = np.all(np.isfinite(error), axis=1)
+    if np.count_nonzero(finite) < 3:
+        return {d: math.nan for d in DOF_NAMES[:ndof]}
+    rmse = np.sqrt(np.mean(error[finite] ** 2, axis=0))
+    return {DOF_NAMES[i]: float(rmse[i]) for i in range(ndof)}
+
+
 def _loop_reference(scenario: Scenario, rec: SimRecord, ideal: SimRecord) -> FloatArray:
     """What a loop's pose is scored against, per sample (n, 3).
 
@@ -325,6 +351,7 @@ def run_closed_loops(scenario: Scenario, seed: int, duration: float | None,
         if name != 'ideal':
             metrics['estimate_wave_band_power'] = _estimate_wave_power(
                 outcome, ndof, start, setup.sample_time)
+            metrics['estimate_rmse'] = _estimate_rmse(outcome, ndof, start)
         metrics.update(outcome.info)
         metrics['seconds'] = round(time.monotonic() - begin, 3)
         if name in names:

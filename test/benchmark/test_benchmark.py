@@ -91,6 +91,8 @@ def test_fast_suite_writes_results_page_json_and_figures(tmp_path: Path) -> None
         assert loops[name]['thrust_wave_band_power']['north'] < 0.1 * raw_power
         assert loops[name]['estimate_wave_band_power']['north'] < \
             0.1 * loops['raw']['estimate_wave_band_power']['north']
+        # and the estimate each loop acted on is closer to the truth than the measurement
+        assert loops[name]['estimate_rmse']['north'] < 0.6 * loops['raw']['estimate_rmse']['north']
     assert loops['ideal']['position_rmse'] < loops['raw']['position_rmse']
 
 

@@ -19,14 +19,14 @@ sessions).
 scored like `benchmark` from the same sample) next to the observer (the recording's own loop),
 oracle_kf and raw loops: position / heading RMSE, largest excursion, wave-band thrust power per
 DOF as a share of the raw loop's, stability, and the adaptive loop's guard trips and rejected
-trainings, and the RMSE of the estimate each loop acted on against the true LF pose
-(`suite._estimate_rmse`: whether a variant's estimate is better in its own loop). Accepted
-seeds: the tuning seeds 1 and 2, and the development seeds 3–10 and 101–230 (never used to
-tune the baselines, never reported as results: a wider screen for loop stability, see
-docs/BENCHMARKS.md "Fifteenth session"; 101–190 since the twenty-second session and 191–230
-since the twenty-third, for screens that need more than ten seeds to resolve a few per
-cent). The held-out seeds (11–20, and on to 30 with `benchmark --seeds 20`) are for
-`benchmark` only.
+trainings, and the RMSE of the estimate each loop acted on against the true LF pose, with its
+part in the control band (`suite._estimate_errors`: whether, and where in frequency, a
+variant's estimate is better in its own loop). Accepted seeds: the tuning seeds 1 and 2,
+and the development seeds 3–10 and 101–230 (never used to tune the baselines, never reported
+as results: a wider screen for loop stability, see docs/BENCHMARKS.md "Fifteenth session";
+101–190 since the twenty-second session and 191–230 since the twenty-third, for screens that
+need more than ten seeds to resolve a few per cent). The held-out seeds (11–20, and on to 30
+with `benchmark --seeds 20`) are for `benchmark` only.
 """
 from __future__ import annotations
 
@@ -166,11 +166,15 @@ def loops(scenario: Any, seed: int, duration: float, setup: Any, recording: Any,
 
 
 def _estimate(entry: dict[str, Any]) -> str:
-    """'; estimate N / E / yaw' RMSE of the estimate the loop acted on ('' for the ideal)."""
-    rmse = entry.get('estimate_rmse')
-    if not rmse:
+    """'; estimate N / E / yaw (control band N / E / yaw)' of the estimate the loop acted on.
+
+    RMSE against the true LF pose and its part in `suite.CONTROL_BAND`; '' for the ideal loop.
+    """
+    rmse, control = entry.get('estimate_rmse'), entry.get('estimate_error_control_band')
+    if not rmse or not control:
         return ''
-    return '; estimate ' + ' / '.join(f'{v:.4g}' for v in rmse.values())
+    return ('; estimate ' + ' / '.join(f'{v:.4g}' for v in rmse.values()) + ' (control band '
+            + ' / '.join(f'{v:.4g}' for v in control.values()) + ')')
 
 
 def _counters(entry: dict[str, Any]) -> str:

@@ -266,15 +266,17 @@ def _estimate_wave_power(outcome: _LoopOutcome, ndof: int, start: float,
             for i in range(ndof)}
 
 
-def _estimate_rmse(outcome: _LoopOutcome, ndof: int, start: float) -> dict[str, float]:
-    """RMSE of the estimate the PID was fed against the true LF pose when it was fed, per DOF.
+# [rad/s] the DP control band: the position loops' bandwidth is 0.1 rad/s (the heading's 0.2),
+# and an estimate error there moves the vessel; an error above it mostly moves the thrust
+CONTROL_BAND = (0.0, 0.1)
+
+
+def _loop_estimate_error(outcome: _LoopOutcome, ndof: int, start: float) -> FloatArray:
+    """Estimate the PID was fed minus the true LF pose when it was fed, (m, ndof), from start.
 
     Estimate j, returned at ``estimate_t[j]``, is held by the PID from that instant (the
     adaptive predictor's LF pose predicted for t + h included: it is what the loop acts on), so
-    it is compared with the truth at that sample. Heading error wrapped; samples from ``start``;
-    NaN with fewer than 3 finite pairs (an aborted or empty loop). Shows whether a variant's
-    estimate is better *in its own loop*, where the thrust it regresses on answers its own
-    output, which the open loop on the fair recordings cannot show.
+    it is compared with the truth at that sample. Heading error wrapped; only finite rows.
     """
     rec = outcome.record
     keep = outcome.estimate_t >= start
@@ -285,11 +287,30 @@ def _estimate_rmse(outcome: _LoopOutcome, ndof: int, start: float) -> dict[str, 
     error = est[on_grid] - rec.truth_lf_pose[index[on_grid], :ndof]
     if ndof == 3:
         error[:, 2] = wrap_angle(error[:, 2])
-    finite = np.all(np.isfinite(error), axis=1)
-    if np.count_nonzero(finite) < 3:
-        return {d: math.nan for d in DOF_NAMES[:ndof]}
-    rmse = np.sqrt(np.mean(error[finite] ** 2, axis=0))
-    return {DOF_NAMES[i]: float(rmse[i]) for i in range(ndof)}
+    return np.asarray(error[np.all(np.isfinite(error), axis=1)], dtype=np.float64)
+
+
+def _estimate_errors(outcome: _LoopOutcome, ndof: int, start: float,
+                     sample_time: float) -> dict[str, dict[str, float]]:
+    """The loop's own estimate error per DOF: RMSE, and RMS in the control band (mean included).
+
+    ``estimate_rmse``: RMSE of `_loop_estimate_error`. ``estimate_error_control_band``:
+    √(Welch power in ``CONTROL_BAND`` + mean²), the part of the error the position loop follows.
+    Both show whether a variant's estimate is better *in its own loop*, where the thrust it
+    regresses on answers its own output, which the open loop on the fair recordings cannot
+    show; the second shows where in frequency. NaN with fewer than 16 samples (an aborted or
+    empty loop).
+    """
+    error = _loop_estimate_error(outcome, ndof, start)
+    names = DOF_NAMES[:ndof]
+    if error.shape[0] < 16:
+        nan = {d: math.nan for d in names}
+        return {'estimate_rmse': nan, 'estimate_error_control_band': dict(nan)}
+    rmse = np.sqrt(np.mean(error ** 2, axis=0))
+    control = [math.sqrt(band_power(error[:, i], sample_time, CONTROL_BAND)
+                         + float(np.mean(error[:, i])) ** 2) for i in range(ndof)]
+    return {'estimate_rmse': {d: float(rmse[i]) for i, d in enumerate(names)},
+            'estimate_error_control_band': {d: control[i] for i, d in enumerate(names)}}
 
 
 def _loop_reference(scenario: Scenario, rec: SimRecord, ideal: SimRecord) -> FloatArray:
@@ -351,7 +372,7 @@ def run_closed_loops(scenario: Scenario, seed: int, duration: float | None,
         if name != 'ideal':
             metrics['estimate_wave_band_power'] = _estimate_wave_power(
                 outcome, ndof, start, setup.sample_time)
-            metrics['estimate_rmse'] = _estimate_rmse(outcome, ndof, start)
+            metrics.update(_estimate_errors(outcome, ndof, start, setup.sample_time))
         metrics.update(outcome.info)
         metrics['seconds'] = round(time.monotonic() - begin, 3)
         if name in names:

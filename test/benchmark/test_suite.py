@@ -6,8 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from lf_predictor_ros.benchmark.suite import _estimate_rmse, _LoopOutcome
+from lf_predictor_ros.benchmark.suite import CONTROL_BAND, _estimate_errors, _LoopOutcome
 from sim_ros.simulation import SimRecord
+
+H = 1.0  # [s] estimator period
 
 
 def _outcome(t: np.ndarray, truth: np.ndarray, estimate_t: np.ndarray,
@@ -17,27 +19,45 @@ def _outcome(t: np.ndarray, truth: np.ndarray, estimate_t: np.ndarray,
     return _LoopOutcome(record, False, {}, estimate_t, estimates)
 
 
-def test_estimate_rmse_compares_each_estimate_with_the_truth_when_it_was_fed() -> None:
-    """Truth on a 0.1 s grid, estimates every 1 s with known offsets; heading wrapped."""
-    t = np.round(np.arange(0.0, 100.0, 0.1), 10)
+def test_loop_estimate_error_compares_each_estimate_with_the_truth_when_it_was_fed() -> None:
+    """Truth on a 0.1 s grid, estimates every 1 s with known errors; heading wrapped.
+
+    North: ±0.3 m alternating (at 0.5 Hz, far above the control band: RMSE 0.3, control band
+    ≈ 0); east: a constant 0.4 m (all in the control band: the mean counts); yaw: 0.02 rad
+    across ±π; a slow 0.2 m sine at 0.05 rad/s added to north shows up in the control band.
+    """
+    t = np.round(np.arange(0.0, 2000.0, 0.1), 10)
     truth = np.zeros((t.size, 3))
-    truth[:, 0] = 0.05 * t  # moving north: an estimate at the wrong sample would show it
+    truth[:, 0] = 0.05 * t  # moving north: an estimate compared at the wrong sample would show
     truth[:, 2] = math.pi - 0.01  # heading just below π
-    estimate_t = np.arange(1.0, 100.0, 1.0)
+    estimate_t = np.arange(1.0, 2000.0, H)
     estimates = np.zeros((estimate_t.size, 3))
-    estimates[:, 0] = 0.05 * estimate_t + np.where(np.arange(estimate_t.size) % 2, 0.3, -0.3)
+    fast = np.where(np.arange(estimate_t.size) % 2, 0.3, -0.3)
+    estimates[:, 0] = 0.05 * estimate_t + fast
     estimates[:, 1] = 0.4
     estimates[:, 2] = -math.pi + 0.01  # 0.02 rad from the truth across ±π
-    rmse = _estimate_rmse(_outcome(t, truth, estimate_t, estimates), 3, start=10.0)
+    out = _estimate_errors(_outcome(t, truth, estimate_t, estimates), 3, 10.0, H)
+    rmse, control = out['estimate_rmse'], out['estimate_error_control_band']
     assert rmse['north'] == pytest.approx(0.3, rel=1e-9)
     assert rmse['east'] == pytest.approx(0.4, rel=1e-9)
     assert rmse['yaw'] == pytest.approx(0.02, rel=1e-6)
+    assert control['north'] < 0.01  # the 0.5 Hz error is outside the control band
+    assert control['east'] == pytest.approx(0.4, rel=1e-6)  # a bias is all control band
+    assert control['yaw'] == pytest.approx(0.02, rel=1e-4)
+    # a slow error (0.05 rad/s, inside CONTROL_BAND = (0, 0.1)) of RMS 0.2/√2 is seen there
+    assert CONTROL_BAND[0] <= 0.05 <= CONTROL_BAND[1]
+    slow = estimates.copy()
+    slow[:, 0] += 0.2 * np.sin(0.05 * estimate_t)
+    out = _estimate_errors(_outcome(t, truth, estimate_t, slow), 3, 10.0, H)
+    assert out['estimate_error_control_band']['north'] == pytest.approx(0.2 / math.sqrt(2),
+                                                                        rel=0.1)
     # samples before start are not scored: a large early error changes nothing
     early = estimates.copy()
     early[:5, 0] += 100.0
-    assert _estimate_rmse(_outcome(t, truth, estimate_t, early), 3, 10.0) == rmse
+    assert _estimate_errors(_outcome(t, truth, estimate_t, early), 3, 10.0, H)['estimate_rmse'] \
+        == rmse
     # one DOF; an empty (aborted before start) loop is NaN, not a crash
-    assert _estimate_rmse(_outcome(t, truth, estimate_t, estimates), 1, 10.0) == \
-        {'north': pytest.approx(0.3, rel=1e-9)}
-    empty = _estimate_rmse(_outcome(t, truth, np.zeros(0), np.zeros((0, 3))), 3, 10.0)
-    assert all(math.isnan(v) for v in empty.values())
+    one = _estimate_errors(_outcome(t, truth, estimate_t, estimates), 1, 10.0, H)
+    assert one['estimate_rmse'] == {'north': pytest.approx(0.3, rel=1e-9)}
+    empty = _estimate_errors(_outcome(t, truth, np.zeros(0), np.zeros((0, 3))), 3, 10.0, H)
+    assert all(math.isnan(v) for part in empty.values() for v in part.values())

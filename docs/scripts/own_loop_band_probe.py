@@ -1,0 +1,75 @@
+"""The adaptive predictor in its own DP loop: estimate error and true offset per frequency band.
+
+    python docs/scripts/own_loop_band_probe.py rao_swell 5 default
+    python docs/scripts/own_loop_band_probe.py rao_swell 5 dof_coupling:heading   # a field:value
+
+One loop per call: the seed's scenario (its scheduled events delayed as `method_probe.py` and
+`benchmark` delay them), the shipped predictor with the one override, the PID on its estimate
+(`suite._run_loop`), scored from the benchmark's first scored sample. Printed as one JSON line,
+for north and east each: the RMS of the estimate error it acted on (`suite._loop_estimate_error`)
+and of the true LF pose's offset from the loop reference (the ideal loop's track) in the control
+band (0–0.1 rad/s, mean included), between it and the wave band (0.1–0.3) and in the wave band
+(0.3–1.3). The twenty-fourth session used it to show that a variant can lose position in the
+control band while its estimate error there does not grow (docs/BENCHMARKS.md).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+import json
+import sys
+
+import numpy as np
+import torch
+
+from lf_predictor_ros.benchmark import stability
+from lf_predictor_ros.benchmark.benchmark import SCHEDULE_SPREAD
+from lf_predictor_ros.benchmark.estimators import predictor_params
+from lf_predictor_ros.benchmark.suite import (
+    _loop_estimate_error,
+    _loop_reference,
+    _run_loop,
+    make_recording,
+    make_setup,
+    schedule_shift_for_seed,
+    scored_start,
+)
+from lf_predictor_ros.core.evaluation import band_power
+from sim_ros.simulation import load_scenario, scenario_with_schedule_shift, simulate
+
+DURATION = 1800.0  # [s] as method_probe
+BANDS = ((0.0, 0.1), (0.1, 0.3), (0.3, 1.3))  # [rad/s] control band, between, wave band
+
+
+def band_rms(x: np.ndarray, sample_time: float) -> list[list[float]]:
+    """Per column (north, east): RMS in each of BANDS (the first with the mean)."""
+    return [[float(np.sqrt(band_power(x[:, i], sample_time, band)
+                           + (float(np.mean(x[:, i])) ** 2 if band[0] == 0.0 else 0.0)))
+             for band in BANDS] for i in range(2)]
+
+
+def main(argv: list[str]) -> None:
+    """Run one loop (module docstring) and print its JSON line."""
+    name, seed, variant = argv[0], int(argv[1]), argv[2]
+    overrides = None if variant == 'default' else dict([variant.split(':', 1)])
+    torch.set_num_threads(1)
+    scenario = scenario_with_schedule_shift(load_scenario(name),
+                                            schedule_shift_for_seed(seed, SCHEDULE_SPREAD))
+    params = predictor_params(scenario, None)
+    setup = make_setup(scenario, seed, params)
+    data = make_recording(scenario, seed, DURATION, setup).data()
+    start = float(data['t'][scored_start(params, len(data['t']))])
+    ideal = simulate(scenario, seed=seed, duration=DURATION, controller=True, feedback='truth_lf')
+    variant_setup = replace(setup, params=predictor_params(scenario, overrides))
+    outcome = _run_loop('adaptive', scenario, seed, DURATION, variant_setup, ideal)
+    record = outcome.record
+    keep = record.t >= start
+    offset = stability.pose_offset(record.truth_lf_pose[keep],
+                                   _loop_reference(scenario, record, ideal)[keep], 3)
+    stride = int(round(params.sample_time / scenario.sample_time))
+    print(json.dumps({'seed': seed, 'variant': variant,
+                      'err': band_rms(_loop_estimate_error(outcome, 3, start), params.sample_time),
+                      'pos': band_rms(offset[::stride], params.sample_time)}))
+
+
+if __name__ == '__main__':
+    main(sys.argv[1:])

@@ -65,10 +65,11 @@ def main(argv: list[str]) -> None:
     keep = record.t >= start
     offset = stability.pose_offset(record.truth_lf_pose[keep],
                                    _loop_reference(scenario, record, ideal)[keep], 3)
-    stride = int(round(params.sample_time / scenario.sample_time))
+    stride = int(round(params.sample_time / scenario.sample_time))  # sensor samples per h
+    error = _loop_estimate_error(outcome, 3, start, stride)
     print(json.dumps({'seed': seed, 'variant': variant,
-                      'err': band_rms(_loop_estimate_error(outcome, 3, start), params.sample_time),
-                      'pos': band_rms(offset[::stride], params.sample_time)}))
+                      'err': band_rms(error, params.sample_time),
+                      'pos': band_rms(offset[stride - 1::stride], params.sample_time)}))
 
 
 if __name__ == '__main__':

@@ -6,7 +6,12 @@ import math
 import numpy as np
 import pytest
 
-from lf_predictor_ros.benchmark.suite import CONTROL_BAND, _estimate_errors, _LoopOutcome
+from lf_predictor_ros.benchmark.suite import (
+    CONTROL_BAND,
+    _estimate_errors,
+    _estimate_wave_power,
+    _LoopOutcome,
+)
 from sim_ros.simulation import SimRecord
 
 H = 1.0  # [s] estimator period
@@ -61,3 +66,29 @@ def test_loop_estimate_error_compares_each_estimate_with_the_truth_when_it_was_f
     assert one['estimate_rmse'] == {'north': pytest.approx(0.3, rel=1e-9)}
     empty = _estimate_errors(_outcome(t, truth, np.zeros(0), np.zeros((0, 3))), 3, 10.0, H)
     assert all(math.isnan(v) for part in empty.values() for v in part.values())
+
+
+def test_held_estimates_are_read_once_per_estimate_on_a_finer_sensor_grid() -> None:
+    """A 0.1 s scenario records the held estimate at every sensor sample (`GridInput`).
+
+    An estimate series that is a 0.5 rad/s sine (amplitude 1 m) on the 1 s estimator grid, held
+    for ten 0.1 s samples: its wave-band power (0.3–1.3 rad/s) is ≈ 1/2 m² and its error
+    against a still truth is all outside the control band, once the series is read one sample
+    per estimate (stride 10). Read at the 1 s period without the stride (the bug before the
+    twenty-fourth session), the sine would sit at 0.05 rad/s: no wave power, all in the control
+    band.
+    """
+    sensor = 0.1
+    t = np.round(np.arange(sensor, 3000.0 + sensor / 2, sensor), 10)
+    grid = np.floor(t + 1e-9)  # the time of the estimate held at each sensor sample
+    truth = np.zeros((t.size, 3))
+    estimates = np.zeros((t.size, 3))
+    estimates[:, 0] = np.sin(0.5 * grid)
+    outcome = _outcome(t, truth, t, estimates)
+    power = _estimate_wave_power(outcome, 3, 100.0, 1.0, stride=10)
+    assert power['north'] == pytest.approx(0.5, rel=0.05)
+    errors = _estimate_errors(outcome, 3, 100.0, 1.0, stride=10)
+    assert errors['estimate_rmse']['north'] == pytest.approx(1 / math.sqrt(2), rel=0.01)
+    assert errors['estimate_error_control_band']['north'] < 0.05
+    wrong = _estimate_wave_power(outcome, 3, 100.0, 1.0)  # stride 1: the held series as if at h
+    assert wrong['north'] < 0.05

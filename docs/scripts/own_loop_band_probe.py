@@ -33,18 +33,16 @@ from lf_predictor_ros.benchmark.suite import (
     schedule_shift_for_seed,
     scored_start,
 )
-from lf_predictor_ros.core.evaluation import band_power
+from lf_predictor_ros.core.evaluation import band_rms
 from sim_ros.simulation import load_scenario, scenario_with_schedule_shift, simulate
 
 DURATION = 1800.0  # [s] as method_probe
 BANDS = ((0.0, 0.1), (0.1, 0.3), (0.3, 1.3))  # [rad/s] control band, between, wave band
 
 
-def band_rms(x: np.ndarray, sample_time: float) -> list[list[float]]:
-    """Per column (north, east): RMS in each of BANDS (the first with the mean)."""
-    return [[float(np.sqrt(band_power(x[:, i], sample_time, band)
-                           + (float(np.mean(x[:, i])) ** 2 if band[0] == 0.0 else 0.0)))
-             for band in BANDS] for i in range(2)]
+def bands(x: np.ndarray, sample_time: float) -> list[list[float]]:
+    """Per column (north, east): RMS in each of BANDS (`band_rms`: the first with the mean)."""
+    return [[band_rms(x[:, i], sample_time, band) for band in BANDS] for i in range(2)]
 
 
 def main(argv: list[str]) -> None:
@@ -66,10 +64,9 @@ def main(argv: list[str]) -> None:
     offset = stability.pose_offset(record.truth_lf_pose[keep],
                                    _loop_reference(scenario, record, ideal)[keep], 3)
     stride = int(round(params.sample_time / scenario.sample_time))  # sensor samples per h
-    error = _loop_estimate_error(outcome, 3, start, stride)
     print(json.dumps({'seed': seed, 'variant': variant,
-                      'err': band_rms(error, params.sample_time),
-                      'pos': band_rms(offset[stride - 1::stride], params.sample_time)}))
+                      'err': bands(_loop_estimate_error(outcome, 3, start), params.sample_time),
+                      'pos': bands(offset[stride - 1::stride], params.sample_time)}))
 
 
 if __name__ == '__main__':

@@ -68,6 +68,7 @@ from lf_predictor_ros.benchmark.recordings import (
     LeakReport,
     Recording,
     check_scorable,
+    grid_stride,
     leak_check,
     record,
     require_fair,
@@ -82,6 +83,7 @@ from lf_predictor_ros.core.evaluation import (
     LoopRun,
     Metrics,
     band_power,
+    band_rms,
     loop_metrics,
     score,
 )
@@ -225,6 +227,8 @@ def _nan_loop_metrics(ndof: int) -> dict[str, Any]:
 
 @dataclass(frozen=True)
 class _LoopOutcome:
+    """A loop's record and the estimates the PID was fed, one row per estimate (h)."""
+
     record: SimRecord
     aborted: bool
     info: dict[str, Any]
@@ -249,33 +253,30 @@ def _run_loop(name: str, scenario: Scenario, seed: int, duration: float | None,
                             'aborted_at': run.aborted_at}
     if counters is not None:
         info['counters'] = counters
-    return _LoopOutcome(run.record, run.aborted_at is not None, info, run.estimate_t,
-                        run.estimates)
+    times, estimates = _grid_estimates(run.estimate_t, run.estimates,
+                                       grid_stride(scenario, setup.sample_time))
+    return _LoopOutcome(run.record, run.aborted_at is not None, info, times, estimates)
 
 
-def _grid_estimates(outcome: _LoopOutcome, stride: int) -> tuple[FloatArray, FloatArray]:
+def _grid_estimates(times: FloatArray, estimates: FloatArray,
+                    stride: int) -> tuple[FloatArray, FloatArray]:
     """(times, estimates) at the estimator's own calls, one per h.
 
     `run_loop` records the estimate the PID holds at every sensor sample (``GridInput``: a new
-    one every ``stride``-th sample, the same one in between), so a spectrum of the recorded
-    series must either use the sensor period or, as here, keep one sample per estimate: the
-    ``stride``-th, where each new estimate appears (as `LoopSeries` does). Before the twenty-
-    fourth session the held 10 Hz series was read as if sampled at h, which put a 0.1 s
-    scenario's wave band (0.3–1.3 rad/s) at 0.03–0.13 rad/s of the real series.
+    one every ``stride``-th sample, the same one in between); one sample per estimate is kept:
+    the ``stride``-th, where each new estimate appears (as `LoopSeries` does), so every
+    spectrum of a `_LoopOutcome` is taken at h. Before the twenty-fourth session the held 10 Hz
+    series was read as if sampled at h, which put a 0.1 s scenario's wave band (0.3–1.3 rad/s)
+    at 0.03–0.13 rad/s of the real series.
     """
-    return outcome.estimate_t[stride - 1::stride], outcome.estimates[stride - 1::stride]
+    return times[stride - 1::stride], estimates[stride - 1::stride]
 
 
 def _estimate_wave_power(outcome: _LoopOutcome, ndof: int, start: float,
-                         sample_time: float, stride: int = 1) -> dict[str, float]:
-    """Wave-band power of the estimate the PID was fed, per DOF (heading unwrapped).
-
-    ``sample_time``: h, the estimator's period; ``stride``: sensor samples per h
-    (`_grid_estimates`).
-    """
-    times, estimates = _grid_estimates(outcome, stride)
-    keep = times >= start
-    est = estimates[keep, :ndof].copy()
+                         sample_time: float) -> dict[str, float]:
+    """Wave-band power of the estimate the PID was fed, per DOF (heading unwrapped)."""
+    keep = outcome.estimate_t >= start
+    est = outcome.estimates[keep, :ndof].copy()
     if est.shape[0] < 16 or not np.all(np.isfinite(est)):
         return {d: math.nan for d in DOF_NAMES[:ndof]}
     if ndof == 3:
@@ -289,19 +290,17 @@ def _estimate_wave_power(outcome: _LoopOutcome, ndof: int, start: float,
 CONTROL_BAND = (0.0, 0.1)
 
 
-def _loop_estimate_error(outcome: _LoopOutcome, ndof: int, start: float,
-                         stride: int = 1) -> FloatArray:
+def _loop_estimate_error(outcome: _LoopOutcome, ndof: int, start: float) -> FloatArray:
     """Estimate the PID was fed minus the true LF pose when it was fed, (m, ndof), from start.
 
-    One row per estimate (`_grid_estimates`, ``stride`` sensor samples per h): estimate j,
-    returned at time t_j, is held by the PID from that instant (the adaptive predictor's LF pose
-    predicted for t + h included: it is what the loop acts on), so it is compared with the
-    truth at that sample. Heading error wrapped; only finite rows.
+    One row per estimate: estimate j, returned at ``estimate_t[j]``, is held by the PID from
+    that instant (the adaptive predictor's LF pose predicted for t + h included: it is what the
+    loop acts on), so it is compared with the truth at that sample. Heading error wrapped; only
+    finite rows.
     """
     rec = outcome.record
-    grid_t, grid_est = _grid_estimates(outcome, stride)
-    keep = grid_t >= start
-    times, est = grid_t[keep], grid_est[keep, :ndof]
+    keep = outcome.estimate_t >= start
+    times, est = outcome.estimate_t[keep], outcome.estimates[keep, :ndof]
     index = np.searchsorted(rec.t, times - 1e-9)
     on_grid = index < rec.t.size
     on_grid[on_grid] = np.abs(rec.t[index[on_grid]] - times[on_grid]) <= 1e-6
@@ -311,25 +310,24 @@ def _loop_estimate_error(outcome: _LoopOutcome, ndof: int, start: float,
     return np.asarray(error[np.all(np.isfinite(error), axis=1)], dtype=np.float64)
 
 
-def _estimate_errors(outcome: _LoopOutcome, ndof: int, start: float, sample_time: float,
-                     stride: int = 1) -> dict[str, dict[str, float]]:
+def _estimate_errors(outcome: _LoopOutcome, ndof: int, start: float,
+                     sample_time: float) -> dict[str, dict[str, float]]:
     """The loop's own estimate error per DOF: RMSE, and RMS in the control band (mean included).
 
     ``estimate_rmse``: RMSE of `_loop_estimate_error`. ``estimate_error_control_band``:
     √(Welch power in ``CONTROL_BAND`` + mean²), the part of the error the position loop follows.
     Both show whether a variant's estimate is better *in its own loop*, where the thrust it
     regresses on answers its own output, which the open loop on the fair recordings cannot
-    show; the second shows where in frequency. ``sample_time``: h; ``stride``: sensor samples
-    per h. NaN with fewer than 16 estimates (an aborted or empty loop).
+    show; the second shows where in frequency. ``sample_time``: h. NaN with fewer than 16
+    estimates (an aborted or empty loop).
     """
-    error = _loop_estimate_error(outcome, ndof, start, stride)
+    error = _loop_estimate_error(outcome, ndof, start)
     names = DOF_NAMES[:ndof]
     if error.shape[0] < 16:
         nan = {d: math.nan for d in names}
         return {'estimate_rmse': nan, 'estimate_error_control_band': dict(nan)}
     rmse = np.sqrt(np.mean(error ** 2, axis=0))
-    control = [math.sqrt(band_power(error[:, i], sample_time, CONTROL_BAND)
-                         + float(np.mean(error[:, i])) ** 2) for i in range(ndof)]
+    control = [band_rms(error[:, i], sample_time, CONTROL_BAND) for i in range(ndof)]
     return {'estimate_rmse': {d: float(rmse[i]) for i, d in enumerate(names)},
             'estimate_error_control_band': {d: control[i] for i, d in enumerate(names)}}
 
@@ -392,8 +390,8 @@ def run_closed_loops(scenario: Scenario, seed: int, duration: float | None,
             rec.thrust_command[keep], None if limit is None else np.asarray(limit), ndof)
         if name != 'ideal':
             metrics['estimate_wave_band_power'] = _estimate_wave_power(
-                outcome, ndof, start, setup.sample_time, stride)
-            metrics.update(_estimate_errors(outcome, ndof, start, setup.sample_time, stride))
+                outcome, ndof, start, setup.sample_time)
+            metrics.update(_estimate_errors(outcome, ndof, start, setup.sample_time))
         metrics.update(outcome.info)
         metrics['seconds'] = round(time.monotonic() - begin, 3)
         if name in names:

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+import math
 from typing import Any
 
 import numpy as np
@@ -141,6 +142,18 @@ def band_power(
     if np.count_nonzero(inside) < 2:
         return 0.0
     return float(np.trapezoid(psd[inside], freq[inside]))
+
+
+def band_rms(x: FloatArray, sample_time: float, band: tuple[float, float]) -> float:
+    """RMS of x within band [rad/s]: √ of `band_power`, plus the mean² when the band starts at 0.
+
+    `band_power` detrends the mean; a band from 0 (a control band) must count a constant offset,
+    which moves a DP loop's vessel as much as any slow error.
+    """
+    power = band_power(x, sample_time, band)
+    if band[0] <= 0.0:
+        power += float(np.mean(x)) ** 2
+    return math.sqrt(power)
 
 
 def estimate_lag(

@@ -10,6 +10,7 @@ from lf_predictor_ros.benchmark.suite import (
     CONTROL_BAND,
     _estimate_errors,
     _estimate_wave_power,
+    _grid_estimates,
     _LoopOutcome,
 )
 from sim_ros.simulation import SimRecord
@@ -84,11 +85,14 @@ def test_held_estimates_are_read_once_per_estimate_on_a_finer_sensor_grid() -> N
     truth = np.zeros((t.size, 3))
     estimates = np.zeros((t.size, 3))
     estimates[:, 0] = np.sin(0.5 * grid)
-    outcome = _outcome(t, truth, t, estimates)
-    power = _estimate_wave_power(outcome, 3, 100.0, 1.0, stride=10)
+    # what `_run_loop` keeps: one sample per estimate
+    outcome = _outcome(t, truth, *_grid_estimates(t, estimates, 10))
+    assert outcome.estimate_t[:3].tolist() == [1.0, 2.0, 3.0]
+    power = _estimate_wave_power(outcome, 3, 100.0, 1.0)
     assert power['north'] == pytest.approx(0.5, rel=0.05)
-    errors = _estimate_errors(outcome, 3, 100.0, 1.0, stride=10)
+    errors = _estimate_errors(outcome, 3, 100.0, 1.0)
     assert errors['estimate_rmse']['north'] == pytest.approx(1 / math.sqrt(2), rel=0.01)
     assert errors['estimate_error_control_band']['north'] < 0.05
-    wrong = _estimate_wave_power(outcome, 3, 100.0, 1.0)  # stride 1: the held series as if at h
+    held = _outcome(t, truth, t, estimates)  # the held series read as if at h (the old bug)
+    wrong = _estimate_wave_power(held, 3, 100.0, 1.0)
     assert wrong['north'] < 0.05

@@ -13,6 +13,7 @@ from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.evaluation import (
     LoopRun,
     Metrics,
+    band_rms,
     format_table,
     loop_metrics,
     run_estimator,
@@ -76,6 +77,14 @@ def test_yaw_error_is_wrapped() -> None:
     metrics = score(t, estimate, truth, 3)
     assert metrics.rmse[2] == pytest.approx(0.1, rel=1e-9)
     assert metrics.derivative_rmse[2] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_band_rms_counts_the_mean_only_in_a_band_from_zero() -> None:
+    """A 0.3 m offset plus a 0.2 m sine at 0.8 rad/s: RMS 0.3 in (0, 0.1), 0.2/√2 in (0.3, 1.3)."""
+    t = np.arange(12000) * 0.1
+    x = 0.3 + 0.2 * np.sin(0.8 * t)
+    assert band_rms(x, 0.1, (0.0, 0.1)) == pytest.approx(0.3, rel=0.01)
+    assert band_rms(x, 0.1, (0.3, 1.3)) == pytest.approx(0.2 / math.sqrt(2), rel=0.02)
 
 
 def test_wave_band_power_of_a_sinusoidal_error() -> None:

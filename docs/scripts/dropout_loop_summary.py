@@ -13,11 +13,14 @@ means per scenario. The twenty-fourth session's `reacquire_blend_time` screen us
 from __future__ import annotations
 
 import json
-import math
+from pathlib import Path
 import sys
 from typing import Any
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from loop_screen_summary import paired_ratio  # noqa: E402 - the sibling script
 
 METRICS = ('after', 'during23', 'after_thrust', 'first_after')
 
@@ -41,12 +44,11 @@ def load(path: str) -> dict[tuple[str, int], dict[str, Any]]:
 
 def paired(base: dict[tuple[str, int], dict[str, Any]],
            candidate: dict[tuple[str, int], dict[str, Any]], metric: str) -> str:
-    """One line: paired ratio ×/÷ SE, t, runs better."""
-    logs = np.array([math.log(candidate[k][metric] / base[k][metric]) for k in sorted(base)
-                     if k in candidate and candidate[k][metric] > 0 and base[k][metric] > 0])
-    se = float(logs.std(ddof=1)) / math.sqrt(logs.size)
-    return (f'{metric:13s} paired {math.exp(logs.mean()):.3f} ×/÷ {math.exp(se):.3f}  '
-            f't {logs.mean() / se:+.2f}  better {int((logs < 0).sum())}/{logs.size}')
+    """One line: paired ratio ×/÷ SE, t (`loop_screen_summary.paired_ratio`), runs better."""
+    ratios = [candidate[k][metric] / base[k][metric] for k in sorted(base)
+              if k in candidate and candidate[k][metric] > 0 and base[k][metric] > 0]
+    return (f'{metric:13s} {paired_ratio(ratios)}; '
+            f'better {sum(r < 1.0 for r in ratios)}/{len(ratios)}')
 
 
 def main(argv: list[str]) -> None:

@@ -55,6 +55,14 @@ def parse(lines: Sequence[str]) -> dict[tuple[str, int], dict[str, Loop]]:
     return rows
 
 
+def paired_ratio(ratios: Sequence[float]) -> str:
+    """'paired G ×/÷ S, t T': geometric mean of per-seed ratios, its SE factor, t of the logs."""
+    logs = [math.log(r) for r in ratios]
+    error = statistics.stdev(logs) / math.sqrt(len(logs)) if len(logs) > 1 else math.inf
+    return (f'paired {math.exp(statistics.mean(logs)):.3f} ×/÷ {math.exp(error):.3f}, '
+            f't {statistics.mean(logs) / error:+.1f}' if error > 0.0 else 'paired: identical')
+
+
 def summary(rows: dict[tuple[str, int], dict[str, Loop]]) -> list[str]:
     """The report lines (module docstring)."""
     out: list[str] = []
@@ -86,11 +94,7 @@ def summary(rows: dict[tuple[str, int], dict[str, Loop]]) -> list[str]:
             thrust_paired = [statistics.geometric_mean(r) for r in thrust_ratios]
             over_observer = statistics.mean(v.position / o for v, o in
                                             zip(loops, observer, strict=True))
-            logs = [math.log(r) for r in ratio]
-            error = statistics.stdev(logs) / math.sqrt(len(logs)) if len(logs) > 1 else math.inf
-            paired = (f'paired {math.exp(statistics.mean(logs)):.3f} '
-                      f'×/÷ {math.exp(error):.3f}, t {statistics.mean(logs) / error:+.1f}'
-                      if error > 0.0 else 'paired: identical')
+            paired = paired_ratio(ratio)
             out.append(
                 f'  {name}: position / default mean {statistics.mean(ratio):.3f} median '
                 f'{statistics.median(ratio):.3f} range {min(ratio):.2f}–{max(ratio):.2f}, '

@@ -122,7 +122,6 @@ class LfStateEstimator:
         if self.odometry.is_late(t + self.sample_time):
             return lf_pose, None  # older than an estimate already dead-reckoned
         source: EstimateSource = 'network' if self.predictor.using_network else 'fallback'
-        self.odometry.observe(t, pose, self.predictor.wave_peak_freq)
         odom = self.odometry.track(t + self.sample_time, lf_pose, force, source)
         return lf_pose, odom
 

@@ -57,10 +57,9 @@ from typing import Literal, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import signal
 
 from lf_predictor_ros.core.field_meta import field_doc
-from lf_predictor_ros.core.filters import CausalFilter, low_pass_step
+from lf_predictor_ros.core.filters import low_pass_step
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_dynamics import (
     DEAD_RECKONERS,
@@ -94,19 +93,6 @@ CHI2_3DOF_999 = 16.27  # χ²(3) 99.9 % quantile [-]
 # squared error of the window [-] (a lag fit must not claim that a still vessel is exact; on the
 # tuning seeds 0.05–0.5 change the calibrated NEES by < 10 %).
 HOLD_FLOOR_FRACTION = 0.1
-# Cutoff of the innovation low-pass (``pose_innovation_weight``) as a fraction of ω0 [-]: well
-# below the wave band, so that what passes is the estimate's own LF error (chosen with the weight
-# offline on development seeds 101–104 from 0.2 / 0.3 / 0.5, twenty-fifth session).
-INNOVATION_CUTOFF_FRACTION = 0.2
-# The innovation low-pass is redesigned when ω0 moves by more than this fraction [-].
-INNOVATION_RETUNE_FRACTION = 0.01
-# Only the squared LF innovation in excess of this factor times its own running level counts
-# (``pose_innovation_weight``): the level is z² low-passed over INNOVATION_LEVEL_TIME, so what
-# is usual for the vessel (holding, or steady motion) adds nothing and a manoeuvre's onset does
-# (both chosen offline on development seeds 101–104 from 300 / 600 / 1200 s and 1 / 2 ×,
-# twenty-fifth session) [-], [s].
-INNOVATION_LEVEL_FACTOR = 2.0
-INNOVATION_LEVEL_TIME = 600.0
 
 
 @dataclass(frozen=True)
@@ -136,13 +122,6 @@ class OdometryParams:
         'lag time T assumed for every DOF where a calibration window has no motion to fit it '
         '(prior of the least-squares fit, with a standard deviation of T² equal to T²; '
         '0 = no prior)', 's'))
-    pose_innovation_weight: float = field(default=0.0, metadata=field_doc(
-        'the pose error model gets a part this × diag(max(0, z² − INNOVATION_LEVEL_FACTOR · '
-        'm)) inside pose_cov_scale, z the LF part of the innovation (the measured pose minus '
-        'the pose published for its stamp, through a 2nd-order Butterworth low-pass at '
-        'INNOVATION_CUTOFF_FRACTION × ω0) and m its square low-passed over '
-        "INNOVATION_LEVEL_TIME. It sees the estimate's own lag in the first seconds of a "
-        "manoeuvre, before the estimate's rate (the lag part) does; 0 = off (issue 14)", ''))
     twist_cov_scale: float = field(default=0.61, metadata=field_doc(
         'published twist covariance = this × (holding part + K² a²) of the twist error model '
         'fitted against the target velocity (a: the twist change, twist_accel_time; '
@@ -224,10 +203,6 @@ class OdometryParams:
         if not (math.isfinite(self.pose_lag_memory) and self.pose_lag_memory >= 0.0):
             raise ValueError(f'pose_lag_memory must be a finite number >= 0 s (0: no memory), '
                              f'got {self.pose_lag_memory}')
-        if not (math.isfinite(self.pose_innovation_weight) and
-                self.pose_innovation_weight >= 0.0):
-            raise ValueError('pose_innovation_weight must be a finite number >= 0 (0: off), got '
-                             f'{self.pose_innovation_weight}')
         if not (math.isfinite(self.pose_lag_prior) and self.pose_lag_prior >= 0.0):
             raise ValueError(f'pose_lag_prior must be a finite number >= 0 s, got '
                              f'{self.pose_lag_prior}')
@@ -381,11 +356,6 @@ class LfOdometry:
         self._q_cache: tuple[float, OdometryParams, dict[str, ErrorModel],
                              VesselMemory | None, FloatArray] | None = None
         self._beta_cache: tuple[OdometryParams, FloatArray] | None = None
-        # pose_innovation_weight: the innovation low-pass and the ω0 it was designed for
-        self._innovation_filter: CausalFilter | None = None
-        self._innovation_freq: float | None = None
-        self._innovation_level: FloatArray | None = None  # z² low-passed (INNOVATION_LEVEL_TIME)
-        self._innovation_excess = np.zeros(n)  # max(0, z² − INNOVATION_LEVEL_FACTOR · level)
 
     @property
     def mode(self) -> OdometryMode:
@@ -411,42 +381,6 @@ class LfOdometry:
         if self._mode == 'tracking' or self._last_fix is None:
             return 0.0
         return max(0.0, t - self._last_fix)
-
-    def observe(self, t: float, measured: ArrayLike, wave_peak_freq: float | None) -> None:
-        """The measured pose at t (total motion), for the innovation part of the pose covariance.
-
-        Only with ``pose_innovation_weight`` > 0. The innovation is the measured pose minus the
-        estimate published for t (heading wrapped); without one for t (the first sample, a gap,
-        an irregular stamp) or without ω0, or with a non-finite value, the low-passed
-        innovation is held as it is. The low-pass is redesigned when ω0 moves by more than
-        ``INNOVATION_RETUNE_FRACTION`` (its output stays continuous, `CausalFilter.retune`). Its
-        square's running level starts at the first calibration (before it the covariance is the
-        prior, and the start-up's innovations would count as usual for 10 minutes).
-        """
-        if self.params.pose_innovation_weight <= 0.0:
-            return
-        last = self._last_output
-        if (last is None or wave_peak_freq is None or not math.isfinite(wave_peak_freq) or
-                wave_peak_freq <= 0.0 or abs(last.stamp - t) > 0.5 * self.sample_time):
-            return
-        n = self.ndof
-        pose = np.asarray(measured, dtype=np.float64)
-        if pose.shape != (3,):
-            raise ValueError(f'measured must be a pose of shape (3,), got {pose.shape}')
-        innovation = pose[:n] - last.pose[:n]
-        if not _finite(innovation):
-            return
-        if n == 3:
-            innovation[2] = wrap_angle(float(innovation[2]))
-        z = self._innovation_low_pass(wave_peak_freq).filter(innovation)
-        if not self.calibrated:  # the start-up's innovations are no usual level
-            return
-        square = z * z
-        level = self._innovation_level
-        level = square if level is None else low_pass_step(
-            level, square, min(1.0, self.sample_time / INNOVATION_LEVEL_TIME))
-        self._innovation_level = level
-        self._innovation_excess = np.maximum(0.0, square - INNOVATION_LEVEL_FACTOR * level)
 
     def track(self, t: float, lf_pose: ArrayLike, force: ArrayLike,
               source: EstimateSource = 'network') -> OdometryEstimate | None:
@@ -877,36 +811,12 @@ class LfOdometry:
         self._lag_peak = (t, square)
         return np.asarray(np.sqrt(square), dtype=np.float64)
 
-    def _innovation_low_pass(self, wave_peak_freq: float) -> CausalFilter:
-        """The innovation low-pass for ω0 (designed anew when ω0 has moved; `observe`)."""
-        design = self._innovation_freq
-        current = self._innovation_filter
-        if (current is not None and design is not None and
-                abs(wave_peak_freq - design) <= INNOVATION_RETUNE_FRACTION * design):
-            return current
-        cutoff = INNOVATION_CUTOFF_FRACTION * wave_peak_freq * self.sample_time / math.pi
-        sos = np.asarray(signal.butter(2, min(cutoff, 0.99), output='sos'), dtype=np.float64)
-        if current is None:
-            current = self._innovation_filter = CausalFilter(sos, self.ndof)
-        else:
-            current.retune(sos)
-        self._innovation_freq = wave_peak_freq
-        return current
-
     def _pose_covariance(self, source: EstimateSource, lag: FloatArray) -> FloatArray:
-        """The pose error model of ``source`` at the regressor ``lag`` (`_lag_regressor`).
-
-        With ``pose_innovation_weight`` w > 0, + w · diag(the innovation's excess) inside the
-        scale (`observe`).
-        """
+        """The pose error model of ``source`` at the regressor ``lag`` (`_lag_regressor`)."""
         n = self.ndof
         if self._pose_cov:
             model = self._pose_cov.get(source, self._pose_cov['all'])
-            cov = model.covariance(lag, self.params.pose_lag_scale)
-            weight = self.params.pose_innovation_weight
-            if weight > 0.0:
-                cov.flat[::n + 1] += weight * self._innovation_excess
-            inner = self.params.pose_cov_scale * cov
+            inner = self.params.pose_cov_scale * model.covariance(lag, self.params.pose_lag_scale)
         else:
             inner = np.diag(np.array(self.params.prior_pose_std[:n]) ** 2)
         return self._embed(inner)

@@ -171,92 +171,6 @@ def test_pose_lag_memory_holds_the_peak_rate_and_lets_it_decay() -> None:
     assert out is not None and out.pose_cov[0, 0] == pytest.approx(0.02, rel=1e-3)
 
 
-def _still_odometry(params: OdometryParams, pose: np.ndarray) -> LfOdometry:
-    """An odometry with a known holding model (no lag part) tracking a still ``pose``."""
-    odo = LfOdometry(3, H, params)
-    hold = np.diag([0.01, 0.04, 1e-4])
-    model = ErrorModel(moment=hold, hold=hold, gain=np.zeros(3))
-    twist_model = ErrorModel(moment=np.eye(3), hold=np.eye(3), gain=np.zeros(3))
-    odo.apply_learned(None, ({'all': model}, {'all': twist_model}))
-    odo.track(0.0, pose, np.zeros(3))
-    return odo
-
-
-def _observe_and_track(odo: LfOdometry, pose: np.ndarray, offsets: np.ndarray,
-                       wave_peak_freq: float | None) -> list[np.ndarray]:
-    """Measure, then track, once per second, as `LfStateEstimator.update` does.
-
-    At k the measured pose is the estimate published for k plus the offset (``observe``), then
-    the estimate for k + 1 is ``pose`` (``track``).
-    """
-    covs = []
-    for k, offset in enumerate(offsets):
-        odo.observe(float(k), pose + offset, wave_peak_freq)
-        out = odo.track(float(k + 1), pose, np.zeros(3))
-        assert out is not None
-        covs.append(out.pose_cov)
-    return covs
-
-
-def test_pose_innovation_weight_adds_the_excess_of_a_new_lf_innovation_inside_the_scale() -> None:
-    """Weight w: P = scale · (Σ_hold + w · diag(max(0, z² − 2 m))), m = z² low-passed (600 s).
-
-    After 300 s of zero innovation a step d: 60 s later z ≈ d and m is at most d² (1 − e^(−0.1)),
-    so the part added lies in [0.78, 1] · w · d²; 6000 s later m ≈ d² and nothing is added.
-    """
-    hold = np.diag([0.01, 0.04, 1e-4])
-    pose = np.array([5.0, -3.0, 1.0])
-    offset = np.array([0.3, -0.2, 0.01])
-    offsets = np.concatenate([np.zeros((300, 3)), np.tile(offset, (6060, 1))])
-    params = OdometryParams(pose_cov_scale=2.0, pose_innovation_weight=1.5)
-    covs = _observe_and_track(_still_odometry(params, pose), pose, offsets, 0.6)
-    added = np.diag(covs[359]) / 2.0 - np.diag(hold)
-    assert np.all(added >= 0.78 * 1.5 * offset ** 2)
-    assert np.all(added <= 1.5 * offset ** 2 * (1.0 + 1e-6))
-    np.testing.assert_allclose(covs[-1], 2.0 * hold, rtol=1e-12)
-    assert not np.allclose(covs[359], covs[-1])
-    # off (the default): the same measurements leave the holding model alone
-    plain = _observe_and_track(_still_odometry(OdometryParams(pose_cov_scale=2.0), pose), pose,
-                               offsets[:360], 0.6)
-    np.testing.assert_allclose(plain[-1], 2.0 * hold, rtol=1e-12)
-
-
-def test_pose_innovation_weight_adds_almost_nothing_for_wave_motion() -> None:
-    """A wave-band innovation at ω0 passes the 0.2 ω0 low-pass attenuated about 25 times."""
-    omega, amplitude = 0.6, 1.0
-    pose = np.zeros(3)
-    times = np.arange(1, 601, dtype=np.float64)
-    offsets = np.zeros((600, 3))
-    offsets[:, 0] = amplitude * np.sin(omega * times)
-    params = OdometryParams(pose_cov_scale=1.0, pose_innovation_weight=1.0)
-    covs = _observe_and_track(_still_odometry(params, pose), pose, offsets, omega)
-    added = np.array([c[0, 0] for c in covs]) - 0.01
-    # 2nd-order Butterworth an octave and more above its cutoff: |H(ω0)| ≈ (0.2)² = 0.04
-    assert added.max() < (0.06 * amplitude) ** 2
-
-
-def test_pose_innovation_is_held_without_an_estimate_for_the_stamp_or_without_omega() -> None:
-    """No published estimate for t, or no ω0: the low-passed innovation stays as it was."""
-    pose = np.zeros(3)
-    params = OdometryParams(pose_cov_scale=1.0, pose_innovation_weight=1.0)
-    odo = _still_odometry(params, pose)
-    before = _observe_and_track(odo, pose, np.zeros((5, 3)), None)[-1]
-    np.testing.assert_allclose(before, np.diag([0.01, 0.04, 1e-4]), rtol=1e-12)
-    odo.observe(5.6, pose + 10.0, 0.6)  # the last estimate is for 5 s: nothing to compare
-    odo.observe(5.0, pose + np.nan, 0.6)  # not finite: ignored
-    odo.observe(5.0, pose + 10.0, None)  # no ω0 yet: ignored
-    out = odo.track(6.0, pose, np.zeros(3))
-    assert out is not None
-    np.testing.assert_allclose(out.pose_cov, before, rtol=1e-12)
-    # the heading innovation is wrapped: published −π + 0.01, measured π − 0.01 → −0.02 rad
-    turned = np.array([0.0, 0.0, -math.pi + 0.01])
-    odo = _still_odometry(params, turned)
-    measured = np.concatenate([np.tile(turned, (300, 1)) - turned,
-                               np.tile([0.0, 0.0, 2.0 * math.pi - 0.02], (60, 1))])
-    cov = _observe_and_track(odo, turned, measured, 0.6)[-1]
-    assert 0.78 * 0.02 ** 2 <= cov[2, 2] - 1e-4 <= 0.02 ** 2 * (1.0 + 1e-6)
-
-
 def test_published_twist_covariance_grows_with_the_acceleration() -> None:
     """Known twist model: P = twist_cov_scale · (Σ_hold + K² a²), a the low-passed twist change.
 
@@ -437,8 +351,6 @@ def test_bad_input_is_refused_with_a_message() -> None:
         OdometryParams(prior_pose_std=(1.0, 1.0))
     with pytest.raises(ValueError, match='pose_lag_memory'):
         OdometryParams(pose_lag_memory=-1.0)
-    with pytest.raises(ValueError, match='pose_innovation_weight'):
-        OdometryParams(pose_innovation_weight=math.nan)
     assert odo.coast(6.0, np.zeros(3)) is not None
     assert LfOdometry(3, H).coast(0.0, np.zeros(3)) is None  # never fixed: nothing to publish
 

@@ -255,14 +255,6 @@ class PredictorParams:
             'frequency ω0, depth notch_depth, on the published estimate: it removes the wave '
             'peak the learned filter lets through (in a DP loop, wave-band thrust) at a phase '
             'lag of about 2·ζ/ω0 seconds in the LF band; 0 = off (core/predictor.py)', ''))
-    complementary_cutoff: float = field(
-        default=0.0, metadata=_doc(
-            'the published estimate ŷ gets back the LF part of the measurement it misses: '
-            'ŷ + LP(y − ŷ), LP a 2nd-order Butterworth low-pass at this fraction of ω0 on the '
-            'measured pose minus the estimate published for its stamp (a complementary filter, '
-            "LP·y + (1 − LP)·ŷ): it takes the estimate's own error below the cutoff away at the "
-            'price of LP times the wave motion (about the square of this at ω0); 0 = off, else '
-            'below 1 (core/predictor.py)', ''))
     max_output_rate: tuple[float, ...] = field(
         default=(0.0, 0.0, 0.0), metadata=_doc(
             'largest rate of change of the published estimate (north, east, yaw); set it above '
@@ -433,13 +425,10 @@ class PredictorParams:
         for name in ('weight_decay', 'derivative_weight', 'initial_wave_peak_freq',
                      'wave_augmentation', 'switch_blend_time', 'motion_gate_smoothing',
                      'output_notch_zeta', 'notch_lower_edge', 'notch_zeta_broadband',
-                     'motion_gate_yaw_notch', 'complementary_cutoff'):
+                     'motion_gate_yaw_notch'):
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')
-        if not self.complementary_cutoff < 1.0:
-            raise ValueError(f'complementary_cutoff must be below 1 (a fraction of ω0; 0 = off), '
-                             f'got {self.complementary_cutoff!r}')
         if any(speed < 0.0 for speed in self.lf_augmentation):
             raise ValueError(f'positivity rule: lf_augmentation must be ≥ 0 in every DOF (0 = '
                              f'off), got {list(self.lf_augmentation)!r}')

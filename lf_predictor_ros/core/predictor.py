@@ -80,12 +80,11 @@ import weakref
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import signal
 import torch
 
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.estimator import EstimatorState, EstimatorStatus
-from lf_predictor_ros.core.filters import CausalFilter, low_pass_step
+from lf_predictor_ros.core.filters import low_pass_step
 from lf_predictor_ros.core.frequency import FrequencyEstimate
 from lf_predictor_ros.core.heading import ContinuousHeading, wrap_angle, wrap_pose
 from lf_predictor_ros.core.motion_gate import (
@@ -323,7 +322,6 @@ class AdaptivePredictor:
                 params.motion_gate_yaw_notch > 0.0:
             self._gate_yaw_notch = self._wave_notch(1, params.motion_gate_yaw_notch)
         self._clear_output_state()
-        self._clear_complement()
         self._start_segment()
         if background:
             warm_up()  # import torch's lazy modules now, not on the first training
@@ -369,8 +367,8 @@ class AdaptivePredictor:
             estimate = self._bumpless(t, estimate, model if prediction is not None else None,
                                       self._position(lf_now, update_heading=False))
         self._maybe_retrain(t)
-        return self._complemented(t, self._notched(t, self._gated(
-            t, self._output(estimate, pose_arr), pose_arr, force_arr)), pose_arr)
+        return self._notched(t, self._gated(t, self._output(estimate, pose_arr), pose_arr,
+                                            force_arr))
 
     def _retire_rough_network(self) -> FloatArray | None:
         """``roughness_guard_time``: the network in service makes the loop oscillate: retire it.
@@ -451,7 +449,6 @@ class AdaptivePredictor:
             self._gate.restart()
         if self._gate_yaw_notch is not None:
             self._gate_yaw_notch.reset()
-        self._clear_complement()
 
     def discard_running_job(self) -> None:
         """Drop the result of a running training or ω0 job; the network in service stays.
@@ -720,55 +717,6 @@ class AdaptivePredictor:
         notched = np.array(out, dtype=np.float64)
         notched[:self.ndof] = self._output_notch.update(t, out, _NO_FORCE)[:self.ndof]
         return notched
-
-    def _clear_complement(self) -> None:
-        """Forget the complementary filter's state (``complementary_cutoff``)."""
-        self._complement: CausalFilter | None = None
-        self._complement_freq: float | None = None
-        self._complement_last: tuple[float, FloatArray] | None = None  # (stamp, estimate)
-        self._complement_value = np.zeros(self.ndof)
-
-    def _complemented(self, t: float, out: FloatArray, measured: FloatArray) -> FloatArray:
-        """``out`` + LP(y − ŷ) (``complementary_cutoff``; off: ``out``).
-
-        y − ŷ is the pose measured at t minus the estimate published for t before this
-        correction (heading wrapped); without one for t (the first sample, a gap), without ω0
-        or with a non-finite value the low-passed correction is held. The low-pass is
-        redesigned when ω0 moves by more than 1 % (its output stays continuous).
-        """
-        cutoff = self.params.complementary_cutoff
-        if cutoff <= 0.0:
-            return out
-        n, h = self.ndof, self.params.sample_time
-        last, freq = self._complement_last, self.wave_peak_freq
-        if last is not None and freq is not None and abs(last[0] - t) <= 0.5 * h:
-            innovation = np.array(measured[:n], dtype=np.float64) - last[1]
-            if n == 3:
-                innovation[2] = wrap_angle(float(innovation[2]))
-            if _all_finite(innovation):
-                self._complement_value = self._complement_filter(freq, cutoff).filter(innovation)
-        finite = _all_finite(out)
-        self._complement_last = (t + h, np.array(out[:n], dtype=np.float64)) if finite else None
-        if not finite:
-            return out
-        corrected = np.array(out, dtype=np.float64)
-        corrected[:n] += self._complement_value
-        corrected[2] = wrap_angle(float(corrected[2]))
-        return corrected
-
-    def _complement_filter(self, wave_peak_freq: float, cutoff: float) -> CausalFilter:
-        design, current = self._complement_freq, self._complement
-        if current is not None and design is not None and \
-                abs(wave_peak_freq - design) <= 0.01 * design:
-            return current
-        wn = min(cutoff * wave_peak_freq * self.params.sample_time / math.pi, 0.99)
-        sos = np.asarray(signal.butter(2, wn, output='sos'), dtype=np.float64)
-        if current is None:
-            current = self._complement = CausalFilter(sos, self.ndof)
-        else:
-            current.retune(sos)
-        self._complement_freq = wave_peak_freq
-        return current
 
     def _fallback_freq(self) -> float:
         freq = self.wave_peak_freq

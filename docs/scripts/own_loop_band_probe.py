@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 import json
+from pathlib import Path
 import sys
 
 import numpy as np
@@ -36,6 +37,9 @@ from lf_predictor_ros.benchmark.suite import (
 from lf_predictor_ros.core.evaluation import band_rms
 from sim_ros.simulation import load_scenario, scenario_with_schedule_shift, simulate
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from method_probe import parse_variant  # noqa: E402 - the sibling script
+
 DURATION = 1800.0  # [s] as method_probe
 BANDS = ((0.0, 0.1), (0.1, 0.3), (0.3, 1.3))  # [rad/s] control band, between, wave band
 
@@ -48,7 +52,8 @@ def bands(x: np.ndarray, sample_time: float) -> list[list[float]]:
 def main(argv: list[str]) -> None:
     """Run one loop (module docstring) and print its JSON line."""
     name, seed, variant = argv[0], int(argv[1]), argv[2]
-    overrides = None if variant == 'default' else dict([variant.split(':', 1)])
+    # 'field:value[;field:value]', typed as method_probe types them ('0.2' is a float)
+    overrides = None if variant == 'default' else parse_variant(f'v={variant}')[1]
     torch.set_num_threads(1)
     scenario = scenario_with_schedule_shift(load_scenario(name),
                                             schedule_shift_for_seed(seed, SCHEDULE_SPREAD))

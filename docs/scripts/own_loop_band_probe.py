@@ -2,6 +2,7 @@
 
     python docs/scripts/own_loop_band_probe.py rao_swell 5 default
     python docs/scripts/own_loop_band_probe.py rao_swell 5 dof_coupling:heading   # a field:value
+    python docs/scripts/own_loop_band_probe.py rao_swell 5 observer   # a baseline's own loop
 
 One loop per call: the seed's scenario (its scheduled events delayed as `method_probe.py` and
 `benchmark` delay them), the shipped predictor with the one override, the PID on its estimate
@@ -42,6 +43,8 @@ from method_probe import parse_variant  # noqa: E402 - the sibling script
 
 DURATION = 1800.0  # [s] as method_probe
 BANDS = ((0.0, 0.1), (0.1, 0.3), (0.3, 1.3))  # [rad/s] control band, between, wave band
+# estimators whose loop the probe runs by name, for comparison (benchmark.estimators)
+BASELINES = ('observer', 'observer_mistuned', 'oracle_kf', 'cascade', 'cascade_loop_safe', 'raw')
 
 
 def bands(x: np.ndarray, sample_time: float) -> list[list[float]]:
@@ -52,8 +55,11 @@ def bands(x: np.ndarray, sample_time: float) -> list[list[float]]:
 def main(argv: list[str]) -> None:
     """Run one loop (module docstring) and print its JSON line."""
     name, seed, variant = argv[0], int(argv[1]), argv[2]
-    # 'field:value[;field:value]', typed as method_probe types them ('0.2' is a float)
-    overrides = None if variant == 'default' else parse_variant(f'v={variant}')[1]
+    # 'field:value[;field:value]', typed as method_probe types them ('0.2' is a float); a
+    # baseline's name (observer, oracle_kf, cascade, raw, ...) runs that estimator's loop instead
+    estimator = variant if variant in BASELINES else 'adaptive'
+    overrides = None if variant == 'default' or estimator != 'adaptive' else \
+        parse_variant(f'v={variant}')[1]
     torch.set_num_threads(1)
     scenario = scenario_with_schedule_shift(load_scenario(name),
                                             schedule_shift_for_seed(seed, SCHEDULE_SPREAD))
@@ -63,7 +69,7 @@ def main(argv: list[str]) -> None:
     start = float(data['t'][scored_start(params, len(data['t']))])
     ideal = simulate(scenario, seed=seed, duration=DURATION, controller=True, feedback='truth_lf')
     variant_setup = replace(setup, params=predictor_params(scenario, overrides))
-    outcome = _run_loop('adaptive', scenario, seed, DURATION, variant_setup, ideal)
+    outcome = _run_loop(estimator, scenario, seed, DURATION, variant_setup, ideal)
     record = outcome.record
     keep = record.t >= start
     offset = stability.pose_offset(record.truth_lf_pose[keep],

@@ -8,7 +8,7 @@ with every covariance multiplied by the geometric mean of the file's per-DOF NEE
 scale these very runs would calibrate to). The NEES bounds depend only on the normalized error's
 autocorrelation, which a common factor does not change, so the second line is exact. A
 diagnostic: it separates a candidate's effect on the spread between vessels from the level the
-two-seed calibration sets (docs/BENCHMARKS.md, twenty-fifth session). Never a choice of scale.
+calibration seeds set (docs/BENCHMARKS.md, twenty-fifth session). Never a choice of scale.
 """
 from __future__ import annotations
 

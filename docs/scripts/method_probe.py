@@ -166,15 +166,18 @@ def loops(scenario: Any, seed: int, duration: float, setup: Any, recording: Any,
 
 
 def _estimate(entry: dict[str, Any]) -> str:
-    """'; estimate N / E / yaw (control band N / E / yaw)' of the estimate the loop acted on.
+    """'; estimate N / E / yaw (control band N / E / yaw; between N / E / yaw)' of the estimate.
 
-    RMSE against the true LF pose and its part in `suite.CONTROL_BAND`; '' for the ideal loop.
+    The estimate the loop acted on: RMSE against the true LF pose and its parts in
+    `suite.CONTROL_BAND` and `suite.BETWEEN_BAND`; '' for the ideal loop.
     """
     rmse, control = entry.get('estimate_rmse'), entry.get('estimate_error_control_band')
     if not rmse or not control:
         return ''
+    between = entry.get('estimate_error_between_band')
+    tail = '' if not between else '; between ' + ' / '.join(f'{v:.4g}' for v in between.values())
     return ('; estimate ' + ' / '.join(f'{v:.4g}' for v in rmse.values()) + ' (control band '
-            + ' / '.join(f'{v:.4g}' for v in control.values()) + ')')
+            + ' / '.join(f'{v:.4g}' for v in control.values()) + tail + ')')
 
 
 def _counters(entry: dict[str, Any]) -> str:

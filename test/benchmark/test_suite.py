@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from lf_predictor_ros.benchmark.suite import (
+    BETWEEN_BAND,
     CONTROL_BAND,
     _estimate_errors,
     _estimate_wave_power,
@@ -57,6 +58,17 @@ def test_loop_estimate_error_compares_each_estimate_with_the_truth_when_it_was_f
     out = _estimate_errors(_outcome(t, truth, estimate_t, slow), 3, 10.0, H)
     assert out['estimate_error_control_band']['north'] == pytest.approx(0.2 / math.sqrt(2),
                                                                         rel=0.1)
+    assert out['estimate_error_between_band']['north'] < 0.02  # not between the bands
+    # a 0.2 rad/s error (inside BETWEEN_BAND = (0.1, 0.3)) is seen there and not in the control
+    # band; the 0.5 Hz alternation and the biases are in neither
+    assert BETWEEN_BAND[0] <= 0.2 <= BETWEEN_BAND[1]
+    mid = estimates.copy()
+    mid[:, 0] += 0.2 * np.sin(0.2 * estimate_t)
+    out = _estimate_errors(_outcome(t, truth, estimate_t, mid), 3, 10.0, H)
+    assert out['estimate_error_between_band']['north'] == pytest.approx(0.2 / math.sqrt(2),
+                                                                        rel=0.1)
+    assert out['estimate_error_control_band']['north'] < 0.02
+    assert out['estimate_error_between_band']['east'] < 1e-6  # a bias is no band's but the first
     # samples before start are not scored: a large early error changes nothing
     early = estimates.copy()
     early[:5, 0] += 100.0

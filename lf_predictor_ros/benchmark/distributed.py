@@ -1,10 +1,11 @@
 """Run benchmark cases on Dask distributed: a LocalCluster here, a scheduler address on a cluster.
 
 Every case (scenario, seed) is one task, `run_case_task`, a pure function of its `CaseSpec`: it
-seeds nothing globally, runs torch on one thread (so the numbers do not depend on how many cores
-a worker has) and returns a `CaseResult`. Where a case runs therefore changes nothing: the same
-spec gives the same numbers in this process, in a LocalCluster worker or on a remote worker (the
-test compares them bit for bit).
+seeds nothing globally, runs torch and BLAS on one thread (so the numbers do not depend on how
+many cores a worker has: a threaded BLAS sums in another order on some CPUs, and the last bits
+then differ between this process and a worker) and returns a `CaseResult`. Where a case runs
+therefore changes nothing: the same spec gives the same numbers in this process, in a
+LocalCluster worker or on a remote worker (the test compares them bit for bit).
 
 ``scheduler=None`` starts an in-process `LocalCluster` with one single-threaded worker process
 per core (``workers``), closed again when the cases are done; ``scheduler='tcp://HOST:PORT'``
@@ -20,6 +21,8 @@ import os
 import sys
 import time
 from typing import Any, TextIO
+
+from threadpoolctl import threadpool_limits
 
 from lf_predictor_ros.benchmark.suite import CaseResult, run_case
 
@@ -53,10 +56,15 @@ class CaseSpec:
 
 
 def run_case_task(spec: CaseSpec) -> CaseResult:
-    """One case, deterministic wherever it runs (torch on one thread)."""
+    """One case, deterministic wherever it runs (torch and BLAS on one thread)."""
     import torch
 
     torch.set_num_threads(1)
+    with threadpool_limits(limits=1):  # numpy/scipy BLAS, which the environment may thread
+        return _run_case_task(spec)
+
+
+def _run_case_task(spec: CaseSpec) -> CaseResult:
     kwargs: dict[str, Any] = {'duration': spec.duration,
                               'params_overrides': dict(spec.params_overrides) or None,
                               'loop_estimators': spec.loop_estimators,

@@ -22,7 +22,9 @@ at every later memory, its state kept. Loop names (any combination of the suffix
 - ``_true_omega``: the true ω0 instead of the predictor's;
 - ``_once``: the first memory only, no rebuilds;
 - ``_damping_prior``: D = M / 50 s instead of the fitted damping;
-- ``_no_thrust``: the observer gets zero thrust (its bias state has to absorb the thrust).
+- ``_no_thrust``: the observer gets zero thrust (its bias state has to absorb the thrust);
+- ``_tuned_gains``: the gains of the scenario's tuned observer (`config/baselines`) instead of
+  ``RECORDING_OBSERVER``.
 
 Other names are the suite's loops (`benchmark.estimators`). Scored like `benchmark`
 (`suite.run_closed_loops`, same seed, from 481 s). Tuning and development seeds only (1–10).
@@ -98,6 +100,8 @@ class MemoryObserver:
         full_mass[:n, :n] = np.diag(mass)
         k3, k4 = observer_base_gains(full_mass)
         cfg = RECORDING_OBSERVER
+        if '_tuned_gains' in self.name:  # the tuned observer's entry (config/baselines)
+            cfg = {**RECORDING_OBSERVER, **self.setup.baselines.get('observer', {})}
         observer = PassiveObserver(
             n, self.setup.sample_time, omega, np.diag(mass) if n == 3 else float(mass[0]),
             np.diag(damping) if n == 3 else float(damping[0]),

@@ -11,7 +11,9 @@ ratio, and t = mean / standard error: on rao_swell a change that should not matt
 per-seed SD of 0.17 in log, so a bare mean over ten seeds decides nothing; docs/BENCHMARKS.md,
 twenty-second session), the mean of the per-seed wave-band thrust share ratios to the default per
 DOF (and its paired form, the exponential of the mean per-seed log ratio, which one seed's
-2.5× cannot carry), and the stable count. Every earlier session rewrote this in /tmp; the
+2.5× cannot carry), the stable count and, where the lines carry them, the paired ratios of the
+error of the estimate each loop acted on (in all, in the control band, between the bands; per
+DOF). Every earlier session rewrote this in /tmp; the
 screens' rules ("mean per-seed position ratio ≤ 0.97, thrust ≤ 1.05 per DOF, all stable") read
 these columns.
 """
@@ -30,7 +32,12 @@ LINE = re.compile(
     r'loop (?P<scenario>\S+)\s+(?P<seed>\d+) (?P<name>.+?)\s+position (?P<position>[\d.]+) m '
     r'heading \S+ rad max (?P<excursion>[\d.]+) m thrust WF % raw (?P<thrust>[\d.]+(?: / '
     r'[\d.]+)*) stable (?P<stable>True|False)')
+NUMBERS = r'[\d.eE+-]+(?: / [\d.eE+-]+)*'
+# the tail method_probe prints since the twenty-fourth session (between: twenty-fifth)
+ESTIMATE = re.compile(rf'; estimate (?P<rmse>{NUMBERS}) \(control band (?P<control>{NUMBERS})'
+                      rf'(?:; between (?P<between>{NUMBERS}))?\)')
 DEFAULT = 'adaptive default'
+PARTS = ('rmse', 'control', 'between')  # the estimate error: in all, control band, between
 
 
 @dataclass(frozen=True)
@@ -40,6 +47,8 @@ class Loop:
     position: float  # [m] position RMSE
     thrust: tuple[float, ...]  # wave-band thrust share of the raw loop's per DOF [%]
     stable: bool
+    # the error of the estimate the loop acted on per DOF, by part (PARTS), where printed
+    estimate: tuple[tuple[float, ...] | None, ...] = (None, None, None)
 
 
 def parse(lines: Sequence[str]) -> dict[tuple[str, int], dict[str, Loop]]:
@@ -50,9 +59,25 @@ def parse(lines: Sequence[str]) -> dict[tuple[str, int], dict[str, Loop]]:
         if match is None:
             continue
         thrust = tuple(float(v) for v in match['thrust'].split(' / '))
+        tail = ESTIMATE.search(line)
+        estimate = tuple(None if tail is None or tail[part] is None else
+                         tuple(float(v) for v in tail[part].split(' / ')) for part in PARTS)
         rows[(match['scenario'], int(match['seed']))][match['name'].strip()] = Loop(
-            float(match['position']), thrust, match['stable'] == 'True')
+            float(match['position']), thrust, match['stable'] == 'True', estimate)
     return rows
+
+
+def estimate_ratios(loops: Sequence[Loop], default: Sequence[Loop]) -> str:
+    """'; estimate / default (paired) all …; control …; between …' where every loop has it."""
+    parts = []
+    for k, part in enumerate(PARTS):
+        pairs = [(v.estimate[k], d.estimate[k]) for v, d in zip(loops, default, strict=True)]
+        if any(a is None or b is None for a, b in pairs):
+            continue
+        ratios = [statistics.geometric_mean([a[i] / b[i] for a, b in pairs if a and b])
+                  for i in range(len(pairs[0][0] or ()))]
+        parts.append(f'{part} ' + ' / '.join(f'{r:.2f}' for r in ratios))
+    return '; estimate / default (paired) ' + '; '.join(parts) if parts else ''
 
 
 def paired_ratio(ratios: Sequence[float]) -> str:
@@ -102,7 +127,8 @@ def summary(rows: dict[tuple[str, int], dict[str, Loop]]) -> list[str]:
                 f'{over_observer:.3f}; thrust / default ' +
                 ' / '.join(f'{t:.3f}' for t in thrust) +
                 ' (paired ' + ' / '.join(f'{t:.3f}' for t in thrust_paired) + ')' +
-                f'; stable {sum(v.stable for v in loops)}/{len(loops)}')
+                f'; stable {sum(v.stable for v in loops)}/{len(loops)}' +
+                estimate_ratios(loops, default))
     return out
 
 

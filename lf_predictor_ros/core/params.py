@@ -174,11 +174,6 @@ class PredictorParams:
             'same ratio of the ω0 before it) was not one: the targets before that restart are '
             'taken up again instead of restarting the window once more (the LF motion of a '
             'start-up or a manoeuvre briefly looks like a lower wave peak)'))
-    notch_zeta_yaw: float = field(
-        default=0.0, metadata=_doc(
-            "with ndof 3 and > 0: the targets' notch width for the heading alone, in every sea "
-            '(north and east keep notch_zeta / notch_zeta_broadband); 0 = the same width as '
-            'north and east', ''))
     notch_lower_edge: float = field(
         default=0.23, metadata=_doc(
             'with notch_zeta_broadband: the broadband notch is no wider than the width whose '
@@ -430,7 +425,7 @@ class PredictorParams:
         for name in ('weight_decay', 'derivative_weight', 'initial_wave_peak_freq',
                      'wave_augmentation', 'switch_blend_time', 'motion_gate_smoothing',
                      'output_notch_zeta', 'notch_lower_edge', 'notch_zeta_broadband',
-                     'motion_gate_yaw_notch', 'notch_zeta_yaw'):
+                     'motion_gate_yaw_notch'):
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')

@@ -319,23 +319,10 @@ def make_targets(params: PredictorParams, y: FloatArray, end_index: int,
     if previous is not None:
         shift = end_index - previous.end_index
         if 0 < shift <= beta and len(previous) >= beta - shift:
-            filtered = _filtered(params, y[-params.filter_samples:], sos, wave_peak_freq)
+            filtered = zero_phase(y[-params.filter_samples:], sos)
             return previous.append(filtered, end_index, beta, max_len=params.training_samples)
     span = min(len(y), params.training_samples + eps)
-    return TargetWindow.start(_filtered(params, y[-span:], sos, wave_peak_freq), end_index, eps)
-
-
-def _filtered(params: PredictorParams, y: FloatArray, sos: FloatArray,
-              wave_peak_freq: float) -> FloatArray:
-    """``y`` zero-phase filtered with ``sos``; with ``notch_zeta_yaw`` the heading with its own."""
-    filtered = zero_phase(y, sos)
-    if params.notch_zeta_yaw > 0.0 and params.ndof == 3:
-        yaw_sos = design_wave_filter(wave_peak_freq, params.sample_time,
-                                     notch_zeta=params.notch_zeta_yaw,
-                                     notch_depth=params.notch_depth,
-                                     lowpass_offset=params.lowpass_offset)
-        filtered[:, 2] = zero_phase(y[:, 2:3], yaw_sos)[:, 0]
-    return filtered
+    return TargetWindow.start(zero_phase(y[-span:], sos), end_index, eps)
 
 
 def narrow_reference(params: PredictorParams, y: FloatArray, count: int, wave_peak_freq: float,

@@ -71,11 +71,12 @@ def estimate_ratios(loops: Sequence[Loop], default: Sequence[Loop]) -> str:
     """'; estimate / default (paired) all …; control …; between …' where every loop has it."""
     parts = []
     for k, part in enumerate(PARTS):
-        pairs = [(v.estimate[k], d.estimate[k]) for v, d in zip(loops, default, strict=True)]
-        if any(a is None or b is None for a, b in pairs):
+        pairs = [(a, b) for v, d in zip(loops, default, strict=True)
+                 if (a := v.estimate[k]) is not None and (b := d.estimate[k]) is not None]
+        if not pairs or len(pairs) < len(loops):
             continue
-        ratios = [statistics.geometric_mean([a[i] / b[i] for a, b in pairs if a and b])
-                  for i in range(len(pairs[0][0] or ()))]
+        ratios = [statistics.geometric_mean([a[i] / b[i] for a, b in pairs])
+                  for i in range(len(pairs[0][0]))]
         parts.append(f'{part} ' + ' / '.join(f'{r:.2f}' for r in ratios))
     return '; estimate / default (paired) ' + '; '.join(parts) if parts else ''
 

@@ -25,7 +25,8 @@ import torch
 
 from lf_predictor_ros.benchmark import stability
 from lf_predictor_ros.benchmark.benchmark import SCHEDULE_SPREAD
-from lf_predictor_ros.benchmark.estimators import predictor_params
+from lf_predictor_ros.benchmark.estimators import CAUSAL, PREDICTORS, predictor_params
+from lf_predictor_ros.benchmark.recordings import grid_stride
 from lf_predictor_ros.benchmark.suite import (
     _loop_estimate_error,
     _loop_reference,
@@ -43,8 +44,9 @@ from method_probe import parse_variant  # noqa: E402 - the sibling script
 
 DURATION = 1800.0  # [s] as method_probe
 BANDS = ((0.0, 0.1), (0.1, 0.3), (0.3, 1.3))  # [rad/s] control band, between, wave band
-# estimators whose loop the probe runs by name, for comparison (benchmark.estimators)
-BASELINES = ('observer', 'observer_mistuned', 'oracle_kf', 'cascade', 'cascade_loop_safe', 'raw')
+# estimators whose loop the probe runs by name, for comparison: the causal ones that are not
+# the predictor (benchmark.estimators)
+BASELINES = tuple(name for name in CAUSAL if name not in PREDICTORS)
 
 
 def bands(x: np.ndarray, sample_time: float) -> list[list[float]]:
@@ -74,7 +76,7 @@ def main(argv: list[str]) -> None:
     keep = record.t >= start
     offset = stability.pose_offset(record.truth_lf_pose[keep],
                                    _loop_reference(scenario, record, ideal)[keep], 3)
-    stride = int(round(params.sample_time / scenario.sample_time))  # sensor samples per h
+    stride = grid_stride(scenario, params.sample_time)  # sensor samples per h
     print(json.dumps({'seed': seed, 'variant': variant,
                       'err': bands(_loop_estimate_error(outcome, 3, start), params.sample_time),
                       'pos': bands(offset[stride - 1::stride], params.sample_time)}))

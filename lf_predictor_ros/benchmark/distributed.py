@@ -60,11 +60,6 @@ def run_case_task(spec: CaseSpec) -> CaseResult:
     import torch
 
     torch.set_num_threads(1)
-    with threadpool_limits(limits=1):  # numpy/scipy BLAS, which the environment may thread
-        return _run_case_task(spec)
-
-
-def _run_case_task(spec: CaseSpec) -> CaseResult:
     kwargs: dict[str, Any] = {'duration': spec.duration,
                               'params_overrides': dict(spec.params_overrides) or None,
                               'loop_estimators': spec.loop_estimators,
@@ -73,7 +68,8 @@ def _run_case_task(spec: CaseSpec) -> CaseResult:
         kwargs['schedule_shift'] = spec.schedule_shift
     if spec.estimators is not None:
         kwargs['estimators'] = spec.estimators
-    return run_case(spec.scenario, spec.seed, **kwargs)
+    with threadpool_limits(limits=1):  # numpy/scipy BLAS, which the environment may thread
+        return run_case(spec.scenario, spec.seed, **kwargs)
 
 
 class ProgressBar:

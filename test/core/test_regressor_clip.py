@@ -168,3 +168,80 @@ def test_the_ranges_round_trip_through_checkpoint_meta_and_a_misfit_is_dropped()
     for bad in ({}, {**meta, 'output_range': [[0.0, 1.0], [1.0, 2.0]]},
                 {**meta, 'regressor_range': [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]}):
         assert _linear_net([2.0, 0.0, 1.0]).with_saved_ranges(bad).regressor_range is None
+
+
+def _random_3dof(seed: int) -> NumpyNnarmax:
+    """A 3-DOF relative network with random weights (tanh part and bypass)."""
+    torch.manual_seed(seed)
+    net = NnarmaxNet(SPEC_3DOF)
+    with torch.no_grad():
+        for param in net.parameters():
+            param.copy_(torch.randn_like(param))
+    return NumpyNnarmax.from_module(net)
+
+
+def _heading_columns_of(spec: NnarmaxSpec) -> np.ndarray:
+    return np.arange(spec.n_regressors) % 3 == 2
+
+
+def test_cross_range_leaves_the_heading_and_the_window_rows_as_they_were() -> None:
+    plain = _random_3dof(5)
+    rows = np.random.default_rng(6).normal(size=(40, SPEC_3DOF.n_regressors))
+    cross = plain.with_cross_range(rows)
+    np.testing.assert_array_equal(cross.forward(rows), plain.forward(rows))
+    # a turn: every heading column 50× the window's spread; north/east columns unchanged
+    turn = rows[:5].copy()
+    turn[:, _heading_columns_of(SPEC_3DOF)] *= 50.0
+    out_plain, out_cross = plain.forward(turn), cross.forward(turn)
+    np.testing.assert_array_equal(out_cross[:, 2], out_plain[:, 2])
+    assert np.all(np.abs(out_cross[:, :2] - out_plain[:, :2]) > 1e-6)
+
+
+def test_cross_range_is_what_north_and_east_see_of_the_heading() -> None:
+    plain = _random_3dof(7)
+    rows = np.random.default_rng(8).normal(size=(40, SPEC_3DOF.n_regressors))
+    cross = plain.with_cross_range(rows, widen=2.0)
+    assert cross.cross_range is not None
+    turn = rows[:5].copy()
+    heading = _heading_columns_of(SPEC_3DOF)
+    turn[:, heading] *= 50.0
+    # the same rows with the heading columns clipped by hand to the doubled network-frame range
+    frame = network_frame_regressors(SPEC_3DOF, rows)
+    low, high = frame.min(axis=0), frame.max(axis=0)
+    centre, half = 0.5 * (low + high), (high - low)
+    np.testing.assert_allclose(cross.cross_range[0], centre - half, atol=1e-12)
+    np.testing.assert_allclose(cross.cross_range[1], centre + half, atol=1e-12)
+    ref = turn[:, SPEC_3DOF.nu * 3:SPEC_3DOF.nu * 3 + 3]
+    seen = network_frame_regressors(SPEC_3DOF, turn)
+    seen[:, heading] = np.clip(seen[:, heading], (centre - half)[heading],
+                               (centre + half)[heading])
+    expected = plain._layers(seen)[:, :2] + ref[:, :2]
+    np.testing.assert_allclose(cross.forward(turn)[:, :2], expected, atol=1e-12)
+
+
+def test_cross_range_travels_in_the_meta_and_bad_meta_gives_no_clip() -> None:
+    plain = _random_3dof(9)
+    rows = np.random.default_rng(10).normal(size=(40, SPEC_3DOF.n_regressors))
+    cross = plain.with_cross_range(rows, widen=1.5)
+    meta = cross.range_meta()
+    assert set(meta) == {'cross_range'}
+    restored = plain.with_saved_ranges(meta)
+    turn = rows * 30.0
+    np.testing.assert_array_equal(restored.forward(turn), cross.forward(turn))
+    broken = {'cross_range': [[0.0] * 3, [1.0] * 3]}  # wrong width
+    assert plain.with_saved_ranges(broken).cross_range is None
+    reversed_pair = {'cross_range': [meta['cross_range'][1], meta['cross_range'][0]]}
+    assert plain.with_saved_ranges(reversed_pair).cross_range is None
+
+
+def test_cross_range_needs_three_dof_and_widen_at_least_one() -> None:
+    rows = _window_rows()
+    with pytest.raises(ValueError, match='3-DOF'):
+        _linear_net([2.0, 0.0, 1.0]).with_cross_range(rows)
+    with pytest.raises(ValueError, match='widen'):
+        _random_3dof(1).with_cross_range(np.zeros((3, SPEC_3DOF.n_regressors)), widen=0.5)
+    with pytest.raises(ValueError, match='ndof 3'):
+        PredictorParams(ndof=1, cross_heading_clip=2.0)
+    with pytest.raises(ValueError, match='cross_heading_clip'):
+        PredictorParams(cross_heading_clip=0.5)
+    assert PredictorParams().cross_heading_clip == 0.0

@@ -761,9 +761,6 @@ class NumpyNnarmax:
     # (low, high) of the network's own output (the predicted step of a relative network, before
     # the base and the rotation) over the same window; the predict path clips to it too.
     output_range: tuple[FloatArray, FloatArray] | None = None
-    # (low, high) of every regressor (network frame) over the training window, widened; north
-    # and east are computed with the heading columns clipped to it (``with_cross_range``).
-    cross_range: tuple[FloatArray, FloatArray] | None = None
 
     @classmethod
     def from_module(cls, net: NnarmaxNet) -> NumpyNnarmax:
@@ -808,60 +805,33 @@ class NumpyNnarmax:
         return replace(self, regressor_range=_column_range(rows, widen),
                        output_range=_column_range(outputs, widen))
 
-    def with_cross_range(self, x: FloatArray, widen: float = 1.0) -> NumpyNnarmax:
-        """A copy whose north and east outputs see the heading columns clipped to the window.
-
-        ``x`` and ``widen`` as in ``with_range``, for a 3-DOF network (3 forces, 3 positions).
-        North and east are computed from the rows with every heading column (the yaw moment and
-        the relative headings of every lag block) clipped to its range over ``x``, widened
-        ``widen`` times; the heading output, and north and east of rows inside that range, are
-        exactly the unclipped network's. A turn's heading ramp and yaw moment, tens of times
-        what a station-keeping window showed, then reach the north and east coefficients as the
-        window's largest values: the coefficients fitted on the wave yaw do not extrapolate the
-        turn into a north/east error (docs/BENCHMARKS.md, "Fifteenth session" and
-        "Twenty-sixth session"), while the heading still follows it.
-        """
-        if not widen >= 1.0:
-            raise ValueError(f'with_cross_range: widen must be ≥ 1 (1 = the window range), got '
-                             f'{widen}')
-        if self.spec.n_outputs != 3 or self.spec.n_inputs_u != 3:
-            raise ValueError('with_cross_range needs a 3-DOF network (north, east, heading); '
-                             f'got {self.spec.n_outputs} outputs and {self.spec.n_inputs_u} '
-                             'forces: use ndof 3 or leave cross_heading_clip at 0')
-        raw = np.asarray(x, dtype=np.float64)
-        if raw.ndim != 2 or raw.shape[0] == 0 or raw.shape[1] != self.spec.n_regressors or \
-                not np.all(np.isfinite(raw)):
-            raise ValueError(f'with_cross_range needs finite regressor rows (rows ≥ 1, '
-                             f'{self.spec.n_regressors}), got shape {raw.shape}; NaN/inf rows '
-                             'must be dropped first')
-        rows = network_frame_regressors(self.spec, raw)
-        if self.regressor_range is not None:
-            rows = np.clip(rows, *self.regressor_range)
-        return replace(self, cross_range=_column_range(rows, widen))
-
     def range_meta(self) -> dict[str, list[list[float]]]:
         """The clip ranges as checkpoint meta entries (``with_saved_ranges``); {} without."""
-        meta: dict[str, list[list[float]]] = {}
-        if self.regressor_range is not None and self.output_range is not None:
-            meta['regressor_range'] = [a.tolist() for a in self.regressor_range]
-            meta['output_range'] = [a.tolist() for a in self.output_range]
-        if self.cross_range is not None:
-            meta['cross_range'] = [a.tolist() for a in self.cross_range]
-        return meta
+        if self.regressor_range is None or self.output_range is None:
+            return {}
+        return {'regressor_range': [a.tolist() for a in self.regressor_range],
+                'output_range': [a.tolist() for a in self.output_range]}
 
     def with_saved_ranges(self, meta: Mapping[str, Any]) -> NumpyNnarmax:
         """A copy with the clip ranges a checkpoint's meta carries (``range_meta``).
 
         A checkpoint without them, or with ranges that do not fit the network, gives the network
-        unclipped (as a predictor without regressor_clip or cross_heading_clip saved it).
+        unclipped (as a predictor without regressor_clip saved it).
         """
-        regressors = _saved_range(meta, 'regressor_range', self.spec.n_regressors)
-        outputs = _saved_range(meta, 'output_range', self.spec.n_outputs)
-        both = regressors is not None and outputs is not None
-        cross = _saved_range(meta, 'cross_range', self.spec.n_regressors) \
-            if self.spec.n_outputs == 3 and self.spec.n_inputs_u == 3 else None
-        return replace(self, regressor_range=regressors if both else None,
-                       output_range=outputs if both else None, cross_range=cross)
+        ranges = []
+        for key, width in (('regressor_range', self.spec.n_regressors),
+                           ('output_range', self.spec.n_outputs)):
+            try:
+                low, high = (np.array(v, dtype=np.float64) for v in meta[key])
+            except (KeyError, TypeError, ValueError):
+                return self
+            if low.shape != (width,) or high.shape != (width,) or \
+                    not (np.all(np.isfinite(low)) and np.all(low <= high)):
+                return self
+            low.setflags(write=False)
+            high.setflags(write=False)
+            ranges.append((low, high))
+        return replace(self, regressor_range=ranges[0], output_range=ranges[1])
 
     def forward(self, x: FloatArray) -> FloatArray:
         """ŷLF(t + 1) for regressor rows (rows, n_regressors) or one row (n_regressors,)."""
@@ -877,17 +847,6 @@ class NumpyNnarmax:
     def _forward_absolute(self, x: FloatArray) -> FloatArray:
         if self.regressor_range is not None:
             x = np.clip(x, *self.regressor_range)
-        result = self._layers(x)
-        if self.cross_range is not None:
-            clipped = np.where(_heading_columns(self.spec.n_regressors),
-                               np.clip(x, *self.cross_range), x)
-            result = np.concatenate((self._layers(clipped)[..., :2], result[..., 2:]), axis=-1)
-        if self.output_range is not None:
-            result = np.clip(result, *self.output_range)
-        return result
-
-    def _layers(self, x: FloatArray) -> FloatArray:
-        """The layers on network-frame rows, in position units (no clip)."""
         x_s = (x - self.x_mean) / self.x_std
         hidden = x_s
         for weight, bias in zip(self.hidden_weights, self.hidden_biases, strict=True):
@@ -896,30 +855,9 @@ class NumpyNnarmax:
         if self.bypass_weight is not None:
             out = out + x_s @ self.bypass_weight.T
         result: FloatArray = self.y_mean + self.y_std * out
+        if self.output_range is not None:
+            result = np.clip(result, *self.output_range)
         return result
-
-
-@functools.lru_cache(maxsize=8)
-def _heading_columns(n_regressors: int) -> NDArray[np.bool_]:
-    """Read-only mask of the heading columns of 3-DOF rows: the third of every lag block."""
-    mask: NDArray[np.bool_] = np.arange(n_regressors) % 3 == 2
-    mask.setflags(write=False)
-    return mask
-
-
-def _saved_range(meta: Mapping[str, Any], key: str,
-                 width: int) -> tuple[FloatArray, FloatArray] | None:
-    """Read-only (low, high) of ``meta[key]`` if it is a finite, ordered pair of ``width``."""
-    try:
-        low, high = (np.array(v, dtype=np.float64) for v in meta[key])
-    except (KeyError, TypeError, ValueError):
-        return None
-    if low.shape != (width,) or high.shape != (width,) or \
-            not (np.all(np.isfinite(low)) and np.all(np.isfinite(high)) and np.all(low <= high)):
-        return None
-    low.setflags(write=False)
-    high.setflags(write=False)
-    return low, high
 
 
 def _column_range(rows: FloatArray, widen: float) -> tuple[FloatArray, FloatArray]:

@@ -232,13 +232,6 @@ class PredictorParams:
             'centre: a turn or a move beyond what the window showed reaches the network as the '
             'largest values it was fitted on, never as an extrapolation; 0 = off, else ≥ 1 (off '
             'by default: better open loop, more wave-band thrust in the loop)', ''))
-    cross_heading_clip: float = field(
-        default=0.0, metadata=_doc(
-            'ndof 3: north and east are predicted with the heading columns (yaw moment, '
-            'relative headings) clipped to their range in the training window, widened this '
-            'many times about its centre; the heading is predicted unclipped. A turn reaches '
-            "the north/east coefficients fitted on the window's wave yaw as the largest values "
-            'they were fitted on (issue 13, the first-turn failure); 0 = off, else ≥ 1', ''))
     lf_augmentation: tuple[float, ...] = field(
         default=(0.0, 0.0, 0.0), metadata=_doc(
             'RMS velocity of the synthetic LF motion (below the DP bandwidth) added to the '
@@ -449,11 +442,6 @@ class PredictorParams:
         if self.regressor_clip != 0.0 and not self.regressor_clip >= 1.0:
             raise ValueError(f'regressor_clip must be 0 (off) or ≥ 1 (the training range '
                              f'widened that many times), got {self.regressor_clip!r}')
-        if self.cross_heading_clip != 0.0 and not (self.cross_heading_clip >= 1.0
-                                                   and self.ndof == 3):
-            raise ValueError(f'cross_heading_clip must be 0 (off) or ≥ 1 (the training range '
-                             f'widened that many times) with ndof 3, got '
-                             f'{self.cross_heading_clip!r} with ndof {self.ndof}')
         for name in ('nu', 'ny', 'nfb'):
             if getattr(self, name) < 0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0 (number of delays), got '

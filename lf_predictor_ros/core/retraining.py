@@ -445,12 +445,8 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
     retire = not accepted and incumbent_loss is not None and incumbent_loss > baseline
     model = NumpyNnarmax.from_module(NnarmaxNet.from_state(spec, result.state_dict)) \
         if accepted else None
-    if model is not None and (params.regressor_clip > 0.0 or params.cross_heading_clip > 0.0):
-        rows = build_regressors(u, y, t_values, spec)[0]
-        if params.regressor_clip > 0.0:
-            model = model.with_range(rows, params.regressor_clip)
-        if params.cross_heading_clip > 0.0:
-            model = model.with_cross_range(rows, params.cross_heading_clip)
+    if model is not None and params.regressor_clip > 0.0:
+        model = model.with_range(build_regressors(u, y, t_values, spec)[0], params.regressor_clip)
     return RetrainResult(segment=snapshot.segment, end_index=snapshot.end_index,
                          frequency=frequency, targets=targets, model=model,
                          state_dict=result.state_dict if accepted else None,

@@ -34,6 +34,7 @@ from lf_predictor_ros.benchmark.suite import (
     make_setup,
     schedule_shift_for_seed,
 )
+from lf_predictor_ros.core.heading import wrap_angle
 from sim_ros.simulation import load_scenario, scenario_with_schedule_shift, simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -77,9 +78,11 @@ def main(argv: list[str]) -> None:
     network = np.array([row[1] for row in log])
     freq = np.array([row[2] for row in log], dtype=np.float64)
     estimate = np.array([row[3] for row in log])
-    truth = record.truth_lf_pose[np.clip(np.searchsorted(record.t, times), 0, len(record.t) - 1)]
+    # the truth at the sample each estimate was returned at (as suite._loop_estimate_error)
+    index = np.clip(np.searchsorted(record.t, times - 1e-9), 0, len(record.t) - 1)
+    truth = record.truth_lf_pose[index]
     error = estimate - truth
-    error[:, 2] = (error[:, 2] + np.pi) % (2.0 * np.pi) - np.pi
+    error[:, 2] = wrap_angle(error[:, 2])
     print(f'{args.scenario} seed {args.seed}, events delayed {shift:.1f} s; '
           f'variant {args.variant}')
     print(' block [s]  error N [m]  E [m]  heading [rad]  |offset| max [m]  cascade  ω0  ψ true')

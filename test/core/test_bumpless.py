@@ -216,3 +216,65 @@ def test_new_fields_round_trip_through_a_dict() -> None:
     assert params.switch_blend_time == 10.0 and params.max_output_rate == (0.5, 0.5, 0.02)
     assert params.to_dict()['max_output_rate'] == [0.5, 0.5, 0.02]
     assert PredictorParams.from_dict(params.to_dict()) == params
+
+
+# ---- guard_heading_measured: a heading-only trip keeps the network's north and east -----------
+
+SMALL_3DOF = SMALL.replace(ndof=3, motion_gate=False)
+HEADING_TRIPS = (200, 230)  # [samples] the heading's guard bound is forced to 0 in this window
+
+
+@functools.cache
+def supply_record(seed: int, duration: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(t, measured pose, thrust) of supply_closed_loop, one sample per second."""
+    record = simulate(load_scenario('supply_closed_loop'), seed, duration)
+    stride = int(round(1.0 / (record.t[1] - record.t[0])))
+    pick = slice(stride - 1, None, stride)
+    return record.t[pick], record.measured_pose[pick], record.thrust[pick]
+
+
+def run_heading_trips(forced: bool, **changes: object) -> tuple[FloatArray, AdaptivePredictor]:
+    """3-DOF outputs; with ``forced`` the heading's guard bound is 0 in HEADING_TRIPS."""
+    t, pose, force = supply_record(4, 300.0)
+    predictor = AdaptivePredictor(SMALL_3DOF.replace(**changes), background=False,
+                                  max_trainings=1)
+    plausible = predictor._plausible
+    sample = {'k': 0}
+
+    def heading_guard(prediction: FloatArray, y: FloatArray) -> bool:
+        plausible(prediction, y)  # sets the bound of the network in service
+        bound = predictor._guard_bound
+        if forced and bound is not None and HEADING_TRIPS[0] <= sample['k'] < HEADING_TRIPS[1]:
+            # the heading's bound 0 for this sample (the predictor reads it after this call)
+            predictor._guard_bound = (bound[0], [bound[1][0], bound[1][1], 0.0])
+        return plausible(prediction, y)
+
+    predictor._plausible = heading_guard  # type: ignore[method-assign]
+    out = []
+    for k in range(len(t)):
+        sample['k'] = k
+        if predictor._guard_bound is not None:  # back to the network's own bound
+            predictor._guard_bound = None
+        out.append(predictor.update(float(t[k]), pose[k], force[k]))
+    return np.array(out), predictor
+
+
+def test_a_heading_only_trip_keeps_north_and_east_and_takes_the_measured_heading() -> None:
+    t, pose, _ = supply_record(4, 300.0)
+    free, _ = run_heading_trips(False, guard_heading_measured=True)
+    kept, predictor = run_heading_trips(True, guard_heading_measured=True)
+    cascade, off = run_heading_trips(True)
+    window = slice(*HEADING_TRIPS)
+    assert predictor.counters['guard_trips'] == off.counters['guard_trips'] >= 25
+    # north and east are the network's, as in the run without trips, to the last bit
+    np.testing.assert_array_equal(kept[window, :2], free[window, :2])
+    # the heading is the measurement of the sample (the published heading is wrapped)
+    np.testing.assert_allclose(np.cos(kept[window, 2] - pose[window, 2]), 1.0, atol=1e-12)
+    # without the option the same trips hand north and east to the cascade
+    assert np.max(np.abs(cascade[window, :2] - free[window, :2])) > 1e-3
+    # outside the window all three runs agree
+    np.testing.assert_array_equal(kept[:HEADING_TRIPS[0]], free[:HEADING_TRIPS[0]])
+
+
+def test_guard_heading_measured_is_off_by_default() -> None:
+    assert PredictorParams().guard_heading_measured is False

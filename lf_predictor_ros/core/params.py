@@ -54,7 +54,7 @@ _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
-                'sea_change_revert', 'frequency_yaw', 'guard_heading_measured')
+                'sea_change_revert', 'frequency_yaw')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
 
 
@@ -259,12 +259,6 @@ class PredictorParams:
         default=(0.0, 0.0, 0.0), metadata=_doc(
             'largest rate of change of the published estimate (north, east, yaw); set it above '
             'the fastest LF motion; 0 = no limit on that DOF', 'm/s, m/s, rad/s'))
-    guard_heading_measured: bool = field(
-        default=False, metadata=_doc(
-            'ndof 3: when the distance guard trips on the heading alone, the network keeps '
-            "north and east and the heading is the measured one for that sample (in a turn the "
-            "measurement is the best LF heading there is; the cascade's lags it); a trip in "
-            'north or east hands every DOF to the cascade as before'))
     roughness_guard_time: float = field(
         default=30.0, metadata=_doc(
             "roughness guard (core/roughness.py): while the network prediction's squared second "

@@ -350,14 +350,10 @@ class AdaptivePredictor:
         model = self._model
         if prediction is not None and not self._plausible(prediction, y):
             self._guard_trips += 1
-            if self._heading_only_trip(prediction, y):
-                self._message = 'network heading implausible: measured heading'
-                prediction = np.concatenate((prediction[:2], y[2:]))
-            else:
-                self._message = 'network prediction implausible: cascade fallback'
-                prediction = None
-                self._fb.clear()
-                self._fb.append(self._position(lf_now, update_heading=False))
+            self._message = 'network prediction implausible: cascade fallback'
+            prediction = None
+            self._fb.clear()
+            self._fb.append(self._position(lf_now, update_heading=False))
         if prediction is None:
             self._used_network = False
             estimate = self._position(lf_now, update_heading=False)
@@ -783,14 +779,6 @@ class AdaptivePredictor:
             return bool(np.all(np.abs(prediction - y) <= bound))  # not one pose: broadcast
         # np.all(|prediction − y| <= bound) of one pose (NaN is not plausible)
         return all(abs(a - b) <= c for a, b, c in zip(predicted, measured, bound, strict=True))
-
-    def _heading_only_trip(self, prediction: FloatArray, y: FloatArray) -> bool:
-        """``guard_heading_measured``: the guard tripped on the heading and on nothing else."""
-        if not self.params.guard_heading_measured or self.ndof != 3 or self._guard_bound is None:
-            return False
-        bound = np.asarray(self._guard_bound[1], dtype=np.float64)
-        inside = np.abs(np.asarray(prediction) - np.asarray(y)) <= bound
-        return bool(inside[0] and inside[1] and not inside[2])
 
     # ---- bumpless transfer and rate limit (output only; off with the defaults) ---------------
 

@@ -15,10 +15,11 @@ control band while its estimate error there does not grow (docs/BENCHMARKS.md).
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 import json
 from pathlib import Path
 import sys
+from typing import Any
 
 import numpy as np
 import torch
@@ -54,32 +55,54 @@ def bands(x: np.ndarray, sample_time: float) -> list[list[float]]:
     return [[band_rms(x[:, i], sample_time, band) for band in BANDS] for i in range(2)]
 
 
-def main(argv: list[str]) -> None:
-    """Run one loop (module docstring) and print its JSON line."""
-    name, seed, variant = argv[0], int(argv[1]), argv[2]
-    # 'field:value[;field:value]', typed as method_probe types them ('0.2' is a float); a
-    # baseline's name (observer, oracle_kf, cascade, raw, ...) runs that estimator's loop instead
+@dataclass(frozen=True)
+class LoopCase:
+    """One seed's loop set up as `method_probe.py` and `benchmark` set it up."""
+
+    scenario: Any  # the scenario, its scheduled events delayed for the seed
+    shift: float  # [s] that delay
+    setup: Any  # EstimatorSetup with the variant's predictor parameters
+    ideal: Any  # SimRecord of the ideal loop (the PID on the true LF pose)
+    start: float  # [s] the first scored sample
+    estimator: str  # 'adaptive', or a baseline's name (BASELINES)
+
+
+def loop_case(name: str, seed: int, variant: str) -> LoopCase:
+    """The case of ``variant``: 'default', 'field:value[;field:value]' or a baseline's name.
+
+    Overrides are typed as method_probe types them ('0.2' is a float); a baseline's name
+    (observer, oracle_kf, cascade, raw, ...) runs that estimator's loop instead. The fair
+    recording is made first, as method_probe makes it (the scored start comes from it).
+    """
     estimator = variant if variant in BASELINES else 'adaptive'
     overrides = None if variant == 'default' or estimator != 'adaptive' else \
         parse_variant(f'v={variant}')[1]
-    torch.set_num_threads(1)
-    scenario = scenario_with_schedule_shift(load_scenario(name),
-                                            schedule_shift_for_seed(seed, SCHEDULE_SPREAD))
+    shift = schedule_shift_for_seed(seed, SCHEDULE_SPREAD)
+    scenario = scenario_with_schedule_shift(load_scenario(name), shift)
     params = predictor_params(scenario, None)
     setup = make_setup(scenario, seed, params)
     data = make_recording(scenario, seed, DURATION, setup).data()
     start = float(data['t'][scored_start(params, len(data['t']))])
     ideal = simulate(scenario, seed=seed, duration=DURATION, controller=True, feedback='truth_lf')
-    variant_setup = replace(setup, params=predictor_params(scenario, overrides))
-    outcome = _run_loop(estimator, scenario, seed, DURATION, variant_setup, ideal)
+    return LoopCase(scenario, shift, replace(setup, params=predictor_params(scenario, overrides)),
+                    ideal, start, estimator)
+
+
+def main(argv: list[str]) -> None:
+    """Run one loop (module docstring) and print its JSON line."""
+    name, seed, variant = argv[0], int(argv[1]), argv[2]
+    torch.set_num_threads(1)
+    case = loop_case(name, seed, variant)
+    outcome = _run_loop(case.estimator, case.scenario, seed, DURATION, case.setup, case.ideal)
     record = outcome.record
-    keep = record.t >= start
+    keep = record.t >= case.start
     offset = stability.pose_offset(record.truth_lf_pose[keep],
-                                   _loop_reference(scenario, record, ideal)[keep], 3)
-    stride = grid_stride(scenario, params.sample_time)  # sensor samples per h
+                                   _loop_reference(case.scenario, record, case.ideal)[keep], 3)
+    sample_time = case.setup.params.sample_time
+    stride = grid_stride(case.scenario, sample_time)  # sensor samples per h
     print(json.dumps({'seed': seed, 'variant': variant,
-                      'err': bands(_loop_estimate_error(outcome, 3, start), params.sample_time),
-                      'pos': bands(offset[stride - 1::stride], params.sample_time)}))
+                      'err': bands(_loop_estimate_error(outcome, 3, case.start), sample_time),
+                      'pos': bands(offset[stride - 1::stride], sample_time)}))
 
 
 if __name__ == '__main__':

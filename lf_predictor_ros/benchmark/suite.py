@@ -300,8 +300,14 @@ def _loop_estimate_error(outcome: _LoopOutcome, ndof: int, start: float) -> Floa
     One row per estimate: estimate j, returned at ``estimate_t[j]``, is held by the PID from
     that instant (the adaptive predictor's LF pose predicted for t + h included: it is what the
     loop acts on), so it is compared with the truth at that sample. Heading error wrapped; only
-    finite rows.
+    finite rows. `_timed_loop_estimate_error` gives their times too.
     """
+    return _timed_loop_estimate_error(outcome, ndof, start)[1]
+
+
+def _timed_loop_estimate_error(outcome: _LoopOutcome, ndof: int,
+                               start: float) -> tuple[FloatArray, FloatArray]:
+    """(times, errors) of `_loop_estimate_error`: each row's estimate time [s] with it."""
     rec = outcome.record
     keep = outcome.estimate_t >= start
     times, est = outcome.estimate_t[keep], outcome.estimates[keep, :ndof]
@@ -311,7 +317,9 @@ def _loop_estimate_error(outcome: _LoopOutcome, ndof: int, start: float) -> Floa
     error = est[on_grid] - rec.truth_lf_pose[index[on_grid], :ndof]
     if ndof == 3:
         error[:, 2] = wrap_angle(error[:, 2])
-    return np.asarray(error[np.all(np.isfinite(error), axis=1)], dtype=np.float64)
+    finite = np.all(np.isfinite(error), axis=1)
+    return (np.asarray(times[on_grid][finite], dtype=np.float64),
+            np.asarray(error[finite], dtype=np.float64))
 
 
 def _estimate_errors(outcome: _LoopOutcome, ndof: int, start: float,

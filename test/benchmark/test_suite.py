@@ -13,6 +13,7 @@ from lf_predictor_ros.benchmark.suite import (
     _estimate_wave_power,
     _grid_estimates,
     _LoopOutcome,
+    _timed_loop_estimate_error,
 )
 from sim_ros.simulation import SimRecord
 
@@ -63,6 +64,10 @@ def test_loop_estimate_error_compares_each_estimate_with_the_truth_when_it_was_f
             0.2 / math.sqrt(2), rel=0.1)
         assert out[f'estimate_error_{outside}_band']['north'] < 0.02
         assert out['estimate_error_between_band']['east'] < 1e-6
+    # the timed form: the same rows, each with its estimate time, from start on
+    times, error = _timed_loop_estimate_error(_outcome(t, truth, estimate_t, estimates), 3, 10.0)
+    np.testing.assert_array_equal(times, estimate_t[estimate_t >= 10.0])
+    np.testing.assert_allclose(error[:, 1], 0.4, rtol=1e-9)
     # samples before start are not scored: a large early error changes nothing
     early = estimates.copy()
     early[:5, 0] += 100.0

@@ -286,6 +286,11 @@ class PredictorNode(InputHealth, LifecycleNode):
     # ---- read-only views -----------------------------------------------------------------
 
     @property
+    def samples(self) -> int:
+        """Aligned samples processed in total (the diagnostics' ``samples_predicted``)."""
+        return self._samples
+
+    @property
     def params(self) -> PredictorParams:
         """The predictor parameters in use."""
         return self._params

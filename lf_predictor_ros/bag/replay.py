@@ -84,12 +84,10 @@ from lf_predictor_ros.bag.mcap_reader import BagError, BagReader
 from lf_predictor_ros.bag.mcap_writer import BagWriter
 from lf_predictor_ros.bag.ros_codec import (
     StampedFields,
-    cdr_text,
     diagnostic_array_cdr,
+    estimate_cdr,
     float64_cdr,
-    odometry_cdr,
     offered_qos_yaml,
-    pose_stamped_cdr,
     serialize,
     stamped_fields,
 )
@@ -108,10 +106,7 @@ from lf_predictor_ros.nodes.conversions import (
     FRAME_EARTH,
     NS_PER_S,
     force_from_fields,
-    odometry_fields,
-    odometry_to_msg,
     pose_from_fields,
-    pose_to_msg,
     sec_nanosec_to_ns,
     sec_to_stamp,
 )
@@ -718,20 +713,9 @@ class _Replayer:
 
     def _write_estimate(self, estimate: OdometryEstimate, log_time_ns: int) -> None:
         """One estimate on the lf and odom topics (same stamp and pose)."""
-        stamp = sec_to_stamp(estimate.stamp)
-        frame = self.config.frame_id
-        frame_bytes, body_bytes = cdr_text(frame), cdr_text(FRAME_BODY)
-        if frame_bytes is None or body_bytes is None:  # rclpy's encoder for unusual ids
-            lf_data = serialize(pose_to_msg(estimate.pose, stamp, frame))
-            odom_data = serialize(odometry_to_msg(
-                stamp, estimate.pose, estimate.pose_cov, estimate.twist, estimate.twist_cov,
-                frame, FRAME_BODY))
-        else:  # the same numbers written straight to CDR (odometry_fields checks them)
-            pose, pose_cov, twist, twist_cov = odometry_fields(
-                estimate.pose, estimate.pose_cov, estimate.twist, estimate.twist_cov)
-            lf_data = pose_stamped_cdr(stamp.sec, stamp.nanosec, frame_bytes, pose)
-            odom_data = odometry_cdr(stamp.sec, stamp.nanosec, frame_bytes, body_bytes, pose,
-                                     pose_cov, twist, twist_cov)
+        lf_data, odom_data = estimate_cdr(
+            sec_to_stamp(estimate.stamp), self.config.frame_id, FRAME_BODY, estimate.pose,
+            estimate.pose_cov, estimate.twist, estimate.twist_cov)
         self._write(self.lf_channel, log_time_ns, lf_data)
         self._write(self.odom_channel, log_time_ns, odom_data)
 

@@ -4,6 +4,11 @@ The MCAP writer and reader are ROS-free and deal in bytes; this module turns byt
 message objects and back with rclpy's own type support, so what is written is exactly what a
 ROS publisher sends. `rosidl_runtime_py` is not a dependency: message classes are imported
 from `pkg.msg` like rosidl_runtime_py.utilities.get_message does.
+
+The estimate's messages (PoseStamped, Odometry, Float64) are also written straight to CDR, the
+same bytes as `serialize` gives: replay writes them to the bag that way, and the predictor node
+publishes them that way (`estimate_cdr`; a serialized publish skips rclpy's message objects and
+type-support conversion, the largest part of the node's per-sample step).
 """
 # rclpy's QoSProfile constructor is untyped.
 # mypy: disable-error-code="no-untyped-call"
@@ -14,6 +19,8 @@ import importlib
 import struct
 from typing import Any, NamedTuple
 
+from builtin_interfaces.msg import Time
+from numpy.typing import ArrayLike
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import (
@@ -30,6 +37,7 @@ from lf_predictor_ros.bag.mcap_writer import (
     qos_profiles_yaml,
 )
 from lf_predictor_ros.bag.msgdefs import split_type_name
+from lf_predictor_ros.nodes.conversions import odometry_fields, odometry_to_msg, pose_to_msg
 
 _CLASS_CACHE: dict[str, type[Any]] = {}
 
@@ -147,6 +155,25 @@ def odometry_cdr(sec: int, nanosec: int, frame_id: bytes, child_frame_id: bytes,
     _align8(out)
     out += _ODOMETRY_BODY.pack(*pose, *pose_covariance, *twist, *twist_covariance)
     return bytes(out)
+
+
+def estimate_cdr(stamp: Time, frame_id: str, child_frame_id: str, pose: ArrayLike,
+                 pose_cov: ArrayLike, twist: ArrayLike,
+                 twist_cov: ArrayLike) -> tuple[bytes, bytes]:
+    """One 3-DOF estimate as the CDR of its PoseStamped (lf_pose) and Odometry (lf_odom).
+
+    The bytes `serialize` gives for `pose_to_msg` and `odometry_to_msg` of the same arguments,
+    written directly (`pose_stamped_cdr`, `odometry_cdr`); frame ids the direct writers cannot
+    take (`cdr_text`) go through rclpy's encoder. Raises ValueError as `odometry_to_msg` does.
+    """
+    frame_bytes, child_bytes = cdr_text(frame_id), cdr_text(child_frame_id)
+    if frame_bytes is None or child_bytes is None:
+        return (serialize(pose_to_msg(pose, stamp, frame_id)),
+                serialize(odometry_to_msg(stamp, pose, pose_cov, twist, twist_cov, frame_id,
+                                          child_frame_id)))
+    fields = odometry_fields(pose, pose_cov, twist, twist_cov)  # checked as odometry_to_msg
+    return (pose_stamped_cdr(stamp.sec, stamp.nanosec, frame_bytes, fields[0]),
+            odometry_cdr(stamp.sec, stamp.nanosec, frame_bytes, child_bytes, *fields))
 
 
 def float64_cdr(value: float) -> bytes:

@@ -133,6 +133,7 @@ from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
+from lf_predictor_ros.bag.ros_codec import estimate_cdr, float64_cdr
 from lf_predictor_ros.core.alignment import AlignedSample, AlignerSettings, InputAligner
 from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
@@ -142,8 +143,6 @@ from lf_predictor_ros.nodes.conversions import (
     FRAME_BODY,
     FRAME_EARTH,
     msg_to_force,
-    odometry_to_msg,
-    pose_to_msg,
     sec_to_stamp,
     stamp_to_sec,
 )
@@ -648,7 +647,9 @@ class PredictorNode(InputHealth, LifecycleNode):
             self._reoffers.published(estimate)
         wave_peak_freq = predictor.wave_peak_freq
         if wave_peak_freq is not None:
-            self._freq_pub.publish(Float64(data=float(wave_peak_freq)))
+            value = float(wave_peak_freq)
+            self._freq_pub.publish(float64_cdr(value) if math.isfinite(value)
+                                   else Float64(data=value))
 
     def _publish(self, estimate: OdometryEstimate) -> None:
         """One estimate on lf_pose and lf_odom; no re-offer answered with it unless noted."""
@@ -656,14 +657,16 @@ class PredictorNode(InputHealth, LifecycleNode):
         self._send(estimate)
 
     def _send(self, estimate: OdometryEstimate) -> None:
-        """Publish one estimate on lf_pose and lf_odom (same stamp, same pose)."""
-        stamp = sec_to_stamp(estimate.stamp)
-        frame = self._settings.frame_id
-        pose_msg = pose_to_msg(estimate.pose, stamp, frame)
-        odom_msg = odometry_to_msg(stamp, estimate.pose, estimate.pose_cov, estimate.twist,
-                                   estimate.twist_cov, frame, FRAME_BODY)
-        self._lf_pub.publish(pose_msg)
-        self._odom_pub.publish(odom_msg)
+        """Publish one estimate on lf_pose and lf_odom (same stamp, same pose).
+
+        Published serialized (`estimate_cdr`: the bytes rclpy would send for `pose_to_msg` and
+        `odometry_to_msg`, without building the messages).
+        """
+        lf_data, odom_data = estimate_cdr(
+            sec_to_stamp(estimate.stamp), self._settings.frame_id, FRAME_BODY, estimate.pose,
+            estimate.pose_cov, estimate.twist, estimate.twist_cov)
+        self._lf_pub.publish(lf_data)
+        self._odom_pub.publish(odom_data)
 
     # ---- services ------------------------------------------------------------------------
 

@@ -127,6 +127,41 @@ def test_direct_cdr_writers_decode_to_the_messages_of_the_converters(frame_id: s
     assert ros_codec.cdr_text('nörd') is None and ros_codec.cdr_text('a\0b') is None
 
 
+@pytest.mark.parametrize('frame_id', ['map_ned', 'nörd'])  # direct writers / rclpy's encoder
+def test_estimate_cdr_decodes_to_the_converters_messages(frame_id: str) -> None:
+    # the predictor node publishes these bytes and replay writes them: both must read back as
+    # pose_to_msg's and odometry_to_msg's messages.
+    from lf_predictor_ros.nodes.conversions import odometry_to_msg, pose_to_msg, sec_to_stamp
+
+    pose, twist = np.array([-12.5, 7.25, 3.0]), np.array([0.25, -0.5, -0.02])
+    pose_cov = np.diag([0.3, 0.2, 0.002])
+    pose_cov[0, 2] = pose_cov[2, 0] = 1e-4
+    twist_cov = np.diag([0.1, 0.2, 1e-5])
+    stamp = sec_to_stamp(86_400.25)
+    lf_data, odom_data = ros_codec.estimate_cdr(stamp, frame_id, 'base_link_fsd', pose,
+                                                pose_cov, twist, twist_cov)
+    pose_msg = pose_to_msg(pose, stamp, frame_id)
+    odom_msg = odometry_to_msg(stamp, pose, pose_cov, twist, twist_cov, frame_id,
+                               'base_link_fsd')
+    assert len(lf_data) == len(serialize(pose_msg))
+    assert len(odom_data) == len(serialize(odom_msg))
+    assert deserialize(lf_data, 'geometry_msgs/msg/PoseStamped') == pose_msg
+    assert deserialize(odom_data, 'nav_msgs/msg/Odometry') == odom_msg
+    assert deserialize(odom_data, 'nav_msgs/msg/Odometry').pose.pose.position.x == -12.5
+
+
+def test_estimate_cdr_refuses_what_odometry_to_msg_refuses() -> None:
+    from lf_predictor_ros.nodes.conversions import sec_to_stamp
+
+    stamp, cov = sec_to_stamp(1.0), np.eye(3)
+    with pytest.raises(ValueError, match='pose must be finite'):
+        ros_codec.estimate_cdr(stamp, 'map_ned', 'base_link_fsd', [0.0, math.nan, 0.0], cov,
+                               np.zeros(3), cov)
+    with pytest.raises(ValueError, match='twist must have shape'):
+        ros_codec.estimate_cdr(stamp, 'map_ned', 'base_link_fsd', np.zeros(3), cov,
+                               np.zeros(2), cov)
+
+
 def test_diagnostic_array_cdr_decodes_to_make_diagnostic_array() -> None:
     from builtin_interfaces.msg import Time
 

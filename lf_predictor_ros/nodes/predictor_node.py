@@ -9,7 +9,8 @@ Data path (all times are message stamps, so the node works with ``use_sim_time``
 ``core.lf_state``) → ``lf_pose`` (PoseStamped, ``header.stamp`` = sample time + ``sample_time``,
 the instant the prediction is valid for, frame ``frame_id``), ``lf_odom`` (nav_msgs/Odometry,
 same stamp and pose, ``header.frame_id`` = ``frame_id``, ``child_frame_id`` ``base_link_fsd``:
-body-frame LF twist, calibrated covariances; ``nodes.conversions.odometry_to_msg``) and
+body-frame LF twist, calibrated covariances; the layout of ``nodes.conversions.odometry_to_msg``,
+published already serialized by ``bag.ros_codec.estimate_cdr``) and
 ``wave_peak_frequency`` (Float64 [rad/s], once ω0 is known). While tracking ``lf_pose`` is the
 predictor's LF pose bit for bit. A sample that starts a new data segment (gap, time jump, reset)
 restarts the predictor's segment; the trained network stays, and so does the odometry's state.

@@ -61,11 +61,6 @@ with the motion gate on, the twin's network goes to the sibling file ``path + '.
 predictor writes and reads ``path`` alone, as it always did. With ``checkpoint_path`` set, each
 network's worker saves its own file after each of its accepted trainings.
 
-Threads: with ``background`` the training and ω0 jobs run on a worker thread whose scheduling
-priority is lowered by ``WORKER_NICENESS`` (Linux: per thread; elsewhere nothing changes), so
-that a training competing for a core delays itself, not the predict path (docs/BENCHMARKS.md,
-"Twenty-seventh session": at 100 Hz input the predict p99 while training fell by about 0.2 ms).
-
 Bad input: `update` raises ValueError for a non-finite or wrongly shaped pose/force and leaves its
 state unchanged (the node filters such samples before they get here). A training that raises is
 caught on the worker; the network in service stays, and the status reports the error.
@@ -74,9 +69,8 @@ from __future__ import annotations
 
 import atexit
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 import math
-import os
 from pathlib import Path
 import queue
 import threading
@@ -131,9 +125,6 @@ TWIN_SUFFIX = '.twin'
 # The force argument of the output notch's `CascadeFilter.update` (it ignores the force).
 _NO_FORCE = np.zeros(3)
 _NO_FORCE.flags.writeable = False
-# [nice levels] added to a worker thread's scheduling priority: the jobs yield the CPU to the
-# predict path (the kernel caps the result at 19, the lowest priority).
-WORKER_NICENESS = 19
 
 FloatArray = NDArray[np.float64]
 
@@ -209,28 +200,6 @@ def _smoothstep(phase: float) -> float:
     """Ramp 0 → 1 over phase 0 → 1 with zero slope at both ends (3s² − 2s³)."""
     s = min(max(phase, 0.0), 1.0)
     return s * s * (3.0 - 2.0 * s)
-
-
-def lower_thread_priority(niceness: int = WORKER_NICENESS) -> bool:
-    """Lower the calling thread's scheduling priority by ``niceness``; False where it cannot.
-
-    Linux schedules each thread on its own nice value (`os.setpriority` with the thread's native
-    id); a lower priority needs no privileges. Elsewhere (no per-thread nice value, or refused)
-    nothing changes and False is returned.
-    """
-    try:
-        thread = threading.get_native_id()
-        os.setpriority(os.PRIO_PROCESS, thread,
-                       min(19, os.getpriority(os.PRIO_PROCESS, thread) + niceness))
-    except (AttributeError, OSError):  # no os.setpriority (Windows), or not a thread id here
-        return False
-    return True
-
-
-def _run_yielding(job: Callable[..., None], *args: Any) -> None:
-    """A worker thread's body: lower its priority (`WORKER_NICENESS`), then run the job."""
-    lower_thread_priority()
-    job(*args)
 
 
 _LIVE_PREDICTORS: weakref.WeakSet[AdaptivePredictor] = weakref.WeakSet()
@@ -1037,7 +1006,7 @@ class AdaptivePredictor:
         args = (self._generation, snapshot, self._state_dict, self._targets, self._frequency,
                 self._stop, self._revertible())
         if self.background:
-            self._worker = threading.Thread(target=_run_yielding, args=(self._job, *args),
+            self._worker = threading.Thread(target=self._job, args=args,
                                             name='lf-predictor-training', daemon=True)
             self._worker.start()
         else:
@@ -1066,8 +1035,7 @@ class AdaptivePredictor:
         self._last_freq_k = self._k
         args = (self._generation, self._y.newest(len(self._y)).copy(), self._frequency)
         if self.background:
-            self._worker = threading.Thread(target=_run_yielding,
-                                            args=(self._frequency_job, *args),
+            self._worker = threading.Thread(target=self._frequency_job, args=args,
                                             name='lf-predictor-frequency', daemon=True)
             self._worker.start()
         else:

@@ -10,9 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 import functools
 import math
-import os
 from pathlib import Path
-import sys
 import threading
 import time
 
@@ -496,83 +494,6 @@ def test_worker_exception_keeps_the_network_in_service(monkeypatch: pytest.Monke
     assert status.message == ('training failed, network in service kept (RuntimeError: '
                               'simulated training crash)')
     assert np.all(np.isfinite(out))
-
-
-def _niceness() -> int:
-    """The calling thread's nice value (Linux)."""
-    return os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
-
-
-LINUX_ONLY = pytest.mark.skipif(not sys.platform.startswith('linux'),
-                                reason='per-thread nice values are a Linux feature')
-
-
-@LINUX_ONLY
-def test_lower_thread_priority_lowers_only_the_calling_thread_and_caps_at_19() -> None:
-    main = _niceness()
-    seen: list[tuple[bool, int]] = []
-
-    def body(niceness: int) -> None:
-        seen.append((predictor_module.lower_thread_priority(niceness), _niceness()))
-
-    for niceness in (3, 100):
-        worker = threading.Thread(target=body, args=(niceness,))
-        worker.start()
-        worker.join()
-    assert seen == [(True, min(19, main + 3)), (True, 19)]
-    assert _niceness() == main
-
-
-@LINUX_ONLY
-def test_background_jobs_run_below_the_predict_path_priority(
-        monkeypatch: pytest.MonkeyPatch) -> None:
-    main = _niceness()
-    if main >= 19:
-        pytest.skip('the test process already runs at the lowest priority')
-    frequency_jobs: list[int] = []
-    trainings: list[int] = []
-    original = predictor_module.estimate_frequency
-
-    def recorded_frequency(*args: object, **kwargs: object) -> object:
-        frequency_jobs.append(_niceness())
-        return original(*args, **kwargs)  # type: ignore[arg-type]
-
-    def recorded_crash(*args: object, **kwargs: object) -> None:
-        trainings.append(_niceness())
-        crash()
-
-    monkeypatch.setattr(predictor_module, 'estimate_frequency', recorded_frequency)
-    monkeypatch.setattr(predictor_module, 'run_retraining', recorded_crash)
-    t, pose, force = synthetic_onedof(200, seed=24)
-    predictor = AdaptivePredictor(SMALL, background=True)
-    try:
-        for i in range(FIRST_TRAINING + 5):
-            assert predictor.wait_for_training(5.0)
-            feed(predictor, t, pose, force, i, i + 1)
-        assert predictor.wait_for_training(5.0)
-    finally:
-        predictor.close()
-    lowered = min(19, main + predictor_module.WORKER_NICENESS)
-    assert frequency_jobs and trainings  # both kinds of job ran, each on a lowered thread
-    assert set(frequency_jobs) == {lowered} and set(trainings) == {lowered}
-    assert _niceness() == main  # the thread that feeds samples keeps its priority
-
-
-@LINUX_ONLY
-def test_inline_jobs_keep_the_callers_priority(monkeypatch: pytest.MonkeyPatch) -> None:
-    main = _niceness()
-    trainings: list[int] = []
-
-    def recorded_crash(*args: object, **kwargs: object) -> None:
-        trainings.append(_niceness())
-        crash()
-
-    monkeypatch.setattr(predictor_module, 'run_retraining', recorded_crash)
-    t, pose, force = synthetic_onedof(200, seed=24)
-    predictor = AdaptivePredictor(SMALL, background=False)
-    feed(predictor, t, pose, force, 0, FIRST_TRAINING + 1)
-    assert trainings and set(trainings) == {main}  # run on the caller's thread, not lowered
-    assert _niceness() == main
 
 
 def test_worker_exception_before_any_network_reports_error(

@@ -8,7 +8,8 @@ from `pkg.msg` like rosidl_runtime_py.utilities.get_message does.
 The estimate's messages (PoseStamped, Odometry, Float64) are also written straight to CDR, the
 same bytes as `serialize` gives: replay writes them to the bag that way, and the predictor node
 publishes them that way (`estimate_cdr`; a serialized publish skips rclpy's message objects and
-type-support conversion, the largest part of the node's per-sample step).
+type-support conversion, which were about a third of the node's per-sample step: docs/
+BENCHMARKS.md, "Twenty-seventh session").
 """
 # rclpy's QoSProfile constructor is untyped.
 # mypy: disable-error-code="no-untyped-call"

@@ -287,7 +287,7 @@ class PredictorNode(InputHealth, LifecycleNode):
 
     @property
     def samples(self) -> int:
-        """Aligned samples processed in total (the diagnostics' ``samples_predicted``)."""
+        """Aligned samples processed in total (the diagnostics' ``samples``)."""
         return self._samples
 
     @property

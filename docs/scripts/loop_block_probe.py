@@ -11,8 +11,10 @@ the two times: the RMS error of the estimate the PID acted on (north, east [m], 
 against the true LF pose (`suite._timed_loop_estimate_error`), the largest horizontal distance
 of the true LF pose from the ideal loop's track [m], the share of the estimates the cascade
 served (the network's prediction was missing or tripped the distance guard), the predictor's
-ω0 [rad/s] and the true heading [rad]. The twenty-sixth session used it to find that the
-failing first turns of rao_supply lag in heading (docs/BENCHMARKS.md).
+ω0 [rad/s], the true heading [rad] and the motion gate's mean gain g per DOF (north, east,
+heading; 0: the holding network, 1: the twin; `AdaptivePredictor.motion_gain`, all 0 with the
+gate off). The twenty-sixth session used it to find that the failing first turns of rao_supply
+lag in heading, the twenty-seventh to look at the yaw gate in a move (docs/BENCHMARKS.md).
 """
 from __future__ import annotations
 
@@ -50,11 +52,14 @@ def main(argv: list[str]) -> None:
     case = loop_case(args.scenario, args.seed, args.variant)
     stream = make_estimator('adaptive', case.setup)
     log: list[tuple[float, bool, float]] = []  # (t, the network served, ω0) per call
+    gains: list[np.ndarray] = []  # the motion gate's g per DOF per call
 
     def step(t: float, pose: np.ndarray, force: np.ndarray, wave_peak_freq: float) -> np.ndarray:
         out = stream.step(t, pose, force, wave_peak_freq)
         status = stream.estimator.status()
         log.append((t, status.state == 'trained', status.wave_peak_freq or np.nan))
+        gains.append(np.asarray(getattr(stream.estimator, 'motion_gain', np.zeros(3)),
+                                dtype=np.float64))
         return out
 
     run = run_loop(case.scenario, args.seed, DURATION, case.setup.sample_time, step)
@@ -67,9 +72,11 @@ def main(argv: list[str]) -> None:
     calls = np.array([row[0] for row in log])
     network = np.array([row[1] for row in log])
     freq = np.array([row[2] for row in log], dtype=np.float64)
+    gain = np.array(gains, dtype=np.float64).reshape(len(gains), -1)
     print(f'{args.scenario} seed {args.seed}, events delayed {case.shift:.1f} s; '
           f'variant {args.variant}')
-    print(' block [s]  error N [m]  E [m]  heading [rad]  |offset| max [m]  cascade  ω0  ψ true')
+    print(' block [s]  error N [m]  E [m]  heading [rad]  |offset| max [m]  cascade  ω0  ψ true'
+          '  gate g N / E / ψ')
     for start in np.arange(args.start, args.end, args.block):
         rows = (times >= start) & (times < start + args.block)
         steps = (calls >= start) & (calls < start + args.block)
@@ -80,7 +87,8 @@ def main(argv: list[str]) -> None:
         worst = float(np.max(np.hypot(offset[samples, 0], offset[samples, 1])))
         print(f'{start:9.0f} {rms[0]:12.3f} {rms[1]:6.3f} {rms[2]:14.4f} {worst:17.2f} '
               f'{1.0 - network[steps].mean():8.2f} {np.nanmean(freq[steps]):6.3f} '
-              f'{record.truth_lf_pose[samples, 2].mean():6.3f}')
+              f'{record.truth_lf_pose[samples, 2].mean():6.3f}  '
+              + ' / '.join(f'{g:.2f}' for g in gain[steps].mean(axis=0)))
 
 
 if __name__ == '__main__':

@@ -51,15 +51,14 @@ def main(argv: list[str]) -> None:
     torch.set_num_threads(1)
     case = loop_case(args.scenario, args.seed, args.variant)
     stream = make_estimator('adaptive', case.setup)
-    log: list[tuple[float, bool, float]] = []  # (t, the network served, ω0) per call
-    gains: list[np.ndarray] = []  # the motion gate's g per DOF per call
+    # (t, the network served, ω0, the motion gate's g per DOF) per call
+    log: list[tuple[float, bool, float, np.ndarray]] = []
 
     def step(t: float, pose: np.ndarray, force: np.ndarray, wave_peak_freq: float) -> np.ndarray:
         out = stream.step(t, pose, force, wave_peak_freq)
         status = stream.estimator.status()
-        log.append((t, status.state == 'trained', status.wave_peak_freq or np.nan))
-        gains.append(np.asarray(getattr(stream.estimator, 'motion_gain', np.zeros(3)),
-                                dtype=np.float64))
+        gain = getattr(stream.estimator, 'motion_gain', np.zeros(3))  # the adaptive predictor's
+        log.append((t, status.state == 'trained', status.wave_peak_freq or np.nan, gain))
         return out
 
     run = run_loop(case.scenario, args.seed, DURATION, case.setup.sample_time, step)
@@ -72,7 +71,7 @@ def main(argv: list[str]) -> None:
     calls = np.array([row[0] for row in log])
     network = np.array([row[1] for row in log])
     freq = np.array([row[2] for row in log], dtype=np.float64)
-    gain = np.array(gains, dtype=np.float64).reshape(len(gains), -1)
+    gain = np.array([row[3] for row in log], dtype=np.float64)
     print(f'{args.scenario} seed {args.seed}, events delayed {case.shift:.1f} s; '
           f'variant {args.variant}')
     print(' block [s]  error N [m]  E [m]  heading [rad]  |offset| max [m]  cascade  ω0  ψ true'

@@ -76,7 +76,6 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from numpy.typing import NDArray
-from std_msgs.msg import Float64
 import torch
 import yaml
 
@@ -696,10 +695,7 @@ class _Replayer:
             self._write_estimate(odometry, log_time_ns)
         freq = self.predictor.wave_peak_freq
         if freq is not None:
-            value = float(freq)
-            data = float64_cdr(value) if math.isfinite(value) else \
-                serialize(Float64(data=value))  # rclpy refuses it, as before
-            self._write(self.wave_channel, log_time_ns, data)
+            self._write(self.wave_channel, log_time_ns, float64_cdr(float(freq)))
         self._maybe_diagnostics(sample.t, log_time_ns)
 
     def _maybe_diagnostics(self, t: float, log_time_ns: int) -> None:

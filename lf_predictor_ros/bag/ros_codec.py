@@ -178,7 +178,7 @@ def estimate_cdr(stamp: Time, frame_id: str, child_frame_id: str, pose: ArrayLik
 
 
 def float64_cdr(value: float) -> bytes:
-    """CDR of a std_msgs/Float64."""
+    """CDR of a std_msgs/Float64 (NaN and ±inf too, as rclpy writes them)."""
     return _CDR_LE + _FLOAT64.pack(value)
 
 

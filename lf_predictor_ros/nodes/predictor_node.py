@@ -648,9 +648,7 @@ class PredictorNode(InputHealth, LifecycleNode):
             self._reoffers.published(estimate)
         wave_peak_freq = predictor.wave_peak_freq
         if wave_peak_freq is not None:
-            value = float(wave_peak_freq)
-            self._freq_pub.publish(float64_cdr(value) if math.isfinite(value)
-                                   else Float64(data=value))
+            self._freq_pub.publish(float64_cdr(float(wave_peak_freq)))
 
     def _publish(self, estimate: OdometryEstimate) -> None:
         """One estimate on lf_pose and lf_odom; no re-offer answered with it unless noted."""

@@ -124,6 +124,8 @@ def test_direct_cdr_writers_decode_to_the_messages_of_the_converters(frame_id: s
     assert len(data) == len(serialize(message))
     assert deserialize(data, 'nav_msgs/msg/Odometry') == message
     assert ros_codec.float64_cdr(0.8125) == serialize(Float64(data=0.8125))
+    for value in (math.nan, math.inf, -math.inf):  # rclpy takes these too, with the same bytes
+        assert ros_codec.float64_cdr(value) == serialize(Float64(data=value))
     assert ros_codec.cdr_text('nörd') is None and ros_codec.cdr_text('a\0b') is None
 
 

@@ -87,6 +87,7 @@ from lf_predictor_ros.core.estimator import EstimatorState, EstimatorStatus
 from lf_predictor_ros.core.filters import low_pass_step
 from lf_predictor_ros.core.frequency import FrequencyEstimate
 from lf_predictor_ros.core.heading import ContinuousHeading, wrap_angle, wrap_pose
+from lf_predictor_ros.core.job_worker import JobWorker
 from lf_predictor_ros.core.motion_gate import (
     MotionGate,
     dead_zoned,
@@ -235,7 +236,8 @@ class AdaptivePredictor:
 
     def __init__(self, params: PredictorParams, *, background: bool = True,
                  checkpoint_path: str | None = None, max_trainings: int | None = None,
-                 training_lock: threading.Lock | None = None) -> None:
+                 training_lock: threading.Lock | None = None,
+                 worker_name: str = 'lf-predictor-training') -> None:
         """Create an untrained predictor.
 
         ``background``: train on a worker thread (True, for nodes) or inline at the retraining
@@ -244,7 +246,8 @@ class AdaptivePredictor:
         `twin_checkpoint_path` of it). ``max_trainings``: stop retraining after that many
         accepted trainings (1 gives the thesis's static network; None = adaptive).
         ``training_lock``: held by a worker while it trains, so predictors sharing it train one
-        after the other (the motion gate's twin shares its holding network's).
+        after the other (the motion gate's twin shares its holding network's). ``worker_name``:
+        the name of the worker thread (`core.job_worker`) that runs the trainings and ω0 jobs.
         """
         self.params = params
         self.max_trainings = max_trainings
@@ -258,7 +261,7 @@ class AdaptivePredictor:
         self._training_lock = training_lock or threading.Lock()
         self._outcomes: queue.SimpleQueue[_JobOutcome] = queue.SimpleQueue()
         self._stop = threading.Event()
-        self._worker: threading.Thread | None = None
+        self._worker = JobWorker(worker_name)  # trainings and ω0 jobs, one at a time
         self._generation = 0
         self._model: NumpyNnarmax | None = None
         self._state_dict: dict[str, torch.Tensor] | None = None
@@ -300,7 +303,8 @@ class AdaptivePredictor:
                                roughness_guard_time=0.0),  # the guard: holding network only
                 background=background,
                 checkpoint_path=twin_checkpoint_path(checkpoint_path) if checkpoint_path else None,
-                max_trainings=max_trainings, training_lock=self._training_lock)
+                max_trainings=max_trainings, training_lock=self._training_lock,
+                worker_name='lf-predictor-twin-training')
             self._gate = MotionGate(params.ndof, params.sample_time,
                                     window=params.training_window)
         self._roughness = (RoughnessGuard(params.ndof, params.sample_time,
@@ -389,7 +393,10 @@ class AdaptivePredictor:
         return self._predict()
 
     def reset(self) -> None:
-        """Forget everything learned and collected (parameters stay); a running job is dropped."""
+        """Forget everything learned and collected (parameters stay); a running job is dropped.
+
+        The dropped job stops at its next epoch boundary; the next job waits for that.
+        """
         if self._moving is not None and self._gate is not None:
             self._moving.reset()
             self._gate.reset()
@@ -397,7 +404,6 @@ class AdaptivePredictor:
         self._stop.set()
         self._generation += 1
         self._stop = threading.Event()
-        self._worker = None
         self._model = self._previous_model = None
         self._state_dict = None
         self._frequency = self.params.wave_peak_prior
@@ -483,11 +489,8 @@ class AdaptivePredictor:
         """
         deadline = None if timeout is None else time.monotonic() + timeout
         done = True if self._moving is None else self._moving.wait_for_training(timeout)
-        worker = self._worker
-        if worker is None:
-            return done
-        worker.join(None if deadline is None else max(0.0, deadline - time.monotonic()))
-        return done and not worker.is_alive()
+        return self._worker.wait(None if deadline is None
+                                 else max(0.0, deadline - time.monotonic())) and done
 
     def close(self) -> None:
         """Stop a running training (it is abandoned at its next epoch boundary).
@@ -499,6 +502,7 @@ class AdaptivePredictor:
         if self._moving is not None:
             self._moving.close()
         self.wait_for_training(timeout=5.0)
+        self._worker.shutdown()
 
     @property
     def checkpoint_path(self) -> str | None:
@@ -981,7 +985,7 @@ class AdaptivePredictor:
         return out
 
     def _job_running(self) -> bool:
-        return self._worker is not None and self._worker.is_alive()
+        return self._worker.busy
 
     def _maybe_retrain(self, t: float) -> None:
         n = len(self._y)
@@ -1006,9 +1010,7 @@ class AdaptivePredictor:
         args = (self._generation, snapshot, self._state_dict, self._targets, self._frequency,
                 self._stop, self._revertible())
         if self.background:
-            self._worker = threading.Thread(target=self._job, args=args,
-                                            name='lf-predictor-training', daemon=True)
-            self._worker.start()
+            self._worker.submit(self._job, *args)
         else:
             self._job(*args)
             self._collect_outcomes(t)
@@ -1035,9 +1037,7 @@ class AdaptivePredictor:
         self._last_freq_k = self._k
         args = (self._generation, self._y.newest(len(self._y)).copy(), self._frequency)
         if self.background:
-            self._worker = threading.Thread(target=self._frequency_job, args=args,
-                                            name='lf-predictor-frequency', daemon=True)
-            self._worker.start()
+            self._worker.submit(self._frequency_job, *args)
         else:
             self._frequency_job(*args)
 

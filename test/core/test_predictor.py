@@ -413,12 +413,10 @@ def test_reset_discards_the_result_of_a_running_training() -> None:
     predictor = AdaptivePredictor(LONG, background=True)
     try:
         feed(predictor, t, pose, force, 0, FIRST_TRAINING)
-        worker = predictor._worker  # the job reset() abandons
-        assert worker is not None and worker.is_alive()
+        assert predictor._worker.busy  # the job reset() abandons
         predictor.reset()
         start = time.monotonic()
-        worker.join(5.0)
-        assert not worker.is_alive()
+        assert predictor.wait_for_training(5.0)
         assert time.monotonic() - start < 1.5  # stopped at an epoch boundary, not after 2 s
         feed(predictor, t, pose, force, FIRST_TRAINING, FIRST_TRAINING + 10)
         status = predictor.status()
@@ -667,11 +665,10 @@ def test_close_stops_a_running_training_promptly() -> None:
     t, pose, force = synthetic_onedof(200, seed=25)
     predictor = AdaptivePredictor(LONG, background=True)
     feed(predictor, t, pose, force, 0, FIRST_TRAINING)
-    worker = predictor._worker
-    assert worker is not None and worker.is_alive()
+    assert predictor._worker.busy
     start = time.monotonic()
     predictor.close()
-    assert not worker.is_alive()
+    assert not predictor._worker.busy
     assert time.monotonic() - start < 1.5  # [s] the training alone would run 2 s
 
 
@@ -685,7 +682,7 @@ class HoldingFirstLock:
 
     def __enter__(self) -> HoldingFirstLock:
         holding = self.predictor is not None and \
-            threading.current_thread() is self.predictor._worker
+            threading.current_thread() is self.predictor._worker.thread
         if not holding:
             self.taken.wait(10.0)
         self._lock.acquire()
@@ -718,17 +715,16 @@ def test_close_with_the_twin_waiting_for_the_training_lock_is_prompt() -> None:
         time.sleep(SENSOR_PERIOD)
     assert lock.taken.wait(5.0), 'the holding network did not start training'
     deadline = time.monotonic() + 5.0
-    while (twin._worker is None or not twin._worker.is_alive()) and \
-            time.monotonic() < deadline:
+    while not twin._worker.busy and time.monotonic() < deadline:
         feed(predictor, t, pose, force, k, k + 1)  # the twin's training starts, then waits
         k += 1
         time.sleep(SENSOR_PERIOD)
-    assert twin._worker is not None and twin._worker.is_alive()
+    assert twin._worker.busy
     start = time.monotonic()
     predictor.close()
     assert time.monotonic() - start < 1.5  # [s] the holding training alone runs 2 s
-    assert predictor._worker is not None and not predictor._worker.is_alive()
-    assert not twin._worker.is_alive()
+    assert not predictor._worker.busy
+    assert not twin._worker.busy
 
 
 EXIT_WHILE_TRAINING = r"""
@@ -749,7 +745,7 @@ for k in range(len(record.t)):
     if k == 120:
         predictor.wait_for_training(30)
     time.sleep(0.002)
-assert predictor._worker is not None and predictor._worker.is_alive(), 'no training running'
+assert predictor._worker.busy, 'no training running'
 print('exiting while training')
 """
 

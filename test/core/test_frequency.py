@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 from numpy.typing import NDArray
@@ -217,3 +218,25 @@ def test_a_repeated_estimate_on_the_same_inputs_is_the_stored_one() -> None:
     other = y.copy()
     other[5] = np.nextafter(other[5], np.inf)
     assert estimate(other, 1.0) is not first
+
+
+def test_the_fit_yields_the_gil_on_a_worker_thread_with_the_same_numbers(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # Off the main thread the spectrum fit sleeps every FIT_YIELD_EVALUATIONS evaluations (the
+    # pose callback gets the GIL); on the main thread (replay) it never sleeps. Same result.
+    from lf_predictor_ros.core import frequency
+
+    sleeps: list[float] = []
+    monkeypatch.setattr(frequency.time, 'sleep', sleeps.append)
+    data = frequency._as_columns(measured(32, 0.7, 1200.0, 1.0, 0.05))
+
+    def run() -> FrequencyEstimate:
+        return frequency._estimate(data, 1.0, HIGHPASS_CUTOFF, WAVE_BAND, MIN_PEAK_RATIO, None)
+    on_main = run()
+    assert sleeps == []
+    results: list[FrequencyEstimate] = []
+    worker = threading.Thread(target=lambda: results.append(run()))
+    worker.start()
+    worker.join(60.0)
+    assert results == [on_main] and on_main.confident
+    assert len(sleeps) >= 2 and set(sleeps) == {frequency.FIT_YIELD_SECONDS}

@@ -39,13 +39,10 @@ from collections import OrderedDict
 from dataclasses import dataclass
 import math
 import threading
-import time
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize, signal
-
-from lf_predictor_ros.core.job_worker import on_job_worker
 
 # Welch segments: each segment is 1/WELCH_SEGMENTS_PER_WINDOW of the estimation window, with 50 %
 # overlap, so 2·WELCH_SEGMENTS_PER_WINDOW − 1 = 7 periodograms are averaged.
@@ -54,14 +51,6 @@ WELCH_OVERLAP = 0.5  # fraction of a segment shared with the next one
 HIGHPASS_ORDER = 2  # Butterworth order of the LF-removing high-pass (thesis §4.2.1)
 MIN_BAND_BINS = 3  # Welch bins needed inside the wave band to find and refine a peak
 FIT_DAMPING_RANGE = (0.005, 1.0)  # λ range [-] allowed in the spectrum fit (thesis eq. 3.10)
-# On a `JobWorker` thread (`job_worker.on_job_worker`: the predictor's trainings and ω0 jobs in
-# a node), the spectrum fit sleeps FIT_YIELD_SECONDS [s] every FIT_YIELD_EVALUATIONS [-]
-# evaluations of its likelihood (about every 0.25 ms), so the node's callbacks get the GIL.
-# Without it, scipy's Nelder-Mead on the worker held the pose callback off for 15-110 ms at each
-# retraining (the GIL passed back and forth without reaching the waiting thread; a shorter
-# switch interval did not help). The numbers are unchanged.
-FIT_YIELD_EVALUATIONS = 10
-FIT_YIELD_SECONDS = 5e-5
 
 _FloatArray = NDArray[np.float64]
 
@@ -292,14 +281,8 @@ def _fit_peak(omega: _FloatArray, psd: _FloatArray, in_band: NDArray[np.bool_],
     band_omega_sq = band_omega ** 2  # hoisted out of the ~400 evaluations of one fit
     min_damping, max_damping = FIT_DAMPING_RANGE
     add_reduce = np.add.reduce  # what np.sum of a 1-D array runs, without its dispatch
-    worker = on_job_worker()
-    evaluations = 0
 
     def negative_log_likelihood(theta: _FloatArray) -> float:
-        nonlocal evaluations
-        evaluations += 1
-        if worker and evaluations % FIT_YIELD_EVALUATIONS == 0:
-            time.sleep(FIT_YIELD_SECONDS)  # let the node's callbacks in (FIT_YIELD_EVALUATIONS)
         wave_freq, log_damping, log_gain, log_floor = theta.tolist()
         damping = math.exp(log_damping)
         if not (low <= wave_freq <= high and min_damping <= damping <= max_damping):

@@ -27,19 +27,6 @@ IDLE_TIMEOUT = 600.0  # [s] a thread with no job for this long ends (longer than
 _Job = tuple[Callable[..., object], tuple[Any, ...]] | None  # None: the shutdown marker
 
 
-class _WorkerThread(threading.Thread):
-    """A `JobWorker`'s thread (what `on_job_worker` looks for)."""
-
-
-def on_job_worker() -> bool:
-    """True when called on a `JobWorker`'s thread.
-
-    Code that runs there shares the GIL with a node's callbacks and can give it up now and then
-    (`core.frequency`'s spectrum fit does).
-    """
-    return isinstance(threading.current_thread(), _WorkerThread)
-
-
 class JobWorker:
     """One daemon thread that runs submitted jobs one after the other."""
 
@@ -78,7 +65,7 @@ class JobWorker:
             self._pending += 1
             self._jobs.put((job, args))
             if self._thread is None:
-                self._thread = _WorkerThread(target=self._run, name=self.name, daemon=True)
+                self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
                 self._thread.start()  # once per thread, not once per job
 
     def wait(self, timeout: float | None = None) -> bool:

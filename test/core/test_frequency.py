@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import math
-import threading
 
 import numpy as np
 from numpy.typing import NDArray
@@ -218,33 +217,3 @@ def test_a_repeated_estimate_on_the_same_inputs_is_the_stored_one() -> None:
     other = y.copy()
     other[5] = np.nextafter(other[5], np.inf)
     assert estimate(other, 1.0) is not first
-
-
-def test_the_fit_yields_the_gil_on_a_job_worker_with_the_same_numbers(
-        monkeypatch: pytest.MonkeyPatch) -> None:
-    # On a JobWorker thread (the node's trainings) the spectrum fit sleeps every
-    # FIT_YIELD_EVALUATIONS evaluations so the pose callback gets the GIL; on the main thread
-    # (replay) and on other threads (Dask's benchmark workers) it never sleeps. Same result.
-    from lf_predictor_ros.core import frequency
-    from lf_predictor_ros.core.job_worker import JobWorker
-
-    sleeps: list[float] = []
-    monkeypatch.setattr(frequency.time, 'sleep', sleeps.append)
-    data = frequency._as_columns(measured(32, 0.7, 1200.0, 1.0, 0.05))
-    results: list[FrequencyEstimate] = []
-
-    def run() -> None:
-        results.append(frequency._estimate(data, 1.0, HIGHPASS_CUTOFF, WAVE_BAND,
-                                           MIN_PEAK_RATIO, None))
-    run()
-    plain = threading.Thread(target=run)
-    plain.start()
-    plain.join(60.0)
-    assert len(results) == 2 and sleeps == []
-    worker = JobWorker('test-worker')
-    worker.submit(run)
-    assert worker.wait(60.0)
-    worker.shutdown()
-    assert len(results) == 3 and results[0].confident
-    assert results[0] == results[1] == results[2]
-    assert len(sleeps) >= 2 and set(sleeps) == {frequency.FIT_YIELD_SECONDS}

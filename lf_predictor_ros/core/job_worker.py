@@ -1,9 +1,9 @@
 """A long-lived worker thread for the predictor's training and ω0 jobs (issue 13, cost).
 
-Starting a `threading.Thread` per job blocks the caller until the new thread has started: about
-3.5 ms of the pose callback on the project's 2-core machine, once per retraining (the latency
-benchmark's max). One daemon thread fed by a queue costs the caller a queue put, and the thread
-is started once.
+Starting a `threading.Thread` per job blocks the caller until the new thread has started. On the
+project's 2-core machine the pose callback that started a training took 5.3 ms (median of 25;
+1.2–1.4 ms with this worker; docs/BENCHMARKS.md, twenty-eighth session). One daemon thread fed
+by a queue costs the caller a queue put, and the thread is started once.
 
 Jobs run one at a time, in the order submitted. The thread ends after ``idle_timeout`` seconds
 without a job, or after `shutdown` once the queue is empty; the next `submit` starts a new one.
@@ -47,7 +47,10 @@ class JobWorker:
 
     @property
     def busy(self) -> bool:
-        """A submitted job has not finished yet (queued or running)."""
+        """A submitted job has not finished yet (queued or running).
+
+        Read without the lock (one int, for the pose callback's check); `wait` synchronizes.
+        """
         return self._pending > 0
 
     @property

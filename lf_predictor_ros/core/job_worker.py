@@ -22,7 +22,9 @@ import threading
 import traceback
 from typing import Any
 
-IDLE_TIMEOUT = 600.0  # [s] a thread with no job for this long ends (longer than any Δ in use)
+# [s] a thread with no job for this long ends: 10 × the default Δ (60 s). With a longer Δ the
+# thread ends between trainings and each job starts one, as every job did before this worker.
+IDLE_TIMEOUT = 600.0
 
 _Job = tuple[Callable[..., object], tuple[Any, ...]] | None  # None: the shutdown marker
 

@@ -126,6 +126,8 @@ TWIN_SUFFIX = '.twin'
 # The force argument of the output notch's `CascadeFilter.update` (it ignores the force).
 _NO_FORCE = np.zeros(3)
 _NO_FORCE.flags.writeable = False
+_NO_ROWS = np.zeros((0, 3))  # the feedback history of a network without feedback (nfb 0)
+_NO_ROWS.flags.writeable = False
 
 FloatArray = NDArray[np.float64]
 
@@ -765,7 +767,7 @@ class AdaptivePredictor:
             return None
         u_hist = self._u.newest(max(p.nu, 1))  # only the rows the regressors need:
         y_hist = self._y.newest(max(p.ny, 1))  # the buffers hold up to N + ε samples
-        fb_hist = _newest(self._fb, max(p.nfb, 1))
+        fb_hist = _newest(self._fb, p.nfb) if p.nfb else _NO_ROWS  # nfb 0: not read
         return predict_step(model, u_hist, y_hist, fb_hist)
 
     def _plausible(self, prediction: FloatArray, y: FloatArray) -> bool:

@@ -22,6 +22,7 @@ Heading differences are wrapped. A missing prediction (None) forgets the predict
 from __future__ import annotations
 
 from collections import deque
+import math
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,30 +34,34 @@ ROUGHNESS_RATIO = 50.0  # [-] mean-square ratio, prediction / measurement, that 
 
 
 class _SecondDifference:
-    """Running EWMA of the squared second difference of one pose stream."""
+    """Running EWMA of the squared second difference of one pose stream.
+
+    Plain floats, per DOF: the same IEEE operations as the array form, without numpy's per-call
+    cost on the per-sample path (`AdaptivePredictor.update`).
+    """
 
     def __init__(self, ndof: int, alpha: float) -> None:
         self.ndof, self.alpha = ndof, alpha
-        self.history: deque[FloatArray] = deque(maxlen=3)
-        self.mean_square: FloatArray | None = None
+        self.history: deque[list[float]] = deque(maxlen=3)
+        self.mean_square: list[float] | None = None
 
     def clear(self) -> None:
         self.history.clear()
         self.mean_square = None
 
-    def add(self, pose: FloatArray) -> None:
-        self.history.append(np.array(pose[:self.ndof], dtype=np.float64))
+    def add(self, pose: list[float]) -> None:
+        self.history.append(pose[:self.ndof])
         if len(self.history) < 3:
             return
         a, b, c = self.history
-        second = (c - b) - (b - a)
+        second = [(c_i - b_i) - (b_i - a_i) for a_i, b_i, c_i in zip(a, b, c, strict=True)]
         if self.ndof == 3:
-            second[2] = wrap_angle(float(c[2] - b[2])) - wrap_angle(float(b[2] - a[2]))
-        square = second ** 2
-        if self.mean_square is None:
-            self.mean_square = square
-        else:
-            self.mean_square = self.mean_square + self.alpha * (square - self.mean_square)
+            second[2] = wrap_angle(c[2] - b[2]) - wrap_angle(b[2] - a[2])
+        square = [d * d for d in second]
+        mean = self.mean_square
+        alpha = self.alpha
+        self.mean_square = square if mean is None else \
+            [m + alpha * (s - m) for m, s in zip(mean, square, strict=True)]
 
 
 class RoughnessGuard:
@@ -82,14 +87,17 @@ class RoughnessGuard:
 
     def update(self, measured: FloatArray, predicted: FloatArray | None) -> bool:
         """Add one sample; True while the prediction is ``ratio`` × rougher than measured."""
-        if np.all(np.isfinite(measured)):
-            self._measured.add(measured)
+        measured_values = np.asarray(measured, dtype=np.float64).tolist()
+        if all(map(math.isfinite, measured_values)):
+            self._measured.add(measured_values)
         if predicted is None:
             self._predicted.clear()
             return False
-        if np.all(np.isfinite(predicted)):
-            self._predicted.add(predicted)
+        predicted_values = np.asarray(predicted, dtype=np.float64).tolist()
+        if all(map(math.isfinite, predicted_values)):
+            self._predicted.add(predicted_values)
         ref, own = self._measured.mean_square, self._predicted.mean_square
         if ref is None or own is None:
             return False
-        return bool(np.any(own > self.ratio * ref))
+        ratio = self.ratio
+        return any(o > ratio * r for o, r in zip(own, ref, strict=True))

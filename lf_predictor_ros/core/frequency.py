@@ -36,6 +36,8 @@ Heading must be unwrapped (``heading.unwrap_heading``) before it is passed here.
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 import math
 import threading
@@ -84,6 +86,13 @@ class FrequencyEstimate:
     peak_ratio: float
     per_dof: tuple[float, ...]
     peak_damping: float = math.nan
+
+
+# What computes an estimate that is not cached: `spectrum_estimate`'s arguments in, its result
+# out (`spectrum_fit_by`).
+SpectrumFit = Callable[[_FloatArray, float, float, tuple[float, float], float,
+                        float | FrequencyEstimate | None], FrequencyEstimate]
+_FIT = threading.local()  # .fit: this thread's SpectrumFit (none set: `spectrum_estimate`)
 
 
 def welch_segment_length(n_samples: int) -> int:
@@ -147,8 +156,8 @@ def estimate_wave_peak_freq(
         cached = _RECENT.get(key)
     if cached is not None:
         return cached
-    estimate = _estimate(data, sample_time, highpass_cutoff, wave_band, min_peak_ratio,
-                         previous)
+    fit: SpectrumFit = getattr(_FIT, 'fit', None) or spectrum_estimate
+    estimate = fit(data, sample_time, highpass_cutoff, wave_band, min_peak_ratio, previous)
     with _RECENT_LOCK:
         _RECENT[key] = estimate
         while len(_RECENT) > _RECENT_SIZE:
@@ -156,10 +165,27 @@ def estimate_wave_peak_freq(
     return estimate
 
 
-def _estimate(data: _FloatArray, sample_time: float, highpass_cutoff: float,
-              wave_band: tuple[float, float], min_peak_ratio: float,
-              previous: float | FrequencyEstimate | None) -> FrequencyEstimate:
-    """``estimate_wave_peak_freq`` of checked (n, k) data (no cache)."""
+@contextmanager
+def spectrum_fit_by(fit: SpectrumFit | None) -> Iterator[None]:
+    """Within the block, this thread's uncached estimates are computed by ``fit``.
+
+    ``fit`` takes `spectrum_estimate`'s arguments and returns its result, e.g.
+    `core.fit_process.FitProcess`, which runs it in a child process; None: `spectrum_estimate`
+    itself, on this thread. The cache of recent estimates stays in this process. Other threads
+    are not affected (a thread-local setting, as numpy's ``errstate``).
+    """
+    before = getattr(_FIT, 'fit', None)
+    _FIT.fit = fit
+    try:
+        yield
+    finally:
+        _FIT.fit = before
+
+
+def spectrum_estimate(data: _FloatArray, sample_time: float, highpass_cutoff: float,
+                      wave_band: tuple[float, float], min_peak_ratio: float,
+                      previous: float | FrequencyEstimate | None) -> FrequencyEstimate:
+    """``estimate_wave_peak_freq`` of checked (n, k) data (no cache; a pure function)."""
     omega, psd = _compensated_psd(data, sample_time, highpass_cutoff)
     in_band = (omega >= wave_band[0]) & (omega <= wave_band[1])
     per_dof: list[float] = []

@@ -85,7 +85,8 @@ import torch
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.estimator import EstimatorState, EstimatorStatus
 from lf_predictor_ros.core.filters import low_pass_step
-from lf_predictor_ros.core.frequency import FrequencyEstimate
+from lf_predictor_ros.core.fit_process import FitProcess, shared_fit_process
+from lf_predictor_ros.core.frequency import FrequencyEstimate, spectrum_fit_by
 from lf_predictor_ros.core.heading import ContinuousHeading, wrap_angle, wrap_pose
 from lf_predictor_ros.core.job_worker import JobWorker
 from lf_predictor_ros.core.motion_gate import (
@@ -264,6 +265,8 @@ class AdaptivePredictor:
         self._outcomes: queue.SimpleQueue[_JobOutcome] = queue.SimpleQueue()
         self._stop = threading.Event()
         self._worker = JobWorker(worker_name)  # trainings and ω0 jobs, one at a time
+        # the worker's ω0 spectrum fits run in a child process (core.fit_process); inline: here
+        self._fit_process: FitProcess | None = shared_fit_process() if background else None
         self._generation = 0
         self._model: NumpyNnarmax | None = None
         self._state_dict: dict[str, torch.Tensor] | None = None
@@ -1046,7 +1049,8 @@ class AdaptivePredictor:
     def _frequency_job(self, generation: int, y: FloatArray,
                        previous: FrequencyEstimate | float | None) -> None:
         try:
-            estimate = estimate_frequency(self.params, y, previous)
+            with spectrum_fit_by(self._fit_process):
+                estimate = estimate_frequency(self.params, y, previous)
         except (ValueError, FloatingPointError):
             return  # too little data for the spectrum yet: try again after Δ
         self._outcomes.put(_JobOutcome(generation, None, None, frequency=estimate))
@@ -1057,7 +1061,8 @@ class AdaptivePredictor:
              before_restart: tuple[float, TargetWindow] | None = None) -> None:
         """Worker body: never raises; the outcome goes through the queue."""
         try:
-            with self._training_lock:  # one training at a time per lock (the gate's twin)
+            with self._training_lock, spectrum_fit_by(self._fit_process):
+                # one training at a time per lock (the gate's twin)
                 result = run_retraining(self.params, snapshot, incumbent, targets, frequency,
                                         stop, before_restart)
         except Exception as exc:  # noqa: BLE001 - any failure must keep the node alive

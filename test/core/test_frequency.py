@@ -205,8 +205,8 @@ def test_a_repeated_estimate_on_the_same_inputs_is_the_stored_one() -> None:
     from lf_predictor_ros.core import frequency
 
     y = measured(31, 0.7, 1200.0, 1.0, 0.05)
-    fresh = frequency._estimate(frequency._as_columns(y), 1.0, HIGHPASS_CUTOFF, WAVE_BAND,
-                                MIN_PEAK_RATIO, None)
+    fresh = frequency.spectrum_estimate(frequency._as_columns(y), 1.0, HIGHPASS_CUTOFF,
+                                        WAVE_BAND, MIN_PEAK_RATIO, None)
     first = estimate(y, 1.0)
     assert first == fresh
     assert estimate(y.copy(), 1.0) is first

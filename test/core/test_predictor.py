@@ -13,6 +13,7 @@ import math
 from pathlib import Path
 import threading
 import time
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -324,6 +325,40 @@ def test_background_training_never_blocks_update_and_swaps_atomically(
         check_atomic_swap(spy, models, records)
     finally:
         predictor.close()
+
+
+def test_background_omega_fits_run_in_the_child_with_the_inline_numbers(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The worker's ω0 spectrum fits go to `core.fit_process`; the estimate is the inline one."""
+    from lf_predictor_ros.core import fit_process, frequency
+
+    calls: list[int] = []
+
+    class Counted(fit_process.FitProcess):
+        def __call__(self, *args: Any) -> frequency.FrequencyEstimate:
+            calls.append(1)
+            return super().__call__(*args)
+
+    counted = Counted()
+    monkeypatch.setattr(predictor_module, 'shared_fit_process', lambda: counted)
+    t, pose, force = synthetic_onedof(FIRST_TRAINING + 5, seed=22)
+    inline = AdaptivePredictor(SMALL.replace(motion_gate=False), background=False)
+    background = AdaptivePredictor(SMALL.replace(motion_gate=False), background=True)
+    try:
+        feed(inline, t, pose, force, 0, len(t))
+        assert not calls
+        monkeypatch.setattr(frequency, '_RECENT', frequency.OrderedDict())  # computed afresh
+        for i in range(len(t)):
+            background.update(float(t[i]), pose[i], force[i])
+            assert background.wait_for_training(60.0)
+        assert background.counters['trainings'] == inline.counters['trainings'] == 1
+        assert calls and counted.starts == 1 and counted.failures == 0
+        assert background.wave_peak_freq == inline.wave_peak_freq
+        assert background.wave_peak_freq == pytest.approx(WAVE_PEAK_FREQ, rel=0.1)
+    finally:
+        background.close()
+        inline.close()
+        counted.close()
 
 
 def check_atomic_swap(spy: PredictSpy, models: list[NumpyNnarmax | None],

@@ -1,0 +1,103 @@
+"""The ω0 spectrum fit in a child process (issue 13, cost: the node's callbacks while training).
+
+scipy's Nelder-Mead (`frequency._fit_peak`), run on the predictor's worker thread, keeps the
+node's pose callbacks from taking the GIL for up to 132 ms; the longest callbacks while training
+(37–112 ms) overlapped it (docs/BENCHMARKS.md, twenty-eighth session). In a child process the fit
+holds no lock of the node's, and the worker thread waits for its result with the GIL released.
+
+`FitProcess` is a `frequency.SpectrumFit`: called with `frequency.spectrum_estimate`'s
+arguments, it returns that function's result, computed in one long-lived child process (a
+`ProcessPoolExecutor` of one worker, started by the first call). The child comes from the
+'forkserver' start method: a fork of a small server process that has imported numpy, scipy and
+`core.frequency` only, never a fork of the node, whose rclpy and torch threads a fork would copy
+in an unknown state ('spawn' where forkserver does not exist). Its numbers are those of the
+calling thread: the same function, library and CPU (`test/core/test_fit_process.py`).
+
+An error of the estimate itself (a ValueError for too little data) is raised to the caller as
+it is. When the child cannot be started or dies, the estimate is computed on the calling thread
+instead (the same numbers; counted in ``failures``) and the next call starts a new child.
+
+The predictor uses it for its background jobs only (`frequency.spectrum_fit_by`); inline
+predictors (replay, benchmarks) compute on their own thread as before.
+"""
+from __future__ import annotations
+
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+import multiprocessing
+import threading
+
+from lf_predictor_ros.core.frequency import FrequencyEstimate, _FloatArray, spectrum_estimate
+
+# what the forkserver imports once, before it forks the child
+PRELOAD = ['lf_predictor_ros.core.frequency']
+
+
+class FitProcess:
+    """`frequency.spectrum_estimate` in one long-lived child process (module docstring)."""
+
+    def __init__(self) -> None:
+        """No process runs until the first call."""
+        self._lock = threading.Lock()
+        self._executor: ProcessPoolExecutor | None = None
+        self.failures = 0  # calls computed on the caller's thread: no child, or it died
+        self.starts = 0  # children started
+
+    def __call__(self, data: _FloatArray, sample_time: float, highpass_cutoff: float,
+                 wave_band: tuple[float, float], min_peak_ratio: float,
+                 previous: float | FrequencyEstimate | None) -> FrequencyEstimate:
+        """`spectrum_estimate` of these arguments, computed in the child."""
+        args = (data, sample_time, highpass_cutoff, wave_band, min_peak_ratio, previous)
+        try:
+            future = self._running().submit(spectrum_estimate, *args)
+            return future.result()
+        except (BrokenProcessPool, OSError, RuntimeError):
+            # no child (cannot start, killed, shut down meanwhile): this thread computes it
+            self._discard()
+            with self._lock:
+                self.failures += 1
+            return spectrum_estimate(*args)
+
+    @property
+    def running(self) -> bool:
+        """A child process is (or is being) started."""
+        return self._executor is not None
+
+    def close(self) -> None:
+        """Stop the child (does not wait); the next call starts a new one."""
+        self._discard()
+
+    def _running(self) -> ProcessPoolExecutor:
+        with self._lock:
+            if self._executor is None:
+                self._executor = ProcessPoolExecutor(max_workers=1, mp_context=_context())
+                self.starts += 1
+            return self._executor
+
+    def _discard(self) -> None:
+        with self._lock:
+            executor, self._executor = self._executor, None
+        if executor is not None:
+            executor.shutdown(wait=False, cancel_futures=True)
+
+
+def _context() -> multiprocessing.context.BaseContext:
+    """The forkserver context with the frequency module preloaded; spawn without forkserver."""
+    if 'forkserver' not in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context('spawn')
+    context = multiprocessing.get_context('forkserver')
+    context.set_forkserver_preload(PRELOAD)  # only read when the server starts
+    return context
+
+
+_SHARED: FitProcess | None = None
+_SHARED_LOCK = threading.Lock()
+
+
+def shared_fit_process() -> FitProcess:
+    """The process-wide `FitProcess` (one child for every predictor of this process)."""
+    global _SHARED
+    with _SHARED_LOCK:
+        if _SHARED is None:
+            _SHARED = FitProcess()
+        return _SHARED

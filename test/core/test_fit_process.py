@@ -1,0 +1,122 @@
+"""The ω0 spectrum fit in a child process (core/fit_process.py)."""
+from __future__ import annotations
+
+import math
+import threading
+
+import numpy as np
+import pytest
+
+from lf_predictor_ros.core import frequency
+from lf_predictor_ros.core.fit_process import FitProcess, shared_fit_process
+from lf_predictor_ros.core.frequency import FrequencyEstimate, spectrum_estimate, spectrum_fit_by
+
+WAVE_BAND = (0.25, 1.4)  # rad/s
+HIGHPASS_CUTOFF = 0.2  # rad/s
+MIN_PEAK_RATIO = 5.0
+
+
+def measured(seed: int, wave_std: float) -> np.ndarray:
+    """20 min at 1 s: a random walk, waves of std ``wave_std`` [m] and sensor noise (0.05 m).
+
+    The waves: 120 random-phase sinusoids, frequencies drawn about 0.6 rad/s.
+    """
+    rng = np.random.default_rng(seed)
+    t = np.arange(1200.0)
+    freqs = rng.normal(0.6, 0.03, 120)
+    waves = np.sin(np.outer(t, freqs) + rng.uniform(0.0, 2.0 * math.pi, 120)).sum(axis=1)
+    walk = np.cumsum(rng.standard_normal(t.size)) * 0.05
+    return walk + wave_std * waves / waves.std() + 0.05 * rng.standard_normal(t.size)
+
+
+def arguments(seed: int, previous: float | FrequencyEstimate | None = None) -> tuple[
+        np.ndarray, float, float, tuple[float, float], float, float | FrequencyEstimate | None]:
+    """`spectrum_estimate`'s arguments for a seeded two-DOF record (20 min at 1 s)."""
+    data = np.column_stack([measured(seed, 0.7), measured(seed + 100, 0.3)])
+    return data, 1.0, HIGHPASS_CUTOFF, WAVE_BAND, MIN_PEAK_RATIO, previous
+
+
+@pytest.fixture
+def fit() -> FitProcess:
+    process = FitProcess()
+    yield process
+    process.close()
+
+
+def test_the_child_computes_the_same_numbers_as_this_thread(fit: FitProcess) -> None:
+    assert not fit.running
+    for seed, previous in ((1, None), (2, 0.5), (3, FrequencyEstimate(0.7, True, 9.0, (0.7,)))):
+        args = arguments(seed, previous)
+        here = spectrum_estimate(*args)
+        there = fit(*args)
+        assert there == here  # every field, to the last bit (NaN-free here)
+        assert 0.55 < there.wave_peak_freq < 0.65 and there.confident
+    assert fit.running and fit.starts == 1 and fit.failures == 0
+
+
+def test_an_estimate_error_reaches_the_caller_as_it_is(fit: FitProcess) -> None:
+    data, *rest = arguments(4)
+    with pytest.raises(ValueError, match='padlen') as here:
+        spectrum_estimate(data[:3], *rest)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match='padlen') as there:  # scipy's, raised in the child
+        fit(data[:3], *rest)  # type: ignore[arg-type]
+    assert str(there.value) == str(here.value)
+    assert fit.failures == 0 and fit.running
+
+
+def test_a_killed_child_is_replaced_and_the_call_answered_here(fit: FitProcess) -> None:
+    args = arguments(5)
+    expected = spectrum_estimate(*args)
+    assert fit(*args) == expected
+    executor = fit._executor
+    assert executor is not None
+    for process in list(executor._processes.values()):  # type: ignore[union-attr]
+        process.kill()
+        process.join(timeout=10.0)
+    assert fit(*args) == expected  # the pool is broken: computed on this thread
+    assert fit.failures == 1 and not fit.running
+    assert fit(*args) == expected  # a new child
+    assert fit.starts == 2 and fit.failures == 1
+
+
+def test_the_setting_is_per_thread_and_restored() -> None:
+    calls: list[str] = []
+
+    def counting(*args: object) -> FrequencyEstimate:
+        calls.append(threading.current_thread().name)
+        return FrequencyEstimate(0.61, True, 20.0, (0.61,))
+
+    data = arguments(6)[0]
+    other: list[FrequencyEstimate] = []
+    with spectrum_fit_by(counting):
+        first = frequency.estimate_wave_peak_freq(data, 1.0, highpass_cutoff=HIGHPASS_CUTOFF,
+                                                  wave_band=WAVE_BAND,
+                                                  min_peak_ratio=MIN_PEAK_RATIO, previous=0.42)
+        thread = threading.Thread(target=lambda: other.append(frequency.estimate_wave_peak_freq(
+            data, 1.0, highpass_cutoff=HIGHPASS_CUTOFF, wave_band=WAVE_BAND,
+            min_peak_ratio=MIN_PEAK_RATIO, previous=0.43)))
+        thread.start()
+        thread.join()
+    after = frequency.estimate_wave_peak_freq(data, 1.0, highpass_cutoff=HIGHPASS_CUTOFF,
+                                              wave_band=WAVE_BAND, min_peak_ratio=MIN_PEAK_RATIO,
+                                              previous=0.44)
+    assert first.wave_peak_freq == 0.61 and len(calls) == 1  # only this thread's call
+    assert other[0] == after == spectrum_estimate(data, 1.0, HIGHPASS_CUTOFF, WAVE_BAND,
+                                                  MIN_PEAK_RATIO, 0.44)
+    assert math.isclose(after.wave_peak_freq, 0.6, rel_tol=0.08)
+
+
+def test_one_shared_process_for_the_background_predictors() -> None:
+    from lf_predictor_ros.core.params import PredictorParams
+    from lf_predictor_ros.core.predictor import AdaptivePredictor
+
+    background = AdaptivePredictor(PredictorParams(), background=True)
+    inline = AdaptivePredictor(PredictorParams(), background=False)
+    try:
+        assert background._fit_process is shared_fit_process()
+        assert background._moving is not None
+        assert background._moving._fit_process is shared_fit_process()
+        assert inline._fit_process is None
+    finally:
+        background.close()
+        inline.close()

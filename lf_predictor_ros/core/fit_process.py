@@ -25,6 +25,7 @@ from __future__ import annotations
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 import multiprocessing
+import signal
 import threading
 
 from lf_predictor_ros.core.frequency import FrequencyEstimate, _FloatArray, spectrum_estimate
@@ -58,6 +59,21 @@ class FitProcess:
                 self.failures += 1
             return spectrum_estimate(*args)
 
+    def start(self) -> bool:
+        """Start the child now and wait until it answers (not at the first fit).
+
+        The first start of a process's forkserver imports numpy and scipy in a fresh
+        interpreter (1–2 s): at the first fit, a lockstep run would wait that long for its first
+        ω0 (the demo lost its first two trainings). False if no child can be started.
+        """
+        try:
+            return bool(self._running().submit(_ready).result())
+        except (BrokenProcessPool, OSError, RuntimeError):
+            self._discard()
+            with self._lock:
+                self.failures += 1
+            return False
+
     @property
     def running(self) -> bool:
         """A child process is (or is being) started."""
@@ -70,7 +86,8 @@ class FitProcess:
     def _running(self) -> ProcessPoolExecutor:
         with self._lock:
             if self._executor is None:
-                self._executor = ProcessPoolExecutor(max_workers=1, mp_context=_context())
+                self._executor = ProcessPoolExecutor(max_workers=1, mp_context=_context(),
+                                                     initializer=_child_setup)
                 self.starts += 1
             return self._executor
 
@@ -79,6 +96,20 @@ class FitProcess:
             executor, self._executor = self._executor, None
         if executor is not None:
             executor.shutdown(wait=False, cancel_futures=True)
+
+
+def _ready() -> bool:
+    """The child's answer to `FitProcess.start`."""
+    return True
+
+
+def _child_setup() -> None:
+    """In the child: Ctrl-C is the parent's to handle.
+
+    A terminal's Ctrl-C reaches the whole process group. The parent (the node) ends on it and
+    shuts the child down; the child itself would only print a KeyboardInterrupt traceback.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _context() -> multiprocessing.context.BaseContext:

@@ -334,6 +334,8 @@ class AdaptivePredictor:
         self._start_segment()
         if background:
             warm_up()  # import torch's lazy modules now, not on the first training
+            if self._fit_process is not None:
+                self._fit_process.start()  # the child now, not at the first ω0 fit
             _LIVE_PREDICTORS.add(self)
 
     # ---- the LfEstimator interface ----------------------------------------------------------

@@ -2,12 +2,15 @@
 from __future__ import annotations
 
 import math
+import os
+import signal
 import threading
+import time
 
 import numpy as np
 import pytest
 
-from lf_predictor_ros.core import frequency
+from lf_predictor_ros.core import fit_process, frequency
 from lf_predictor_ros.core.fit_process import FitProcess, shared_fit_process
 from lf_predictor_ros.core.frequency import FrequencyEstimate, spectrum_estimate, spectrum_fit_by
 
@@ -120,3 +123,34 @@ def test_one_shared_process_for_the_background_predictors() -> None:
     finally:
         background.close()
         inline.close()
+
+
+def test_ctrl_c_is_left_to_the_parent(fit: FitProcess) -> None:
+    """A terminal's Ctrl-C reaches the child too: it ignores it (no traceback, still serving)."""
+    args = arguments(7)
+    expected = fit(*args)
+    executor = fit._executor
+    assert executor is not None
+    for process in list(executor._processes.values()):  # type: ignore[union-attr]
+        assert process.pid is not None
+        os.kill(process.pid, signal.SIGINT)
+    time.sleep(0.5)
+    assert fit(*args) == expected
+    assert fit.failures == 0 and fit.starts == 1
+
+
+def test_started_ahead_and_no_child_means_the_same_numbers_here(
+        fit: FitProcess, monkeypatch: pytest.MonkeyPatch) -> None:
+    assert fit.start() and fit.running and fit.starts == 1
+    args = arguments(8)
+    assert fit(*args) == spectrum_estimate(*args)
+    assert fit.starts == 1 and fit.failures == 0
+    fit.close()
+
+    def no_process() -> None:
+        raise OSError('no processes here')
+
+    monkeypatch.setattr(fit_process, '_context', no_process)
+    assert not fit.start() and not fit.running and fit.failures == 1
+    assert fit(*args) == spectrum_estimate(*args)  # computed on this thread
+    assert fit.failures == 2 and fit.starts == 1  # each try counts; none started

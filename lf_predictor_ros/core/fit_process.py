@@ -7,11 +7,12 @@ holds no lock of the node's, and the worker thread waits for its result with the
 
 `FitProcess` is a `frequency.SpectrumFit`: called with `frequency.spectrum_estimate`'s
 arguments, it returns that function's result, computed in one long-lived child process (a
-`ProcessPoolExecutor` of one worker, started by the first call). The child comes from the
-'forkserver' start method: a fork of a small server process that has imported numpy, scipy and
-`core.frequency` only, never a fork of the node, whose rclpy and torch threads a fork would copy
-in an unknown state ('spawn' where forkserver does not exist). Its numbers are those of the
-calling thread: the same function, library and CPU (`test/core/test_fit_process.py`).
+`ProcessPoolExecutor` of one worker, started by `FitProcess.start` or the first call). The
+child comes from the 'forkserver' start method: a fork of a small server process that has
+imported numpy, scipy and `core.frequency` only, never a fork of the node, whose rclpy and torch
+threads a fork would copy in an unknown state ('spawn' where forkserver does not exist). Its
+numbers are those of the calling thread: the same function, library and CPU
+(`test/core/test_fit_process.py`).
 
 An error of the estimate itself (a ValueError for too little data) is raised to the caller as
 it is. When the child cannot be started or dies, the estimate is computed on the calling thread
@@ -22,16 +23,19 @@ predictors (replay, benchmarks) compute on their own thread as before.
 """
 from __future__ import annotations
 
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable
+from concurrent.futures import CancelledError, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 import multiprocessing
 import signal
 import threading
+from typing import TypeVar
 
 from lf_predictor_ros.core.frequency import FrequencyEstimate, _FloatArray, spectrum_estimate
 
 # what the forkserver imports once, before it forks the child
 PRELOAD = ['lf_predictor_ros.core.frequency']
+_T = TypeVar('_T')
 
 
 class FitProcess:
@@ -49,15 +53,10 @@ class FitProcess:
                  previous: float | FrequencyEstimate | None) -> FrequencyEstimate:
         """`spectrum_estimate` of these arguments, computed in the child."""
         args = (data, sample_time, highpass_cutoff, wave_band, min_peak_ratio, previous)
-        try:
-            future = self._running().submit(spectrum_estimate, *args)
-            return future.result()
-        except (BrokenProcessPool, OSError, RuntimeError):
-            # no child (cannot start, killed, shut down meanwhile): this thread computes it
-            self._discard()
-            with self._lock:
-                self.failures += 1
+        answer = self._ask(spectrum_estimate, *args)
+        if answer is None:  # no child (cannot start, killed, closed meanwhile): computed here
             return spectrum_estimate(*args)
+        return answer
 
     def start(self) -> bool:
         """Start the child now and wait until it answers (not at the first fit).
@@ -66,13 +65,26 @@ class FitProcess:
         interpreter (1–2 s): at the first fit, a lockstep run would wait that long for its first
         ω0 (the demo lost its first two trainings). False if no child can be started.
         """
+        return self._ask(_ready) is not None
+
+    def _ask(self, function: Callable[..., _T], *args: object) -> _T | None:
+        """``function(*args)`` in the child; None (counted) when the child is not there.
+
+        An exception of ``function`` itself is raised here as it is.
+        """
         try:
-            return bool(self._running().submit(_ready).result())
-        except (BrokenProcessPool, OSError, RuntimeError):
-            self._discard()
-            with self._lock:
-                self.failures += 1
-            return False
+            future = self._running().submit(function, *args)
+        except (OSError, RuntimeError):  # cannot start, or a broken or closed pool
+            future = None
+        if future is not None:
+            try:
+                return future.result()
+            except (BrokenProcessPool, CancelledError):  # the child died, or close() meanwhile
+                pass
+        self._discard()
+        with self._lock:
+            self.failures += 1
+        return None
 
     @property
     def running(self) -> bool:

@@ -154,3 +154,12 @@ def test_started_ahead_and_no_child_means_the_same_numbers_here(
     assert not fit.start() and not fit.running and fit.failures == 1
     assert fit(*args) == spectrum_estimate(*args)  # computed on this thread
     assert fit.failures == 2 and fit.starts == 1  # each try counts; none started
+
+
+def test_closed_then_called_starts_a_new_child(fit: FitProcess) -> None:
+    args = arguments(9)
+    expected = fit(*args)
+    fit.close()
+    assert not fit.running
+    assert fit(*args) == expected
+    assert fit.starts == 2 and fit.failures == 0

@@ -27,14 +27,17 @@ from collections.abc import Callable
 from concurrent.futures import CancelledError, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 import multiprocessing
+import os
 import signal
 import threading
+import time
 from typing import TypeVar
 
 from lf_predictor_ros.core.frequency import FrequencyEstimate, _FloatArray, spectrum_estimate
 
 # what the forkserver imports once, before it forks the child
 PRELOAD = ['lf_predictor_ros.core.frequency']
+PARENT_CHECK_PERIOD = 1.0  # [s] how often the child checks that the node still exists
 _T = TypeVar('_T')
 
 
@@ -99,7 +102,8 @@ class FitProcess:
         with self._lock:
             if self._executor is None:
                 self._executor = ProcessPoolExecutor(max_workers=1, mp_context=_context(),
-                                                     initializer=_child_setup)
+                                                     initializer=_child_setup,
+                                                     initargs=(os.getpid(),))
                 self.starts += 1
             return self._executor
 
@@ -115,13 +119,32 @@ def _ready() -> bool:
     return True
 
 
-def _child_setup() -> None:
-    """In the child: Ctrl-C is the parent's to handle.
+def _child_setup(parent: int) -> None:
+    """In the child: Ctrl-C is the parent's to handle, and the child ends with its parent.
 
     A terminal's Ctrl-C reaches the whole process group. The parent (the node) ends on it and
     shuts the child down; the child itself would only print a KeyboardInterrupt traceback.
+    A parent killed outright (SIGKILL, a crash) cannot shut it down, and a pool worker waits for
+    work forever (it holds its own queue's write end), keeping the forkserver alive with it: a
+    daemon thread checks every `PARENT_CHECK_PERIOD` that the parent still exists.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_end_with, args=(parent,), name='fit-parent-watch',
+                     daemon=True).start()
+
+
+def _end_with(parent: int) -> None:
+    """End this process once ``parent`` has ended.
+
+    Polled: the parent of a forkserver child is the forkserver, not the node, so Linux's
+    parent-death signal cannot tell.
+    """
+    while True:
+        time.sleep(PARENT_CHECK_PERIOD)
+        try:
+            os.kill(parent, 0)
+        except (ProcessLookupError, PermissionError):  # gone (or the pid is another user's now)
+            os._exit(0)
 
 
 def _context() -> multiprocessing.context.BaseContext:

@@ -3,7 +3,10 @@ from __future__ import annotations
 
 import math
 import os
+from pathlib import Path
 import signal
+import subprocess
+import sys
 import threading
 import time
 
@@ -11,7 +14,7 @@ import numpy as np
 import pytest
 
 from lf_predictor_ros.core import fit_process, frequency
-from lf_predictor_ros.core.fit_process import FitProcess, shared_fit_process
+from lf_predictor_ros.core.fit_process import PARENT_CHECK_PERIOD, FitProcess, shared_fit_process
 from lf_predictor_ros.core.frequency import FrequencyEstimate, spectrum_estimate, spectrum_fit_by
 
 WAVE_BAND = (0.25, 1.4)  # rad/s
@@ -163,3 +166,37 @@ def test_closed_then_called_starts_a_new_child(fit: FitProcess) -> None:
     assert not fit.running
     assert fit(*args) == expected
     assert fit.starts == 2 and fit.failures == 0
+
+
+def _alive(pid: int) -> bool:
+    """The process exists and is no zombie (Linux /proc)."""
+    try:
+        stat = Path(f'/proc/{pid}/stat').read_text()
+    except FileNotFoundError:
+        return False
+    return stat[stat.rindex(')') + 2] not in 'ZX'
+
+
+@pytest.mark.skipif(not Path('/proc/self/stat').exists(), reason='reads Linux /proc')
+def test_the_child_and_its_forkserver_end_when_the_node_is_killed() -> None:
+    """SIGKILL leaves no shutdown to the node: the child notices and ends, the server with it."""
+    code = ('import time\n'
+            'from lf_predictor_ros.core.fit_process import FitProcess\n'
+            'fit = FitProcess()\n'
+            'assert fit.start()\n'
+            'print(*[p.pid for p in fit._executor._processes.values()], flush=True)\n'
+            'time.sleep(120)\n')
+    node = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE)
+    try:
+        assert node.stdout is not None
+        child = int(node.stdout.readline())
+        stat = Path(f'/proc/{child}/stat').read_text()
+        server = int(stat[stat.rindex(')') + 2:].split()[1])  # the child's parent
+        assert _alive(child) and _alive(server) and server != node.pid
+    finally:
+        node.kill()
+        node.wait()
+    deadline = time.monotonic() + 10.0 * PARENT_CHECK_PERIOD
+    while (_alive(child) or _alive(server)) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not _alive(child) and not _alive(server)

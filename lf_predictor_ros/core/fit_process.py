@@ -77,8 +77,8 @@ class FitProcess:
         """
         try:
             future = self._running().submit(function, *args)
-        except (OSError, RuntimeError):  # cannot start, or a broken or closed pool
-            future = None
+        except Exception:  # noqa: BLE001 - no child: cannot start (e.g. in a daemonic process,
+            future = None  # an AssertionError), or a broken or closed pool
         if future is not None:
             try:
                 return future.result()

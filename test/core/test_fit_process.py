@@ -150,8 +150,8 @@ def test_started_ahead_and_no_child_means_the_same_numbers_here(
     assert fit.starts == 1 and fit.failures == 0
     fit.close()
 
-    def no_process() -> None:
-        raise OSError('no processes here')
+    def no_process() -> None:  # multiprocessing's refusal inside a daemonic process
+        raise AssertionError('daemonic processes are not allowed to have children')
 
     monkeypatch.setattr(fit_process, '_context', no_process)
     assert not fit.start() and not fit.running and fit.failures == 1

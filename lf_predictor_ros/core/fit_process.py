@@ -45,7 +45,7 @@ class FitProcess:
     """`frequency.spectrum_estimate` in one long-lived child process (module docstring)."""
 
     def __init__(self) -> None:
-        """No process runs until the first call."""
+        """No process runs until `start` or the first call."""
         self._lock = threading.Lock()
         self._executor: ProcessPoolExecutor | None = None
         self.failures = 0  # calls computed on the caller's thread: no child, or it died

@@ -590,6 +590,14 @@ class AdaptivePredictor:
         return self._gate_valid.copy()
 
     @property
+    def omega_fits_here(self) -> int:
+        """ω0 fits this process ran on a worker thread: no fit child process (0 inline).
+
+        Process-wide (one `core.fit_process` child serves every predictor of the process).
+        """
+        return 0 if self._fit_process is None else self._fit_process.failures
+
+    @property
     def source_switches(self) -> int:
         """Changes of the output's source seen with bumpless transfer on (0 when off)."""
         return self._switches

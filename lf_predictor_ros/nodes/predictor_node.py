@@ -742,6 +742,7 @@ class PredictorNode(InputHealth, LifecycleNode):
             **driver.values(),
             'ndof': self._params.ndof,
             'unfiltered_dofs': unfiltered,
+            'omega_fits_here': predictor.omega_fits_here,
             'warm_start': self._warm_start,
             'model_file': self._model_file,
             'active': self._active,

@@ -353,6 +353,7 @@ def test_background_omega_fits_run_in_the_child_with_the_inline_numbers(
             assert background.wait_for_training(60.0)
         assert background.counters['trainings'] == inline.counters['trainings'] == 1
         assert calls and counted.starts == 1 and counted.failures == 0
+        assert background.omega_fits_here == inline.omega_fits_here == 0
         assert background.wave_peak_freq == inline.wave_peak_freq
         assert background.wave_peak_freq == pytest.approx(WAVE_PEAK_FREQ, rel=0.1)
     finally:

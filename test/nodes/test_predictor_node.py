@@ -53,7 +53,7 @@ DIAGNOSTIC_KEYS = {'state', 'wave_peak_freq', 'last_loss', 'train_seconds', 'mod
                    'rough_retirements',
                    'dropped', 'invalid', 'out_of_order', 'outliers', 'gaps', 'resets',
                    'stale_thrust', 'unexpected_frame', 'callback_errors',
-                   'poses_accepted', 'forces_accepted'}
+                   'poses_accepted', 'forces_accepted', 'omega_fits_here'}
 
 torch.set_num_threads(1)
 
@@ -186,6 +186,7 @@ def test_pose_and_thrust_in_lf_pose_out_training_and_warm_start(
     assert int(report['poses_accepted']) == n  # 1 Hz poses: one per sample, none lost
     assert float(report['wave_peak_freq']) == pytest.approx(freqs[-1], rel=1e-5)
     assert int(report['dropped']) == 0 and int(report['unexpected_frame']) == 0
+    assert int(report['omega_fits_here']) == 0  # the ω0 fits ran in the child process
     # the worker saved the accepted network
     assert model_path.is_file()
     executor.remove_node(node)

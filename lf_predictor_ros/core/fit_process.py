@@ -48,7 +48,7 @@ class FitProcess:
         """No process runs until `start` or the first call."""
         self._lock = threading.Lock()
         self._executor: ProcessPoolExecutor | None = None
-        self.failures = 0  # calls computed on the caller's thread: no child, or it died
+        self.failures = 0  # fits computed on the caller's thread: no child, or it died
         self.starts = 0  # children started
 
     def __call__(self, data: _FloatArray, sample_time: float, highpass_cutoff: float,
@@ -58,6 +58,8 @@ class FitProcess:
         args = (data, sample_time, highpass_cutoff, wave_band, min_peak_ratio, previous)
         answer = self._ask(spectrum_estimate, *args)
         if answer is None:  # no child (cannot start, killed, closed meanwhile): computed here
+            with self._lock:
+                self.failures += 1
             return spectrum_estimate(*args)
         return answer
 
@@ -71,7 +73,7 @@ class FitProcess:
         return self._ask(_ready) is not None
 
     def _ask(self, function: Callable[..., _T], *args: object) -> _T | None:
-        """``function(*args)`` in the child; None (counted) when the child is not there.
+        """``function(*args)`` in the child; None when the child is not there.
 
         An exception of ``function`` itself is raised here as it is.
         """
@@ -85,8 +87,6 @@ class FitProcess:
             except (BrokenProcessPool, CancelledError):  # the child died, or close() meanwhile
                 pass
         self._discard()
-        with self._lock:
-            self.failures += 1
         return None
 
     @property

@@ -835,32 +835,13 @@ class NumpyNnarmax:
 
     def forward(self, x: FloatArray) -> FloatArray:
         """ŷLF(t + 1) for regressor rows (rows, n_regressors) or one row (n_regressors,)."""
-        spec = self.spec
-        if not spec.relative:
+        if not self.spec.relative:
             return self._forward_absolute(x)
-        if x.ndim == 1 and not (spec.ramp_invariant or spec.body_frame):
-            return self._forward_relative_row(x)
-        rows, base, turn = _network_frame(spec, x)
+        rows, base, turn = _network_frame(self.spec, x)
         out = self._forward_absolute(rows)
         if turn is not None:
             out = rotate_blocks(out, *turn)
         result: FloatArray = base + out
-        return result
-
-    def _forward_relative_row(self, x: FloatArray) -> FloatArray:
-        """`forward` of one raw row (n_regressors,) of a plain relative earth-frame network.
-
-        The same operations as `_network_frame` + `_forward_absolute` + the base, on one row
-        (the predict path), without the generic row handling: positions − y(t) block by block,
-        the forces as they are.
-        """
-        offset = _position_offset(self.spec)
-        n_out = self.spec.n_outputs
-        ref = x[offset:offset + n_out]
-        rows = np.array(x, dtype=np.float64)
-        positions = rows[offset:].reshape(-1, n_out)  # a view of the copy's ny (+ nfb) blocks
-        positions -= ref
-        result: FloatArray = ref + self._forward_absolute(rows)
         return result
 
     def _forward_absolute(self, x: FloatArray) -> FloatArray:

@@ -1,4 +1,12 @@
-"""declare_and_load / validated_update / LiveParameters on a real rclpy node (no DDS traffic)."""
+"""declare_and_load / validated_update / LiveParameters on a real rclpy node (no DDS traffic).
+
+The tests share one context whose participant lives for the whole module (`params_context`):
+each test's node is created and destroyed within milliseconds, and a participant deleted that
+young can meet Fast DDS 2.14's busy-wait for an in-flight discovery callback in
+``DomainParticipant::set_listener`` (eProsima/Fast-DDS#6513). Twice, in a full-suite run, the
+second test of this file spun there for good, inside ``rcl_node_fini`` with the GIL held, where no
+pytest timeout can end it (docs/BENCHMARKS.md, twenty-fourth and thirtieth sessions).
+"""
 from __future__ import annotations
 
 from collections.abc import Iterator
@@ -41,9 +49,29 @@ def _node(context: object, overrides: list[Parameter] | None = None) -> Node:
                 start_parameter_services=False)
 
 
+@pytest.fixture(scope='module')
+def params_context() -> Iterator[object]:
+    """One rclpy context for the module; an idle node keeps its one DDS participant alive.
+
+    rmw_fastrtps deletes a context's participant with its last node, so without the anchor
+    every test's short-lived node would create and delete a participant (module docstring).
+    """
+    import rclpy
+    from rclpy.context import Context
+
+    context = Context()
+    rclpy.init(context=context)
+    anchor = Node('params_test_anchor', context=context, start_parameter_services=False)
+    try:
+        yield context
+    finally:
+        anchor.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
 @pytest.fixture
-def node(ros_context: object) -> Iterator[Node]:
-    n = _node(ros_context)
+def node(params_context: object) -> Iterator[Node]:
+    n = _node(params_context)
     yield n
     n.destroy_node()
 
@@ -59,7 +87,7 @@ def test_defaults_are_declared_with_descriptions(node: Node) -> None:
     assert node.describe_parameter('lockstep').description == 'lockstep'
 
 
-def test_overrides_are_loaded_and_converted(ros_context: object) -> None:
+def test_overrides_are_loaded_and_converted(params_context: object) -> None:
     overrides = [
         Parameter('ctl.bandwidth', value=2),  # an INTEGER on the command line -> float
         Parameter('ctl.setpoint', value=[10, -5, 1]),
@@ -67,7 +95,7 @@ def test_overrides_are_loaded_and_converted(ros_context: object) -> None:
         Parameter('ctl.mass_diag', value=[1.0, 2.0, 3.0]),
         Parameter('ctl.lockstep', value=True),
     ]
-    n = _node(ros_context, overrides)
+    n = _node(params_context, overrides)
     try:
         config = declare_and_load(n, ExampleConfig, prefix='ctl')
     finally:
@@ -81,8 +109,8 @@ def test_overrides_are_loaded_and_converted(ros_context: object) -> None:
     assert config.seed == 3
 
 
-def test_invalid_startup_value_raises_the_dataclass_message(ros_context: object) -> None:
-    n = _node(ros_context, [Parameter('bandwidth', value=-0.5)])
+def test_invalid_startup_value_raises_the_dataclass_message(params_context: object) -> None:
+    n = _node(params_context, [Parameter('bandwidth', value=-0.5)])
     try:
         with pytest.raises(ValueError, match=r'bandwidth must be > 0 rad/s, got -0\.5'):
             declare_and_load(n, ExampleConfig)
@@ -90,8 +118,8 @@ def test_invalid_startup_value_raises_the_dataclass_message(ros_context: object)
         n.destroy_node()
 
 
-def test_wrong_type_names_the_parameter(ros_context: object) -> None:
-    n = _node(ros_context, [Parameter('seed', value='seven')])
+def test_wrong_type_names_the_parameter(params_context: object) -> None:
+    n = _node(params_context, [Parameter('seed', value='seven')])
     try:
         with pytest.raises(ValueError, match="parameter 'seed' must be of type integer"):
             declare_and_load(n, ExampleConfig)
@@ -139,8 +167,8 @@ def test_unsupported_field_type_is_a_type_error() -> None:
         field_specs(Bad)
 
 
-def test_runtime_defaults_replace_dataclass_defaults_not_overrides(ros_context: object) -> None:
-    n = _node(ros_context, [Parameter('setpoint', value=[1.0, 2.0, 3.0])])
+def test_runtime_defaults_replace_dataclass_defaults_not_overrides(params_context: object) -> None:
+    n = _node(params_context, [Parameter('setpoint', value=[1.0, 2.0, 3.0])])
     try:
         config = declare_and_load(n, ExampleConfig, defaults={'bandwidth': 0.7,
                                                               'setpoint': [9.0, 9.0, 9.0]})

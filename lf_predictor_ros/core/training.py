@@ -46,10 +46,20 @@ returns a new state_dict. It honours ``max_epochs``, ``max_seconds`` (wall time)
 thread (``torch.set_num_threads(1)``, restored afterwards) because the predict path and the other
 processes share the cores. Call ``warm_up()`` once at start-up: the first Jacobian makes torch
 import ``torch._dynamo`` (≈ 2 s, holding the GIL), which must not happen in the first retraining.
+
+It also runs with subnormal floats flushed to zero on its thread (the CPU's FTZ/DAZ modes,
+``torch.set_flush_denormal``; restored afterwards). Weight decay, warm-started from one training
+to the next, shrinks the weights of hidden units that the data do not use geometrically, until
+they are subnormal (below 2.2e-308): then every product with them, and with the tanh of the
+rows they feed, takes a slow path in the CPU. In a 2 h replay nine LM iterations in ten had
+such weights, and the training took half the replay's time. A subnormal term added to a normal
+number does not change it, so the estimates are the same to the bit (docs/BENCHMARKS.md,
+thirtieth session); the weights that were subnormal come out as exact zeros.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 import copy
 from dataclasses import dataclass
 import math
@@ -400,9 +410,34 @@ def train(
     previous_threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        return _train(net, u, y, targets, mask, settings, stop_event, start)
+        with subnormals_flushed():
+            return _train(net, u, y, targets, mask, settings, stop_event, start)
     finally:
         torch.set_num_threads(previous_threads)
+
+
+_SMALLEST_NORMAL = np.array([np.finfo(np.float64).tiny])  # [-] 2.2e-308
+
+
+def flushing_subnormals() -> bool:
+    """True when this thread's float arithmetic flushes subnormal results to zero (FTZ)."""
+    return float(np.multiply(_SMALLEST_NORMAL, 0.5)[0]) == 0.0
+
+
+@contextmanager
+def subnormals_flushed() -> Iterator[None]:
+    """Flush subnormal floats to zero on this thread inside the block (module docstring).
+
+    The CPU's FTZ and DAZ modes are per thread. Left as they were when they were already on, or
+    when the CPU has none (``torch.set_flush_denormal`` False: nothing changes then).
+    """
+    if flushing_subnormals() or not torch.set_flush_denormal(True):
+        yield
+        return
+    try:
+        yield
+    finally:
+        torch.set_flush_denormal(False)
 
 
 def _train(

@@ -17,8 +17,10 @@ from lf_predictor_ros.core.training import (
     Algorithm,
     TrainSettings,
     evaluate_loss,
+    flushing_subnormals,
     loss_scale,
     predict_window,
+    subnormals_flushed,
     train,
 )
 
@@ -616,3 +618,54 @@ def test_lm_fast_path_trains_to_the_dense_paths_loss(monkeypatch: pytest.MonkeyP
     assert fast.epochs == dense.epochs
     assert fast.loss == pytest.approx(dense.loss, rel=1e-9)
     np.testing.assert_allclose(fast.loss_history, dense.loss_history, rtol=1e-9)
+
+
+SMALLEST_NORMAL = float(np.finfo(np.float64).tiny)  # 2.2e-308
+
+
+def require_flush_support() -> None:
+    if not torch.set_flush_denormal(False):  # True where the CPU has FTZ/DAZ (x86 SSE3, ARM)
+        pytest.skip('this CPU cannot flush subnormal floats to zero')
+
+
+def test_subnormals_flushed_sets_the_mode_inside_and_restores_it() -> None:
+    require_flush_support()
+    assert not flushing_subnormals()
+    assert np.multiply(np.array([SMALLEST_NORMAL]), 0.5)[0] == SMALLEST_NORMAL / 2  # subnormal
+    with subnormals_flushed():
+        assert flushing_subnormals()
+        assert np.multiply(np.array([SMALLEST_NORMAL]), 0.5)[0] == 0.0
+        with subnormals_flushed():  # already on: left on when the inner block ends
+            assert flushing_subnormals()
+        assert flushing_subnormals()
+    assert not flushing_subnormals()
+    torch.set_flush_denormal(True)  # on before (a caller's own choice): not switched off
+    try:
+        with subnormals_flushed():
+            pass
+        assert flushing_subnormals()
+    finally:
+        torch.set_flush_denormal(False)
+
+
+def test_training_turns_subnormal_weights_into_the_zeros_they_act_as() -> None:
+    # Weight decay carried from training to training shrinks unused hidden units until their
+    # weights are subnormal; the trainer flushes them (training.py docstring). With FTZ/DAZ a
+    # subnormal weight is a zero in every product, so training from it gives the bits of training
+    # from zero, and no subnormal comes out.
+    require_flush_support()
+    spec, net, u, y, x, mask = one_layer_case(41)
+    settings = TrainSettings(max_epochs=5, max_seconds=60.0, min_grad=0.0, weight_decay=1e-3)
+    state = net.state_dict()
+    hidden = [k for k in state if k.startswith('hidden.')]
+    tiny = {k: state[k] * 1e-310 for k in hidden}  # |w| ≤ ~1e-310: subnormal, non-zero
+    assert all(((v != 0) & (v.abs() < SMALLEST_NORMAL)).any() for v in tiny.values())
+    net.load_state_dict({**state, **tiny})
+    from_tiny = train(net, u, y, x, mask, settings)
+    net.load_state_dict({**state, **{k: torch.zeros_like(v) for k, v in tiny.items()}})
+    from_zero = train(net, u, y, x, mask, settings)
+    assert not flushing_subnormals()  # the thread's mode is restored
+    assert from_tiny.epochs >= 1 and from_tiny.loss < from_tiny.initial_loss
+    for key, value in from_tiny.state_dict.items():
+        assert not ((value != 0) & (value.abs() < SMALLEST_NORMAL)).any(), key
+        assert torch.equal(value, from_zero.state_dict[key]), key

@@ -53,8 +53,9 @@ to the next, shrinks the weights of hidden units that the data do not use geomet
 they are subnormal (below 2.2e-308): then every product with them, and with the tanh of the
 rows they feed, takes a slow path in the CPU. In a 2 h replay nine LM iterations in ten had
 such weights, and the training took half the replay's time. A subnormal term added to a normal
-number does not change it, so the estimates are the same to the bit (docs/BENCHMARKS.md,
-thirtieth session); the weights that were subnormal come out as exact zeros.
+number does not change it, so the estimates do not change: the same to the bit in that replay and
+in the benchmark's cases (docs/BENCHMARKS.md, thirtieth session). The weights that were subnormal
+come out as exact zeros.
 """
 from __future__ import annotations
 

@@ -3,9 +3,10 @@
 The tests share one context whose participant lives for the whole module (`params_context`):
 each test's node is created and destroyed within milliseconds, and a participant deleted that
 young can meet Fast DDS 2.14's busy-wait for an in-flight discovery callback in
-``DomainParticipant::set_listener`` (eProsima/Fast-DDS#6513). Twice, in a full-suite run, the
-second test of this file spun there for good, inside ``rcl_node_fini`` with the GIL held, where no
-pytest timeout can end it (docs/BENCHMARKS.md, twenty-fourth and thirtieth sessions).
+``DomainParticipant::set_listener`` (eProsima/Fast-DDS#6513). A fresh-clone run spun there for
+good in the second test of this file (gdb: inside ``rcl_node_fini``, with the GIL held, where no
+pytest timeout can end it), and CI later hung at the same test (docs/BENCHMARKS.md,
+twenty-fourth and thirtieth sessions).
 """
 from __future__ import annotations
 

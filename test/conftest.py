@@ -7,6 +7,7 @@ CI jobs and a developer's running demo never see each other's topics.
 from __future__ import annotations
 
 from collections.abc import Iterator
+from contextlib import contextmanager
 import os
 import sys
 
@@ -31,9 +32,9 @@ os.environ.setdefault('RCUTILS_LOGGING_BUFFERED_STREAM', '1')
 os.environ.setdefault('MPLBACKEND', 'Agg')
 
 
-@pytest.fixture
-def ros_context() -> Iterator[object]:
-    """An initialized rclpy Context for one test, shut down afterwards whatever happens."""
+@contextmanager
+def _initialized_context() -> Iterator[object]:
+    """An initialized rclpy Context, shut down afterwards whatever happens."""
     import rclpy
     from rclpy.context import Context
 
@@ -43,6 +44,20 @@ def ros_context() -> Iterator[object]:
         yield context
     finally:
         rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture
+def ros_context() -> Iterator[object]:
+    """An initialized rclpy Context for one test, shut down afterwards whatever happens."""
+    with _initialized_context() as context:
+        yield context
+
+
+@pytest.fixture(scope='module')
+def ros_module_context() -> Iterator[object]:
+    """One initialized rclpy Context shared by a module's tests, shut down after the last."""
+    with _initialized_context() as context:
+        yield context
 
 
 @pytest.fixture

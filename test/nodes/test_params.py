@@ -51,23 +51,18 @@ def _node(context: object, overrides: list[Parameter] | None = None) -> Node:
 
 
 @pytest.fixture(scope='module')
-def params_context() -> Iterator[object]:
-    """One rclpy context for the module; an idle node keeps its one DDS participant alive.
+def params_context(ros_module_context: object) -> Iterator[object]:
+    """The module's rclpy context; an idle node keeps its one DDS participant alive.
 
     rmw_fastrtps deletes a context's participant with its last node, so without the anchor
     every test's short-lived node would create and delete a participant (module docstring).
     """
-    import rclpy
-    from rclpy.context import Context
-
-    context = Context()
-    rclpy.init(context=context)
-    anchor = Node('params_test_anchor', context=context, start_parameter_services=False)
+    anchor = Node('params_test_anchor', context=ros_module_context,
+                  start_parameter_services=False)
     try:
-        yield context
+        yield ros_module_context
     finally:
         anchor.destroy_node()
-        rclpy.try_shutdown(context=context)
 
 
 @pytest.fixture

@@ -31,7 +31,13 @@ from mcap.records import Channel, Chunk, Message, Metadata, Schema, Statistics
 from mcap.stream_reader import breakup_chunk
 import yaml
 
-from lf_predictor_ros.bag.mcap_writer import PROFILE, BagError, BagWriter
+from lf_predictor_ros.bag.mcap_writer import (
+    METADATA_KEY,
+    METADATA_NAME,
+    PROFILE,
+    BagError,
+    BagWriter,
+)
 
 __all__ = ['BagError', 'BagMessage', 'BagReader', 'TopicInfo', 'recover']
 
@@ -200,6 +206,22 @@ class BagReader:
     def metadata(self) -> dict[str, dict[str, str]]:
         """Metadata records by name (e.g. `rosbag2` -> {'serialized_metadata': yaml text})."""
         return {name: dict(values) for name, values in self._index.metadata.items()}
+
+    def custom_data(self) -> dict[str, str]:
+        """rosbag2 custom data of the bag metadata record (`BagWriter`'s ``custom_data``).
+
+        Empty when the bag has none, has no `rosbag2` metadata record (e.g. a bag whose writer
+        was killed) or the record's YAML holds no valid map: it is information, never required.
+        """
+        record = self._index.metadata.get(METADATA_NAME, {})
+        try:
+            values = yaml.safe_load(record.get(METADATA_KEY, '')) or {}
+            custom = values.get('custom_data') or {}
+        except (yaml.YAMLError, AttributeError):
+            return {}
+        if not isinstance(custom, dict):
+            return {}
+        return {str(key): str(value) for key, value in custom.items()}
 
     @property
     def message_count(self) -> int:
@@ -460,11 +482,18 @@ def recover(src: str | os.PathLike[str], dst: str | os.PathLike[str], *,
             overwrite: bool = False, **writer_options: Any) -> int:
     """Rewrite the readable part of bag `src` (e.g. from a killed recorder) as a finished `dst`.
 
-    Keeps topics, schema texts, QoS metadata, log and publish times. Returns the number of
-    messages written. `writer_options` go to BagWriter (chunk_size, compression).
+    Keeps topics, schema texts, QoS metadata, log and publish times, and the custom data of a
+    finished bag. Returns the number of messages written. `writer_options` go to BagWriter
+    (chunk_size, compression, custom_data).
     """
-    with BagReader(src, allow_incomplete=True) as reader, \
-            BagWriter(dst, overwrite=overwrite, **writer_options) as writer:
+    with BagReader(src, allow_incomplete=True) as reader:
+        writer_options.setdefault('custom_data', reader.custom_data())
+        return _rewrite(reader, src, BagWriter(dst, overwrite=overwrite, **writer_options))
+
+
+def _rewrite(reader: BagReader, src: str | os.PathLike[str], writer: BagWriter) -> int:
+    """Copy every readable message of ``reader`` with its topic to ``writer``, close it."""
+    with writer:
         channel_ids: dict[int, int] = {}
         for channel_id, channel in sorted(reader._index.channels.items()):
             schema = reader._index.schemas.get(channel.schema_id)

@@ -9,8 +9,9 @@ What the file holds (what `rosbag2_storage_mcap` writes in Jazzy, so `ros2 bag`,
   text, a list of QoS profiles) and `topic_type_hash` (RIHS01 hash, empty when unknown);
 - messages in zstd (default), lz4 or uncompressed chunks, with message indexes;
 - on `close()`: a metadata record `rosbag2` whose key `serialized_metadata` is the YAML of the
-  bag metadata (the content of a rosbag2 `metadata.yaml` without its top-level key), then the
-  summary (schemas, channels, statistics, chunk and metadata indexes) and the footer.
+  bag metadata (the content of a rosbag2 `metadata.yaml` without its top-level key; its
+  `custom_data` map holds the writer's `custom_data`, as `ros2 bag record --custom-data` does),
+  then the summary (schemas, channels, statistics, chunk and metadata indexes) and the footer.
 
 Crash bound: every finished chunk is handed to the operating system at once (the file is not
 buffered in Python). A chunk is finished when it holds `chunk_size` bytes (default 256 KiB), when
@@ -194,12 +195,15 @@ class BagWriter:
 
     Thread-safe; `close()` is idempotent and may be called from a signal handler: if the signal
     interrupts a `write()` on the same thread, closing is deferred to the end of that write.
+    ``custom_data``: rosbag2 custom data (str -> str) for the bag metadata, e.g. where a
+    simulated recording came from (`sim_bag`); `BagReader.custom_data()` reads it back.
     """
 
     def __init__(self, path: str | os.PathLike[str], *, chunk_size: int = DEFAULT_CHUNK_SIZE,
                  compression: str = 'zstd',
                  max_chunk_duration: float = DEFAULT_MAX_CHUNK_DURATION,
-                 overwrite: bool = False) -> None:
+                 overwrite: bool = False,
+                 custom_data: Mapping[str, str] | None = None) -> None:
         if chunk_size < 1:
             raise BagError(f'chunk_size must be >= 1 byte, got {chunk_size}; 262144 is a good '
                            'default')
@@ -208,6 +212,7 @@ class BagWriter:
         if compression not in COMPRESSIONS:
             raise BagError(f'compression must be one of {sorted(COMPRESSIONS)}, '
                            f'got {compression!r}')
+        self._custom_data = _checked_custom_data(custom_data or {})
         self.path = Path(path)
         self.chunk_size = chunk_size
         self.compression = compression
@@ -472,11 +477,20 @@ class BagWriter:
                 'duration': {'nanoseconds': duration},
                 'message_count': self._message_count,
             }],
-            'custom_data': {},
+            'custom_data': dict(self._custom_data),
             'ros_distro': ROS_DISTRO,
         }
         text: str = yaml.safe_dump(metadata, sort_keys=False, default_flow_style=False)
         return text
+
+
+def _checked_custom_data(values: Mapping[str, str]) -> dict[str, str]:
+    """A copy of rosbag2 custom data after checking it is a map of non-empty str to str."""
+    for key, value in values.items():
+        if not (isinstance(key, str) and key and isinstance(value, str)):
+            raise BagError(f'custom_data must map non-empty strings to strings (rosbag2 '
+                           f'metadata), got {key!r}: {value!r}; convert the value with str()')
+    return dict(values)
 
 
 class _Guard:

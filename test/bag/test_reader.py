@@ -204,6 +204,22 @@ def test_topic_filter(tmp_path: Path) -> None:
             list(reader.messages(['/c']))
 
 
+def test_recover_keeps_the_custom_data_of_a_finished_bag(tmp_path: Path) -> None:
+    source = tmp_path / 'source.mcap'
+    custom = {'lf_predictor_ros.scenario': 'rao_supply'}
+    with BagWriter(source, custom_data=custom) as writer:
+        channel = writer.add_topic('/wave_peak_frequency', FLOAT)
+        writer.write(channel, 10, serialize(Float64(data=0.6)))
+    copy = tmp_path / 'copy.mcap'
+    assert recover(source, copy) == 1
+    with BagReader(copy) as reader:
+        assert reader.custom_data() == custom
+    relabelled = tmp_path / 'relabelled.mcap'
+    assert recover(source, relabelled, custom_data={'a': 'b'}) == 1
+    with BagReader(relabelled) as reader:
+        assert reader.custom_data() == {'a': 'b'}
+
+
 def test_recover_rewrites_a_killed_file_completely(tmp_path: Path) -> None:
     live = tmp_path / 'live.mcap'
     writer = BagWriter(live, chunk_size=300, compression='none')

@@ -185,6 +185,26 @@ def test_file_carries_rosbag2_metadata_summary_and_schemas(tmp_path: Path) -> No
     assert counts == {topic: sum(1 for m in written if m[0] == topic) for topic in TOPICS}
 
 
+def test_custom_data_round_trips_through_the_rosbag2_metadata(tmp_path: Path) -> None:
+    path = tmp_path / 'custom.mcap'
+    custom = {'lf_predictor_ros.recording_loop': 'estimator', 'vessel': 'supply 76 m: ä'}
+    with BagWriter(path, custom_data=custom) as writer:
+        writer.write(writer.add_topic('/x', 'std_msgs/msg/Float64'), 5, serialize(Float64()))
+    with path.open('rb') as stream:
+        metadata = {m.name: m.metadata for m in make_reader(stream).iter_metadata()}
+    assert yaml.safe_load(metadata['rosbag2']['serialized_metadata'])['custom_data'] == custom
+    with BagReader(path) as reader:
+        assert reader.custom_data() == custom
+    plain = tmp_path / 'plain.mcap'
+    _write(plain, _messages(seed=4, n=3))
+    with BagReader(plain) as reader:
+        assert reader.custom_data() == {}
+    for bad in ({'': 'x'}, {'seed': 5}):
+        with pytest.raises(BagError, match='custom_data must map non-empty strings'):
+            BagWriter(tmp_path / 'bad.mcap', custom_data=bad)  # type: ignore[dict-item]
+    assert not (tmp_path / 'bad.mcap').exists()
+
+
 def test_sigkill_loses_at_most_the_open_chunk(tmp_path: Path) -> None:
     """A copy of the file taken while the writer is open is what a SIGKILL leaves behind."""
     path = tmp_path / 'live.mcap'

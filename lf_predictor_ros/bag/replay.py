@@ -48,7 +48,10 @@ When the truth topic (default `/truth/lf_pose`) is present, a metrics table comp
 warm-up (from the first sample whose estimate came from a trained network; from the start if none
 did), the predictor, the raw measurement and the causal notch + low-pass cascade tuned to the
 final ω0 estimate, each against the truth linearly interpolated to the estimate's stamp
-(`core.evaluation.score`). `--metrics` writes them with the run information as JSON.
+(`core.evaluation.score`). `--metrics` writes them with the run information as JSON. A bag
+whose rosbag2 custom data say its DP loop ran on the true LF pose (`sim_bag --loop-estimator
+truth`, `bag.provenance`) gets a warning and `LEAKS` in the metrics heading: its thrust encodes
+the truth, so the metrics flatter every estimator that uses thrust.
 
 Exit codes: 0 success; 1 data problem (missing topic, corrupt or foreign file, wrong message
 type, no pose in the bag, incompatible checkpoint, nothing to save); 2 usage (bad arguments,
@@ -81,6 +84,7 @@ import yaml
 
 from lf_predictor_ros.bag.mcap_reader import BagError, BagReader
 from lf_predictor_ros.bag.mcap_writer import BagWriter
+from lf_predictor_ros.bag.provenance import leak_warning
 from lf_predictor_ros.bag.ros_codec import (
     StampedFields,
     diagnostic_array_cdr,
@@ -477,6 +481,8 @@ class ReplayResult:
     truth_pose: PoseRows = field(default_factory=PoseRows)
     metrics: dict[str, Metrics] | None = None
     evaluation_start: float | None = None  # [s]
+    recording: dict[str, str] = field(default_factory=dict)  # the input's rosbag2 custom data
+    leaks_truth: bool = False  # the input says its DP loop ran on the true LF pose
 
     @property
     def realtime_factor(self) -> float:
@@ -751,6 +757,11 @@ def replay(options: ReplayOptions, config: ReplayConfig,
     wall_start = time.monotonic()
     with BagReader(options.input, allow_incomplete=True) as reader:
         _check_input_topics(reader, options)
+        result.recording = reader.custom_data()
+        leak = leak_warning(result.recording)
+        if leak is not None:
+            result.leaks_truth = True
+            result.warnings.append(leak)
         if not reader.complete:
             result.partial = True
             result.problem = reader.problem
@@ -886,8 +897,9 @@ def summary_lines(result: ReplayResult, options: ReplayOptions) -> list[str]:
         f'({result.realtime_factor:.1f} x real time)' + (' [PARTIAL]' if result.partial else ''),
     ]
     if result.metrics:
+        leaks = ' [LEAKS: thrust computed from the truth, see the warning]'
         lines.append(f'metrics vs {options.truth_topic} from t = {result.evaluation_start:.1f} s '
-                     '(after warm-up):')
+                     f'(after warm-up){leaks if result.leaks_truth else ""}:')
         lines.append(format_table(result.metrics))
     elif result.metrics is None and result.truth_t:
         lines.append('replay: no metrics (too little overlap with the truth)')
@@ -926,6 +938,8 @@ def metrics_document(result: ReplayResult, options: ReplayOptions,
         'final_state': result.final_state,
         'final_wave_peak_freq': result.final_wave_peak_freq,
         'evaluation_start': result.evaluation_start,
+        'recording': result.recording,
+        'metrics_leak_truth': result.leaks_truth,
         'wave_band': list(DEFAULT_WAVE_BAND),
         'metrics': (None if result.metrics is None
                     else {name: m.to_dict() for name, m in result.metrics.items()}),

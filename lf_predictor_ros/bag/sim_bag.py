@@ -5,6 +5,14 @@
 Topics: `/thrust` (WrenchStamped), `/truth/lf_pose`, `/truth/pose` and `/measured_pose`
 (PoseStamped), one message each per simulator sample, log time = stamp. For replay benchmarks and
 tests, and to try `replay` without a vessel.
+
+A scenario with a DP controller is recorded with its loop closed on ``--loop-estimator``
+(default `observer`: the passive observer with the scenario's tuned gains, fed once per h, as the
+benchmark records; `benchmark.recordings.record`), so the thrust does not encode the truth and
+`replay`'s metrics against the truth are fair. ``--loop-estimator truth`` is the scenario file's
+own loop (its PID on the true LF pose at every sensor sample; the bags of the sessions before
+the thirty-first): its thrust leaks the truth, so use it for cost measurements only. The bag's
+rosbag2 custom data say which loop it was (`bag.provenance`), and `replay` warns on a leaking one.
 """
 from __future__ import annotations
 
@@ -14,19 +22,57 @@ from pathlib import Path
 import sys
 
 from lf_predictor_ros.bag.mcap_writer import BagWriter, qos_profile_dict, qos_profiles_yaml
+from lf_predictor_ros.bag.provenance import recording_custom_data
 from lf_predictor_ros.bag.ros_codec import serialize
+from lf_predictor_ros.benchmark.estimators import CAUSAL, predictor_params
+from lf_predictor_ros.benchmark.recordings import Provenance
+from lf_predictor_ros.benchmark.suite import make_recording, make_setup
 from lf_predictor_ros.nodes.conversions import pose_to_msg, wrench_to_msg
-from sim_ros.simulation import SimRecord, load_scenario, simulate
+from sim_ros.simulation import Scenario, SimRecord, load_scenario, simulate
 
 POSE = 'geometry_msgs/msg/PoseStamped'
 WRENCH = 'geometry_msgs/msg/WrenchStamped'
 SENSOR_QOS = qos_profiles_yaml([qos_profile_dict(reliability='best_effort', depth=5)])
+TRUTH_LOOP = 'truth'  # --loop-estimator: the scenario's PID on the true LF pose (leaks)
+LOOP_CHOICES = (*CAUSAL, TRUTH_LOOP)
+DEFAULT_LOOP = 'observer'
+
+
+def simulate_recording(scenario: Scenario, seed: int, duration: float | None,
+                       loop_estimator: str = DEFAULT_LOOP) -> tuple[SimRecord, Provenance]:
+    """The full-rate run of ``scenario`` and where it came from (module docstring).
+
+    Open loop when the scenario has no DP controller (``loop_estimator`` unused); otherwise the
+    loop closed on ``loop_estimator`` (a causal estimator of `benchmark.estimators`, fed once
+    per h) or, for ``'truth'``, the scenario file's PID on the true LF pose. Raises ValueError
+    for an unknown estimator or a recording loop that diverges.
+    """
+    if loop_estimator not in LOOP_CHOICES:
+        raise ValueError(f'unknown loop estimator {loop_estimator!r}; choose one of '
+                         f'{LOOP_CHOICES}')
+    total = scenario.duration if duration is None else float(duration)
+    if not scenario.controller.enabled or loop_estimator == TRUTH_LOOP:
+        loop = 'truth_lf' if scenario.controller.enabled else 'open'
+        return (simulate(scenario, seed=seed, duration=duration),
+                Provenance(scenario.name, seed, total, scenario.sample_time, loop))
+    setup = make_setup(scenario, seed, predictor_params(scenario))
+    recording = make_recording(scenario, seed, duration, setup, loop_estimator)
+    if recording.loop_run is None:  # record() keeps the run of every estimator loop
+        raise RuntimeError('the recording of an estimator loop came without its run')
+    return recording.loop_run.record, recording.provenance
 
 
 def write_record(path: Path, record: SimRecord, *, duration: float | None = None,
-                 truth: bool = True, total_truth: bool = False) -> Path:
-    """Thrust, truth and measured pose of each sample (in that order, log time = stamp)."""
-    with BagWriter(path) as writer:
+                 truth: bool = True, total_truth: bool = False,
+                 provenance: Provenance | None = None) -> Path:
+    """Thrust, truth and measured pose of each sample (in that order, log time = stamp).
+
+    ``provenance`` goes into the bag's rosbag2 custom data (`bag.provenance`).
+    """
+    custom = (None if provenance is None else
+              recording_custom_data(provenance.scenario, provenance.seed, provenance.loop,
+                                    provenance.estimator))
+    with BagWriter(path, custom_data=custom) as writer:
         pose_ch = writer.add_topic('/measured_pose', POSE, SENSOR_QOS)
         thrust_ch = writer.add_topic('/thrust', WRENCH)
         truth_ch = writer.add_topic('/truth/lf_pose', POSE) if truth else -1
@@ -51,11 +97,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('scenario')
     parser.add_argument('-o', '--output', required=True)
     parser.add_argument('--duration', type=float)
-    parser.add_argument('--seed', type=int)
+    parser.add_argument('--seed', type=int, help="default: the scenario file's seed")
+    parser.add_argument('--loop-estimator', choices=LOOP_CHOICES, default=DEFAULT_LOOP,
+                        help='estimator the DP loop is closed on (default observer); truth: '
+                        'the PID on the true LF pose, whose thrust leaks it (cost only)')
     args = parser.parse_args(argv)
-    record = simulate(load_scenario(args.scenario), seed=args.seed, duration=args.duration)
-    write_record(Path(args.output), record, truth=True, total_truth=True)
-    print(f'wrote {len(record.t)} samples to {args.output}')
+    scenario = load_scenario(args.scenario)
+    seed = scenario.seed if args.seed is None else args.seed
+    try:
+        record, provenance = simulate_recording(scenario, seed, args.duration,
+                                                args.loop_estimator)
+    except ValueError as err:
+        parser.exit(2, f'sim_bag: error: {err}\n')
+    write_record(Path(args.output), record, truth=True, total_truth=True, provenance=provenance)
+    print(f'wrote {len(record.t)} samples ({provenance.label()}) to {args.output}')
     return 0
 
 

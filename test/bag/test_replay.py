@@ -35,6 +35,7 @@ from lf_predictor_ros.bag.msgdefs import full_definition
 from lf_predictor_ros.bag.ros_codec import deserialize, serialize
 from lf_predictor_ros.bag.series import read_diagnostics, read_series
 from lf_predictor_ros.bag.sim_bag import write_record
+from lf_predictor_ros.benchmark.recordings import Provenance
 from lf_predictor_ros.core.alignment import InputAligner
 from lf_predictor_ros.core.evaluation import run_estimator
 from lf_predictor_ros.core.odometry import UNESTIMATED_VARIANCE
@@ -298,6 +299,26 @@ def test_predictor_beats_the_raw_measurement_after_warm_up(first_run: dict[str, 
     predictor, measurement = metrics['predictor']['north'], metrics['measurement']['north']
     assert predictor['rmse'] < measurement['rmse']
     assert predictor['wave_band_power'] < 0.5 * measurement['wave_band_power']
+
+
+def test_a_bag_whose_loop_ran_on_the_truth_is_flagged_leaking(
+        work: Path, record: SimRecord, params_file: Path, first_run: dict[str, Any]) -> None:
+    assert first_run['metrics']['recording'] == {}  # no custom data: nothing claimed
+    assert first_run['metrics']['metrics_leak_truth'] is False
+    assert 'LEAKS' not in first_run['stdout'] + first_run['stderr']
+    provenance = Provenance('onedof_feedback', SIM_SEED, 60.0, SAMPLE_TIME, 'truth_lf')
+    bag = write_record(work / 'leaks.mcap', record, duration=60.0, provenance=provenance)
+    metrics = work / 'leaks.json'
+    code, stdout, stderr = run_replay(bag, '-o', work / 'leaks_out.mcap', '--params-file',
+                                      params_file, '--metrics', metrics)
+    assert code == 0
+    assert "warning: the bag's DP loop ran on the true LF pose" in stderr
+    assert '(after warm-up) [LEAKS: thrust computed from the truth' in stdout
+    document = json.loads(metrics.read_text(encoding='utf-8'))
+    assert document['metrics_leak_truth'] is True and document['metrics'] is not None
+    assert document['recording'] == {'lf_predictor_ros.scenario': 'onedof_feedback',
+                                     'lf_predictor_ros.seed': str(SIM_SEED),
+                                     'lf_predictor_ros.recording_loop': 'truth_lf'}
 
 
 def test_no_truth_no_metrics(work: Path, record: SimRecord, params_file: Path) -> None:

@@ -17,6 +17,12 @@ interpolates (thesis §2.5), while a DP vessel slowly drifts to positions outsid
 window. The bypass starts as persistence (ŷLF(t + 1) = fb(t)), so an untrained network holds the
 last LF value and training learns the correction; switch it off for the plain eq. 2.2 network.
 
+Linear network (``hidden_units`` 0, needs the bypass): no tanh part, ŷLF(t + 1) = y_mean + y_std ·
+(v_0 + B x_s), the linear ARX model (eq. 2.2 without hidden layer) on the same regressors. It is
+linear in its weights, so `training.train` fits it by one least-squares solve
+(``fit_linear_bypass``). The layers keep their names with zero width, so checkpoints, the numpy
+predict path and every other user of the state dict stay the same.
+
 Relative coordinates (``NnarmaxSpec.relative``, our addition): a wave filter is translation
 invariant — moving the vessel 10 m moves its LF estimate 10 m — but a tanh network fed absolute
 positions is not, and fails as soon as the vessel leaves the positions of its training window.
@@ -96,8 +102,8 @@ class NnarmaxSpec:
 
     ``n_outputs``: position channels (1: surge/north only, 3: north, east, yaw);
     ``n_inputs_u``: force channels (1 or 3); ``nu``, ``ny``, ``nfb``: number of delayed forces,
-    measured positions and LF feedback values; ``hidden_units`` per hidden layer;
-    ``hidden_layers`` ≥ 1 (the thesis uses one); ``linear_bypass``: add a linear input→output
+    measured positions and LF feedback values; ``hidden_units`` per hidden layer (0: the linear
+    network, module docstring; needs the bypass); ``hidden_layers`` ≥ 1 (the thesis uses one); ``linear_bypass``: add a linear input→output
     path (see module docstring); ``relative``: position regressors and the output are taken
     relative to the newest measured position y(t) (translation invariance, see module docstring);
     ``body_frame``: with ``relative`` and 3 DOF, regressors and output step in the body frame of
@@ -133,7 +139,7 @@ class NnarmaxSpec:
                 'NnarmaxSpec needs ny + nfb ≥ 1: the network must see a position (measured or '
                 'fed back) to predict the next one'
             )
-        _check_count('hidden_units', self.hidden_units, 'an int ≥ 1', 1)
+        _check_count('hidden_units', self.hidden_units, 'an int ≥ 0', 0)
         _check_count('hidden_layers', self.hidden_layers, 'an int ≥ 1', 1)
         if not isinstance(self.relative, bool):
             raise ValueError(f'NnarmaxSpec.relative must be a bool, got {self.relative!r}')
@@ -144,6 +150,9 @@ class NnarmaxSpec:
             raise ValueError(
                 f'NnarmaxSpec.linear_bypass must be a bool, got {self.linear_bypass!r}'
             )
+        if self.hidden_units == 0 and not self.linear_bypass:
+            raise ValueError('NnarmaxSpec.hidden_units = 0 (no tanh part) needs linear_bypass '
+                             '= True, or the network has no path from its inputs: set one')
         if not isinstance(self.body_frame, bool):
             raise ValueError(f'NnarmaxSpec.body_frame must be a bool, got {self.body_frame!r}')
         if self.body_frame and not (self.relative and self.n_outputs == 3
@@ -167,6 +176,11 @@ class NnarmaxSpec:
     def n_regressors(self) -> int:
         """Length of one regressor row."""
         return n_regressors(self)
+
+    @property
+    def linear(self) -> bool:
+        """True for the linear network (``hidden_units`` 0): linear in its weights."""
+        return self.hidden_units == 0
 
     @property
     def first_index(self) -> int:

@@ -449,7 +449,10 @@ class PredictorParams:
         if self.ny + self.nfb < 1:
             raise ValueError(f'regressor rule: ny + nfb must be ≥ 1 (the network must see a '
                              f'position, thesis §4.4), got ny = {self.ny}, nfb = {self.nfb}')
-        for name in ('hidden_units', 'hidden_layers', 'max_epochs'):
+        if self.hidden_units < 0:
+            raise ValueError(f'positivity rule: hidden_units must be ≥ 0 (0: the linear network, '
+                             f'no tanh part), got {self.hidden_units!r}')
+        for name in ('hidden_layers', 'max_epochs'):
             if getattr(self, name) < 1:
                 raise ValueError(f'positivity rule: {name} must be ≥ 1, got '
                                  f'{getattr(self, name)!r}')

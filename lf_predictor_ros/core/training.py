@@ -171,7 +171,8 @@ class TrainResult:
     ``loss``/``initial_loss``: MSE part of the objective on the masked window after/before;
     ``epochs``: completed epochs (LM: accepted or attempted weight updates); ``seconds``: wall
     time; ``converged``: stopped because a convergence criterion held; ``stopped_reason``: one of
-    'max_epochs', 'max_seconds', 'stop_event', 'loss_goal', 'min_grad', 'mu_max', 'non_finite';
+    'max_epochs', 'max_seconds', 'stop_event', 'loss_goal', 'min_grad', 'mu_max', 'non_finite',
+    'least_squares' (the linear network, solved exactly, ``epochs`` 0);
     ``loss_history``: MSE part after every epoch; ``objective``/``initial_objective``: the full
     objective J(w) (with derivative and weight-decay terms) after/before. Never
     ``objective > initial_objective``; the MSE part alone may rise when d or b > 0.
@@ -383,7 +384,7 @@ class _Run:
         return bool(self.history) and self.history[-1] <= self.settings.loss_goal
 
 
-_CONVERGED = ('loss_goal', 'min_grad', 'mu_max')
+_CONVERGED = ('loss_goal', 'min_grad', 'mu_max', 'least_squares')
 # closure evaluations per L-BFGS iteration: 1 + up to 25 strong-Wolfe trials (torch's max_ls);
 # torch's default max_eval = 1.25·max_iter would starve the line search at max_iter = 1
 _LBFGS_MAX_EVAL = 26
@@ -457,7 +458,8 @@ def _train(
     model = copy.deepcopy(net)
     if settings.standardize:
         model.set_standardization(u, y, preserve_function=True)
-    if settings.linear_init:
+    solved = _solved_by_least_squares(spec, settings)
+    if settings.linear_init or solved:
         model.fit_linear_bypass(window.x_series[:-1], window.target, window.keep)
     runner = _WindowPredictor(model, n_static_regressors(spec), spec.nfb)
     parallel = settings.mode == 'parallel'
@@ -470,8 +472,8 @@ def _train(
         'lbfgs': _lbfgs,
         'adam': _adam,
     }
-    reason = 'max_epochs'
-    if settings.max_epochs > 0:
+    reason = 'least_squares' if solved else 'max_epochs'
+    if settings.max_epochs > 0 and not solved:
         reason = run.stop_reason() or optimizers[settings.algorithm](runner, window, parallel, run)
     with torch.no_grad():
         objective, prediction = _objective(runner, window, parallel, settings)
@@ -489,6 +491,18 @@ def _train(
         objective=float(objective),
         initial_objective=float(initial_objective),
     )
+
+
+def _solved_by_least_squares(spec: NnarmaxSpec, settings: TrainSettings) -> bool:
+    """True when one least-squares solve is the exact training: the linear network on the MSE.
+
+    The linear network (no tanh part) is linear in its weights, and with neither a derivative
+    term nor a recursion through fed-back outputs (parallel mode with nfb > 0) its objective is
+    the plain MSE: ``fit_linear_bypass`` finds its optimum (up to its 1e-6 ridge) in one solve.
+    ``weight_decay`` has nothing to act on then (it covers only the tanh part).
+    """
+    recursive = settings.mode == 'parallel' and spec.nfb > 0
+    return spec.linear and settings.derivative_weight == 0.0 and not recursive
 
 
 def _objective(

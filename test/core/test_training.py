@@ -669,3 +669,34 @@ def test_training_turns_subnormal_weights_into_the_zeros_they_act_as() -> None:
     for key, value in from_tiny.state_dict.items():
         assert not ((value != 0) & (value.abs() < SMALLEST_NORMAL)).any(), key
         assert torch.equal(value, from_zero.state_dict[key]), key
+
+
+def test_the_linear_network_is_trained_by_one_exact_least_squares_solve() -> None:
+    """hidden_units 0: no LM epoch, the optimum of the MSE; LM only where the loss is not MSE."""
+    rng = np.random.default_rng(12)
+    n = 300
+    u = rng.normal(size=(n, 1))
+    y = np.zeros((n, 1))
+    for t in range(1, n - 1):
+        y[t + 1] = 1.6 * y[t] - 0.6 * y[t - 1] + 0.2 * u[t] + 0.01 + rng.normal(scale=0.01)
+    spec = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=1, ny=2, nfb=0, hidden_units=0,
+                       relative=True)
+    mask = np.arange(n) % 7 != 3
+    result = train(NnarmaxNet(spec), u, y, y, mask, TrainSettings(weight_decay=0.1))
+    assert (result.stopped_reason, result.epochs, result.converged) == ('least_squares', 0,
+                                                                       True)
+    # the same fit by numpy: the step y(t+1) − y(t) on [u(t), y(t−1) − y(t), 1] over kept rows
+    rows = np.arange(1, n - 1)
+    rows = rows[mask[rows + 1]]
+    design = np.column_stack((u[rows, 0], y[rows - 1, 0] - y[rows, 0], np.ones(len(rows))))
+    coef = np.linalg.lstsq(design, y[rows + 1, 0] - y[rows, 0], rcond=None)[0]
+    net = NnarmaxNet.from_state(spec, result.state_dict)
+    x = torch.tensor([[1.0, 0.5, 0.0], [0.0, 0.0, 0.0]], dtype=torch.float64)  # u, y(t), y(t−1)
+    with torch.no_grad():
+        steps = net(x)[:, 0].numpy() - [0.5, 0.0]  # the step ŷ(t + 1) − y(t)
+    assert steps == pytest.approx([coef[0] - 0.5 * coef[1] + coef[2], coef[2]], abs=1e-6)
+    # a derivative term makes the objective more than the MSE: then the optimizer runs
+    with_derivative = train(NnarmaxNet(spec), u, y, y, mask,
+                            TrainSettings(max_epochs=3, derivative_weight=0.5))
+    assert with_derivative.stopped_reason != 'least_squares' and with_derivative.epochs > 0
+    assert with_derivative.objective <= with_derivative.initial_objective

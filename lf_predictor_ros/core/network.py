@@ -264,6 +264,47 @@ def _safe_std(std: FloatArray, mean: FloatArray) -> FloatArray:
     return np.where(std > floor, std, 1.0)
 
 
+class _Linear(torch.nn.Linear):
+    """torch's Linear, without its default initialization for zero-width weights.
+
+    The layers of the linear network (``hidden_units`` 0) have no weights; torch's init would
+    warn that initializing them is a no-op. ``NnarmaxNet.reset_parameters`` sets every weight
+    anyway; non-empty layers keep torch's init (and its use of torch's global RNG) as before.
+    """
+
+    def reset_parameters(self) -> None:
+        """torch's initialization unless the weight has no elements."""
+        if self.weight.numel() > 0:
+            super().reset_parameters()
+
+
+def solve_ridge(design: torch.Tensor, wanted: torch.Tensor, ridges: torch.Tensor
+                ) -> torch.Tensor:
+    """argmin_w ‖design w − wanted‖² + rows · Σ_j ridges_j w_j², the last column unpenalized.
+
+    ``design`` (rows, n_columns) with the bias column last, ``wanted`` (rows, n_outputs),
+    ``ridges`` (n_columns − 1,) or (n_columns − 1, n_outputs): one penalty per column, or per
+    column and output (a separate problem per output). lstsq (minimum norm) rather than solve:
+    in relative mode the y(t) − y(t) column is identically 0, so without a ridge the normal
+    matrix is singular.
+    """
+    rows, n_columns = design.shape
+    normal = design.T @ design
+    rhs = design.T @ wanted
+    per_output = ridges.reshape(n_columns - 1, -1)
+    if per_output.shape[1] == 1:
+        return torch.linalg.lstsq(normal + _penalty(per_output[:, 0], rows), rhs,
+                                  driver='gelsd').solution
+    columns = [torch.linalg.lstsq(normal + _penalty(per_output[:, i], rows), rhs[:, i:i + 1],
+                                  driver='gelsd').solution for i in range(wanted.shape[1])]
+    return torch.cat(columns, dim=1)
+
+
+def _penalty(ridges: torch.Tensor, rows: int) -> torch.Tensor:
+    """rows · diag(ridges, 0): the bias (last column) is not penalized."""
+    return torch.diag(torch.cat((ridges, ridges.new_zeros(1)))) * rows
+
+
 class NnarmaxNet(torch.nn.Module):
     """NNARMAX network: raw regressor rows (rows, n_regressors) → ŷLF(t + 1) (rows, n_outputs)."""
 
@@ -278,10 +319,10 @@ class NnarmaxNet(torch.nn.Module):
         self.spec = spec
         widths = [spec.n_regressors] + [spec.hidden_units] * spec.hidden_layers
         self.hidden = torch.nn.ModuleList(
-            torch.nn.Linear(widths[i], widths[i + 1], dtype=torch.float64)
+            _Linear(widths[i], widths[i + 1], dtype=torch.float64)
             for i in range(spec.hidden_layers)
         )
-        self.output = torch.nn.Linear(spec.hidden_units, spec.n_outputs, dtype=torch.float64)
+        self.output = _Linear(spec.hidden_units, spec.n_outputs, dtype=torch.float64)
         self.bypass: torch.nn.Linear | None = (
             torch.nn.Linear(spec.n_regressors, spec.n_outputs, bias=False, dtype=torch.float64)
             if spec.linear_bypass
@@ -361,8 +402,17 @@ class NnarmaxNet(torch.nn.Module):
         """
         if self.bypass is None:
             return
+        design, wanted = self.linear_problem(x, target, keep)
+        ridges = torch.full((design.shape[1] - 1,), ridge, dtype=design.dtype)
+        self.set_linear_solution(solve_ridge(design, wanted, ridges))
+
+    def linear_problem(self, x: torch.Tensor, target: torch.Tensor, keep: torch.Tensor
+                       ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(design, wanted) of ``fit_linear_bypass``: the kept rows' standardized regressors
+        with a ones column (the bias) last, and what the bypass must add to the tanh part's
+        output there (rows, n_outputs), in the network's frame (relative, body) and units.
+        """
         with torch.no_grad():
-            ref = torch.zeros_like(target)
             step = target
             if self.spec.relative:
                 ref, shift, base = _relative_frame_torch(self.spec, x)
@@ -380,12 +430,15 @@ class NnarmaxNet(torch.nn.Module):
             wanted = (step[keep] - self.y_mean) / self.y_std
             residual = wanted - (hidden @ self.output.weight.T)
             design = torch.cat((x_s, torch.ones(x_s.shape[0], 1, dtype=x_s.dtype)), dim=1)
-            penalty = ridge * design.shape[0] * torch.eye(design.shape[1], dtype=x_s.dtype)
-            penalty[-1, -1] = 0.0  # the bias is not penalized
-            # lstsq (minimum norm) rather than solve: in relative mode the y(t) − y(t) column
-            # is identically 0, so without a ridge the normal matrix is singular
-            solution = torch.linalg.lstsq(design.T @ design + penalty, design.T @ residual,
-                                          driver='gelsd').solution
+        return design, residual
+
+    def set_linear_solution(self, solution: torch.Tensor) -> None:
+        """Put a (n_regressors + 1, n_outputs) solution of ``linear_problem`` in the bypass (rows
+        but the last) and the output bias (the last row)."""
+        if self.bypass is None:
+            raise ValueError('the network has no linear bypass to set: build it with '
+                             'linear_bypass = True')
+        with torch.no_grad():
             self.bypass.weight.copy_(solution[:-1].T)
             self.output.bias.copy_(solution[-1])
 

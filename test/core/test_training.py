@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 import torch
 
-from lf_predictor_ros.core.network import NnarmaxNet, NnarmaxSpec
+from lf_predictor_ros.core.network import NnarmaxNet, NnarmaxSpec, solve_ridge
 from lf_predictor_ros.core.training import (
+    BASE_RIDGE,
     Algorithm,
     TrainSettings,
     evaluate_loss,
@@ -22,6 +23,7 @@ from lf_predictor_ros.core.training import (
     predict_window,
     subnormals_flushed,
     train,
+    validated_force_ridges,
 )
 
 # torch loads its forward-AD decompositions once per process via the deprecated torch.jit.script
@@ -700,3 +702,46 @@ def test_the_linear_network_is_trained_by_one_exact_least_squares_solve() -> Non
                             TrainSettings(max_epochs=3, derivative_weight=0.5))
     assert with_derivative.stopped_reason != 'least_squares' and with_derivative.epochs > 0
     assert with_derivative.objective <= with_derivative.initial_objective
+
+
+def test_validated_force_ridges_trust_a_force_only_where_the_newest_rows_confirm_it() -> None:
+    """Output 0 is driven by the force, output 1 only correlates with it in the old rows."""
+    rng = np.random.default_rng(21)
+    rows, holdout = 400, 100
+    force, position = rng.normal(size=rows), rng.normal(size=rows)
+    design = torch.from_numpy(np.column_stack((force, position, np.ones(rows))))
+    spurious = np.where(np.arange(rows) < rows - holdout, 1.0, -1.0) * force  # flips sign
+    wanted = torch.from_numpy(np.column_stack((
+        2.0 * force + 0.5 * position + rng.normal(scale=0.1, size=rows),
+        0.5 * position + 0.5 * spurious + rng.normal(scale=0.1, size=rows))))
+    grid = (1e-6, 1e-2, 1.0, 1e3)
+    ridges = validated_force_ridges(design, wanted, 1, holdout, grid)
+    assert ridges.shape == (2, 2)
+    assert ridges[0].tolist() == [1e-6, 1e3]  # the force column: trusted / dropped
+    assert ridges[1].tolist() == [BASE_RIDGE, BASE_RIDGE]  # the position column as always
+    # per-output ridges solve each output's own problem
+    both = solve_ridge(design, wanted, ridges)
+    for i in range(2):
+        alone = solve_ridge(design, wanted[:, i:i + 1], ridges[:, i])
+        assert torch.allclose(both[:, i:i + 1], alone, atol=1e-12)
+    assert abs(float(both[0, 0]) - 2.0) < 0.02 and abs(float(both[0, 1])) < 0.01
+
+
+def test_training_with_a_force_ridge_grid_solves_with_the_chosen_ridges() -> None:
+    rng = np.random.default_rng(22)
+    n = 300
+    u = rng.normal(size=(n, 1))
+    y = np.cumsum(0.1 * np.roll(u, 1, axis=0) + rng.normal(scale=0.01, size=(n, 1)), axis=0)
+    spec = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=2, ny=2, nfb=0, hidden_units=0,
+                       relative=True)
+    settings = TrainSettings(force_ridge_grid=(1e-6, 1.0, 1e3), validation_rows=60)
+    result = train(NnarmaxNet(spec), u, y, y, None, settings)
+    assert result.stopped_reason == 'least_squares'
+    free = train(NnarmaxNet(spec), u, y, y, None, TrainSettings())
+    # the force drives the motion here: the validation keeps it free, the same fit as without
+    for name in ('bypass.weight', 'output.bias'):
+        assert torch.allclose(result.state_dict[name], free.state_dict[name], atol=1e-9)
+    with pytest.raises(ValueError, match='force_ridge_grid needs validation_rows'):
+        TrainSettings(force_ridge_grid=(1.0,))
+    with pytest.raises(ValueError, match='finite ridges > 0'):
+        TrainSettings(force_ridge_grid=(0.0,), validation_rows=5)

@@ -49,6 +49,18 @@ def narx_data(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return u[:, None], y[:, None]
 
 
+def linear_system(seed: int, n: int = 300, offset: float = 0.0,
+                  noise: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """y(t+1) = 1.6 y(t) − 0.6 y(t−1) + 0.2 u(t) + offset + e(t), u ~ N(0, 1), e ~ N(0, noise²)."""
+    rng = np.random.default_rng(seed)
+    u = rng.normal(size=(n, 1))
+    y = np.zeros((n, 1))
+    for t in range(1, n - 1):
+        e = rng.normal(scale=noise) if noise > 0.0 else 0.0
+        y[t + 1] = 1.6 * y[t] - 0.6 * y[t - 1] + 0.2 * u[t] + offset + e
+    return u, y
+
+
 def one_step_rmse(net: NnarmaxNet, u: np.ndarray, y: np.ndarray, targets: np.ndarray) -> float:
     """RMSE of the one-step predictions ŷ(t+1) against targets(t+1)."""
     prediction, first = predict_window(net, u, y, targets, 'series_parallel')
@@ -476,12 +488,7 @@ def test_loss_scale_is_the_size_of_what_the_network_predicts() -> None:
 
 def test_linear_init_fits_a_linear_system_before_the_first_epoch() -> None:
     """y(t+1) = 1.6 y(t) − 0.6 y(t−1) + 0.2 u(t): zero epochs of LM, loss ~ 0 with linear_init."""
-    rng = np.random.default_rng(8)
-    n = 300
-    u = rng.normal(size=(n, 1))
-    y = np.zeros((n, 1))
-    for t in range(1, n - 1):
-        y[t + 1] = 1.6 * y[t] - 0.6 * y[t - 1] + 0.2 * u[t]
+    u, y = linear_system(seed=8)
     spec = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=1, ny=2, nfb=0, hidden_units=2,
                        relative=True)
     plain = train(NnarmaxNet(spec), u, y, y, None, TrainSettings(max_epochs=0))
@@ -675,12 +682,8 @@ def test_training_turns_subnormal_weights_into_the_zeros_they_act_as() -> None:
 
 def test_the_linear_network_is_trained_by_one_exact_least_squares_solve() -> None:
     """hidden_units 0: no LM epoch, the optimum of the MSE; LM only where the loss is not MSE."""
-    rng = np.random.default_rng(12)
-    n = 300
-    u = rng.normal(size=(n, 1))
-    y = np.zeros((n, 1))
-    for t in range(1, n - 1):
-        y[t + 1] = 1.6 * y[t] - 0.6 * y[t - 1] + 0.2 * u[t] + 0.01 + rng.normal(scale=0.01)
+    u, y = linear_system(seed=12, offset=0.01, noise=0.01)
+    n = len(y)
     spec = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=1, ny=2, nfb=0, hidden_units=0,
                        relative=True)
     mask = np.arange(n) % 7 != 3

@@ -103,9 +103,10 @@ class NnarmaxSpec:
     ``n_outputs``: position channels (1: surge/north only, 3: north, east, yaw);
     ``n_inputs_u``: force channels (1 or 3); ``nu``, ``ny``, ``nfb``: number of delayed forces,
     measured positions and LF feedback values; ``hidden_units`` per hidden layer (0: the linear
-    network, module docstring; needs the bypass); ``hidden_layers`` ≥ 1 (the thesis uses one); ``linear_bypass``: add a linear input→output
-    path (see module docstring); ``relative``: position regressors and the output are taken
-    relative to the newest measured position y(t) (translation invariance, see module docstring);
+    network, module docstring; needs the bypass); ``hidden_layers`` ≥ 1 (the thesis uses one);
+    ``linear_bypass``: add a linear input→output path (see module docstring); ``relative``:
+    position regressors and the output are taken relative to the newest measured position y(t)
+    (translation invariance, see module docstring);
     ``body_frame``: with ``relative`` and 3 DOF, regressors and output step in the body frame of
     the newest heading (rotation invariance, see module docstring).
     """
@@ -273,7 +274,7 @@ class _Linear(torch.nn.Linear):
     """
 
     def reset_parameters(self) -> None:
-        """torch's initialization unless the weight has no elements."""
+        """The initialization of torch, unless the weight has no elements."""
         if self.weight.numel() > 0:
             super().reset_parameters()
 
@@ -301,7 +302,7 @@ def solve_ridge(design: torch.Tensor, wanted: torch.Tensor, ridges: torch.Tensor
 
 
 def _penalty(ridges: torch.Tensor, rows: int) -> torch.Tensor:
-    """rows · diag(ridges, 0): the bias (last column) is not penalized."""
+    """The penalty matrix rows · diag(ridges, 0): the bias (last column) is not penalized."""
     return torch.diag(torch.cat((ridges, ridges.new_zeros(1)))) * rows
 
 
@@ -408,9 +409,11 @@ class NnarmaxNet(torch.nn.Module):
 
     def linear_problem(self, x: torch.Tensor, target: torch.Tensor, keep: torch.Tensor
                        ) -> tuple[torch.Tensor, torch.Tensor]:
-        """(design, wanted) of ``fit_linear_bypass``: the kept rows' standardized regressors
-        with a ones column (the bias) last, and what the bypass must add to the tanh part's
-        output there (rows, n_outputs), in the network's frame (relative, body) and units.
+        """The least-squares problem (design, wanted) of ``fit_linear_bypass``.
+
+        design: the kept rows' standardized regressors with a ones column (the bias) last;
+        wanted: what the bypass must add to the tanh part's output there (rows, n_outputs), in
+        the network's frame (relative, body) and units.
         """
         with torch.no_grad():
             step = target
@@ -433,8 +436,10 @@ class NnarmaxNet(torch.nn.Module):
         return design, residual
 
     def set_linear_solution(self, solution: torch.Tensor) -> None:
-        """Put a (n_regressors + 1, n_outputs) solution of ``linear_problem`` in the bypass (rows
-        but the last) and the output bias (the last row)."""
+        """Put a solution of ``linear_problem`` in the bypass and the output bias.
+
+        ``solution`` (n_regressors + 1, n_outputs): the bypass rows, then the bias row.
+        """
         if self.bypass is None:
             raise ValueError('the network has no linear bypass to set: build it with '
                              'linear_bypass = True')

@@ -52,7 +52,8 @@ _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'tra
 _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed',
                'motion_gate_ny', 'ramp_order')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
-_BOOL_FIELDS = ('linear_init', 'thrust_validation', 'thrust_ridge_validation', 'ramp_invariant', 'motion_gate',
+_BOOL_FIELDS = ('linear_init', 'thrust_validation', 'thrust_ridge_validation', 'ramp_invariant',
+                'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
                 'sea_change_revert', 'frequency_yaw')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')

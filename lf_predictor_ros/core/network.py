@@ -294,8 +294,9 @@ def solve_ridge(design: torch.Tensor, wanted: torch.Tensor, ridges: torch.Tensor
     rhs = design.T @ wanted
     per_output = ridges.reshape(n_columns - 1, -1)
     if per_output.shape[1] == 1:
-        return torch.linalg.lstsq(normal + _penalty(per_output[:, 0], rows), rhs,
-                                  driver='gelsd').solution
+        solution: torch.Tensor = torch.linalg.lstsq(normal + _penalty(per_output[:, 0], rows),
+                                                    rhs, driver='gelsd').solution
+        return solution
     columns = [torch.linalg.lstsq(normal + _penalty(per_output[:, i], rows), rhs[:, i:i + 1],
                                   driver='gelsd').solution for i in range(wanted.shape[1])]
     return torch.cat(columns, dim=1)

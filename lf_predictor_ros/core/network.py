@@ -17,6 +17,12 @@ interpolates (thesis §2.5), while a DP vessel slowly drifts to positions outsid
 window. The bypass starts as persistence (ŷLF(t + 1) = fb(t)), so an untrained network holds the
 last LF value and training learns the correction; switch it off for the plain eq. 2.2 network.
 
+Linear network (``hidden_units`` 0, needs the bypass): no tanh part, ŷLF(t + 1) = y_mean + y_std ·
+(v_0 + B x_s), the linear ARX model (eq. 2.2 without hidden layer) on the same regressors. It is
+linear in its weights, so `training.train` fits it by one least-squares solve
+(``fit_linear_bypass``). The layers keep their names with zero width, so checkpoints, the numpy
+predict path and every other user of the state dict stay the same.
+
 Relative coordinates (``NnarmaxSpec.relative``, our addition): a wave filter is translation
 invariant — moving the vessel 10 m moves its LF estimate 10 m — but a tanh network fed absolute
 positions is not, and fails as soon as the vessel leaves the positions of its training window.
@@ -96,10 +102,11 @@ class NnarmaxSpec:
 
     ``n_outputs``: position channels (1: surge/north only, 3: north, east, yaw);
     ``n_inputs_u``: force channels (1 or 3); ``nu``, ``ny``, ``nfb``: number of delayed forces,
-    measured positions and LF feedback values; ``hidden_units`` per hidden layer;
-    ``hidden_layers`` ≥ 1 (the thesis uses one); ``linear_bypass``: add a linear input→output
-    path (see module docstring); ``relative``: position regressors and the output are taken
-    relative to the newest measured position y(t) (translation invariance, see module docstring);
+    measured positions and LF feedback values; ``hidden_units`` per hidden layer (0: the linear
+    network, module docstring; needs the bypass); ``hidden_layers`` ≥ 1 (the thesis uses one);
+    ``linear_bypass``: add a linear input→output path (see module docstring); ``relative``:
+    position regressors and the output are taken relative to the newest measured position y(t)
+    (translation invariance, see module docstring);
     ``body_frame``: with ``relative`` and 3 DOF, regressors and output step in the body frame of
     the newest heading (rotation invariance, see module docstring).
     """
@@ -133,7 +140,7 @@ class NnarmaxSpec:
                 'NnarmaxSpec needs ny + nfb ≥ 1: the network must see a position (measured or '
                 'fed back) to predict the next one'
             )
-        _check_count('hidden_units', self.hidden_units, 'an int ≥ 1', 1)
+        _check_count('hidden_units', self.hidden_units, 'an int ≥ 0', 0)
         _check_count('hidden_layers', self.hidden_layers, 'an int ≥ 1', 1)
         if not isinstance(self.relative, bool):
             raise ValueError(f'NnarmaxSpec.relative must be a bool, got {self.relative!r}')
@@ -144,6 +151,9 @@ class NnarmaxSpec:
             raise ValueError(
                 f'NnarmaxSpec.linear_bypass must be a bool, got {self.linear_bypass!r}'
             )
+        if self.hidden_units == 0 and not self.linear_bypass:
+            raise ValueError('NnarmaxSpec.hidden_units = 0 (no tanh part) needs linear_bypass '
+                             '= True, or the network has no path from its inputs: set one')
         if not isinstance(self.body_frame, bool):
             raise ValueError(f'NnarmaxSpec.body_frame must be a bool, got {self.body_frame!r}')
         if self.body_frame and not (self.relative and self.n_outputs == 3
@@ -167,6 +177,11 @@ class NnarmaxSpec:
     def n_regressors(self) -> int:
         """Length of one regressor row."""
         return n_regressors(self)
+
+    @property
+    def linear(self) -> bool:
+        """True for the linear network (``hidden_units`` 0): linear in its weights."""
+        return self.hidden_units == 0
 
     @property
     def first_index(self) -> int:
@@ -250,6 +265,48 @@ def _safe_std(std: FloatArray, mean: FloatArray) -> FloatArray:
     return np.where(std > floor, std, 1.0)
 
 
+class _Linear(torch.nn.Linear):
+    """torch's Linear, without its default initialization for zero-width weights.
+
+    The layers of the linear network (``hidden_units`` 0) have no weights; torch's init would
+    warn that initializing them is a no-op. ``NnarmaxNet.reset_parameters`` sets every weight
+    anyway; non-empty layers keep torch's init (and its use of torch's global RNG) as before.
+    """
+
+    def reset_parameters(self) -> None:
+        """The initialization of torch, unless the weight has no elements."""
+        if self.weight.numel() > 0:
+            super().reset_parameters()
+
+
+def solve_ridge(design: torch.Tensor, wanted: torch.Tensor, ridges: torch.Tensor
+                ) -> torch.Tensor:
+    """argmin_w ‖design w − wanted‖² + rows · Σ_j ridges_j w_j², the last column unpenalized.
+
+    ``design`` (rows, n_columns) with the bias column last, ``wanted`` (rows, n_outputs),
+    ``ridges`` (n_columns − 1,) or (n_columns − 1, n_outputs): one penalty per column, or per
+    column and output (a separate problem per output). lstsq (minimum norm) rather than solve:
+    in relative mode the y(t) − y(t) column is identically 0, so without a ridge the normal
+    matrix is singular.
+    """
+    rows, n_columns = design.shape
+    normal = design.T @ design
+    rhs = design.T @ wanted
+    per_output = ridges.reshape(n_columns - 1, -1)
+    if per_output.shape[1] == 1:
+        solution: torch.Tensor = torch.linalg.lstsq(normal + _penalty(per_output[:, 0], rows),
+                                                    rhs, driver='gelsd').solution
+        return solution
+    columns = [torch.linalg.lstsq(normal + _penalty(per_output[:, i], rows), rhs[:, i:i + 1],
+                                  driver='gelsd').solution for i in range(wanted.shape[1])]
+    return torch.cat(columns, dim=1)
+
+
+def _penalty(ridges: torch.Tensor, rows: int) -> torch.Tensor:
+    """The penalty matrix rows · diag(ridges, 0): the bias (last column) is not penalized."""
+    return torch.diag(torch.cat((ridges, ridges.new_zeros(1)))) * rows
+
+
 class NnarmaxNet(torch.nn.Module):
     """NNARMAX network: raw regressor rows (rows, n_regressors) → ŷLF(t + 1) (rows, n_outputs)."""
 
@@ -264,10 +321,10 @@ class NnarmaxNet(torch.nn.Module):
         self.spec = spec
         widths = [spec.n_regressors] + [spec.hidden_units] * spec.hidden_layers
         self.hidden = torch.nn.ModuleList(
-            torch.nn.Linear(widths[i], widths[i + 1], dtype=torch.float64)
+            _Linear(widths[i], widths[i + 1], dtype=torch.float64)
             for i in range(spec.hidden_layers)
         )
-        self.output = torch.nn.Linear(spec.hidden_units, spec.n_outputs, dtype=torch.float64)
+        self.output = _Linear(spec.hidden_units, spec.n_outputs, dtype=torch.float64)
         self.bypass: torch.nn.Linear | None = (
             torch.nn.Linear(spec.n_regressors, spec.n_outputs, bias=False, dtype=torch.float64)
             if spec.linear_bypass
@@ -347,8 +404,19 @@ class NnarmaxNet(torch.nn.Module):
         """
         if self.bypass is None:
             return
+        design, wanted = self.linear_problem(x, target, keep)
+        ridges = torch.full((design.shape[1] - 1,), ridge, dtype=design.dtype)
+        self.set_linear_solution(solve_ridge(design, wanted, ridges))
+
+    def linear_problem(self, x: torch.Tensor, target: torch.Tensor, keep: torch.Tensor
+                       ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The least-squares problem (design, wanted) of ``fit_linear_bypass``.
+
+        design: the kept rows' standardized regressors with a ones column (the bias) last;
+        wanted: what the bypass must add to the tanh part's output there (rows, n_outputs), in
+        the network's frame (relative, body) and units.
+        """
         with torch.no_grad():
-            ref = torch.zeros_like(target)
             step = target
             if self.spec.relative:
                 ref, shift, base = _relative_frame_torch(self.spec, x)
@@ -366,12 +434,17 @@ class NnarmaxNet(torch.nn.Module):
             wanted = (step[keep] - self.y_mean) / self.y_std
             residual = wanted - (hidden @ self.output.weight.T)
             design = torch.cat((x_s, torch.ones(x_s.shape[0], 1, dtype=x_s.dtype)), dim=1)
-            penalty = ridge * design.shape[0] * torch.eye(design.shape[1], dtype=x_s.dtype)
-            penalty[-1, -1] = 0.0  # the bias is not penalized
-            # lstsq (minimum norm) rather than solve: in relative mode the y(t) − y(t) column
-            # is identically 0, so without a ridge the normal matrix is singular
-            solution = torch.linalg.lstsq(design.T @ design + penalty, design.T @ residual,
-                                          driver='gelsd').solution
+        return design, residual
+
+    def set_linear_solution(self, solution: torch.Tensor) -> None:
+        """Put a solution of ``linear_problem`` in the bypass and the output bias.
+
+        ``solution`` (n_regressors + 1, n_outputs): the bypass rows, then the bias row.
+        """
+        if self.bypass is None:
+            raise ValueError('the network has no linear bypass to set: build it with '
+                             'linear_bypass = True')
+        with torch.no_grad():
             self.bypass.weight.copy_(solution[:-1].T)
             self.output.bias.copy_(solution[-1])
 

@@ -52,7 +52,8 @@ _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'tra
 _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed',
                'motion_gate_ny', 'ramp_order')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
-_BOOL_FIELDS = ('linear_init', 'thrust_validation', 'ramp_invariant', 'motion_gate',
+_BOOL_FIELDS = ('linear_init', 'thrust_validation', 'thrust_ridge_validation', 'ramp_invariant',
+                'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
                 'sea_change_revert', 'frequency_yaw')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
@@ -202,13 +203,19 @@ class PredictorParams:
             "for a wave peak: in the RAO loops ω0 was 0.25–0.44 against the sea's 0.48–0.63; "
             'false holds position 9–17 % better with less wave-band thrust, development seeds, '
             'docs/BENCHMARKS.md "Twenty-third session")'))
-    hidden_units: int = field(default=2, metadata=_doc('neurons per hidden layer'))
+    hidden_units: int = field(default=0, metadata=_doc(
+        'neurons per hidden layer; 0: the linear network (no tanh part, the linear ARX model on '
+        'the same regressors, trained by one least-squares solve; the default: a tanh part of 2 '
+        'units decays to zero under the weight penalty within about nine trainings and held '
+        'position no better in 40-seed loop screens, docs/BENCHMARKS.md "Thirty-first '
+        'session")'))
     hidden_layers: int = field(default=1, metadata=_doc('hidden layers'))
     max_epochs: int = field(default=10, metadata=_doc('epochs per training'))
     max_train_seconds: float = field(
         default=20.0, metadata=_doc('wall-clock limit of one training', 's'))
     weight_decay: float = field(
-        default=0.1, metadata=_doc('weight penalty of the tanh part (MSEREG, thesis eq. 2.8)', ''))
+        default=0.1, metadata=_doc('weight penalty of the tanh part (MSEREG, thesis eq. 2.8); '
+                                   'nothing to act on with hidden_units 0', ''))
     derivative_weight: float = field(
         default=0.0, metadata=_doc('weight of the derivative-error loss term', ''))
     trainer: str = field(default='lm', metadata=_doc('training algorithm: lm, lbfgs or adam'))
@@ -225,6 +232,13 @@ class PredictorParams:
             'motion (an LF model fitted with the thrust must dead-reckon the newest third better '
             'than one fitted without it, core/lf_dynamics.py); if not, the network is trained '
             'without the thrust regressors (their weights 0)'))
+    thrust_ridge_validation: bool = field(
+        default=False, metadata=_doc(
+            'linear network (hidden_units 0) only: the ridge on the thrust regressors is chosen '
+            'per output, at each training, from a grid (1e-6 … 1e3 per row, standardized units) '
+            'by the error on the newest retrain_period of the window of a fit on the rest, then '
+            'refitted on all of it: the newest data decide how much the thrust is trusted (issue '
+            '13, hypothesis 1)'))
     regressor_clip: float = field(
         default=0.0, metadata=_doc(
             'clip every regressor the network sees (relative positions, forces) and its output '
@@ -449,7 +463,13 @@ class PredictorParams:
         if self.ny + self.nfb < 1:
             raise ValueError(f'regressor rule: ny + nfb must be ≥ 1 (the network must see a '
                              f'position, thesis §4.4), got ny = {self.ny}, nfb = {self.nfb}')
-        for name in ('hidden_units', 'hidden_layers', 'max_epochs'):
+        if self.hidden_units < 0:
+            raise ValueError(f'positivity rule: hidden_units must be ≥ 0 (0: the linear network, '
+                             f'no tanh part), got {self.hidden_units!r}')
+        if self.thrust_ridge_validation and self.hidden_units != 0:
+            raise ValueError('thrust_ridge_validation needs the linear network (hidden_units 0, '
+                             f'got {self.hidden_units}): set hidden_units 0 or switch it off')
+        for name in ('hidden_layers', 'max_epochs'):
             if getattr(self, name) < 1:
                 raise ValueError(f'positivity rule: {name} must be ≥ 1, got '
                                  f'{getattr(self, name)!r}')

@@ -60,6 +60,10 @@ FloatArray = NDArray[np.float64]
 # A candidate must not be worse than the network in service by more than this factor on the
 # newest targets (1.0 = strictly no worse; a little slack avoids freezing on numerical noise).
 ACCEPT_LOSS_RATIO = 1.02
+# Ridges per row (standardized units) on the thrust regressors that `thrust_ridge_validation`
+# chooses from: from the trainer's own 1e-6 (thrust as free as the positions) to 1e3 (thrust
+# in effect dropped).
+FORCE_RIDGE_GRID = (1e-6, 1e-3, 1e-2, 1e-1, 1.0, 10.0, 1e3)
 # An ω0 estimate this close (relative) to a wave-band edge is not trusted if an earlier one exists.
 EDGE_MARGIN = 0.05
 # ω0 moving by more than this (relative) between retrainings is a new sea state (see
@@ -161,7 +165,9 @@ def train_settings(params: PredictorParams) -> TrainSettings:
                          max_epochs=params.max_epochs, max_seconds=params.max_train_seconds,
                          weight_decay=params.weight_decay,
                          derivative_weight=params.derivative_weight,
-                         linear_init=params.linear_init, seed=params.seed)
+                         linear_init=params.linear_init, seed=params.seed,
+                         force_ridge_grid=FORCE_RIDGE_GRID if params.thrust_ridge_validation
+                         else (), validation_rows=params.retrain_samples)
 
 
 def first_training_samples(params: PredictorParams) -> int:

@@ -59,7 +59,7 @@ come out as exact zeros.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 import copy
 from dataclasses import dataclass
@@ -78,6 +78,7 @@ from lf_predictor_ros.core.network import (
     NnarmaxSpec,
     _relative_frame_torch,
     rotate_blocks_torch,
+    solve_ridge,
 )
 from lf_predictor_ros.core.regressors import (
     as_series,
@@ -88,6 +89,7 @@ from lf_predictor_ros.core.regressors import (
 
 FloatArray = NDArray[np.float64]
 Algorithm = Literal['lm', 'lbfgs', 'adam']
+BASE_RIDGE = 1e-6  # [-] per row, standardized units: fit_linear_bypass's ridge on every column
 Mode = Literal['series_parallel', 'parallel']
 
 _ALGORITHMS = ('lm', 'lbfgs', 'adam')
@@ -106,7 +108,10 @@ class TrainSettings:
     ``min_grad`` stops when ‖∇J‖ falls below it; ``loss_goal`` stops when the MSE part reaches it;
     ``standardize`` re-computes the input/output standardization from the window (exactly
     function-preserving, so the warm start is kept); ``linear_init`` solves the linear bypass by
-    least squares before the first epoch (``NnarmaxNet.fit_linear_bypass``); ``seed`` is
+    least squares before the first epoch (``NnarmaxNet.fit_linear_bypass``);
+    ``force_ridge_grid`` (linear network only; empty: off) the ridges per row on the force
+    columns to choose from, per output, by the error on the newest ``validation_rows`` kept rows
+    of a fit on the others (``validated_force_ridges``); ``seed`` is
     recorded for stochastic variants (mini-batches, restarts): the three full-batch algorithms
     here use no randomness, so a run is reproducible bit for bit without touching torch's global
     RNG.
@@ -128,6 +133,8 @@ class TrainSettings:
     standardize: bool = True
     linear_init: bool = False
     seed: int = 0
+    force_ridge_grid: tuple[float, ...] = ()
+    validation_rows: int = 0
 
     def __post_init__(self) -> None:
         """Validate; raise ValueError naming the broken rule."""
@@ -161,6 +168,12 @@ class TrainSettings:
             )
         if not (math.isfinite(self.lr) and self.lr > 0.0):
             raise ValueError(f'TrainSettings.lr must be > 0, got {self.lr}')
+        if any(not (math.isfinite(r) and r > 0.0) for r in self.force_ridge_grid):
+            raise ValueError('TrainSettings.force_ridge_grid must hold finite ridges > 0, got '
+                             f'{self.force_ridge_grid}')
+        if self.force_ridge_grid and self.validation_rows < 1:
+            raise ValueError('TrainSettings.force_ridge_grid needs validation_rows ≥ 1 (the '
+                             f'newest rows that choose the ridge), got {self.validation_rows}')
 
 
 @dataclass(frozen=True)
@@ -171,7 +184,8 @@ class TrainResult:
     ``loss``/``initial_loss``: MSE part of the objective on the masked window after/before;
     ``epochs``: completed epochs (LM: accepted or attempted weight updates); ``seconds``: wall
     time; ``converged``: stopped because a convergence criterion held; ``stopped_reason``: one of
-    'max_epochs', 'max_seconds', 'stop_event', 'loss_goal', 'min_grad', 'mu_max', 'non_finite';
+    'max_epochs', 'max_seconds', 'stop_event', 'loss_goal', 'min_grad', 'mu_max', 'non_finite',
+    'least_squares' (the linear network, solved exactly, ``epochs`` 0);
     ``loss_history``: MSE part after every epoch; ``objective``/``initial_objective``: the full
     objective J(w) (with derivative and weight-decay terms) after/before. Never
     ``objective > initial_objective``; the MSE part alone may rise when d or b > 0.
@@ -383,7 +397,7 @@ class _Run:
         return bool(self.history) and self.history[-1] <= self.settings.loss_goal
 
 
-_CONVERGED = ('loss_goal', 'min_grad', 'mu_max')
+_CONVERGED = ('loss_goal', 'min_grad', 'mu_max', 'least_squares')
 # closure evaluations per L-BFGS iteration: 1 + up to 25 strong-Wolfe trials (torch's max_ls);
 # torch's default max_eval = 1.25·max_iter would starve the line search at max_iter = 1
 _LBFGS_MAX_EVAL = 26
@@ -457,7 +471,13 @@ def _train(
     model = copy.deepcopy(net)
     if settings.standardize:
         model.set_standardization(u, y, preserve_function=True)
-    if settings.linear_init:
+    solved = _solved_by_least_squares(spec, settings)
+    if solved and settings.force_ridge_grid:
+        design, wanted = model.linear_problem(window.x_series[:-1], window.target, window.keep)
+        ridges = validated_force_ridges(design, wanted, spec.nu * spec.n_inputs_u,
+                                        settings.validation_rows, settings.force_ridge_grid)
+        model.set_linear_solution(solve_ridge(design, wanted, ridges))
+    elif settings.linear_init or solved:
         model.fit_linear_bypass(window.x_series[:-1], window.target, window.keep)
     runner = _WindowPredictor(model, n_static_regressors(spec), spec.nfb)
     parallel = settings.mode == 'parallel'
@@ -470,8 +490,8 @@ def _train(
         'lbfgs': _lbfgs,
         'adam': _adam,
     }
-    reason = 'max_epochs'
-    if settings.max_epochs > 0:
+    reason = 'least_squares' if solved else 'max_epochs'
+    if settings.max_epochs > 0 and not solved:
         reason = run.stop_reason() or optimizers[settings.algorithm](runner, window, parallel, run)
     with torch.no_grad():
         objective, prediction = _objective(runner, window, parallel, settings)
@@ -489,6 +509,43 @@ def _train(
         objective=float(objective),
         initial_objective=float(initial_objective),
     )
+
+
+def _solved_by_least_squares(spec: NnarmaxSpec, settings: TrainSettings) -> bool:
+    """True when one least-squares solve is the exact training: the linear network on the MSE.
+
+    The linear network (no tanh part) is linear in its weights, and with neither a derivative
+    term nor a recursion through fed-back outputs (parallel mode with nfb > 0) its objective is
+    the plain MSE: ``fit_linear_bypass`` finds its optimum (up to its 1e-6 ridge) in one solve.
+    ``weight_decay`` has nothing to act on then (it covers only the tanh part).
+    """
+    recursive = settings.mode == 'parallel' and spec.nfb > 0
+    return spec.linear and settings.derivative_weight == 0.0 and not recursive
+
+
+def validated_force_ridges(design: torch.Tensor, wanted: torch.Tensor, n_force: int,
+                           validation_rows: int, grid: Sequence[float]) -> torch.Tensor:
+    """Per column and output ridges (n_columns − 1, n_outputs) of the linear network.
+
+    ``design``, ``wanted``: ``NnarmaxNet.linear_problem`` (kept rows, oldest first); the first
+    ``n_force`` columns are the force regressors. Each ridge of ``grid`` on the force columns
+    (every other column keeps ``BASE_RIDGE``) is fitted on all rows but the newest
+    ``validation_rows`` (at most half) and scored per output by the mean squared error on those;
+    each output takes the ridge with the least error (the smaller one on a tie).
+    """
+    rows, n_columns = design.shape
+    holdout = min(validation_rows, rows // 2)
+    fit, check = slice(0, rows - holdout), slice(rows - holdout, rows)
+    errors = []
+    for ridge in grid:
+        ridges = torch.full((n_columns - 1,), BASE_RIDGE, dtype=design.dtype)
+        ridges[:n_force] = ridge
+        solution = solve_ridge(design[fit], wanted[fit], ridges)
+        errors.append(torch.mean((design[check] @ solution - wanted[check]) ** 2, dim=0))
+    best = torch.argmin(torch.stack(errors), dim=0)  # (n_outputs,): first minimum on a tie
+    chosen = torch.full((n_columns - 1, wanted.shape[1]), BASE_RIDGE, dtype=design.dtype)
+    chosen[:n_force] = torch.tensor(grid, dtype=design.dtype)[best]
+    return chosen
 
 
 def _objective(

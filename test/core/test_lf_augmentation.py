@@ -74,12 +74,17 @@ def test_lf_copy_adds_the_motion_to_positions_and_its_filtered_version_to_the_ta
     assert plain[1] is y
 
 
-def test_without_force_inputs_makes_the_output_independent_of_the_thrust() -> None:
-    params = PredictorParams()
+@pytest.mark.parametrize('hidden_units', [0, 2])
+def test_without_force_inputs_makes_the_output_independent_of_the_thrust(hidden_units: int,
+                                                                         ) -> None:
+    params = PredictorParams(hidden_units=hidden_units)
     spec = network_spec(params)
     net = NnarmaxNet(spec, seed=3)
     with torch.no_grad():
-        net.output.weight.normal_()  # a network that does use its tanh part
+        if hidden_units:
+            net.output.weight.normal_()  # a network that does use its tanh part
+        else:
+            net.bypass.weight.normal_(std=1e-3)  # a linear network that uses the thrust
     state = net.state_dict()
     before = {k: v.clone() for k, v in state.items()}
     gated = NumpyNnarmax.from_module(NnarmaxNet.from_state(spec, without_force_inputs(state,

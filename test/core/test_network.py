@@ -53,8 +53,11 @@ def test_spec_rejects_broken_rules() -> None:
         NnarmaxSpec(n_outputs=2, n_inputs_u=1, nu=1, ny=1, nfb=1, hidden_units=4)
     with pytest.raises(ValueError, match='ny \\+ nfb ≥ 1'):
         NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=2, ny=0, nfb=0, hidden_units=4)
-    with pytest.raises(ValueError, match='hidden_units must be an int ≥ 1'):
-        NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=1, ny=1, nfb=1, hidden_units=0)
+    with pytest.raises(ValueError, match='hidden_units must be an int ≥ 0'):
+        NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=1, ny=1, nfb=1, hidden_units=-1)
+    with pytest.raises(ValueError, match='hidden_units = 0 .* needs linear_bypass'):
+        NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=1, ny=1, nfb=1, hidden_units=0,
+                    linear_bypass=False)
     with pytest.raises(ValueError, match='nu must be an int ≥ 0'):
         NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=-1, ny=1, nfb=1, hidden_units=3)
     assert SPEC_3DOF.n_regressors == 2 * 3 + (3 + 2) * 3
@@ -313,3 +316,32 @@ def test_fit_linear_bypass_recovers_a_linear_arx_system_exactly(relative: bool) 
     with torch.no_grad():
         error = net(x_t) - target
     assert float(error.abs().max()) < 1e-8
+
+
+def test_linear_network_is_the_bypass_plus_a_bias() -> None:
+    """hidden_units 0: ŷ = y_mean + y_std · (v_0 + B x_s), weights n_reg · n_out + n_out."""
+    spec = NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=3, nfb=0, hidden_units=0,
+                       relative=True, body_frame=True)
+    assert spec.linear and not SPEC_3DOF.linear
+    net = NnarmaxNet(spec, seed=4)
+    assert sum(p.numel() for p in net.parameters()) == spec.n_regressors * 3 + 3
+    u, y, _ = _random_series(60, seed=5)
+    net.set_standardization(u, y)
+    rng = np.random.default_rng(6)
+    bias = torch.tensor([0.3, -0.2, 0.01], dtype=torch.float64)
+    with torch.no_grad():
+        net.bypass.weight.copy_(torch.from_numpy(rng.normal(scale=0.01,
+                                                            size=(3, spec.n_regressors))))
+        x_t = torch.from_numpy(build_regressors(u, y, y, spec)[0])
+        without_bias = net(x_t)
+        net.output.bias.copy_(bias)
+        got = net(x_t)
+    # the bias is one body-frame step v_0 · y_std, turned to north/east by the newest heading
+    psi = torch.from_numpy(y[spec.first_index:, 2])
+    step = bias * net.y_std
+    expected = torch.stack((torch.cos(psi) * step[0] - torch.sin(psi) * step[1],
+                            torch.sin(psi) * step[0] + torch.cos(psi) * step[1],
+                            step[2].expand_as(psi)), dim=1)
+    assert torch.allclose(got - without_bias, expected, atol=1e-12)
+    assert np.allclose(NumpyNnarmax.from_module(net).forward(x_t.numpy()), got.numpy(),
+                       atol=1e-12)

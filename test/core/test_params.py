@@ -39,8 +39,10 @@ RULE_CASES: list[tuple[str, dict[str, Any], str]] = [
     ('derivative_weight', {'derivative_weight': -0.1}, r'derivative_weight must be ≥ 0'),
     ('nu', {'nu': -1}, r'nu must be ≥ 0'),
     ('ny+nfb', {'ny': 0, 'nfb': 0}, r'regressor rule: ny \+ nfb must be ≥ 1'),
-    ('hidden_units', {'hidden_units': 0}, r'hidden_units must be ≥ 1'),
+    ('hidden_units', {'hidden_units': -1}, r'hidden_units must be ≥ 0 \(0: the linear network'),
     ('hidden_layers', {'hidden_layers': 0}, r'hidden_layers must be ≥ 1'),
+    ('thrust_ridge_validation', {'thrust_ridge_validation': True, 'hidden_units': 2},
+     r'thrust_ridge_validation needs the linear network \(hidden_units 0, got 2\)'),
     ('max_epochs', {'max_epochs': 0}, r'max_epochs must be ≥ 1'),
     ('sub-sample window', {'transient_length': 0.2}, r'transient_length = 0\.2 s is shorter '
                                                       r'than one sample'),

@@ -47,7 +47,9 @@ WAVE_PEAK_FREQ = 0.8  # [rad/s] ω0 of the onedof_excited scenario and of the sy
 BAND_CENTRE = math.sqrt(0.25 * 1.4)  # [rad/s] fallback notch before any ω0 estimate
 # Background mode: a training that keeps running for about 2 s of wall time.
 # Adam has no convergence stop here (min_grad 1e-10, no loss goal), so it uses the full 2 s.
-LONG = SMALL.replace(trainer='adam', max_epochs=1_000_000, max_train_seconds=2.0)
+# a training that runs its whole time limit: an optimizer needs a tanh part to run at all (the
+# linear network of the defaults is one least-squares solve)
+LONG = SMALL.replace(trainer='adam', max_epochs=1_000_000, max_train_seconds=2.0, hidden_units=2)
 LATENCY_BOUND = 0.050  # [s] generous bound on one update while a training runs
 SENSOR_PERIOD = 0.002  # [s] pause between two updates in the background tests
 
@@ -773,7 +775,7 @@ from lf_predictor_ros.core.predictor import AdaptivePredictor
 params = PredictorParams(ndof=1, sample_time=1.0, retrain_period=20.0, training_window=200.0,
                          transient_length=10.0, filter_window=60.0, append_length=40.0,
                          estimation_window=600.0, max_epochs=1000000, max_train_seconds=10.0,
-                         trainer='adam', nu=4, ny=12)
+                         trainer='adam', nu=4, ny=12, hidden_units=2)
 record = simulate(load_scenario('onedof_feedback'), seed=4, duration=180.0)
 predictor = AdaptivePredictor(params, background=True)
 for k in range(len(record.t)):

@@ -27,7 +27,7 @@ from lf_predictor_ros.core.network import (
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.regressors import rotate_blocks
 from lf_predictor_ros.core.retraining import network_spec, train_settings
-from lf_predictor_ros.core.training import train
+from lf_predictor_ros.core.training import evaluate_loss, train
 
 FloatArray = NDArray[np.float64]
 RAMPS = (((5.0, -3.0, 0.4), (0.2, -0.1, 0.01)), ((50.0, 30.0, -2.0), (-1.0, 0.3, -0.02)))
@@ -206,7 +206,8 @@ def test_training_on_station_keeping_still_follows_a_ramp() -> None:
     u = rng.normal(size=(n, 3))
     net = NnarmaxNet(network_spec(params), seed=0)
     result = train(net, u, y, lf, None, train_settings(params))
-    assert result.loss < result.initial_loss
+    untrained = evaluate_loss(net, network_spec(params), u, y, lf, None, 'series_parallel')
+    assert result.loss < 0.5 * untrained  # measured 0.297 against 1.058
     net.load_state_dict(result.state_dict)
     fast = NumpyNnarmax.from_module(net)
     residuals = [predict_step(fast, np.zeros((40, 3)), ramp(o, v), ramp(o, v))

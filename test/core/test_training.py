@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 import torch
 
-from lf_predictor_ros.core.network import NnarmaxNet, NnarmaxSpec
+from lf_predictor_ros.core.network import NnarmaxNet, NnarmaxSpec, solve_ridge
 from lf_predictor_ros.core.training import (
+    BASE_RIDGE,
     Algorithm,
     TrainSettings,
     evaluate_loss,
@@ -22,6 +23,7 @@ from lf_predictor_ros.core.training import (
     predict_window,
     subnormals_flushed,
     train,
+    validated_force_ridges,
 )
 
 # torch loads its forward-AD decompositions once per process via the deprecated torch.jit.script
@@ -45,6 +47,18 @@ def narx_data(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     u.setflags(write=False)
     y.setflags(write=False)
     return u[:, None], y[:, None]
+
+
+def linear_system(seed: int, n: int = 300, offset: float = 0.0,
+                  noise: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """y(t+1) = 1.6 y(t) − 0.6 y(t−1) + 0.2 u(t) + offset + e(t), u ~ N(0, 1), e ~ N(0, noise²)."""
+    rng = np.random.default_rng(seed)
+    u = rng.normal(size=(n, 1))
+    y = np.zeros((n, 1))
+    for t in range(1, n - 1):
+        e = rng.normal(scale=noise) if noise > 0.0 else 0.0
+        y[t + 1] = 1.6 * y[t] - 0.6 * y[t - 1] + 0.2 * u[t] + offset + e
+    return u, y
 
 
 def one_step_rmse(net: NnarmaxNet, u: np.ndarray, y: np.ndarray, targets: np.ndarray) -> float:
@@ -474,12 +488,7 @@ def test_loss_scale_is_the_size_of_what_the_network_predicts() -> None:
 
 def test_linear_init_fits_a_linear_system_before_the_first_epoch() -> None:
     """y(t+1) = 1.6 y(t) − 0.6 y(t−1) + 0.2 u(t): zero epochs of LM, loss ~ 0 with linear_init."""
-    rng = np.random.default_rng(8)
-    n = 300
-    u = rng.normal(size=(n, 1))
-    y = np.zeros((n, 1))
-    for t in range(1, n - 1):
-        y[t + 1] = 1.6 * y[t] - 0.6 * y[t - 1] + 0.2 * u[t]
+    u, y = linear_system(seed=8)
     spec = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=1, ny=2, nfb=0, hidden_units=2,
                        relative=True)
     plain = train(NnarmaxNet(spec), u, y, y, None, TrainSettings(max_epochs=0))
@@ -669,3 +678,73 @@ def test_training_turns_subnormal_weights_into_the_zeros_they_act_as() -> None:
     for key, value in from_tiny.state_dict.items():
         assert not ((value != 0) & (value.abs() < SMALLEST_NORMAL)).any(), key
         assert torch.equal(value, from_zero.state_dict[key]), key
+
+
+def test_the_linear_network_is_trained_by_one_exact_least_squares_solve() -> None:
+    """hidden_units 0: no LM epoch, the optimum of the MSE; LM only where the loss is not MSE."""
+    u, y = linear_system(seed=12, offset=0.01, noise=0.01)
+    n = len(y)
+    spec = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=1, ny=2, nfb=0, hidden_units=0,
+                       relative=True)
+    mask = np.arange(n) % 7 != 3
+    result = train(NnarmaxNet(spec), u, y, y, mask, TrainSettings(weight_decay=0.1))
+    assert (result.stopped_reason, result.epochs, result.converged) == ('least_squares', 0,
+                                                                       True)
+    # the same fit by numpy: the step y(t+1) − y(t) on [u(t), y(t−1) − y(t), 1] over kept rows
+    rows = np.arange(1, n - 1)
+    rows = rows[mask[rows + 1]]
+    design = np.column_stack((u[rows, 0], y[rows - 1, 0] - y[rows, 0], np.ones(len(rows))))
+    coef = np.linalg.lstsq(design, y[rows + 1, 0] - y[rows, 0], rcond=None)[0]
+    net = NnarmaxNet.from_state(spec, result.state_dict)
+    x = torch.tensor([[1.0, 0.5, 0.0], [0.0, 0.0, 0.0]], dtype=torch.float64)  # u, y(t), y(t−1)
+    with torch.no_grad():
+        steps = net(x)[:, 0].numpy() - [0.5, 0.0]  # the step ŷ(t + 1) − y(t)
+    assert steps == pytest.approx([coef[0] - 0.5 * coef[1] + coef[2], coef[2]], abs=1e-6)
+    # a derivative term makes the objective more than the MSE: then the optimizer runs
+    with_derivative = train(NnarmaxNet(spec), u, y, y, mask,
+                            TrainSettings(max_epochs=3, derivative_weight=0.5))
+    assert with_derivative.stopped_reason != 'least_squares' and with_derivative.epochs > 0
+    assert with_derivative.objective <= with_derivative.initial_objective
+
+
+def test_validated_force_ridges_trust_a_force_only_where_the_newest_rows_confirm_it() -> None:
+    """Output 0 is driven by the force, output 1 only correlates with it in the old rows."""
+    rng = np.random.default_rng(21)
+    rows, holdout = 400, 100
+    force, position = rng.normal(size=rows), rng.normal(size=rows)
+    design = torch.from_numpy(np.column_stack((force, position, np.ones(rows))))
+    spurious = np.where(np.arange(rows) < rows - holdout, 1.0, -1.0) * force  # flips sign
+    wanted = torch.from_numpy(np.column_stack((
+        2.0 * force + 0.5 * position + rng.normal(scale=0.1, size=rows),
+        0.5 * position + 0.5 * spurious + rng.normal(scale=0.1, size=rows))))
+    grid = (1e-6, 1e-2, 1.0, 1e3)
+    ridges = validated_force_ridges(design, wanted, 1, holdout, grid)
+    assert ridges.shape == (2, 2)
+    assert ridges[0].tolist() == [1e-6, 1e3]  # the force column: trusted / dropped
+    assert ridges[1].tolist() == [BASE_RIDGE, BASE_RIDGE]  # the position column as always
+    # per-output ridges solve each output's own problem
+    both = solve_ridge(design, wanted, ridges)
+    for i in range(2):
+        alone = solve_ridge(design, wanted[:, i:i + 1], ridges[:, i])
+        assert torch.allclose(both[:, i:i + 1], alone, atol=1e-12)
+    assert abs(float(both[0, 0]) - 2.0) < 0.02 and abs(float(both[0, 1])) < 0.01
+
+
+def test_training_with_a_force_ridge_grid_solves_with_the_chosen_ridges() -> None:
+    rng = np.random.default_rng(22)
+    n = 300
+    u = rng.normal(size=(n, 1))
+    y = np.cumsum(0.1 * np.roll(u, 1, axis=0) + rng.normal(scale=0.01, size=(n, 1)), axis=0)
+    spec = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=2, ny=2, nfb=0, hidden_units=0,
+                       relative=True)
+    settings = TrainSettings(force_ridge_grid=(1e-6, 1.0, 1e3), validation_rows=60)
+    result = train(NnarmaxNet(spec), u, y, y, None, settings)
+    assert result.stopped_reason == 'least_squares'
+    free = train(NnarmaxNet(spec), u, y, y, None, TrainSettings())
+    # the force drives the motion here: the validation keeps it free, the same fit as without
+    for name in ('bypass.weight', 'output.bias'):
+        assert torch.allclose(result.state_dict[name], free.state_dict[name], atol=1e-9)
+    with pytest.raises(ValueError, match='force_ridge_grid needs validation_rows'):
+        TrainSettings(force_ridge_grid=(1.0,))
+    with pytest.raises(ValueError, match='finite ridges > 0'):
+        TrainSettings(force_ridge_grid=(0.0,), validation_rows=5)

@@ -44,17 +44,19 @@ def simulate_recording(scenario: Scenario, seed: int, duration: float | None,
 
     Open loop when the scenario has no DP controller (``loop_estimator`` unused); otherwise the
     loop closed on ``loop_estimator`` (a causal estimator of `benchmark.estimators`, fed once
-    per h) or, for ``'truth'``, the scenario file's PID on the true LF pose. Raises ValueError
+    per h) or, for ``'truth'``, the scenario's PID on the true LF pose. Raises ValueError
     for an unknown estimator or a recording loop that diverges.
     """
     if loop_estimator not in LOOP_CHOICES:
         raise ValueError(f'unknown loop estimator {loop_estimator!r}; choose one of '
                          f'{LOOP_CHOICES}')
     total = scenario.duration if duration is None else float(duration)
-    if not scenario.controller.enabled or loop_estimator == TRUTH_LOOP:
-        loop = 'truth_lf' if scenario.controller.enabled else 'open'
+    if not scenario.controller.enabled:
         return (simulate(scenario, seed=seed, duration=duration),
-                Provenance(scenario.name, seed, total, scenario.sample_time, loop))
+                Provenance(scenario.name, seed, total, scenario.sample_time, 'open'))
+    if loop_estimator == TRUTH_LOOP:
+        return (simulate(scenario, seed=seed, duration=duration, feedback='truth_lf'),
+                Provenance(scenario.name, seed, total, scenario.sample_time, 'truth_lf'))
     setup = make_setup(scenario, seed, predictor_params(scenario))
     recording = make_recording(scenario, seed, duration, setup, loop_estimator)
     if recording.loop_run is None:  # record() keeps the run of every estimator loop

@@ -24,11 +24,11 @@ import sys
 from lf_predictor_ros.bag.mcap_writer import BagWriter, qos_profile_dict, qos_profiles_yaml
 from lf_predictor_ros.bag.provenance import recording_custom_data
 from lf_predictor_ros.bag.ros_codec import serialize
-from lf_predictor_ros.benchmark.estimators import CAUSAL, predictor_params
-from lf_predictor_ros.benchmark.recordings import Provenance
-from lf_predictor_ros.benchmark.suite import make_recording, make_setup
+from lf_predictor_ros.benchmark.estimators import CAUSAL, make_estimator, predictor_params
+from lf_predictor_ros.benchmark.recordings import Provenance, record
+from lf_predictor_ros.benchmark.suite import make_setup
 from lf_predictor_ros.nodes.conversions import pose_to_msg, wrench_to_msg
-from sim_ros.simulation import Scenario, SimRecord, load_scenario, simulate
+from sim_ros.simulation import Scenario, SimRecord, load_scenario
 
 POSE = 'geometry_msgs/msg/PoseStamped'
 WRENCH = 'geometry_msgs/msg/WrenchStamped'
@@ -42,26 +42,23 @@ def simulate_recording(scenario: Scenario, seed: int, duration: float | None,
                        loop_estimator: str = DEFAULT_LOOP) -> tuple[SimRecord, Provenance]:
     """The full-rate run of ``scenario`` and where it came from (module docstring).
 
-    Open loop when the scenario has no DP controller (``loop_estimator`` unused); otherwise the
-    loop closed on ``loop_estimator`` (a causal estimator of `benchmark.estimators`, fed once
-    per h) or, for ``'truth'``, the scenario's PID on the true LF pose. Raises ValueError
-    for an unknown estimator or a recording loop that diverges.
+    `recordings.record` on the predictor's grid: open loop when the scenario has no DP
+    controller (``loop_estimator`` unused); otherwise the loop closed on ``loop_estimator`` (a
+    causal estimator of `benchmark.estimators`, fed once per h) or, for ``'truth'``, the PID on
+    the true LF pose at every sensor sample. Raises ValueError for an unknown estimator or a
+    recording loop that diverges.
     """
     if loop_estimator not in LOOP_CHOICES:
         raise ValueError(f'unknown loop estimator {loop_estimator!r}; choose one of '
                          f'{LOOP_CHOICES}')
-    total = scenario.duration if duration is None else float(duration)
-    if not scenario.controller.enabled:
-        return (simulate(scenario, seed=seed, duration=duration),
-                Provenance(scenario.name, seed, total, scenario.sample_time, 'open'))
-    if loop_estimator == TRUTH_LOOP:
-        return (simulate(scenario, seed=seed, duration=duration, feedback='truth_lf'),
-                Provenance(scenario.name, seed, total, scenario.sample_time, 'truth_lf'))
     setup = make_setup(scenario, seed, predictor_params(scenario))
-    recording = make_recording(scenario, seed, duration, setup, loop_estimator)
-    if recording.loop_run is None:  # record() keeps the run of every estimator loop
-        raise RuntimeError('the recording of an estimator loop came without its run')
-    return recording.loop_run.record, recording.provenance
+    truth_fed = loop_estimator == TRUTH_LOOP
+    recording = record(scenario, seed, duration, setup.sample_time,
+                       None if truth_fed else loop_estimator,
+                       lambda name: make_estimator(name, setup).step, truth_fed=truth_fed)
+    if recording.full_rate is None:  # record() keeps the run it decimated
+        raise RuntimeError('the recording came without its full-rate run')
+    return recording.full_rate, recording.provenance
 
 
 def write_record(path: Path, record: SimRecord, *, duration: float | None = None,

@@ -110,6 +110,8 @@ class Recording:
     omega: FloatArray  # true wave peak frequency ω0 [rad/s]
     # the full-rate run of an 'estimator' recording: it *is* that estimator's closed loop
     loop_run: ClosedLoopRun | None = field(default=None, repr=False, compare=False)
+    # the simulator run at the sensor rate the grid arrays were decimated from (`sim_bag`)
+    full_rate: SimRecord | None = field(default=None, repr=False, compare=False)
     # first-order wave motion η_w = true pose − true LF pose of the grid instant [m, m, rad]
     # (heading wrapped); None where unknown. For `seen_truth`, not an estimator input.
     wave: FloatArray | None = field(default=None, repr=False, compare=False)
@@ -234,14 +236,15 @@ def record(scenario: Scenario, seed: int, duration: float | None, sample_time: f
                              'choose a stable loop estimator')
         provenance = Provenance(scenario.name, seed, total, sample_time, 'estimator',
                                 loop_estimator)
-        return _recording(provenance, decimate(run.record, stride), run)
-    return _recording(provenance, decimate(raw, stride))
+        return _recording(provenance, run.record, stride, run)
+    return _recording(provenance, raw, stride)
 
 
-def _recording(provenance: Provenance, grid: dict[str, FloatArray],
+def _recording(provenance: Provenance, raw: SimRecord, stride: int,
                run: ClosedLoopRun | None = None) -> Recording:
+    grid = decimate(raw, stride)
     return Recording(provenance, grid['t'], grid['y'], grid['u'], grid['truth'], grid['omega'],
-                     run, grid.get('wave'))
+                     run, raw, grid.get('wave'))
 
 
 def check_scorable(recording: Recording, scenario: str | None = None,

@@ -491,11 +491,12 @@ def _train(
         'adam': _adam,
     }
     reason = 'least_squares' if solved else 'max_epochs'
+    objective, loss = initial_objective, initial_loss  # unless an optimizer moves the weights
     if settings.max_epochs > 0 and not solved:
         reason = run.stop_reason() or optimizers[settings.algorithm](runner, window, parallel, run)
-    with torch.no_grad():
-        objective, prediction = _objective(runner, window, parallel, settings)
-        loss = _mse(prediction, window)
+        with torch.no_grad():
+            objective, prediction = _objective(runner, window, parallel, settings)
+            loss = _mse(prediction, window)
     state = {name: value.detach().clone() for name, value in model.state_dict().items()}
     return TrainResult(
         state_dict=state,

@@ -75,6 +75,7 @@ FloatArray = NDArray[np.float64]
 __all__ = [
     'CHECKPOINT_FORMAT',
     'CHECKPOINT_VERSION',
+    'LINEAR_RIDGE',
     'NnarmaxNet',
     'NnarmaxSpec',
     'NumpyNnarmax',
@@ -83,6 +84,7 @@ __all__ = [
     'predict_step',
     'rotate_blocks_torch',
     'save_checkpoint',
+    'solve_ridge',
 ]
 
 CHECKPOINT_FORMAT = 'lf_predictor_ros.nnarmax'
@@ -265,6 +267,11 @@ def _safe_std(std: FloatArray, mean: FloatArray) -> FloatArray:
     return np.where(std > floor, std, 1.0)
 
 
+# [-] per row, standardized units: the ridge of the linear part's least-squares solve on every
+# column but the bias (``NnarmaxNet.fit_linear_bypass``)
+LINEAR_RIDGE = 1e-6
+
+
 class _Linear(torch.nn.Linear):
     """torch's Linear, without its default initialization for zero-width weights.
 
@@ -391,7 +398,7 @@ class NnarmaxNet(torch.nn.Module):
         return self.y_mean + self.y_std * out
 
     def fit_linear_bypass(self, x: torch.Tensor, target: torch.Tensor, keep: torch.Tensor,
-                          ridge: float = 1e-6) -> None:
+                          ridge: float = LINEAR_RIDGE) -> None:
         """Solve the linear bypass and output bias by ridge least squares, in place.
 
         ``x`` (rows, n_regressors) raw regressor rows, ``target`` (rows, n_outputs) the values

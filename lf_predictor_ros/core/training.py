@@ -74,6 +74,7 @@ import torch
 from torch.func import functional_call, jacrev, vmap
 
 from lf_predictor_ros.core.network import (
+    LINEAR_RIDGE,
     NnarmaxNet,
     NnarmaxSpec,
     _relative_frame_torch,
@@ -89,7 +90,7 @@ from lf_predictor_ros.core.regressors import (
 
 FloatArray = NDArray[np.float64]
 Algorithm = Literal['lm', 'lbfgs', 'adam']
-BASE_RIDGE = 1e-6  # [-] per row, standardized units: fit_linear_bypass's ridge on every column
+BASE_RIDGE = LINEAR_RIDGE  # every column's ridge but the thrust's (validated_force_ridges)
 Mode = Literal['series_parallel', 'parallel']
 
 _ALGORITHMS = ('lm', 'lbfgs', 'adam')
@@ -517,7 +518,7 @@ def _solved_by_least_squares(spec: NnarmaxSpec, settings: TrainSettings) -> bool
 
     The linear network (no tanh part) is linear in its weights, and with neither a derivative
     term nor a recursion through fed-back outputs (parallel mode with nfb > 0) its objective is
-    the plain MSE: ``fit_linear_bypass`` finds its optimum (up to its 1e-6 ridge) in one solve.
+    the plain MSE: ``fit_linear_bypass`` finds its optimum (up to ``LINEAR_RIDGE``) in one solve.
     ``weight_decay`` has nothing to act on then (it covers only the tanh part).
     """
     recursive = settings.mode == 'parallel' and spec.nfb > 0

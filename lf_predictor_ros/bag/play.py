@@ -1,7 +1,8 @@
 """`play`: publish a bag's messages on their ROS topics in (scaled) real time, with /clock.
 
     play BAG [--rate R] [--loop] [--topics T [T ...]] [--clock] [--clock-rate HZ]
-             [--delay S] [--wait-for-subscribers S] [--ros-args ...]
+             [--delay S] [--wait-for-subscribers S] [--wait-for-all-acked S]
+             [--ros-args ...]
 
 For stacks without rosbag2. BAG is an `.mcap` file or a rosbag2 directory. Messages go out as
 the recorded CDR bytes (rclpy publishes serialized data directly), in log-time order, the
@@ -13,6 +14,14 @@ With `--clock`, `/clock` (rosgraph_msgs/Clock, reliable, keep_last 10, so it mat
 reliable and best-effort subscribers) carries the bag time: just before each message whose log
 time is later than the last published clock, and at `--clock-rate` Hz while waiting. A `/clock`
 topic recorded in the bag is then not replayed. After a `--loop` restart the clock jumps back.
+
+At the end of the bag `play` waits (up to `--wait-for-all-acked` seconds, default 5) until every
+reliable subscriber has acknowledged every message, as rosbag2's option of that name does. A
+sample lost on the way (a full receive buffer on a loaded machine) is repaired only after the
+writer's next heartbeat, and DDS writers send one every few seconds (Fast DDS: 3 s); a writer
+destroyed before that takes the repair with it, and the subscriber never sees the bag's last
+messages. Best-effort subscribers (the predictor's sensor QoS) send no acknowledgements and cost
+no wait. A topic still unacknowledged at the timeout is named in a warning.
 
 Exits 0 at the end of the bag, 1 on an unreadable bag or an unknown message type, and 0 on
 Ctrl-C / SIGTERM.
@@ -30,6 +39,7 @@ from typing import Any
 
 import rclpy
 from rclpy.context import Context
+from rclpy.duration import Duration
 from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.publisher import Publisher
@@ -43,6 +53,9 @@ from lf_predictor_ros.bag.ros_codec import message_class, qos_from_yaml
 CLOCK_TOPIC = '/clock'
 CLOCK_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 _MAX_SLEEP = 0.05  # [s] longest sleep between checks for shutdown
+# [s] the end's wait for acknowledgements: above Fast DDS's 3 s heartbeat period, after which a
+# reliable reader's acknowledgement (or its request to repeat a lost sample) comes.
+DEFAULT_ACK_TIMEOUT = 5.0
 # Not the node's name: rosout would try (and fail) to publish records made after a signal.
 LOGGER_NAME = 'lf_predictor_ros.play'
 
@@ -59,6 +72,7 @@ class PlayOptions:
     clock_rate: float
     delay: float
     wait_for_subscribers: float
+    wait_for_all_acked: float = DEFAULT_ACK_TIMEOUT
 
 
 def parse_args(args: Sequence[str] | None) -> PlayOptions:
@@ -80,16 +94,22 @@ def parse_args(args: Sequence[str] | None) -> PlayOptions:
                         help='wait S seconds before the first message (default 0)')
     parser.add_argument('--wait-for-subscribers', type=float, default=0.0, metavar='S',
                         help='wait up to S seconds until every topic has a subscriber')
+    parser.add_argument('--wait-for-all-acked', type=float, default=DEFAULT_ACK_TIMEOUT,
+                        metavar='S',
+                        help='at the end, wait up to S seconds until every reliable subscriber '
+                             f'acknowledged every message (default {DEFAULT_ACK_TIMEOUT:g}; '
+                             '0: do not wait)')
     argv = remove_ros_args(list(args) if args is not None else sys.argv)
     ns = parser.parse_args(argv[1:])
     if not ns.rate > 0.0:
         parser.error(f'--rate must be > 0, got {ns.rate}')
     if not ns.clock_rate > 0.0:
         parser.error(f'--clock-rate must be > 0 Hz, got {ns.clock_rate}')
-    if ns.delay < 0.0 or ns.wait_for_subscribers < 0.0:
-        parser.error('--delay and --wait-for-subscribers must be >= 0 s')
+    if not (ns.delay >= 0.0 and ns.wait_for_subscribers >= 0.0
+            and ns.wait_for_all_acked >= 0.0):
+        parser.error('--delay, --wait-for-subscribers and --wait-for-all-acked must be >= 0 s')
     return PlayOptions(ns.bag, ns.rate, ns.loop, ns.topics, ns.clock, ns.clock_rate, ns.delay,
-                       ns.wait_for_subscribers)
+                       ns.wait_for_subscribers, ns.wait_for_all_acked)
 
 
 def clock_message(time_ns: int) -> Clock:
@@ -131,6 +151,22 @@ class Player:
         while context.ok() and time.monotonic() < deadline and any(
                 p.get_subscription_count() == 0 for p in publishers):
             time.sleep(0.01)
+
+    def wait_for_all_acked(self) -> list[str]:
+        """Wait until reliable subscribers acknowledged everything; the topics that did not.
+
+        One deadline for all publishers (`wait_for_all_acked` seconds from now).
+        """
+        deadline = time.monotonic() + self._options.wait_for_all_acked
+        publishers = dict(self._publishers)
+        if self._clock_publisher is not None:
+            publishers[CLOCK_TOPIC] = self._clock_publisher
+        unacknowledged = []
+        for topic, publisher in publishers.items():
+            left = max(0.0, deadline - time.monotonic())
+            if not publisher.wait_for_all_acked(Duration(seconds=left)):
+                unacknowledged.append(topic)
+        return unacknowledged
 
     def play_once(self, context: Context) -> bool:
         """Play the bag once; False if shutdown interrupted it."""
@@ -199,6 +235,13 @@ def run(options: PlayOptions, args: Sequence[str] | None = None) -> int:
         _sleep(options.delay, context)
         while player.play_once(context) and options.loop:
             pass
+        if context.ok() and options.wait_for_all_acked > 0.0:
+            late = player.wait_for_all_acked()
+            if late:
+                logger.warning(
+                    f'subscribers on {late} did not acknowledge every message within '
+                    f'{options.wait_for_all_acked:g} s; they may have missed the last ones '
+                    '(a longer --wait-for-all-acked gives them more time)')
         return 0
     except KeyboardInterrupt:  # SIGINT: rclpy chains to Python's handler
         return 0

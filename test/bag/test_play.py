@@ -11,13 +11,16 @@ from typing import Any
 
 from geometry_msgs.msg import PoseStamped
 import pytest
+from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
+from lf_predictor_ros.bag.mcap_reader import BagReader
 from lf_predictor_ros.bag.mcap_writer import BagWriter
+from lf_predictor_ros.bag.play import CLOCK_TOPIC, DEFAULT_ACK_TIMEOUT, Player, parse_args
 from lf_predictor_ros.bag.ros_codec import serialize
 
 pytestmark = pytest.mark.filterwarnings('ignore::DeprecationWarning:lark.*')
@@ -82,13 +85,15 @@ def test_play_publishes_in_order_with_clock(tmp_path: Path, ros_context: Any,
         end = time.monotonic() + 0.5  # let the last messages arrive
         while time.monotonic() < end and len(poses) < N_POSES:
             executor.spin_once(timeout_sec=0.02)
-        assert play.poll() == 0, play.communicate()
     finally:
         if play.poll() is None:
             play.kill()
-        play.communicate(timeout=5.0)
+        _, stderr = play.communicate(timeout=5.0)
         executor.shutdown()
         node.destroy_node()
+    assert play.returncode == 0, stderr
+    # Every reliable subscriber (ours) acknowledged everything before play's writers went.
+    assert 'did not acknowledge' not in stderr
     assert [x for x, _ in poses] == [float(i) for i in range(N_POSES)]
     assert frequencies == pytest.approx([0.0, 0.4, 0.8])
     # Scaled real time: the last pose leaves (N - 1) * 50 ms / 2 = 225 ms after the first.
@@ -98,6 +103,52 @@ def test_play_publishes_in_order_with_clock(tmp_path: Path, ros_context: Any,
     assert clocks and clocks == sorted(clocks)
     assert clocks[0] >= START_NS
     assert clocks[-1] == START_NS + (N_POSES - 1) * SAMPLE_NS
+
+
+class _Publisher:
+    """A publisher whose acknowledgements come (or not) within any timeout."""
+
+    def __init__(self, acked: bool) -> None:
+        self.acked = acked
+        self.timeouts: list[float] = []
+
+    def wait_for_all_acked(self, timeout: Duration) -> bool:
+        self.timeouts.append(timeout.nanoseconds / 1e9)
+        return self.acked
+
+
+class _Node:
+    """Hands out _Publisher objects: acknowledged except on `late_topics`."""
+
+    def __init__(self, late_topics: set[str]) -> None:
+        self.late_topics = late_topics
+        self.publishers: dict[str, _Publisher] = {}
+
+    def create_publisher(self, _type: Any, topic: str, _qos: Any) -> _Publisher:
+        self.publishers[topic] = _Publisher(topic not in self.late_topics)
+        return self.publishers[topic]
+
+
+def test_wait_for_all_acked_names_the_topics_left_unacknowledged(tmp_path: Path) -> None:
+    bag = tmp_path / 'play.mcap'
+    _write_bag(bag)
+    options = parse_args(['play', str(bag), '--clock', '--wait-for-all-acked', '3'])
+    assert options.wait_for_all_acked == 3.0
+    node = _Node({'/wave_peak_frequency'})
+    with BagReader(bag) as reader:
+        player = Player(node, reader, options)  # type: ignore[arg-type]
+    assert player.wait_for_all_acked() == ['/wave_peak_frequency']
+    # Every publisher (bag topics and /clock) was asked, within one 3 s deadline.
+    assert set(node.publishers) == {'/measured_pose', '/wave_peak_frequency', CLOCK_TOPIC}
+    timeouts = [t for p in node.publishers.values() for t in p.timeouts]
+    assert len(timeouts) == 3 and all(0.0 <= t <= 3.0 for t in timeouts)
+    assert parse_args(['play', str(bag)]).wait_for_all_acked == DEFAULT_ACK_TIMEOUT
+
+
+def test_negative_ack_timeout_is_a_usage_error() -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        parse_args(['play', 'x.mcap', '--wait-for-all-acked', '-1'])
+    assert exit_info.value.code == 2
 
 
 def test_play_help_and_missing_bag() -> None:

@@ -359,9 +359,11 @@ class PredictorNode(InputHealth, LifecycleNode):
         self._timer = self.create_timer(self._settings.diagnostics_period,
                                         self.publish_diagnostics)
         p = self._params
+        fit = ('linear network, least squares' if p.hidden_units == 0
+               else f'{p.hidden_units} tanh units, trainer {p.trainer}')
         self.get_logger().info(
             f'configured: {p.ndof}-DOF, sample time {p.sample_time} s, retrain every '
-            f'{p.retrain_period} s on {p.training_window} s, trainer {p.trainer}; model '
+            f'{p.retrain_period} s on {p.training_window} s, {fit}; model '
             f'{self._model_file}; reference checks '
             f'{"on" if self._checks.reference_checks else "OFF"}')
         self._warn_passthrough()

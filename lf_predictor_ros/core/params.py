@@ -108,6 +108,12 @@ class PredictorParams:
             'g·LP(moving − holding)): the extra wave motion of the twin stays out of the '
             'estimate; '
             '0 = off (holding + g·(moving − holding))', 's'))
+    motion_gate_time: float = field(
+        default=10.0, metadata=_doc(
+            "with motion_gate: time constant of the first-order low-pass on the twin's "
+            'per-sample step whose square, against its median over the training window, sets '
+            'the gain (shorter: the gate opens sooner after a move or a turn starts, and more '
+            'often on wave groups; core/motion_gate.py)', 's'))
     motion_gate_ny: int = field(
         default=0, metadata=_doc(
             'with motion_gate: delayed positions n_y of the ramp-invariant twin (its line is '
@@ -433,7 +439,7 @@ class PredictorParams:
     def _check_positive(self) -> None:
         for name in ('sample_time', *_WINDOW_FIELDS, 'highpass_cutoff', 'notch_zeta',
                      'fallback_notch_zeta',
-                     'lowpass_offset', 'max_train_seconds'):
+                     'lowpass_offset', 'max_train_seconds', 'motion_gate_time'):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f'positivity rule: {name} must be > 0, got '
                                  f'{getattr(self, name)!r}: give a positive value')

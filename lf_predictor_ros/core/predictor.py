@@ -311,6 +311,7 @@ class AdaptivePredictor:
                 max_trainings=max_trainings, training_lock=self._training_lock,
                 worker_name='lf-predictor-twin-training')
             self._gate = MotionGate(params.ndof, params.sample_time,
+                                    time_constant=params.motion_gate_time,
                                     window=params.training_window)
         self._roughness = (RoughnessGuard(params.ndof, params.sample_time,
                                           params.roughness_guard_time)

@@ -97,6 +97,29 @@ def test_gate_stays_shut_while_holding_and_opens_in_a_move() -> None:
     assert np.all(gate.update(pose + 150 * velocity) > 0.0)
 
 
+def test_motion_gate_time_sets_how_soon_a_move_opens_the_gate() -> None:
+    """At T = h the first step of a move opens the gate; at T = 10 h only 1/10 of it counts."""
+    first_gains = {}
+    for time_constant in (1.0, 10.0):
+        gate = MotionGate(3, 1.0, time_constant=time_constant, window=600.0)
+        rng = np.random.default_rng(4)
+        pose = np.zeros(3)
+        for _k in range(1200):  # holding, as above: RMS step ≈ 0.01 m, 2e-4 rad
+            pose = 0.99 * pose + rng.normal(0.0, [0.01, 0.01, 0.0002])
+            gate.update(pose)
+        # a slow move: 3 × the RMS holding step per sample
+        first_gains[time_constant] = gate.update(pose + np.array([0.03, -0.03, 0.0006]))
+    assert np.all(first_gains[1.0] > 0.75)
+    assert np.all(first_gains[10.0] < 0.1)
+    # The predictor hands its parameter to its gate: α = h / T.
+    predictor = AdaptivePredictor(SMALL.replace(motion_gate=True, motion_gate_time=4.0),
+                                  background=False)
+    try:
+        assert predictor._gate is not None and predictor._gate._alpha == 0.25
+    finally:
+        predictor.close()
+
+
 def test_gate_rejects_bad_settings() -> None:
     with pytest.raises(ValueError, match='ndof 1 or 3'):
         MotionGate(2, 1.0)
@@ -330,6 +353,14 @@ def test_the_twin_has_its_own_ny_when_given_and_the_ramp_order(order: int) -> No
 def test_negative_or_nan_smoothing_is_refused(value: float, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         SMALL.replace(motion_gate=True, motion_gate_smoothing=value)
+
+
+@pytest.mark.parametrize(('value', 'message'), [
+    (0.0, 'motion_gate_time must be > 0'), (math.inf, 'motion_gate_time must be finite')])
+def test_a_gate_time_that_is_not_positive_and_finite_is_refused(value: float,
+                                                                 message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        SMALL.replace(motion_gate=True, motion_gate_time=value)
 
 
 def test_wait_for_training_keeps_one_timeout_for_both_networks(

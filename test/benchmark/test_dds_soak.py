@@ -37,11 +37,12 @@ BLOCK_BYTES = 64 * 2**20  # [bytes] allocation whose pages must show up in VmRSS
 _ZERO_RESULT: dict[str, Any] = {
     f.name: (False if f.type == 'bool' else 0) for f in dataclasses.fields(SoakResult)
     if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING}
-# 840 msg/s (poses and thrust at 4 × 100 Hz, canaries) into keep_last 5 sensor-QoS queues (the contract's):
-# a node descheduled for more than ~12 ms loses samples, and how often that happens is the
-# machine's load, not the code's. The loss is a benchmark figure (docs/RELIABILITY.md, 0.01–0.5 %
-# there); this bound only catches a broken pipeline (no delivery, a wrong QoS, double counting).
-# It was 2 %, and a loaded CI machine went over it (2.2–2.3 %) in three sessions.
+# 840 msg/s (poses and thrust at 4 × 100 Hz, canaries) into the contract's keep_last 5
+# sensor-QoS queues: a node descheduled for more than ~12 ms loses samples, and how often
+# that happens is the machine's load, not the code's. The loss is a benchmark figure
+# (docs/RELIABILITY.md, 0.01–0.5 % there); this bound only catches a broken pipeline (no
+# delivery, a wrong QoS, double counting). It was 2 %, and a loaded CI machine went over it
+# (2.2–2.3 %) in three sessions.
 MAX_SMOKE_POSE_LOSS = 0.10
 
 

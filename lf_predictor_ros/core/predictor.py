@@ -319,6 +319,7 @@ class AdaptivePredictor:
         self._previous_model: NumpyNnarmax | None = None  # the network before _model
         self._rough_retirements = 0
         self._gain = np.zeros(params.ndof)
+        self._untaken = np.zeros(params.ndof)  # (1 − g) · the twin's offset (untaken_twin_offset)
         smoothing = params.motion_gate_smoothing
         self._gate_alpha = 1.0 if smoothing <= 0.0 else min(1.0, params.sample_time / smoothing)
         self._gate_offset = np.zeros(params.ndof)  # LP(moving − holding) (motion_gate_smoothing)
@@ -584,6 +585,19 @@ class AdaptivePredictor:
     def motion_gain(self) -> FloatArray:
         """The motion gate's gain g per DOF at the last sample (zeros when the gate is off)."""
         return self._gain.copy()
+
+    @property
+    def untaken_twin_offset(self) -> FloatArray:
+        """(1 − g) · the twin's offset per DOF at the last sample: the motion left out.
+
+        The offset is the one the gate scales (the moving twin's estimate minus the holding
+        output, low-passed with ``motion_gate_smoothing``, the heading notched with
+        ``motion_gate_yaw_notch``; heading wrapped); g the published gain. In a move or a turn
+        the twin follows and the holding filter lags, so this is what the published estimate
+        probably lags by (``OdometryParams.pose_twin_prior``). Zeros when the gate is off or the
+        twin is not on its network.
+        """
+        return self._untaken.copy()
 
     @property
     def motion_gate_valid(self) -> NDArray[np.bool_]:
@@ -930,6 +944,7 @@ class AdaptivePredictor:
             # fallback is another filter's, and the step where the source switches is no motion.
             self._gate.restart()
             self._gain = np.zeros(self.ndof)
+            self._untaken = np.zeros(self.ndof)
             self._gate_offset = np.zeros(self.ndof)
             if self._gate_yaw_notch is not None:
                 self._gate_yaw_notch.reset()
@@ -950,6 +965,7 @@ class AdaptivePredictor:
         gains = [g * (1.0 if on else 0.0)
                  for g, on in zip(gains, self._gate_valid.tolist(), strict=True)]
         self._gain = np.array(gains, dtype=np.float64)
+        self._untaken = (1.0 - self._gain) * offset
         return shifted(out, self._gain * offset, self.ndof)
 
     def _yaw_notched(self, t: float, offset: FloatArray) -> FloatArray:

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 import pytest
 import torch
 
+from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.motion_gate import (
     GATE_MIN_FILL,
     GATE_RATIO,
@@ -154,6 +155,7 @@ class Trace:
     Attributes:
         out: the outputs, shape (600, 3).
         gain: `motion_gain`, shape (600, ndof).
+        untaken: `untaken_twin_offset`, shape (600, ndof).
         valid: `motion_gate_valid`, shape (600, ndof).
         using_network: the predictor's `using_network`, shape (600,).
         twin_using_network: the twin's (``_moving``) `using_network`; None without a twin.
@@ -164,6 +166,7 @@ class Trace:
 
     out: FloatArray
     gain: FloatArray
+    untaken: FloatArray
     valid: NDArray[np.bool_]
     using_network: NDArray[np.bool_]
     twin_using_network: NDArray[np.bool_] | None
@@ -184,6 +187,7 @@ def _run(params: PredictorParams) -> Trace:
     predictor = AdaptivePredictor(params, background=False)
     out: list[FloatArray] = []
     gain: list[FloatArray] = []
+    untaken: list[FloatArray] = []
     valid: list[NDArray[np.bool_]] = []
     on_network: list[bool] = []
     twin_on_network: list[bool] = []
@@ -191,6 +195,7 @@ def _run(params: PredictorParams) -> Trace:
     for k in range(t.size):
         out.append(np.array(predictor.update(t[k], pose[k], force[k]), dtype=np.float64))
         gain.append(np.array(predictor.motion_gain, dtype=np.float64))
+        untaken.append(np.array(predictor.untaken_twin_offset, dtype=np.float64))
         valid.append(np.array(predictor.motion_gate_valid, dtype=bool))
         on_network.append(bool(predictor.using_network))
         twin = predictor._moving
@@ -199,6 +204,7 @@ def _run(params: PredictorParams) -> Trace:
         targets.append(predictor.targets)  # immutable: values read-only, frozen
     assert t.size == 600 and len(twin_on_network) in (0, t.size)
     return Trace(out=_frozen(out, np.float64), gain=_frozen(gain, np.float64),
+                 untaken=_frozen(untaken, np.float64),
                  valid=_frozen(valid, bool), using_network=_frozen(on_network, bool),
                  twin_using_network=_frozen(twin_on_network, bool) if twin_on_network else None,
                  targets=tuple(targets),
@@ -224,13 +230,19 @@ def test_gated_output_is_the_blend_of_the_two_networks_run_alone(
         if moving.using_network[k]:
             assert out == pytest.approx(blend(a, b, gain, 3), abs=1e-9)
             blended += int(np.any(gain > 0.5))
+            # what the gate left out: (1 − g) · (moving − holding), heading wrapped
+            offset = b - a
+            offset[2] = wrap_angle(offset[2])
+            assert gated.untaken[k] == pytest.approx((1.0 - gain) * offset, abs=1e-9)
         else:
-            assert np.all(gain == 0.0)
+            assert np.all(gain == 0.0) and np.all(gated.untaken[k] == 0.0)
             assert out == pytest.approx(a, abs=1e-12)
     counters = gated.counters
     assert counters['moving_trainings'] == moving.counters['trainings'] > 0
     assert counters['trainings'] == holding.counters['trainings']
     assert blended > 20  # the move opened the gate (not a test of the zero gain only)
+    assert np.all(holding.untaken == 0.0)  # no gate: nothing left out
+    assert np.max(np.abs(gated.untaken[:, 0])) > 0.02  # the move: the twin ahead [m]
 
 
 def test_without_yaw_the_gate_blends_north_and_east_and_keeps_the_holding_heading(

@@ -554,7 +554,7 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                            'pose_cov_scale': odometry.pose_cov_scale,
                            'pose_lag_scale': odometry.pose_lag_scale,
                            'pose_lag_prior': odometry.pose_lag_prior,
-                           'pose_twin_prior': odometry.pose_twin_prior,
+                           'pose_twin_gain': odometry.pose_twin_gain,
                            'twist_cov_scale': odometry.twist_cov_scale,
                            'twist_bandwidth': odometry.twist_bandwidth,
                            'dead_reckoning_timeout': odometry.dead_reckoning_timeout,

@@ -122,13 +122,12 @@ class OdometryParams:
         'lag time T assumed for every DOF where a calibration window has no motion to fit it '
         '(prior of the least-squares fit, with a standard deviation of T² equal to T²; '
         '0 = no prior)', 's'))
-    pose_twin_prior: float = field(default=0.0, metadata=field_doc(
-        'with the motion gate: the pose error model adds C_i m_i², m the part of the moving '
-        "twin's offset the gate left out of the output ((1 − g) · LP(twin − holding), "
-        'AdaptivePredictor.untaken_twin_offset: the holding filter lags a move or a turn the '
-        'twin follows), C_i fitted against the targets by least squares on the residual of the '
-        'lag part and shrunk towards this prior (standard deviation of C equal to it); '
-        '0 = off (issue 14)', ''))
+    pose_twin_gain: float = field(default=0.0, metadata=field_doc(
+        'with the motion gate: the published pose covariance adds this × diag(m²), outside '
+        "pose_cov_scale, m the part of the moving twin's offset the gate left out of the "
+        'output ((1 − g) · LP(twin − holding), AdaptivePredictor.untaken_twin_offset: the '
+        'holding filter lags a move or a turn that the twin follows, so m is what the estimate '
+        'probably lags by, against the truth); 0 = off (issue 14)', ''))
     twist_cov_scale: float = field(default=0.61, metadata=field_doc(
         'published twist covariance = this × (holding part + K² a²) of the twist error model '
         'fitted against the target velocity (a: the twist change, twist_accel_time; '
@@ -215,9 +214,9 @@ class OdometryParams:
         if not (math.isfinite(self.pose_lag_prior) and self.pose_lag_prior >= 0.0):
             raise ValueError(f'pose_lag_prior must be a finite number >= 0 s, got '
                              f'{self.pose_lag_prior}')
-        if not (math.isfinite(self.pose_twin_prior) and self.pose_twin_prior >= 0.0):
-            raise ValueError(f'pose_twin_prior must be a finite number >= 0 (0: off), got '
-                             f'{self.pose_twin_prior}')
+        if not (math.isfinite(self.pose_twin_gain) and self.pose_twin_gain >= 0.0):
+            raise ValueError(f'pose_twin_gain must be a finite number >= 0 (0: off), got '
+                             f'{self.pose_twin_gain}')
         if not (math.isfinite(self.dead_reckoning_velocity_time) and
                 self.dead_reckoning_velocity_time > 0.0):
             raise ValueError('dead_reckoning_velocity_time must be a positive number of seconds, '
@@ -293,23 +292,16 @@ class ErrorModel:
         hold: holding part Σ_hold, ndof × ndof (the correlation of ``moment``, diagonal σ²_hold).
         gain: T_i² per DOF [s²]: variance added per squared regressor w_i² (pose: N/E
             earth-frame velocity [m/s], yaw rate [rad/s]; twist: acceleration [m/s², rad/s²]).
-        twin_gain: C_i per DOF: variance added per squared untaken twin offset m_i² (pose
-            only, ``pose_twin_prior`` > 0); None: no such term.
     """
 
     moment: FloatArray
     hold: FloatArray
     gain: FloatArray
-    twin_gain: FloatArray | None = None
 
-    def covariance(self, rates: FloatArray, lag_scale: float,
-                   twin_offset: FloatArray | None = None) -> FloatArray:
-        """Σ_hold + lag_scale · diag(T_i² w_i²) (+ diag(C_i m_i²)) for the regressors w, m."""
+    def covariance(self, rates: FloatArray, lag_scale: float) -> FloatArray:
+        """Σ_hold + lag_scale · diag(T_i² w_i²) for the regressor w (ndof,)."""
         cov = self.hold.copy()
-        diagonal = lag_scale * self.gain * rates * rates
-        if self.twin_gain is not None and twin_offset is not None:
-            diagonal = diagonal + self.twin_gain * twin_offset * twin_offset
-        cov.flat[::cov.shape[0] + 1] += diagonal
+        cov.flat[::cov.shape[0] + 1] += lag_scale * self.gain * rates * rates
         return cov
 
 
@@ -323,8 +315,6 @@ class Published:
     source: EstimateSource
     accel: FloatArray  # the twist's low-passed change per second (twist error model regressor)
     lag: FloatArray  # the pose error model's regressor w (`LfOdometry._lag_regressor`)
-    # the untaken twin offset m (ndof; `AdaptivePredictor.untaken_twin_offset`), zeros without
-    twin_offset: FloatArray | None = None
 
 
 class LfOdometry:
@@ -410,7 +400,7 @@ class LfOdometry:
 
         While dead reckoning, a fix is first checked for plausibility (module docstring); a fix
         held back returns the dead-reckoned estimate (or None once lost). ``twin_offset``: the
-        predictor's untaken twin offset m for this estimate (ndof; ``pose_twin_prior``), None:
+        predictor's untaken twin offset m for this estimate (ndof; ``pose_twin_gain``), None:
         zeros.
         """
         pose = _vector(lf_pose, 3, 'lf_pose')
@@ -444,7 +434,7 @@ class LfOdometry:
         twist = x[self.ndof:].copy()
         accel = self._twist_change(t, twist)
         lag = self._lag_regressor(t, z, twist)
-        self._history.append(Published(t, z.copy(), twist, source, accel, lag, offset))
+        self._history.append(Published(t, z.copy(), twist, source, accel, lag))
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
         self._slow_twist = twist.copy() if self._slow_twist is None else \
             low_pass_step(self._slow_twist, twist, alpha)
@@ -513,8 +503,7 @@ class LfOdometry:
         self.apply_learned(memory, calibrate(self.published(), times, targets, self.ndof,
                                              self.sample_time,
                                              self.params.min_calibration_samples,
-                                             self.params.pose_lag_prior,
-                                             self.params.pose_twin_prior))
+                                             self.params.pose_lag_prior))
 
     def published(self) -> list[Published]:
         """A copy of the published history the covariances are calibrated on (oldest first)."""
@@ -840,12 +829,16 @@ class LfOdometry:
 
     def _pose_covariance(self, source: EstimateSource, lag: FloatArray,
                          twin_offset: FloatArray | None = None) -> FloatArray:
-        """The pose error model of ``source`` at the regressors ``lag`` and ``twin_offset``."""
+        """The pose error model of ``source`` at the regressor ``lag`` (`_lag_regressor`).
+
+        Plus ``pose_twin_gain`` · diag(m²), m = ``twin_offset``, once calibrated.
+        """
         n = self.ndof
         if self._pose_cov:
             model = self._pose_cov.get(source, self._pose_cov['all'])
-            inner = self.params.pose_cov_scale * model.covariance(
-                lag, self.params.pose_lag_scale, twin_offset)
+            inner = self.params.pose_cov_scale * model.covariance(lag, self.params.pose_lag_scale)
+            if twin_offset is not None and self.params.pose_twin_gain > 0.0:
+                inner.flat[::n + 1] += self.params.pose_twin_gain * twin_offset * twin_offset
         else:
             inner = np.diag(np.array(self.params.prior_pose_std[:n]) ** 2)
         return self._embed(inner)
@@ -899,17 +892,16 @@ class LfOdometry:
 
 
 def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike, ndof: int,
-              sample_time: float, min_samples: int, lag_prior: float = 0.0,
-              twin_prior: float = 0.0) -> Covariances | None:
+              sample_time: float, min_samples: int, lag_prior: float = 0.0
+              ) -> Covariances | None:
     """Pose error models and twist covariances against the targets (module docstring).
 
     Every published estimate whose stamp is a target instant (not the first or last) is
     compared with the target and with the targets' differentiated body velocity: per source
     ('network', 'fallback': only with ``min_samples`` matches) and over all, the pose error
     model (`fit_error_model` on each estimate's regressor ``Published.lag``, prior lag time
-    ``lag_prior`` [s]; with ``twin_prior`` > 0 also the term of the untaken twin offset
-    ``Published.twin_offset``, prior C₀ = ``twin_prior``) and the twist error's second moment
-    (bias included). None when nothing matches. Pure: runs on a worker.
+    ``lag_prior`` [s]) and the twist error's second moment (bias included). None when nothing
+    matches. Pure: runs on a worker.
     """
     stamps = np.asarray(times, dtype=np.float64)
     values = np.array(targets, dtype=np.float64).reshape(stamps.shape[0], -1)
@@ -933,13 +925,8 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
     twists = np.array([p.twist for p in rows])
     twist_err = twists - velocity[idx]
     rates = np.array([p.lag for p in rows])
-    offsets = None
-    if twin_prior > 0.0:
-        offsets = np.array([np.zeros(ndof) if p.twin_offset is None else p.twin_offset
-                            for p in rows])
     sources = np.array([p.source for p in rows])
-    pooled = fit_error_model(pose_err, rates, lag_prior, twin_offsets=offsets,
-                             twin_prior=twin_prior)
+    pooled = fit_error_model(pose_err, rates, lag_prior)
     pose_cov: dict[str, ErrorModel] = {'all': pooled}
     accel = np.array([p.accel for p in rows])
     twist_cov: dict[str, ErrorModel] = {'all': fit_error_model(twist_err, accel)}
@@ -947,18 +934,13 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
         mask = sources == source
         if np.count_nonzero(mask) >= min_samples:
             # the lag time from every source (more motion to fit it), the holding part per source
-            pose_cov[source] = fit_error_model(
-                pose_err[mask], rates[mask], gain=pooled.gain,
-                twin_offsets=None if offsets is None else offsets[mask],
-                twin_gain=pooled.twin_gain)
+            pose_cov[source] = fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain)
             twist_cov[source] = fit_error_model(twist_err[mask], accel[mask])
     return pose_cov, twist_cov
 
 
 def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,
-                    gain: FloatArray | None = None, *, twin_offsets: ArrayLike | None = None,
-                    twin_prior: float = 0.0, twin_gain: FloatArray | None = None
-                    ) -> ErrorModel:
+                    gain: FloatArray | None = None) -> ErrorModel:
     """Fit E[e_i²] = σ²_hold,i + T_i² w_i² per DOF (module docstring); errors, regressor (m, n).
 
     T_i² = the least-squares slope of e_i² on w_i² (clipped at 0), shrunk towards the prior
@@ -968,12 +950,6 @@ def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,
     at least ``HOLD_FLOOR_FRACTION`` · mean e_i². Σ_hold keeps the correlations of the mean e eᵀ.
     A given ``gain`` (T_i² [s²], e.g. fitted on every source) is used as it is: only σ²_hold is
     fitted.
-
-    With ``twin_offsets`` m (m, n) the model is E[e_i²] = σ²_hold,i + T_i² w_i² + C_i m_i²: C_i
-    is the clipped least-squares slope of the residual e_i² − T_i² w_i² on m_i², shrunk towards
-    ``twin_prior`` as T_i² is towards its prior (after T_i², which keeps its fit without the
-    term); σ²_hold,i = mean e_i² − T_i² mean w_i² − C_i mean m_i² (floored). A given
-    ``twin_gain`` is used as it is.
     """
     e = np.asarray(errors, dtype=np.float64)
     w = np.asarray(rates, dtype=np.float64)
@@ -998,45 +974,12 @@ def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,
                                  still=bool(sxx[i] <= 1e-12 * e.shape[0] *
                                             float(np.mean(w2[:, i] ** 2))))
         hold[i] = max(float(mean_e2[i]) - gains[i] * float(mean_w2[i]), floor)
-    twin = None
-    if twin_offsets is not None:
-        twin = _twin_gains(e2 - gains * w2, np.asarray(twin_offsets, dtype=np.float64),
-                           twin_prior, twin_gain)
-        m2 = np.asarray(twin_offsets, dtype=np.float64) ** 2
-        for i in range(n):
-            floor = HOLD_FLOOR_FRACTION * float(mean_e2[i])
-            hold[i] = max(hold[i] - twin[i] * float(m2[:, i].mean()), floor)
     diag = np.sqrt(np.diag(moment))
     with np.errstate(divide='ignore', invalid='ignore'):
         corr = np.where(np.outer(diag, diag) > 0.0, moment / np.outer(diag, diag), 0.0)
     np.fill_diagonal(corr, 1.0)
     std = np.sqrt(hold)
-    return ErrorModel(moment=moment, hold=np.asarray(corr * np.outer(std, std)), gain=gains,
-                      twin_gain=twin)
-
-
-def _twin_gains(residual: FloatArray, offsets: FloatArray, prior: float,
-                given: FloatArray | None) -> FloatArray:
-    """C_i per DOF: the slope of ``residual`` (e² − T² w²) on m², shrunk towards ``prior``."""
-    if offsets.shape != residual.shape:
-        raise ValueError(f'twin_offsets must have the shape of the errors {residual.shape}, '
-                         f'got {offsets.shape}')
-    n = residual.shape[1]
-    if given is not None:
-        return np.array(given, dtype=np.float64).reshape(n)
-    m2 = offsets ** 2
-    mean_r, mean_m2 = residual.mean(axis=0), m2.mean(axis=0)
-    dm2 = m2 - mean_m2
-    sxx = np.sum(dm2 ** 2, axis=0)
-    sxy = np.sum(dm2 * (residual - mean_r), axis=0)
-    gains = np.zeros(n)
-    for i in range(n):
-        floor = HOLD_FLOOR_FRACTION * max(float(mean_r[i]), 0.0)
-        gains[i] = _lag_gain(float(sxx[i]), float(sxy[i]), float(mean_r[i]), float(mean_m2[i]),
-                             floor, prior,
-                             still=bool(sxx[i] <= 1e-12 * residual.shape[0] *
-                                        float(np.mean(m2[:, i] ** 2))))
-    return gains
+    return ErrorModel(moment=moment, hold=np.asarray(corr * np.outer(std, std)), gain=gains)
 
 
 def _lag_gain(sxx: float, sxy: float, mean_e2: float, mean_w2: float, floor: float,

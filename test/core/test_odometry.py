@@ -94,64 +94,30 @@ def test_pose_error_model_recovers_lag_time_and_holding_std() -> None:
                                np.array([0.04, 0.0, 2.5e-5]))
 
 
-def test_pose_error_model_recovers_the_twin_offset_gain_after_the_lag() -> None:
-    """Errors T·w + √C·m + σ·noise (m independent of w): C = (1, 0.25, 2) within 10 %.
-
-    With the twin term the lag fit is the one without it, C is the slope of e² − T² w² on m²,
-    σ²_hold = mean e² − T² mean w² − C mean m²; the covariance adds C m². A given C is kept.
-    """
-    rng = np.random.default_rng(5)
-    m = 20000
-    lag = np.array([3.0, 2.0, 4.0])
-    gain = np.array([1.0, 0.25, 2.0])
-    sigma = np.array([0.3, 0.15, 0.012])  # σ² above HOLD_FLOOR_FRACTION of the mean e²
-    rates = rng.uniform(-1.0, 1.0, size=(m, 3)) * np.array([0.1, 0.1, 0.003])
-    offsets = rng.uniform(-1.0, 1.0, size=(m, 3)) * np.array([0.5, 0.5, 0.02])
-    errors = lag * rates + np.sqrt(gain) * offsets + sigma * rng.normal(size=(m, 3))
-    plain = fit_error_model(errors, rates, 0.0)
-    model = fit_error_model(errors, rates, 0.0, twin_offsets=offsets, twin_prior=0.0)
-    np.testing.assert_allclose(model.gain, plain.gain)
-    assert model.twin_gain is not None and plain.twin_gain is None
-    np.testing.assert_allclose(model.twin_gain, gain, rtol=0.1)
-    np.testing.assert_allclose(np.sqrt(np.diag(model.hold)), sigma, rtol=0.1)
-    np.testing.assert_allclose(np.diag(model.hold), np.mean(errors ** 2, axis=0) - model.gain *
-                               np.mean(rates ** 2, axis=0) - model.twin_gain *
-                               np.mean(offsets ** 2, axis=0))
-    w, off = np.array([0.2, 0.0, 0.005]), np.array([0.3, -1.0, 0.0])
-    np.testing.assert_allclose(np.diag(model.covariance(w, 1.0, off)),
-                               np.diag(model.covariance(w, 1.0)) + model.twin_gain * off ** 2)
-    kept = fit_error_model(errors, rates, 0.0, twin_offsets=offsets, twin_prior=1.0,
-                           twin_gain=np.array([0.5, 0.5, 0.5]))
-    assert kept.twin_gain is not None and kept.twin_gain.tolist() == [0.5, 0.5, 0.5]
-    # no offsets seen (m ≡ 0): the prior, which adds nothing while m stays 0
-    still = fit_error_model(errors, rates, 0.0, twin_offsets=np.zeros((m, 3)), twin_prior=1.0)
-    assert still.twin_gain is not None and still.twin_gain.tolist() == [1.0, 1.0, 1.0]
-    np.testing.assert_allclose(still.hold, plain.hold)
-    with pytest.raises(ValueError, match='twin_offsets must have the shape'):
-        fit_error_model(errors, rates, 0.0, twin_offsets=offsets[:, :1], twin_prior=1.0)
-
-
 def test_published_pose_covariance_adds_the_untaken_twin_offset() -> None:
-    """P = pose_cov_scale · (Σ_hold + C m²) for the offset handed to `track` (none: zeros)."""
+    """P = pose_cov_scale · Σ_hold + pose_twin_gain · diag(m²) for the offset given to `track`.
+
+    No offset given: zeros; pose_twin_gain 0 (the default): the offset changes nothing.
+    """
     hold = np.diag([0.01, 0.04, 1e-4])
-    model = ErrorModel(moment=hold, hold=hold, gain=np.zeros(3),
-                       twin_gain=np.array([1.0, 0.5, 2.0]))
+    model = ErrorModel(moment=hold, hold=hold, gain=np.zeros(3))
     twist_model = ErrorModel(moment=np.eye(3), hold=np.eye(3), gain=np.zeros(3))
-    odo = LfOdometry(3, H, OdometryParams(pose_cov_scale=2.0, pose_twin_prior=1.0))
-    odo.apply_learned(None, ({'all': model}, {'all': twist_model}))
-    odo.track(0.0, [0.0, 0.0, 0.0], np.zeros(3))
-    plain = odo.track(1.0, [0.0, 0.0, 0.0], np.zeros(3))
-    moving = odo.track(2.0, [0.0, 0.0, 0.0], np.zeros(3), 'network', [0.5, -0.2, 0.01])
-    assert plain is not None and moving is not None
-    np.testing.assert_allclose(np.diag(plain.pose_cov), [0.02, 0.08, 2e-4])
-    np.testing.assert_allclose(np.diag(moving.pose_cov),
-                               2.0 * (np.array([0.01, 0.04, 1e-4]) +
-                                      np.array([0.25, 0.02, 2e-4])))
-    assert odo.published()[-1].twin_offset.tolist() == [0.5, -0.2, 0.01]
-    with pytest.raises(ValueError, match='twin_offset'):
-        odo.track(3.0, [0.0, 0.0, 0.0], np.zeros(3), 'network', [0.5, 0.0])
-    with pytest.raises(ValueError, match='pose_twin_prior must be a finite number >= 0'):
-        OdometryParams(pose_twin_prior=-1.0)
+    offset = [0.5, -0.2, 0.01]
+    expected = {0.0: 2.0 * np.diag(hold), 3.0: 2.0 * np.diag(hold) + 3.0 * np.square(offset)}
+    for gain, added in expected.items():
+        odo = LfOdometry(3, H, OdometryParams(pose_cov_scale=2.0, pose_twin_gain=gain))
+        odo.apply_learned(None, ({'all': model}, {'all': twist_model}))
+        odo.track(0.0, [0.0, 0.0, 0.0], np.zeros(3))
+        plain = odo.track(1.0, [0.0, 0.0, 0.0], np.zeros(3))
+        moving = odo.track(2.0, [0.0, 0.0, 0.0], np.zeros(3), 'network', offset)
+        assert plain is not None and moving is not None
+        np.testing.assert_allclose(np.diag(plain.pose_cov), 2.0 * np.diag(hold))
+        np.testing.assert_allclose(np.diag(moving.pose_cov), added)
+        np.testing.assert_array_equal(moving.pose_cov - np.diag(np.diag(moving.pose_cov)), 0.0)
+        with pytest.raises(ValueError, match='twin_offset'):
+            odo.track(3.0, [0.0, 0.0, 0.0], np.zeros(3), 'network', [0.5, 0.0])
+    with pytest.raises(ValueError, match='pose_twin_gain must be a finite number >= 0'):
+        OdometryParams(pose_twin_gain=-1.0)
 
 
 def test_pose_error_model_of_a_still_window_is_the_prior() -> None:

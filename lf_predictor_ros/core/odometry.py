@@ -93,6 +93,14 @@ CHI2_3DOF_999 = 16.27  # χ²(3) 99.9 % quantile [-]
 # squared error of the window [-] (a lag fit must not claim that a still vessel is exact; on the
 # tuning seeds 0.05–0.5 change the calibrated NEES by < 10 %).
 HOLD_FLOOR_FRACTION = 0.1
+# ``pose_twin_gain``: only the untaken twin offset's square in excess of this factor times its
+# own running level counts; the level is m² low-passed over TWIN_LEVEL_TIME from the first
+# calibrated estimate on. While the vessel holds station the twin's offset is its extra wave
+# motion, and a vessel that always moves (threedof_open_loop) always has an offset: neither is
+# a lag. Chosen on development seeds 101–102 from 2 and 4 (docs/BENCHMARKS.md, thirty-second
+# session), the values of the twenty-fifth session's innovation excess.
+TWIN_LEVEL_TIME = 600.0  # [s]
+TWIN_LEVEL_FACTOR = 2.0  # [-]
 
 
 @dataclass(frozen=True)
@@ -123,11 +131,12 @@ class OdometryParams:
         '(prior of the least-squares fit, with a standard deviation of T² equal to T²; '
         '0 = no prior)', 's'))
     pose_twin_gain: float = field(default=0.0, metadata=field_doc(
-        'with the motion gate: the published pose covariance adds this × diag(m²), outside '
-        "pose_cov_scale, m the part of the moving twin's offset the gate left out of the "
-        'output ((1 − g) · LP(twin − holding), AdaptivePredictor.untaken_twin_offset: the '
-        'holding filter lags a move or a turn that the twin follows, so m is what the estimate '
-        'probably lags by, against the truth); 0 = off (issue 14)', ''))
+        'with the motion gate: the published pose covariance adds this × diag(max(0, m² − '
+        "2 L)), outside pose_cov_scale, m the part of the moving twin's offset the gate left "
+        'out of the output ((1 − g) · LP(twin − holding), '
+        'AdaptivePredictor.untaken_twin_offset: the holding filter lags a move or a turn that '
+        'the twin follows, so m is what the estimate probably lags by, against the truth), L '
+        'the running level of m² (TWIN_LEVEL_TIME); 0 = off (issue 14)', ''))
     twist_cov_scale: float = field(default=0.61, metadata=field_doc(
         'published twist covariance = this × (holding part + K² a²) of the twist error model '
         'fitted against the target velocity (a: the twist change, twist_accel_time; '
@@ -342,6 +351,7 @@ class LfOdometry:
         self._twist_cov: dict[str, ErrorModel] = {}
         self._accel: tuple[float, FloatArray, FloatArray] | None = None  # (t, twist, accel)
         self._lag_peak: tuple[float, FloatArray] | None = None  # (t, held w²), pose_lag_memory
+        self._twin_level: FloatArray | None = None  # running level of m² (pose_twin_gain)
         self._history: deque[Published] = deque(maxlen=HISTORY_SAMPLES)
         self._x: FloatArray | None = None
         self._p = np.zeros((2 * n, 2 * n))
@@ -488,10 +498,10 @@ class LfOdometry:
     def restart(self) -> None:
         """A new data segment (time jump, bag loop): keep the calibration and the memory."""
         memory, pose_cov, twist_cov = self._memory, self._pose_cov, self._twist_cov
-        counters = self.counters
+        counters, twin_level = self.counters, self._twin_level
         self.reset()
         self._memory, self._pose_cov, self._twist_cov = memory, pose_cov, twist_cov
-        self.counters = counters
+        self.counters, self._twin_level = counters, twin_level
 
     def learn(self, times: ArrayLike, targets: ArrayLike, memory: VesselMemory | None) -> None:
         """New zero-phase targets (times [s] (m,), LF poses (m, ndof)) → calibrate covariances.
@@ -831,17 +841,32 @@ class LfOdometry:
                          twin_offset: FloatArray | None = None) -> FloatArray:
         """The pose error model of ``source`` at the regressor ``lag`` (`_lag_regressor`).
 
-        Plus ``pose_twin_gain`` · diag(m²), m = ``twin_offset``, once calibrated.
+        Plus ``pose_twin_gain`` · diag(`_twin_excess`(m)), m = ``twin_offset``, once calibrated.
         """
         n = self.ndof
         if self._pose_cov:
             model = self._pose_cov.get(source, self._pose_cov['all'])
             inner = self.params.pose_cov_scale * model.covariance(lag, self.params.pose_lag_scale)
             if twin_offset is not None and self.params.pose_twin_gain > 0.0:
-                inner.flat[::n + 1] += self.params.pose_twin_gain * twin_offset * twin_offset
+                inner.flat[::n + 1] += self.params.pose_twin_gain * self._twin_excess(twin_offset)
         else:
             inner = np.diag(np.array(self.params.prior_pose_std[:n]) ** 2)
         return self._embed(inner)
+
+    def _twin_excess(self, twin_offset: FloatArray) -> FloatArray:
+        """max(0, m² − TWIN_LEVEL_FACTOR · L) per DOF, then L ← LP(L, m²) (one sample).
+
+        L starts at the first m² (that sample adds nothing).
+        """
+        square = twin_offset * twin_offset
+        level = self._twin_level
+        if level is None:
+            self._twin_level = square.copy()
+            return np.zeros_like(square)
+        excess = np.maximum(square - TWIN_LEVEL_FACTOR * level, 0.0)
+        self._twin_level = low_pass_step(level, square,
+                                         min(1.0, self.sample_time / TWIN_LEVEL_TIME))
+        return excess
 
     def _twist_change(self, t: float, twist: FloatArray) -> FloatArray:
         """The twist's change per second low-passed over ``twist_accel_time`` (O(n))."""

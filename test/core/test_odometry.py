@@ -10,6 +10,8 @@ import pytest
 from lf_predictor_ros.core.lf_dynamics import DriftCurve, LfDynamics, VesselMemory
 from lf_predictor_ros.core.odometry import (
     HOLD_FLOOR_FRACTION,
+    TWIN_LEVEL_FACTOR,
+    TWIN_LEVEL_TIME,
     UNESTIMATED_VARIANCE,
     ErrorModel,
     LfOdometry,
@@ -94,28 +96,35 @@ def test_pose_error_model_recovers_lag_time_and_holding_std() -> None:
                                np.array([0.04, 0.0, 2.5e-5]))
 
 
-def test_published_pose_covariance_adds_the_untaken_twin_offset() -> None:
-    """P = pose_cov_scale · Σ_hold + pose_twin_gain · diag(m²) for the offset given to `track`.
+def test_published_pose_covariance_adds_the_untaken_twin_offsets_excess() -> None:
+    """P = pose_cov_scale · Σ_hold + pose_twin_gain · diag(max(0, m² − 2 L)), L the level of m².
 
-    No offset given: zeros; pose_twin_gain 0 (the default): the offset changes nothing.
+    L starts at the first offset (here zeros, a vessel holding station), then low-passes m²
+    over TWIN_LEVEL_TIME: a new offset m counts fully once, then less as L grows; gain 0 (the
+    default) adds nothing; no offset given: zeros.
     """
     hold = np.diag([0.01, 0.04, 1e-4])
     model = ErrorModel(moment=hold, hold=hold, gain=np.zeros(3))
     twist_model = ErrorModel(moment=np.eye(3), hold=np.eye(3), gain=np.zeros(3))
-    offset = [0.5, -0.2, 0.01]
-    expected = {0.0: 2.0 * np.diag(hold), 3.0: 2.0 * np.diag(hold) + 3.0 * np.square(offset)}
-    for gain, added in expected.items():
+    m2 = np.square([0.5, -0.2, 0.01])
+    a = H / TWIN_LEVEL_TIME
+    for gain in (0.0, 3.0):
         odo = LfOdometry(3, H, OdometryParams(pose_cov_scale=2.0, pose_twin_gain=gain))
         odo.apply_learned(None, ({'all': model}, {'all': twist_model}))
-        odo.track(0.0, [0.0, 0.0, 0.0], np.zeros(3))
-        plain = odo.track(1.0, [0.0, 0.0, 0.0], np.zeros(3))
-        moving = odo.track(2.0, [0.0, 0.0, 0.0], np.zeros(3), 'network', offset)
-        assert plain is not None and moving is not None
-        np.testing.assert_allclose(np.diag(plain.pose_cov), 2.0 * np.diag(hold))
-        np.testing.assert_allclose(np.diag(moving.pose_cov), added)
-        np.testing.assert_array_equal(moving.pose_cov - np.diag(np.diag(moving.pose_cov)), 0.0)
+        for k in range(3):  # the level starts at 0
+            plain = odo.track(float(k), [0.0, 0.0, 0.0], np.zeros(3))
+            assert plain is not None
+            np.testing.assert_allclose(np.diag(plain.pose_cov), 2.0 * np.diag(hold))
+        first = odo.track(3.0, [0.0, 0.0, 0.0], np.zeros(3), 'network', np.sqrt(m2))
+        second = odo.track(4.0, [0.0, 0.0, 0.0], np.zeros(3), 'network', np.sqrt(m2))
+        assert first is not None and second is not None
+        np.testing.assert_allclose(np.diag(first.pose_cov), 2.0 * np.diag(hold) + gain * m2)
+        level = a * m2  # after the first offset
+        np.testing.assert_allclose(np.diag(second.pose_cov),
+                                   2.0 * np.diag(hold) + gain * (m2 - TWIN_LEVEL_FACTOR * level))
+        np.testing.assert_array_equal(second.pose_cov - np.diag(np.diag(second.pose_cov)), 0.0)
         with pytest.raises(ValueError, match='twin_offset'):
-            odo.track(3.0, [0.0, 0.0, 0.0], np.zeros(3), 'network', [0.5, 0.0])
+            odo.track(5.0, [0.0, 0.0, 0.0], np.zeros(3), 'network', [0.5, 0.0])
     with pytest.raises(ValueError, match='pose_twin_gain must be a finite number >= 0'):
         OdometryParams(pose_twin_gain=-1.0)
 

@@ -23,7 +23,10 @@ thrust, and gives an ``OdometryEstimate``:
   ``HOLD_FLOOR_FRACTION`` of the mean e_i²; T_i from every source of the window, which has more
   motion to fit it, σ²_hold,i per source). The published pose covariance is
   ``pose_cov_scale`` · (Σ_hold + ``pose_lag_scale`` · diag(T_i² w_i²)) with w the current
-  twist (Σ_hold: the correlation of the mean e eᵀ with the σ²_hold diagonal; O(n²) per sample).
+  twist (Σ_hold: the correlation of the mean e eᵀ with the σ²_hold diagonal; O(n²) per sample),
+  plus, with ``pose_twin_gain`` > 0 (off by default), that gain · diag(max(0, m² − 2 L)) outside
+  the scale: m the motion gate twin's offset the gate left out of the output (what the holding
+  network lags a move or a turn by), L its running level (``TWIN_LEVEL_TIME``).
   Twist: the same model with the twist's change per second, low-passed over
   ``twist_accel_time``, as regressor (no prior), times ``twist_cov_scale``. The scales are
   calibrated on simulations against the truth (the targets are not the truth). Before the

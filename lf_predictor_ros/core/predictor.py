@@ -594,7 +594,7 @@ class AdaptivePredictor:
         output, low-passed with ``motion_gate_smoothing``, the heading notched with
         ``motion_gate_yaw_notch``; heading wrapped); g the published gain. In a move or a turn
         the twin follows and the holding filter lags, so this is what the published estimate
-        probably lags by (``OdometryParams.pose_twin_prior``). Zeros when the gate is off or the
+        probably lags by (``OdometryParams.pose_twin_gain``). Zeros when the gate is off or the
         twin is not on its network.
         """
         return self._untaken.copy()

@@ -142,12 +142,17 @@ class Player:
         self._last_clock_ns = -1
         self.published = 0
 
+    def _all_publishers(self) -> dict[str, Publisher]:
+        """Every publisher by topic: the bag's topics, and /clock with ``--clock``."""
+        publishers = dict(self._publishers)
+        if self._clock_publisher is not None:
+            publishers[CLOCK_TOPIC] = self._clock_publisher
+        return publishers
+
     def wait_for_subscribers(self, context: Context) -> None:
         """Wait until every publisher (and /clock) has a subscriber, or the timeout passes."""
         deadline = time.monotonic() + self._options.wait_for_subscribers
-        publishers = list(self._publishers.values())
-        if self._clock_publisher is not None:
-            publishers.append(self._clock_publisher)
+        publishers = list(self._all_publishers().values())
         while context.ok() and time.monotonic() < deadline and any(
                 p.get_subscription_count() == 0 for p in publishers):
             time.sleep(0.01)
@@ -158,11 +163,8 @@ class Player:
         One deadline for all publishers (`wait_for_all_acked` seconds from now).
         """
         deadline = time.monotonic() + self._options.wait_for_all_acked
-        publishers = dict(self._publishers)
-        if self._clock_publisher is not None:
-            publishers[CLOCK_TOPIC] = self._clock_publisher
         unacknowledged = []
-        for topic, publisher in publishers.items():
+        for topic, publisher in self._all_publishers().items():
             left = max(0.0, deadline - time.monotonic())
             if not publisher.wait_for_all_acked(Duration(seconds=left)):
                 unacknowledged.append(topic)

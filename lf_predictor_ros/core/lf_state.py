@@ -122,8 +122,10 @@ class LfStateEstimator:
         if self.odometry.is_late(t + self.sample_time):
             return lf_pose, None  # older than an estimate already dead-reckoned
         source: EstimateSource = 'network' if self.predictor.using_network else 'fallback'
-        odom = self.odometry.track(t + self.sample_time, lf_pose, force, source,
-                                   self.predictor.untaken_twin_offset)
+        # the untaken twin offset only where the odometry uses it (pose_twin_gain; off by default)
+        offset = self.predictor.untaken_twin_offset if self.odometry.params.pose_twin_gain > 0.0 \
+            else None
+        odom = self.odometry.track(t + self.sample_time, lf_pose, force, source, offset)
         return lf_pose, odom
 
     def command(self, t: float, force: FloatArray) -> bool:

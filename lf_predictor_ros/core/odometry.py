@@ -413,8 +413,8 @@ class LfOdometry:
 
         While dead reckoning, a fix is first checked for plausibility (module docstring); a fix
         held back returns the dead-reckoned estimate (or None once lost). ``twin_offset``: the
-        predictor's untaken twin offset m for this estimate (ndof; ``pose_twin_gain``), None:
-        zeros.
+        predictor's untaken twin offset m for this estimate (ndof; used with ``pose_twin_gain``
+        > 0), None: no term.
         """
         pose = _vector(lf_pose, 3, 'lf_pose')
         tau = _vector(force, 3, 'force')
@@ -425,8 +425,7 @@ class LfOdometry:
         if self.is_late(t):
             raise ValueError(f'stamp {t} is older than the last one {self._t}: restart() first')
         z = self._measurement(pose)
-        offset = np.zeros(self.ndof) if twin_offset is None else \
-            _vector(twin_offset, self.ndof, 'twin_offset')
+        offset = None if twin_offset is None else _vector(twin_offset, self.ndof, 'twin_offset')
         memory = self._memory  # the thrust clipped to what it has seen, once per sample
         clipped = tau if memory is None else memory.plausible_force(tau)
         if self._x is None:

@@ -101,7 +101,7 @@ def test_published_pose_covariance_adds_the_untaken_twin_offsets_excess() -> Non
 
     L starts at the first offset (here zeros, a vessel holding station), then low-passes m²
     over TWIN_LEVEL_TIME: a new offset m counts fully once, then less as L grows; gain 0 (the
-    default) adds nothing; no offset given: zeros.
+    default) adds nothing; no offset given: no term.
     """
     hold = np.diag([0.01, 0.04, 1e-4])
     model = ErrorModel(moment=hold, hold=hold, gain=np.zeros(3))
@@ -112,7 +112,7 @@ def test_published_pose_covariance_adds_the_untaken_twin_offsets_excess() -> Non
         odo = LfOdometry(3, H, OdometryParams(pose_cov_scale=2.0, pose_twin_gain=gain))
         odo.apply_learned(None, ({'all': model}, {'all': twist_model}))
         for k in range(3):  # the level starts at 0
-            plain = odo.track(float(k), [0.0, 0.0, 0.0], np.zeros(3))
+            plain = odo.track(float(k), [0.0, 0.0, 0.0], np.zeros(3), 'network', np.zeros(3))
             assert plain is not None
             np.testing.assert_allclose(np.diag(plain.pose_cov), 2.0 * np.diag(hold))
         first = odo.track(3.0, [0.0, 0.0, 0.0], np.zeros(3), 'network', np.sqrt(m2))
@@ -123,8 +123,11 @@ def test_published_pose_covariance_adds_the_untaken_twin_offsets_excess() -> Non
         np.testing.assert_allclose(np.diag(second.pose_cov),
                                    2.0 * np.diag(hold) + gain * (m2 - TWIN_LEVEL_FACTOR * level))
         np.testing.assert_array_equal(second.pose_cov - np.diag(np.diag(second.pose_cov)), 0.0)
+        without = odo.track(5.0, [0.0, 0.0, 0.0], np.zeros(3))  # no offset given: no term
+        assert without is not None
+        np.testing.assert_allclose(np.diag(without.pose_cov), 2.0 * np.diag(hold))
         with pytest.raises(ValueError, match='twin_offset'):
-            odo.track(5.0, [0.0, 0.0, 0.0], np.zeros(3), 'network', [0.5, 0.0])
+            odo.track(6.0, [0.0, 0.0, 0.0], np.zeros(3), 'network', [0.5, 0.0])
     with pytest.raises(ValueError, match='pose_twin_gain must be a finite number >= 0'):
         OdometryParams(pose_twin_gain=-1.0)
 

@@ -319,7 +319,8 @@ class AdaptivePredictor:
         self._previous_model: NumpyNnarmax | None = None  # the network before _model
         self._rough_retirements = 0
         self._gain = np.zeros(params.ndof)
-        self._untaken = np.zeros(params.ndof)  # (1 − g) · the twin's offset (untaken_twin_offset)
+        # the offset the gate scaled at the last sample (None: none), for untaken_twin_offset
+        self._scaled_offset: FloatArray | None = None
         smoothing = params.motion_gate_smoothing
         self._gate_alpha = 1.0 if smoothing <= 0.0 else min(1.0, params.sample_time / smoothing)
         self._gate_offset = np.zeros(params.ndof)  # LP(moving − holding) (motion_gate_smoothing)
@@ -597,7 +598,9 @@ class AdaptivePredictor:
         probably lags by (``OdometryParams.pose_twin_gain``). Zeros when the gate is off or the
         twin is not on its network.
         """
-        return self._untaken.copy()
+        if self._scaled_offset is None:
+            return np.zeros(self.ndof)
+        return np.asarray((1.0 - self._gain) * self._scaled_offset, dtype=np.float64)
 
     @property
     def motion_gate_valid(self) -> NDArray[np.bool_]:
@@ -944,7 +947,7 @@ class AdaptivePredictor:
             # fallback is another filter's, and the step where the source switches is no motion.
             self._gate.restart()
             self._gain = np.zeros(self.ndof)
-            self._untaken = np.zeros(self.ndof)
+            self._scaled_offset = None
             self._gate_offset = np.zeros(self.ndof)
             if self._gate_yaw_notch is not None:
                 self._gate_yaw_notch.reset()
@@ -965,7 +968,7 @@ class AdaptivePredictor:
         gains = [g * (1.0 if on else 0.0)
                  for g, on in zip(gains, self._gate_valid.tolist(), strict=True)]
         self._gain = np.array(gains, dtype=np.float64)
-        self._untaken = (1.0 - self._gain) * offset
+        self._scaled_offset = offset
         return shifted(out, self._gain * offset, self.ndof)
 
     def _yaw_notched(self, t: float, offset: FloatArray) -> FloatArray:

@@ -555,6 +555,7 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                            'pose_lag_scale': odometry.pose_lag_scale,
                            'pose_lag_prior': odometry.pose_lag_prior,
                            'pose_twin_gain': odometry.pose_twin_gain,
+                           'pose_twin_fit': odometry.pose_twin_fit,
                            'twist_cov_scale': odometry.twist_cov_scale,
                            'twist_bandwidth': odometry.twist_bandwidth,
                            'dead_reckoning_timeout': odometry.dead_reckoning_timeout,

@@ -257,7 +257,7 @@ class LfStateEstimator:
                 odometry.params.pose_lag_prior,
                 _input_gain(odometry.params.vessel_inertia, self.ndof), commands,
                 self._controller_read if reading else None, self.predictor.targets_peak_damping,
-                reference)
+                reference, odometry.params.pose_twin_fit)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -287,7 +287,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            min_samples: int, lag_prior: float, input_gain: FloatArray | None = None,
            commands: tuple[FloatArray, FloatArray] | None = None,
            remembered: ControllerRead | None = None,
-           peak_damping: float = math.nan, reference: FloatArray | None = None) -> Learned:
+           peak_damping: float = math.nan, reference: FloatArray | None = None,
+           twin_fit: bool = False) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -302,7 +303,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     or a remembered read marks the memory ``dp_controlled``, and the memory's message carries
     its note ('… remembered from t=… s' for a remembered one).
     The memory is None if it cannot be learned; the covariances compare the published estimates
-    with ``reference`` (same instants; None: the targets ``values``; `odometry.calibrate`).
+    with ``reference`` (same instants; None: the targets ``values``; `odometry.calibrate`, which
+    fits the untaken twin offset's coefficients with ``twin_fit``).
     The read returned is the one in force afterwards: this read if it succeeded,
     ``remembered`` if it failed for lack of data, else None.
     """
@@ -333,7 +335,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                          dp_controlled=in_force is not None,
                          message=f'{memory.message}; {note}' if note else memory.message)
     return memory, calibrate(published, times, values if reference is None else reference,
-                             params.ndof, params.sample_time, min_samples, lag_prior), in_force
+                             params.ndof, params.sample_time, min_samples, lag_prior,
+                             twin_fit), in_force
 
 
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,

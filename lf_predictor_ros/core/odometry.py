@@ -54,7 +54,7 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 from typing import Literal, cast
 
@@ -140,6 +140,12 @@ class OdometryParams:
         'AdaptivePredictor.untaken_twin_offset: the holding filter lags a move or a turn that '
         'the twin follows, so m is what the estimate probably lags by, against the truth), L '
         'the running level of m² (TWIN_LEVEL_TIME); 0 = off (issue 14)', ''))
+    pose_twin_fit: bool = field(default=False, metadata=field_doc(
+        'with pose_twin_gain > 0: the term is pose_twin_gain · C_i · max(0, m_i² − 2 L_i) with '
+        'C_i fitted per DOF at every calibration against the reference (the least-squares slope '
+        'of the squared pose error on that excess, clipped at 0; 0 while the window has fewer '
+        'than min_calibration_samples samples with an excess): the term acts only on a vessel '
+        "and DOF where the twin's untaken offset has explained the error (false: C_i = 1)", ''))
     twist_cov_scale: float = field(default=0.61, metadata=field_doc(
         'published twist covariance = this × (holding part + K² a²) of the twist error model '
         'fitted against the target velocity (a: the twist change, twist_accel_time; '
@@ -304,11 +310,14 @@ class ErrorModel:
         hold: holding part Σ_hold, ndof × ndof (the correlation of ``moment``, diagonal σ²_hold).
         gain: T_i² per DOF [s²]: variance added per squared regressor w_i² (pose: N/E
             earth-frame velocity [m/s], yaw rate [rad/s]; twist: acceleration [m/s², rad/s²]).
+        twin_gain: C_i per DOF (pose, ``pose_twin_fit``): variance added per unit of the
+            untaken twin offset's excess (`fit_twin_gain`); None: not fitted.
     """
 
     moment: FloatArray
     hold: FloatArray
     gain: FloatArray
+    twin_gain: FloatArray | None = None
 
     def covariance(self, rates: FloatArray, lag_scale: float) -> FloatArray:
         """Σ_hold + lag_scale · diag(T_i² w_i²) for the regressor w (ndof,)."""
@@ -327,6 +336,9 @@ class Published:
     source: EstimateSource
     accel: FloatArray  # the twist's low-passed change per second (twist error model regressor)
     lag: FloatArray  # the pose error model's regressor w (`LfOdometry._lag_regressor`)
+    # the untaken twin offset's excess max(0, m² − 2 L) (`LfOdometry._twin_excess`; None: no
+    # offset given or not calibrated yet)
+    twin_excess: FloatArray | None = None
 
 
 class LfOdometry:
@@ -446,7 +458,10 @@ class LfOdometry:
         twist = x[self.ndof:].copy()
         accel = self._twist_change(t, twist)
         lag = self._lag_regressor(t, z, twist)
-        self._history.append(Published(t, z.copy(), twist, source, accel, lag))
+        excess = None
+        if offset is not None and self.params.pose_twin_gain > 0.0 and self.calibrated:
+            excess = self._twin_excess(offset)
+        self._history.append(Published(t, z.copy(), twist, source, accel, lag, excess))
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
         self._slow_twist = twist.copy() if self._slow_twist is None else \
             low_pass_step(self._slow_twist, twist, alpha)
@@ -454,7 +469,7 @@ class LfOdometry:
         self._slow_force = applied.copy() if self._slow_force is None else \
             low_pass_step(self._slow_force, applied, self._force_rate())
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
-                                            self._pose_covariance(source, lag, offset))
+                                            self._pose_covariance(source, lag, excess))
         out = OdometryEstimate(
             stamp=t, pose=published, pose_cov=pose_cov, twist=self._full(twist),
             twist_cov=self._twist_covariance(source, accel), mode='tracking',
@@ -515,7 +530,8 @@ class LfOdometry:
         self.apply_learned(memory, calibrate(self.published(), times, targets, self.ndof,
                                              self.sample_time,
                                              self.params.min_calibration_samples,
-                                             self.params.pose_lag_prior))
+                                             self.params.pose_lag_prior,
+                                             self.params.pose_twin_fit))
 
     def published(self) -> list[Published]:
         """A copy of the published history the covariances are calibrated on (oldest first)."""
@@ -840,17 +856,21 @@ class LfOdometry:
         return np.asarray(np.sqrt(square), dtype=np.float64)
 
     def _pose_covariance(self, source: EstimateSource, lag: FloatArray,
-                         twin_offset: FloatArray | None = None) -> FloatArray:
+                         twin_excess: FloatArray | None = None) -> FloatArray:
         """The pose error model of ``source`` at the regressor ``lag`` (`_lag_regressor`).
 
-        Plus ``pose_twin_gain`` · diag(`_twin_excess`(m)), m = ``twin_offset``, once calibrated.
+        Plus ``pose_twin_gain`` · diag(C ∘ x), x = ``twin_excess`` (`_twin_excess`), C = 1 or,
+        with ``pose_twin_fit``, the model's fitted ``twin_gain`` (none fitted: 0).
         """
         n = self.ndof
         if self._pose_cov:
             model = self._pose_cov.get(source, self._pose_cov['all'])
             inner = self.params.pose_cov_scale * model.covariance(lag, self.params.pose_lag_scale)
-            if twin_offset is not None and self.params.pose_twin_gain > 0.0:
-                inner.flat[::n + 1] += self.params.pose_twin_gain * self._twin_excess(twin_offset)
+            if twin_excess is not None:
+                added = self.params.pose_twin_gain * twin_excess
+                if self.params.pose_twin_fit:
+                    added = added * (0.0 if model.twin_gain is None else model.twin_gain)
+                inner.flat[::n + 1] += added
         else:
             inner = np.diag(np.array(self.params.prior_pose_std[:n]) ** 2)
         return self._embed(inner)
@@ -919,16 +939,18 @@ class LfOdometry:
 
 
 def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike, ndof: int,
-              sample_time: float, min_samples: int, lag_prior: float = 0.0
-              ) -> Covariances | None:
+              sample_time: float, min_samples: int, lag_prior: float = 0.0,
+              twin_fit: bool = False) -> Covariances | None:
     """Pose error models and twist covariances against the targets (module docstring).
 
     Every published estimate whose stamp is a target instant (not the first or last) is
     compared with the target and with the targets' differentiated body velocity: per source
     ('network', 'fallback': only with ``min_samples`` matches) and over all, the pose error
     model (`fit_error_model` on each estimate's regressor ``Published.lag``, prior lag time
-    ``lag_prior`` [s]) and the twist error's second moment (bias included). None when nothing
-    matches. Pure: runs on a worker.
+    ``lag_prior`` [s]) and the twist error's second moment (bias included); with ``twin_fit``
+    also the untaken twin offset's coefficient C of every DOF (`fit_twin_gain` on the matches
+    that carry ``Published.twin_excess``, pooled over the sources). None when nothing matches.
+    Pure: runs on a worker.
     """
     stamps = np.asarray(times, dtype=np.float64)
     values = np.array(targets, dtype=np.float64).reshape(stamps.shape[0], -1)
@@ -954,6 +976,11 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
     rates = np.array([p.lag for p in rows])
     sources = np.array([p.source for p in rows])
     pooled = fit_error_model(pose_err, rates, lag_prior)
+    if twin_fit:
+        with_excess = [k for k, p in enumerate(rows) if p.twin_excess is not None]
+        excess = np.array([rows[k].twin_excess for k in with_excess]).reshape(-1, ndof)
+        pooled = replace(pooled, twin_gain=fit_twin_gain(pose_err[with_excess], excess,
+                                                         min_samples))
     pose_cov: dict[str, ErrorModel] = {'all': pooled}
     accel = np.array([p.accel for p in rows])
     twist_cov: dict[str, ErrorModel] = {'all': fit_error_model(twist_err, accel)}
@@ -961,7 +988,9 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
         mask = sources == source
         if np.count_nonzero(mask) >= min_samples:
             # the lag time from every source (more motion to fit it), the holding part per source
-            pose_cov[source] = fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain)
+            pose_cov[source] = replace(
+                fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain),
+                twin_gain=pooled.twin_gain)
             twist_cov[source] = fit_error_model(twist_err[mask], accel[mask])
     return pose_cov, twist_cov
 
@@ -1007,6 +1036,30 @@ def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,
     np.fill_diagonal(corr, 1.0)
     std = np.sqrt(hold)
     return ErrorModel(moment=moment, hold=np.asarray(corr * np.outer(std, std)), gain=gains)
+
+
+def fit_twin_gain(errors: ArrayLike, excess: ArrayLike, min_samples: int) -> FloatArray:
+    """C_i per DOF: the least-squares slope of e_i² on the twin offset's excess x_i, ≥ 0.
+
+    errors and excess (m, n) of the same estimates (e against the calibration reference, x from
+    `LfOdometry._twin_excess`). A DOF with fewer than ``min_samples`` samples of x_i > 0 gets 0:
+    no evidence that the untaken offset explains its error (``pose_twin_fit``).
+    """
+    e = np.asarray(errors, dtype=np.float64)
+    x = np.asarray(excess, dtype=np.float64)
+    if e.ndim != 2 or x.shape != e.shape:
+        raise ValueError(f'errors and excess must have the same shape (m, n), got {e.shape} '
+                         f'and {x.shape}')
+    gains = np.zeros(e.shape[1])
+    for i in range(e.shape[1]):
+        if np.count_nonzero(x[:, i] > 0.0) < min_samples:
+            continue
+        dx = x[:, i] - x[:, i].mean()
+        sxx = float(np.sum(dx * dx))
+        if sxx > 0.0:
+            e2 = e[:, i] ** 2
+            gains[i] = max(0.0, float(np.sum(dx * (e2 - e2.mean()))) / sxx)
+    return gains
 
 
 def _lag_gain(sxx: float, sxy: float, mean_e2: float, mean_w2: float, floor: float,

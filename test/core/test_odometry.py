@@ -16,7 +16,10 @@ from lf_predictor_ros.core.odometry import (
     ErrorModel,
     LfOdometry,
     OdometryParams,
+    Published,
+    calibrate,
     fit_error_model,
+    fit_twin_gain,
     normalized_error_squared,
 )
 
@@ -130,6 +133,71 @@ def test_published_pose_covariance_adds_the_untaken_twin_offsets_excess() -> Non
             odo.track(6.0, [0.0, 0.0, 0.0], np.zeros(3), 'network', [0.5, 0.0])
     with pytest.raises(ValueError, match='pose_twin_gain must be a finite number >= 0'):
         OdometryParams(pose_twin_gain=-1.0)
+
+
+def test_twin_gain_is_the_slope_of_the_squared_error_on_the_excess() -> None:
+    """e² = 0.01 + 0.7 x exactly: C = 0.7; an error that shrinks with x: 0; too few x > 0: 0."""
+    x = np.zeros((400, 3))
+    x[100:300, 0] = np.linspace(0.0, 2.0, 200)
+    x[100:300, 1] = np.linspace(0.0, 2.0, 200)
+    x[:10, 2] = 1.0  # 10 samples with an excess: fewer than 60
+    e = np.zeros((400, 3))
+    e[:, 0] = np.sqrt(0.01 + 0.7 * x[:, 0])
+    e[:, 1] = np.sqrt(np.maximum(1.0 - 0.4 * x[:, 1], 0.0))
+    e[:, 2] = np.sqrt(0.01 + 5.0 * x[:, 2])
+    np.testing.assert_allclose(fit_twin_gain(e, x, 60), [0.7, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(fit_twin_gain(e, x, 5)[2], 5.0, rtol=1e-12)
+    with pytest.raises(ValueError, match='same shape'):
+        fit_twin_gain(e, x[:, :2], 60)
+
+
+def test_calibration_fits_the_twin_gain_on_the_estimates_that_carry_an_excess() -> None:
+    """calibrate(..., twin_fit=True): north errors √(0.04 + 0.5 x) against the targets → C_N 0.5.
+
+    East has an excess but a constant error (C 0), the heading no excess (C 0); estimates
+    without an excess (None, before the first calibration) are left out of the fit; both
+    sources get the pooled C; without twin_fit nothing is fitted.
+    """
+    n = 600
+    times = np.arange(float(n))
+    targets = np.zeros((n, 3))
+    x = np.zeros((n, 3))
+    x[200:400, 0] = x[200:400, 1] = np.linspace(0.0, 1.0, 200)
+    history = []
+    for k in range(n):
+        error = np.array([math.sqrt(0.04 + 0.5 * x[k, 0]), 0.1, 0.001])
+        excess = None if k < 100 else x[k].copy()
+        if k < 100:  # far off, no excess: would pull C down if it counted
+            error[0] = 3.0
+        history.append(Published(float(k), targets[k] + error, np.zeros(3),
+                                 'network' if k % 2 else 'fallback', np.zeros(3), np.zeros(3),
+                                 excess))
+    fitted = calibrate(history, times, targets, 3, H, 60, 0.0, twin_fit=True)
+    plain = calibrate(history, times, targets, 3, H, 60, 0.0)
+    assert fitted is not None and plain is not None
+    for source in ('all', 'network', 'fallback'):
+        twin = fitted[0][source].twin_gain
+        assert twin is not None
+        np.testing.assert_allclose(twin, [0.5, 0.0, 0.0], atol=1e-9)
+        assert plain[0][source].twin_gain is None
+
+
+def test_fitted_twin_gain_scales_the_published_excess() -> None:
+    """pose_twin_fit: P = scale · Σ_hold + pose_twin_gain · C ∘ x; no C fitted: no term."""
+    hold = np.diag([0.01, 0.04, 1e-4])
+    twist_model = ErrorModel(moment=np.eye(3), hold=np.eye(3), gain=np.zeros(3))
+    m2 = np.square([0.5, -0.2, 0.01])
+    params = OdometryParams(pose_cov_scale=2.0, pose_twin_gain=3.0, pose_twin_fit=True)
+    for twin_gain in (np.array([0.5, 0.0, 2.0]), None):
+        model = ErrorModel(moment=hold, hold=hold, gain=np.zeros(3), twin_gain=twin_gain)
+        odo = LfOdometry(3, H, params)
+        odo.apply_learned(None, ({'all': model}, {'all': twist_model}))
+        odo.track(0.0, [0.0, 0.0, 0.0], np.zeros(3), 'network', np.zeros(3))  # the level: 0
+        out = odo.track(1.0, [0.0, 0.0, 0.0], np.zeros(3), 'network', np.sqrt(m2))
+        assert out is not None
+        c = np.zeros(3) if twin_gain is None else twin_gain
+        np.testing.assert_allclose(np.diag(out.pose_cov), 2.0 * np.diag(hold) + 3.0 * c * m2)
+        assert odo.published()[-1].twin_excess is not None
 
 
 def test_pose_error_model_of_a_still_window_is_the_prior() -> None:

@@ -24,6 +24,7 @@ from lf_predictor_ros.core.training import (
     subnormals_flushed,
     train,
     validated_force_ridges,
+    warm_up,
 )
 
 # torch loads its forward-AD decompositions once per process via the deprecated torch.jit.script
@@ -204,6 +205,7 @@ def test_derivative_term_reduces_the_derivative_error() -> None:
 
 
 def test_max_seconds_is_honoured() -> None:
+    warm_up()  # the lazy imports of a first training (seconds on a loaded machine) come first
     u, y = narx_data(600, seed=8)
     settings = TrainSettings(algorithm='adam', max_epochs=10**7, max_seconds=0.3)
     result = train(NnarmaxNet(NARX_SPEC), u, y, y, None, settings)
@@ -214,6 +216,7 @@ def test_max_seconds_is_honoured() -> None:
 
 
 def test_stop_event_aborts_a_running_training() -> None:
+    warm_up()  # as above: the timer measures the training, not the first imports
     u, y = narx_data(600, seed=9)
     stop = threading.Event()
     timer = threading.Timer(0.2, stop.set)

@@ -122,7 +122,7 @@ class LfStateEstimator:
         if self.odometry.is_late(t + self.sample_time):
             return lf_pose, None  # older than an estimate already dead-reckoned
         source: EstimateSource = 'network' if self.predictor.using_network else 'fallback'
-        # the untaken twin offset only where the odometry uses it (pose_twin_gain; off by default)
+        # the untaken twin offset only where the odometry uses it (pose_twin_gain > 0)
         offset = self.predictor.untaken_twin_offset if self.odometry.params.pose_twin_gain > 0.0 \
             else None
         odom = self.odometry.track(t + self.sample_time, lf_pose, force, source, offset)

@@ -24,9 +24,11 @@ thrust, and gives an ``OdometryEstimate``:
   motion to fit it, σ²_hold,i per source). The published pose covariance is
   ``pose_cov_scale`` · (Σ_hold + ``pose_lag_scale`` · diag(T_i² w_i²)) with w the current
   twist (Σ_hold: the correlation of the mean e eᵀ with the σ²_hold diagonal; O(n²) per sample),
-  plus, with ``pose_twin_gain`` > 0 (off by default), that gain · diag(max(0, m² − 2 L)) outside
-  the scale: m the motion gate twin's offset the gate left out of the output (what the holding
-  network lags a move or a turn by), L its running level (``TWIN_LEVEL_TIME``).
+  plus, with ``pose_twin_gain`` > 0 (1 by default), that gain · diag(C ∘ max(0, m² − 2 L))
+  outside the scale: m the motion gate twin's offset the gate left out of the output (what the
+  holding network lags a move or a turn by), L its running level (``TWIN_LEVEL_TIME``), C per
+  DOF the least-squares slope of e² on that excess against the targets (``pose_twin_fit``, on
+  by default: 0 where the offset has not explained the error; off: C = 1).
   Twist: the same model with the twist's change per second, low-passed over
   ``twist_accel_time``, as regressor (no prior), times ``twist_cov_scale``. The scales are
   calibrated on simulations against the truth (the targets are not the truth). Before the
@@ -133,19 +135,22 @@ class OdometryParams:
         'lag time T assumed for every DOF where a calibration window has no motion to fit it '
         '(prior of the least-squares fit, with a standard deviation of T² equal to T²; '
         '0 = no prior)', 's'))
-    pose_twin_gain: float = field(default=0.0, metadata=field_doc(
+    pose_twin_gain: float = field(default=1.0, metadata=field_doc(
         'with the motion gate: the published pose covariance adds this × diag(max(0, m² − '
         "2 L)), outside pose_cov_scale, m the part of the moving twin's offset the gate left "
         'out of the output ((1 − g) · LP(twin − holding), '
         'AdaptivePredictor.untaken_twin_offset: the holding filter lags a move or a turn that '
         'the twin follows, so m is what the estimate probably lags by, against the truth), L '
-        'the running level of m² (TWIN_LEVEL_TIME); 0 = off (issue 14)', ''))
-    pose_twin_fit: bool = field(default=False, metadata=field_doc(
+        'the running level of m² (TWIN_LEVEL_TIME); 0 = off (issue 14; 1 with pose_twin_fit '
+        'since the thirty-third session: docs/BENCHMARKS.md)', ''))
+    pose_twin_fit: bool = field(default=True, metadata=field_doc(
         'with pose_twin_gain > 0: the term is pose_twin_gain · C_i · max(0, m_i² − 2 L_i) with '
         'C_i fitted per DOF at every calibration against the reference (the least-squares slope '
         'of the squared pose error on that excess, clipped at 0; 0 while the window has fewer '
         'than min_calibration_samples samples with an excess): the term acts only on a vessel '
-        "and DOF where the twin's untaken offset has explained the error (false: C_i = 1)", ''))
+        "and DOF where the twin's untaken offset has explained the error (false: C_i = 1; "
+        'adopted on fresh development seeds 373–380, runs inside their pose NEES bounds 16 → '
+        '19 of 32, docs/BENCHMARKS.md "Thirty-third session")', ''))
     twist_cov_scale: float = field(default=0.61, metadata=field_doc(
         'published twist covariance = this × (holding part + K² a²) of the twist error model '
         'fitted against the target velocity (a: the twist change, twist_accel_time; '

@@ -189,6 +189,7 @@ class _WindowPredictor:
     wave_peak_freq = None
     targets_peak_damping = math.nan
     narrow_reference = None  # narrow targets: the covariances are fitted against them
+    untaken_twin_offset = np.zeros(1)  # no motion gate (1 DOF): nothing left out
 
     def __init__(self) -> None:
         self.targets: TargetWindow | None = None

@@ -112,7 +112,8 @@ def test_published_pose_covariance_adds_the_untaken_twin_offsets_excess() -> Non
     m2 = np.square([0.5, -0.2, 0.01])
     a = H / TWIN_LEVEL_TIME
     for gain in (0.0, 3.0):
-        odo = LfOdometry(3, H, OdometryParams(pose_cov_scale=2.0, pose_twin_gain=gain))
+        odo = LfOdometry(3, H, OdometryParams(pose_cov_scale=2.0, pose_twin_gain=gain,
+                                              pose_twin_fit=False))  # C = 1
         odo.apply_learned(None, ({'all': model}, {'all': twist_model}))
         for k in range(3):  # the level starts at 0
             plain = odo.track(float(k), [0.0, 0.0, 0.0], np.zeros(3), 'network', np.zeros(3))

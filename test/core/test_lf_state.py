@@ -9,7 +9,12 @@ import torch
 
 from lf_predictor_ros.core.lf_dynamics import body_velocity
 from lf_predictor_ros.core.lf_state import LfStateEstimator, implied_input_gain
-from lf_predictor_ros.core.odometry import Published, normalized_error_squared
+from lf_predictor_ros.core.odometry import (
+    LfOdometry,
+    OdometryParams,
+    Published,
+    normalized_error_squared,
+)
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.targets import TargetWindow
 from sim_ros.simulation import load_scenario, simulate
@@ -202,6 +207,42 @@ class _WindowPredictor:
 
     def close(self) -> None:
         pass
+
+
+def test_the_untaken_twin_offset_reaches_the_odometry_only_where_it_is_used(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The predictor's untaken twin offset goes to LfOdometry.track where the odometry uses it.
+
+    Default (pose_twin_gain 1): the offset of each sample; pose_twin_gain 0: None.
+    """
+    params = PredictorParams(ndof=1, sample_time=1.0, retrain_period=20.0,
+                             training_window=200.0, transient_length=10.0, filter_window=60.0,
+                             append_length=40.0, estimation_window=600.0)
+    seen: list[object] = []
+    real_track = LfOdometry.track
+
+    def spy(self: LfOdometry, t: float, pose: object, force: object, source: str = 'network',
+            twin_offset: object = None) -> object:
+        seen.append(None if twin_offset is None else np.array(twin_offset))
+        return real_track(self, t, pose, force, source, twin_offset)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(LfOdometry, 'track', spy)
+    for odometry, expect in ((OdometryParams(), [0.25]),
+                             (OdometryParams(pose_twin_gain=0.0), None)):
+        fake = _WindowPredictor()
+        fake.untaken_twin_offset = np.array([0.25])  # type: ignore[misc]
+        est = LfStateEstimator(params, odometry, background=False,
+                               predictor=fake)  # type: ignore[arg-type]
+        seen.clear()
+        for k in range(3):
+            est.update(float(k), np.array([0.1 * k, 0.0, 0.0]), np.zeros(3))
+        est.close()
+        assert len(seen) == 3
+        for offset in seen:
+            if expect is None:
+                assert offset is None
+            else:
+                np.testing.assert_array_equal(offset, expect)
 
 
 def test_the_last_controller_read_stands_in_for_a_window_without_enough_data() -> None:

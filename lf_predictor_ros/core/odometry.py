@@ -137,7 +137,8 @@ class OdometryParams:
         '0 = no prior)', 's'))
     pose_twin_gain: float = field(default=1.0, metadata=field_doc(
         'with the motion gate: the published pose covariance adds this × diag(max(0, m² − '
-        "2 L)), outside pose_cov_scale, m the part of the moving twin's offset the gate left "
+        "2 L)) (× C_i with pose_twin_fit), outside pose_cov_scale, m the part of the moving "
+        "twin's offset the gate left "
         'out of the output ((1 − g) · LP(twin − holding), '
         'AdaptivePredictor.untaken_twin_offset: the holding filter lags a move or a turn that '
         'the twin follows, so m is what the estimate probably lags by, against the truth), L '

@@ -32,7 +32,7 @@ with `benchmark --seeds 20`) are for `benchmark` only.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import replace
 import math
 import sys
@@ -90,6 +90,20 @@ def parse_variant(text: str) -> tuple[str, dict[str, Any]]:
                 except ValueError:
                     overrides[key] = value
     return name, overrides
+
+
+def parse_cases(texts: Sequence[str], allowed: Collection[int]) -> list[tuple[str, int]]:
+    """'SCENARIO:SEED' items → [(scenario, seed)]; ValueError naming a bad item or seed."""
+    cases = []
+    for text in texts:
+        scenario, _, seed = text.partition(':')
+        if not seed.isdigit():
+            raise ValueError(f'give SCENARIO:SEED, got {text!r}')
+        if int(seed) not in allowed:
+            raise ValueError(f'seed {seed} of {text!r} is not allowed here (held-out seeds: '
+                             '`benchmark`)')
+        cases.append((scenario, int(seed)))
+    return cases
 
 
 def fair_case(scenario_name: str, seed: int, duration: float,

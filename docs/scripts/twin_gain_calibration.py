@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from method_probe import fair_case  # noqa: E402 - the sibling script
+from method_probe import fair_case, parse_cases  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.benchmark.baseline_tuning import TUNING_SEEDS  # noqa: E402
 from lf_predictor_ros.benchmark.benchmark import SCHEDULE_SPREAD  # noqa: E402
@@ -106,12 +106,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=(__doc__ or '').splitlines()[0])
     parser.add_argument('cases', nargs='+', help='SCENARIO:SEED')
     args = parser.parse_args(argv)
-    cases = []
-    for case in args.cases:
-        scenario, _, seed = case.partition(':')
-        if not seed.isdigit() or int(seed) not in CALIBRATION_SEEDS:
-            parser.error(f'give SCENARIO:SEED with a seed of {CALIBRATION_SEEDS}, got {case!r}')
-        cases.append((scenario, int(seed)))
+    try:
+        cases = parse_cases(args.cases, CALIBRATION_SEEDS)
+    except ValueError as exc:
+        parser.error(f'{exc}; calibration seeds: {CALIBRATION_SEEDS}')
     torch.set_num_threads(1)
     per_scenario: dict[str, list[float]] = defaultdict(list)
     for scenario, seed in cases:

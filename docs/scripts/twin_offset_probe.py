@@ -31,7 +31,11 @@ from numpy.typing import NDArray
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from method_probe import DEVELOPMENT_SEEDS, fair_case  # noqa: E402 - the sibling script
+from method_probe import (  # noqa: E402 - the sibling script
+    DEVELOPMENT_SEEDS,
+    fair_case,
+    parse_cases,
+)
 
 from lf_predictor_ros.benchmark.baseline_tuning import TUNING_SEEDS  # noqa: E402
 from lf_predictor_ros.benchmark.benchmark import SCHEDULE_SPREAD  # noqa: E402
@@ -104,14 +108,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=(__doc__ or '').splitlines()[0])
     parser.add_argument('cases', nargs='+', help='SCENARIO:SEED')
     args = parser.parse_args(argv)
-    cases = []
-    for case in args.cases:
-        scenario, _, seed = case.partition(':')
-        if not seed.isdigit():
-            parser.error(f'give SCENARIO:SEED, got {case!r}')
-        cases.append((scenario, int(seed)))
-    if {seed for _, seed in cases} - set(TUNING_SEEDS) - set(DEVELOPMENT_SEEDS):
-        parser.error('only tuning and development seeds (held-out seeds: `benchmark`)')
+    try:
+        cases = parse_cases(args.cases, {*TUNING_SEEDS, *DEVELOPMENT_SEEDS})
+    except ValueError as exc:
+        parser.error(f'{exc}; only tuning and development seeds')
     torch.set_num_threads(1)
     for scenario, seed in cases:
         n, rows = collect(scenario, seed)

@@ -106,6 +106,18 @@ def parse_cases(texts: Sequence[str], allowed: Collection[int]) -> list[tuple[st
     return cases
 
 
+def case_arguments(argv: Sequence[str] | None, description: str, allowed: Collection[int],
+                   allowed_name: str) -> list[tuple[str, int]]:
+    """The 'SCENARIO:SEED …' command line of a probe; a usage error names ``allowed_name``."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument('cases', nargs='+', help='SCENARIO:SEED')
+    args = parser.parse_args(argv)
+    try:
+        return parse_cases(args.cases, allowed)
+    except ValueError as exc:
+        parser.error(f'{exc}; {allowed_name}')
+
+
 def fair_case(scenario_name: str, seed: int, duration: float,
               schedule_spread: float = 0.0) -> tuple[Any, Any, Any, Any]:
     """(scenario, shipped predictor params, estimator setup, fair recording) of one case.

@@ -14,7 +14,6 @@ over `odometry.TWIN_LEVEL_TIME` from the first sample), against each.
 """
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 from pathlib import Path
 import sys
@@ -24,7 +23,7 @@ from numpy.typing import NDArray
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from method_probe import DEVELOPMENT_SEEDS, parse_cases  # noqa: E402 - the sibling script
+from method_probe import DEVELOPMENT_SEEDS, case_arguments  # noqa: E402 - the sibling script
 from twin_gain_calibration import windows  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.benchmark.baseline_tuning import TUNING_SEEDS  # noqa: E402
@@ -84,13 +83,9 @@ def report(scenario: str, seed: int) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=(__doc__ or '').splitlines()[0])
-    parser.add_argument('cases', nargs='+', help='SCENARIO:SEED')
-    args = parser.parse_args(argv)
-    try:
-        cases = parse_cases(args.cases, {*TUNING_SEEDS, *DEVELOPMENT_SEEDS})
-    except ValueError as exc:
-        parser.error(f'{exc}; only tuning and development seeds')
+    cases = case_arguments(argv, (__doc__ or '').splitlines()[0],
+                           {*TUNING_SEEDS, *DEVELOPMENT_SEEDS},
+                           'only tuning and development seeds')
     torch.set_num_threads(1)
     for scenario, seed in cases:
         report(scenario, seed)

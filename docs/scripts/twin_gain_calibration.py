@@ -16,7 +16,6 @@ Windows overlap (each calibration's window slides by Δ), so a long-lived window
 """
 from __future__ import annotations
 
-import argparse
 from collections import defaultdict
 from collections.abc import Sequence
 from pathlib import Path
@@ -28,7 +27,7 @@ from numpy.typing import NDArray
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from method_probe import fair_case, parse_cases  # noqa: E402 - the sibling script
+from method_probe import case_arguments, fair_case  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.benchmark.baseline_tuning import TUNING_SEEDS  # noqa: E402
 from lf_predictor_ros.benchmark.benchmark import SCHEDULE_SPREAD  # noqa: E402
@@ -103,13 +102,8 @@ def ratios(scenario_name: str, seed: int) -> list[tuple[float, int, float, float
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=(__doc__ or '').splitlines()[0])
-    parser.add_argument('cases', nargs='+', help='SCENARIO:SEED')
-    args = parser.parse_args(argv)
-    try:
-        cases = parse_cases(args.cases, CALIBRATION_SEEDS)
-    except ValueError as exc:
-        parser.error(f'{exc}; calibration seeds: {CALIBRATION_SEEDS}')
+    cases = case_arguments(argv, (__doc__ or '').splitlines()[0], CALIBRATION_SEEDS,
+                           f'calibration seeds: {CALIBRATION_SEEDS}')
     torch.set_num_threads(1)
     per_scenario: dict[str, list[float]] = defaultdict(list)
     for scenario, seed in cases:

@@ -21,7 +21,6 @@ docs/BENCHMARKS.md, thirty-second session.
 """
 from __future__ import annotations
 
-import argparse
 from collections.abc import Callable, Sequence
 from pathlib import Path
 import sys
@@ -33,8 +32,8 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from method_probe import (  # noqa: E402 - the sibling script
     DEVELOPMENT_SEEDS,
+    case_arguments,
     fair_case,
-    parse_cases,
 )
 
 from lf_predictor_ros.benchmark.baseline_tuning import TUNING_SEEDS  # noqa: E402
@@ -105,13 +104,9 @@ def report(name: str, n: int, rows: list[Row]) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=(__doc__ or '').splitlines()[0])
-    parser.add_argument('cases', nargs='+', help='SCENARIO:SEED')
-    args = parser.parse_args(argv)
-    try:
-        cases = parse_cases(args.cases, {*TUNING_SEEDS, *DEVELOPMENT_SEEDS})
-    except ValueError as exc:
-        parser.error(f'{exc}; only tuning and development seeds')
+    cases = case_arguments(argv, (__doc__ or '').splitlines()[0],
+                           {*TUNING_SEEDS, *DEVELOPMENT_SEEDS},
+                           'only tuning and development seeds')
     torch.set_num_threads(1)
     for scenario, seed in cases:
         n, rows = collect(scenario, seed)

@@ -1048,24 +1048,19 @@ def fit_twin_gain(errors: ArrayLike, excess: ArrayLike, min_samples: int) -> Flo
     """C_i per DOF: the least-squares slope of e_i² on the twin offset's excess x_i, ≥ 0.
 
     errors and excess (m, n) of the same estimates (e against the calibration reference, x from
-    `LfOdometry._twin_excess`). A DOF with fewer than ``min_samples`` samples of x_i > 0 gets 0:
-    no evidence that the untaken offset explains its error (``pose_twin_fit``).
+    `LfOdometry._twin_excess`): `fit_error_model`'s clipped slope with no prior, the excess as
+    its squared regressor. A DOF with fewer than ``min_samples`` samples of x_i > 0 gets 0: no
+    evidence that the untaken offset explains its error (``pose_twin_fit``).
     """
     e = np.asarray(errors, dtype=np.float64)
     x = np.asarray(excess, dtype=np.float64)
     if e.ndim != 2 or x.shape != e.shape:
         raise ValueError(f'errors and excess must have the same shape (m, n), got {e.shape} '
                          f'and {x.shape}')
-    gains = np.zeros(e.shape[1])
-    for i in range(e.shape[1]):
-        if np.count_nonzero(x[:, i] > 0.0) < min_samples:
-            continue
-        dx = x[:, i] - x[:, i].mean()
-        sxx = float(np.sum(dx * dx))
-        if sxx > 0.0:
-            e2 = e[:, i] ** 2
-            gains[i] = max(0.0, float(np.sum(dx * (e2 - e2.mean()))) / sxx)
-    return gains
+    if e.shape[0] == 0:
+        return np.zeros(e.shape[1])
+    gains = fit_error_model(e, np.sqrt(np.maximum(x, 0.0))).gain
+    return np.where(np.count_nonzero(x > 0.0, axis=0) >= min_samples, gains, 0.0)
 
 
 def _lag_gain(sxx: float, sxy: float, mean_e2: float, mean_w2: float, floor: float,

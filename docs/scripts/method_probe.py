@@ -32,7 +32,7 @@ with `benchmark --seeds 20`) are for `benchmark` only.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Collection, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import replace
 import math
 import sys
@@ -116,6 +116,16 @@ def case_arguments(argv: Sequence[str] | None, description: str, allowed: Collec
         return parse_cases(args.cases, allowed)
     except ValueError as exc:
         parser.error(f'{exc}; {allowed_name}')
+
+
+def run_cases(argv: Sequence[str] | None, description: str, allowed: Collection[int],
+              allowed_name: str, run: Callable[[str, int], None]) -> int:
+    """`case_arguments`, then ``run(scenario, seed)`` for each case on one torch thread; 0."""
+    cases = case_arguments(argv, description, allowed, allowed_name)
+    torch.set_num_threads(1)
+    for scenario, seed in cases:
+        run(scenario, seed)
+    return 0
 
 
 def fair_case(scenario_name: str, seed: int, duration: float,

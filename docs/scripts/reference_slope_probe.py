@@ -20,14 +20,12 @@ import sys
 
 import numpy as np
 from numpy.typing import NDArray
-import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from method_probe import DEVELOPMENT_SEEDS, case_arguments  # noqa: E402 - the sibling script
-from twin_gain_calibration import windows  # noqa: E402 - the sibling script
+from method_probe import DEVELOPMENT_SEEDS, run_cases  # noqa: E402 - the sibling script
+from twin_gain_calibration import window_errors, windows  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.benchmark.baseline_tuning import TUNING_SEEDS  # noqa: E402
-from lf_predictor_ros.core.heading import wrap_angle  # noqa: E402
 from lf_predictor_ros.core.lf_state import LfStateEstimator  # noqa: E402
 from lf_predictor_ros.core.odometry import TWIN_LEVEL_TIME  # noqa: E402
 
@@ -63,15 +61,8 @@ def report(scenario: str, seed: int) -> None:
         level[k] = level[k - 1] + min(1.0, h / TWIN_LEVEL_TIME) * (m2[k] - level[k - 1])
     excess = np.maximum(0.0, m2 - 2.0 * level)
     history, times, reference = captured[-1]
-    stamps = np.array([p.stamp for p in history])
-    index = np.round((stamps - times[0]) / h).astype(np.int64)
-    ok = (index >= 1) & (index < len(times) - 1)
-    pose = np.array([p.pose for p, good in zip(history, ok, strict=True) if good])
-    at = np.round((stamps[ok] - t[0]) / h).astype(np.int64)
-    e_ref, e_truth = pose - reference[index[ok]], pose - truth[at][:, :n]
-    if n == 3:
-        e_ref[:, 2], e_truth[:, 2] = wrap_angle(e_ref[:, 2]), wrap_angle(e_truth[:, 2])
-    print(f'{scenario} {seed}: last window {times[0]:.0f}–{times[-1]:.0f} s, {len(pose)} '
+    rows, at, e_ref, e_truth = window_errors(history, times, reference, t, truth, n, h)
+    print(f'{scenario} {seed}: last window {times[0]:.0f}–{times[-1]:.0f} s, {len(rows)} '
           'estimates', flush=True)
     for i in range(n):
         rms_ref, rms_truth = (float(np.sqrt(np.mean(e[:, i] ** 2))) for e in (e_ref, e_truth))
@@ -83,13 +74,8 @@ def report(scenario: str, seed: int) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    cases = case_arguments(argv, (__doc__ or '').splitlines()[0],
-                           {*TUNING_SEEDS, *DEVELOPMENT_SEEDS},
-                           'only tuning and development seeds')
-    torch.set_num_threads(1)
-    for scenario, seed in cases:
-        report(scenario, seed)
-    return 0
+    return run_cases(argv, (__doc__ or '').splitlines()[0], {*TUNING_SEEDS, *DEVELOPMENT_SEEDS},
+                     'only tuning and development seeds', report)
 
 
 if __name__ == '__main__':

@@ -74,24 +74,36 @@ def windows(scenario_name: str, seed: int) -> tuple[int, float, FloatArray, Floa
     return params.ndof, params.sample_time, data['t'], data['truth'], captured
 
 
+def window_errors(rows: Sequence[Published], times: FloatArray, reference: FloatArray,
+                  t: FloatArray, truth: FloatArray, n: int, h: float
+                  ) -> tuple[list[Published], FloatArray, FloatArray, FloatArray]:
+    """(estimates, run indices, errors vs reference, errors vs truth) of one window.
+
+    The published estimates at inner target instants, as `calibrate` matches them; the heading
+    error wrapped.
+    """
+    stamps = np.array([p.stamp for p in rows])
+    index = np.round((stamps - times[0]) / h).astype(np.int64)
+    ok = (index >= 1) & (index < len(times) - 1)
+    kept = [p for p, good in zip(rows, ok, strict=True) if good]
+    pose = np.array([p.pose for p in kept]).reshape(-1, n)
+    at = np.round((stamps[ok] - t[0]) / h).astype(np.int64)
+    e_ref, e_truth = pose - reference[index[ok]], pose - truth[at][:, :n]
+    if n == 3:
+        e_ref[:, 2], e_truth[:, 2] = wrap_angle(e_ref[:, 2]), wrap_angle(e_truth[:, 2])
+    return kept, at, e_ref, e_truth
+
+
 def ratios(scenario_name: str, seed: int) -> list[tuple[float, int, float, float]]:
     """(window end, DOF, reference slope, truth slope) of every qualifying (window, DOF)."""
     n, h, t, truth, captured = windows(scenario_name, seed)
     out = []
     for history, times, reference in captured:
-        rows = [p for p in history if p.twin_excess is not None]
-        stamps = np.array([p.stamp for p in rows])
-        index = np.round((stamps - times[0]) / h).astype(np.int64) if rows else stamps
-        ok = (index >= 1) & (index < len(times) - 1)
-        rows = [p for p, good in zip(rows, ok, strict=True) if good]
+        rows, _, e_ref, e_truth = window_errors(
+            [p for p in history if p.twin_excess is not None], times, reference, t, truth, n, h)
         if not rows:
             continue
-        pose = np.array([p.pose for p in rows])
         excess = np.array([p.twin_excess for p in rows])
-        at = np.round((stamps[ok] - t[0]) / h).astype(np.int64)
-        e_ref, e_truth = pose - reference[index[ok]], pose - truth[at][:, :n]
-        if n == 3:
-            e_ref[:, 2], e_truth[:, 2] = wrap_angle(e_ref[:, 2]), wrap_angle(e_truth[:, 2])
         for i in range(n):
             if np.count_nonzero(excess[:, i] > 0.0) < MIN_EXCESS_SAMPLES:
                 continue

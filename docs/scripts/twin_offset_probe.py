@@ -27,13 +27,12 @@ import sys
 
 import numpy as np
 from numpy.typing import NDArray
-import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from method_probe import (  # noqa: E402 - the sibling script
     DEVELOPMENT_SEEDS,
-    case_arguments,
     fair_case,
+    run_cases,
 )
 
 from lf_predictor_ros.benchmark.baseline_tuning import TUNING_SEEDS  # noqa: E402
@@ -103,15 +102,15 @@ def report(name: str, n: int, rows: list[Row]) -> None:
               + ' / '.join(f'{v:.2f}' for v in per_dof / len(rows)), flush=True)
 
 
+def probe(scenario: str, seed: int) -> None:
+    """Collect one run and print its report."""
+    n, rows = collect(scenario, seed)
+    report(f'{scenario} {seed}', n, rows)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    cases = case_arguments(argv, (__doc__ or '').splitlines()[0],
-                           {*TUNING_SEEDS, *DEVELOPMENT_SEEDS},
-                           'only tuning and development seeds')
-    torch.set_num_threads(1)
-    for scenario, seed in cases:
-        n, rows = collect(scenario, seed)
-        report(f'{scenario} {seed}', n, rows)
-    return 0
+    return run_cases(argv, (__doc__ or '').splitlines()[0], {*TUNING_SEEDS, *DEVELOPMENT_SEEDS},
+                     'only tuning and development seeds', probe)
 
 
 if __name__ == '__main__':

@@ -257,7 +257,8 @@ class LfStateEstimator:
                 odometry.params.pose_lag_prior,
                 _input_gain(odometry.params.vessel_inertia, self.ndof), commands,
                 self._controller_read if reading else None, self.predictor.targets_peak_damping,
-                reference, odometry.params.pose_twin_fit)
+                reference, odometry.params.pose_twin_fit,
+                odometry.params.twist_reference_cutoff)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -288,7 +289,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            commands: tuple[FloatArray, FloatArray] | None = None,
            remembered: ControllerRead | None = None,
            peak_damping: float = math.nan, reference: FloatArray | None = None,
-           twin_fit: bool = False) -> Learned:
+           twin_fit: bool = False, twist_cutoff: float = 0.0) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -304,7 +305,9 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     its note ('… remembered from t=… s' for a remembered one).
     The memory is None if it cannot be learned; the covariances compare the published estimates
     with ``reference`` (same instants; None: the targets ``values``; `odometry.calibrate`, which
-    fits the untaken twin offset's coefficients with ``twin_fit``).
+    fits the untaken twin offset's coefficients with ``twin_fit``, and with ``twist_cutoff`` > 0
+    [× ω0] compares the twist with the reference velocity low-passed below ``twist_cutoff`` ·
+    ``wave_peak_freq``; no ω0: the velocity as it is).
     The read returned is the one in force afterwards: this read if it succeeded,
     ``remembered`` if it failed for lack of data, else None.
     """
@@ -334,9 +337,11 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
         memory = replace(memory, known_gain=source if memory.model is not None else '',
                          dp_controlled=in_force is not None,
                          message=f'{memory.message}; {note}' if note else memory.message)
+    known = wave_peak_freq is not None and math.isfinite(wave_peak_freq) and wave_peak_freq > 0
+    cutoff = twist_cutoff * wave_peak_freq if known and wave_peak_freq is not None else 0.0
     return memory, calibrate(published, times, values if reference is None else reference,
                              params.ndof, params.sample_time, min_samples, lag_prior,
-                             twin_fit), in_force
+                             twin_fit, cutoff), in_force
 
 
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,

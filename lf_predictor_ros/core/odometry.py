@@ -62,9 +62,10 @@ from typing import Literal, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy import signal
 
 from lf_predictor_ros.core.field_meta import field_doc
-from lf_predictor_ros.core.filters import low_pass_step
+from lf_predictor_ros.core.filters import low_pass_step, zero_phase
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_dynamics import (
     DEAD_RECKONERS,
@@ -106,6 +107,9 @@ HOLD_FLOOR_FRACTION = 0.1
 # session), the values of the twenty-fifth session's innovation excess.
 TWIN_LEVEL_TIME = 600.0  # [s]
 TWIN_LEVEL_FACTOR = 2.0  # [-]
+# ``twist_reference_cutoff``: Butterworth order of the zero-phase low-pass on the reference
+# velocity (forward and backward: the magnitude response squared) [-].
+TWIST_REFERENCE_ORDER = 4
 
 
 @dataclass(frozen=True)
@@ -158,6 +162,14 @@ class OdometryParams:
         'calibrated as pose_cov_scale on tuning seeds 1–2; the eight calibration seeds give '
         '0.68, which the DDS consistency test on the supply vessel refuses: docs/BENCHMARKS.md '
         '"Twenty-fifth session")', ''))
+    twist_reference_cutoff: float = field(default=0.0, metadata=field_doc(
+        "the twist error model is fitted against the targets' body velocity low-passed "
+        '(zero-phase Butterworth, order TWIST_REFERENCE_ORDER) below this × the estimated wave '
+        "peak frequency ω0: the targets' residual wave motion, differentiated, is an error of "
+        'the reference, not of the twist, and its share differs by vessel and sea (probe on '
+        'calibration seed 231: the truth / reference ratio of the twist error 0.5–1.0 against '
+        'the velocity as it is, 0.85–1.18 against it low-passed at 0.5 ω0, docs/BENCHMARKS.md '
+        '"Thirty-fourth session"); 0 = the velocity as it is, no ω0 yet: as it is', '× ω0'))
     twist_accel_time: float = field(default=10.0, metadata=field_doc(
         'the twist error model grows with the change of the published twist per second, '
         'low-passed over this time (chosen from 2 / 5 / 10 / 20 s on tuning seeds 1–2, '
@@ -241,6 +253,10 @@ class OdometryParams:
         if not (math.isfinite(self.pose_twin_gain) and self.pose_twin_gain >= 0.0):
             raise ValueError(f'pose_twin_gain must be a finite number >= 0 (0: off), got '
                              f'{self.pose_twin_gain}')
+        if not (math.isfinite(self.twist_reference_cutoff) and
+                self.twist_reference_cutoff >= 0.0):
+            raise ValueError('twist_reference_cutoff must be a finite number >= 0 (× ω0; 0: the '
+                             f'reference velocity as it is), got {self.twist_reference_cutoff}')
         if not (math.isfinite(self.dead_reckoning_velocity_time) and
                 self.dead_reckoning_velocity_time > 0.0):
             raise ValueError('dead_reckoning_velocity_time must be a positive number of seconds, '
@@ -946,11 +962,12 @@ class LfOdometry:
 
 def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike, ndof: int,
               sample_time: float, min_samples: int, lag_prior: float = 0.0,
-              twin_fit: bool = False) -> Covariances | None:
+              twin_fit: bool = False, twist_cutoff: float = 0.0) -> Covariances | None:
     """Pose error models and twist covariances against the targets (module docstring).
 
     Every published estimate whose stamp is a target instant (not the first or last) is
-    compared with the target and with the targets' differentiated body velocity: per source
+    compared with the target and with the targets' differentiated body velocity (with
+    ``twist_cutoff`` > 0 [rad/s] low-passed below it, `reference_velocity`): per source
     ('network', 'fallback': only with ``min_samples`` matches) and over all, the pose error
     model (`fit_error_model` on each estimate's regressor ``Published.lag``, prior lag time
     ``lag_prior`` [s]) and the twist error's second moment (bias included); with ``twin_fit``
@@ -965,7 +982,7 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
                          f'{values.shape}')
     if not history:
         return None
-    velocity = body_velocity(values, sample_time)
+    velocity = reference_velocity(values, sample_time, twist_cutoff)
     pub_t = np.array([p.stamp for p in history])
     index = np.round((pub_t - stamps[0]) / sample_time).astype(np.int64)
     ok = (index >= 1) & (index < stamps.shape[0] - 1)
@@ -999,6 +1016,28 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
                 twin_gain=pooled.twin_gain)
             twist_cov[source] = fit_error_model(twist_err[mask], accel[mask])
     return pose_cov, twist_cov
+
+
+def reference_velocity(targets: ArrayLike, sample_time: float, cutoff: float = 0.0
+                       ) -> FloatArray:
+    """The targets' LF body velocity (`body_velocity`), low-passed below ``cutoff`` [rad/s].
+
+    The twist calibration's reference (``OdometryParams.twist_reference_cutoff``): the zero-phase
+    targets keep some wave motion, which differentiation amplifies by ω; the twist filter does
+    not share it, so against the raw velocity the twist looks worse than it is, by a share that
+    depends on the vessel and the sea. The low-pass is a zero-phase Butterworth of order
+    ``TWIST_REFERENCE_ORDER`` (`filters.zero_phase`: the reference may look ahead). ``cutoff`` 0,
+    or at or above the Nyquist frequency: the velocity as it is. The input is not modified.
+    """
+    velocity = body_velocity(targets, sample_time)
+    if not (math.isfinite(cutoff) and cutoff >= 0.0):
+        raise ValueError(f'cutoff must be a finite number >= 0 rad/s (0: no low-pass), got '
+                         f'{cutoff}')
+    normalized = cutoff * sample_time / math.pi  # × the Nyquist frequency
+    if cutoff == 0.0 or normalized >= 1.0:
+        return velocity
+    sos = signal.butter(TWIST_REFERENCE_ORDER, normalized, btype='low', output='sos')
+    return zero_phase(velocity, np.asarray(sos, dtype=np.float64))
 
 
 def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,

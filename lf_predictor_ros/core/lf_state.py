@@ -307,7 +307,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     with ``reference`` (same instants; None: the targets ``values``; `odometry.calibrate`, which
     fits the untaken twin offset's coefficients with ``twin_fit``, and with ``twist_cutoff`` > 0
     [× ω0] compares the twist with the reference velocity low-passed below ``twist_cutoff`` ·
-    ``wave_peak_freq``; no ω0: the velocity as it is).
+    ``wave_peak_freq``; no ω0 yet: the velocity as it is).
     The read returned is the one in force afterwards: this read if it succeeded,
     ``remembered`` if it failed for lack of data, else None.
     """
@@ -337,8 +337,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
         memory = replace(memory, known_gain=source if memory.model is not None else '',
                          dp_controlled=in_force is not None,
                          message=f'{memory.message}; {note}' if note else memory.message)
-    known = wave_peak_freq is not None and math.isfinite(wave_peak_freq) and wave_peak_freq > 0
-    cutoff = twist_cutoff * wave_peak_freq if known and wave_peak_freq is not None else 0.0
+    cutoff = 0.0 if wave_peak_freq is None else twist_cutoff * wave_peak_freq
     return memory, calibrate(published, times, values if reference is None else reference,
                              params.ndof, params.sample_time, min_samples, lag_prior,
                              twin_fit, cutoff), in_force

@@ -410,3 +410,23 @@ def test_wide_notch_targets_are_replaced_by_the_narrow_reference_for_calibration
         np.testing.assert_array_equal(compared[-1], expected)
     finally:
         est.close()
+
+
+@pytest.mark.parametrize(('omega', 'expected'), [(0.8, 0.4), (None, 0.0)])
+def test_the_twist_reference_cutoff_is_a_fraction_of_the_wave_peak_frequency(
+        monkeypatch: pytest.MonkeyPatch, omega: float | None, expected: float) -> None:
+    """_learn hands calibrate twist_cutoff · ω0 [rad/s]; before the first ω0 no low-pass (0)."""
+    from lf_predictor_ros.core import lf_state
+
+    received: list[float] = []
+
+    def spy(*args: object) -> None:
+        received.append(float(args[-1]))  # type: ignore[arg-type]
+
+    monkeypatch.setattr(lf_state, 'calibrate', spy)
+    params = PredictorParams(ndof=1, sample_time=1.0)
+    times = np.arange(100.0)
+    values = np.linspace(0.0, 10.0, 100).reshape(-1, 1)
+    lf_state._learn(params, times, values, np.zeros((100, 1)), omega, [], 60.0, 60, 0.0,
+                    twist_cutoff=0.5)
+    assert received == [pytest.approx(expected)]

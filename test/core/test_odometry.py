@@ -21,6 +21,7 @@ from lf_predictor_ros.core.odometry import (
     fit_error_model,
     fit_twin_gain,
     normalized_error_squared,
+    reference_velocity,
 )
 
 H = 1.0
@@ -181,6 +182,61 @@ def test_calibration_fits_the_twin_gain_on_the_estimates_that_carry_an_excess() 
         assert twin is not None
         np.testing.assert_allclose(twin, [0.5, 0.0, 0.0], atol=1e-9)
         assert plain[0][source].twin_gain is None
+
+
+def _ramp_with_wave(n: int, speed: float = 0.3, amplitude: float = 0.1,
+                    omega: float = 0.8) -> np.ndarray:
+    """Targets: north at ``speed`` m/s plus a wave of ``amplitude`` m at ``omega`` rad/s."""
+    t = np.arange(float(n)) * H
+    return np.column_stack([speed * t + amplitude * np.sin(omega * t), np.zeros(n),
+                            np.zeros(n)])
+
+
+def test_reference_velocity_low_pass_removes_the_targets_wave_motion() -> None:
+    """0.3 m/s + 0.1 m at 0.8 rad/s, cut at 0.4 rad/s.
+
+    The central difference at h = 1 s sees 0.1 · sin(0.8) / h = 0.0717 m/s of wave velocity.
+    The order-4 Butterworth forward and backward passes |H(0.8)|² ≈ 0.004 of the wave: the
+    velocity is 0.3 m/s within 1 mm/s away from the ends; cutoff 0, or at or above the Nyquist
+    frequency (π rad/s at h = 1 s), gives `body_velocity` itself.
+    """
+    targets = _ramp_with_wave(600)
+    kept = targets.copy()
+    raw = reference_velocity(targets, H)
+    assert np.max(np.abs(raw[50:-50, 0] - 0.3)) == pytest.approx(0.1 * math.sin(0.8), rel=1e-3)
+    clean = reference_velocity(targets, H, 0.4)
+    np.testing.assert_allclose(clean[50:-50, 0], 0.3, atol=1e-3)
+    np.testing.assert_allclose(clean[:, 1:], 0.0, atol=1e-12)
+    np.testing.assert_array_equal(reference_velocity(targets, H, math.pi), raw)
+    np.testing.assert_array_equal(targets, kept)
+    for bad in (-0.1, math.nan):
+        with pytest.raises(ValueError, match='cutoff'):
+            reference_velocity(targets, H, bad)
+
+
+def test_twist_calibration_against_the_wave_free_reference() -> None:
+    """A twist that is the true LF velocity: exact against the low-passed reference.
+
+    Against the targets' velocity as it is, the targets' own wave velocity (central difference:
+    0.1 · sin(0.8) m/s amplitude, mean square 0.00257 m²/s²) is counted as twist error; with
+    ``twist_cutoff`` 0.4 rad/s it is not (what is left: the filter's ends and the 0.4 % it
+    passes).
+    """
+    n = 600
+    times = np.arange(float(n)) * H
+    targets = _ramp_with_wave(n)
+    history = [Published(float(k), targets[k], np.array([0.3, 0.0, 0.0]), 'network',
+                         np.zeros(3), np.zeros(3)) for k in range(n)]
+    as_is = calibrate(history, times, targets, 3, H, 60)
+    clean = calibrate(history, times, targets, 3, H, 60, twist_cutoff=0.4)
+    assert as_is is not None and clean is not None
+    wave_square = (0.1 * math.sin(0.8)) ** 2 / 2
+    assert as_is[1]['all'].moment[0, 0] == pytest.approx(wave_square, rel=0.02)
+    assert clean[1]['all'].moment[0, 0] < 0.02 * wave_square
+    # the pose models do not depend on the twist's reference
+    np.testing.assert_array_equal(as_is[0]['all'].hold, clean[0]['all'].hold)
+    with pytest.raises(ValueError, match='twist_reference_cutoff'):
+        OdometryParams(twist_reference_cutoff=-0.5)
 
 
 def test_fitted_twin_gain_scales_the_published_excess() -> None:

@@ -1,0 +1,98 @@
+"""The twist error against the calibration reference velocity, low-passed or not, and the truth.
+
+    OMP_NUM_THREADS=1 python docs/scripts/twist_reference_probe.py rao_supply:231 \
+        supply_closed_loop:231 threedof_open_loop:231 onedof_feedback:231
+
+Tuning and lf_odom calibration seeds only (1, 2, 231–236; issue 14, thirty-fourth session). Per
+SCENARIO:SEED, `LfStateEstimator` with the shipped defaults runs inline on the fair recording
+(`twin_gain_calibration.windows`: 1500 s, the benchmark's schedule spread) and every calibration
+window is kept. For the last three windows, every other one, on the published twists of the
+window from 481 s on and at least 30 samples from its ends: the RMS twist error against the
+reference velocity (the window's reference differentiated, as `odometry.calibrate` does) and
+against the true LF velocity, their ratio of mean squares (truth / reference), the reference
+velocity's own content above 0.5 ω0 (zero-phase Butterworth high-pass of order 4, ω0 the
+recording's median true wave peak frequency) and the ratio against the reference with that
+content removed (`truth/lp`).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+import sys
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import signal
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from method_probe import run_cases  # noqa: E402 - the sibling script
+import twin_gain_calibration  # noqa: E402 - the sibling script
+
+from lf_predictor_ros.core.lf_dynamics import body_velocity  # noqa: E402
+
+FloatArray = NDArray[np.float64]
+SCORED_FROM = 481.0  # [s] the benchmark's first scored sample at h = 1 s
+EDGE = 30  # [samples] left out at each end of a window (the zero-phase filters' ends)
+CUTOFF = 0.5  # × ω0
+_OMEGA: dict[str, float] = {}  # the recording's median true ω0 per scenario
+_fair_case = getattr(twin_gain_calibration, 'fair_case')  # noqa: B009 - its import
+
+
+def _keeping_omega(scenario: str, seed: int, *args: Any) -> Any:
+    out = _fair_case(scenario, seed, *args)
+    _OMEGA[scenario] = float(np.median(out[3].data()['omega']))
+    return out
+
+
+def _high_pass(x: FloatArray, h: float, cutoff: float) -> FloatArray:
+    b, a = signal.butter(4, cutoff / (np.pi / h), 'high')
+    return np.asarray(signal.filtfilt(b, a, x, axis=0), dtype=np.float64)
+
+
+def _unwrapped(pose: FloatArray, n: int) -> FloatArray:
+    out = np.array(pose[:, :n], dtype=np.float64)
+    if n == 3:
+        out[:, 2] = np.unwrap(out[:, 2])
+    return out
+
+
+def probe(scenario: str, seed: int) -> None:
+    """Print one line per examined window."""
+    setattr(twin_gain_calibration, 'fair_case', _keeping_omega)  # noqa: B010 - this run only
+    try:
+        n, h, t, truth, captured = twin_gain_calibration.windows(scenario, seed)
+    finally:
+        setattr(twin_gain_calibration, 'fair_case', _fair_case)  # noqa: B010
+    true_v = body_velocity(_unwrapped(truth, n), h)
+    cutoff = CUTOFF * _OMEGA[scenario]
+    for history, times, reference in captured[-6::2]:
+        ref_v = body_velocity(_unwrapped(reference.reshape(len(times), -1), n), h)
+        stamps = np.array([p.stamp for p in history])
+        index = np.round((stamps - times[0]) / h).astype(np.int64)
+        ok = (index >= EDGE) & (index < len(times) - EDGE) & (stamps >= SCORED_FROM)
+        if not np.any(ok):
+            continue
+        at = np.round((stamps[ok] - t[0]) / h).astype(np.int64)
+        twist = np.array([p.twist for p in history])[ok]
+        wave = _high_pass(ref_v, h, cutoff)[index[ok]]
+        e_ref = twist - ref_v[index[ok]]
+        e_truth = twist - true_v[at]
+        ref2, truth2 = np.mean(e_ref ** 2, axis=0), np.mean(e_truth ** 2, axis=0)
+        low2 = np.mean((e_ref + wave) ** 2, axis=0)
+        print(f'{scenario} {seed} window_end {times[-1]:.0f} rms vs reference '
+              f'{np.sqrt(ref2).round(4)} vs truth {np.sqrt(truth2).round(4)} truth/reference '
+              f'{(truth2 / ref2).round(2)} reference above {CUTOFF} w0 '
+              f'{np.sqrt(np.mean(wave ** 2, axis=0)).round(4)} reference - truth '
+              f'{np.sqrt(np.mean((ref_v[index[ok]] - true_v[at]) ** 2, axis=0)).round(4)} '
+              f'truth/lp {(truth2 / low2).round(2)}', flush=True)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return run_cases(argv, (__doc__ or '').splitlines()[0],
+                     twin_gain_calibration.CALIBRATION_SEEDS,
+                     f'calibration seeds: {twin_gain_calibration.CALIBRATION_SEEDS}', probe)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

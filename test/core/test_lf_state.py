@@ -211,26 +211,31 @@ class _WindowPredictor:
 
 def test_the_untaken_twin_offset_reaches_the_odometry_only_where_it_is_used(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """The predictor's untaken twin offset goes to LfOdometry.track where the odometry uses it.
+    """The predictor's untaken twin offset and ω0 go to LfOdometry.track where it uses them.
 
-    Default (pose_twin_gain 1): the offset of each sample; pose_twin_gain 0: None.
+    Default (pose_twin_gain 1, twist_wave_time 0): the offset of each sample and no ω0;
+    pose_twin_gain 0: no offset; twist_wave_time > 0: the predictor's ω0.
     """
     params = PredictorParams(ndof=1, sample_time=1.0, retrain_period=20.0,
                              training_window=200.0, transient_length=10.0, filter_window=60.0,
                              append_length=40.0, estimation_window=600.0)
-    seen: list[object] = []
+    seen: list[tuple[object, object]] = []
     real_track = LfOdometry.track
 
     def spy(self: LfOdometry, t: float, pose: object, force: object, source: str = 'network',
-            twin_offset: object = None) -> object:
-        seen.append(None if twin_offset is None else np.array(twin_offset))
-        return real_track(self, t, pose, force, source, twin_offset)  # type: ignore[arg-type]
+            twin_offset: object = None, wave_peak_freq: float | None = None) -> object:
+        seen.append((None if twin_offset is None else np.array(twin_offset), wave_peak_freq))
+        return real_track(self, t, pose, force, source, twin_offset,  # type: ignore[arg-type]
+                          wave_peak_freq=wave_peak_freq)
 
     monkeypatch.setattr(LfOdometry, 'track', spy)
-    for odometry, expect in ((OdometryParams(), [0.25]),
-                             (OdometryParams(pose_twin_gain=0.0), None)):
+    wave = OdometryParams(twist_reference_cutoff=0.5, twist_wave_time=5.0)
+    for odometry, expect, omega in ((OdometryParams(), [0.25], None),
+                                    (OdometryParams(pose_twin_gain=0.0), None, None),
+                                    (wave, [0.25], 0.7)):
         fake = _WindowPredictor()
         fake.untaken_twin_offset = np.array([0.25])  # type: ignore[misc]
+        fake.wave_peak_freq = 0.7  # type: ignore[assignment]
         est = LfStateEstimator(params, odometry, background=False,
                                predictor=fake)  # type: ignore[arg-type]
         seen.clear()
@@ -238,7 +243,8 @@ def test_the_untaken_twin_offset_reaches_the_odometry_only_where_it_is_used(
             est.update(float(k), np.array([0.1 * k, 0.0, 0.0]), np.zeros(3))
         est.close()
         assert len(seen) == 3
-        for offset in seen:
+        for offset, given in seen:
+            assert given == omega
             if expect is None:
                 assert offset is None
             else:
@@ -420,8 +426,10 @@ def test_the_twist_reference_cutoff_is_a_fraction_of_the_wave_peak_frequency(
 
     received: list[float] = []
 
-    def spy(*args: object) -> None:
-        received.append(float(args[-1]))  # type: ignore[arg-type]
+    def spy(history: object, times: object, targets: object, ndof: int, sample_time: float,
+            min_samples: int, lag_prior: float, twin_fit: bool, twist_cutoff: float,
+            twist_wave: bool) -> None:
+        received.append(twist_cutoff)
 
     monkeypatch.setattr(lf_state, 'calibrate', spy)
     params = PredictorParams(ndof=1, sample_time=1.0)

@@ -1071,14 +1071,18 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
                                                          min_samples))
     pose_cov: dict[str, ErrorModel] = {'all': pooled}
     accel = np.array([p.accel for p in rows])
-    waves = [p.wave for p in rows]
-    wave = np.array(waves).reshape(-1, ndof) if twist_wave and \
-        all(w is not None for w in waves) and len(rows) >= min_samples else None
+    # twist_wave: the estimates that carry a wave envelope (none before the first ω0)
+    has_wave = np.array([p.wave is not None for p in rows]) if twist_wave else \
+        np.zeros(len(rows), dtype=bool)
+    wave = np.zeros((len(rows), ndof))
+    if np.any(has_wave):
+        wave[has_wave] = np.array([p.wave for p in rows if p.wave is not None])
 
     def twist_model(mask: NDArray[np.bool_]) -> ErrorModel:
-        if wave is None:
+        with_wave = mask & has_wave
+        if np.count_nonzero(with_wave) < min_samples:
             return fit_error_model(twist_err[mask], accel[mask])
-        return fit_twist_wave_model(twist_err[mask], accel[mask], wave[mask])
+        return fit_twist_wave_model(twist_err[with_wave], accel[with_wave], wave[with_wave])
 
     everything = np.ones(len(rows), dtype=bool)
     twist_cov: dict[str, ErrorModel] = {'all': twist_model(everything)}

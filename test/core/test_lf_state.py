@@ -418,23 +418,24 @@ def test_wide_notch_targets_are_replaced_by_the_narrow_reference_for_calibration
         est.close()
 
 
-@pytest.mark.parametrize(('omega', 'expected'), [(0.8, 0.4), (None, 0.0)])
-def test_the_twist_reference_cutoff_is_a_fraction_of_the_wave_peak_frequency(
-        monkeypatch: pytest.MonkeyPatch, omega: float | None, expected: float) -> None:
-    """_learn hands calibrate twist_cutoff · ω0 [rad/s]; before the first ω0 no low-pass (0)."""
+@pytest.mark.parametrize(('omega', 'expected'), [(0.8, (0.4, 0.2)), (None, (0.0, 0.0))])
+def test_the_reference_cutoffs_are_fractions_of_the_wave_peak_frequency(
+        monkeypatch: pytest.MonkeyPatch, omega: float | None,
+        expected: tuple[float, float]) -> None:
+    """_learn hands calibrate the cutoffs · ω0 [rad/s]; before the first ω0 no low-pass (0)."""
     from lf_predictor_ros.core import lf_state
 
-    received: list[float] = []
+    received: list[tuple[float, float]] = []
 
     def spy(history: object, times: object, targets: object, ndof: int, sample_time: float,
             min_samples: int, lag_prior: float, twin_fit: bool, twist_cutoff: float,
-            twist_wave: bool) -> None:
-        received.append(twist_cutoff)
+            twist_wave: bool, pose_cutoff: float) -> None:
+        received.append((twist_cutoff, pose_cutoff))
 
     monkeypatch.setattr(lf_state, 'calibrate', spy)
     params = PredictorParams(ndof=1, sample_time=1.0)
     times = np.arange(100.0)
     values = np.linspace(0.0, 10.0, 100).reshape(-1, 1)
     lf_state._learn(params, times, values, np.zeros((100, 1)), omega, [], 60.0, 60, 0.0,
-                    twist_cutoff=0.5)
+                    twist_cutoff=0.5, pose_cutoff=0.25)
     assert received == [pytest.approx(expected)]

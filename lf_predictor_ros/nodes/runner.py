@@ -5,17 +5,24 @@
 
 A node whose constructor rejects its configuration logs FATAL with the reason and the process
 exits 1; Ctrl-C and an external shutdown end the spin quietly; the node is always destroyed and
-the context shut down (`try_shutdown`, safe when a signal already did it).
+the context shut down (`try_shutdown`, safe when a signal already did it). A node that ends by
+itself (``until``'s future, e.g. the simulator at the end of its scenario) first waits up to
+``FLUSH_TIMEOUT`` for its subscribers to acknowledge what its reliable publishers sent, so the
+last messages of a run are not lost with the publisher.
 """
 from __future__ import annotations
 
 from collections.abc import Callable
+import time
 
 import rclpy
+from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.task import Future
 from rclpy.utilities import ok, try_shutdown
+
+FLUSH_TIMEOUT = 2.0  # [s] longest wait for the subscribers' acknowledgements at a normal end
 
 
 def spin_node(make_node: Callable[[], Node], *,
@@ -46,6 +53,8 @@ def spin_until_shutdown(node: Node, until: Callable[[Node], Future | None] | Non
         done = until(node) if until is not None else None
         if done is not None:
             rclpy.spin_until_future_complete(node, done)
+            if done.done() and ok():
+                flush(node)
         else:
             rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -58,3 +67,16 @@ def spin_until_shutdown(node: Node, until: Callable[[Node], Future | None] | Non
     finally:
         node.destroy_node()
         try_shutdown()
+
+
+def flush(node: Node, timeout: float = FLUSH_TIMEOUT) -> bool:
+    """Wait until the subscribers have acknowledged every reliable publisher's messages.
+
+    At most ``timeout`` [s] in all (best-effort publishers return at once); True if all did.
+    """
+    deadline = time.monotonic() + timeout
+    acked = True
+    for publisher in node.publishers:
+        remaining = max(0.0, deadline - time.monotonic())
+        acked = publisher.wait_for_all_acked(Duration(seconds=remaining)) and acked
+    return acked

@@ -107,9 +107,9 @@ HOLD_FLOOR_FRACTION = 0.1
 # session), the values of the twenty-fifth session's innovation excess.
 TWIN_LEVEL_TIME = 600.0  # [s]
 TWIN_LEVEL_FACTOR = 2.0  # [-]
-# ``twist_reference_cutoff``: Butterworth order of the zero-phase low-pass on the reference
-# velocity (forward and backward: the magnitude response squared) [-].
-TWIST_REFERENCE_ORDER = 4
+# ``pose_reference_cutoff``, ``twist_reference_cutoff``: Butterworth order of the zero-phase
+# low-pass on the calibration reference (forward and backward: the magnitude response squared).
+REFERENCE_LOW_PASS_ORDER = 4
 
 
 @dataclass(frozen=True)
@@ -164,27 +164,31 @@ class OdometryParams:
         '"Twenty-fifth session")', ''))
     pose_reference_cutoff: float = field(default=0.0, metadata=field_doc(
         'the pose error models (and the twin term, pose_twin_fit) are fitted against the '
-        'targets low-passed (zero-phase Butterworth, order TWIST_REFERENCE_ORDER) below this × '
+        'targets low-passed (zero-phase Butterworth, order REFERENCE_LOW_PASS_ORDER) below this × '
         "the estimated ω0: the targets' residual wave motion is an error of the reference, not "
         'of the pose (probe on calibration seed 231: the truth / reference ratio of the pose '
         'error 0.77–1.44 against the targets as they are, 0.99–1.28 low-passed at 0.5 ω0, '
         'docs/BENCHMARKS.md "Thirty-fourth session"); 0 = the targets as they are, no ω0 yet: '
-        'as they are', '× ω0'))
+        'as they are (0 by default: on the calibration seeds it raised every vessel alike, '
+        'ninth rule)', '× ω0'))
     twist_reference_cutoff: float = field(default=0.0, metadata=field_doc(
         "the twist error model is fitted against the targets' body velocity low-passed "
-        '(zero-phase Butterworth, order TWIST_REFERENCE_ORDER) below this × the estimated wave '
+        '(zero-phase Butterworth, order REFERENCE_LOW_PASS_ORDER) below this × the estimated wave '
         "peak frequency ω0: the targets' residual wave motion, differentiated, is an error of "
         'the reference, not of the twist, and its share differs by vessel and sea (probe on '
         'calibration seed 231: the truth / reference ratio of the twist error 0.5–1.0 against '
         'the velocity as it is, 0.85–1.18 against it low-passed at 0.5 ω0, docs/BENCHMARKS.md '
-        '"Thirty-fourth session"); 0 = the velocity as it is, no ω0 yet: as it is', '× ω0'))
+        '"Thirty-fourth session"); 0 = the velocity as it is, no ω0 yet: as it is (0 by '
+        'default: on the calibration seeds rao_supply became overconfident, seventh rule)',
+        '× ω0'))
     twist_wave_time: float = field(default=0.0, metadata=field_doc(
         "with twist_reference_cutoff > 0: the twist error model adds J_i z_i, z the twist's own "
         'content above twist_reference_cutoff × ω0 (causal Butterworth high-pass of order 2) '
         'squared and low-passed over this time: the twist error is mostly the wave motion the '
         'twist passes, and in a spread sea it comes in wave groups (thirty-fourth session probe: '
         'e² correlates 0.48–0.65 with z on rao_supply); J is fitted with the holding and '
-        'acceleration parts by non-negative least squares; 0 = off', 's'))
+        'acceleration parts by non-negative least squares; 0 = off (off by default: eighth '
+        'rule)', 's'))
     twist_accel_time: float = field(default=10.0, metadata=field_doc(
         'the twist error model grows with the change of the published twist per second, '
         'low-passed over this time (chosen from 2 / 5 / 10 / 20 s on tuning seeds 1–2, '
@@ -1117,9 +1121,9 @@ def reference_velocity(targets: ArrayLike, sample_time: float, cutoff: float = 0
     The twist calibration's reference (``OdometryParams.twist_reference_cutoff``): the zero-phase
     targets keep some wave motion, which differentiation amplifies by ω; the twist filter does
     not share it, so against the raw velocity the twist looks worse than it is, by a share that
-    depends on the vessel and the sea. The low-pass is a zero-phase Butterworth of order
-    ``TWIST_REFERENCE_ORDER`` (`filters.zero_phase`: the reference may look ahead). ``cutoff`` 0,
-    or at or above the Nyquist frequency: the velocity as it is. The input is not modified.
+    depends on the vessel and the sea. The low-pass is `low_passed` (zero-phase: the reference
+    may look ahead). ``cutoff`` 0, or at or above the Nyquist frequency: the velocity as it is.
+    The input is not modified.
     """
     return low_passed(body_velocity(targets, sample_time), sample_time, cutoff)
 
@@ -1127,7 +1131,7 @@ def reference_velocity(targets: ArrayLike, sample_time: float, cutoff: float = 0
 def low_passed(series: ArrayLike, sample_time: float, cutoff: float) -> FloatArray:
     """A series (m, n) low-passed below ``cutoff`` [rad/s], zero-phase (a new array).
 
-    Butterworth of order ``TWIST_REFERENCE_ORDER``, forward and backward (`filters.zero_phase`),
+    Butterworth of order ``REFERENCE_LOW_PASS_ORDER``, forward and backward (`filters.zero_phase`),
     on the series minus its least-squares line per column, the line added back: a zero-phase
     low-pass keeps a line, and without the detrend Gustafsson's initial conditions err by up to
     0.8 m at the ends of a 0.3 m/s ramp (test_odometry.py); ``cutoff`` 0, or at or above the
@@ -1141,7 +1145,7 @@ def low_passed(series: ArrayLike, sample_time: float, cutoff: float) -> FloatArr
     normalized = cutoff * sample_time / math.pi  # × the Nyquist frequency
     if cutoff == 0.0 or normalized >= 1.0 or values.shape[0] < 2:
         return values
-    sos = signal.butter(TWIST_REFERENCE_ORDER, normalized, btype='low', output='sos')
+    sos = signal.butter(REFERENCE_LOW_PASS_ORDER, normalized, btype='low', output='sos')
     steps = np.arange(values.shape[0], dtype=np.float64)
     design = np.column_stack([np.ones_like(steps), steps])
     coef = np.linalg.lstsq(design, values, rcond=None)[0]

@@ -12,7 +12,8 @@ reference velocity (the window's reference differentiated, as `odometry.calibrat
 against the true LF velocity, their ratio of mean squares (truth / reference), the reference
 velocity's own content above 0.5 ω0 (zero-phase Butterworth high-pass of order 4, ω0 the
 recording's median true wave peak frequency) and the ratio against the reference with that
-content removed (`truth/lp`).
+content removed (`truth/lp`). With ``--pose`` the same for the published pose against the
+window's targets, low-passed by `odometry.low_passed` (the ninth rule's reference).
 """
 from __future__ import annotations
 
@@ -29,7 +30,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from method_probe import run_cases  # noqa: E402 - the sibling script
 import twin_gain_calibration  # noqa: E402 - the sibling script
 
+from lf_predictor_ros.core.heading import wrap_angle  # noqa: E402
 from lf_predictor_ros.core.lf_dynamics import body_velocity  # noqa: E402
+from lf_predictor_ros.core.odometry import low_passed  # noqa: E402
 
 FloatArray = NDArray[np.float64]
 SCORED_FROM = 481.0  # [s] the benchmark's first scored sample at h = 1 s
@@ -88,10 +91,48 @@ def probe(scenario: str, seed: int) -> None:
               f'truth/lp {(truth2 / low2).round(2)}', flush=True)
 
 
+def _mean_square(pose: FloatArray, target: FloatArray) -> FloatArray:
+    """Mean squared pose error per DOF (heading wrapped)."""
+    error = pose - target
+    if pose.shape[1] == 3:
+        error[:, 2] = wrap_angle(error[:, 2])
+    return np.asarray(np.mean(error ** 2, axis=0), dtype=np.float64)
+
+
+def pose_probe(scenario: str, seed: int) -> None:
+    """``--pose``: one line per examined window, the pose against the targets."""
+    setattr(twin_gain_calibration, 'fair_case', _keeping_omega)  # noqa: B010 - this run only
+    try:
+        n, h, t, truth, captured = twin_gain_calibration.windows(scenario, seed)
+    finally:
+        setattr(twin_gain_calibration, 'fair_case', _fair_case)  # noqa: B010
+    cutoff = CUTOFF * _OMEGA[scenario]
+    for history, times, reference in captured[-6::2]:
+        ref = _unwrapped(reference.reshape(len(times), -1), n)
+        clean = low_passed(ref, h, cutoff)
+        stamps = np.array([p.stamp for p in history])
+        index = np.round((stamps - times[0]) / h).astype(np.int64)
+        ok = (index >= EDGE) & (index < len(times) - EDGE) & (stamps >= SCORED_FROM)
+        if not np.any(ok):
+            continue
+        at = np.round((stamps[ok] - t[0]) / h).astype(np.int64)
+        pose = np.array([p.pose for p in history])[ok]
+        ref2, clean2 = _mean_square(pose, ref[index[ok]]), _mean_square(pose, clean[index[ok]])
+        truth2 = _mean_square(pose, truth[at][:, :n])
+        wave = np.sqrt(np.mean((ref - clean)[index[ok]] ** 2, axis=0))
+        print(f'{scenario} {seed} window_end {times[-1]:.0f} pose rms vs reference '
+              f'{np.sqrt(ref2).round(4)} vs truth {np.sqrt(truth2).round(4)} truth/reference '
+              f'{(truth2 / ref2).round(2)} truth/lp {(truth2 / clean2).round(2)} reference '
+              f'above {CUTOFF} w0 {wave.round(4)}', flush=True)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    return run_cases(argv, (__doc__ or '').splitlines()[0],
+    args = list(sys.argv[1:] if argv is None else argv)
+    pose = '--pose' in args
+    return run_cases([a for a in args if a != '--pose'], (__doc__ or '').splitlines()[0],
                      twin_gain_calibration.CALIBRATION_SEEDS,
-                     f'calibration seeds: {twin_gain_calibration.CALIBRATION_SEEDS}', probe)
+                     f'calibration seeds: {twin_gain_calibration.CALIBRATION_SEEDS}',
+                     pose_probe if pose else probe)
 
 
 if __name__ == '__main__':

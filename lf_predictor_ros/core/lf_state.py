@@ -262,7 +262,7 @@ class LfStateEstimator:
                 self._controller_read if reading else None, self.predictor.targets_peak_damping,
                 reference, odometry.params.pose_twin_fit,
                 odometry.params.twist_reference_cutoff, odometry.params.twist_wave_time > 0.0,
-                odometry.params.pose_reference_cutoff)
+                odometry.params.pose_reference_cutoff, odometry.params.twist_likelihood_fit)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -294,7 +294,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            remembered: ControllerRead | None = None,
            peak_damping: float = math.nan, reference: FloatArray | None = None,
            twin_fit: bool = False, twist_cutoff: float = 0.0,
-           twist_wave: bool = False, pose_cutoff: float = 0.0) -> Learned:
+           twist_wave: bool = False, pose_cutoff: float = 0.0,
+           twist_likelihood: bool = False) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -314,7 +315,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     [× ω0] compares the twist with the reference velocity low-passed below ``twist_cutoff`` ·
     ``wave_peak_freq``; no ω0 yet: the velocity as it is; ``twist_wave``: the twist model's
     wave-envelope part too, `odometry.fit_twist_wave_model`; ``pose_cutoff`` [× ω0]: the pose
-    against the reference low-passed below ``pose_cutoff`` · ``wave_peak_freq``).
+    against the reference low-passed below ``pose_cutoff`` · ``wave_peak_freq``;
+    ``twist_likelihood``: the twist model by maximum likelihood).
     The read returned is the one in force afterwards: this read if it succeeded,
     ``remembered`` if it failed for lack of data, else None.
     """
@@ -348,7 +350,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     pose_edge = 0.0 if wave_peak_freq is None else pose_cutoff * wave_peak_freq
     return memory, calibrate(published, times, values if reference is None else reference,
                              params.ndof, params.sample_time, min_samples, lag_prior,
-                             twin_fit, cutoff, twist_wave, pose_edge), in_force
+                             twin_fit, cutoff, twist_wave, pose_edge, twist_likelihood), in_force
 
 
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,

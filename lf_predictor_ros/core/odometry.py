@@ -189,6 +189,12 @@ class OdometryParams:
         'e² correlates 0.48–0.65 with z on rao_supply); J is fitted with the holding and '
         'acceleration parts by non-negative least squares; 0 = off (off by default: eighth '
         'rule)', 's'))
+    twist_likelihood_fit: bool = field(default=False, metadata=field_doc(
+        'fit the twist error model (holding and acceleration parts) by Gaussian maximum '
+        'likelihood (iteratively reweighted least squares on e², weights 1/σ⁴) instead of '
+        'least squares on e²: least squares lets the manoeuvres, whose e² is thousands of times '
+        "the calm samples', set the holding part; the likelihood makes the window's mean e²/σ² "
+        '1 (thirty-fourth session, tenth rule); false: least squares', ''))
     twist_accel_time: float = field(default=10.0, metadata=field_doc(
         'the twist error model grows with the change of the published twist per second, '
         'low-passed over this time (chosen from 2 / 5 / 10 / 20 s on tuning seeds 1–2, '
@@ -1043,13 +1049,15 @@ class LfOdometry:
 def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike, ndof: int,
               sample_time: float, min_samples: int, lag_prior: float = 0.0,
               twin_fit: bool = False, twist_cutoff: float = 0.0,
-              twist_wave: bool = False, pose_cutoff: float = 0.0) -> Covariances | None:
+              twist_wave: bool = False, pose_cutoff: float = 0.0,
+              twist_likelihood: bool = False) -> Covariances | None:
     """Pose error models and twist covariances against the targets (module docstring).
 
     Every published estimate whose stamp is a target instant (not the first or last) is
     compared with the target and with the targets' differentiated body velocity (with
     ``twist_cutoff`` > 0 [rad/s] low-passed below it, `reference_velocity`; the pose with
-    ``pose_cutoff`` > 0 [rad/s] against the targets low-passed below it, `low_passed`): per source
+    ``pose_cutoff`` > 0 [rad/s] against the targets low-passed below it, `low_passed`; with
+    ``twist_likelihood`` the twist model by `fit_error_model_likelihood`): per source
     ('network', 'fallback': only with ``min_samples`` matches) and over all, the pose error
     model (`fit_error_model` on each estimate's regressor ``Published.lag``, prior lag time
     ``lag_prior`` [s]) and the twist error's second moment (bias included); with ``twin_fit``
@@ -1097,6 +1105,8 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
 
     def twist_model(mask: NDArray[np.bool_]) -> ErrorModel:
         with_wave = mask & has_wave
+        if twist_likelihood:
+            return fit_error_model_likelihood(twist_err[mask], accel[mask])
         if np.count_nonzero(with_wave) < min_samples:
             return fit_error_model(twist_err[mask], accel[mask])
         return fit_twist_wave_model(twist_err[with_wave], accel[with_wave], wave[with_wave])
@@ -1195,6 +1205,66 @@ def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,
     np.fill_diagonal(corr, 1.0)
     std = np.sqrt(hold)
     return ErrorModel(moment=moment, hold=np.asarray(corr * np.outer(std, std)), gain=gains)
+
+
+LIKELIHOOD_ITERATIONS = 50  # most reweightings of `fit_error_model_likelihood` [-]
+LIKELIHOOD_TOLERANCE = 1e-9  # relative change of σ² that ends them [-]
+
+
+def fit_error_model_likelihood(errors: ArrayLike, rates: ArrayLike) -> ErrorModel:
+    """`fit_error_model` (no prior) refined to the Gaussian maximum likelihood per DOF.
+
+    σ²_i(w) = σ²_hold,i + T_i² w_i² maximizes Σ −log σ² − e²/σ² over the window: iteratively
+    reweighted least squares of e² on [1, w²] with weights 1/σ⁴ (Var e² = 2σ⁴), whose fixed
+    point solves the likelihood's score equations, so the window's mean e²/σ² is 1 wherever
+    the constraints (T² ≥ 0, σ²_hold ≥ ``HOLD_FLOOR_FRACTION`` · mean e²) do not bind. Starts
+    from the least-squares fit; Σ_hold keeps the correlations of the mean e eᵀ. The inputs are
+    not modified.
+    """
+    base = fit_error_model(errors, rates)
+    e2 = np.asarray(errors, dtype=np.float64) ** 2
+    w2 = np.asarray(rates, dtype=np.float64) ** 2
+    n = e2.shape[1]
+    hold = np.diag(base.hold).copy()
+    gain = base.gain.copy()
+    for i in range(n):
+        floor = HOLD_FLOOR_FRACTION * float(np.mean(e2[:, i]))
+        hold[i], gain[i] = _likelihood_refit(e2[:, i], w2[:, i], float(hold[i]),
+                                             float(gain[i]), floor)
+    diag = np.sqrt(np.diag(base.moment))
+    with np.errstate(divide='ignore', invalid='ignore'):
+        corr = np.where(np.outer(diag, diag) > 0.0, base.moment / np.outer(diag, diag), 0.0)
+    np.fill_diagonal(corr, 1.0)
+    std = np.sqrt(hold)
+    return ErrorModel(moment=base.moment, hold=np.asarray(corr * np.outer(std, std)),
+                      gain=gain)
+
+
+def _likelihood_refit(e2: FloatArray, x: FloatArray, hold: float, gain: float,
+                      floor: float) -> tuple[float, float]:
+    """(σ²_hold, T²) of one DOF: weighted least squares of e² on [1, x], weights 1/σ⁴, repeated."""
+    if floor <= 0.0:
+        return hold, gain
+    for _ in range(LIKELIHOOD_ITERATIONS):
+        sigma2 = hold + gain * x
+        w = 1.0 / (sigma2 * sigma2)
+        sw, swx, swxx = float(np.sum(w)), float(np.sum(w * x)), float(np.sum(w * x * x))
+        swy, swxy = float(np.sum(w * e2)), float(np.sum(w * x * e2))
+        det = sw * swxx - swx * swx
+        new_gain = (sw * swxy - swx * swy) / det if det > 1e-12 * sw * swxx else 0.0
+        new_hold = (swy - new_gain * swx) / sw
+        if new_gain < 0.0:  # the constraint T² ≥ 0 binds
+            new_gain, new_hold = 0.0, swy / sw
+        if new_hold < floor:  # the floor binds: T² alone
+            new_hold = floor
+            new_gain = max(0.0, float(np.sum(w * x * (e2 - floor))) / swxx) if swxx > 0.0 \
+                else 0.0
+        change = abs(new_hold - hold) / hold + (abs(new_gain - gain) / gain if gain > 0 else
+                                                 abs(new_gain) * float(np.max(x)) / hold)
+        hold, gain = new_hold, new_gain
+        if change < LIKELIHOOD_TOLERANCE:
+            break
+    return hold, gain
 
 
 def fit_twist_wave_model(errors: ArrayLike, accel: ArrayLike, wave: ArrayLike) -> ErrorModel:

@@ -429,7 +429,7 @@ def test_the_reference_cutoffs_are_fractions_of_the_wave_peak_frequency(
 
     def spy(history: object, times: object, targets: object, ndof: int, sample_time: float,
             min_samples: int, lag_prior: float, twin_fit: bool, twist_cutoff: float,
-            twist_wave: bool, pose_cutoff: float) -> None:
+            twist_wave: bool, pose_cutoff: float, twist_likelihood: bool) -> None:
         received.append((twist_cutoff, pose_cutoff))
 
     monkeypatch.setattr(lf_state, 'calibrate', spy)

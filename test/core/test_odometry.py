@@ -19,6 +19,7 @@ from lf_predictor_ros.core.odometry import (
     Published,
     calibrate,
     fit_error_model,
+    fit_error_model_likelihood,
     fit_twin_gain,
     fit_twist_wave_model,
     low_passed,
@@ -249,6 +250,30 @@ def test_twist_calibration_against_the_wave_free_reference() -> None:
     assert np.max(np.abs(lagging)) < 0.11  # the wave alone, also at the ends
     with pytest.raises(ValueError, match='twist_reference_cutoff'):
         OdometryParams(twist_reference_cutoff=-0.5)
+
+
+def test_likelihood_fit_recovers_the_model_and_makes_the_mean_nees_one() -> None:
+    """Errors N(0, 0.01 + 0.5 a²) with a = 0 most of the time and up to 1 in a few 'turns'.
+
+    Gaussian maximum likelihood recovers σ²_hold 0.01 and T² 0.5 within 15 % (seeded), and its
+    score equations make the window's mean e²/σ² 1 exactly (least squares on e² gives 0.97
+    here).
+    """
+    rng = np.random.default_rng(7)
+    m = 20000
+    a = np.zeros((m, 1))
+    for start in range(1000, m, 2000):  # ten turns of 100 samples
+        a[start:start + 100, 0] = np.sin(np.linspace(0.0, np.pi, 100))
+    sigma2 = 0.01 + 0.5 * a[:, 0] ** 2
+    e = (np.sqrt(sigma2) * rng.standard_normal(m)).reshape(-1, 1)
+    ml = fit_error_model_likelihood(e, a)
+    ls = fit_error_model(e, a)
+    assert ml.hold[0, 0] == pytest.approx(0.01, rel=0.15)
+    assert ml.gain[0] == pytest.approx(0.5, rel=0.15)
+    fitted = ml.hold[0, 0] + ml.gain[0] * a[:, 0] ** 2
+    assert np.mean(e[:, 0] ** 2 / fitted) == pytest.approx(1.0, abs=1e-6)
+    plain = ls.hold[0, 0] + ls.gain[0] * a[:, 0] ** 2
+    assert abs(np.mean(e[:, 0] ** 2 / plain) - 1.0) > 0.01
 
 
 def test_twist_wave_model_recovers_the_envelope_gain() -> None:

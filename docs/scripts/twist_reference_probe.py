@@ -17,7 +17,8 @@ window's targets, low-passed by `odometry.low_passed` (the ninth rule's referenc
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 import sys
 from typing import Any
@@ -32,7 +33,7 @@ import twin_gain_calibration  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.core.heading import wrap_angle  # noqa: E402
 from lf_predictor_ros.core.lf_dynamics import body_velocity  # noqa: E402
-from lf_predictor_ros.core.odometry import low_passed  # noqa: E402
+from lf_predictor_ros.core.odometry import Published, low_passed  # noqa: E402
 
 FloatArray = NDArray[np.float64]
 SCORED_FROM = 481.0  # [s] the benchmark's first scored sample at h = 1 s
@@ -60,34 +61,57 @@ def _unwrapped(pose: FloatArray, n: int) -> FloatArray:
     return out
 
 
-def probe(scenario: str, seed: int) -> None:
-    """Print one line per examined window."""
+@dataclass(frozen=True)
+class Examined:
+    """One examined window: the published estimates kept and where they sit."""
+
+    n: int
+    h: float
+    truth: FloatArray  # the run's true LF pose
+    times: FloatArray  # the window's target instants
+    reference: FloatArray  # the window's reference, heading unwrapped
+    rows: list[Published]  # the kept estimates
+    index: NDArray[np.int64]  # their rows in the window
+    at: NDArray[np.int64]  # their rows in the run
+    cutoff: float  # CUTOFF · ω0 [rad/s]
+
+
+def examined(scenario: str, seed: int) -> Iterator[Examined]:
+    """Three of the last six calibration windows of one run, every other one."""
     setattr(twin_gain_calibration, 'fair_case', _keeping_omega)  # noqa: B010 - this run only
     try:
         n, h, t, truth, captured = twin_gain_calibration.windows(scenario, seed)
     finally:
         setattr(twin_gain_calibration, 'fair_case', _fair_case)  # noqa: B010
-    true_v = body_velocity(_unwrapped(truth, n), h)
-    cutoff = CUTOFF * _OMEGA[scenario]
     for history, times, reference in captured[-6::2]:
-        ref_v = body_velocity(_unwrapped(reference.reshape(len(times), -1), n), h)
         stamps = np.array([p.stamp for p in history])
         index = np.round((stamps - times[0]) / h).astype(np.int64)
         ok = (index >= EDGE) & (index < len(times) - EDGE) & (stamps >= SCORED_FROM)
-        if not np.any(ok):
-            continue
-        at = np.round((stamps[ok] - t[0]) / h).astype(np.int64)
-        twist = np.array([p.twist for p in history])[ok]
-        wave = _high_pass(ref_v, h, cutoff)[index[ok]]
-        e_ref = twist - ref_v[index[ok]]
-        e_truth = twist - true_v[at]
+        if np.any(ok):
+            yield Examined(n, h, truth, times, _unwrapped(reference.reshape(len(times), -1), n),
+                           [p for p, good in zip(history, ok, strict=True) if good], index[ok],
+                           np.round((stamps[ok] - t[0]) / h).astype(np.int64),
+                           CUTOFF * _OMEGA[scenario])
+
+
+def probe(scenario: str, seed: int) -> None:
+    """Print one line per examined window."""
+    true_v: FloatArray | None = None
+    for w in examined(scenario, seed):
+        if true_v is None:
+            true_v = body_velocity(_unwrapped(w.truth, w.n), w.h)
+        ref_v = body_velocity(w.reference, w.h)
+        twist = np.array([p.twist for p in w.rows])
+        wave = _high_pass(ref_v, w.h, w.cutoff)[w.index]
+        e_ref = twist - ref_v[w.index]
+        e_truth = twist - true_v[w.at]
         ref2, truth2 = np.mean(e_ref ** 2, axis=0), np.mean(e_truth ** 2, axis=0)
         low2 = np.mean((e_ref + wave) ** 2, axis=0)
-        print(f'{scenario} {seed} window_end {times[-1]:.0f} rms vs reference '
+        print(f'{scenario} {seed} window_end {w.times[-1]:.0f} rms vs reference '
               f'{np.sqrt(ref2).round(4)} vs truth {np.sqrt(truth2).round(4)} truth/reference '
               f'{(truth2 / ref2).round(2)} reference above {CUTOFF} w0 '
               f'{np.sqrt(np.mean(wave ** 2, axis=0)).round(4)} reference - truth '
-              f'{np.sqrt(np.mean((ref_v[index[ok]] - true_v[at]) ** 2, axis=0)).round(4)} '
+              f'{np.sqrt(np.mean((ref_v[w.index] - true_v[w.at]) ** 2, axis=0)).round(4)} '
               f'truth/lp {(truth2 / low2).round(2)}', flush=True)
 
 
@@ -101,26 +125,14 @@ def _mean_square(pose: FloatArray, target: FloatArray) -> FloatArray:
 
 def pose_probe(scenario: str, seed: int) -> None:
     """``--pose``: one line per examined window, the pose against the targets."""
-    setattr(twin_gain_calibration, 'fair_case', _keeping_omega)  # noqa: B010 - this run only
-    try:
-        n, h, t, truth, captured = twin_gain_calibration.windows(scenario, seed)
-    finally:
-        setattr(twin_gain_calibration, 'fair_case', _fair_case)  # noqa: B010
-    cutoff = CUTOFF * _OMEGA[scenario]
-    for history, times, reference in captured[-6::2]:
-        ref = _unwrapped(reference.reshape(len(times), -1), n)
-        clean = low_passed(ref, h, cutoff)
-        stamps = np.array([p.stamp for p in history])
-        index = np.round((stamps - times[0]) / h).astype(np.int64)
-        ok = (index >= EDGE) & (index < len(times) - EDGE) & (stamps >= SCORED_FROM)
-        if not np.any(ok):
-            continue
-        at = np.round((stamps[ok] - t[0]) / h).astype(np.int64)
-        pose = np.array([p.pose for p in history])[ok]
-        ref2, clean2 = _mean_square(pose, ref[index[ok]]), _mean_square(pose, clean[index[ok]])
-        truth2 = _mean_square(pose, truth[at][:, :n])
-        wave = np.sqrt(np.mean((ref - clean)[index[ok]] ** 2, axis=0))
-        print(f'{scenario} {seed} window_end {times[-1]:.0f} pose rms vs reference '
+    for w in examined(scenario, seed):
+        clean = low_passed(w.reference, w.h, w.cutoff)
+        pose = np.array([p.pose for p in w.rows])
+        ref2 = _mean_square(pose, w.reference[w.index])
+        clean2 = _mean_square(pose, clean[w.index])
+        truth2 = _mean_square(pose, w.truth[w.at][:, :w.n])
+        wave = np.sqrt(np.mean((w.reference - clean)[w.index] ** 2, axis=0))
+        print(f'{scenario} {seed} window_end {w.times[-1]:.0f} pose rms vs reference '
               f'{np.sqrt(ref2).round(4)} vs truth {np.sqrt(truth2).round(4)} truth/reference '
               f'{(truth2 / ref2).round(2)} truth/lp {(truth2 / clean2).round(2)} reference '
               f'above {CUTOFF} w0 {wave.round(4)}', flush=True)

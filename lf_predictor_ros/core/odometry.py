@@ -1199,12 +1199,17 @@ def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,
                                  still=bool(sxx[i] <= 1e-12 * e.shape[0] *
                                             float(np.mean(w2[:, i] ** 2))))
         hold[i] = max(float(mean_e2[i]) - gains[i] * float(mean_w2[i]), floor)
+    return ErrorModel(moment=moment, hold=_hold_matrix(moment, hold), gain=gains)
+
+
+def _hold_matrix(moment: FloatArray, hold: FloatArray) -> FloatArray:
+    """Σ_hold: the correlations of the mean e eᵀ ``moment`` with the variances ``hold``."""
     diag = np.sqrt(np.diag(moment))
     with np.errstate(divide='ignore', invalid='ignore'):
         corr = np.where(np.outer(diag, diag) > 0.0, moment / np.outer(diag, diag), 0.0)
     np.fill_diagonal(corr, 1.0)
     std = np.sqrt(hold)
-    return ErrorModel(moment=moment, hold=np.asarray(corr * np.outer(std, std)), gain=gains)
+    return np.asarray(corr * np.outer(std, std), dtype=np.float64)
 
 
 LIKELIHOOD_ITERATIONS = 50  # most reweightings of `fit_error_model_likelihood` [-]
@@ -1231,13 +1236,7 @@ def fit_error_model_likelihood(errors: ArrayLike, rates: ArrayLike) -> ErrorMode
         floor = HOLD_FLOOR_FRACTION * float(np.mean(e2[:, i]))
         hold[i], gain[i] = _likelihood_refit(e2[:, i], w2[:, i], float(hold[i]),
                                              float(gain[i]), floor)
-    diag = np.sqrt(np.diag(base.moment))
-    with np.errstate(divide='ignore', invalid='ignore'):
-        corr = np.where(np.outer(diag, diag) > 0.0, base.moment / np.outer(diag, diag), 0.0)
-    np.fill_diagonal(corr, 1.0)
-    std = np.sqrt(hold)
-    return ErrorModel(moment=base.moment, hold=np.asarray(corr * np.outer(std, std)),
-                      gain=gain)
+    return ErrorModel(moment=base.moment, hold=_hold_matrix(base.moment, hold), gain=gain)
 
 
 def _likelihood_refit(e2: FloatArray, x: FloatArray, hold: float, gain: float,
@@ -1291,13 +1290,8 @@ def fit_twist_wave_model(errors: ArrayLike, accel: ArrayLike, wave: ArrayLike) -
         coef = coef / scale
         floor = HOLD_FLOOR_FRACTION * float(np.mean(e[:, i] ** 2))
         hold[i], gain[i], wave_gain[i] = max(float(coef[0]), floor), coef[1], coef[2]
-    diag = np.sqrt(np.diag(base.moment))
-    with np.errstate(divide='ignore', invalid='ignore'):
-        corr = np.where(np.outer(diag, diag) > 0.0, base.moment / np.outer(diag, diag), 0.0)
-    np.fill_diagonal(corr, 1.0)
-    std = np.sqrt(hold)
-    return ErrorModel(moment=base.moment, hold=np.asarray(corr * np.outer(std, std)),
-                      gain=gain, wave_gain=wave_gain)
+    return ErrorModel(moment=base.moment, hold=_hold_matrix(base.moment, hold), gain=gain,
+                      wave_gain=wave_gain)
 
 
 def fit_twin_gain(errors: ArrayLike, excess: ArrayLike, min_samples: int) -> FloatArray:

@@ -13,7 +13,13 @@ against the true LF velocity, their ratio of mean squares (truth / reference), t
 velocity's own content above 0.5 ω0 (zero-phase Butterworth high-pass of order 4, ω0 the
 recording's median true wave peak frequency) and the ratio against the reference with that
 content removed (`truth/lp`). With ``--pose`` the same for the published pose against the
-window's targets, low-passed by `odometry.low_passed` (the ninth rule's reference).
+window's targets, low-passed by `odometry.low_passed` (the ninth rule's reference). With
+``--shared``, on the last window only: the twist error e (against the truth) and the low-passed
+reference's error d (`odometry.reference_velocity`, against the truth), their RMS and
+correlation on the calm half of the samples (|a| below its median per DOF, a the twist error
+model's regressor), and in the band 0.1 rad/s – 0.5 ω0 (zero-phase Butterworth band-pass of
+order 2) the RMS of e, of the true velocity, of the reference and of d, with the correlations
+of e and d with minus the true velocity and with each other (tenth rule, thirty-fourth session).
 """
 from __future__ import annotations
 
@@ -33,7 +39,11 @@ import twin_gain_calibration  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.core.heading import wrap_angle  # noqa: E402
 from lf_predictor_ros.core.lf_dynamics import body_velocity  # noqa: E402
-from lf_predictor_ros.core.odometry import Published, low_passed  # noqa: E402
+from lf_predictor_ros.core.odometry import (  # noqa: E402
+    Published,
+    low_passed,
+    reference_velocity,
+)
 
 FloatArray = NDArray[np.float64]
 SCORED_FROM = 481.0  # [s] the benchmark's first scored sample at h = 1 s
@@ -138,13 +148,51 @@ def pose_probe(scenario: str, seed: int) -> None:
               f'above {CUTOFF} w0 {wave.round(4)}', flush=True)
 
 
+SHARED_BAND_LOW = 0.1  # [rad/s] lower edge of the --shared band (above the DP loops' ω_n)
+
+
+def _rms(x: FloatArray) -> float:
+    return float(np.sqrt(np.mean(x ** 2)))
+
+
+def _corr(x: FloatArray, y: FloatArray) -> float:
+    return round(float(np.corrcoef(x, y)[0, 1]), 2)
+
+
+def shared_probe(scenario: str, seed: int) -> None:
+    """``--shared``: what the twist's error shares with the low-passed reference's."""
+    windows = list(examined(scenario, seed))[-1:]
+    for w in windows:
+        true_v = body_velocity(_unwrapped(w.truth, w.n), w.h)[w.at]
+        twist = np.array([p.twist for p in w.rows])
+        reference = reference_velocity(w.reference, w.h, w.cutoff)[w.index]
+        e, d = twist - true_v, reference - true_v
+        accel = np.abs(np.array([p.accel for p in w.rows]))
+        calm = accel < np.median(accel, axis=0)
+        b, a = signal.butter(2, [SHARED_BAND_LOW * w.h / np.pi, w.cutoff * w.h / np.pi], 'band')
+        for i in range(w.n):
+            c = calm[:, i]
+            print(f'{scenario} {seed} window_end {w.times[-1]:.0f} dof {i} calm: rms e '
+                  f'{_rms(e[c, i]):.5f} d {_rms(d[c, i]):.5f} e against the reference '
+                  f'{_rms(e[c, i] - d[c, i]):.5f}; corr(e, d) {_corr(e[c, i], d[c, i])}')
+            eb, tb, rb, db = (np.asarray(signal.filtfilt(b, a, x), dtype=np.float64)
+                              for x in (e[:, i], true_v[:, i], reference[:, i], d[:, i]))
+            print(f'  band {SHARED_BAND_LOW}-{w.cutoff:.2f} rad/s: rms e {_rms(eb):.5f} true '
+                  f'{_rms(tb):.5f} reference {_rms(rb):.5f} d {_rms(db):.5f}; corr(e, -true) '
+                  f'{_corr(eb, -tb)} corr(d, -true) {_corr(db, -tb)} corr(e, d) {_corr(eb, db)}',
+                  flush=True)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
-    pose = '--pose' in args
-    return run_cases([a for a in args if a != '--pose'], (__doc__ or '').splitlines()[0],
-                     twin_gain_calibration.CALIBRATION_SEEDS,
-                     f'calibration seeds: {twin_gain_calibration.CALIBRATION_SEEDS}',
-                     pose_probe if pose else probe)
+    mode = probe
+    if '--pose' in args:
+        mode = pose_probe
+    if '--shared' in args:
+        mode = shared_probe
+    return run_cases([a for a in args if a not in ('--pose', '--shared')],
+                     (__doc__ or '').splitlines()[0], twin_gain_calibration.CALIBRATION_SEEDS,
+                     f'calibration seeds: {twin_gain_calibration.CALIBRATION_SEEDS}', mode)
 
 
 if __name__ == '__main__':

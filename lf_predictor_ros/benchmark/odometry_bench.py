@@ -558,7 +558,6 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                            'pose_twin_fit': odometry.pose_twin_fit,
                            'twist_cov_scale': odometry.twist_cov_scale,
                            'twist_reference_cutoff': odometry.twist_reference_cutoff,
-                           'twist_wave_time': odometry.twist_wave_time,
                            'pose_reference_cutoff': odometry.pose_reference_cutoff,
                            'twist_likelihood_fit': odometry.twist_likelihood_fit,
                            'twist_bandwidth': odometry.twist_bandwidth,

@@ -125,10 +125,7 @@ class LfStateEstimator:
         # the untaken twin offset only where the odometry uses it (pose_twin_gain > 0)
         offset = self.predictor.untaken_twin_offset if self.odometry.params.pose_twin_gain > 0.0 \
             else None
-        omega = self.predictor.wave_peak_freq if self.odometry.params.twist_wave_time > 0.0 \
-            else None
-        odom = self.odometry.track(t + self.sample_time, lf_pose, force, source, offset,
-                                   wave_peak_freq=omega)
+        odom = self.odometry.track(t + self.sample_time, lf_pose, force, source, offset)
         return lf_pose, odom
 
     def command(self, t: float, force: FloatArray) -> bool:
@@ -261,8 +258,8 @@ class LfStateEstimator:
                 _input_gain(odometry.params.vessel_inertia, self.ndof), commands,
                 self._controller_read if reading else None, self.predictor.targets_peak_damping,
                 reference, odometry.params.pose_twin_fit,
-                odometry.params.twist_reference_cutoff, odometry.params.twist_wave_time > 0.0,
-                odometry.params.pose_reference_cutoff, odometry.params.twist_likelihood_fit)
+                odometry.params.twist_reference_cutoff, odometry.params.pose_reference_cutoff,
+                odometry.params.twist_likelihood_fit)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -293,8 +290,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            commands: tuple[FloatArray, FloatArray] | None = None,
            remembered: ControllerRead | None = None,
            peak_damping: float = math.nan, reference: FloatArray | None = None,
-           twin_fit: bool = False, twist_cutoff: float = 0.0,
-           twist_wave: bool = False, pose_cutoff: float = 0.0,
+           twin_fit: bool = False, twist_cutoff: float = 0.0, pose_cutoff: float = 0.0,
            twist_likelihood: bool = False) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
@@ -313,8 +309,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     with ``reference`` (same instants; None: the targets ``values``; `odometry.calibrate`, which
     fits the untaken twin offset's coefficients with ``twin_fit``, and with ``twist_cutoff`` > 0
     [× ω0] compares the twist with the reference velocity low-passed below ``twist_cutoff`` ·
-    ``wave_peak_freq``; no ω0 yet: the velocity as it is; ``twist_wave``: the twist model's
-    wave-envelope part too, `odometry.fit_twist_wave_model`; ``pose_cutoff`` [× ω0]: the pose
+    ``wave_peak_freq``; no ω0 yet: the velocity as it is; ``pose_cutoff`` [× ω0]: the pose
     against the reference low-passed below ``pose_cutoff`` · ``wave_peak_freq``;
     ``twist_likelihood``: the twist model by maximum likelihood).
     The read returned is the one in force afterwards: this read if it succeeded,
@@ -350,7 +345,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     pose_edge = 0.0 if wave_peak_freq is None else pose_cutoff * wave_peak_freq
     return memory, calibrate(published, times, values if reference is None else reference,
                              params.ndof, params.sample_time, min_samples, lag_prior,
-                             twin_fit, cutoff, twist_wave, pose_edge, twist_likelihood), in_force
+                             twin_fit, cutoff, pose_edge, twist_likelihood), in_force
 
 
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,

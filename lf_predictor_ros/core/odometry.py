@@ -62,7 +62,7 @@ from typing import Literal, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import optimize, signal
+from scipy import signal
 
 from lf_predictor_ros.core.field_meta import field_doc
 from lf_predictor_ros.core.filters import low_pass_step, zero_phase
@@ -181,14 +181,6 @@ class OdometryParams:
         '"Thirty-fourth session"); 0 = the velocity as it is, no ω0 yet: as it is (0 by '
         'default: on the calibration seeds rao_supply became overconfident, seventh rule)',
         '× ω0'))
-    twist_wave_time: float = field(default=0.0, metadata=field_doc(
-        "with twist_reference_cutoff > 0: the twist error model adds J_i z_i, z the twist's own "
-        'content above twist_reference_cutoff × ω0 (causal Butterworth high-pass of order 2) '
-        'squared and low-passed over this time: the twist error is mostly the wave motion the '
-        'twist passes, and in a spread sea it comes in wave groups (thirty-fourth session probe: '
-        'e² correlates 0.48–0.65 with z on rao_supply); J is fitted with the holding and '
-        'acceleration parts by non-negative least squares; 0 = off (off by default: eighth '
-        'rule)', 's'))
     twist_likelihood_fit: bool = field(default=False, metadata=field_doc(
         'fit the twist error model (holding and acceleration parts) by Gaussian maximum '
         'likelihood (iteratively reweighted least squares on e², weights 1/σ⁴) instead of '
@@ -286,12 +278,6 @@ class OdometryParams:
                 self.twist_reference_cutoff >= 0.0):
             raise ValueError('twist_reference_cutoff must be a finite number >= 0 (× ω0; 0: the '
                              f'reference velocity as it is), got {self.twist_reference_cutoff}')
-        if not (math.isfinite(self.twist_wave_time) and self.twist_wave_time >= 0.0):
-            raise ValueError('twist_wave_time must be a finite number >= 0 s (0: off), got '
-                             f'{self.twist_wave_time}')
-        if self.twist_wave_time > 0.0 and self.twist_reference_cutoff <= 0.0:
-            raise ValueError('twist_wave_time > 0 needs twist_reference_cutoff > 0 (the band '
-                             'edge of the wave content, × ω0): set both, or twist_wave_time 0')
         if not (math.isfinite(self.dead_reckoning_velocity_time) and
                 self.dead_reckoning_velocity_time > 0.0):
             raise ValueError('dead_reckoning_velocity_time must be a positive number of seconds, '
@@ -369,24 +355,17 @@ class ErrorModel:
             earth-frame velocity [m/s], yaw rate [rad/s]; twist: acceleration [m/s², rad/s²]).
         twin_gain: C_i per DOF (pose, ``pose_twin_fit``): variance added per unit of the
             untaken twin offset's excess (`fit_twin_gain`); None: not fitted.
-        wave_gain: J_i per DOF (twist, ``twist_wave_time``): variance added per unit of the
-            twist's wave envelope z_i (`fit_twist_wave_model`) [-]; None: not fitted.
     """
 
     moment: FloatArray
     hold: FloatArray
     gain: FloatArray
     twin_gain: FloatArray | None = None
-    wave_gain: FloatArray | None = None
 
-    def covariance(self, rates: FloatArray, lag_scale: float,
-                   wave: FloatArray | None = None) -> FloatArray:
-        """Σ_hold + lag_scale · diag(T_i² w_i²) (+ diag(J_i z_i) for a wave envelope z)."""
+    def covariance(self, rates: FloatArray, lag_scale: float) -> FloatArray:
+        """Σ_hold + lag_scale · diag(T_i² w_i²) for the regressor w (ndof,)."""
         cov = self.hold.copy()
-        diagonal = lag_scale * self.gain * rates * rates
-        if wave is not None and self.wave_gain is not None:
-            diagonal = diagonal + self.wave_gain * wave
-        cov.flat[::cov.shape[0] + 1] += diagonal
+        cov.flat[::cov.shape[0] + 1] += lag_scale * self.gain * rates * rates
         return cov
 
 
@@ -403,8 +382,6 @@ class Published:
     # the untaken twin offset's excess max(0, m² − 2 L) (`LfOdometry._twin_excess`; None: no
     # offset given or not calibrated yet)
     twin_excess: FloatArray | None = None
-    # the twist's wave envelope z (`LfOdometry._wave_envelope`; None: off or no ω0 yet)
-    wave: FloatArray | None = None
 
 
 class LfOdometry:
@@ -433,8 +410,6 @@ class LfOdometry:
         self._accel: tuple[float, FloatArray, FloatArray] | None = None  # (t, twist, accel)
         self._lag_peak: tuple[float, FloatArray] | None = None  # (t, held w²), pose_lag_memory
         self._twin_level: FloatArray | None = None  # running level of m² (pose_twin_gain)
-        # twist_wave_time: (band edge [rad/s], high-pass coefficients, its state, envelope z)
-        self._wave: tuple[float, list[float], list[list[float]], FloatArray] | None = None
         self._history: deque[Published] = deque(maxlen=HISTORY_SAMPLES)
         self._x: FloatArray | None = None
         self._p = np.zeros((2 * n, 2 * n))
@@ -488,15 +463,13 @@ class LfOdometry:
 
     def track(self, t: float, lf_pose: ArrayLike, force: ArrayLike,
               source: EstimateSource = 'network',
-              twin_offset: ArrayLike | None = None,
-              wave_peak_freq: float | None = None) -> OdometryEstimate | None:
+              twin_offset: ArrayLike | None = None) -> OdometryEstimate | None:
         """A new LF pose (valid at t) with the thrust applied; returns the estimate for t.
 
         While dead reckoning, a fix is first checked for plausibility (module docstring); a fix
         held back returns the dead-reckoned estimate (or None once lost). ``twin_offset``: the
         predictor's untaken twin offset m for this estimate (ndof; used with ``pose_twin_gain``
-        > 0), None: no term. ``wave_peak_freq``: the predictor's ω0 estimate [rad/s] (used with
-        ``twist_wave_time`` > 0), None: no wave envelope.
+        > 0), None: no term.
         """
         pose = _vector(lf_pose, 3, 'lf_pose')
         tau = _vector(force, 3, 'force')
@@ -531,8 +504,7 @@ class LfOdometry:
         excess = None
         if offset is not None and self.params.pose_twin_gain > 0.0 and self.calibrated:
             excess = self._twin_excess(offset)
-        wave = self._wave_envelope(twist, wave_peak_freq)
-        self._history.append(Published(t, z.copy(), twist, source, accel, lag, excess, wave))
+        self._history.append(Published(t, z.copy(), twist, source, accel, lag, excess))
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
         self._slow_twist = twist.copy() if self._slow_twist is None else \
             low_pass_step(self._slow_twist, twist, alpha)
@@ -543,7 +515,7 @@ class LfOdometry:
                                             self._pose_covariance(source, lag, excess))
         out = OdometryEstimate(
             stamp=t, pose=published, pose_cov=pose_cov, twist=self._full(twist),
-            twist_cov=self._twist_covariance(source, accel, wave), mode='tracking',
+            twist_cov=self._twist_covariance(source, accel), mode='tracking',
             dead_reckoning_time=0.0,
             calibrated=self.calibrated, reckoner=self.reckoner)
         out.pose[2] = wrap_angle(float(out.pose[2]))
@@ -974,48 +946,11 @@ class LfOdometry:
         self._accel = (t, twist, accel)
         return accel
 
-    def _wave_envelope(self, twist: FloatArray, wave_peak_freq: float | None
-                       ) -> FloatArray | None:
-        """z: the twist high-passed at ``twist_reference_cutoff`` · ω0, squared, low-passed.
-
-        ``twist_wave_time`` > 0 only (else None); None also without a usable ω0 (None, not
-        finite, or a band edge at or above the Nyquist frequency). The high-pass (causal
-        Butterworth, order 2, direct form II transposed) is redesigned when the band edge
-        moves by more than 1 %, keeping its state; z starts at 0. O(n) per sample.
-        """
-        time = self.params.twist_wave_time
-        if time <= 0.0 or wave_peak_freq is None or not math.isfinite(wave_peak_freq) or \
-                wave_peak_freq <= 0.0:
-            return None
-        edge = self.params.twist_reference_cutoff * wave_peak_freq
-        normalized = edge * self.sample_time / math.pi
-        if normalized >= 1.0:
-            return None
-        state = self._wave
-        if state is None or abs(edge - state[0]) > 0.01 * state[0]:
-            b, a = signal.butter(2, normalized, btype='high')
-            coefficients = [float(v) for v in (*b, *a[1:])]  # b0, b1, b2, a1, a2
-            memory = state[2] if state is not None else [[0.0, 0.0] for _ in range(self.ndof)]
-            envelope = state[3] if state is not None else np.zeros(self.ndof)
-            state = (edge, coefficients, memory, envelope)
-        b0, b1, b2, a1, a2 = state[1]
-        alpha = min(1.0, self.sample_time / time)
-        squares = []
-        for value, delay in zip(twist.tolist(), state[2], strict=True):
-            out = b0 * value + delay[0]
-            delay[0] = b1 * value - a1 * out + delay[1]
-            delay[1] = b2 * value - a2 * out
-            squares.append(out * out)
-        envelope = state[3] + alpha * (np.array(squares) - state[3])
-        self._wave = (state[0], state[1], state[2], envelope)
-        return envelope
-
-    def _twist_covariance(self, source: EstimateSource, accel: FloatArray,
-                          wave: FloatArray | None = None) -> FloatArray:
+    def _twist_covariance(self, source: EstimateSource, accel: FloatArray) -> FloatArray:
         n = self.ndof
         if self._twist_cov:
             model = self._twist_cov.get(source, self._twist_cov['all'])
-            inner = self.params.twist_cov_scale * model.covariance(accel, 1.0, wave)
+            inner = self.params.twist_cov_scale * model.covariance(accel, 1.0)
         else:
             inner = self._p[n:, n:].copy()
         return self._embed(inner)
@@ -1048,8 +983,7 @@ class LfOdometry:
 
 def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike, ndof: int,
               sample_time: float, min_samples: int, lag_prior: float = 0.0,
-              twin_fit: bool = False, twist_cutoff: float = 0.0,
-              twist_wave: bool = False, pose_cutoff: float = 0.0,
+              twin_fit: bool = False, twist_cutoff: float = 0.0, pose_cutoff: float = 0.0,
               twist_likelihood: bool = False) -> Covariances | None:
     """Pose error models and twist covariances against the targets (module docstring).
 
@@ -1096,23 +1030,8 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
                                                          min_samples))
     pose_cov: dict[str, ErrorModel] = {'all': pooled}
     accel = np.array([p.accel for p in rows])
-    # twist_wave: the estimates that carry a wave envelope (none before the first ω0)
-    has_wave = np.array([p.wave is not None for p in rows]) if twist_wave else \
-        np.zeros(len(rows), dtype=bool)
-    wave = np.zeros((len(rows), ndof))
-    if np.any(has_wave):
-        wave[has_wave] = np.array([p.wave for p in rows if p.wave is not None])
-
-    def twist_model(mask: NDArray[np.bool_]) -> ErrorModel:
-        with_wave = mask & has_wave
-        if twist_likelihood:
-            return fit_error_model_likelihood(twist_err[mask], accel[mask])
-        if np.count_nonzero(with_wave) < min_samples:
-            return fit_error_model(twist_err[mask], accel[mask])
-        return fit_twist_wave_model(twist_err[with_wave], accel[with_wave], wave[with_wave])
-
-    everything = np.ones(len(rows), dtype=bool)
-    twist_cov: dict[str, ErrorModel] = {'all': twist_model(everything)}
+    fit_twist = fit_error_model_likelihood if twist_likelihood else fit_error_model
+    twist_cov: dict[str, ErrorModel] = {'all': fit_twist(twist_err, accel)}
     for source in SOURCES:
         mask = sources == source
         if np.count_nonzero(mask) >= min_samples:
@@ -1120,7 +1039,7 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
             pose_cov[source] = replace(
                 fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain),
                 twin_gain=pooled.twin_gain)
-            twist_cov[source] = twist_model(mask)
+            twist_cov[source] = fit_twist(twist_err[mask], accel[mask])
     return pose_cov, twist_cov
 
 
@@ -1264,34 +1183,6 @@ def _likelihood_refit(e2: FloatArray, x: FloatArray, hold: float, gain: float,
         if change < LIKELIHOOD_TOLERANCE:
             break
     return hold, gain
-
-
-def fit_twist_wave_model(errors: ArrayLike, accel: ArrayLike, wave: ArrayLike) -> ErrorModel:
-    """E[e_i²] = σ²_hold,i + K_i² a_i² + J_i z_i per DOF, non-negative least squares.
-
-    ``errors``, ``accel`` (the twist error model's regressor a) and ``wave`` (the wave envelope
-    z, ``twist_wave_time``) are (m, n) of the same estimates. σ²_hold,i is at least
-    ``HOLD_FLOOR_FRACTION`` · mean e_i²; Σ_hold keeps the correlations of the mean e eᵀ, as in
-    `fit_error_model`. The inputs are not modified.
-    """
-    e = np.asarray(errors, dtype=np.float64)
-    a = np.asarray(accel, dtype=np.float64)
-    z = np.asarray(wave, dtype=np.float64)
-    if e.ndim != 2 or a.shape != e.shape or z.shape != e.shape or e.shape[0] < 1:
-        raise ValueError(f'errors, accel and wave must be (m >= 1, n) alike, got {e.shape}, '
-                         f'{a.shape} and {z.shape}')
-    base = fit_error_model(e, a)
-    n = e.shape[1]
-    hold, gain, wave_gain = np.zeros(n), np.zeros(n), np.zeros(n)
-    for i in range(n):
-        design = np.column_stack([np.ones(e.shape[0]), a[:, i] ** 2, z[:, i]])
-        scale = np.maximum(np.max(np.abs(design), axis=0), 1e-300)  # columns of like size
-        coef, _ = optimize.nnls(design / scale, e[:, i] ** 2)
-        coef = coef / scale
-        floor = HOLD_FLOOR_FRACTION * float(np.mean(e[:, i] ** 2))
-        hold[i], gain[i], wave_gain[i] = max(float(coef[0]), floor), coef[1], coef[2]
-    return ErrorModel(moment=base.moment, hold=_hold_matrix(base.moment, hold), gain=gain,
-                      wave_gain=wave_gain)
 
 
 def fit_twin_gain(errors: ArrayLike, excess: ArrayLike, min_samples: int) -> FloatArray:

@@ -211,31 +211,26 @@ class _WindowPredictor:
 
 def test_the_untaken_twin_offset_reaches_the_odometry_only_where_it_is_used(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """The predictor's untaken twin offset and ω0 go to LfOdometry.track where it uses them.
+    """The predictor's untaken twin offset goes to LfOdometry.track where the odometry uses it.
 
-    Default (pose_twin_gain 1, twist_wave_time 0): the offset of each sample and no ω0;
-    pose_twin_gain 0: no offset; twist_wave_time > 0: the predictor's ω0.
+    Default (pose_twin_gain 1): the offset of each sample; pose_twin_gain 0: None.
     """
     params = PredictorParams(ndof=1, sample_time=1.0, retrain_period=20.0,
                              training_window=200.0, transient_length=10.0, filter_window=60.0,
                              append_length=40.0, estimation_window=600.0)
-    seen: list[tuple[object, object]] = []
+    seen: list[object] = []
     real_track = LfOdometry.track
 
     def spy(self: LfOdometry, t: float, pose: object, force: object, source: str = 'network',
-            twin_offset: object = None, wave_peak_freq: float | None = None) -> object:
-        seen.append((None if twin_offset is None else np.array(twin_offset), wave_peak_freq))
-        return real_track(self, t, pose, force, source, twin_offset,  # type: ignore[arg-type]
-                          wave_peak_freq=wave_peak_freq)
+            twin_offset: object = None) -> object:
+        seen.append(None if twin_offset is None else np.array(twin_offset))
+        return real_track(self, t, pose, force, source, twin_offset)  # type: ignore[arg-type]
 
     monkeypatch.setattr(LfOdometry, 'track', spy)
-    wave = OdometryParams(twist_reference_cutoff=0.5, twist_wave_time=5.0)
-    for odometry, expect, omega in ((OdometryParams(), [0.25], None),
-                                    (OdometryParams(pose_twin_gain=0.0), None, None),
-                                    (wave, [0.25], 0.7)):
+    for odometry, expect in ((OdometryParams(), [0.25]),
+                             (OdometryParams(pose_twin_gain=0.0), None)):
         fake = _WindowPredictor()
         fake.untaken_twin_offset = np.array([0.25])  # type: ignore[misc]
-        fake.wave_peak_freq = 0.7  # type: ignore[assignment]
         est = LfStateEstimator(params, odometry, background=False,
                                predictor=fake)  # type: ignore[arg-type]
         seen.clear()
@@ -243,8 +238,7 @@ def test_the_untaken_twin_offset_reaches_the_odometry_only_where_it_is_used(
             est.update(float(k), np.array([0.1 * k, 0.0, 0.0]), np.zeros(3))
         est.close()
         assert len(seen) == 3
-        for offset, given in seen:
-            assert given == omega
+        for offset in seen:
             if expect is None:
                 assert offset is None
             else:
@@ -422,20 +416,23 @@ def test_wide_notch_targets_are_replaced_by_the_narrow_reference_for_calibration
 def test_the_reference_cutoffs_are_fractions_of_the_wave_peak_frequency(
         monkeypatch: pytest.MonkeyPatch, omega: float | None,
         expected: tuple[float, float]) -> None:
-    """_learn hands calibrate the cutoffs · ω0 [rad/s]; before the first ω0 no low-pass (0)."""
+    """_learn hands calibrate the cutoffs · ω0 [rad/s] and the likelihood-fit flag.
+
+    Before the first ω0 there is no low-pass (cutoffs 0).
+    """
     from lf_predictor_ros.core import lf_state
 
-    received: list[tuple[float, float]] = []
+    received: list[tuple[float, float, bool]] = []
 
     def spy(history: object, times: object, targets: object, ndof: int, sample_time: float,
             min_samples: int, lag_prior: float, twin_fit: bool, twist_cutoff: float,
-            twist_wave: bool, pose_cutoff: float, twist_likelihood: bool) -> None:
-        received.append((twist_cutoff, pose_cutoff))
+            pose_cutoff: float, twist_likelihood: bool) -> None:
+        received.append((twist_cutoff, pose_cutoff, twist_likelihood))
 
     monkeypatch.setattr(lf_state, 'calibrate', spy)
     params = PredictorParams(ndof=1, sample_time=1.0)
     times = np.arange(100.0)
     values = np.linspace(0.0, 10.0, 100).reshape(-1, 1)
     lf_state._learn(params, times, values, np.zeros((100, 1)), omega, [], 60.0, 60, 0.0,
-                    twist_cutoff=0.5, pose_cutoff=0.25)
-    assert received == [pytest.approx(expected)]
+                    twist_cutoff=0.5, pose_cutoff=0.25, twist_likelihood=True)
+    assert received == [(pytest.approx(expected[0]), pytest.approx(expected[1]), True)]

@@ -21,7 +21,6 @@ from lf_predictor_ros.core.odometry import (
     fit_error_model,
     fit_error_model_likelihood,
     fit_twin_gain,
-    fit_twist_wave_model,
     low_passed,
     normalized_error_squared,
     reference_velocity,
@@ -274,52 +273,6 @@ def test_likelihood_fit_recovers_the_model_and_makes_the_mean_nees_one() -> None
     assert np.mean(e[:, 0] ** 2 / fitted) == pytest.approx(1.0, abs=1e-6)
     plain = ls.hold[0, 0] + ls.gain[0] * a[:, 0] ** 2
     assert abs(np.mean(e[:, 0] ** 2 / plain) - 1.0) > 0.01
-
-
-def test_twist_wave_model_recovers_the_envelope_gain() -> None:
-    """e² = 0.5 + 0.4 a² + 0.5 z exactly (a, z independent ramps): hold 0.5, K² 0.4, J 0.5.
-
-    A DOF whose error does not grow with z gets J = 0 (non-negative), and the holding part
-    keeps its floor of HOLD_FLOOR_FRACTION · mean e².
-    """
-    m = 400
-    a = np.column_stack([np.linspace(0.0, 1.0, m), np.zeros(m)])
-    z = np.column_stack([np.tile(np.linspace(0.0, 2.0, 20), m // 20), np.linspace(0.0, 1.0, m)])
-    e = np.column_stack([np.sqrt(0.5 + 0.4 * a[:, 0] ** 2 + 0.5 * z[:, 0]),
-                         np.sqrt(np.maximum(0.5 - 0.4 * z[:, 1], 0.0))])
-    model = fit_twist_wave_model(e, a, z)
-    assert model.wave_gain is not None
-    np.testing.assert_allclose([model.hold[0, 0], model.gain[0], model.wave_gain[0]],
-                               [0.5, 0.4, 0.5], atol=1e-9)
-    assert model.wave_gain[1] == 0.0
-    assert model.hold[1, 1] >= HOLD_FLOOR_FRACTION * np.mean(e[:, 1] ** 2) - 1e-15
-    cov = model.covariance(np.array([1.0, 0.0]), 1.0, np.array([2.0, 0.0]))
-    assert cov[0, 0] == pytest.approx(0.5 + 0.4 + 1.0)
-    with pytest.raises(ValueError, match='alike'):
-        fit_twist_wave_model(e, a, z[:, :1])
-
-
-def test_twist_wave_envelope_is_the_mean_square_of_the_twists_wave_part() -> None:
-    """A twist of 0.05 m/s at 0.8 rad/s on a still vessel: z → 0.05² / 2 (band edge 0.4).
-
-    With ``twist_wave_time`` 0, or without ω0, no envelope is kept (None).
-    """
-    params = OdometryParams(twist_reference_cutoff=0.5, twist_wave_time=20.0)
-    odo = LfOdometry(1, 0.1, params)
-    omega = 0.8
-    out = None
-    for k in range(6000):
-        t = 0.1 * k
-        odo.track(t, [0.05 / omega * math.sin(omega * t), 0.0, 0.0], np.zeros(3),
-                  wave_peak_freq=0.8)
-        out = odo.published()[-1].wave
-    assert out is not None
-    # the twist filter (bandwidth 1 rad/s) passes 0.8 rad/s nearly whole, the high-pass too
-    assert out[0] == pytest.approx(0.05 ** 2 / 2, rel=0.25)
-    plain = LfOdometry(1, 0.1)
-    plain.track(0.0, np.zeros(3), np.zeros(3), wave_peak_freq=0.8)
-    odo.track(600.0, np.zeros(3), np.zeros(3))
-    assert plain.published()[-1].wave is None and odo.published()[-1].wave is None
 
 
 def test_fitted_twin_gain_scales_the_published_excess() -> None:

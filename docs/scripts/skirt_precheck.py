@@ -27,6 +27,7 @@ from scipy import signal
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import method_probe  # noqa: E402 - the sibling script
 
+from lf_predictor_ros.core.filters import frequency_response  # noqa: E402
 import lf_predictor_ros.core.retraining as retraining  # noqa: E402
 
 FloatArray = NDArray[np.float64]
@@ -39,7 +40,7 @@ _zero_phase = getattr(retraining, 'zero_phase')  # noqa: B009 - the function it 
 def _notch_frequency(sos: FloatArray) -> float:
     """The first local minimum of |H| [rad/sample] (the notch; the low-pass has none)."""
     grid = np.linspace(1e-3, 0.99 * np.pi, 4000)
-    _, response = signal.sosfreqz(sos, worN=grid)
+    response = frequency_response(sos, grid, 1.0)
     minima = signal.argrelmin(np.abs(response))[0]
     return float(grid[minima[0]] if minima.size else grid[np.argmin(np.abs(response))])
 
@@ -57,7 +58,7 @@ def compensated(y: Any, sos: FloatArray) -> FloatArray:
     extended = np.pad(data - line, ((pad, pad), (0, 0)), mode='reflect')
     size = extended.shape[0]
     omega = 2.0 * np.pi * np.fft.rfftfreq(size)  # [rad/sample]
-    _, response = signal.sosfreqz(sos, worN=omega)
+    response = frequency_response(sos, omega, 1.0)  # h = 1 sample: omega in rad/sample
     notch = _notch_frequency(sos)
     taper = np.clip((SKIRT_HIGH * notch - omega) / ((SKIRT_HIGH - SKIRT_LOW) * notch), 0.0, 1.0)
     gain = 1.0 + (1.0 / np.maximum(np.abs(response) ** 2, MIN_POWER) - 1.0) * \

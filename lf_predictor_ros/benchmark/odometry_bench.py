@@ -560,6 +560,7 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                            'twist_reference_cutoff': odometry.twist_reference_cutoff,
                            'pose_reference_cutoff': odometry.pose_reference_cutoff,
                            'twist_likelihood_fit': odometry.twist_likelihood_fit,
+                           'twist_attenuation': odometry.twist_attenuation,
                            'twist_bandwidth': odometry.twist_bandwidth,
                            'dead_reckoning_timeout': odometry.dead_reckoning_timeout,
                            'recording': recording.provenance.to_dict()}

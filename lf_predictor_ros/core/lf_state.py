@@ -259,7 +259,7 @@ class LfStateEstimator:
                 self._controller_read if reading else None, self.predictor.targets_peak_damping,
                 reference, odometry.params.pose_twin_fit,
                 odometry.params.twist_reference_cutoff, odometry.params.pose_reference_cutoff,
-                odometry.params.twist_likelihood_fit)
+                odometry.params.twist_likelihood_fit, odometry.params.twist_attenuation)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -291,7 +291,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            remembered: ControllerRead | None = None,
            peak_damping: float = math.nan, reference: FloatArray | None = None,
            twin_fit: bool = False, twist_cutoff: float = 0.0, pose_cutoff: float = 0.0,
-           twist_likelihood: bool = False) -> Learned:
+           twist_likelihood: bool = False, twist_attenuation: bool = False) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -311,7 +311,9 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     [× ω0] compares the twist with the reference velocity low-passed below ``twist_cutoff`` ·
     ``wave_peak_freq``; no ω0 yet: the velocity as it is; ``pose_cutoff`` [× ω0]: the pose
     against the reference low-passed below ``pose_cutoff`` · ``wave_peak_freq``;
-    ``twist_likelihood``: the twist model by maximum likelihood).
+    ``twist_likelihood``: the twist model by maximum likelihood; ``twist_attenuation``: with
+    ``twist_cutoff`` > 0 the twist models add what the reference's zero-phase filter, the
+    targets' or with ``reference`` the narrow notch's, took below the cutoff).
     The read returned is the one in force afterwards: this read if it succeeded,
     ``remembered`` if it failed for lack of data, else None.
     """
@@ -343,9 +345,14 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                          message=f'{memory.message}; {note}' if note else memory.message)
     cutoff = 0.0 if wave_peak_freq is None else twist_cutoff * wave_peak_freq
     pose_edge = 0.0 if wave_peak_freq is None else pose_cutoff * wave_peak_freq
+    reference_filter = None
+    if twist_attenuation and wave_peak_freq is not None:
+        # `retraining.narrow_reference` filters with the narrow notch, the targets with ``sos``
+        reference_filter = sos if reference is None else target_filter(params, wave_peak_freq)
     return memory, calibrate(published, times, values if reference is None else reference,
                              params.ndof, params.sample_time, min_samples, lag_prior,
-                             twin_fit, cutoff, pose_edge, twist_likelihood), in_force
+                             twin_fit, cutoff, pose_edge, twist_likelihood,
+                             reference_filter), in_force
 
 
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,

@@ -65,7 +65,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import signal
 
 from lf_predictor_ros.core.field_meta import field_doc
-from lf_predictor_ros.core.filters import low_pass_step, zero_phase
+from lf_predictor_ros.core.filters import frequency_response, low_pass_step, zero_phase
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_dynamics import (
     DEAD_RECKONERS,
@@ -110,6 +110,10 @@ TWIN_LEVEL_FACTOR = 2.0  # [-]
 # ``pose_reference_cutoff``, ``twist_reference_cutoff``: Butterworth order of the zero-phase
 # low-pass on the calibration reference (forward and backward: the magnitude response squared).
 REFERENCE_LOW_PASS_ORDER = 4
+# ``twist_attenuation``: frequencies where the targets' zero-phase filter keeps less than this
+# share of the power are left out of the attenuated variance (there the reference holds too
+# little of the LF motion to say what was taken; the ×(1 − G)/G correction is at most 4).
+ATTENUATION_MIN_POWER = 0.2  # [-]
 
 
 @dataclass(frozen=True)
@@ -187,6 +191,14 @@ class OdometryParams:
         'least squares on e²: least squares lets the manoeuvres, whose e² is thousands of times '
         "the calm samples', set the holding part; the likelihood makes the window's mean e²/σ² "
         '1 (thirty-fourth session, tenth rule); false: least squares', ''))
+    twist_attenuation: bool = field(default=False, metadata=field_doc(
+        'with twist_reference_cutoff > 0: the twist error model\'s holding part adds, per DOF, '
+        "the variance of the LF velocity the targets' zero-phase filter took away below that "
+        "cutoff (`attenuated_variance`: the reference velocity's content where the filter's "
+        'power response G is at least ATTENUATION_MIN_POWER, times (1 − G)/G). The reference '
+        "shares that error with the twist (the notch's skirt takes 14–19 % of rao_supply's LF "
+        'velocity between 0.1 rad/s and 0.5 ω0 and the twist misses the same part), so the fit '
+        'cannot see it (thirty-fifth session, eleventh rule); false: off', ''))
     twist_accel_time: float = field(default=10.0, metadata=field_doc(
         'the twist error model grows with the change of the published twist per second, '
         'low-passed over this time (chosen from 2 / 5 / 10 / 20 s on tuning seeds 1–2, '
@@ -984,14 +996,18 @@ class LfOdometry:
 def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike, ndof: int,
               sample_time: float, min_samples: int, lag_prior: float = 0.0,
               twin_fit: bool = False, twist_cutoff: float = 0.0, pose_cutoff: float = 0.0,
-              twist_likelihood: bool = False) -> Covariances | None:
+              twist_likelihood: bool = False,
+              reference_filter: FloatArray | None = None) -> Covariances | None:
     """Pose error models and twist covariances against the targets (module docstring).
 
     Every published estimate whose stamp is a target instant (not the first or last) is
     compared with the target and with the targets' differentiated body velocity (with
     ``twist_cutoff`` > 0 [rad/s] low-passed below it, `reference_velocity`; the pose with
     ``pose_cutoff`` > 0 [rad/s] against the targets low-passed below it, `low_passed`; with
-    ``twist_likelihood`` the twist model by `fit_error_model_likelihood`): per source
+    ``twist_likelihood`` the twist model by `fit_error_model_likelihood`; with
+    ``reference_filter``, the SOS of the zero-phase filter that made the targets, and
+    ``twist_cutoff`` > 0, every twist model's holding part adds `attenuated_variance` below
+    ``twist_cutoff``): per source
     ('network', 'fallback': only with ``min_samples`` matches) and over all, the pose error
     model (`fit_error_model` on each estimate's regressor ``Published.lag``, prior lag time
     ``lag_prior`` [s]) and the twist error's second moment (bias included); with ``twin_fit``
@@ -1040,7 +1056,45 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
                 fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain),
                 twin_gain=pooled.twin_gain)
             twist_cov[source] = fit_twist(twist_err[mask], accel[mask])
+    if reference_filter is not None and twist_cutoff > 0.0:
+        taken = np.diag(attenuated_variance(body_velocity(values, sample_time), sample_time,
+                                            reference_filter, twist_cutoff))
+        twist_cov = {key: replace(model, hold=model.hold + taken)
+                     for key, model in twist_cov.items()}
     return pose_cov, twist_cov
+
+
+def attenuated_variance(velocity: ArrayLike, sample_time: float, reference_filter: FloatArray,
+                        edge: float) -> FloatArray:
+    """Variance per column of what a zero-phase filter took from a series below ``edge`` [rad/s].
+
+    ``velocity`` (m, n) is the filtered series (the targets' LF velocity), ``reference_filter``
+    the SOS applied forward and backward (power response G = |H|², `filters.frequency_response`).
+    Where G < 1 the filter removed (1 − G) X of the true content X, and the series holds G X, so
+    the removed part is (1 − G)/G times the series' content. Its mean square, over the
+    frequencies below ``edge`` with G ≥ ``ATTENUATION_MIN_POWER``, from the series minus its
+    least-squares line, Hann-windowed (the window's power divided out). (n,) zeros for fewer
+    than 16 samples. The input is not modified.
+    """
+    values = np.array(velocity, dtype=np.float64)
+    if values.ndim != 2 or not np.all(np.isfinite(values)):
+        raise ValueError(f'velocity must be a finite (m, n) array, got shape {values.shape}')
+    if not (math.isfinite(edge) and edge >= 0.0):
+        raise ValueError(f'edge must be a finite number >= 0 rad/s, got {edge}')
+    m = values.shape[0]
+    if m < 16:
+        return np.zeros(values.shape[1])
+    steps = np.arange(m, dtype=np.float64)
+    design = np.column_stack([np.ones_like(steps), steps])
+    detrended = values - design @ np.linalg.lstsq(design, values, rcond=None)[0]
+    window = np.hanning(m)
+    omega = 2.0 * np.pi * np.fft.rfftfreq(m, sample_time)  # [rad/s]
+    power = np.abs(frequency_response(reference_filter, omega, sample_time)) ** 2
+    kept = (omega < edge) & (power >= ATTENUATION_MIN_POWER)
+    factor = np.where(kept, (1.0 - np.minimum(power, 1.0)) / np.maximum(power, 1e-12), 0.0)
+    taken = np.fft.irfft(np.fft.rfft(detrended * window[:, None], axis=0) * factor[:, None],
+                         n=m, axis=0)
+    return np.asarray(np.mean(taken ** 2, axis=0) / np.mean(window ** 2), dtype=np.float64)
 
 
 def reference_velocity(targets: ArrayLike, sample_time: float, cutoff: float = 0.0

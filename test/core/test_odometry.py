@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from lf_predictor_ros.core.filters import design_wave_filter, frequency_response
 from lf_predictor_ros.core.lf_dynamics import DriftCurve, LfDynamics, VesselMemory
 from lf_predictor_ros.core.odometry import (
     HOLD_FLOOR_FRACTION,
@@ -17,6 +18,7 @@ from lf_predictor_ros.core.odometry import (
     LfOdometry,
     OdometryParams,
     Published,
+    attenuated_variance,
     calibrate,
     fit_error_model,
     fit_error_model_likelihood,
@@ -249,6 +251,55 @@ def test_twist_calibration_against_the_wave_free_reference() -> None:
     assert np.max(np.abs(lagging)) < 0.11  # the wave alone, also at the ends
     with pytest.raises(ValueError, match='twist_reference_cutoff'):
         OdometryParams(twist_reference_cutoff=-0.5)
+
+
+def test_attenuated_variance_is_what_the_zero_phase_filter_took() -> None:
+    """A sinusoid of amplitude 1 at ω below the edge, passed through G = |H(ω)|² already.
+
+    The part taken is (1 − G) sin, mean square (1 − G)²/2: matched within 1 % by the Hann
+    estimate at 0.1–0.25 rad/s, with the targets' broadband notch at ω0 0.63 rad/s (G 0.85 to
+    0.40); a frequency above the edge or where G < ATTENUATION_MIN_POWER counts nothing, and
+    the input is not modified.
+    """
+    h = 0.1
+    sos = design_wave_filter(0.63, h, notch_zeta=1.3)
+    t = np.arange(12000) * h
+    for omega in (0.1, 0.15, 0.2, 0.25):
+        power = abs(complex(frequency_response(sos, [omega], h)[0])) ** 2
+        series = power * np.column_stack([np.sin(omega * t), np.zeros_like(t)])
+        kept = series.copy()
+        taken = attenuated_variance(series, h, sos, 0.315)
+        assert taken[0] == pytest.approx((1.0 - power) ** 2 / 2, rel=0.01)
+        assert taken[1] == 0.0
+        np.testing.assert_array_equal(series, kept)
+    above_edge = attenuated_variance(np.sin(0.25 * t)[:, None], h, sos, 0.2)
+    assert above_edge[0] < 1e-4  # the Hann window's leakage only
+    in_the_notch = attenuated_variance(np.sin(0.63 * t)[:, None], h, sos, 1.0)
+    assert in_the_notch[0] < 1e-4
+    assert attenuated_variance(np.ones((10, 2)), h, sos, 0.3).tolist() == [0.0, 0.0]
+    with pytest.raises(ValueError, match='edge'):
+        attenuated_variance(series, h, sos, -1.0)
+    # calibrate adds it to every twist model's holding part, only with a cutoff
+    n = 3000
+    times = np.arange(float(n)) * h
+    targets = np.column_stack([5.0 * np.sin(0.15 * times), np.zeros(n), np.zeros(n)])
+    history = [Published(float(k * h), targets[k], np.zeros(3), 'network', np.zeros(3),
+                         np.zeros(3)) for k in range(n)]
+    plain = calibrate(history, times, targets, 3, h, 60, twist_cutoff=0.315)
+    added = calibrate(history, times, targets, 3, h, 60, twist_cutoff=0.315,
+                      reference_filter=sos)
+    no_cutoff = calibrate(history, times, targets, 3, h, 60, reference_filter=sos)
+    bare = calibrate(history, times, targets, 3, h, 60)
+    assert plain is not None and added is not None and no_cutoff is not None
+    assert bare is not None
+    expected = attenuated_variance(reference_velocity(targets, h), h, sos, 0.315)
+    assert expected[0] > 0.0
+    for key in plain[1]:
+        np.testing.assert_allclose(np.diag(added[1][key].hold - plain[1][key].hold), expected,
+                                   rtol=1e-12)
+    np.testing.assert_array_equal(no_cutoff[1]['all'].hold, bare[1]['all'].hold)
+    with pytest.raises(ValueError, match='finite'):
+        attenuated_variance(np.full((20, 1), math.nan), h, sos, 0.3)
 
 
 def test_likelihood_fit_recovers_the_model_and_makes_the_mean_nees_one() -> None:

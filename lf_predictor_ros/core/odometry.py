@@ -575,18 +575,27 @@ class LfOdometry:
         self._memory, self._pose_cov, self._twist_cov = memory, pose_cov, twist_cov
         self.counters, self._twin_level = counters, twin_level
 
-    def learn(self, times: ArrayLike, targets: ArrayLike, memory: VesselMemory | None) -> None:
+    def learn(self, times: ArrayLike, targets: ArrayLike, memory: VesselMemory | None,
+              wave_peak_freq: float | None = None,
+              reference_filter: FloatArray | None = None) -> None:
         """New zero-phase targets (times [s] (m,), LF poses (m, ndof)) → calibrate covariances.
 
         ``memory`` is the vessel memory learned from the same window (``learn_vessel_memory``);
-        None keeps the previous one. The same as ``apply_learned(memory, calibrate(...))`` on
-        this odometry's published history (``LfStateEstimator`` runs `calibrate` on a worker).
+        None keeps the previous one. ``wave_peak_freq`` [rad/s] scales the reference cutoffs
+        (``twist_reference_cutoff``, ``pose_reference_cutoff``; None: no ω0 yet, the targets as
+        they are) and ``reference_filter`` is the SOS the targets were filtered with
+        (``twist_attenuation``; None: none). The same as ``apply_learned(memory,
+        calibrate(...))`` on this odometry's published history with every calibration setting
+        of ``params`` (``LfStateEstimator`` runs `calibrate` on a worker).
         """
-        self.apply_learned(memory, calibrate(self.published(), times, targets, self.ndof,
-                                             self.sample_time,
-                                             self.params.min_calibration_samples,
-                                             self.params.pose_lag_prior,
-                                             self.params.pose_twin_fit))
+        params = self.params
+        scale = 0.0 if wave_peak_freq is None else wave_peak_freq
+        self.apply_learned(memory, calibrate(
+            self.published(), times, targets, self.ndof, self.sample_time,
+            params.min_calibration_samples, params.pose_lag_prior, params.pose_twin_fit,
+            params.twist_reference_cutoff * scale, params.pose_reference_cutoff * scale,
+            params.twist_likelihood_fit,
+            reference_filter if params.twist_attenuation else None))
 
     def published(self) -> list[Published]:
         """A copy of the published history the covariances are calibrated on (oldest first)."""

@@ -81,6 +81,45 @@ def test_covariance_is_calibrated_from_target_comparison() -> None:
     assert out.pose_cov[1, 1] == pytest.approx(0.0, abs=1e-12)
 
 
+def test_learn_uses_every_calibration_setting() -> None:
+    """`LfOdometry.learn` equals `calibrate` with the odometry's own settings.
+
+    A 0.05 m north wave at 0.8 rad/s on a 0.01 m/s ramp, published as the ramp itself: the
+    likelihood fit, the reference cutoffs (× ω0 0.8 rad/s: 0.5 ω0 = 0.4 rad/s) and the
+    attenuation term with the targets' filter reach the calibration; without ω0 the cutoffs
+    are off, as on the worker (`lf_state._learn`).
+    """
+    n = 400
+    times = np.arange(float(n)) * H
+    ramp = np.column_stack([0.01 * times, np.zeros(n), np.zeros(n)])
+    targets = ramp + np.column_stack([0.05 * np.sin(0.8 * times), np.zeros(n), np.zeros(n)])
+    sos = design_wave_filter(0.8, H, notch_zeta=1.3)
+    params = OdometryParams(twist_likelihood_fit=True, twist_reference_cutoff=0.5,
+                            pose_reference_cutoff=0.5, twist_attenuation=True)
+    holds = []
+    for omega in (0.8, None):
+        odo = LfOdometry(3, H, params)
+        for k in range(n):
+            odo.track(times[k], ramp[k], np.zeros(3))
+        history = odo.published()
+        odo.learn(times, targets, None, omega, sos)
+        edge = 0.0 if omega is None else 0.4
+        expected = calibrate(history, times, targets, 3, H, params.min_calibration_samples,
+                             params.pose_lag_prior, params.pose_twin_fit, edge, edge, True, sos)
+        assert expected is not None
+        used = (getattr(odo, '_pose_cov'), getattr(odo, '_twist_cov'))
+        for got, want in zip(used, expected, strict=True):
+            assert got.keys() == want.keys()
+            for key in want:
+                np.testing.assert_array_equal(got[key].hold, want[key].hold)
+                np.testing.assert_array_equal(got[key].gain, want[key].gain)
+        holds.append((expected[0]['all'].hold[0, 0], expected[1]['all'].hold[0, 0]))
+    # the settings matter here: with ω0 the pose is fitted against the wave-free ramp
+    # (its error 0, the floor) and the twist's holding part carries the attenuation term
+    assert holds[0][0] < 0.1 * holds[1][0]
+    assert holds[0][1] != holds[1][1]
+
+
 def test_pose_error_model_recovers_lag_time_and_holding_std() -> None:
     """Errors T·w + σ·noise with T = (3 s, 2 s, 4 s), σ = (0.1 m, 0.05 m, 0.004 rad).
 

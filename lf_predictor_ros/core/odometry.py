@@ -192,7 +192,7 @@ class OdometryParams:
         "the calm samples', set the holding part; the likelihood makes the window's mean e²/σ² "
         '1 (thirty-fourth session, tenth rule); false: least squares', ''))
     twist_attenuation: bool = field(default=False, metadata=field_doc(
-        'with twist_reference_cutoff > 0: the twist error model\'s holding part adds, per DOF, '
+        "with twist_reference_cutoff > 0: the twist error model's holding part adds, per DOF, "
         "the variance of the LF velocity the targets' zero-phase filter took away below that "
         "cutoff (`attenuated_variance`: the reference velocity's content where the filter's "
         'power response G is at least ATTENUATION_MIN_POWER, times (1 − G)/G). The reference '

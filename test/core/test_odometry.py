@@ -98,21 +98,22 @@ def test_learn_uses_every_calibration_setting() -> None:
                             pose_reference_cutoff=0.5, twist_attenuation=True)
     holds = []
     for omega in (0.8, None):
-        odo = LfOdometry(3, H, params)
+        odo, twin = LfOdometry(3, H, params), LfOdometry(3, H, params)
         for k in range(n):
             odo.track(times[k], ramp[k], np.zeros(3))
+            twin.track(times[k], ramp[k], np.zeros(3))
         history = odo.published()
         odo.learn(times, targets, None, omega, sos)
         edge = 0.0 if omega is None else 0.4
         expected = calibrate(history, times, targets, 3, H, params.min_calibration_samples,
                              params.pose_lag_prior, params.pose_twin_fit, edge, edge, True, sos)
         assert expected is not None
-        used = (getattr(odo, '_pose_cov'), getattr(odo, '_twist_cov'))
-        for got, want in zip(used, expected, strict=True):
-            assert got.keys() == want.keys()
-            for key in want:
-                np.testing.assert_array_equal(got[key].hold, want[key].hold)
-                np.testing.assert_array_equal(got[key].gain, want[key].gain)
+        twin.apply_learned(None, expected)
+        got, want = odo.track(float(n), ramp[-1], np.zeros(3)), \
+            twin.track(float(n), ramp[-1], np.zeros(3))
+        assert got is not None and want is not None and got.calibrated
+        np.testing.assert_array_equal(got.pose_cov, want.pose_cov)
+        np.testing.assert_array_equal(got.twist_cov, want.twist_cov)
         holds.append((expected[0]['all'].hold[0, 0], expected[1]['all'].hold[0, 0]))
     # the settings matter here: with ω0 the pose is fitted against the wave-free ramp
     # (its error 0, the floor) and the twist's holding part carries the attenuation term

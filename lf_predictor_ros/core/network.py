@@ -286,13 +286,14 @@ class _Linear(torch.nn.Linear):
             super().reset_parameters()
 
 
-def solve_ridge(design: torch.Tensor, wanted: torch.Tensor, ridges: torch.Tensor
-                ) -> torch.Tensor:
-    """argmin_w ‖design w − wanted‖² + rows · Σ_j ridges_j w_j², the last column unpenalized.
+def solve_ridge(design: torch.Tensor, wanted: torch.Tensor, ridges: torch.Tensor,
+                prior: torch.Tensor | None = None) -> torch.Tensor:
+    """argmin_w ‖design w − wanted‖² + rows · Σ_j ridges_j (w_j − prior_j)², the last column free.
 
     ``design`` (rows, n_columns) with the bias column last, ``wanted`` (rows, n_outputs),
     ``ridges`` (n_columns − 1,) or (n_columns − 1, n_outputs): one penalty per column, or per
-    column and output (a separate problem per output). lstsq (minimum norm) rather than solve:
+    column and output (a separate problem per output); ``prior`` (n_columns − 1, n_outputs):
+    the weights each penalty pulls towards (None: 0). lstsq (minimum norm) rather than solve:
     in relative mode the y(t) − y(t) column is identically 0, so without a ridge the normal
     matrix is singular.
     """
@@ -300,6 +301,9 @@ def solve_ridge(design: torch.Tensor, wanted: torch.Tensor, ridges: torch.Tensor
     normal = design.T @ design
     rhs = design.T @ wanted
     per_output = ridges.reshape(n_columns - 1, -1)
+    if prior is not None:
+        pull = per_output * prior * rows  # (n_columns − 1, n_outputs), broadcast per output
+        rhs = rhs + torch.cat((pull, pull.new_zeros(1, pull.shape[1])))
     if per_output.shape[1] == 1:
         solution: torch.Tensor = torch.linalg.lstsq(normal + _penalty(per_output[:, 0], rows),
                                                     rhs, driver='gelsd').solution
@@ -398,7 +402,7 @@ class NnarmaxNet(torch.nn.Module):
         return self.y_mean + self.y_std * out
 
     def fit_linear_bypass(self, x: torch.Tensor, target: torch.Tensor, keep: torch.Tensor,
-                          ridge: float = LINEAR_RIDGE) -> None:
+                          ridge: float = LINEAR_RIDGE, force_prior: float = 0.0) -> None:
         """Solve the linear bypass and output bias by ridge least squares, in place.
 
         ``x`` (rows, n_regressors) raw regressor rows, ``target`` (rows, n_outputs) the values
@@ -408,12 +412,26 @@ class NnarmaxNet(torch.nn.Module):
         residual of the tanh part. A linear least-squares problem has one global optimum, found
         in one solve; gradient-based training then starts from it (series-parallel only: the
         feedback columns must hold the targets). No-op without a bypass.
+
+        ``force_prior`` > 0: the force columns' ridge is ``force_prior`` per row towards their
+        current weights (the warm start's, in the current standardization) instead of
+        ``ridge`` towards 0. A window whose forces add nothing to the positions (a DP loop
+        without excitation: the thrust is a function of the filter's own past estimates) then
+        leaves those weights where earlier windows put them, instead of setting them freely
+        (``PredictorParams.thrust_prior``).
         """
         if self.bypass is None:
             return
         design, wanted = self.linear_problem(x, target, keep)
         ridges = torch.full((design.shape[1] - 1,), ridge, dtype=design.dtype)
-        self.set_linear_solution(solve_ridge(design, wanted, ridges))
+        prior = None
+        if force_prior > 0.0:
+            n_force = self.spec.nu * self.spec.n_inputs_u
+            ridges[:n_force] = force_prior
+            with torch.no_grad():
+                prior = torch.zeros((design.shape[1] - 1, wanted.shape[1]), dtype=design.dtype)
+                prior[:n_force] = self.bypass.weight.T[:n_force]
+        self.set_linear_solution(solve_ridge(design, wanted, ridges, prior))
 
     def linear_problem(self, x: torch.Tensor, target: torch.Tensor, keep: torch.Tensor
                        ) -> tuple[torch.Tensor, torch.Tensor]:

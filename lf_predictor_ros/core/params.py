@@ -246,6 +246,16 @@ class PredictorParams:
             'by the error on the newest retrain_period of the window of a fit on the rest, then '
             'refitted on all of it: the newest data decide how much the thrust is trusted (issue '
             '13, hypothesis 1)'))
+    thrust_prior: float = field(
+        default=0.0, metadata=_doc(
+            "the least-squares fit's ridge on the thrust regressors, per row in standardized "
+            "units, pulls them towards the network in service's instead of towards 0 "
+            '(NnarmaxNet.fit_linear_bypass): a window whose thrust adds nothing to the positions '
+            '(a DP loop without excitation, where the thrust is a function of the estimates) '
+            'leaves the thrust weights where the earlier windows put them instead of setting '
+            'them freely, which closed limit cycles at 0.45-0.52 rad/s with the DP controller '
+            'on onedof_feedback (docs/BENCHMARKS.md, thirty-fifth session; issue 13, '
+            'hypothesis 1); 0 = off (the plain ridge towards 0)', ''))
     regressor_clip: float = field(
         default=0.0, metadata=_doc(
             'clip every regressor the network sees (relative positions, forces) and its output '
@@ -450,6 +460,9 @@ class PredictorParams:
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')
+        if not (math.isfinite(self.thrust_prior) and self.thrust_prior >= 0.0):
+            raise ValueError(f'positivity rule: thrust_prior must be a finite number ≥ 0 (0 = '
+                             f'off), got {self.thrust_prior!r}')
         if any(speed < 0.0 for speed in self.lf_augmentation):
             raise ValueError(f'positivity rule: lf_augmentation must be ≥ 0 in every DOF (0 = '
                              f'off), got {list(self.lf_augmentation)!r}')

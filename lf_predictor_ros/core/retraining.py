@@ -167,7 +167,8 @@ def train_settings(params: PredictorParams) -> TrainSettings:
                          derivative_weight=params.derivative_weight,
                          linear_init=params.linear_init, seed=params.seed,
                          force_ridge_grid=FORCE_RIDGE_GRID if params.thrust_ridge_validation
-                         else (), validation_rows=params.retrain_samples)
+                         else (), validation_rows=params.retrain_samples,
+                         force_prior=params.thrust_prior)
 
 
 def first_training_samples(params: PredictorParams) -> int:

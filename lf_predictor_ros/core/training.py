@@ -112,7 +112,9 @@ class TrainSettings:
     least squares before the first epoch (``NnarmaxNet.fit_linear_bypass``);
     ``force_ridge_grid`` (linear network only; empty: off) the ridges per row on the force
     columns to choose from, per output, by the error on the newest ``validation_rows`` kept rows
-    of a fit on the others (``validated_force_ridges``); ``seed`` is
+    of a fit on the others (``validated_force_ridges``); ``force_prior`` > 0 the force
+    columns' ridge per row towards the warm start's weights in the least-squares solve
+    (``NnarmaxNet.fit_linear_bypass``; 0: ``LINEAR_RIDGE`` towards 0); ``seed`` is
     recorded for stochastic variants (mini-batches, restarts): the three full-batch algorithms
     here use no randomness, so a run is reproducible bit for bit without touching torch's global
     RNG.
@@ -136,6 +138,7 @@ class TrainSettings:
     seed: int = 0
     force_ridge_grid: tuple[float, ...] = ()
     validation_rows: int = 0
+    force_prior: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate; raise ValueError naming the broken rule."""
@@ -152,7 +155,7 @@ class TrainSettings:
                 f'TrainSettings.max_seconds must be > 0 s (math.inf for no limit), got '
                 f'{self.max_seconds}'
             )
-        for name in ('weight_decay', 'derivative_weight', 'min_grad', 'loss_goal'):
+        for name in ('weight_decay', 'derivative_weight', 'min_grad', 'loss_goal', 'force_prior'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f'TrainSettings.{name} must be a finite number ≥ 0, got {value}')
@@ -479,7 +482,8 @@ def _train(
                                         settings.validation_rows, settings.force_ridge_grid)
         model.set_linear_solution(solve_ridge(design, wanted, ridges))
     elif settings.linear_init or solved:
-        model.fit_linear_bypass(window.x_series[:-1], window.target, window.keep)
+        model.fit_linear_bypass(window.x_series[:-1], window.target, window.keep,
+                                force_prior=settings.force_prior)
     runner = _WindowPredictor(model, n_static_regressors(spec), spec.nfb)
     parallel = settings.mode == 'parallel'
     with torch.no_grad():

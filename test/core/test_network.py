@@ -18,6 +18,7 @@ from lf_predictor_ros.core.network import (
     predict_step,
     relative_spread,
     save_checkpoint,
+    solve_ridge,
 )
 from lf_predictor_ros.core.regressors import build_regressors, regressor_vector
 
@@ -316,6 +317,69 @@ def test_fit_linear_bypass_recovers_a_linear_arx_system_exactly(relative: bool) 
     with torch.no_grad():
         error = net(x_t) - target
     assert float(error.abs().max()) < 1e-8
+
+
+def test_solve_ridge_pulls_towards_the_prior() -> None:
+    """The minimizer of ‖D w − y‖² + rows λ (w − p)²: (DᵀD + rows λ) w = Dᵀy + rows λ p.
+
+    One regressor x with y = 2 x (+ bias 0.5, unpenalized): λ 0 gives 2; λ = mean x² gives the
+    mean of 2 and the prior 5, i.e. 3.5; with no prior the same λ gives 1 (towards 0).
+    """
+    rng = np.random.default_rng(8)
+    x = rng.normal(size=500)
+    x -= x.mean()
+    design = torch.from_numpy(np.column_stack((x, np.ones_like(x))))
+    wanted = torch.from_numpy((2.0 * x + 0.5)[:, None])
+    lam = float(np.mean(x * x))
+    prior = torch.tensor([[5.0]], dtype=torch.float64)
+    assert float(solve_ridge(design, wanted, torch.tensor([0.0], dtype=torch.float64),
+                             prior)[0, 0]) == pytest.approx(2.0, abs=1e-9)
+    pulled = solve_ridge(design, wanted, torch.tensor([lam], dtype=torch.float64), prior)
+    assert float(pulled[0, 0]) == pytest.approx(3.5, abs=1e-9)
+    assert float(pulled[1, 0]) == pytest.approx(0.5, abs=1e-9)  # the bias is free
+    shrunk = solve_ridge(design, wanted, torch.tensor([lam], dtype=torch.float64))
+    assert float(shrunk[0, 0]) == pytest.approx(1.0, abs=1e-9)
+
+
+def test_force_prior_keeps_force_weights_the_window_cannot_identify() -> None:
+    """A window whose force is a copy of the newest position: the force weight is unidentified.
+
+    Plain ridge: the minimum-norm split between the force and the position weight. With
+    ``force_prior``: the force weight stays at its warm-start value (within 1e-3 relative: the
+    position weight's own ridge LINEAR_RIDGE towards 0 pulls a little the other way) and the
+    position weight takes the rest, so the prediction on the window is as good. A window
+    where the force is independent identifies its weight whatever the prior.
+    """
+    rng = np.random.default_rng(9)
+    n = 600
+    spec = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=1, ny=1, nfb=0, hidden_units=0,
+                       relative=False)
+    y = np.cumsum(rng.normal(size=(n, 1)), axis=0) * 0.1
+    for collinear in (True, False):
+        u = y.copy() if collinear else rng.normal(size=(n, 1))
+        x, first = build_regressors(u, y, y, spec)
+        x_t = torch.from_numpy(x[:-1])  # rows t = first … n − 2, predicting ŷ(t + 1)
+        target = torch.from_numpy(0.9 * y[first:-1] + (0.0 if collinear else 0.3 * u[first:-1]))
+        keep = torch.ones(len(target), dtype=torch.bool)
+        warm = NnarmaxNet(spec, seed=1)
+        warm.set_standardization(u, y)
+        with torch.no_grad():
+            warm.bypass.weight[0, 0] = 0.25  # the warm start's force weight (standardized)
+        plain, pulled = NnarmaxNet.from_state(spec, warm.state_dict()), \
+            NnarmaxNet.from_state(spec, warm.state_dict())
+        plain.fit_linear_bypass(x_t, target, keep)
+        pulled.fit_linear_bypass(x_t, target, keep, force_prior=0.01)
+        with torch.no_grad():
+            force_weight = float(pulled.bypass.weight[0, 0])
+            plain_weight = float(plain.bypass.weight[0, 0])
+            error = float((pulled(x_t) - target).abs().max())
+        if collinear:
+            assert force_weight == pytest.approx(0.25, rel=1e-3)
+            assert plain_weight != pytest.approx(0.25, rel=1e-2)
+            assert error < 1e-6
+        else:
+            true_weight = 0.3 * float(plain.u_std[0]) / float(plain.y_std[0])
+            assert force_weight == pytest.approx(true_weight, rel=0.02)
 
 
 def test_linear_network_is_the_bypass_plus_a_bias() -> None:

@@ -463,6 +463,9 @@ class PredictorParams:
         if not (math.isfinite(self.thrust_prior) and self.thrust_prior >= 0.0):
             raise ValueError(f'positivity rule: thrust_prior must be a finite number ≥ 0 (0 = '
                              f'off), got {self.thrust_prior!r}')
+        if self.thrust_prior > 0.0 and self.thrust_ridge_validation:
+            raise ValueError('thrust_prior and thrust_ridge_validation both set the thrust '
+                             "weights' ridge: switch one of them off")
         if any(speed < 0.0 for speed in self.lf_augmentation):
             raise ValueError(f'positivity rule: lf_augmentation must be ≥ 0 in every DOF (0 = '
                              f'off), got {list(self.lf_augmentation)!r}')

@@ -43,6 +43,10 @@ RULE_CASES: list[tuple[str, dict[str, Any], str]] = [
     ('hidden_layers', {'hidden_layers': 0}, r'hidden_layers must be ≥ 1'),
     ('thrust_ridge_validation', {'thrust_ridge_validation': True, 'hidden_units': 2},
      r'thrust_ridge_validation needs the linear network \(hidden_units 0, got 2\)'),
+    ('thrust_prior negative', {'thrust_prior': -0.01}, r'thrust_prior must be a finite number'),
+    ('thrust_prior nan', {'thrust_prior': math.nan}, r'thrust_prior must be finite'),
+    ('thrust_prior with the grid', {'thrust_prior': 0.01, 'thrust_ridge_validation': True},
+     r'thrust_prior and thrust_ridge_validation'),
     ('max_epochs', {'max_epochs': 0}, r'max_epochs must be ≥ 1'),
     ('sub-sample window', {'transient_length': 0.2}, r'transient_length = 0\.2 s is shorter '
                                                       r'than one sample'),

@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from method_probe import run_cases  # noqa: E402 - the sibling script
 import twin_gain_calibration  # noqa: E402 - the sibling script
 
-from lf_predictor_ros.benchmark.odometry_bench import _true_twist  # noqa: E402
+from lf_predictor_ros.benchmark.odometry_bench import true_twist  # noqa: E402
 from lf_predictor_ros.core.heading import wrap_angle  # noqa: E402
 from lf_predictor_ros.core.lf_dynamics import body_velocity  # noqa: E402
 from lf_predictor_ros.core.odometry import (  # noqa: E402
@@ -110,7 +110,7 @@ def probe(scenario: str, seed: int) -> None:
     true_v: FloatArray | None = None
     for w in examined(scenario, seed):
         if true_v is None:
-            true_v = _true_twist(w.truth, w.h, w.n)
+            true_v = true_twist(w.truth, w.h, w.n)
         ref_v = body_velocity(w.reference, w.h)
         twist = np.array([p.twist for p in w.rows])
         wave = _high_pass(ref_v, w.h, w.cutoff)[w.index]
@@ -164,7 +164,7 @@ def shared_probe(scenario: str, seed: int) -> None:
     """``--shared``: what the twist's error shares with the low-passed reference's."""
     windows = list(examined(scenario, seed))[-1:]
     for w in windows:
-        true_v = _true_twist(w.truth, w.h, w.n)[w.at]
+        true_v = true_twist(w.truth, w.h, w.n)[w.at]
         twist = np.array([p.twist for p in w.rows])
         reference = reference_velocity(w.reference, w.h, w.cutoff)[w.index]
         e, d = twist - true_v, reference - true_v

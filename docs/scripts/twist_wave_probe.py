@@ -38,7 +38,7 @@ from method_probe import case_arguments  # noqa: E402 - the sibling script
 from twin_gain_calibration import CALIBRATION_SEEDS  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.benchmark.estimators import predictor_params  # noqa: E402
-from lf_predictor_ros.benchmark.odometry_bench import _true_twist, consistency  # noqa: E402
+from lf_predictor_ros.benchmark.odometry_bench import consistency, true_twist  # noqa: E402
 from lf_predictor_ros.benchmark.suite import (  # noqa: E402
     make_recording,
     make_setup,
@@ -93,7 +93,7 @@ def probe(scenario_name: str, seed: int, blocks: bool) -> None:
     idx = np.array(keep) + 1
     twist = np.array([o.twist[:n] for o in odoms])
     cov = np.array([o.twist_cov[:n, :n] for o in odoms])
-    true = _true_twist(data['truth'], h, n)[idx]
+    true = true_twist(data['truth'], h, n)[idx]
     err = twist - true
     nees = consistency(err, cov)
     edge = CUTOFF * omega

@@ -227,7 +227,8 @@ def _wrap_error(estimate: FloatArray, truth: FloatArray, ndof: int) -> FloatArra
     return err
 
 
-def _true_twist(truth: FloatArray, sample_time: float, ndof: int) -> FloatArray:
+def true_twist(truth: FloatArray, sample_time: float, ndof: int) -> FloatArray:
+    """The true LF body velocity of a true LF pose series (heading unwrapped; a new array)."""
     eta = truth[:, :ndof].copy()
     if ndof == 3:
         eta[:, 2] = np.unwrap(eta[:, 2])
@@ -255,16 +256,16 @@ def _tracking_run(params: PredictorParams, odometry: OdometryParams,
     pose_cov = np.array([o.pose_cov[:n, :n] for o in odoms])
     twist = np.array([o.twist[:n] for o in odoms])
     twist_cov = np.array([o.twist_cov[:n, :n] for o in odoms])
-    true_twist = _true_twist(truth, h, n)[idx]
+    truth_twist = true_twist(truth, h, n)[idx]
     pose_err = _wrap_error(pose, truth[idx], n)
-    twist_err = twist - true_twist
+    twist_err = twist - truth_twist
     # PID's finite difference of the published pose, over the whole run (filter warmed up)
     all_pose = np.array([o.pose if o is not None else np.full(3, np.nan) for o in outs[:-1]])
     valid = np.all(np.isfinite(all_pose), axis=1)
     first = int(np.argmax(valid))
     fd = np.full((all_pose.shape[0], n), np.nan)
     fd[first:] = pid_velocity(all_pose[first:], h, n)
-    fd_err = fd[np.array(keep)] - true_twist
+    fd_err = fd[np.array(keep)] - truth_twist
 
     def rms(values: FloatArray) -> list[float]:
         return [float(v) for v in np.sqrt(np.nanmean(values**2, axis=0))]
@@ -272,7 +273,7 @@ def _tracking_run(params: PredictorParams, odometry: OdometryParams,
     seen: dict[str, Any] = {}
     if seen_truth is not None:
         seen_pose_err = _wrap_error(pose, seen_truth[idx], n)
-        seen_twist_err = twist - _true_twist(seen_truth, h, n)[idx]
+        seen_twist_err = twist - true_twist(seen_truth, h, n)[idx]
         seen = {'pose_seen': consistency(seen_pose_err, pose_cov),
                 'twist_seen': consistency(seen_twist_err, twist_cov),
                 'pose_seen_rmse': rms(seen_pose_err), 'twist_seen_rmse': rms(seen_twist_err)}
@@ -282,7 +283,7 @@ def _tracking_run(params: PredictorParams, odometry: OdometryParams,
             'pose': consistency(pose_err, pose_cov), 'twist': consistency(twist_err, twist_cov),
             'pose_rmse': rms(pose_err), 'pose_std_published': rms(
                 np.sqrt(np.diagonal(pose_cov, axis1=1, axis2=2))),
-            'twist_rmse': rms(twist_err), 'twist_zero_rmse': rms(true_twist),
+            'twist_rmse': rms(twist_err), 'twist_zero_rmse': rms(truth_twist),
             'twist_pid_fd_rmse': rms(fd_err),
             'twist_std_published': rms(np.sqrt(np.diagonal(twist_cov, axis1=1, axis2=2)))}
 

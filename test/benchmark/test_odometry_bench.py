@@ -24,6 +24,7 @@ from lf_predictor_ros.benchmark.odometry_bench import (
     pid_velocity,
     report,
     run_odometry_case,
+    true_twist,
 )
 from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
@@ -207,3 +208,21 @@ def test_odometry_overrides_are_validated() -> None:
     assert _odometry_overrides(['dead_reckoner=kalman']) is None  # invalid value
     assert _odometry_overrides(['no_such_field=1']) is None
     assert _odometry_overrides(['dead_reckoner']) is None  # no '='
+
+
+def test_true_twist_is_the_body_velocity_across_the_heading_wrap() -> None:
+    """1 m/s north while turning at 0.01 rad/s through ±π: u = cos ψ, v = −sin ψ, r = 0.01.
+
+    The heading is wrapped in the truth; the twist is taken on the unwrapped heading (central
+    differences: exact for the linear motion and the constant rate, away from the ends).
+    """
+    h = 1.0
+    t = np.arange(200.0) * h
+    heading = 3.0 + 0.01 * t  # crosses π at t ≈ 14 s
+    truth = np.column_stack([t, np.zeros_like(t), np.angle(np.exp(1j * heading))])
+    kept = truth.copy()
+    twist = true_twist(truth, h, 3)
+    np.testing.assert_allclose(twist[1:-1, 2], 0.01, atol=1e-12)
+    np.testing.assert_allclose(twist[1:-1, 0], np.cos(heading[1:-1]), atol=1e-12)
+    np.testing.assert_allclose(twist[1:-1, 1], -np.sin(heading[1:-1]), atol=1e-12)
+    np.testing.assert_array_equal(truth, kept)

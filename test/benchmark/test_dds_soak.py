@@ -28,21 +28,23 @@ from lf_predictor_ros.benchmark.dds_soak import (
 )
 from lf_predictor_ros.nodes.conversions import pose_to_msg, sec_to_stamp
 
-# Smoke run: 1 simulated minute at 100 Hz, 4× real time = 15 s of feed (+ node start-up).
+# Smoke run: 1 simulated minute at 25 Hz, 4× real time = 15 s of feed (+ node start-up): 100
+# poses and 100 thrusts per second of wall time, the message rate of the contract's 100 Hz in
+# real time, compressed in simulated time.
 SMOKE_MINUTES = 1.0  # [min simulated]
 SMOKE_SPEED = 4.0  # [× real time]
-SMOKE_RATE = 100.0  # [Hz]
+SMOKE_RATE = 25.0  # [Hz]
 BLOCK_BYTES = 64 * 2**20  # [bytes] allocation whose pages must show up in VmRSS
 # Every required SoakResult field as 0 / False (a result to format, not a measurement).
 _ZERO_RESULT: dict[str, Any] = {
     f.name: (False if f.type == 'bool' else 0) for f in dataclasses.fields(SoakResult)
     if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING}
-# 840 msg/s (poses and thrust at 4 × 100 Hz, canaries) into the contract's keep_last 5
-# sensor-QoS queues: a node descheduled for more than ~12 ms loses samples, and how often
-# that happens is the machine's load, not the code's. The loss is a benchmark figure
-# (docs/RELIABILITY.md, 0.01–0.5 % there); this bound only catches a broken pipeline (no
-# delivery, a wrong QoS, double counting). It was 2 %, and a loaded CI machine went over it
-# (2.2–2.3 %) in three sessions.
+# The smoke run once fed 100 Hz at 4× real time (840 msg/s) into the contract's keep_last 5
+# sensor-QoS queues: whether the node keeps up with four times the contract's rate is the
+# machine's speed and load, not the code's, and CI machines lost 2.2 % to 21 % of the poses
+# (this machine, idle, 10–13 % on 2026-12-03; 0 % at 25 Hz, 0.3 % at 2×). The loss at and
+# above the contract's rate is a benchmark figure (docs/RELIABILITY.md, "Load and soak"); this
+# bound only catches a broken pipeline (no delivery, a wrong QoS, double counting).
 MAX_SMOKE_POSE_LOSS = 0.10
 
 
@@ -122,14 +124,14 @@ def test_config_rejects_nonsense() -> None:
 def test_short_soak_through_dds_delivers_and_accounts_for_everything() -> None:
     result = run_soak(SoakConfig(minutes=SMOKE_MINUTES, speed=SMOKE_SPEED, rate=SMOKE_RATE))
     assert result.node_exit_code == 0
-    assert result.poses_sent == 5990 and result.canaries_sent == 599  # t = 0 … 59.9 s
+    assert result.poses_sent == 1498 and result.canaries_sent == 149  # t = 0 … 59.88 s
     assert result.achieved_speed == pytest.approx(SMOKE_SPEED, rel=0.05)
     # The node saw (nearly) every pose: canaries it did not count are the only losses.
     assert result.canaries_received <= result.canaries_sent
     assert result.node_pose_loss <= MAX_SMOKE_POSE_LOSS, result
     # The exact count agrees: every pose the node took was a real one, none twice.
     assert 0 < result.poses_accepted <= result.poses_sent
-    assert result.pose_loss_exact == pytest.approx(1.0 - result.poses_accepted / 5990)
+    assert result.pose_loss_exact == pytest.approx(1.0 - result.poses_accepted / 1498)
     assert result.pose_loss_exact <= MAX_SMOKE_POSE_LOSS, result
     # The real stream is clean: nothing dropped as out-of-order or outlier, no gap, no staleness.
     assert result.node_dropped == 0 and result.node_gaps == 0 and result.node_stale_thrust == 0

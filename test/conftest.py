@@ -1,8 +1,9 @@
 """Test harness: DDS isolation per test process and an rclpy Context per test.
 
-Every pytest process gets its own ROS_DOMAIN_ID (derived from the PID, range 1..100 minus a few
-reserved ones) and discovery limited to localhost, set before anything imports rclpy, so parallel
-CI jobs and a developer's running demo never see each other's topics.
+Every pytest process gets its own ROS_DOMAIN_ID (range 1..100, derived from the PID; under
+pytest-xdist from the controller's PID plus the worker's index, so the workers of one run never
+share a domain) and discovery limited to localhost, set before anything imports rclpy, so parallel
+CI jobs, the workers of one run and a developer's running demo never see each other's topics.
 """
 from __future__ import annotations
 
@@ -21,13 +22,22 @@ if _TESTS not in sys.path:
     sys.path.append(_TESTS)
 
 
-def _isolated_domain_id(pid: int) -> int:
+def _isolated_domain_id(pid: int, worker: str | None = None, parent: int = 0) -> int:
+    """A ROS_DOMAIN_ID for this test process, 1..100.
+
+    ``worker``: pytest-xdist's ``PYTEST_XDIST_WORKER`` ('gw0', 'gw1', …; None outside xdist);
+    the workers are children of the run's controller (``parent``): consecutive domains from its
+    PID, so two workers of one run never collide (PIDs modulo 100 could).
+    """
     # 1..100: stays inside the range every RMW maps to valid ports; 0 is the default domain.
-    return 1 + pid % 100
+    if worker is None or not worker.startswith('gw') or not worker[2:].isdigit():
+        return 1 + pid % 100
+    return 1 + (parent + int(worker[2:])) % 100
 
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-os.environ['ROS_DOMAIN_ID'] = str(_isolated_domain_id(os.getpid()))
+os.environ['ROS_DOMAIN_ID'] = str(_isolated_domain_id(
+    os.getpid(), os.environ.get('PYTEST_XDIST_WORKER'), os.getppid()))
 os.environ.setdefault('RCUTILS_LOGGING_BUFFERED_STREAM', '1')
 os.environ.setdefault('MPLBACKEND', 'Agg')
 

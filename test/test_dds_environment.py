@@ -98,3 +98,15 @@ def test_other_domain_is_not_heard(ros_context: object, dds_env: dict[str, str])
         executor.shutdown()
         node.destroy_node()
     assert received == []
+
+
+def test_domain_ids_stay_in_range_and_xdist_workers_never_share_one() -> None:
+    from conftest import _isolated_domain_id
+
+    assert _isolated_domain_id(4321) == 22 and _isolated_domain_id(4399) == 100
+    assert _isolated_domain_id(4400) == 1  # never 0, the default domain
+    # PIDs 4321 and 4421 collide modulo 100; workers of one run (controller PID 4399) do not
+    workers = [_isolated_domain_id(pid, f'gw{i}', 4399) for i, pid in enumerate((4321, 4421))]
+    assert workers == [100, 1]
+    assert len({_isolated_domain_id(0, f'gw{i}', 977) for i in range(100)}) == 100
+    assert _isolated_domain_id(4321, 'master', 4399) == 22  # not an xdist worker name: the PID

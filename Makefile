@@ -3,6 +3,8 @@ VENV ?= .venv
 SHELL := /bin/bash
 ACT := source $(VENV)/setup.bash &&
 SCENARIO ?=
+# pytest-xdist workers for `make test` (auto: one per core; 0: in this process)
+PYTEST_WORKERS ?= auto
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
 .PHONY: venv demo test lint typecheck pytest benchmark clean
@@ -23,7 +25,7 @@ typecheck:
 	@$(ACT) echo '[typecheck] mypy' && mypy
 
 pytest:
-	@$(ACT) echo '[pytest]' && python -m pytest $(PYTEST_ARGS)
+	@$(ACT) echo '[pytest]' && python -m pytest -n $(PYTEST_WORKERS) --dist loadfile $(PYTEST_ARGS)
 
 benchmark: venv
 	@$(ACT) benchmark $(BENCHMARK_ARGS)

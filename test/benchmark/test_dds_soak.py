@@ -41,10 +41,10 @@ _ZERO_RESULT: dict[str, Any] = {
     if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING}
 # The smoke run once fed 100 Hz at 4× real time (840 msg/s) into the contract's keep_last 5
 # sensor-QoS queues: whether the node keeps up with four times the contract's rate is the
-# machine's speed and load, not the code's, and CI machines lost 2.2 % to 21 % of the poses
-# (this machine, idle, 10–13 % on 2026-12-03; 0 % at 25 Hz, 0.3 % at 2×). The loss at and
-# above the contract's rate is a benchmark figure (docs/RELIABILITY.md, "Load and soak"); this
-# bound only catches a broken pipeline (no delivery, a wrong QoS, double counting).
+# machine's speed and state, not the code's: CI machines lost 2.2 % to 21 % of the poses, and
+# this one 10–13 % and an hour later 0.03 % (2026-12-03; 0 % at 25 Hz, 0.3 % at 2×). The
+# loss at and above the contract's rate is a benchmark figure (docs/RELIABILITY.md, "Load and
+# soak"); this bound only catches a broken pipeline (no delivery, a wrong QoS, double counting).
 MAX_SMOKE_POSE_LOSS = 0.10
 
 

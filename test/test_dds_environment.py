@@ -79,6 +79,7 @@ def test_other_domain_is_not_heard(ros_context: object, dds_env: dict[str, str])
     from rclpy.executors import SingleThreadedExecutor
 
     other = dict(dds_env)
+    # the next domain: under xdist another worker's (conftest), where no test uses probe_pose
     other['ROS_DOMAIN_ID'] = str(1 + (int(dds_env['ROS_DOMAIN_ID']) % 100))
     assert other['ROS_DOMAIN_ID'] != dds_env['ROS_DOMAIN_ID']
     node = rclpy.create_node('dds_probe_isolated', context=ros_context)

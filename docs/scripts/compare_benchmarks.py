@@ -20,20 +20,26 @@ import math
 import sys
 from typing import Any
 
+from lf_predictor_ros.benchmark.benchmark import section_name
 from lf_predictor_ros.benchmark.scoring import interval, ratios
 
 DOFS = ('north', 'east', 'yaw')
 
 
 def cases(path: str) -> dict[tuple[str, int], dict[str, Any]]:
-    """(scenario, seed) → case of a benchmark JSON (gzip-compressed if it ends in .gz)."""
+    """(section, seed) → case of a benchmark JSON (gzip-compressed if it ends in .gz).
+
+    The section is the scenario, with its run length for a scenario's long run
+    (`benchmark.section_name`: ``supply_closed_loop, 7200 s runs``).
+    """
     if path.endswith('.gz'):
         with gzip.open(path, 'rt', encoding='utf-8') as compressed:
             data = json.load(compressed)
     else:
         with open(path, encoding='utf-8') as handle:
             data = json.load(handle)
-    return {(case['scenario'], int(case['seed'])): case for case in data['cases']}
+    return {(section_name(case['scenario'], float(case['duration'])), int(case['seed'])): case
+            for case in data['cases']}
 
 
 def cell(values: Sequence[float]) -> str:

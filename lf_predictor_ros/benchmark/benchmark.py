@@ -15,7 +15,9 @@ Per scenario the page has, in this order: the **closed-loop** table (every causa
 own DP loop; `suite.run_closed_loops`) with the targets of the method issue; the **open-loop**
 table on the fair recording (the DP loop closed on ``--recording-loop``, the tuned observer by
 default), with the recording's provenance and the thrust-only leak check; the adaptation table
-for ω0 schedules. Targets are printed met / MISSED, never hidden.
+for ω0 schedules. Targets are printed met / MISSED, never hidden. The station-keeping scenarios
+of `LONG_RUNS` run a second time for two hours on the same seeds, in sections of their own
+(``supply_closed_loop, 7200 s runs``); ``--no-long-runs`` skips them.
 """
 from __future__ import annotations
 
@@ -63,6 +65,12 @@ SUITE: dict[str, float | None] = {
     'threedof_open_loop': 1800.0,
     'omega_steps': None,  # the adaptation benchmark (ω0 steps 1.25 → 0.3 → 1.25 rad/s, 3 h)
 }
+# scenario → a second, long run of the same seeds [s]: a DP operation lasts hours, and 1800 s
+# runs miss what takes time to show (late limit cycles once the training window has slid past
+# the start's excitation) and weigh the warm-up (docs/BENCHMARKS.md, thirty-sixth session: two
+# hours moved the station-keeping verdicts both ways). Station keeping only: these scenarios
+# have no setpoint schedule, so run length is the only difference. `--no-long-runs` drops them.
+LONG_RUNS: dict[str, float] = {'supply_closed_loop': 7200.0, 'onedof_feedback': 7200.0}
 # 900 s for the 3-DOF case: its linear limit fits 106 coefficients on ≥ 424 scored samples
 FAST_SUITE: dict[str, float | None] = {'onedof_feedback': 600.0, 'supply_closed_loop': 900.0}
 FAST_OVERRIDES = {'max_epochs': 15}  # smoke run only: fewer epochs per training
@@ -95,7 +103,11 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
                         help=f'first held-out seed (default {FIRST_HELD_OUT_SEED}; seeds '
                         f'{TUNING_SEEDS} are tuning seeds and refused)')
     parser.add_argument('--scenarios', nargs='*', help='subset of the suite')
-    parser.add_argument('--duration', type=float, help='override every duration [s]')
+    parser.add_argument('--duration', type=float,
+                        help='override every duration [s] (one run per scenario and seed)')
+    parser.add_argument('--no-long-runs', action='store_true',
+                        help='skip the second, long run of ' + ', '.join(
+                            f'{name} ({seconds:.0f} s)' for name, seconds in LONG_RUNS.items()))
     parser.add_argument('--recording-loop', default=DEFAULT_RECORDING_LOOP, choices=CAUSAL,
                         help='estimator the open-loop recordings close their DP loop on')
     parser.add_argument('--scheduler', help="Dask scheduler address (tcp://HOST:PORT); default: "
@@ -442,35 +454,40 @@ def _stability_rule() -> str:
 
 
 def write_figures(results: list[CaseResult], page: Path) -> dict[str, list[str]]:
-    """PNGs of the first held-out seed of each scenario next to the page; links per scenario."""
+    """PNGs of the first held-out seed of each section (`section_name`) next to the page.
+
+    Returns the image links per section.
+    """
     from lf_predictor_ros.benchmark.plots import plot_adaptation, plot_closed_loops
 
     folder = page.parent / FIGURE_DIR
     links: dict[str, list[str]] = {}
     for case in results:
-        if case.scenario in links:
+        section = section_name(case.scenario, case.duration)
+        if section in links:
             continue
-        links[case.scenario] = []
+        links[section] = []
+        stem = section.replace(', ', '_').replace(' s runs', 's')
         if case.loop_series:
             folder.mkdir(parents=True, exist_ok=True)
-            name = f'{case.scenario}_closed_loop.png'
-            plot_closed_loops(f'{case.scenario}, seed {case.seed}: closed loops',
+            name = f'{stem}_closed_loop.png'
+            plot_closed_loops(f'{section}, seed {case.seed}: closed loops',
                               case.loop_series, case.ndof, folder / name)
-            links[case.scenario].append(f'{FIGURE_DIR}/{name}')
+            links[section].append(f'{FIGURE_DIR}/{name}')
         if case.adaptation_series is not None:
             folder.mkdir(parents=True, exist_ok=True)
-            name = f'{case.scenario}_adaptation.png'
-            plot_adaptation(f'{case.scenario}, seed {case.seed}: rolling RMSE of the LF '
+            name = f'{stem}_adaptation.png'
+            plot_adaptation(f'{section}, seed {case.seed}: rolling RMSE of the LF '
                             'estimate, adaptive vs frozen', case.adaptation_series,
                             folder / name, 'm')
-            links[case.scenario].append(f'{FIGURE_DIR}/{name}')
+            links[section].append(f'{FIGURE_DIR}/{name}')
     return links
 
 
 def render(results: list[CaseResult], command: str, wall: float, where: str,
            figures: Mapping[str, Sequence[str]] | None = None,
            overrides: Mapping[str, Any] | None = None) -> str:
-    """The results page (markdown); ``figures`` maps a scenario to its image links.
+    """The results page (markdown); ``figures``: a section's image links (`section_name`).
 
     ``overrides``: the PredictorParams values given instead of the shipped defaults (said on
     the page: then 'adaptive' is not the product as shipped).
@@ -504,19 +521,30 @@ def render(results: list[CaseResult], command: str, wall: float, where: str,
              ' "Fair benchmark".', '']
     by_scenario: dict[str, list[CaseResult]] = {}
     for case in results:
-        by_scenario.setdefault(case.scenario, []).append(case)
+        by_scenario.setdefault(section_name(case.scenario, case.duration), []).append(case)
     for name, cases in by_scenario.items():
         lines += [f'### {name}', '', f'{len(cases)} held-out seed(s): '
                   f'{", ".join(str(c.seed) for c in cases)}.' + _shift_note(cases), '']
         if any(c.closed_loop for c in cases):
             lines += _closed_loop_table(cases)
-        lines += _open_loop_table(name, cases)
-        lines += _seen_truth_table(name, cases)
+        lines += _open_loop_table(cases[0].scenario, cases)
+        lines += _seen_truth_table(cases[0].scenario, cases)
         if any(c.adaptation for c in cases):
             lines += _adaptation_table(cases)
         for link in (figures or {}).get(name, ()):
             lines += [f'![{name}]({link})', '']
     return '\n'.join(lines) + '\n'
+
+
+def _durations(name: str, args: argparse.Namespace) -> list[float | None]:
+    """The runs of one scenario [s]: ``--duration``, else the suite's, then its long run."""
+    if args.duration:
+        return [args.duration]
+    suite = FAST_SUITE if args.fast else SUITE
+    durations = [suite.get(name, SUITE.get(name))]
+    if not (args.fast or args.no_long_runs) and name in LONG_RUNS:
+        durations.append(LONG_RUNS[name])
+    return durations
 
 
 def _specs(args: argparse.Namespace) -> list[CaseSpec]:
@@ -525,10 +553,19 @@ def _specs(args: argparse.Namespace) -> list[CaseSpec]:
     seeds = [args.first_seed] if args.fast else list(range(args.first_seed,
                                                            args.first_seed + args.seeds))
     overrides = {**(FAST_OVERRIDES if args.fast else {}), **args.param}
-    return [CaseSpec(name, seed, args.duration or suite.get(name, SUITE.get(name)), overrides,
-                     args.recording_loop,
+    return [CaseSpec(name, seed, duration, overrides, args.recording_loop,
                      schedule_shift=schedule_shift_for_seed(seed, args.schedule_spread))
-            for name in names for seed in seeds]
+            for name in names for duration in _durations(name, args) for seed in seeds]
+
+
+def section_name(scenario: str, duration: float) -> str:
+    """A case's section on the page: its scenario, and its run length if that is its long run.
+
+    ``supply_closed_loop, 7200 s runs`` (`LONG_RUNS`). ``duration``: the run's simulated length
+    [s]; its last sample is one step short, so it is read to the 10 s.
+    """
+    length = float(round(duration, -1))
+    return f'{scenario}, {length:.0f} s runs' if LONG_RUNS.get(scenario) == length else scenario
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -11,12 +11,15 @@ import pytest
 
 from lf_predictor_ros.benchmark.adaptation import AdaptationEvent
 from lf_predictor_ros.benchmark.benchmark import (
+    LONG_RUNS,
     SCHEDULE_SPREAD,
+    SUITE,
     _parse,
     _specs,
     main,
     param_overrides,
     render,
+    section_name,
     write_figures,
 )
 from lf_predictor_ros.benchmark.recordings import LeakError, record
@@ -375,3 +378,50 @@ def test_schedule_spread_gives_each_seed_its_own_shift(capsys: pytest.CaptureFix
     with pytest.raises(SystemExit):
         main(['--schedule-spread', '-5'])
     assert '--schedule-spread must be finite and >= 0' in capsys.readouterr().err
+
+
+def test_station_keeping_scenarios_also_run_two_hours_in_their_own_sections(
+        tmp_path: Path) -> None:
+    """The default suite adds a 7200 s run of each LONG_RUNS scenario on the same seeds."""
+    assert LONG_RUNS == {'supply_closed_loop': 7200.0, 'onedof_feedback': 7200.0}
+    assert all(SUITE[name] == 1800.0 for name in LONG_RUNS)
+    specs = _specs(_parse(['--seeds', '2']))
+    runs = [(s.scenario, s.duration, s.seed) for s in specs]
+    assert len(runs) == len(set(runs)) == 2 * (len(SUITE) + len(LONG_RUNS))
+    assert [(d, seed) for name, d, seed in runs if name == 'onedof_feedback'] == \
+        [(1800.0, 11), (1800.0, 12), (7200.0, 11), (7200.0, 12)]
+    assert [d for name, d, _ in runs if name == 'rao_supply'] == [1800.0, 1800.0]
+    # the same seed's long run delays its events by the same draw
+    shifts = {(s.scenario, s.seed): set() for s in specs}
+    for spec in specs:
+        shifts[spec.scenario, spec.seed].add(spec.schedule_shift)
+    assert all(len(v) == 1 for v in shifts.values())
+    assert [s.duration for s in _specs(_parse(['--seeds', '1', '--no-long-runs',
+                                               '--scenarios', 'onedof_feedback']))] == [1800.0]
+    assert [s.duration for s in _specs(_parse(['--seeds', '1', '--duration', '900',
+                                               '--scenarios', 'onedof_feedback']))] == [900.0]
+    assert [s.duration for s in _specs(_parse(['--fast']))] == [600.0, 900.0]
+    # sections: a scenario's long run is named with its length, every other run by its scenario
+    assert section_name('onedof_feedback', 7199.9) == 'onedof_feedback, 7200 s runs'
+    assert section_name('onedof_feedback', 1799.0) == 'onedof_feedback'
+    assert section_name('rao_supply', 7200.0) == 'rao_supply'
+    short = [_case(2, 2.0), _case(3, 4.0)]
+    long = [dataclasses.replace(c, duration=7199.9) for c in (_case(2, 1.0), _case(3, 1.0))]
+    page = render(short + long, 'b', 1.0, 'here')
+    assert page.count('### onedof_feedback') == 2
+    assert '### onedof_feedback\n\n2 held-out seed(s): 2, 3.' in page
+    assert '### onedof_feedback, 7200 s runs\n\n2 held-out seed(s): 2, 3.' in page
+    # each section scores its own cases: thrust 3 % of raw (short), 1 % (long)
+    short_part, long_part = page.split('### onedof_feedback, 7200 s runs')
+    target = '| thrust wave-band power adaptive / raw loop ≤ 0.03 per DOF | north '
+    assert target + '0.03 [-0.0971, 0.157] | met |' in short_part
+    assert target + '0.01 [0.01, 0.01] | met |' in long_part
+    t = np.arange(0.0, 100.0, 10.0)
+    loop = LoopSeries(t, np.zeros((t.size, 1)), t, np.ones((t.size, 1)))
+    with_series = [dataclasses.replace(c, loop_series={'ideal': loop})
+                   for c in (short[0], long[0])]
+    links = write_figures(with_series, tmp_path / 'RESULTS.md')
+    assert links == {'onedof_feedback': ['results/onedof_feedback_closed_loop.png'],
+                     'onedof_feedback, 7200 s runs':
+                         ['results/onedof_feedback_7200s_closed_loop.png']}
+    assert (tmp_path / 'results' / 'onedof_feedback_7200s_closed_loop.png').is_file()

@@ -519,10 +519,10 @@ def render(results: list[CaseResult], command: str, wall: float, where: str,
              f'Held-out seeds: {seeds}. Tuning seeds (never in the tables): {list(TUNING_SEEDS)}.',
              '', 'What the numbers say, and where the learned filter loses: `docs/BENCHMARKS.md`,'
              ' "Fair benchmark".', '']
-    by_scenario: dict[str, list[CaseResult]] = {}
+    by_section: dict[str, list[CaseResult]] = {}
     for case in results:
-        by_scenario.setdefault(section_name(case.scenario, case.duration), []).append(case)
-    for name, cases in by_scenario.items():
+        by_section.setdefault(section_name(case.scenario, case.duration), []).append(case)
+    for name, cases in by_section.items():
         lines += [f'### {name}', '', f'{len(cases)} held-out seed(s): '
                   f'{", ".join(str(c.seed) for c in cases)}.' + _shift_note(cases), '']
         if any(c.closed_loop for c in cases):
@@ -536,11 +536,11 @@ def render(results: list[CaseResult], command: str, wall: float, where: str,
     return '\n'.join(lines) + '\n'
 
 
-def _durations(name: str, args: argparse.Namespace) -> list[float | None]:
+def _durations(name: str, args: argparse.Namespace,
+               suite: Mapping[str, float | None]) -> list[float | None]:
     """The runs of one scenario [s]: ``--duration``, else the suite's, then its long run."""
     if args.duration:
         return [args.duration]
-    suite = FAST_SUITE if args.fast else SUITE
     durations = [suite.get(name, SUITE.get(name))]
     if not (args.fast or args.no_long_runs) and name in LONG_RUNS:
         durations.append(LONG_RUNS[name])
@@ -555,7 +555,8 @@ def _specs(args: argparse.Namespace) -> list[CaseSpec]:
     overrides = {**(FAST_OVERRIDES if args.fast else {}), **args.param}
     return [CaseSpec(name, seed, duration, overrides, args.recording_loop,
                      schedule_shift=schedule_shift_for_seed(seed, args.schedule_spread))
-            for name in names for duration in _durations(name, args) for seed in seeds]
+            for name in names for duration in _durations(name, args, suite)
+            for seed in seeds]
 
 
 def section_name(scenario: str, duration: float) -> str:

@@ -30,6 +30,14 @@ restarted, the memory is emptied). Then
    free, and the forgotten memory is kept for the next training.
 
 The first training and every restart fit as the package does (empty memory).
+
+The package accepts a candidate only if its loss on the window is within 2 % of the network in
+service's (`retraining._judge`). A memory candidate minimizes the window's error *plus* the
+memory's penalty, so on the window alone it is often worse: in the pre-check's runs most
+candidates were rejected after the first twenty minutes, and the network in service aged.
+``--judge-penalized`` judges a memory candidate as what it is, the optimum of the penalized
+objective (where the network in service is one feasible point and cannot be better): only the
+finiteness test and the causal cascade's loss (`run_retraining`) can reject it.
 """
 from __future__ import annotations
 
@@ -46,7 +54,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import method_probe  # noqa: E402
 
-from lf_predictor_ros.core import network  # noqa: E402
+from lf_predictor_ros.core import network, retraining  # noqa: E402
 from lf_predictor_ros.core.network import LINEAR_RIDGE, NnarmaxNet  # noqa: E402
 
 RETRAIN_PERIOD = 60.0  # [s] the shipped Δ (the memory's time forgetting is per training)
@@ -71,7 +79,17 @@ class Memory:
 
 
 MEMORIES: dict[bool, Memory] = {}
-SETTINGS: dict[str, float] = {'memory_time': 3600.0}
+SETTINGS: dict[str, float] = {'memory_time': 3600.0, 'judge_penalized': 0.0}
+LAST_FIT = {'memory': False}  # did the newest fit use the memory (inline training: its judge)
+_ORIGINAL_JUDGE = retraining._judge
+
+
+def judge(loss: float, objective: float, initial_objective: float,
+          incumbent_loss: float | None, state: dict[str, torch.Tensor]) -> tuple[bool, str]:
+    """`retraining._judge`; with ``--judge-penalized`` a memory fit skips the loss tests."""
+    if SETTINGS['judge_penalized'] and LAST_FIT['memory']:
+        return _ORIGINAL_JUDGE(loss, math.nan, math.nan, None, state)
+    return _ORIGINAL_JUDGE(loss, objective, initial_objective, incumbent_loss, state)
 
 
 def centred(design: torch.Tensor, wanted: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -94,6 +112,7 @@ def _departed(memory: Memory, x: torch.Tensor) -> int | None:
 def fit_with_memory(self: NnarmaxNet, x: torch.Tensor, target: torch.Tensor, keep: torch.Tensor,
                     ridge: float = LINEAR_RIDGE, force_prior: float = 0.0) -> None:
     """`NnarmaxNet.fit_linear_bypass` with the memory (module docstring) when force_prior > 0."""
+    LAST_FIT['memory'] = False
     if force_prior <= 0.0 or self.bypass is None:
         _ORIGINAL(self, x, target, keep, ridge)
         return
@@ -149,6 +168,7 @@ def fit_with_memory(self: NnarmaxNet, x: torch.Tensor, target: torch.Tensor, kee
     rhs[:-1] += info_kept @ means
     solution = torch.linalg.lstsq(normal, rhs, driver='gelsd').solution
     self.set_linear_solution(solution)
+    LAST_FIT['memory'] = True
     memory.info = info_kept / scale
     memory.vector = memory.info @ ((means * y_std[None, :]) / std[:, None])
 
@@ -159,10 +179,14 @@ def main(argv: Sequence[str] | None = None) -> int:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--memory-time', type=float, default=3600.0,
                         help='time constant of the forgetting in time [s]')
+    parser.add_argument('--judge-penalized', action='store_true',
+                        help='a memory candidate is not judged on the window loss alone')
     parser.add_argument('rest', nargs=argparse.REMAINDER, help='-- method_probe arguments')
     args = parser.parse_args(argv)
     rest: list[Any] = [a for a in args.rest if a != '--']
     SETTINGS['memory_time'] = args.memory_time
+    SETTINGS['judge_penalized'] = float(args.judge_penalized)
+    retraining._judge = judge
     NnarmaxNet.fit_linear_bypass = fit_with_memory  # type: ignore[method-assign]
     assert network.NnarmaxNet.fit_linear_bypass is fit_with_memory
     try:

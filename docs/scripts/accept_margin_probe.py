@@ -26,7 +26,6 @@ from collections.abc import Sequence
 import math
 from pathlib import Path
 import sys
-from typing import Any
 
 import torch
 
@@ -65,13 +64,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if not 0.0 < args.margin <= 1.0:
         parser.error(f'--margin must be in (0, 1], got {args.margin}')
-    rest: list[Any] = [a for a in args.rest if a != '--']
     SETTINGS['margin'] = args.margin
     retraining._judge = judge
-    try:
-        return method_probe.main(rest)
-    finally:
-        print(f'# verdicts (holding and twin, all loops): {dict(VERDICTS)}', file=sys.stderr)
+    return method_probe.main_counting(args.rest, VERDICTS,
+                                      'verdicts (holding and twin, all loops)')
 
 
 if __name__ == '__main__':

@@ -41,6 +41,13 @@ _ORIGINAL = retraining.run_retraining  # the function the predictor module impor
 VERDICTS: Counter[str] = Counter()
 
 
+def quiet_window(params: PredictorParams, snapshot: Snapshot, incumbent: Any) -> bool:
+    """No excitation: a network in service, a full window N seen, no move or turn in it."""
+    window = params.training_samples
+    return (incumbent is not None and snapshot.end_index >= window
+            and not manoeuvring(snapshot.y[-window:], params.sample_time))
+
+
 def gated_retraining(params: PredictorParams, snapshot: Snapshot, incumbent: Any,
                      *args: Any, **kwargs: Any) -> RetrainResult:
     """`run_retraining`, its candidate kept out of service without excitation (docstring)."""
@@ -48,9 +55,7 @@ def gated_retraining(params: PredictorParams, snapshot: Snapshot, incumbent: Any
     if not result.accepted:
         VERDICTS['rejected by the package'] += 1
         return result
-    window = params.training_samples
-    holds = (incumbent is not None and not result.restarted and snapshot.end_index >= window
-             and not manoeuvring(snapshot.y[-window:], params.sample_time)
+    holds = (quiet_window(params, snapshot, incumbent) and not result.restarted
              and result.incumbent_loss is not None and result.baseline_loss is not None
              and result.incumbent_loss <= result.baseline_loss)
     if not holds:
@@ -64,12 +69,9 @@ def gated_retraining(params: PredictorParams, snapshot: Snapshot, incumbent: Any
 
 def main(argv: Sequence[str] | None = None) -> int:
     """CLI (module docstring)."""
-    rest = [a for a in (sys.argv[1:] if argv is None else argv) if a != '--']
     predictor.run_retraining = gated_retraining  # type: ignore[attr-defined]
-    try:
-        return method_probe.main(rest)
-    finally:
-        print(f'# verdicts (holding and twin, all loops): {dict(VERDICTS)}', file=sys.stderr)
+    return method_probe.main_counting(sys.argv[1:] if argv is None else argv, VERDICTS,
+                                      'verdicts (holding and twin, all loops)')
 
 
 if __name__ == '__main__':

@@ -32,7 +32,7 @@ seeds (11–20, and on to 30 with `benchmark --seeds 20`) are for `benchmark` on
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable, Collection, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import replace
 import math
 import sys
@@ -257,6 +257,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             run(scenario_name, seed, variants, args.duration, args.profile, args.closed_loop,
                 open_loop=not args.loops_only, schedule_spread=args.schedule_spread)
     return 0
+
+
+def main_counting(argv: Sequence[str], counts: Mapping[str, int], label: str) -> int:
+    """`main` on ``argv`` (a leading ``--`` dropped), then ``counts`` on stderr under ``label``.
+
+    For the probes that patch one function of the package in this process and count what it
+    decided (`accept_margin_probe.py`, `excitation_gate_probe.py`, `thrust_hold_probe.py`).
+    """
+    try:
+        return main([a for a in argv if a != '--'])
+    finally:
+        print(f'# {label}: {dict(counts)}', file=sys.stderr)
 
 
 if __name__ == '__main__':

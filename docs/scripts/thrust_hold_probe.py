@@ -30,10 +30,10 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from excitation_gate_probe import quiet_window  # noqa: E402
 import method_probe  # noqa: E402
 
 from lf_predictor_ros.core import predictor, retraining  # noqa: E402
-from lf_predictor_ros.core.manoeuvre import manoeuvring  # noqa: E402
 from lf_predictor_ros.core.params import PredictorParams  # noqa: E402
 from lf_predictor_ros.core.retraining import RetrainResult, Snapshot  # noqa: E402
 
@@ -47,9 +47,7 @@ VERDICTS: Counter[str] = Counter()
 def held_retraining(params: PredictorParams, snapshot: Snapshot, incumbent: Any,
                     *args: Any, **kwargs: Any) -> RetrainResult:
     """`run_retraining`, the thrust weights held on windows without excitation (docstring)."""
-    window = params.training_samples
-    hold = (incumbent is not None and snapshot.end_index >= window
-            and not manoeuvring(snapshot.y[-window:], params.sample_time))
+    hold = quiet_window(params, snapshot, incumbent)
     VERDICTS['held' if hold else 'free'] += 1
     used = params.replace(thrust_prior=HOLD_RIDGE) if hold else params
     return _ORIGINAL(used, snapshot, incumbent, *args, **kwargs)
@@ -57,13 +55,9 @@ def held_retraining(params: PredictorParams, snapshot: Snapshot, incumbent: Any,
 
 def main(argv: Sequence[str] | None = None) -> int:
     """CLI (module docstring)."""
-    rest = [a for a in (sys.argv[1:] if argv is None else argv) if a != '--']
     predictor.run_retraining = held_retraining  # type: ignore[attr-defined]
-    try:
-        return method_probe.main(rest)
-    finally:
-        print(f'# thrust weights (holding and twin, all loops): {dict(VERDICTS)}',
-              file=sys.stderr)
+    return method_probe.main_counting(sys.argv[1:] if argv is None else argv, VERDICTS,
+                                      'thrust weights (holding and twin, all loops)')
 
 
 if __name__ == '__main__':

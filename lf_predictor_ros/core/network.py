@@ -402,7 +402,8 @@ class NnarmaxNet(torch.nn.Module):
         return self.y_mean + self.y_std * out
 
     def fit_linear_bypass(self, x: torch.Tensor, target: torch.Tensor, keep: torch.Tensor,
-                          ridge: float = LINEAR_RIDGE, force_prior: float = 0.0) -> None:
+                          ridge: float = LINEAR_RIDGE, force_prior: float = 0.0,
+                          hold_forces: bool = False) -> None:
         """Solve the linear bypass and output bias by ridge least squares, in place.
 
         ``x`` (rows, n_regressors) raw regressor rows, ``target`` (rows, n_outputs) the values
@@ -419,11 +420,18 @@ class NnarmaxNet(torch.nn.Module):
         without excitation: the thrust is a function of the filter's own past estimates) then
         leaves those weights where earlier windows put them, instead of setting them freely
         (``PredictorParams.thrust_prior``).
+
+        ``hold_forces``: the force columns' weights stay exactly at their current values (the
+        warm start's) and the other columns and the bias are the least-squares solution given
+        them (``force_prior`` has nothing to act on then; ``PredictorParams.thrust_hold``).
         """
         if self.bypass is None:
             return
         design, wanted = self.linear_problem(x, target, keep)
         ridges = torch.full((design.shape[1] - 1,), ridge, dtype=design.dtype)
+        if hold_forces:
+            self.set_linear_solution(self._solve_forces_held(design, wanted, ridges))
+            return
         prior = None
         if force_prior > 0.0:
             n_force = self.spec.nu * self.spec.n_inputs_u
@@ -432,6 +440,24 @@ class NnarmaxNet(torch.nn.Module):
                 prior = torch.zeros((design.shape[1] - 1, wanted.shape[1]), dtype=design.dtype)
                 prior[:n_force] = self.bypass.weight.T[:n_force]
         self.set_linear_solution(solve_ridge(design, wanted, ridges, prior))
+
+    def _solve_forces_held(self, design: torch.Tensor, wanted: torch.Tensor,
+                           ridges: torch.Tensor) -> torch.Tensor:
+        """`solve_ridge` with the force columns' weights fixed at the bypass's current ones.
+
+        Their part of the output is taken off ``wanted`` and the remaining columns (bias last)
+        are solved on what is left: an exact constrained least-squares solution, not a limit of
+        ever larger ridges.
+        """
+        if self.bypass is None:
+            raise ValueError('the network has no linear bypass to hold: build it with '
+                             'linear_bypass = True')
+        n_force = self.spec.nu * self.spec.n_inputs_u
+        with torch.no_grad():
+            held = self.bypass.weight.T[:n_force].clone()  # (n_force, n_outputs)
+            rest = solve_ridge(design[:, n_force:], wanted - design[:, :n_force] @ held,
+                               ridges[n_force:])
+        return torch.cat((held, rest))
 
     def linear_problem(self, x: torch.Tensor, target: torch.Tensor, keep: torch.Tensor
                        ) -> tuple[torch.Tensor, torch.Tensor]:

@@ -52,8 +52,8 @@ _WINDOW_FIELDS = ('estimation_window', 'retrain_period', 'training_window', 'tra
 _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_epochs', 'seed',
                'motion_gate_ny', 'ramp_order')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
-_BOOL_FIELDS = ('linear_init', 'thrust_validation', 'thrust_ridge_validation', 'ramp_invariant',
-                'motion_gate',
+_BOOL_FIELDS = ('linear_init', 'thrust_validation', 'thrust_ridge_validation', 'thrust_hold',
+                'ramp_invariant', 'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
                 'sea_change_revert', 'frequency_yaw')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
@@ -256,6 +256,15 @@ class PredictorParams:
             'them freely, which closed limit cycles at 0.45-0.52 rad/s with the DP controller '
             'on onedof_feedback (docs/BENCHMARKS.md, thirty-fifth session; issue 13, '
             'hypothesis 1); 0 = off (the plain ridge towards 0)', ''))
+    thrust_hold: bool = field(
+        default=False, metadata=_doc(
+            'linear network (hidden_units 0) only: a retraining whose window shows no '
+            'excitation (a network in service, a full training window seen, no setpoint move or '
+            'turn in it by core/manoeuvre.py) keeps the thrust weights exactly at the network in '
+            "service's and refits only the position weights and the bias given them: in station "
+            'keeping the thrust is a function of the estimates and cannot identify its weights, '
+            'while the wave part keeps adapting to the sea (issue 13, hypothesis 1; '
+            'docs/BENCHMARKS.md, thirty-eighth and thirty-ninth sessions)'))
     regressor_clip: float = field(
         default=0.0, metadata=_doc(
             'clip every regressor the network sees (relative positions, forces) and its output '
@@ -492,6 +501,8 @@ class PredictorParams:
         if self.thrust_ridge_validation and self.hidden_units != 0:
             raise ValueError('thrust_ridge_validation needs the linear network (hidden_units 0, '
                              f'got {self.hidden_units}): set hidden_units 0 or switch it off')
+        if self.thrust_hold:
+            self._check_thrust_hold()
         for name in ('hidden_layers', 'max_epochs'):
             if getattr(self, name) < 1:
                 raise ValueError(f'positivity rule: {name} must be ≥ 1, got '
@@ -506,6 +517,18 @@ class PredictorParams:
         if not self.min_peak_ratio > 1.0:
             raise ValueError(f'peak ratio rule: min_peak_ratio must exceed 1 (a peak above the '
                              f'band median), got {self.min_peak_ratio!r}')
+
+    def _check_thrust_hold(self) -> None:
+        """``thrust_hold`` needs one least-squares solve and no other rule on the thrust."""
+        if self.hidden_units != 0 or self.derivative_weight != 0.0 or \
+                (self.training_mode == 'parallel' and self.nfb > 0):
+            raise ValueError('thrust_hold needs the linear network solved by least squares '
+                             '(hidden_units 0, derivative_weight 0, no parallel training with '
+                             'nfb > 0): change those or switch thrust_hold off')
+        for other in ('thrust_validation', 'thrust_ridge_validation'):
+            if getattr(self, other):
+                raise ValueError(f'thrust_hold and {other} both decide the thrust weights per '
+                                 'window: switch one of them off')
 
     def _check_choices(self) -> None:
         if self.ndof not in NDOF_VALUES:

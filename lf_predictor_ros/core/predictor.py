@@ -295,6 +295,7 @@ class AdaptivePredictor:
         self._guard_bound: tuple[FloatArray, list[float]] | None = None
         self._guard_trips = 0
         self._no_thrust = 0  # accepted trainings whose thrust test failed (thrust_validation)
+        self._thrust_held = 0  # accepted trainings that kept the thrust weights (thrust_hold)
         self._smoothing = params.switch_blend_time > 0.0 or any(
             rate > 0.0 for rate in params.max_output_rate[:params.ndof])
         # Motion gate (issue 13): a ramp-invariant twin on the same data, blended in by
@@ -571,7 +572,8 @@ class AdaptivePredictor:
                   'overruns': self._overruns, 'training_errors': self._errors,
                   'guard_trips': self._guard_trips,
                   'rough_retirements': self._rough_retirements,
-                  'segments': self._segment, 'trainings_without_thrust': self._no_thrust}
+                  'segments': self._segment, 'trainings_without_thrust': self._no_thrust,
+                  'trainings_thrust_held': self._thrust_held}
         if self._moving is not None:
             counts.update({f'moving_{key}': value for key, value in
                            self._moving.counters.items() if key != 'segments'})
@@ -1149,6 +1151,7 @@ class AdaptivePredictor:
                 self._previous_model = self._model
             self._model, self._state_dict = result.model, result.state_dict
             self._no_thrust += 0 if result.thrust_used else 1
+            self._thrust_held += 1 if result.thrust_held else 0
             self._wave_spread = result.wave_spread
             self._model_time = t
             self._trainings += 1

@@ -115,6 +115,9 @@ class RetrainResult:
     # ``sea_change_revert``: ω0 came back to its value before a recent restart, whose targets
     # were taken up again instead of restarting once more
     reverted: bool = False
+    # ``thrust_hold``: the window showed no excitation and the candidate kept the thrust
+    # weights of the network in service (`thrust_held`)
+    thrust_held: bool = False
 
 
 # Dead-reckoning horizon of the thrust test of ``thrust_validation`` [s] (the dead-reckoning
@@ -144,6 +147,26 @@ def thrust_predicts_motion(params: PredictorParams, u: FloatArray, targets: Floa
                                                             peak_damping)
     return thrust_improves_dead_reckoning(eta, forces, params.sample_time, THRUST_TEST_HORIZON,
                                           sos)
+
+
+def thrust_held(params: PredictorParams, snapshot: Snapshot,
+                incumbent: dict[str, torch.Tensor] | None) -> bool:
+    """Does this retraining keep the thrust weights of the network in service? (``thrust_hold``)
+
+    Yes when the window shows no excitation: a network is in service (its weights are the warm
+    start), the predictor has seen at least a full training window N of this segment, and the
+    newest N samples show no setpoint move or turn (`manoeuvre.manoeuvring`). In DP station
+    keeping the thrust is then a function of the filter's own past estimates and cannot
+    identify the thrust weights (closed-loop identification without excitation, thesis §5.2.3):
+    refitting them on such windows made the late limit cycles of onedof_feedback, while the wave
+    part must keep adapting to the sea (docs/BENCHMARKS.md, thirty-eighth session). A window
+    restarted for a new sea is judged the same way: without a manoeuvre in it, the new sea
+    changes the wave part, not the vessel's response to thrust.
+    """
+    window = params.training_samples
+    return (params.thrust_hold and params.nu > 0 and incumbent is not None
+            and snapshot.end_index >= window
+            and not manoeuvring(snapshot.y[-window:], params.sample_time))
 
 
 def network_spec(params: PredictorParams) -> NnarmaxSpec:
@@ -428,7 +451,8 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
         net = NnarmaxNet(spec, seed=params.seed)
     else:
         net = NnarmaxNet.from_state(spec, incumbent)
-    settings = train_settings(params)
+    held = thrust_held(params, snapshot, incumbent)
+    settings = replace(train_settings(params), hold_forces=held)
     thrust_used = not params.thrust_validation or params.nu == 0 or \
         thrust_predicts_motion(params, u, t_values, mask, frequency.wave_peak_freq, damping)
     u_fit = u if thrust_used else np.zeros_like(u)
@@ -462,7 +486,7 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
                          wave_spread=spread, baseline_loss=baseline,
                          retire_incumbent=retire, thrust_used=thrust_used,
                          targets_peak_damping=damping, narrow_reference=reference,
-                         restarted=changed, reverted=reverted)
+                         restarted=changed, reverted=reverted, thrust_held=held)
 
 
 def training_data(params: PredictorParams, snapshot: Snapshot, u: FloatArray, y: FloatArray,

@@ -114,7 +114,9 @@ class TrainSettings:
     columns to choose from, per output, by the error on the newest ``validation_rows`` kept rows
     of a fit on the others (``validated_force_ridges``); ``force_prior`` > 0 the force
     columns' ridge per row towards the warm start's weights in the least-squares solve
-    (``NnarmaxNet.fit_linear_bypass``; 0: ``LINEAR_RIDGE`` towards 0); ``seed`` is
+    (``NnarmaxNet.fit_linear_bypass``; 0: ``LINEAR_RIDGE`` towards 0); ``hold_forces`` (the
+    linear network solved by least squares only) keeps the force weights exactly at the warm
+    start's and solves the rest given them; ``seed`` is
     recorded for stochastic variants (mini-batches, restarts): the three full-batch algorithms
     here use no randomness, so a run is reproducible bit for bit without touching torch's global
     RNG.
@@ -139,6 +141,7 @@ class TrainSettings:
     force_ridge_grid: tuple[float, ...] = ()
     validation_rows: int = 0
     force_prior: float = 0.0
+    hold_forces: bool = False
 
     def __post_init__(self) -> None:
         """Validate; raise ValueError naming the broken rule."""
@@ -178,6 +181,9 @@ class TrainSettings:
         if self.force_ridge_grid and self.validation_rows < 1:
             raise ValueError('TrainSettings.force_ridge_grid needs validation_rows ≥ 1 (the '
                              f'newest rows that choose the ridge), got {self.validation_rows}')
+        if self.hold_forces and self.force_ridge_grid:
+            raise ValueError('TrainSettings.hold_forces and force_ridge_grid both set the force '
+                             'weights: give one of them')
 
 
 @dataclass(frozen=True)
@@ -476,6 +482,10 @@ def _train(
     if settings.standardize:
         model.set_standardization(u, y, preserve_function=True)
     solved = _solved_by_least_squares(spec, settings)
+    if settings.hold_forces and not solved:
+        raise ValueError('TrainSettings.hold_forces needs the linear network solved by least '
+                         'squares (no tanh part, derivative_weight 0, no parallel training with '
+                         'feedback): the gradient training would move the held force weights')
     if solved and settings.force_ridge_grid:
         design, wanted = model.linear_problem(window.x_series[:-1], window.target, window.keep)
         ridges = validated_force_ridges(design, wanted, spec.nu * spec.n_inputs_u,
@@ -483,7 +493,8 @@ def _train(
         model.set_linear_solution(solve_ridge(design, wanted, ridges))
     elif settings.linear_init or solved:
         model.fit_linear_bypass(window.x_series[:-1], window.target, window.keep,
-                                force_prior=settings.force_prior)
+                                force_prior=settings.force_prior,
+                                hold_forces=settings.hold_forces)
     runner = _WindowPredictor(model, n_static_regressors(spec), spec.nfb)
     parallel = settings.mode == 'parallel'
     with torch.no_grad():

@@ -161,6 +161,7 @@ def predictor_values(status: EstimatorStatus,
         'rough_retirements': int(counters.get('rough_retirements', 0)),
         'segments': int(counters.get('segments', 0)),
         'trainings_without_thrust': int(counters.get('trainings_without_thrust', 0)),
+        'trainings_thrust_held': int(counters.get('trainings_thrust_held', 0)),
     }
 
 

@@ -382,6 +382,44 @@ def test_force_prior_keeps_force_weights_the_window_cannot_identify() -> None:
             assert force_weight == pytest.approx(true_weight, rel=0.02)
 
 
+def test_hold_forces_keeps_the_force_weights_and_solves_the_rest_given_them() -> None:
+    """``hold_forces``: the force weights stay bit for bit, the rest is the reduced solution.
+
+    A window with an independent force (its true weight 0.3 in raw units) and a warm start whose
+    force weight is wrong (0.25 standardized): the held fit keeps 0.25 and its position weight
+    and bias are the least-squares solution of the target minus the held force part (numpy's
+    lstsq on the reduced problem), while the free fit finds the true force weight.
+    """
+    rng = np.random.default_rng(10)
+    n = 600
+    spec = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=1, ny=1, nfb=0, hidden_units=0,
+                       relative=False)
+    y = np.cumsum(rng.normal(size=(n, 1)), axis=0) * 0.1
+    u = rng.normal(size=(n, 1))
+    x, first = build_regressors(u, y, y, spec)
+    x_t = torch.from_numpy(x[:-1])
+    target = torch.from_numpy(0.9 * y[first:-1] + 0.3 * u[first:-1] + 0.05)
+    keep = torch.ones(len(target), dtype=torch.bool)
+    warm = NnarmaxNet(spec, seed=1)
+    warm.set_standardization(u, y)
+    with torch.no_grad():
+        warm.bypass.weight[0, 0] = 0.25
+    held, free = NnarmaxNet.from_state(spec, warm.state_dict()), \
+        NnarmaxNet.from_state(spec, warm.state_dict())
+    held.fit_linear_bypass(x_t, target, keep, hold_forces=True, force_prior=0.5)
+    free.fit_linear_bypass(x_t, target, keep)
+    weights, bias = held.bypass.weight.detach(), held.output.bias.detach()
+    assert float(weights[0, 0]) == 0.25
+    design, wanted = held.linear_problem(x_t, target, keep)
+    reduced = (wanted - 0.25 * design[:, :1]).numpy()
+    expected = np.linalg.lstsq(design[:, 1:].numpy(), reduced, rcond=None)[0]
+    assert float(weights[0, 1]) == pytest.approx(float(expected[0, 0]), abs=1e-6)
+    assert float(bias[0]) == pytest.approx(float(expected[1, 0]), abs=1e-6)
+    true_weight = 0.3 * float(free.u_std[0]) / float(free.y_std[0])
+    assert float(free.bypass.weight.detach()[0, 0]) == pytest.approx(true_weight, rel=0.02)
+    assert abs(true_weight - 0.25) > 0.05  # the held weight is a real constraint here
+
+
 def test_linear_network_is_the_bypass_plus_a_bias() -> None:
     """hidden_units 0: ŷ = y_mean + y_std · (v_0 + B x_s), weights n_reg · n_out + n_out."""
     spec = NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=3, nfb=0, hidden_units=0,

@@ -751,3 +751,41 @@ def test_training_with_a_force_ridge_grid_solves_with_the_chosen_ridges() -> Non
         TrainSettings(force_ridge_grid=(1.0,))
     with pytest.raises(ValueError, match='finite ridges > 0'):
         TrainSettings(force_ridge_grid=(0.0,), validation_rows=5)
+
+
+def force_gain(net: NnarmaxNet) -> np.ndarray:
+    """ŷ(t + 1)'s change per unit of each force regressor (raw units; the linear network)."""
+    n_force = net.spec.nu * net.spec.n_inputs_u
+    x = torch.zeros((n_force + 1, net.spec.n_regressors), dtype=torch.float64)
+    x[1:, :n_force] = torch.eye(n_force, dtype=torch.float64)
+    with torch.no_grad():
+        out = net(x)
+    return (out[1:] - out[:1]).numpy()
+
+
+def test_hold_forces_keeps_the_warm_starts_force_gains_through_a_new_standardization() -> None:
+    """The held force weights act in raw units as the warm start's did; the rest is refitted."""
+    rng = np.random.default_rng(23)
+    n = 300
+    u = rng.normal(size=(n, 1))
+    y = np.cumsum(0.1 * np.roll(u, 1, axis=0) + rng.normal(scale=0.01, size=(n, 1)), axis=0)
+    spec = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=2, ny=2, nfb=0, hidden_units=0,
+                       relative=True)
+    # the warm start: fitted on the first half with thrust scaled by 3 (its gains a third)
+    warm = NnarmaxNet.from_state(spec, train(NnarmaxNet(spec), 3.0 * u[:150], y[:150],
+                                             y[:150], None, TrainSettings()).state_dict)
+    held = train(warm, u, y, y, None, TrainSettings(hold_forces=True))
+    free = train(warm, u, y, y, None, TrainSettings())
+    assert held.stopped_reason == 'least_squares'
+    np.testing.assert_allclose(force_gain(NnarmaxNet.from_state(spec, held.state_dict)),
+                               force_gain(warm), rtol=1e-9, atol=1e-12)
+    free_gain = force_gain(NnarmaxNet.from_state(spec, free.state_dict))
+    assert abs(float(free_gain.sum()) - 0.1) < 0.01  # the window's own: 0.1 m per unit force
+    assert abs(float(force_gain(warm).sum()) - 0.1 / 3.0) < 0.01
+    assert held.loss > free.loss  # the constraint costs the window something
+    with pytest.raises(ValueError, match='hold_forces needs the linear network'):
+        train(NnarmaxNet(NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=2, ny=2, nfb=0,
+                                     hidden_units=2, relative=True)),
+              u, y, y, None, TrainSettings(hold_forces=True, max_epochs=1))
+    with pytest.raises(ValueError, match='hold_forces and force_ridge_grid'):
+        TrainSettings(hold_forces=True, force_ridge_grid=(1.0,), validation_rows=5)

@@ -50,11 +50,11 @@ def held_regrowth(params: PredictorParams, snapshot: Snapshot, incumbent: Any,
         VERDICTS['free'] += 1
         return result
     VERDICTS['held'] += 1
-    retraining.thrust_held = lambda *_: True  # type: ignore[assignment]
+    retraining.thrust_held = lambda *_: True
     try:
         return _ORIGINAL(params.replace(thrust_hold=True), snapshot, incumbent, *args, **kwargs)
     finally:
-        retraining.thrust_held = _THRUST_HELD  # type: ignore[assignment]
+        retraining.thrust_held = _THRUST_HELD
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -153,15 +153,16 @@ def thrust_held(params: PredictorParams, snapshot: Snapshot,
                 incumbent: dict[str, torch.Tensor] | None) -> bool:
     """Does this retraining keep the thrust weights of the network in service? (``thrust_hold``)
 
-    Yes when the window shows no excitation: a network is in service (its weights are the warm
-    start), the predictor has seen at least a full training window N of this segment, and the
-    newest N samples show no setpoint move or turn (`manoeuvre.manoeuvring`). In DP station
-    keeping the thrust is then a function of the filter's own past estimates and cannot
-    identify the thrust weights (closed-loop identification without excitation, thesis §5.2.3):
-    refitting them on such windows made the late limit cycles of onedof_feedback, while the wave
-    part must keep adapting to the sea (docs/BENCHMARKS.md, thirty-eighth session). A window
-    restarted for a new sea is judged the same way: without a manoeuvre in it, the new sea
-    changes the wave part, not the vessel's response to thrust.
+    Yes when the window shows no excitation: there is a warm start (``incumbent``: the network
+    in service, or the last one retired to the cascade), the predictor has seen at least a full
+    training window N of this segment, and the newest N samples show no setpoint move or turn
+    (`manoeuvre.manoeuvring`). In DP station keeping the thrust is then a function of the
+    filter's own past estimates and cannot identify the thrust weights (closed-loop
+    identification without excitation, thesis §5.2.3): refitting them on such windows made the
+    late limit cycles of onedof_feedback, while the wave part must keep adapting to the sea
+    (docs/BENCHMARKS.md, thirty-eighth session). A window restarted for a new sea is judged the
+    same way, although thrust weights fitted in a swell near the LF band carry part of the wave
+    filter (thirty-ninth session, the regrowth probe).
     """
     window = params.training_samples
     return (params.thrust_hold and params.nu > 0 and incumbent is not None

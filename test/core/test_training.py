@@ -735,13 +735,19 @@ def test_validated_force_ridges_trust_a_force_only_where_the_newest_rows_confirm
     assert abs(float(both[0, 0]) - 2.0) < 0.02 and abs(float(both[0, 1])) < 0.01
 
 
-def test_training_with_a_force_ridge_grid_solves_with_the_chosen_ridges() -> None:
-    rng = np.random.default_rng(22)
+def force_driven_drift(seed: int) -> tuple[np.ndarray, np.ndarray, NnarmaxSpec]:
+    """300 samples of y(t + 1) = y(t) + 0.1 u(t) + noise (0.01) and a linear network for it."""
+    rng = np.random.default_rng(seed)
     n = 300
     u = rng.normal(size=(n, 1))
     y = np.cumsum(0.1 * np.roll(u, 1, axis=0) + rng.normal(scale=0.01, size=(n, 1)), axis=0)
     spec = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=2, ny=2, nfb=0, hidden_units=0,
                        relative=True)
+    return u, y, spec
+
+
+def test_training_with_a_force_ridge_grid_solves_with_the_chosen_ridges() -> None:
+    u, y, spec = force_driven_drift(22)
     settings = TrainSettings(force_ridge_grid=(1e-6, 1.0, 1e3), validation_rows=60)
     result = train(NnarmaxNet(spec), u, y, y, None, settings)
     assert result.stopped_reason == 'least_squares'
@@ -767,12 +773,7 @@ def force_gain(net: NnarmaxNet) -> np.ndarray:
 
 def test_hold_forces_keeps_the_warm_starts_force_gains_through_a_new_standardization() -> None:
     """The held force weights act in raw units as the warm start's did; the rest is refitted."""
-    rng = np.random.default_rng(23)
-    n = 300
-    u = rng.normal(size=(n, 1))
-    y = np.cumsum(0.1 * np.roll(u, 1, axis=0) + rng.normal(scale=0.01, size=(n, 1)), axis=0)
-    spec = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=2, ny=2, nfb=0, hidden_units=0,
-                       relative=True)
+    u, y, spec = force_driven_drift(23)
     # the warm start: fitted on the first half with thrust scaled by 3 (its gains a third)
     warm = NnarmaxNet.from_state(spec, train(NnarmaxNet(spec), 3.0 * u[:150], y[:150],
                                              y[:150], None, TrainSettings()).state_dict)

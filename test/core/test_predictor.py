@@ -127,6 +127,19 @@ def feed(predictor: AdaptivePredictor, t: FloatArray, pose: FloatArray, force: F
                      for i in range(start, stop)])
 
 
+def feed_to_first_training(predictor: AdaptivePredictor, t: FloatArray, pose: FloatArray,
+                           force: FloatArray) -> None:
+    """Feed samples 0…FIRST_TRAINING−1 so that the first training starts at the last one.
+
+    Before it the predictor runs early ω0-only jobs on its worker; under load one may still run
+    at the first-training sample, and the training then starts at a later sample. Waiting for
+    the worker before the last sample makes the start deterministic.
+    """
+    feed(predictor, t, pose, force, 0, FIRST_TRAINING - 1)
+    assert predictor.wait_for_training(30.0), 'an early ω0 job did not finish in 30 s'
+    feed(predictor, t, pose, force, FIRST_TRAINING - 1, FIRST_TRAINING)
+
+
 def total_trainings(predictor: AdaptivePredictor) -> int:
     """Accepted + rejected trainings."""
     status = predictor.status()
@@ -424,7 +437,7 @@ def test_request_retrain_refused_while_a_training_runs() -> None:
     t, pose, force = synthetic_onedof(200, seed=22)
     predictor = AdaptivePredictor(LONG, background=True)
     try:
-        feed(predictor, t, pose, force, 0, FIRST_TRAINING)
+        feed_to_first_training(predictor, t, pose, force)
         assert not predictor.wait_for_training(0.0)
         assert predictor.request_retrain() == (False, 'a training is already running')
     finally:
@@ -454,7 +467,7 @@ def test_reset_discards_the_result_of_a_running_training() -> None:
     t, pose, force = synthetic_onedof(300, seed=23)
     predictor = AdaptivePredictor(STOPPABLE, background=True)
     try:
-        feed(predictor, t, pose, force, 0, FIRST_TRAINING)
+        feed_to_first_training(predictor, t, pose, force)
         assert predictor._worker.busy  # the job reset() abandons
         predictor.reset()
         start = time.monotonic()
@@ -707,7 +720,7 @@ def test_bad_input_raises_and_leaves_the_state_unchanged() -> None:
 def test_close_stops_a_running_training_promptly() -> None:
     t, pose, force = synthetic_onedof(200, seed=25)
     predictor = AdaptivePredictor(STOPPABLE, background=True)
-    feed(predictor, t, pose, force, 0, FIRST_TRAINING)
+    feed_to_first_training(predictor, t, pose, force)
     assert predictor._worker.busy
     start = time.monotonic()
     predictor.close()

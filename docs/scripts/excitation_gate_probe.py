@@ -13,8 +13,9 @@ predictor calls it) in its process, for **every** variant it runs: run the defau
 An accepted candidate is turned into a rejected one ("no excitation in the window") when all
 hold: a network is in service; the window did not restart for a new sea; the predictor has seen
 at least a full training window N of its segment; the newest N samples show no setpoint move or
-turn (`manoeuvre.manoeuvring`: two consecutive 60 s block means apart by more than 2 m or 2°);
-and the network in service is no worse than the causal cascade on the window's targets. So the
+turn (`retraining.without_excitation`, the package's `thrust_hold` test: two consecutive 60 s
+block means apart by more than 2 m or 2°); and the network in service is no worse than the
+causal cascade on the window's targets. So the
 network in service is the last one trained on a window that held a manoeuvre (or the start's
 transient), or the first one trained on a full window of station keeping, until a manoeuvre or
 a new sea comes.
@@ -33,19 +34,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import method_probe  # noqa: E402
 
 from lf_predictor_ros.core import predictor, retraining  # noqa: E402
-from lf_predictor_ros.core.manoeuvre import manoeuvring  # noqa: E402
 from lf_predictor_ros.core.params import PredictorParams  # noqa: E402
-from lf_predictor_ros.core.retraining import RetrainResult, Snapshot  # noqa: E402
+from lf_predictor_ros.core.retraining import (  # noqa: E402
+    RetrainResult,
+    Snapshot,
+    without_excitation,
+)
 
 _ORIGINAL = retraining.run_retraining  # the function the predictor module imported
 VERDICTS: Counter[str] = Counter()
-
-
-def quiet_window(params: PredictorParams, snapshot: Snapshot, incumbent: Any) -> bool:
-    """No excitation: a network in service, a full window N seen, no move or turn in it."""
-    window = params.training_samples
-    return (incumbent is not None and snapshot.end_index >= window
-            and not manoeuvring(snapshot.y[-window:], params.sample_time))
 
 
 def gated_retraining(params: PredictorParams, snapshot: Snapshot, incumbent: Any,
@@ -55,7 +52,7 @@ def gated_retraining(params: PredictorParams, snapshot: Snapshot, incumbent: Any
     if not result.accepted:
         VERDICTS['rejected by the package'] += 1
         return result
-    holds = (quiet_window(params, snapshot, incumbent) and not result.restarted
+    holds = (without_excitation(params, snapshot, incumbent) and not result.restarted
              and result.incumbent_loss is not None and result.baseline_loss is not None
              and result.incumbent_loss <= result.baseline_loss)
     if not holds:

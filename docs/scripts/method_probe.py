@@ -263,7 +263,7 @@ def main_counting(argv: Sequence[str], counts: Mapping[str, int], label: str) ->
     """`main` on ``argv`` (a leading ``--`` dropped), then ``counts`` on stderr under ``label``.
 
     For the probes that patch one function of the package in this process and count what it
-    decided (`accept_margin_probe.py`, `excitation_gate_probe.py`, `thrust_hold_probe.py`).
+    decided (`accept_margin_probe.py`, `excitation_gate_probe.py`).
     """
     try:
         return main([a for a in argv if a != '--'])

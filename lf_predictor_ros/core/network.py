@@ -313,6 +313,20 @@ def solve_ridge(design: torch.Tensor, wanted: torch.Tensor, ridges: torch.Tensor
     return torch.cat(columns, dim=1)
 
 
+def solve_with_fixed_rows(design: torch.Tensor, wanted: torch.Tensor, ridges: torch.Tensor,
+                          fixed: torch.Tensor) -> torch.Tensor:
+    """`solve_ridge` with the first ``len(fixed)`` rows of the solution fixed at ``fixed``.
+
+    Their columns' part of ``wanted`` is taken off and the remaining columns (bias last) are
+    solved on what is left: an exact constrained least-squares solution, not a limit of ever
+    larger ridges. ``fixed`` (n_fixed, n_outputs); returns (n_columns, n_outputs).
+    """
+    n_fixed = fixed.shape[0]
+    rest = solve_ridge(design[:, n_fixed:], wanted - design[:, :n_fixed] @ fixed,
+                       ridges[n_fixed:])
+    return torch.cat((fixed, rest))
+
+
 def _penalty(ridges: torch.Tensor, rows: int) -> torch.Tensor:
     """The penalty matrix rows · diag(ridges, 0): the bias (last column) is not penalized."""
     return torch.diag(torch.cat((ridges, ridges.new_zeros(1)))) * rows
@@ -429,35 +443,19 @@ class NnarmaxNet(torch.nn.Module):
             return
         design, wanted = self.linear_problem(x, target, keep)
         ridges = torch.full((design.shape[1] - 1,), ridge, dtype=design.dtype)
+        n_force = self.spec.nu * self.spec.n_inputs_u
         if hold_forces:
-            self.set_linear_solution(self._solve_forces_held(design, wanted, ridges))
+            with torch.no_grad():
+                held = self.bypass.weight.T[:n_force].clone()
+            self.set_linear_solution(solve_with_fixed_rows(design, wanted, ridges, held))
             return
         prior = None
         if force_prior > 0.0:
-            n_force = self.spec.nu * self.spec.n_inputs_u
             ridges[:n_force] = force_prior
             with torch.no_grad():
                 prior = torch.zeros((design.shape[1] - 1, wanted.shape[1]), dtype=design.dtype)
                 prior[:n_force] = self.bypass.weight.T[:n_force]
         self.set_linear_solution(solve_ridge(design, wanted, ridges, prior))
-
-    def _solve_forces_held(self, design: torch.Tensor, wanted: torch.Tensor,
-                           ridges: torch.Tensor) -> torch.Tensor:
-        """`solve_ridge` with the force columns' weights fixed at the bypass's current ones.
-
-        Their part of the output is taken off ``wanted`` and the remaining columns (bias last)
-        are solved on what is left: an exact constrained least-squares solution, not a limit of
-        ever larger ridges.
-        """
-        if self.bypass is None:
-            raise ValueError('the network has no linear bypass to hold: build it with '
-                             'linear_bypass = True')
-        n_force = self.spec.nu * self.spec.n_inputs_u
-        with torch.no_grad():
-            held = self.bypass.weight.T[:n_force].clone()  # (n_force, n_outputs)
-            rest = solve_ridge(design[:, n_force:], wanted - design[:, :n_force] @ held,
-                               ridges[n_force:])
-        return torch.cat((held, rest))
 
     def linear_problem(self, x: torch.Tensor, target: torch.Tensor, keep: torch.Tensor
                        ) -> tuple[torch.Tensor, torch.Tensor]:

@@ -149,25 +149,33 @@ def thrust_predicts_motion(params: PredictorParams, u: FloatArray, targets: Floa
                                           sos)
 
 
+def without_excitation(params: PredictorParams, snapshot: Snapshot,
+                        incumbent: dict[str, torch.Tensor] | None) -> bool:
+    """Does this retraining's window show no excitation a network could be identified from?
+
+    True when there is a warm start (``incumbent``: the network in service, or the last one
+    retired to the cascade), the predictor has seen at least a full training window N of this
+    segment, and the newest N samples show no setpoint move or turn (`manoeuvre.manoeuvring`).
+    In DP station keeping the thrust is then a function of the filter's own past estimates
+    (closed-loop identification without excitation, thesis §5.2.3).
+    """
+    window = params.training_samples
+    return (incumbent is not None and snapshot.end_index >= window
+            and not manoeuvring(snapshot.y[-window:], params.sample_time))
+
+
 def thrust_held(params: PredictorParams, snapshot: Snapshot,
                 incumbent: dict[str, torch.Tensor] | None) -> bool:
-    """Does this retraining keep the thrust weights of the network in service? (``thrust_hold``)
+    """Does this retraining keep the thrust weights of the warm start? (``thrust_hold``)
 
-    Yes when the window shows no excitation: there is a warm start (``incumbent``: the network
-    in service, or the last one retired to the cascade), the predictor has seen at least a full
-    training window N of this segment, and the newest N samples show no setpoint move or turn
-    (`manoeuvre.manoeuvring`). In DP station keeping the thrust is then a function of the
-    filter's own past estimates and cannot identify the thrust weights (closed-loop
-    identification without excitation, thesis §5.2.3): refitting them on such windows made the
+    Yes on a window `without_excitation`: refitting the thrust weights on such windows made the
     late limit cycles of onedof_feedback, while the wave part must keep adapting to the sea
     (docs/BENCHMARKS.md, thirty-eighth session). A window restarted for a new sea is judged the
     same way, although thrust weights fitted in a swell near the LF band carry part of the wave
     filter (thirty-ninth session, the regrowth probe).
     """
-    window = params.training_samples
-    return (params.thrust_hold and params.nu > 0 and incumbent is not None
-            and snapshot.end_index >= window
-            and not manoeuvring(snapshot.y[-window:], params.sample_time))
+    return params.thrust_hold and params.nu > 0 and without_excitation(params, snapshot,
+                                                                       incumbent)
 
 
 def network_spec(params: PredictorParams) -> NnarmaxSpec:

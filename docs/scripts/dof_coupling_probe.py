@@ -1,0 +1,74 @@
+"""Exploratory: each output DOF of the linear network on its own DOF's regressors (issue 13).
+
+    OMP_NUM_THREADS=1 python docs/scripts/dof_coupling_probe.py --scenarios rao_supply \
+        --seeds 559 560 --closed-loop --loops-only --variant "perdof=" [--yaw-coupled]
+
+`method_probe.py` with `NnarmaxNet.fit_linear_bypass` patched in this process only (nothing in
+the package changes): the least-squares solve of the linear network (the shipped default,
+``hidden_units`` 0: that solve is its whole training) is done per output, on the output's own
+force channel and its own position channel (all their lags) and the bias; the other weights are
+0. With ``--yaw-coupled`` only north and east are fitted so; the heading keeps every column.
+The motion gate's twin is fitted the same way (it is the same class). For 1 DOF nothing
+changes. It is the twenty-first session's ``dof_coupling: none`` (removed in `fce8467`, screened
+then on the tanh network of that time), on today's defaults: `truth_window_probe.py` found that
+a sliding ARX fitted on the true LF pose extrapolates to the RAO vessels' manoeuvres far better
+per DOF than coupled (docs/BENCHMARKS.md, fortieth session). Every variant of the run gets the
+patch (run the default rows from another process). Only the plain solve is patched: the
+force-prior and held-force paths raise, and `thrust_ridge_validation` (its own solve) is left
+coupled. Development seeds only, as `method_probe.py`.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+import sys
+
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import method_probe  # noqa: E402 - the sibling script
+
+from lf_predictor_ros.core import network  # noqa: E402
+
+# Output DOFs that keep every regressor (``--yaw-coupled``: the heading, 2); the others are fitted
+# on their own DOF's columns.
+COUPLED_OUTPUTS: set[int] = set()
+
+
+def column_dofs(n_force: int, force_channels: int, position_channels: int, n_columns: int
+                ) -> torch.Tensor:
+    """Per regressor column, the channel (DOF) it carries: forces first, then positions."""
+    dofs = [j % force_channels if j < n_force else (j - n_force) % position_channels
+            for j in range(n_columns)]
+    return torch.tensor(dofs, dtype=torch.long)
+
+
+def per_dof_fit(self: network.NnarmaxNet, x: torch.Tensor, target: torch.Tensor,
+                keep: torch.Tensor, ridge: float = network.LINEAR_RIDGE,
+                force_prior: float = 0.0, hold_forces: bool = False) -> None:
+    """`NnarmaxNet.fit_linear_bypass`, one ridge least-squares problem per output DOF."""
+    if self.bypass is None:
+        return
+    if force_prior > 0.0 or hold_forces:
+        raise NotImplementedError('the per-DOF probe patches the plain solve only')
+    design, wanted = self.linear_problem(x, target, keep)
+    n_regressors, n_outputs = design.shape[1] - 1, wanted.shape[1]
+    dofs = column_dofs(self.spec.nu * self.spec.n_inputs_u, self.spec.n_inputs_u, n_outputs,
+                       n_regressors)
+    solution = torch.zeros((n_regressors + 1, n_outputs), dtype=design.dtype)
+    for dof in range(n_outputs):
+        own = torch.nonzero(dofs == dof)[:, 0] if dof not in COUPLED_OUTPUTS else \
+            torch.arange(n_regressors)
+        columns = torch.cat((own, torch.tensor([n_regressors])))
+        ridges = torch.full((columns.numel() - 1,), ridge, dtype=design.dtype)
+        fitted = network.solve_ridge(design[:, columns], wanted[:, dof:dof + 1], ridges)
+        solution[columns, dof] = fitted[:, 0]
+    self.set_linear_solution(solution)
+
+
+if __name__ == '__main__':
+    setattr(network.NnarmaxNet, 'fit_linear_bypass', per_dof_fit)  # noqa: B010 - the patch
+    argv = sys.argv[1:]
+    if '--yaw-coupled' in argv:  # the heading keeps its coupled fit; north and east per DOF
+        argv.remove('--yaw-coupled')
+        COUPLED_OUTPUTS.add(2)
+    sys.exit(method_probe.main(argv))

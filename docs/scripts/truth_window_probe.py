@@ -53,6 +53,7 @@ from lf_predictor_ros.benchmark.suite import (  # noqa: E402
     make_setup,
     scored_start,
 )
+from lf_predictor_ros.core import regressors  # noqa: E402
 from lf_predictor_ros.core.params import PredictorParams  # noqa: E402
 from lf_predictor_ros.core.retraining import first_training_samples  # noqa: E402
 from sim_ros.simulation import load_scenario  # noqa: E402
@@ -61,20 +62,9 @@ FloatArray = NDArray[np.float64]
 IndexArray = NDArray[np.intp]
 
 
-def to_body(north: FloatArray, east: FloatArray, heading: FloatArray
-            ) -> tuple[FloatArray, FloatArray]:
-    """(surge, sway) of earth-frame (north, east) at ``heading`` [rad] (R(ψ)ᵀ, Fossen §2.2)."""
-    c, s = np.cos(heading), np.sin(heading)
-    return c * north + s * east, -s * north + c * east
-
-
-def earth_forces(u: FloatArray, heading: FloatArray) -> FloatArray:
-    """Body-frame forces (n, 3) turned to north/east with each sample's heading, u = R(ψ)τ.
-
-    As the predictor does for 3 DOF (`core.predictor`, Fossen 2011 §7.1); the yaw moment stays.
-    """
-    c, s = np.cos(heading), np.sin(heading)
-    return np.column_stack([c * u[:, 0] - s * u[:, 1], s * u[:, 0] + c * u[:, 1], u[:, 2]])
+def into_body(values: FloatArray, heading: FloatArray) -> FloatArray:
+    """(north, east) of every 3-channel block of each row turned by R(ψ)ᵀ, ψ per row."""
+    return regressors.rotate_blocks(values, np.cos(heading), -np.sin(heading))
 
 
 def designs(y: FloatArray, u: FloatArray, rows: IndexArray, nu: int, ny: int, body: bool,
@@ -87,13 +77,11 @@ def designs(y: FloatArray, u: FloatArray, rows: IndexArray, nu: int, ny: int, bo
     """
     newest = y[rows]
     differences = y[rows[:, None] - np.arange(1, ny)[None, :]] - newest[:, None, :]
-    if body:
-        surge, sway = to_body(differences[:, :, 0], differences[:, :, 1], newest[:, 2:3])
-        differences = np.stack([surge, sway, differences[:, :, 2]], axis=2)
-    forces = u[rows[:, None] - np.arange(nu)[None, :], :3]  # earth frame (`earth_forces`)
-    if body:  # R(ψ(t))ᵀ R(ψ(t − i)) τ(t − i), as the predictor's body frame
-        surge, sway = to_body(forces[:, :, 0], forces[:, :, 1], newest[:, 2:3])
-        forces = np.stack([surge, sway, forces[:, :, 2]], axis=2)
+    forces = u[rows[:, None] - np.arange(nu)[None, :], :3]  # earth frame: R(ψ(t − i)) τ(t − i)
+    if body:  # as the predictor's body frame: R(ψ(t))ᵀ of every block
+        differences = into_body(differences.reshape(rows.size, -1),
+                                newest[:, 2]).reshape(differences.shape)
+        forces = into_body(forces.reshape(rows.size, -1), newest[:, 2]).reshape(forces.shape)
     constant = np.ones((rows.size, 1))
     if coupled:
         shared = np.hstack([forces.reshape(rows.size, -1), differences.reshape(rows.size, -1),
@@ -115,17 +103,14 @@ def sliding_on_truth(y: FloatArray, u: FloatArray, truth: FloatArray, params: Pr
         fit_designs, newest = designs(y, u, rows, nu, ny, body, coupled)
         goal = truth[rows] - newest
         if body:
-            surge, sway = to_body(goal[:, 0], goal[:, 1], newest[:, 2])
-            goal = np.column_stack([surge, sway, goal[:, 2]])
+            goal = into_body(goal, newest[:, 2])
         apply = np.arange(k0, min(k0 + delta, n))
         apply_designs, base = designs(y, u, apply, nu, ny, body, coupled)
         step = np.column_stack([
             apply_designs[d] @ target_fit_probe.least_squares_fit(fit_designs[d], goal[:, d:d + 1])
             for d in range(3)])
         if body:  # back to the earth frame: R(ψ)
-            c, s = np.cos(base[:, 2]), np.sin(base[:, 2])
-            step = np.column_stack([c * step[:, 0] - s * step[:, 1],
-                                    s * step[:, 0] + c * step[:, 1], step[:, 2]])
+            step = regressors.rotate_blocks(step, np.cos(base[:, 2]), np.sin(base[:, 2]))
         out[apply] = base + step
     return out
 
@@ -141,7 +126,9 @@ def run(scenario_name: str, seed: int, growing: bool) -> None:
     y, u, truth = data['y'], data['u'], data['truth']
     y_c, truth_c = np.array(y, dtype=np.float64), np.array(truth, dtype=np.float64)
     y_c[:, 2], truth_c[:, 2] = np.unwrap(y[:, 2]), np.unwrap(truth[:, 2])
-    u_earth = earth_forces(np.asarray(u, dtype=np.float64), y_c[:, 2])
+    # the forces turned to north/east with each sample's heading, u = R(ψ)τ, as the predictor
+    # does for 3 DOF (`core.predictor`, Fossen 2011 §7.1)
+    u_earth = regressors.rotate_blocks(u[:, :3], np.cos(y_c[:, 2]), np.sin(y_c[:, 2]))
     start = scored_start(params, y.shape[0])
     rows: dict[str, FloatArray] = {
         'in-sample truth': linear_limit(y, u, truth, 3, params.nu, params.ny, start)}

@@ -166,7 +166,7 @@ def run(scenario_name: str, seed: int, variants: Sequence[tuple[str, dict[str, A
         rmse = np.sqrt(np.mean(error[start:, :n] ** 2, axis=0))
         steps = score(t[start + 1:], estimate[start:], truth[start + 1:], n).largest_step_ratio
         c = predictor.counters
-        print(f'{scenario_name:20s} {seed} {name:12s} ' + ' '.join(f'{v:.4f}' for v in rmse) +
+        print(f'{scenario_name:20s} {seed} {name:12s} ' + ' '.join(f'{v:.4g}' for v in rmse) +
               f"  accepted {c['trainings']} rejected {c['rejected_trainings']} without thrust "
               f"{c['trainings_without_thrust']} largest step ratio "
               + ' / '.join(f'{v:.2f}' for v in steps), flush=True)

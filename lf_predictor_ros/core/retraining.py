@@ -470,7 +470,8 @@ def run_retraining(params: PredictorParams, snapshot: Snapshot,
                    settings, stop_event=stop_event)
     if not thrust_used:
         result = replace(result, state_dict=without_force_inputs(result.state_dict, spec))
-    augmented = params.wave_augmentation > 0.0 or any(v > 0.0 for v in params.lf_augmentation)
+    augmented = params.wave_augmentation > 0.0 or \
+        any(v > 0.0 for v in params.lf_augmentation[:y.shape[1]])
     loss = evaluate_loss(result.state_dict, spec, u, y, t_values, mask, settings.mode) \
         if augmented else result.loss
     incumbent_loss = None

@@ -74,6 +74,26 @@ def test_lf_copy_adds_the_motion_to_positions_and_its_filtered_version_to_the_ta
     assert plain[1] is y
 
 
+def test_a_heading_entry_leaves_a_1dof_training_untouched() -> None:
+    """The yaw entry of ``lf_augmentation`` does not exist on a 1-DOF vessel: same network."""
+    snapshot = _snapshot()
+    torch.set_num_threads(1)
+    plain = run_retraining(PredictorParams(ndof=1), snapshot, None, None, None)
+    heading = run_retraining(PredictorParams(ndof=1, lf_augmentation=(0.0, 0.0, 0.00025)),
+                             snapshot, None, None, None)
+    assert plain.accepted and heading.accepted
+    assert heading.loss == plain.loss
+    assert plain.state_dict is not None and heading.state_dict is not None
+    for name, value in plain.state_dict.items():
+        assert torch.equal(heading.state_dict[name], value), name
+    # the north entry does act on the same vessel
+    north = run_retraining(PredictorParams(ndof=1, lf_augmentation=(0.05, 0.0, 0.0)),
+                           snapshot, None, None, None)
+    assert north.state_dict is not None
+    assert not all(torch.equal(north.state_dict[name], value)
+                   for name, value in plain.state_dict.items())
+
+
 @pytest.mark.parametrize('hidden_units', [0, 2])
 def test_without_force_inputs_makes_the_output_independent_of_the_thrust(hidden_units: int,
                                                                          ) -> None:

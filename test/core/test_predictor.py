@@ -792,10 +792,11 @@ from sim_ros.simulation import load_scenario, simulate
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
 # Adam has no convergence stop (the least-squares start lets LM converge in milliseconds), so
-# every training runs its full 10 s and one is surely running when the script ends
+# every training runs its full 3 s, and the one started at sample 140 is surely running when
+# the script ends (the last 40 samples take about 0.15 s)
 params = PredictorParams(ndof=1, sample_time=1.0, retrain_period=20.0, training_window=200.0,
                          transient_length=10.0, filter_window=60.0, append_length=40.0,
-                         estimation_window=600.0, max_epochs=1000000, max_train_seconds=10.0,
+                         estimation_window=600.0, max_epochs=1000000, max_train_seconds=3.0,
                          trainer='adam', nu=4, ny=12, hidden_units=2)
 record = simulate(load_scenario('onedof_feedback'), seed=4, duration=180.0)
 predictor = AdaptivePredictor(params, background=True)

@@ -29,11 +29,11 @@ from lf_predictor_ros.core import retraining, training  # noqa: E402
 from lf_predictor_ros.core.network import NnarmaxNet  # noqa: E402
 
 _ORIGINAL_DATA = retraining.training_data
-_ORIGINAL_TRAIN = training.train  # what retraining imported
+ORIGINAL_TRAIN = training.train  # what retraining imported
 _STASH = threading.local()  # the plain window of this thread's retraining, when augmented
 
 
-def _training_data(*args: Any, **kwargs: Any) -> Any:
+def remember_plain(*args: Any, **kwargs: Any) -> Any:
     """`retraining.training_data`, remembering the plain window when it adds a copy."""
     data = _ORIGINAL_DATA(*args, **kwargs)
     plain = tuple(args[2:6])  # u, y, targets, mask of the window
@@ -41,24 +41,36 @@ def _training_data(*args: Any, **kwargs: Any) -> Any:
     return data
 
 
-def _train(net: NnarmaxNet, u: Any, y: Any, targets: Any, mask: Any, settings: Any,
-           **kwargs: Any) -> Any:
-    """Window alone first; then window and copy with its force weights held."""
+def solve_plain_first(net: NnarmaxNet, settings: Any,
+                      **kwargs: Any) -> tuple[Any, NnarmaxNet] | None:
+    """The first stage: this retraining's plain window solved, and a network warm from it.
+
+    None (and the stash cleared) when no two-stage solve applies: the data carry no copy, or
+    the linear network is not solved by least squares, or a force-ridge grid chooses its ridges.
+    """
     plain = getattr(_STASH, 'plain', None)
     _STASH.plain = None
     if plain is None or not training._solved_by_least_squares(net.spec, settings) or \
             settings.force_ridge_grid:
-        return _ORIGINAL_TRAIN(net, u, y, targets, mask, settings, **kwargs)
+        return None
     plain_u, plain_y, plain_targets, plain_mask = plain
-    first = _ORIGINAL_TRAIN(net, plain_u, plain_y, plain_targets, plain_mask, settings, **kwargs)
-    warm = NnarmaxNet.from_state(net.spec, first.state_dict)
-    return _ORIGINAL_TRAIN(warm, u, y, targets, mask, replace(settings, hold_forces=True),
-                           **kwargs)
+    first = ORIGINAL_TRAIN(net, plain_u, plain_y, plain_targets, plain_mask, settings, **kwargs)
+    return first, NnarmaxNet.from_state(net.spec, first.state_dict)
+
+
+def _train(net: NnarmaxNet, u: Any, y: Any, targets: Any, mask: Any, settings: Any,
+           **kwargs: Any) -> Any:
+    """Window alone first; then window and copy with its force weights held."""
+    staged = solve_plain_first(net, settings, **kwargs)
+    if staged is None:
+        return ORIGINAL_TRAIN(net, u, y, targets, mask, settings, **kwargs)
+    return ORIGINAL_TRAIN(staged[1], u, y, targets, mask, replace(settings, hold_forces=True),
+                          **kwargs)
 
 
 def main(argv: list[str]) -> int:
     """Patch the two functions in `retraining`, run `method_probe.main`."""
-    setattr(retraining, 'training_data', _training_data)  # noqa: B010 - the patch is the point
+    setattr(retraining, 'training_data', remember_plain)  # noqa: B010 - the patch is the point
     setattr(retraining, 'train', _train)  # noqa: B010
     return method_probe.main(argv)
 

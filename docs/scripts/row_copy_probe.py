@@ -21,43 +21,28 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 import sys
-import threading
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from held_copy_probe import ORIGINAL_TRAIN, remember_plain, solve_plain_first  # noqa: E402 - sibling
 import method_probe  # noqa: E402 - the sibling script
 
-from lf_predictor_ros.core import retraining, training  # noqa: E402
+from lf_predictor_ros.core import retraining  # noqa: E402
 from lf_predictor_ros.core.network import NnarmaxNet  # noqa: E402
 
-_ORIGINAL_DATA = retraining.training_data
-_ORIGINAL_TRAIN = training.train  # what retraining imported
-_STASH = threading.local()  # the plain window of this thread's retraining, when augmented
 ROW_KEYS = ('bypass.weight', 'output.weight', 'output.bias')  # one row per output
 COPY_ROWS: tuple[int, ...] = (0, 1)
-
-
-def _training_data(*args: Any, **kwargs: Any) -> Any:
-    """`retraining.training_data`, remembering the plain window when it adds a copy."""
-    data = _ORIGINAL_DATA(*args, **kwargs)
-    plain = tuple(args[2:6])  # u, y, targets, mask of the window
-    _STASH.plain = plain if len(data[1]) > len(plain[1]) else None
-    return data
 
 
 def _train(net: NnarmaxNet, u: Any, y: Any, targets: Any, mask: Any, settings: Any,
            **kwargs: Any) -> Any:
     """Window alone, then window and copy; rows COPY_ROWS from the second solve."""
-    plain = getattr(_STASH, 'plain', None)
-    _STASH.plain = None
-    if plain is None or not training._solved_by_least_squares(net.spec, settings) or \
-            settings.force_ridge_grid:
-        return _ORIGINAL_TRAIN(net, u, y, targets, mask, settings, **kwargs)
-    plain_u, plain_y, plain_targets, plain_mask = plain
-    first = _ORIGINAL_TRAIN(net, plain_u, plain_y, plain_targets, plain_mask, settings, **kwargs)
-    warm = NnarmaxNet.from_state(net.spec, first.state_dict)
-    second = _ORIGINAL_TRAIN(warm, u, y, targets, mask, replace(settings, standardize=False),
-                             **kwargs)
+    staged = solve_plain_first(net, settings, **kwargs)
+    if staged is None:
+        return ORIGINAL_TRAIN(net, u, y, targets, mask, settings, **kwargs)
+    first, warm = staged
+    second = ORIGINAL_TRAIN(warm, u, y, targets, mask, replace(settings, standardize=False),
+                            **kwargs)
     state = {key: value.clone() for key, value in first.state_dict.items()}
     for key in ROW_KEYS:
         for row in COPY_ROWS:
@@ -76,7 +61,7 @@ def main(argv: list[str]) -> int:
             end += 1
         COPY_ROWS = tuple(int(a) for a in argv[at + 1:end])
         argv = argv[:at] + argv[end:]
-    setattr(retraining, 'training_data', _training_data)  # noqa: B010 - the patch is the point
+    setattr(retraining, 'training_data', remember_plain)  # noqa: B010 - the patch is the point
     setattr(retraining, 'train', _train)  # noqa: B010
     return method_probe.main(argv)
 

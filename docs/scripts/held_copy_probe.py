@@ -10,8 +10,8 @@ copy; then on the window and the copy with the force weights held at the first s
 (`TrainSettings.hold_forces`, the least-squares solve of the linear network only; otherwise the
 retraining is left as it is). Why: the copy adds slow motion the thrust did not cause, and the
 joint fit trades the thrust's weight for following it. On threedof_open_loop seed 579 the yaw
-output's thrust part falls 28–39 % with `lf_augmentation: [0, 0, 0.00025]` (north and east
-within 10 %), and its open-loop heading error rises 26 % (docs/BENCHMARKS.md, forty-first
+output's thrust part falls 27–38 % with `lf_augmentation: [0, 0, 0.00025]` (north and east
+within 2 %), and its open-loop heading error rises 26 % (docs/BENCHMARKS.md, forty-first
 session). Development seeds only, as `method_probe.py`.
 """
 from __future__ import annotations

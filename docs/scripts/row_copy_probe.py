@@ -10,8 +10,9 @@ more rows than the window) solves the linear network twice: on the window alone 
 copy), then on the window and the copy with the first solve's standardization (so that the two
 solutions' rows act on the same standardized regressors). The outputs named by ``--copy-rows``
 (0 north, 1 east, 2 heading) take the second solve's row, the others the first's. Why: with the
-heading copy (`lf_augmentation: [0, 0, 0.00025]`) rao_supply's north/east estimate error in a
-turn falls by up to half (seed 581, blocks 1081–1200 s: 0.72 / 0.83 m → 0.51 / 0.35 m), while
+heading copy (`lf_augmentation: [0, 0, 0.00025]`) rao_supply's estimate error in a turn falls
+in north and east as much as in the heading (seed 581, RMS over the turn's blocks 1081–1200 s:
+north 0.78 → 0.44 m, east 0.44 → 0.37 m, heading 0.034 → 0.020 rad), while
 the cost on vessels that do not turn is in the heading row (docs/BENCHMARKS.md, forty-first
 session). Linear network solved by least squares only; otherwise the retraining is left as it
 is. Development seeds only, as `method_probe.py`.

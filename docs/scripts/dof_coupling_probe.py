@@ -44,11 +44,12 @@ def column_dofs(n_force: int, force_channels: int, position_channels: int, n_col
 
 def per_dof_fit(self: network.NnarmaxNet, x: torch.Tensor, target: torch.Tensor,
                 keep: torch.Tensor, ridge: float = network.LINEAR_RIDGE,
-                force_prior: float = 0.0, hold_forces: bool = False) -> None:
+                force_prior: float = 0.0, hold_forces: bool = False,
+                north_east_decoupled: bool = False) -> None:
     """`NnarmaxNet.fit_linear_bypass`, one ridge least-squares problem per output DOF."""
     if self.bypass is None:
         return
-    if force_prior > 0.0 or hold_forces:
+    if force_prior > 0.0 or hold_forces or north_east_decoupled:
         raise NotImplementedError('the per-DOF probe patches the plain solve only')
     design, wanted = self.linear_problem(x, target, keep)
     n_regressors, n_outputs = design.shape[1] - 1, wanted.shape[1]

@@ -111,10 +111,11 @@ def _departed(memory: Memory, x: torch.Tensor) -> int | None:
 
 def fit_with_memory(self: NnarmaxNet, x: torch.Tensor, target: torch.Tensor, keep: torch.Tensor,
                     ridge: float = LINEAR_RIDGE, force_prior: float = 0.0,
-                    hold_forces: bool = False) -> None:
+                    hold_forces: bool = False, north_east_decoupled: bool = False) -> None:
     """`NnarmaxNet.fit_linear_bypass` with the memory (module docstring) when force_prior > 0."""
-    if hold_forces:
-        raise ValueError('the memory probe does not combine with thrust_hold: switch it off')
+    if hold_forces or north_east_decoupled:
+        raise ValueError('the memory probe does not combine with thrust_hold or '
+                         'north_east_decoupled: switch them off')
     LAST_FIT['memory'] = False
     if force_prior <= 0.0 or self.bypass is None:
         _ORIGINAL(self, x, target, keep, ridge)

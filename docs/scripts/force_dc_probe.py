@@ -1,4 +1,4 @@
-"""Exploratory: the linear network with no steady-state gain from thrust to its estimate (issue 13).
+"""Exploratory: a linear network with no steady-state gain from thrust to its estimate (issue 13).
 
     OMP_NUM_THREADS=1 python docs/scripts/force_dc_probe.py --scenarios rao_supply \
         --seeds 635 636 --closed-loop --loops-only --variant "dc0="
@@ -67,11 +67,12 @@ def force_map(nu: int, force_channels: int, n_columns: int) -> torch.Tensor:
 
 def zero_dc_fit(self: network.NnarmaxNet, x: torch.Tensor, target: torch.Tensor,
                 keep: torch.Tensor, ridge: float = network.LINEAR_RIDGE,
-                force_prior: float = 0.0, hold_forces: bool = False) -> None:
+                force_prior: float = 0.0, hold_forces: bool = False,
+                north_east_decoupled: bool = False) -> None:
     """`NnarmaxNet.fit_linear_bypass` with every thrust channel's lag weights summing to zero."""
     if self.bypass is None:
         return
-    if force_prior > 0.0 or hold_forces:
+    if force_prior > 0.0 or hold_forces or north_east_decoupled:
         raise NotImplementedError('the force-DC probe patches the plain solve only')
     design, wanted = self.linear_problem(x, target, keep)
     mapping = force_map(self.spec.nu, self.spec.n_inputs_u, design.shape[1]).to(design.dtype)

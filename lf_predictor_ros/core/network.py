@@ -313,6 +313,41 @@ def solve_ridge(design: torch.Tensor, wanted: torch.Tensor, ridges: torch.Tensor
     return torch.cat(columns, dim=1)
 
 
+def own_dof_columns(spec: NnarmaxSpec) -> torch.Tensor:
+    """Columns each output is solved on with ``north_east_decoupled`` (n_regressors, n_outputs).
+
+    North and east: their own DOF's force and position (and feedback) columns, every lag; the
+    heading (and a 1-DOF output): every column. In the lag-major layout the channel of force
+    column j is j mod n_inputs_u, of position column j mod n_outputs after the forces.
+    """
+    n_force = spec.nu * spec.n_inputs_u
+    channel = torch.tensor([j % spec.n_inputs_u if j < n_force else (j - n_force) % spec.n_outputs
+                            for j in range(spec.n_regressors)], dtype=torch.long)
+    allowed = torch.ones((spec.n_regressors, spec.n_outputs), dtype=torch.bool)
+    if spec.n_outputs == 3:
+        for dof in (0, 1):
+            allowed[:, dof] = channel == dof
+    return allowed
+
+
+def solve_per_output(design: torch.Tensor, wanted: torch.Tensor, ridge: float,
+                     allowed: torch.Tensor) -> torch.Tensor:
+    """`solve_ridge` for each output alone on its ``allowed`` columns and the bias (last column).
+
+    ``allowed`` (n_columns − 1, n_outputs) bool; the weights of the other columns are 0. Returns
+    (n_columns, n_outputs).
+    """
+    n_regressors = design.shape[1] - 1
+    solution = torch.zeros((n_regressors + 1, wanted.shape[1]), dtype=design.dtype)
+    bias = torch.tensor([n_regressors])
+    for output in range(wanted.shape[1]):
+        columns = torch.cat((torch.nonzero(allowed[:, output])[:, 0], bias))
+        ridges = torch.full((columns.numel() - 1,), ridge, dtype=design.dtype)
+        fitted = solve_ridge(design[:, columns], wanted[:, output:output + 1], ridges)
+        solution[columns, output] = fitted[:, 0]
+    return solution
+
+
 def solve_with_fixed_rows(design: torch.Tensor, wanted: torch.Tensor, ridges: torch.Tensor,
                           fixed: torch.Tensor) -> torch.Tensor:
     """`solve_ridge` with the first ``len(fixed)`` rows of the solution fixed at ``fixed``.
@@ -417,7 +452,7 @@ class NnarmaxNet(torch.nn.Module):
 
     def fit_linear_bypass(self, x: torch.Tensor, target: torch.Tensor, keep: torch.Tensor,
                           ridge: float = LINEAR_RIDGE, force_prior: float = 0.0,
-                          hold_forces: bool = False) -> None:
+                          hold_forces: bool = False, north_east_decoupled: bool = False) -> None:
         """Solve the linear bypass and output bias by ridge least squares, in place.
 
         ``x`` (rows, n_regressors) raw regressor rows, ``target`` (rows, n_outputs) the values
@@ -438,10 +473,22 @@ class NnarmaxNet(torch.nn.Module):
         ``hold_forces``: the force columns' weights stay exactly at their current values (the
         warm start's) and the other columns and the bias are the least-squares solution given
         them (``force_prior`` has nothing to act on then; ``PredictorParams.thrust_hold``).
+
+        ``north_east_decoupled`` (3 outputs; no effect with 1): the north and east outputs are
+        each solved on their own DOF's force and position columns and the bias, their other
+        weights 0; the heading output on every column (``own_dof_columns``,
+        ``PredictorParams.north_east_decoupled``). Not with ``force_prior`` or ``hold_forces``.
         """
         if self.bypass is None:
             return
         design, wanted = self.linear_problem(x, target, keep)
+        if north_east_decoupled and wanted.shape[1] == 3:
+            if force_prior > 0.0 or hold_forces:
+                raise ValueError('north_east_decoupled solves every output on its own columns: '
+                                 'it does not combine with force_prior or hold_forces')
+            self.set_linear_solution(solve_per_output(design, wanted, ridge,
+                                                      own_dof_columns(self.spec)))
+            return
         ridges = torch.full((design.shape[1] - 1,), ridge, dtype=design.dtype)
         n_force = self.spec.nu * self.spec.n_inputs_u
         if hold_forces:

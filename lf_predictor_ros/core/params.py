@@ -53,6 +53,7 @@ _INT_FIELDS = ('ndof', 'nu', 'ny', 'nfb', 'hidden_units', 'hidden_layers', 'max_
                'motion_gate_ny', 'ramp_order')
 _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confirm')
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'thrust_ridge_validation', 'thrust_hold',
+                'north_east_decoupled',
                 'ramp_invariant', 'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
                 'sea_change_revert', 'frequency_yaw')
@@ -265,6 +266,13 @@ class PredictorParams:
             'keeping the thrust is a function of the estimates and cannot identify its weights, '
             'while the wave part keeps adapting to the sea (issue 13, hypothesis 1; '
             'docs/BENCHMARKS.md, thirty-eighth and thirty-ninth sessions)'))
+    north_east_decoupled: bool = field(
+        default=False, metadata=_doc(
+            'ndof 3, linear network (hidden_units 0) only: the north and east estimates are each '
+            "fitted on their own DOF's thrust and position lags (and the bias), the heading on "
+            'every regressor; in a turn the heading lags and the yaw moment then no longer reach '
+            'the north/east estimate, where they put metres of error and tripped the sanity '
+            'guard (issue 13; docs/BENCHMARKS.md, forty-second session); no effect with ndof 1'))
     regressor_clip: float = field(
         default=0.0, metadata=_doc(
             'clip every regressor the network sees (relative positions, forces) and its output '
@@ -503,6 +511,8 @@ class PredictorParams:
                              f'got {self.hidden_units}): set hidden_units 0 or switch it off')
         if self.thrust_hold:
             self._check_thrust_hold()
+        if self.north_east_decoupled and self.ndof == 3:
+            self._check_north_east_decoupled()
         for name in ('hidden_layers', 'max_epochs'):
             if getattr(self, name) < 1:
                 raise ValueError(f'positivity rule: {name} must be ≥ 1, got '
@@ -529,6 +539,21 @@ class PredictorParams:
             if getattr(self, other):
                 raise ValueError(f'thrust_hold and {other} both decide the thrust weights per '
                                  'window: switch one of them off')
+
+    def _check_north_east_decoupled(self) -> None:
+        """``north_east_decoupled`` needs one least-squares solve per output and no thrust rule."""
+        if self.hidden_units != 0 or self.derivative_weight != 0.0 or \
+                (self.training_mode == 'parallel' and self.nfb > 0):
+            raise ValueError('north_east_decoupled needs the linear network solved by least '
+                             'squares (hidden_units 0, derivative_weight 0, no parallel training '
+                             'with nfb > 0): change those or set north_east_decoupled false')
+        for other in ('thrust_ridge_validation', 'thrust_hold'):
+            if getattr(self, other):
+                raise ValueError(f'north_east_decoupled and {other} both shape the least-squares '
+                                 'solve: switch one of them off')
+        if self.thrust_prior > 0.0:
+            raise ValueError('north_east_decoupled and thrust_prior both shape the least-squares '
+                             'solve: set thrust_prior 0 or north_east_decoupled false')
 
     def _check_choices(self) -> None:
         if self.ndof not in NDOF_VALUES:

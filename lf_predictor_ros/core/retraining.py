@@ -200,7 +200,8 @@ def train_settings(params: PredictorParams) -> TrainSettings:
                          linear_init=params.linear_init, seed=params.seed,
                          force_ridge_grid=FORCE_RIDGE_GRID if params.thrust_ridge_validation
                          else (), validation_rows=params.retrain_samples,
-                         force_prior=params.thrust_prior)
+                         force_prior=params.thrust_prior,
+                         north_east_decoupled=params.north_east_decoupled and params.ndof == 3)
 
 
 def first_training_samples(params: PredictorParams) -> int:

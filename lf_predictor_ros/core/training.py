@@ -116,7 +116,9 @@ class TrainSettings:
     columns' ridge per row towards the warm start's weights in the least-squares solve
     (``NnarmaxNet.fit_linear_bypass``; 0: ``LINEAR_RIDGE`` towards 0); ``hold_forces`` (the
     linear network solved by least squares only) keeps the force weights exactly at the warm
-    start's and solves the rest given them; ``seed`` is
+    start's and solves the rest given them; ``north_east_decoupled`` (the linear network
+    solved by least squares only; no effect with one output) solves the north and east outputs
+    each on its own DOF's columns (``NnarmaxNet.fit_linear_bypass``); ``seed`` is
     recorded for stochastic variants (mini-batches, restarts): the three full-batch algorithms
     here use no randomness, so a run is reproducible bit for bit without touching torch's global
     RNG.
@@ -142,6 +144,7 @@ class TrainSettings:
     validation_rows: int = 0
     force_prior: float = 0.0
     hold_forces: bool = False
+    north_east_decoupled: bool = False
 
     def __post_init__(self) -> None:
         """Validate; raise ValueError naming the broken rule."""
@@ -184,6 +187,11 @@ class TrainSettings:
         if self.hold_forces and self.force_ridge_grid:
             raise ValueError('TrainSettings.hold_forces and force_ridge_grid both set the force '
                              'weights: give one of them')
+        if self.north_east_decoupled and (self.hold_forces or self.force_ridge_grid or
+                                          self.force_prior > 0.0):
+            raise ValueError('TrainSettings.north_east_decoupled solves each output on its own '
+                             'columns and does not combine with hold_forces, force_ridge_grid '
+                             'or force_prior: give one of them')
 
 
 @dataclass(frozen=True)
@@ -486,6 +494,10 @@ def _train(
         raise ValueError('TrainSettings.hold_forces needs the linear network solved by least '
                          'squares (no tanh part, derivative_weight 0, no parallel training with '
                          'feedback): the gradient training would move the held force weights')
+    if settings.north_east_decoupled and spec.n_outputs == 3 and not solved:
+        raise ValueError('TrainSettings.north_east_decoupled needs the linear network solved by '
+                         'least squares (no tanh part, derivative_weight 0, no parallel training '
+                         'with feedback): the gradient training would couple the outputs again')
     if solved and settings.force_ridge_grid:
         design, wanted = model.linear_problem(window.x_series[:-1], window.target, window.keep)
         ridges = validated_force_ridges(design, wanted, spec.nu * spec.n_inputs_u,
@@ -494,7 +506,8 @@ def _train(
     elif settings.linear_init or solved:
         model.fit_linear_bypass(window.x_series[:-1], window.target, window.keep,
                                 force_prior=settings.force_prior,
-                                hold_forces=settings.hold_forces)
+                                hold_forces=settings.hold_forces,
+                                north_east_decoupled=settings.north_east_decoupled)
     runner = _WindowPredictor(model, n_static_regressors(spec), spec.nfb)
     parallel = settings.mode == 'parallel'
     with torch.no_grad():

@@ -268,11 +268,14 @@ class PredictorParams:
             'docs/BENCHMARKS.md, thirty-eighth and thirty-ninth sessions)'))
     north_east_decoupled: bool = field(
         default=False, metadata=_doc(
-            'ndof 3, linear network (hidden_units 0) only: the north and east estimates are each '
-            "fitted on their own DOF's thrust and position lags (and the bias), the heading on "
-            'every regressor; in a turn the heading lags and the yaw moment then no longer reach '
-            'the north/east estimate, where they put metres of error and tripped the sanity '
-            'guard (issue 13; docs/BENCHMARKS.md, forty-second session); no effect with ndof 1'))
+            "the north and east estimates are each fitted on their own DOF's thrust and "
+            'position lags (and the bias), the heading on every regressor; in a turn the heading '
+            'lags and the yaw moment then no longer reach the north/east estimate, where they put '
+            'metres of error and tripped the sanity guard (issue 13; docs/BENCHMARKS.md, '
+            'forty-second session). It acts on the plain least-squares solve of the linear '
+            'network with ndof 3 only: with ndof 1, a tanh part (hidden_units > 0), '
+            'derivative_weight > 0, parallel training with nfb > 0, thrust_hold, thrust_prior > 0 '
+            'or thrust_ridge_validation the outputs stay coupled as before'))
     regressor_clip: float = field(
         default=0.0, metadata=_doc(
             'clip every regressor the network sees (relative positions, forces) and its output '
@@ -356,6 +359,14 @@ class PredictorParams:
         return tuple(f.name for f in fields(cls))
 
     # ---- derived quantities ------------------------------------------------------------------
+
+    @property
+    def decouples_north_east(self) -> bool:
+        """``north_east_decoupled`` and a training it acts on (see the field's description)."""
+        solved = self.hidden_units == 0 and self.derivative_weight == 0.0 and not (
+            self.training_mode == 'parallel' and self.nfb > 0)
+        other_rule = self.thrust_hold or self.thrust_prior > 0.0 or self.thrust_ridge_validation
+        return self.north_east_decoupled and self.ndof == 3 and solved and not other_rule
 
     @property
     def estimation_samples(self) -> int:
@@ -511,8 +522,6 @@ class PredictorParams:
                              f'got {self.hidden_units}): set hidden_units 0 or switch it off')
         if self.thrust_hold:
             self._check_thrust_hold()
-        if self.north_east_decoupled and self.ndof == 3:
-            self._check_north_east_decoupled()
         for name in ('hidden_layers', 'max_epochs'):
             if getattr(self, name) < 1:
                 raise ValueError(f'positivity rule: {name} must be ≥ 1, got '
@@ -539,21 +548,6 @@ class PredictorParams:
             if getattr(self, other):
                 raise ValueError(f'thrust_hold and {other} both decide the thrust weights per '
                                  'window: switch one of them off')
-
-    def _check_north_east_decoupled(self) -> None:
-        """``north_east_decoupled`` needs one least-squares solve per output and no thrust rule."""
-        if self.hidden_units != 0 or self.derivative_weight != 0.0 or \
-                (self.training_mode == 'parallel' and self.nfb > 0):
-            raise ValueError('north_east_decoupled needs the linear network solved by least '
-                             'squares (hidden_units 0, derivative_weight 0, no parallel training '
-                             'with nfb > 0): change those or set north_east_decoupled false')
-        for other in ('thrust_ridge_validation', 'thrust_hold'):
-            if getattr(self, other):
-                raise ValueError(f'north_east_decoupled and {other} both shape the least-squares '
-                                 'solve: switch one of them off')
-        if self.thrust_prior > 0.0:
-            raise ValueError('north_east_decoupled and thrust_prior both shape the least-squares '
-                             'solve: set thrust_prior 0 or north_east_decoupled false')
 
     def _check_choices(self) -> None:
         if self.ndof not in NDOF_VALUES:

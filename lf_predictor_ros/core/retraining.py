@@ -201,7 +201,7 @@ def train_settings(params: PredictorParams) -> TrainSettings:
                          force_ridge_grid=FORCE_RIDGE_GRID if params.thrust_ridge_validation
                          else (), validation_rows=params.retrain_samples,
                          force_prior=params.thrust_prior,
-                         north_east_decoupled=params.north_east_decoupled and params.ndof == 3)
+                         north_east_decoupled=params.decouples_north_east)
 
 
 def first_training_samples(params: PredictorParams) -> int:

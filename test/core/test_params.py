@@ -56,18 +56,6 @@ RULE_CASES: list[tuple[str, dict[str, Any], str]] = [
     ('thrust_hold with the grid', {'thrust_hold': True, 'thrust_ridge_validation': True},
      r'thrust_hold and thrust_ridge_validation both decide'),
     ('thrust_hold not a bool', {'thrust_hold': 1}, r'thrust_hold must be true or false'),
-    ('north_east_decoupled tanh', {'north_east_decoupled': True, 'hidden_units': 2},
-     r'north_east_decoupled needs the linear network solved by least squares'),
-    ('north_east_decoupled parallel', {'north_east_decoupled': True, 'nfb': 2,
-                                       'motion_gate': False, 'training_mode': 'parallel'},
-     r'north_east_decoupled needs the linear network'),
-    ('north_east_decoupled with the hold', {'north_east_decoupled': True, 'thrust_hold': True},
-     r'north_east_decoupled and thrust_hold'),
-    ('north_east_decoupled with the grid',
-     {'north_east_decoupled': True, 'thrust_ridge_validation': True},
-     r'north_east_decoupled and thrust_ridge_validation'),
-    ('north_east_decoupled with the prior', {'north_east_decoupled': True, 'thrust_prior': 0.01},
-     r'north_east_decoupled and thrust_prior'),
     ('north_east_decoupled not a bool', {'north_east_decoupled': 1},
      r'north_east_decoupled must be true or false'),
     ('max_epochs', {'max_epochs': 0}, r'max_epochs must be ≥ 1'),
@@ -236,3 +224,14 @@ def test_the_targets_notch_widens_only_in_a_broadband_sea() -> None:
     assert wide.target_notch_zeta(0.4, peak_damping=0.1) == 0.8
     assert PredictorParams(notch_zeta_broadband=1.3, notch_lower_edge=0.0).target_notch_zeta(
         0.4, peak_damping=0.1) == 1.3  # no edge: no limit
+
+
+@pytest.mark.parametrize('changes', [
+    {'ndof': 1}, {'hidden_units': 2}, {'derivative_weight': 0.1}, {'thrust_hold': True},
+    {'thrust_prior': 0.01}, {'thrust_ridge_validation': True},
+    {'nfb': 2, 'motion_gate': False, 'training_mode': 'parallel'}])
+def test_north_east_decoupled_acts_only_on_the_plain_linear_solve(changes: dict[str, Any]
+                                                                  ) -> None:
+    assert PredictorParams(north_east_decoupled=True).decouples_north_east
+    assert not PredictorParams(north_east_decoupled=False).decouples_north_east
+    assert not PredictorParams(north_east_decoupled=True, **changes).decouples_north_east

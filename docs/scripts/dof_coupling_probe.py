@@ -13,9 +13,11 @@ changes. It is the twenty-first session's ``dof_coupling: none`` (removed in `fc
 then on the tanh network of that time), on today's defaults: `truth_window_probe.py` found that
 a sliding ARX fitted on the true LF pose extrapolates to the RAO vessels' manoeuvres far better
 per DOF than coupled (docs/BENCHMARKS.md, fortieth session). Every variant of the run gets the
-patch (run the default rows from another process). Only the plain solve is patched: the
-force-prior and held-force paths raise, and `thrust_ridge_validation` (its own solve) is left
-coupled. Development seeds only, as `method_probe.py`.
+patch (run the default rows from another process). The package's `north_east_decoupled` (the
+``--yaw-coupled`` fit as an option, since the forty-second session) is ignored: the probe sets
+the coupling itself. Only the plain solve is patched: the force-prior and held-force paths raise,
+and `thrust_ridge_validation` (its own solve) is left coupled. Development seeds only, as
+`method_probe.py`.
 """
 from __future__ import annotations
 
@@ -49,7 +51,7 @@ def per_dof_fit(self: network.NnarmaxNet, x: torch.Tensor, target: torch.Tensor,
     """`NnarmaxNet.fit_linear_bypass`, one ridge least-squares problem per output DOF."""
     if self.bypass is None:
         return
-    if force_prior > 0.0 or hold_forces or north_east_decoupled:
+    if force_prior > 0.0 or hold_forces:
         raise NotImplementedError('the per-DOF probe patches the plain solve only')
     design, wanted = self.linear_problem(x, target, keep)
     n_regressors, n_outputs = design.shape[1] - 1, wanted.shape[1]

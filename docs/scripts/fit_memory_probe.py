@@ -113,12 +113,11 @@ def fit_with_memory(self: NnarmaxNet, x: torch.Tensor, target: torch.Tensor, kee
                     ridge: float = LINEAR_RIDGE, force_prior: float = 0.0,
                     hold_forces: bool = False, north_east_decoupled: bool = False) -> None:
     """`NnarmaxNet.fit_linear_bypass` with the memory (module docstring) when force_prior > 0."""
-    if hold_forces or north_east_decoupled:
-        raise ValueError('the memory probe does not combine with thrust_hold or '
-                         'north_east_decoupled: switch them off')
+    if hold_forces:
+        raise ValueError('the memory probe does not combine with thrust_hold: switch it off')
     LAST_FIT['memory'] = False
     if force_prior <= 0.0 or self.bypass is None:
-        _ORIGINAL(self, x, target, keep, ridge)
+        _ORIGINAL(self, x, target, keep, ridge, north_east_decoupled=north_east_decoupled)
         return
     constant = force_prior
     memory = MEMORIES.setdefault(self.spec.ramp_invariant, Memory())
@@ -142,7 +141,7 @@ def fit_with_memory(self: NnarmaxNet, x: torch.Tensor, target: torch.Tensor, kee
     memory.previous = (x.clone(), target.clone(), keep.clone())
     design, wanted = self.linear_problem(x, target, keep)
     if memory.info is None or memory.vector is None:
-        _ORIGINAL(self, x, target, keep, ridge)
+        _ORIGINAL(self, x, target, keep, ridge, north_east_decoupled=north_east_decoupled)
         return
     # 2. forgetting in time, then in the directions the window identifies (standardized units)
     decay = math.exp(-RETRAIN_PERIOD / SETTINGS['memory_time'])

@@ -17,7 +17,8 @@ The patch solves the same ridge least-squares problem with the thrust weights of
 channel, output) constrained to sum to zero: they are written w = N z with N an orthonormal basis
 of the zero-sum vectors of the nu lags, so the ridge penalty ‖w‖² = ‖z‖² is the shipped one. In
 standardized units the constraint is the same (all lags of a channel share one scale and one
-mean). The motion gate's twin is fitted the same way (it is the same class). Only the plain solve
+mean). The motion gate's twin is fitted the same way (it is the same class); the package's
+`north_east_decoupled` is ignored (every output on every column). Only the plain solve
 is patched: the force-prior and held-force paths raise, and `thrust_ridge_validation` (its own
 solve) is left as it is. Every variant of the run gets the patch (run the default rows from
 another process). Development seeds only, as `method_probe.py`.
@@ -72,7 +73,7 @@ def zero_dc_fit(self: network.NnarmaxNet, x: torch.Tensor, target: torch.Tensor,
     """`NnarmaxNet.fit_linear_bypass` with every thrust channel's lag weights summing to zero."""
     if self.bypass is None:
         return
-    if force_prior > 0.0 or hold_forces or north_east_decoupled:
+    if force_prior > 0.0 or hold_forces:
         raise NotImplementedError('the force-DC probe patches the plain solve only')
     design, wanted = self.linear_problem(x, target, keep)
     mapping = force_map(self.spec.nu, self.spec.n_inputs_u, design.shape[1]).to(design.dtype)

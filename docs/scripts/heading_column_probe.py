@@ -11,7 +11,8 @@ relative heading lags ψ(t − i) − ψ(t) add: in station keeping those lags c
 radian. The patch solves the shipped ridge problem with the north and east outputs' weights on
 the heading position columns fixed at 0 (``--drop-moment``: on the yaw-moment columns too); the
 heading output keeps every column. The motion gate's twin is fitted the same way (it is the same
-class). Only the plain solve is patched: the force-prior and held-force paths raise, and
+class). The package's `north_east_decoupled` is ignored (the probe sets the coupling itself).
+Only the plain solve is patched: the force-prior and held-force paths raise, and
 `thrust_ridge_validation` (its own solve) is left as it is. Every variant of the run gets the
 patch (run the default rows from another process). Development seeds only, as
 `method_probe.py`.
@@ -48,7 +49,7 @@ def no_heading_fit(self: network.NnarmaxNet, x: torch.Tensor, target: torch.Tens
     """`NnarmaxNet.fit_linear_bypass`, the north/east rows without the heading columns."""
     if self.bypass is None:
         return
-    if force_prior > 0.0 or hold_forces or north_east_decoupled:
+    if force_prior > 0.0 or hold_forces:
         raise NotImplementedError('the heading-column probe patches the plain solve only')
     design, wanted = self.linear_problem(x, target, keep)
     n_regressors, n_outputs = design.shape[1] - 1, wanted.shape[1]

@@ -361,12 +361,21 @@ class PredictorParams:
     # ---- derived quantities ------------------------------------------------------------------
 
     @property
+    def trained_by_least_squares(self) -> bool:
+        """One least-squares solve is the whole training (training._solved_by_least_squares).
+
+        The linear network (hidden_units 0), no derivative term, no recursion through fed-back
+        outputs (parallel training with nfb > 0).
+        """
+        return self.hidden_units == 0 and self.derivative_weight == 0.0 and not (
+            self.training_mode == 'parallel' and self.nfb > 0)
+
+    @property
     def decouples_north_east(self) -> bool:
         """``north_east_decoupled`` and a training it acts on (see the field's description)."""
-        solved = self.hidden_units == 0 and self.derivative_weight == 0.0 and not (
-            self.training_mode == 'parallel' and self.nfb > 0)
         other_rule = self.thrust_hold or self.thrust_prior > 0.0 or self.thrust_ridge_validation
-        return self.north_east_decoupled and self.ndof == 3 and solved and not other_rule
+        return (self.north_east_decoupled and self.ndof == 3 and self.trained_by_least_squares
+                and not other_rule)
 
     @property
     def estimation_samples(self) -> int:
@@ -539,8 +548,7 @@ class PredictorParams:
 
     def _check_thrust_hold(self) -> None:
         """``thrust_hold`` needs one least-squares solve and no other rule on the thrust."""
-        if self.hidden_units != 0 or self.derivative_weight != 0.0 or \
-                (self.training_mode == 'parallel' and self.nfb > 0):
+        if not self.trained_by_least_squares:
             raise ValueError('thrust_hold needs the linear network solved by least squares '
                              '(hidden_units 0, derivative_weight 0, no parallel training with '
                              'nfb > 0): change those or switch thrust_hold off')

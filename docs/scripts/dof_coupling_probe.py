@@ -44,29 +44,36 @@ def column_dofs(n_force: int, force_channels: int, position_channels: int, n_col
     return torch.tensor(dofs, dtype=torch.long)
 
 
+def plain_problem(net: network.NnarmaxNet, x: torch.Tensor, target: torch.Tensor,
+                  keep: torch.Tensor, force_prior: float, hold_forces: bool, probe: str
+                  ) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """The plain least-squares problem of a patched `fit_linear_bypass` (None: no bypass).
+
+    Shared by the probes that replace the solve; they patch the plain solve only.
+    """
+    if net.bypass is None:
+        return None
+    if force_prior > 0.0 or hold_forces:
+        raise NotImplementedError(f'the {probe} probe patches the plain solve only')
+    return net.linear_problem(x, target, keep)
+
+
 def per_dof_fit(self: network.NnarmaxNet, x: torch.Tensor, target: torch.Tensor,
                 keep: torch.Tensor, ridge: float = network.LINEAR_RIDGE,
                 force_prior: float = 0.0, hold_forces: bool = False,
                 north_east_decoupled: bool = False) -> None:
     """`NnarmaxNet.fit_linear_bypass`, one ridge least-squares problem per output DOF."""
-    if self.bypass is None:
+    problem = plain_problem(self, x, target, keep, force_prior, hold_forces, 'per-DOF')
+    if problem is None:
         return
-    if force_prior > 0.0 or hold_forces:
-        raise NotImplementedError('the per-DOF probe patches the plain solve only')
-    design, wanted = self.linear_problem(x, target, keep)
+    design, wanted = problem
     n_regressors, n_outputs = design.shape[1] - 1, wanted.shape[1]
     dofs = column_dofs(self.spec.nu * self.spec.n_inputs_u, self.spec.n_inputs_u, n_outputs,
                        n_regressors)
-    solution = torch.zeros((n_regressors + 1, n_outputs), dtype=design.dtype)
-    for dof in range(n_outputs):
-        own = torch.nonzero(dofs == dof)[:, 0] if dof not in COUPLED_OUTPUTS else \
-            torch.arange(n_regressors)
-        columns = torch.cat((own, torch.tensor([n_regressors])))
-        ridges = torch.full((columns.numel() - 1,), ridge, dtype=design.dtype)
-        fitted = network.solve_ridge(design[:, columns], wanted[:, dof:dof + 1], ridges)
-        solution[columns, dof] = fitted[:, 0]
-    self.set_linear_solution(solution)
-
+    allowed = torch.stack([dofs == dof if dof not in COUPLED_OUTPUTS else
+                           torch.ones(n_regressors, dtype=torch.bool) for dof in range(n_outputs)],
+                          dim=1)
+    self.set_linear_solution(network.solve_per_output(design, wanted, ridge, allowed))
 
 if __name__ == '__main__':
     setattr(network.NnarmaxNet, 'fit_linear_bypass', per_dof_fit)  # noqa: B010 - the patch

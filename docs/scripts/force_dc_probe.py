@@ -32,6 +32,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from dof_coupling_probe import plain_problem  # noqa: E402 - the sibling script
 import method_probe  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.core import network  # noqa: E402
@@ -71,11 +72,10 @@ def zero_dc_fit(self: network.NnarmaxNet, x: torch.Tensor, target: torch.Tensor,
                 force_prior: float = 0.0, hold_forces: bool = False,
                 north_east_decoupled: bool = False) -> None:
     """`NnarmaxNet.fit_linear_bypass` with every thrust channel's lag weights summing to zero."""
-    if self.bypass is None:
+    problem = plain_problem(self, x, target, keep, force_prior, hold_forces, 'force-DC')
+    if problem is None:
         return
-    if force_prior > 0.0 or hold_forces:
-        raise NotImplementedError('the force-DC probe patches the plain solve only')
-    design, wanted = self.linear_problem(x, target, keep)
+    design, wanted = problem
     mapping = force_map(self.spec.nu, self.spec.n_inputs_u, design.shape[1]).to(design.dtype)
     reduced = design @ mapping  # the bias column stays the last one
     ridges = torch.full((reduced.shape[1] - 1,), ridge, dtype=design.dtype)

@@ -25,6 +25,7 @@ import sys
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from dof_coupling_probe import plain_problem  # noqa: E402 - the sibling script
 import method_probe  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.core import network  # noqa: E402
@@ -47,11 +48,10 @@ def no_heading_fit(self: network.NnarmaxNet, x: torch.Tensor, target: torch.Tens
                    force_prior: float = 0.0, hold_forces: bool = False,
                    north_east_decoupled: bool = False) -> None:
     """`NnarmaxNet.fit_linear_bypass`, the north/east rows without the heading columns."""
-    if self.bypass is None:
+    problem = plain_problem(self, x, target, keep, force_prior, hold_forces, 'heading-column')
+    if problem is None:
         return
-    if force_prior > 0.0 or hold_forces:
-        raise NotImplementedError('the heading-column probe patches the plain solve only')
-    design, wanted = self.linear_problem(x, target, keep)
+    design, wanted = problem
     n_regressors, n_outputs = design.shape[1] - 1, wanted.shape[1]
     ridges = torch.full((n_regressors,), ridge, dtype=design.dtype)
     solution = network.solve_ridge(design, wanted, ridges)

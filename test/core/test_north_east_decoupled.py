@@ -15,7 +15,12 @@ from lf_predictor_ros.core.network import (
     solve_ridge,
 )
 from lf_predictor_ros.core.params import PredictorParams
-from lf_predictor_ros.core.retraining import Snapshot, network_spec, run_retraining
+from lf_predictor_ros.core.retraining import (
+    Snapshot,
+    network_spec,
+    run_retraining,
+    train_settings,
+)
 from lf_predictor_ros.core.training import TrainSettings, train
 from sim_ros.simulation import load_scenario, simulate
 
@@ -105,8 +110,12 @@ def test_a_1dof_training_is_untouched() -> None:
     assert flagged.loss == plain.loss
     for name, value in plain.state_dict.items():
         assert torch.equal(flagged.state_dict[name], value), name
-    # a tanh network on one DOF is allowed: there is nothing to decouple
-    PredictorParams(ndof=1, hidden_units=2, north_east_decoupled=True)
+    # the trainer is not even asked to decouple one output
+    assert not train_settings(PredictorParams(ndof=1, north_east_decoupled=True)
+                              ).north_east_decoupled
+    assert train_settings(PredictorParams(north_east_decoupled=True)).north_east_decoupled
+    assert not train_settings(PredictorParams(north_east_decoupled=True, thrust_hold=True)
+                              ).north_east_decoupled  # the hold's own solve stays coupled
 
 
 @pytest.mark.parametrize('changes', [{'hold_forces': True}, {'force_prior': 0.01},

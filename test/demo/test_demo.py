@@ -143,9 +143,15 @@ def _command(stamp: float) -> WrenchStamped:
 
 
 def _lockstep_node(ros_context: object, **overrides: float | list[str]) -> SimulatorNode:
-    """A lockstep SimulatorNode (timeout 0.2 s) that sees a controller without one running."""
+    """A lockstep SimulatorNode (timeout 0.2 s) that sees a controller without one running.
+
+    One ``_advance`` makes its steps for at most ``tick_period`` of wall time; the 1 s here keeps
+    the step counts these tests assert independent of the machine's load (with the node's 0.01 s
+    a loaded two-core machine made 1 step of 5 in one call: forty-second session).
+    """
     values: dict[str, float | bool | list[str]] = {'lockstep': True, 'lockstep_timeout': 0.2,
-                                                   'speed_factor': 0.0, **overrides}
+                                                   'speed_factor': 0.0, 'tick_period': 1.0,
+                                                   **overrides}
     node = SimulatorNode(context=ros_context, parameter_overrides=[
         Parameter(name, value=value) for name, value in values.items()])
     node._peer_seen_at = -math.inf  # no controller process here: skip the discovery wait

@@ -53,6 +53,11 @@ def _probe_qos() -> QoSProfile:
     return QoSProfile(depth=10_000, reliability=ReliabilityPolicy.RELIABLE)
 
 
+# [s] wall time allowed for DDS discovery: it returns as soon as every subscription matched;
+# 10 s ran out once on a host losing up to half its CPU to steal time (forty-second session)
+DISCOVERY_TIMEOUT = 30.0
+
+
 class Probe:
     """Subscribes to topics and keeps every message received."""
 
@@ -62,7 +67,7 @@ class Probe:
             node.create_subscription(msg_type, topic, self._keeper(topic), _probe_qos())
             for topic, msg_type in topics.items()]
 
-    def wait_matched(self, timeout: float) -> None:
+    def wait_matched(self, timeout: float = DISCOVERY_TIMEOUT) -> None:
         """Block until every subscription is matched with a publisher (DDS discovery)."""
         end = time.monotonic() + timeout
         while any(sub.get_publisher_count() == 0 for sub in self.subscriptions):
@@ -94,7 +99,7 @@ def test_simulator_publishes_every_topic_with_types_frames_and_stamps(
     probe = Probe(probe_node, TOPICS)
     executor.add_node(sim)
     executor.add_node(probe_node)
-    probe.wait_matched(timeout=10.0)  # before the first tick publishes the first sample
+    probe.wait_matched()  # before the first tick publishes the first sample
     executor.spin_until_future_complete(sim.done, timeout_sec=10.0)
     _spin_for(executor, 0.5)  # drain
     assert sim.done.done() and sim.steps == 30
@@ -430,7 +435,7 @@ def test_closed_loop_over_dds_holds_supply_vessel_and_is_deterministic(
     try:
         # lockstep: the simulator holds t = 0 until the first command, so start the
         # controller once the probe hears the simulator and no sample is missed
-        probe.wait_matched(timeout=10.0)
+        probe.wait_matched()
         ctl_proc = _start('sim_ros.nodes.dp_controller_node', [
             '--ros-args', '--params-file', 'config/dp_controller.yaml',
             '-r', 'lf_pose:=truth/lf_pose'], dds_env, tmp_path / 'dp_controller.log')

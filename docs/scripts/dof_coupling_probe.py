@@ -36,14 +36,6 @@ from lf_predictor_ros.core import network  # noqa: E402
 COUPLED_OUTPUTS: set[int] = set()
 
 
-def column_dofs(n_force: int, force_channels: int, position_channels: int, n_columns: int
-                ) -> torch.Tensor:
-    """Per regressor column, the channel (DOF) it carries: forces first, then positions."""
-    dofs = [j % force_channels if j < n_force else (j - n_force) % position_channels
-            for j in range(n_columns)]
-    return torch.tensor(dofs, dtype=torch.long)
-
-
 def plain_problem(net: network.NnarmaxNet, x: torch.Tensor, target: torch.Tensor,
                   keep: torch.Tensor, force_prior: float, hold_forces: bool, probe: str
                   ) -> tuple[torch.Tensor, torch.Tensor] | None:
@@ -68,8 +60,7 @@ def per_dof_fit(self: network.NnarmaxNet, x: torch.Tensor, target: torch.Tensor,
         return
     design, wanted = problem
     n_regressors, n_outputs = design.shape[1] - 1, wanted.shape[1]
-    dofs = column_dofs(self.spec.nu * self.spec.n_inputs_u, self.spec.n_inputs_u, n_outputs,
-                       n_regressors)
+    dofs = network.column_channels(self.spec)
     allowed = torch.stack([dofs == dof if dof not in COUPLED_OUTPUTS else
                            torch.ones(n_regressors, dtype=torch.bool) for dof in range(n_outputs)],
                           dim=1)

@@ -35,12 +35,11 @@ DROP_MOMENT = False  # ``--drop-moment``: the north/east rows lose the yaw-momen
 
 
 def dropped_columns(spec: network.NnarmaxSpec, drop_moment: bool) -> torch.Tensor:
-    """Regressor columns the north/east outputs do without (lag-major layout, forces first)."""
-    n_force = spec.nu * spec.n_inputs_u
-    columns = [n_force + lag * spec.n_outputs + HEADING for lag in range(spec.ny + spec.nfb)]
-    if drop_moment:
-        columns += [lag * spec.n_inputs_u + HEADING for lag in range(spec.nu)]
-    return torch.tensor(sorted(columns), dtype=torch.long)
+    """Regressor columns the north/east outputs do without (``network.column_channels``)."""
+    heading = network.column_channels(spec) == HEADING
+    if not drop_moment:  # the yaw-moment (force) columns stay
+        heading[:spec.nu * spec.n_inputs_u] = False
+    return torch.nonzero(heading)[:, 0]
 
 
 def no_heading_fit(self: network.NnarmaxNet, x: torch.Tensor, target: torch.Tensor,

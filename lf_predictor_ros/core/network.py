@@ -313,16 +313,25 @@ def solve_ridge(design: torch.Tensor, wanted: torch.Tensor, ridges: torch.Tensor
     return torch.cat(columns, dim=1)
 
 
+def column_channels(spec: NnarmaxSpec) -> torch.Tensor:
+    """Per regressor column, the channel (DOF) it carries, (n_regressors,) long.
+
+    Lag-major layout (``regressors`` module docstring): force column j carries channel
+    j mod n_inputs_u; after the nu · n_inputs_u force columns, position (and feedback) column j
+    carries (j − nu · n_inputs_u) mod n_outputs.
+    """
+    n_force = spec.nu * spec.n_inputs_u
+    return torch.tensor([j % spec.n_inputs_u if j < n_force else (j - n_force) % spec.n_outputs
+                         for j in range(spec.n_regressors)], dtype=torch.long)
+
+
 def own_dof_columns(spec: NnarmaxSpec) -> torch.Tensor:
     """Columns each output is solved on with ``north_east_decoupled`` (n_regressors, n_outputs).
 
-    North and east: their own DOF's force and position (and feedback) columns, every lag; the
-    heading (and a 1-DOF output): every column. In the lag-major layout the channel of force
-    column j is j mod n_inputs_u, of position column j mod n_outputs after the forces.
+    North and east: their own DOF's force and position (and feedback) columns, every lag
+    (``column_channels``); the heading (and a 1-DOF output): every column.
     """
-    n_force = spec.nu * spec.n_inputs_u
-    channel = torch.tensor([j % spec.n_inputs_u if j < n_force else (j - n_force) % spec.n_outputs
-                            for j in range(spec.n_regressors)], dtype=torch.long)
+    channel = column_channels(spec)
     allowed = torch.ones((spec.n_regressors, spec.n_outputs), dtype=torch.bool)
     if spec.n_outputs == 3:
         for dof in (0, 1):

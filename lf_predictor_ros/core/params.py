@@ -267,13 +267,15 @@ class PredictorParams:
             'while the wave part keeps adapting to the sea (issue 13, hypothesis 1; '
             'docs/BENCHMARKS.md, thirty-eighth and thirty-ninth sessions)'))
     north_east_decoupled: bool = field(
-        default=False, metadata=_doc(
+        default=True, metadata=_doc(
             "the north and east estimates are each fitted on their own DOF's thrust and "
             'position lags (and the bias), the heading on every regressor; in a turn the heading '
             'lags and the yaw moment then no longer reach the north/east estimate, where they put '
             'metres of error and tripped the sanity guard (issue 13; docs/BENCHMARKS.md, '
-            'forty-second session). It acts on the plain least-squares solve of the linear '
-            'network with ndof 3 only: with ndof 1, a tanh part (hidden_units > 0), '
+            'forty-second and forty-third sessions; the default since the forty-third; false = '
+            'every output fitted on every regressor, as before). It acts on the plain '
+            'least-squares solve of the linear network with ndof 3 only: with ndof 1, a tanh '
+            'part (hidden_units > 0), '
             'derivative_weight > 0, parallel training with nfb > 0, thrust_hold, thrust_prior > 0 '
             'or thrust_ridge_validation the outputs stay coupled as before'))
     regressor_clip: float = field(

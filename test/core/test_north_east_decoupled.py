@@ -82,10 +82,12 @@ def _threedof_snapshot() -> Snapshot:
 def test_a_3dof_training_keeps_only_own_dof_weights_in_north_and_east() -> None:
     torch.set_num_threads(1)
     snapshot = _threedof_snapshot()
-    params = PredictorParams(motion_gate=False)
+    params = PredictorParams(motion_gate=False, north_east_decoupled=False)
     coupled = run_retraining(params, snapshot, None, None, None)
     decoupled = run_retraining(params.replace(north_east_decoupled=True), snapshot, None, None,
                                None)
+    # the shipped default (since the forty-third session) is the per-DOF fit
+    assert PredictorParams().decouples_north_east
     assert coupled.state_dict is not None and decoupled.state_dict is not None
     weights = decoupled.state_dict['bypass.weight'].numpy()  # (outputs, regressors)
     allowed = own_dof_columns(network_spec(params)).numpy().T
@@ -103,7 +105,8 @@ def test_a_1dof_training_is_untouched() -> None:
     record = simulate(load_scenario('onedof_excited'), 1, 1500.0)
     snapshot = Snapshot(u=np.array(record.thrust[:, :1]), y=np.array(record.measured_pose[:, :1]),
                         end_index=len(record.t) - 1, segment=1)
-    plain = run_retraining(PredictorParams(ndof=1), snapshot, None, None, None)
+    plain = run_retraining(PredictorParams(ndof=1, north_east_decoupled=False), snapshot, None,
+                           None, None)
     flagged = run_retraining(PredictorParams(ndof=1, north_east_decoupled=True), snapshot, None,
                              None, None)
     assert plain.state_dict is not None and flagged.state_dict is not None

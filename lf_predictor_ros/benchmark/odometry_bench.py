@@ -88,6 +88,7 @@ from numpy.typing import NDArray
 from scipy import stats
 import yaml
 
+from lf_predictor_ros.benchmark.benchmark import param_overrides
 from lf_predictor_ros.benchmark.estimators import make_estimator, predictor_params
 from lf_predictor_ros.benchmark.recordings import run_loop
 from lf_predictor_ros.benchmark.scoring import fmt_number, interval
@@ -967,6 +968,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                      help='also the closed loops through pose dropouts (item 5; with the loops)')
     run.add_argument('--odometry', nargs='*', default=[], metavar='FIELD=VALUE',
                      help='OdometryParams overrides, e.g. dead_reckoner=model (YAML values)')
+    run.add_argument('--param', action='append', default=[], metavar='FIELD=VALUE',
+                     help='run the predictor with this PredictorParams value instead of the '
+                     "scenario's default (YAML value; repeatable), e.g. "
+                     'north_east_decoupled=false, as `benchmark --param`')
     run.add_argument('--scheduler', default=None, help="Dask address, or 'none' (in process)")
     run.add_argument('--workers', type=int, default=2)
     run.add_argument('-o', '--output', required=True, help='JSON file')
@@ -983,10 +988,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         if overrides is None:
             parser.error(f'--odometry takes FIELD=VALUE with FIELD an OdometryParams field and '
                          f'a valid value, got {args.odometry}')
+        try:
+            params = param_overrides(args.param)
+        except ValueError as exc:
+            parser.error(str(exc))
         specs = [OdometrySpec(s, seed, args.duration, args.pose_cov_scale, args.twist_cov_scale,
                               bandwidth, lag, not args.no_loops and seed in loop_seeds,
                               not args.no_dead_reckoning, not args.no_tracking,
-                              dropout_loops=args.dropout_loops,
+                              params_overrides=params, dropout_loops=args.dropout_loops,
                               odometry_overrides=overrides)
                  for bandwidth in args.twist_bandwidth for lag in args.pose_lag_scale
                  for s in args.scenarios for seed in args.seeds]

@@ -3,10 +3,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 import pytest
 
+from lf_predictor_ros.benchmark import odometry_bench
 from lf_predictor_ros.benchmark.odometry_bench import (
     DRIFT_TIMES,
     LOOP_FD,
@@ -208,6 +210,33 @@ def test_odometry_overrides_are_validated() -> None:
     assert _odometry_overrides(['dead_reckoner=kalman']) is None  # invalid value
     assert _odometry_overrides(['no_such_field=1']) is None
     assert _odometry_overrides(['dead_reckoner']) is None  # no '='
+
+
+def test_param_reaches_every_case_and_a_bad_one_stops_before_a_run(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Any) -> None:
+    seen: list[Any] = []
+
+    def run_specs(specs: Any, *args: Any, **kwargs: Any) -> list[dict[str, Any]]:
+        seen.extend(specs)
+        return []
+
+    monkeypatch.setattr(odometry_bench, 'run_specs', run_specs)
+    monkeypatch.setattr(odometry_bench, 'report', lambda cases: '')
+    out = tmp_path / 'x.json'
+    assert odometry_bench.main(['run', '--scenarios', 'rao_supply', 'supply_closed_loop',
+                                '--seeds', '3', '--param', 'north_east_decoupled=false',
+                                '--param', 'lf_augmentation=[0, 0, 0.001]', '-o',
+                                str(out)]) == 0
+    assert len(seen) == 2
+    for spec in seen:
+        assert spec.params_overrides == {'north_east_decoupled': False,
+                                         'lf_augmentation': (0, 0, 0.001)}
+    assert odometry_bench.main(['run', '--seeds', '3', '-o', str(out)]) == 0
+    assert seen[-1].params_overrides == {}  # without --param: the defaults
+    for bad in ('no_such_field=1', 'north_east_decoupled=3', 'north_east_decoupled'):
+        with pytest.raises(SystemExit):
+            odometry_bench.main(['run', '--seeds', '3', '--param', bad, '-o', str(out)])
+    assert len(seen) == 2 + len(odometry_bench.DEFAULT_SCENARIOS)  # no run was started
 
 
 def test_true_twist_is_the_body_velocity_across_the_heading_wrap() -> None:

@@ -32,12 +32,11 @@ import sys
 import time
 from typing import Any
 
-import yaml
-
 from lf_predictor_ros.benchmark import stability
 from lf_predictor_ros.benchmark.adaptation import FROZEN_RATIO, RECOVERY_WINDOWS, TOLERANCE
 from lf_predictor_ros.benchmark.baseline_tuning import TUNING_SEEDS
 from lf_predictor_ros.benchmark.distributed import IN_PROCESS, CaseSpec, run_cases
+from lf_predictor_ros.benchmark.estimators import param_overrides
 from lf_predictor_ros.benchmark.scoring import fmt_number, interval, ratios, verdict
 from lf_predictor_ros.benchmark.suite import (
     CAUSAL,
@@ -140,19 +139,6 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
         parser.error(f'held-out seeds {list(held_out)} overlap the tuning seeds {TUNING_SEEDS}: '
                      'choose --first-seed above them')
     return args
-
-
-def param_overrides(items: Sequence[str]) -> dict[str, Any]:
-    """``FIELD=VALUE`` strings (YAML values) → PredictorParams overrides; ValueError if invalid."""
-    out: dict[str, Any] = {}
-    for item in items:
-        name, sep, text = item.partition('=')
-        if not sep or not name:
-            raise ValueError(f'--param {item!r}: write FIELD=VALUE, e.g. motion_gate=true')
-        value = yaml.safe_load(text)
-        out[name] = tuple(value) if isinstance(value, list) else value
-    PredictorParams.from_dict(out)  # unknown fields and invalid values raise here, before a run
-    return out
 
 
 # ------------------------------------------------------------------------------ cells

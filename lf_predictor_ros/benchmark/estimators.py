@@ -22,13 +22,14 @@ estimates its own.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
 import math
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+import yaml
 
 from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.params import PredictorParams
@@ -103,6 +104,19 @@ class StreamingEstimator:
 def scenario_ndof(scenario: Scenario) -> int:
     """1 for the thesis's 1-DOF vessel, 3 otherwise."""
     return scenario.ndof
+
+
+def param_overrides(items: Sequence[str]) -> dict[str, Any]:
+    """``FIELD=VALUE`` strings (YAML values) → PredictorParams overrides; ValueError if invalid."""
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, text = item.partition('=')
+        if not sep or not name:
+            raise ValueError(f'--param {item!r}: write FIELD=VALUE, e.g. motion_gate=true')
+        value = yaml.safe_load(text)
+        out[name] = tuple(value) if isinstance(value, list) else value
+    PredictorParams.from_dict(out)  # unknown fields and invalid values raise here, before a run
+    return out
 
 
 def predictor_params(scenario: Scenario, overrides: Mapping[str, Any] | None = None,

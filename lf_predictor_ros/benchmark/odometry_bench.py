@@ -88,8 +88,7 @@ from numpy.typing import NDArray
 from scipy import stats
 import yaml
 
-from lf_predictor_ros.benchmark.benchmark import param_overrides
-from lf_predictor_ros.benchmark.estimators import make_estimator, predictor_params
+from lf_predictor_ros.benchmark.estimators import make_estimator, param_overrides, predictor_params
 from lf_predictor_ros.benchmark.recordings import run_loop
 from lf_predictor_ros.benchmark.scoring import fmt_number, interval
 from lf_predictor_ros.benchmark.seen_truth import recording_seen_truth

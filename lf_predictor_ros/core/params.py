@@ -275,9 +275,9 @@ class PredictorParams:
             'forty-second and forty-third sessions; the default since the forty-third; false = '
             'every output fitted on every regressor, as before). It acts on the plain '
             'least-squares solve of the linear network with ndof 3 only: with ndof 1, a tanh '
-            'part (hidden_units > 0), '
-            'derivative_weight > 0, parallel training with nfb > 0, thrust_hold, thrust_prior > 0 '
-            'or thrust_ridge_validation the outputs stay coupled as before'))
+            'part (hidden_units > 0), derivative_weight > 0, parallel training with nfb > 0, '
+            'thrust_hold, thrust_prior > 0 or thrust_ridge_validation the outputs stay coupled '
+            'as before'))
     regressor_clip: float = field(
         default=0.0, metadata=_doc(
             'clip every regressor the network sees (relative positions, forces) and its output '

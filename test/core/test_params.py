@@ -235,3 +235,9 @@ def test_north_east_decoupled_acts_only_on_the_plain_linear_solve(changes: dict[
     assert PredictorParams(north_east_decoupled=True).decouples_north_east
     assert not PredictorParams(north_east_decoupled=False).decouples_north_east
     assert not PredictorParams(north_east_decoupled=True, **changes).decouples_north_east
+
+
+def test_the_shipped_3dof_default_fits_north_and_east_per_dof() -> None:
+    # the default since the forty-third session (docs/BENCHMARKS.md); 1 DOF has nothing to split
+    assert PredictorParams().decouples_north_east
+    assert not PredictorParams(ndof=1).decouples_north_east

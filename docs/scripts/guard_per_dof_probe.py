@@ -2,9 +2,12 @@
 
     OMP_NUM_THREADS=1 python docs/scripts/guard_per_dof_probe.py --scenarios rao_supply \
         --seeds 687 688 --closed-loop --loops-only --variant "pd="
+    OMP_NUM_THREADS=1 python docs/scripts/guard_per_dof_probe.py --blocks rao_supply 675 \
+        default 1100 1200 --block 4 --bias --rate
 
-`method_probe.py` with, in this process only (nothing in the package changes), the guard of
-`AdaptivePredictor.update` (`_plausible`) made per DOF. Shipped: a prediction farther from the
+`method_probe.py` (or, with ``--blocks`` first, `loop_block_probe.py`) with, in this process
+only (nothing in the package changes), the guard of `AdaptivePredictor.update` (`_plausible`)
+made per DOF. Shipped: a prediction farther from the
 newest measurement than ``GUARD_SPREADS`` RMS of the training window's wave motion plus a floor
 in any DOF is not believed, and the cascade stands in for every DOF (and the feedback history is
 re-seeded). In a RAO vessel's turn the network trips it on north, then on heading
@@ -25,6 +28,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import loop_block_probe  # noqa: E402 - the sibling script
 import method_probe  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.core.predictor import AdaptivePredictor  # noqa: E402
@@ -68,4 +72,7 @@ def per_dof_plausible(self: Any, prediction: np.ndarray, y: np.ndarray) -> bool:
 if __name__ == '__main__':
     setattr(AdaptivePredictor, '__init__', _init_keeping_cascade)  # noqa: B010 - the patch
     setattr(AdaptivePredictor, '_plausible', per_dof_plausible)  # noqa: B010 - the patch
+    if sys.argv[1:2] == ['--blocks']:  # one loop, block by block (`loop_block_probe.py`)
+        loop_block_probe.main(sys.argv[2:])
+        sys.exit(0)
     sys.exit(method_probe.main(sys.argv[1:]))

@@ -47,27 +47,45 @@ def main(argv: list[str]) -> None:
     parser.add_argument('start', type=float, help='first block start [s]')
     parser.add_argument('end', type=float, help='last block end [s]')
     parser.add_argument('--block', type=float, default=20.0, help='block length [s]')
+    parser.add_argument('--rate', action='store_true',
+                        help='also print the RMS rate of the error per DOF per block '
+                             '(its finite difference between consecutive estimates [m/s, rad/s]: '
+                             "what the PID's D term sees of it)")
+    parser.add_argument('--force', action='store_true',
+                        help='also print the mean applied thrust per block: earth-frame north, '
+                             'east [kN] (the body force turned by the measured heading) and '
+                             'the yaw moment [MN·m]')
+    parser.add_argument('--bias', action='store_true',
+                        help='also print the mean error per DOF (estimate − truth) per block')
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     case = loop_case(args.scenario, args.seed, args.variant)
-    stream = make_estimator('adaptive', case.setup)
+    stream = make_estimator(case.estimator, case.setup)
     # (t, the network served, ω0, the motion gate's g per DOF) per call
     log: list[tuple[float, bool, float, np.ndarray]] = []
+    forces: list[np.ndarray] = []  # per call: earth-frame north, east [N], yaw moment [N·m]
 
     def step(t: float, pose: np.ndarray, force: np.ndarray, wave_peak_freq: float) -> np.ndarray:
         out = stream.step(t, pose, force, wave_peak_freq)
-        status = stream.estimator.status()
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        forces.append(np.array([c * force[0] - s * force[1], s * force[0] + c * force[1],
+                                force[2]]))
         gain = getattr(stream.estimator, 'motion_gain', np.zeros(3))  # the adaptive predictor's
-        log.append((t, status.state == 'trained', status.wave_peak_freq or np.nan, gain))
+        if hasattr(stream.estimator, 'status'):  # the adaptive predictor
+            status = stream.estimator.status()
+            log.append((t, status.state == 'trained', status.wave_peak_freq or np.nan, gain))
+        else:  # a baseline (its variant's name): no cascade share, no ω0 of its own
+            log.append((t, True, np.nan, gain))
         return out
 
     run = run_loop(case.scenario, args.seed, DURATION, case.setup.sample_time, step)
-    outcome = _run_loop('adaptive', case.scenario, args.seed, DURATION, case.setup, case.ideal,
+    outcome = _run_loop(case.estimator, case.scenario, args.seed, DURATION, case.setup, case.ideal,
                         recorded=run)
     record = outcome.record
     offset = stability.pose_offset(record.truth_lf_pose,
                                    _loop_reference(case.scenario, record, case.ideal), 3)
     times, error = _timed_loop_estimate_error(outcome, 3, args.start)
+    rate = np.diff(error, axis=0) / np.diff(times)[:, None]  # row k: from estimate k to k + 1
     calls = np.array([row[0] for row in log])
     network = np.array([row[1] for row in log])
     freq = np.array([row[2] for row in log], dtype=np.float64)
@@ -87,7 +105,14 @@ def main(argv: list[str]) -> None:
         print(f'{start:9.0f} {rms[0]:12.3f} {rms[1]:6.3f} {rms[2]:14.4f} {worst:17.2f} '
               f'{1.0 - network[steps].mean():8.2f} {np.nanmean(freq[steps]):6.3f} '
               f'{record.truth_lf_pose[samples, 2].mean():6.3f}  '
-              + ' / '.join(f'{g:.2f}' for g in gain[steps].mean(axis=0)))
+              + ' / '.join(f'{g:.2f}' for g in gain[steps].mean(axis=0))
+              + ('  mean ' + ' / '.join(f'{m:+.3f}' for m in error[rows].mean(axis=0))
+                 if args.bias else '')
+              + ('  force {:.0f} / {:.0f} kN / {:.2f} MNm'.format(
+                  *(np.mean(np.asarray(forces)[steps], axis=0) / [1e3, 1e3, 1e6]))
+                 if args.force else '')
+              + ('  rate ' + ' / '.join(f'{r:.3f}' for r in np.sqrt(np.mean(
+                  rate[rows[1:]] ** 2, axis=0))) if args.rate else ''))
 
 
 if __name__ == '__main__':

@@ -13,8 +13,13 @@ of the true LF pose from the ideal loop's track [m], the share of the estimates 
 served (the network's prediction was missing or tripped the distance guard), the predictor's
 ω0 [rad/s], the true heading [rad] and the motion gate's mean gain g per DOF (north, east,
 heading; 0: the holding network, 1: the twin; `AdaptivePredictor.motion_gain`, all 0 with the
-gate off). The twenty-sixth session used it to find that the failing first turns of rao_supply
-lag in heading, the twenty-seventh to look at the yaw gate in a move (docs/BENCHMARKS.md).
+gate off). A baseline's name as the variant (``observer``, ``oracle_kf``, …) runs that
+estimator's loop instead (cascade share 0, ω0 nan). ``--bias`` adds the mean error per DOF,
+``--rate`` the RMS rate of the error between consecutive estimates (what the PID's D term sees
+of it), ``--force`` the mean applied thrust (earth-frame north/east, yaw moment). The
+twenty-sixth session used it to find that the failing first turns of rao_supply lag in
+heading, the twenty-seventh to look at the yaw gate in a move, the forty-fourth to follow the
+turn excursions second by second (docs/BENCHMARKS.md).
 """
 from __future__ import annotations
 
@@ -71,7 +76,7 @@ def main(argv: list[str]) -> None:
         forces.append(np.array([c * force[0] - s * force[1], s * force[0] + c * force[1],
                                 force[2]]))
         gain = getattr(stream.estimator, 'motion_gain', np.zeros(3))  # the adaptive predictor's
-        if hasattr(stream.estimator, 'status'):  # the adaptive predictor
+        if case.estimator == 'adaptive':
             status = stream.estimator.status()
             log.append((t, status.state == 'trained', status.wave_peak_freq or np.nan, gain))
         else:  # a baseline (its variant's name): no cascade share, no ω0 of its own
@@ -101,9 +106,11 @@ def main(argv: list[str]) -> None:
         if not rows.any():
             continue
         rms = np.sqrt(np.mean(error[rows] ** 2, axis=0))
+        omega = (float(np.nanmean(freq[steps])) if np.isfinite(freq[steps]).any()
+                 else np.nan)  # a baseline's loop has no ω0 of its own
         worst = float(np.max(np.hypot(offset[samples, 0], offset[samples, 1])))
         print(f'{start:9.0f} {rms[0]:12.3f} {rms[1]:6.3f} {rms[2]:14.4f} {worst:17.2f} '
-              f'{1.0 - network[steps].mean():8.2f} {np.nanmean(freq[steps]):6.3f} '
+              f'{1.0 - network[steps].mean():8.2f} {omega:6.3f} '
               f'{record.truth_lf_pose[samples, 2].mean():6.3f}  '
               + ' / '.join(f'{g:.2f}' for g in gain[steps].mean(axis=0))
               + ('  mean ' + ' / '.join(f'{m:+.3f}' for m in error[rows].mean(axis=0))

@@ -38,6 +38,7 @@ import loop_block_probe  # noqa: E402 - the sibling script
 import method_probe  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.core import predictor as predictor_module  # noqa: E402
+from lf_predictor_ros.core.network import predict_step  # noqa: E402
 from lf_predictor_ros.core.predictor import AdaptivePredictor  # noqa: E402
 
 TURN_RATE = float(os.environ.get('TURN_RATE', '0.005'))  # [rad/s]
@@ -58,9 +59,9 @@ def _force_channels_tracking_turns(self: Any, force: np.ndarray, yaw: float) -> 
     if not hasattr(self, 'probe_heading'):
         self.probe_heading = deque(maxlen=TURN_SPAN + TURN_MEAN)
         self.probe_hold_left = 0
-        self.probe_held: np.ndarray | None = None
+        self.probe_held = None  # the held row (north/east thrust), None: no turn
         self.probe_held_rows = 0
-        self.probe_last_u: np.ndarray | None = None
+        self.probe_last_u = None  # the previous sample's channels
         self.probe_turn_samples = 0
     headings = self.probe_heading
     if headings:
@@ -103,7 +104,7 @@ def predict_with_held_thrust(self: Any, model: Any) -> np.ndarray | None:
     y_hist = self._y.newest(max(p.ny, 1))
     fb_hist = (predictor_module._newest(self._fb, p.nfb) if p.nfb
                else predictor_module._NO_ROWS)
-    result: np.ndarray = predictor_module.predict_step(model, u_hist, y_hist, fb_hist)
+    result: np.ndarray = predict_step(model, u_hist, y_hist, fb_hist)
     return result
 
 

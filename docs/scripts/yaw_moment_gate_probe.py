@@ -67,7 +67,7 @@ def _moment_gain(self: Any, moment: float) -> float:
         self.probe_since += h
     if self.probe_since <= YM_HOLD:
         return 1.0
-    return max(0.0, 1.0 - (self.probe_since - YM_HOLD) / YM_FADE)
+    return max(0.0, 1.0 - float(self.probe_since - YM_HOLD) / YM_FADE)
 
 
 def gated_by_yaw_moment(self: Any, t: float, out: np.ndarray, pose: np.ndarray,

@@ -22,7 +22,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import loop_block_probe  # noqa: E402 - the sibling script
-import method_probe  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.core import predictor as predictor_module  # noqa: E402
 
@@ -33,7 +32,4 @@ if __name__ == '__main__':
     floor[2] = GUARD_FLOOR_YAW
     predictor_module.GUARD_FLOOR = floor
     print(f'# guard floor {floor.tolist()}', flush=True)
-    if sys.argv[1:2] == ['--blocks']:
-        loop_block_probe.main(sys.argv[2:])
-        sys.exit(0)
-    sys.exit(method_probe.main(sys.argv[1:]))
+    sys.exit(loop_block_probe.probe_main(sys.argv[1:]))

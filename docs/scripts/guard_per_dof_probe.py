@@ -29,7 +29,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import loop_block_probe  # noqa: E402 - the sibling script
-import method_probe  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.core.predictor import AdaptivePredictor  # noqa: E402
 
@@ -72,7 +71,4 @@ def per_dof_plausible(self: Any, prediction: np.ndarray, y: np.ndarray) -> bool:
 if __name__ == '__main__':
     setattr(AdaptivePredictor, '__init__', _init_keeping_cascade)  # noqa: B010 - the patch
     setattr(AdaptivePredictor, '_plausible', per_dof_plausible)  # noqa: B010 - the patch
-    if sys.argv[1:2] == ['--blocks']:  # one loop, block by block (`loop_block_probe.py`)
-        loop_block_probe.main(sys.argv[2:])
-        sys.exit(0)
-    sys.exit(method_probe.main(sys.argv[1:]))
+    sys.exit(loop_block_probe.probe_main(sys.argv[1:]))

@@ -122,5 +122,18 @@ def main(argv: list[str]) -> None:
                   rate[rows[1:]] ** 2, axis=0))) if args.rate else ''))
 
 
+def probe_main(argv: list[str]) -> int:
+    """A patching probe's entry: ``--blocks`` first runs `main`, else `method_probe.main`.
+
+    The probes that patch the predictor in their own process (`guard_per_dof_probe.py`,
+    `turn_thrust_hold_probe.py`, ...) call this after patching.
+    """
+    if argv[:1] == ['--blocks']:
+        main(argv[1:])
+        return 0
+    import method_probe  # the sibling script (imported here: the block probe alone needs none)
+    return int(method_probe.main(argv))
+
+
 if __name__ == '__main__':
     main(sys.argv[1:])

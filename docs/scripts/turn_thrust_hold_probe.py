@@ -35,7 +35,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import loop_block_probe  # noqa: E402 - the sibling script
-import method_probe  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.core import predictor as predictor_module  # noqa: E402
 from lf_predictor_ros.core.network import predict_step  # noqa: E402
@@ -114,7 +113,4 @@ if __name__ == '__main__':
     setattr(AdaptivePredictor, '_predict_with', predict_with_held_thrust)  # noqa: B010
     print(f'# turn thrust hold: TURN_RATE {TURN_RATE} rad/s, TURN_SPAN {TURN_SPAN}, '
           f'TURN_MEAN {TURN_MEAN}, TURN_HANGOVER {TURN_HANGOVER} s', flush=True)
-    if sys.argv[1:2] == ['--blocks']:
-        loop_block_probe.main(sys.argv[2:])
-        sys.exit(0)
-    sys.exit(method_probe.main(sys.argv[1:]))
+    sys.exit(loop_block_probe.probe_main(sys.argv[1:]))

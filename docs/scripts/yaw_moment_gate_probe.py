@@ -32,7 +32,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import loop_block_probe  # noqa: E402 - the sibling script
-import method_probe  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.core.motion_gate import shifted  # noqa: E402
 from lf_predictor_ros.core.predictor import AdaptivePredictor  # noqa: E402
@@ -89,7 +88,4 @@ if __name__ == '__main__':
     setattr(AdaptivePredictor, '_gated', gated_by_yaw_moment)  # noqa: B010 - the patch
     print(f'# yaw moment gate: YM_TIME {YM_TIME} s, YM_LEVEL_TIME {YM_LEVEL_TIME} s, '
           f'YM_RATIO {YM_RATIO}, YM_HOLD {YM_HOLD} s, YM_FADE {YM_FADE} s', flush=True)
-    if sys.argv[1:2] == ['--blocks']:
-        loop_block_probe.main(sys.argv[2:])
-        sys.exit(0)
-    sys.exit(method_probe.main(sys.argv[1:]))
+    sys.exit(loop_block_probe.probe_main(sys.argv[1:]))

@@ -18,8 +18,10 @@ unchanged): |yaw moment| low-passed over ``YM_TIME`` s against its level (its ru
 over the first ``YM_LEVEL_TIME`` s, then low-passed over that time; no gain before); the heading
 gain is 1 while the ratio exceeds ``YM_RATIO`` and for ``YM_HOLD`` s after, then falls linearly
 to 0 over ``YM_FADE`` s. It multiplies the gate's (low-passed, notched) heading offset twin −
-holding as the shipped gain does. Environment variables set the constants. Every variant of
-the run gets the patch. Development seeds only, as `method_probe.py`.
+holding as the shipped gain does. Environment variables set the constants; ``GUARD_FLOOR_YAW``
+(rad, unset: the shipped 0.02) also sets the sanity guard's heading floor, as
+`guard_heading_floor_probe.py` does. Every variant of the run gets the patch. Development seeds
+only, as `method_probe.py`.
 """
 from __future__ import annotations
 
@@ -33,6 +35,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import loop_block_probe  # noqa: E402 - the sibling script
 
+from lf_predictor_ros.core import predictor as predictor_module  # noqa: E402
 from lf_predictor_ros.core.motion_gate import shifted  # noqa: E402
 from lf_predictor_ros.core.predictor import AdaptivePredictor  # noqa: E402
 
@@ -86,6 +89,11 @@ def gated_by_yaw_moment(self: Any, t: float, out: np.ndarray, pose: np.ndarray,
 
 if __name__ == '__main__':
     setattr(AdaptivePredictor, '_gated', gated_by_yaw_moment)  # noqa: B010 - the patch
+    if 'GUARD_FLOOR_YAW' in os.environ:
+        floor = np.array(predictor_module.GUARD_FLOOR, dtype=np.float64)
+        floor[2] = float(os.environ['GUARD_FLOOR_YAW'])
+        predictor_module.GUARD_FLOOR = floor
+        print(f'# guard floor {floor.tolist()}', flush=True)
     print(f'# yaw moment gate: YM_TIME {YM_TIME} s, YM_LEVEL_TIME {YM_LEVEL_TIME} s, '
           f'YM_RATIO {YM_RATIO}, YM_HOLD {YM_HOLD} s, YM_FADE {YM_FADE} s', flush=True)
     sys.exit(loop_block_probe.probe_main(sys.argv[1:]))

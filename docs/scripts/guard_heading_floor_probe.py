@@ -27,9 +27,15 @@ from lf_predictor_ros.core import predictor as predictor_module  # noqa: E402
 
 GUARD_FLOOR_YAW = float(os.environ.get('GUARD_FLOOR_YAW', '0.1'))  # [rad]
 
-if __name__ == '__main__':
+
+def set_heading_floor(floor_yaw: float) -> None:
+    """The patch: `core.predictor.GUARD_FLOOR`'s heading entry set to ``floor_yaw`` [rad]."""
     floor = np.array(predictor_module.GUARD_FLOOR, dtype=np.float64)
-    floor[2] = GUARD_FLOOR_YAW
+    floor[2] = floor_yaw
     predictor_module.GUARD_FLOOR = floor
     print(f'# guard floor {floor.tolist()}', flush=True)
+
+
+if __name__ == '__main__':
+    set_heading_floor(GUARD_FLOOR_YAW)
     sys.exit(loop_block_probe.probe_main(sys.argv[1:]))

@@ -25,7 +25,6 @@ process). Development seeds only, as `method_probe.py`.
 from __future__ import annotations
 
 from collections import deque
-import math
 import os
 from pathlib import Path
 import sys
@@ -36,8 +35,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import loop_block_probe  # noqa: E402 - the sibling script
 
-from lf_predictor_ros.core import predictor as predictor_module  # noqa: E402
-from lf_predictor_ros.core.network import predict_step  # noqa: E402
+from lf_predictor_ros.core.heading import ContinuousHeading  # noqa: E402
 from lf_predictor_ros.core.predictor import AdaptivePredictor  # noqa: E402
 
 TURN_RATE = float(os.environ.get('TURN_RATE', '0.005'))  # [rad/s]
@@ -57,15 +55,14 @@ def _force_channels_tracking_turns(self: Any, force: np.ndarray, yaw: float) -> 
         return u
     if not hasattr(self, 'probe_heading'):
         self.probe_heading = deque(maxlen=TURN_SPAN + TURN_MEAN)
+        self.probe_unwrap = ContinuousHeading()
         self.probe_hold_left = 0
         self.probe_held = None  # the held row (north/east thrust), None: no turn
         self.probe_held_rows = 0
         self.probe_last_u = None  # the previous sample's channels
         self.probe_turn_samples = 0
     headings = self.probe_heading
-    if headings:
-        yaw = headings[-1] + math.remainder(yaw - headings[-1], 2.0 * math.pi)
-    headings.append(yaw)
+    headings.append(self.probe_unwrap.update(yaw))
     turning = False
     if len(headings) == headings.maxlen:
         values = np.asarray(headings)
@@ -88,24 +85,36 @@ def _force_channels_tracking_turns(self: Any, force: np.ndarray, yaw: float) -> 
     return u
 
 
+class _HeldThrustRows:
+    """The predictor's thrust rows as its prediction reads them: the held rows replaced."""
+
+    def __init__(self, rows: Any, held: np.ndarray, held_rows: int) -> None:
+        self._rows, self._held, self._held_rows = rows, held, held_rows
+
+    def __len__(self) -> int:
+        return len(self._rows)
+
+    def newest(self, count: int) -> np.ndarray:
+        """The package's newest rows, a copy with the held channels of the held rows set."""
+        rows = np.array(self._rows.newest(count))
+        n = min(self._held_rows, rows.shape[0])
+        if n > 0:
+            rows[-n:, HELD_CHANNELS] = self._held[list(HELD_CHANNELS)]
+        return rows
+
+
 def predict_with_held_thrust(self: Any, model: Any) -> np.ndarray | None:
-    """`_predict_with`, the held rows' north/east thrust replaced (module docstring)."""
+    """The package's `_predict_with` over the thrust rows with the held ones replaced."""
     held = getattr(self, 'probe_held', None)
     if held is None:
         return _PREDICT_WITH(self, model)
-    p = self.params
-    if len(self._y) < p.max_lag or len(self._fb) < p.nfb:
-        return None
-    u_hist = np.array(self._u.newest(max(p.nu, 1)))
-    rows = min(self.probe_held_rows, u_hist.shape[0])
-    if rows > 0:
-        u_hist[-rows:, HELD_CHANNELS] = held[list(HELD_CHANNELS)]
-    y_hist = self._y.newest(max(p.ny, 1))
-    fb_hist = (predictor_module._newest(self._fb, p.nfb) if p.nfb
-               else predictor_module._NO_ROWS)
-    result: np.ndarray = predict_step(model, u_hist, y_hist, fb_hist)
+    rows = self._u
+    self._u = _HeldThrustRows(rows, held, self.probe_held_rows)
+    try:
+        result: np.ndarray | None = _PREDICT_WITH(self, model)
+    finally:
+        self._u = rows  # the training buffer keeps the true thrust
     return result
-
 
 if __name__ == '__main__':
     setattr(AdaptivePredictor, '_force_channels',  # noqa: B010 - the patch

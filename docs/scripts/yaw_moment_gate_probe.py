@@ -33,9 +33,9 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import guard_heading_floor_probe  # noqa: E402 - the sibling script
 import loop_block_probe  # noqa: E402 - the sibling script
 
-from lf_predictor_ros.core import predictor as predictor_module  # noqa: E402
 from lf_predictor_ros.core.motion_gate import shifted  # noqa: E402
 from lf_predictor_ros.core.predictor import AdaptivePredictor  # noqa: E402
 
@@ -90,10 +90,7 @@ def gated_by_yaw_moment(self: Any, t: float, out: np.ndarray, pose: np.ndarray,
 if __name__ == '__main__':
     setattr(AdaptivePredictor, '_gated', gated_by_yaw_moment)  # noqa: B010 - the patch
     if 'GUARD_FLOOR_YAW' in os.environ:
-        floor = np.array(predictor_module.GUARD_FLOOR, dtype=np.float64)
-        floor[2] = float(os.environ['GUARD_FLOOR_YAW'])
-        predictor_module.GUARD_FLOOR = floor
-        print(f'# guard floor {floor.tolist()}', flush=True)
+        guard_heading_floor_probe.set_heading_floor(float(os.environ['GUARD_FLOOR_YAW']))
     print(f'# yaw moment gate: YM_TIME {YM_TIME} s, YM_LEVEL_TIME {YM_LEVEL_TIME} s, '
           f'YM_RATIO {YM_RATIO}, YM_HOLD {YM_HOLD} s, YM_FADE {YM_FADE} s', flush=True)
     sys.exit(loop_block_probe.probe_main(sys.argv[1:]))

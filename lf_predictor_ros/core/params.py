@@ -57,7 +57,7 @@ _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'thrust_ridge_validation', '
                 'ramp_invariant', 'motion_gate',
                 'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
                 'sea_change_revert', 'frequency_yaw')
-_TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation')
+_TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation', 'guard_floor')
 
 
 _doc = field_doc  # (core.field_meta; kept short here, where every field uses it)
@@ -135,6 +135,18 @@ class PredictorParams:
             'with motion_gate and 3 DOF: the gate acts on the heading too; false: north and '
             "east only, the heading is the holding network's (the twin lets more of a swell's "
             'yaw motion through in turns)'))
+    motion_gate_yaw_moment_ratio: float = field(
+        default=5.0, metadata=_doc(
+            "with motion_gate and motion_gate_yaw: the gate's heading gain comes from the "
+            "applied yaw moment instead of the twin's velocity: 1 while |N| (low-passed over "
+            '2 s) exceeds this many times its level (low-passed over 600 s; no gain in the '
+            'first 600 s), held motion_gate_yaw_hold, then faded to 0 over 10 s (a turn is '
+            'known from the moment before the heading shows it; core/yaw_moment_trigger.py); '
+            '0 = off (the velocity gain, as north and east)', ''))
+    motion_gate_yaw_hold: float = field(
+        default=30.0, metadata=_doc(
+            'with motion_gate_yaw_moment_ratio: time the heading gain stays 1 after the yaw '
+            'moment was last above its ratio', 's'))
     motion_gate_yaw_notch: float = field(
         default=0.0, metadata=_doc(
             'with motion_gate and motion_gate_yaw: width ζ of a causal notch at the estimated '
@@ -308,6 +320,12 @@ class PredictorParams:
             'frequency ω0, depth notch_depth, on the published estimate: it removes the wave '
             'peak the learned filter lets through (in a DP loop, wave-band thrust) at a phase '
             'lag of about 2·ζ/ω0 seconds in the LF band; 0 = off (core/predictor.py)', ''))
+    guard_floor: tuple[float, ...] = field(
+        default=(0.5, 0.5, 0.02), metadata=_doc(
+            'floor of the sanity guard (north, east, yaw): a network prediction farther from '
+            'the newest measurement than 6 × the RMS wave motion of its training window plus '
+            'this is not believed and the cascade fallback stands in (the heading floor lets a '
+            "turn's lag pass without switching the heading's source)", 'm, m, rad'))
     max_output_rate: tuple[float, ...] = field(
         default=(0.0, 0.0, 0.0), metadata=_doc(
             'largest rate of change of the published estimate (north, east, yaw); set it above '
@@ -477,6 +495,12 @@ class PredictorParams:
                              f'rad/s] (0 = no limit), got {rates!r}')
         object.__setattr__(self, 'max_output_rate',
                            tuple(_finite_float('max_output_rate', rate) for rate in rates))
+        floor = self.guard_floor
+        if isinstance(floor, (str, bytes)) or not hasattr(floor, '__len__') or len(floor) != 3:
+            raise ValueError(f'guard_floor must be three numbers [north m, east m, yaw rad], got '
+                             f'{floor!r}')
+        object.__setattr__(self, 'guard_floor',
+                           tuple(_finite_float('guard_floor', value) for value in floor))
         speeds = self.lf_augmentation
         if isinstance(speeds, (str, bytes)) or not hasattr(speeds, '__len__') or \
                 len(speeds) != 3:
@@ -495,7 +519,8 @@ class PredictorParams:
         for name in ('weight_decay', 'derivative_weight', 'initial_wave_peak_freq',
                      'wave_augmentation', 'switch_blend_time', 'motion_gate_smoothing',
                      'output_notch_zeta', 'notch_lower_edge', 'notch_zeta_broadband',
-                     'motion_gate_yaw_notch'):
+                     'motion_gate_yaw_notch', 'motion_gate_yaw_moment_ratio',
+                     'motion_gate_yaw_hold'):
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')
@@ -512,6 +537,9 @@ class PredictorParams:
             raise ValueError(f'positivity rule: roughness_guard_time must be 0 (off) or > '
                              f'sample_time {self.sample_time} s, got '
                              f'{self.roughness_guard_time!r}')
+        if any(value < 0.0 for value in self.guard_floor):
+            raise ValueError(f'positivity rule: guard_floor must be ≥ 0 in every DOF, got '
+                             f'{list(self.guard_floor)!r}')
         if any(rate < 0.0 for rate in self.max_output_rate):
             raise ValueError(f'positivity rule: max_output_rate must be ≥ 0 in every DOF (0 = no '
                              f'limit), got {list(self.max_output_rate)!r}')

@@ -116,12 +116,13 @@ from lf_predictor_ros.core.retraining import (
 from lf_predictor_ros.core.roughness import RoughnessGuard
 from lf_predictor_ros.core.targets import TargetWindow
 from lf_predictor_ros.core.training import warm_up
+from lf_predictor_ros.core.yaw_moment_trigger import YawMomentTrigger
 
 # Sanity guard: a prediction farther from the newest measurement than this many RMS of the
 # wave-frequency motion seen in training (plus a floor) is not believed; the cascade stands in
 # and the feedback history is re-seeded from it (stops a free-running recursion from running away).
+# The floor is ``PredictorParams.guard_floor`` [m, m, rad].
 GUARD_SPREADS = 6.0
-GUARD_FLOOR = np.array([0.5, 0.5, 0.02])  # [m, m, rad]
 # Appended to a checkpoint's path to name the motion gate twin's checkpoint beside it.
 TWIN_SUFFIX = '.twin'
 # The force argument of the output notch's `CascadeFilter.update` (it ignores the force).
@@ -294,6 +295,7 @@ class AdaptivePredictor:
         # (the wave spread it was made from, the guard's bound per DOF), see _plausible
         self._guard_bound: tuple[FloatArray, list[float]] | None = None
         self._guard_trips = 0
+        self._guard_floor = np.array(params.guard_floor[:params.ndof])
         self._no_thrust = 0  # accepted trainings whose thrust test failed (thrust_validation)
         self._thrust_held = 0  # accepted trainings that kept the thrust weights (thrust_hold)
         self._smoothing = params.switch_blend_time > 0.0 or any(
@@ -331,6 +333,13 @@ class AdaptivePredictor:
         self._gate_dofs = np.array([True, True, params.motion_gate_yaw][:params.ndof])
         # motion_gate_yaw_notch: a notch at ω0 on the gate's heading difference (1 channel)
         self._gate_yaw_notch: CascadeFilter | None = None
+        # motion_gate_yaw_moment_ratio: the heading gain from the yaw moment
+        self._yaw_trigger: YawMomentTrigger | None = None
+        if params.motion_gate and params.motion_gate_yaw and params.ndof == 3 and \
+                params.motion_gate_yaw_moment_ratio > 0.0:
+            self._yaw_trigger = YawMomentTrigger(params.sample_time,
+                                                 params.motion_gate_yaw_moment_ratio,
+                                                 params.motion_gate_yaw_hold)
         if params.motion_gate and params.motion_gate_yaw and params.ndof == 3 and \
                 params.motion_gate_yaw_notch > 0.0:
             self._gate_yaw_notch = self._wave_notch(1, params.motion_gate_yaw_notch)
@@ -411,6 +420,8 @@ class AdaptivePredictor:
         if self._moving is not None and self._gate is not None:
             self._moving.reset()
             self._gate.reset()
+        if self._yaw_trigger is not None:
+            self._yaw_trigger.reset()
         self._gate_valid = np.full(self.ndof, not self.params.motion_gate_validation)
         self._stop.set()
         self._generation += 1
@@ -810,7 +821,7 @@ class AdaptivePredictor:
         guard = self._guard_bound
         if guard is None or guard[0] is not spread:  # a new network's spread: a new bound
             guard = self._guard_bound = (
-                spread, (GUARD_SPREADS * spread + GUARD_FLOOR[:self.ndof]).tolist())
+                spread, (GUARD_SPREADS * spread + self._guard_floor).tolist())
         bound = guard[1]
         predicted, measured = np.asarray(prediction).tolist(), np.asarray(y).tolist()
         if not (isinstance(bound, list) and isinstance(predicted, list) and
@@ -943,6 +954,9 @@ class AdaptivePredictor:
         if self._moving is None or self._gate is None:
             return out
         moving = self._moving.update(t, pose, force)
+        # motion_gate_yaw_moment_ratio: the heading gain of this sample, from the yaw moment
+        yaw_gain = None if self._yaw_trigger is None else self._yaw_trigger.update(
+            float(force[2]))
         offset = moving_offset(out, moving, self.ndof)
         if not self._moving.using_network or not _all_finite(offset):
             # The gate measures the twin's network alone: the usual velocity of the cascade
@@ -967,6 +981,8 @@ class AdaptivePredictor:
                  for g, on in zip(gain.tolist(), self._gate_dofs.tolist(), strict=True)]
         if self.params.motion_gate_validation:  # the gated output is only logged for it
             self._validate_gate(out, shifted(out, np.array(gains) * offset, self.ndof))
+        if yaw_gain is not None:  # (the validation above judged the velocity gain)
+            gains[2] = yaw_gain
         gains = [g * (1.0 if on else 0.0)
                  for g, on in zip(gains, self._gate_valid.tolist(), strict=True)]
         self._gain = np.array(gains, dtype=np.float64)

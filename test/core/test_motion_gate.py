@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 import pytest
 import torch
 
+from lf_predictor_ros.core import yaw_moment_trigger
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.motion_gate import (
     GATE_MIN_FILL,
@@ -38,17 +39,19 @@ from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor, twin_checkpoint_path
 from lf_predictor_ros.core.retraining import run_retraining
 from lf_predictor_ros.core.targets import TargetWindow
+from lf_predictor_ros.core.yaw_moment_trigger import YawMomentTrigger
 
 FloatArray = NDArray[np.float64]
 # The holding network alone (a test switches the gate on); the gate's shaping off, unlike the
 # shipped defaults, so that the gated output is the plain blend and a test sets the stage it
-# checks: no low-pass (motion_gate_smoothing 0), no dead zone, the heading gated too, and a
-# line (ramp_order 1) for the twin (SMALL.replace(ramp_invariant=True), the same network).
+# checks: no low-pass (motion_gate_smoothing 0), no dead zone, the heading gated too by the
+# velocity gain (not the yaw moment's), and a line (ramp_order 1) for the twin
+# (SMALL.replace(ramp_invariant=True), the same network).
 SMALL = PredictorParams(ndof=3, sample_time=1.0, retrain_period=20.0, training_window=200.0,
                         transient_length=10.0, filter_window=60.0, append_length=40.0,
                         estimation_window=480.0, max_epochs=5, nu=4, ny=12,
                         motion_gate=False, motion_gate_smoothing=0.0, motion_gate_dead_zone=0.0,
-                        motion_gate_yaw=True, ramp_order=1)
+                        motion_gate_yaw=True, motion_gate_yaw_moment_ratio=0.0, ramp_order=1)
 
 
 def test_gain_is_half_where_the_velocity_is_sqrt_k_times_usual() -> None:
@@ -182,8 +185,13 @@ def _frozen(rows: list[Any], dtype: type) -> NDArray[Any]:
 
 def _run(params: PredictorParams) -> Trace:
     """Run `params` (background=False, deterministic) over ``moving_run(600, 2)``."""
+    return _run_on(params, *moving_run(600, 2))
+
+
+def _run_on(params: PredictorParams, t: FloatArray, pose: FloatArray, force: FloatArray
+            ) -> Trace:
+    """Run `params` (background=False, deterministic) over 600 samples (t, pose, force)."""
     torch.set_num_threads(1)  # one core, whoever calls it (as the autouse fixture sets)
-    t, pose, force = moving_run(600, 2)
     predictor = AdaptivePredictor(params, background=False)
     out: list[FloatArray] = []
     gain: list[FloatArray] = []
@@ -505,6 +513,7 @@ def test_the_dead_zone_scales_the_published_gain(
 # ---- the twin's checkpoint -------------------------------------------------------------------
 
 GATED = SMALL.replace(motion_gate=True)
+GATED_BY_MOMENT = GATED.replace(motion_gate_yaw_moment_ratio=5.0, motion_gate_yaw_hold=30.0)
 SAVED_AT = 130  # [samples] the saved predictor trained once, at sample 120
 FED = 110  # [samples] fed after loading: fewer than a first training needs (120), no training
 RUN = SAVED_AT + FED  # the move starts at 0.75 × RUN = 180, 50 samples after the load
@@ -685,3 +694,53 @@ def test_with_the_yaw_notch_the_gate_changes_the_heading_only(
     opened = gated.gain[:, 2] > 0.5
     assert np.count_nonzero(opened) > 20
     assert np.max(np.abs(notched.out[opened, 2] - gated.out[opened, 2])) > 1e-5
+
+
+# ---- the heading gain from the yaw moment (motion_gate_yaw_moment_ratio) ---------------------
+
+
+def test_the_yaw_moment_sets_the_heading_gain_and_nothing_else(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """motion_gate_yaw_moment_ratio ρ: yaw gain = `YawMomentTrigger` on the applied N.
+
+    ``moving_run`` with a yaw moment 20 N·m above its noise (σ 1 N·m) while the vessel turns;
+    the level's warm-up shortened to 200 s so that a 600 s run holds it. Against the velocity
+    gain (ρ 0) on the same data: the same networks, the same north/east gains and outputs; the
+    heading gain the trigger's where the twin is on its network (else 0), and the heading
+    holding + g·offset, so that out + untaken is the same for both (holding + offset).
+    """
+    monkeypatch.setattr(yaw_moment_trigger, 'LEVEL_TIME', 200.0)
+    t, pose, force = moving_run(600, 2)
+    turning = (t >= 450.0) & (t < 550.0)  # the ramp of moving_run(600, …): 0.75·n, 100 s
+    force[turning, 2] += 20.0  # [N·m]
+    moment = _run_on(GATED_BY_MOMENT, t, pose, force)
+    velocity = _run_on(GATED_BY_MOMENT.replace(motion_gate_yaw_moment_ratio=0.0), t, pose, force)
+    reference = YawMomentTrigger(1.0, 5.0, 30.0)
+    expected = np.array([reference.update(float(n)) for n in force[:, 2]])
+    assert moment.twin_using_network is not None
+    on = moment.twin_using_network
+    assert np.array_equal(moment.gain[:, 2], np.where(on, expected, 0.0))
+    assert np.array_equal(moment.gain[:, :2], velocity.gain[:, :2])
+    assert np.array_equal(moment.out[:, :2], velocity.out[:, :2])
+    assert moment.counters == velocity.counters
+    whole = moment.out[:, 2] + moment.untaken[:, 2]  # holding + offset, whatever the gain
+    assert np.abs(np.vectorize(wrap_angle)(whole - velocity.out[:, 2] - velocity.untaken[:, 2])
+                  ) == pytest.approx(np.zeros(600), abs=1e-12)
+    opened = moment.gain[:, 2] == 1.0
+    # the turn until its moment is no longer 5× the rising level (about 37 s with a 200 s
+    # level), then the 30 s hold
+    assert np.count_nonzero(opened) >= 50 and np.all(t[opened] >= 450.0)
+    assert np.all(moment.gain[t >= 590.0, 2] == 0.0)  # the hold and the fade end before 590 s
+    assert np.max(np.abs(moment.out[:, 2] - velocity.out[:, 2])) > 1e-3  # and that shows
+
+
+def test_the_yaw_moment_trigger_is_built_only_where_it_acts() -> None:
+    assert AdaptivePredictor(GATED_BY_MOMENT, background=False)._yaw_trigger is not None
+    for params in (GATED_BY_MOMENT.replace(motion_gate_yaw=False),
+                   GATED_BY_MOMENT.replace(motion_gate_yaw_moment_ratio=0.0),
+                   GATED_BY_MOMENT.replace(motion_gate=False)):
+        assert AdaptivePredictor(params, background=False)._yaw_trigger is None
+    with pytest.raises(ValueError, match='motion_gate_yaw_hold must be ≥ 0'):
+        GATED_BY_MOMENT.replace(motion_gate_yaw_hold=-1.0)
+    with pytest.raises(ValueError, match='motion_gate_yaw_moment_ratio must be ≥ 0'):
+        GATED_BY_MOMENT.replace(motion_gate_yaw_moment_ratio=-5.0)

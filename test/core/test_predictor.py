@@ -916,3 +916,36 @@ def test_a_restart_undone_within_two_periods_hands_the_old_targets_back(
         else:
             assert offered[199] is None
             assert len(results[199]) == len(results[179])  # restarted again
+
+
+@pytest.mark.parametrize('floor', [(0.5, 0.5, 0.02), (0.5, 0.5, 0.1), (1.0, 0.2, 0.0)])
+def test_the_sanity_guard_bound_is_six_wave_spreads_plus_guard_floor(
+        floor: tuple[float, float, float]) -> None:
+    """Believed up to 6 × the wave spread + ``guard_floor`` from the measurement, per DOF."""
+    predictor = AdaptivePredictor(PredictorParams(ndof=3, guard_floor=floor, motion_gate=False),
+                                  background=False)
+    spread = np.array([0.1, 0.05, 0.01])  # [m, m, rad] RMS wave motion of the window
+    predictor._wave_spread = spread
+    bound = 6.0 * spread + np.array(floor)
+    measured = np.array([10.0, -3.0, 0.5])
+    assert predictor._plausible(measured + 0.999 * bound, measured)
+    assert predictor._plausible(measured - 0.999 * bound, measured)
+    for dof in range(3):
+        beyond = measured.copy()
+        beyond[dof] += 1.001 * bound[dof]
+        assert not predictor._plausible(beyond, measured)
+    one = AdaptivePredictor(PredictorParams(ndof=1, guard_floor=floor, motion_gate=False),
+                            background=False)
+    one._wave_spread = spread[:1]
+    assert one._plausible(np.array([0.999 * bound[0]]), np.zeros(1))
+    assert not one._plausible(np.array([1.001 * bound[0]]), np.zeros(1))
+
+
+@pytest.mark.parametrize(('floor', 'message'), [
+    ((0.5, 0.5), 'guard_floor must be three numbers'),
+    ((0.5, -0.5, 0.1), 'guard_floor must be ≥ 0'),
+    ((0.5, math.nan, 0.1), 'guard_floor'),
+])
+def test_a_bad_guard_floor_is_refused(floor: tuple[float, ...], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        PredictorParams(guard_floor=floor)

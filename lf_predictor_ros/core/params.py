@@ -131,7 +131,7 @@ class PredictorParams:
             'targets of the last training window than the holding network alone (checked at '
             'every new target window; shut until the first check; core/motion_gate.py)'))
     motion_gate_yaw: bool = field(
-        default=False, metadata=_doc(
+        default=True, metadata=_doc(
             'with motion_gate and 3 DOF: the gate acts on the heading too; false: north and '
             "east only, the heading is the holding network's (the twin lets more of a swell's "
             'yaw motion through in turns)'))
@@ -321,7 +321,7 @@ class PredictorParams:
             'peak the learned filter lets through (in a DP loop, wave-band thrust) at a phase '
             'lag of about 2·ζ/ω0 seconds in the LF band; 0 = off (core/predictor.py)', ''))
     guard_floor: tuple[float, ...] = field(
-        default=(0.5, 0.5, 0.02), metadata=_doc(
+        default=(0.5, 0.5, 0.1), metadata=_doc(
             'floor of the sanity guard (north, east, yaw): a network prediction farther from '
             'the newest measurement than 6 × the RMS wave motion of its training window plus '
             'this is not believed and the cascade fallback stands in (the heading floor lets a '

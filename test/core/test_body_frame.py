@@ -62,11 +62,12 @@ def reference() -> tuple[PredictorParams, FloatArray, FloatArray, FloatArray, Fl
 
     The run predates ``frequency_yaw`` (its ω0 spectrum had the heading in), so that is pinned
     here; left to the default, the quarter-turn test below would also see the N + E spectrum
-    summed in another order, a rounding difference that 15 LM trainings amplify to 2e-5 m.
+    summed in another order, a rounding difference that 15 LM trainings amplify to 2e-5 m. It
+    also predates ``guard_floor`` (the sanity guard's floor was [0.5 m, 0.5 m, 0.02 rad]).
     """
     data = np.load(REFERENCE)
     params = PredictorParams.from_dict(ast.literal_eval(str(data['params']))).replace(
-        frequency_yaw=True)
+        frequency_yaw=True, guard_floor=(0.5, 0.5, 0.02))
     return params, data['t'], data['pose'], data['force'], data['output']
 
 

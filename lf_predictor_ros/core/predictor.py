@@ -950,6 +950,8 @@ class AdaptivePredictor:
         The gate's velocity and usual velocity are those of the twin's network alone: while the
         twin is on its fallback the gate restarts (its history of the network's motion stays),
         so it opens only after ``GATE_MIN_FILL`` of a window of the network's own outputs.
+        With ``motion_gate_yaw_moment_ratio`` the heading's gain is the yaw moment's
+        (``core.yaw_moment_trigger``, fed every sample's moment) instead of the velocity's.
         """
         if self._moving is None or self._gate is None:
             return out

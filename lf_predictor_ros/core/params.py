@@ -489,25 +489,10 @@ class PredictorParams:
             raise ValueError(f'wave_band must be two numbers (low, high) in rad/s, got {band!r}')
         object.__setattr__(self, 'wave_band',
                            tuple(_finite_float('wave_band', edge) for edge in band))
-        rates = self.max_output_rate
-        if isinstance(rates, (str, bytes)) or not hasattr(rates, '__len__') or len(rates) != 3:
-            raise ValueError(f'max_output_rate must be three numbers [north m/s, east m/s, yaw '
-                             f'rad/s] (0 = no limit), got {rates!r}')
-        object.__setattr__(self, 'max_output_rate',
-                           tuple(_finite_float('max_output_rate', rate) for rate in rates))
-        floor = self.guard_floor
-        if isinstance(floor, (str, bytes)) or not hasattr(floor, '__len__') or len(floor) != 3:
-            raise ValueError(f'guard_floor must be three numbers [north m, east m, yaw rad], got '
-                             f'{floor!r}')
-        object.__setattr__(self, 'guard_floor',
-                           tuple(_finite_float('guard_floor', value) for value in floor))
-        speeds = self.lf_augmentation
-        if isinstance(speeds, (str, bytes)) or not hasattr(speeds, '__len__') or \
-                len(speeds) != 3:
-            raise ValueError(f'lf_augmentation must be three numbers [north m/s, east m/s, yaw '
-                             f'rad/s] (0 = off), got {speeds!r}')
-        object.__setattr__(self, 'lf_augmentation',
-                           tuple(_finite_float('lf_augmentation', speed) for speed in speeds))
+        for name, units in (('max_output_rate', '[north m/s, east m/s, yaw rad/s] (0 = no limit)'),
+                            ('guard_floor', '[north m, east m, yaw rad]'),
+                            ('lf_augmentation', '[north m/s, east m/s, yaw rad/s] (0 = off)')):
+            object.__setattr__(self, name, _three_floats(name, getattr(self, name), units))
 
     def _check_positive(self) -> None:
         for name in ('sample_time', *_WINDOW_FIELDS, 'highpass_cutoff', 'notch_zeta',
@@ -711,6 +696,13 @@ def _is_integral(value: Any) -> bool:
     if isinstance(value, numbers.Integral):
         return True
     return isinstance(value, float) and math.isfinite(value) and value.is_integer()
+
+
+def _three_floats(name: str, values: Any, units: str) -> tuple[float, ...]:
+    """``values`` as a tuple of three finite floats, else ValueError naming the parameter."""
+    if isinstance(values, (str, bytes)) or not hasattr(values, '__len__') or len(values) != 3:
+        raise ValueError(f'{name} must be three numbers {units}, got {values!r}')
+    return tuple(_finite_float(name, value) for value in values)
 
 
 def _finite_float(name: str, value: Any) -> float:

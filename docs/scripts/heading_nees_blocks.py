@@ -8,9 +8,12 @@ The fair recording of `odometry_bench` (`suite.make_recording`), replayed open l
 scored start: the heading error RMS against the true LF heading [rad], the published heading std
 RMS [rad], the mean heading NEES e²/σ², the largest single-sample e²/σ², the true yaw rate RMS
 [rad/s], the predictor's heading gate gain (mean), the fraction of samples from the network
-(else the cascade fallback) and the guard trips in the block. Why (docs/BENCHMARKS.md, forty-fifth
-session): with the heading gated by the yaw moment the held-out heading NEES of rao_supply rose
-1.36 → 2.13 while its heading error fell to 0.28×. Development seeds only (as
+(else the cascade fallback) and the guard trips in the block. ``--steps N`` also lists the N
+largest one-sample steps of the published heading (the benchmark's output-step target compares
+them with the largest true LF step) with the heading gate gain before and after each. Why
+(docs/BENCHMARKS.md, forty-fifth session): with the heading gated by the yaw moment the held-out
+heading NEES of rao_supply rose 1.36 → 2.13 while its heading error fell to 0.28×, and its
+largest heading output step rose 2.5 → 3.36× the largest true LF step. Development seeds only (as
 `method_probe.py`): held-out seeds 11–30 are refused.
 """
 from __future__ import annotations
@@ -43,6 +46,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--to', dest='last', type=float, default=math.inf,
                         help='last block end [s]')
     parser.add_argument('--param', action='append', default=[], metavar='FIELD=VALUE')
+    parser.add_argument('--steps', type=int, default=0,
+                        help='also list this many largest one-sample heading output steps')
     args = parser.parse_args(argv)
     if args.seed in HELD_OUT:
         parser.error(f'seed {args.seed} is held out (11–30): use a development seed')
@@ -55,11 +60,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     # (t, error, std, gain, on network, guard trips so far) per sample from the scored start,
     # the estimate of update k being for t[k + 1]
     rows = []
+    headings = []  # (t + h, published heading, heading gate gain) of every sample
     try:
         for k in range(len(data['t']) - 1):
-            _, odom = estimator.update(float(data['t'][k]), data['y'][k], data['u'][k])
+            lf_pose, odom = estimator.update(float(data['t'][k]), data['y'][k], data['u'][k])
             predictor = estimator.predictor
             gain = predictor.motion_gain
+            headings.append((float(data['t'][k + 1]), float(lf_pose[2]),
+                             float(gain[2]) if len(gain) == 3 else math.nan))
             if k + 1 < begin or odom is None:
                 continue
             error = wrap_angle(float(odom.pose[2] - data['truth'][k + 1][2]))
@@ -87,7 +95,22 @@ def main(argv: Sequence[str] | None = None) -> int:
               f'{np.mean(block[:, 3]):10.2f}  {np.mean(block[:, 4]):7.2f}  '
               f'{block[-1, 5] - block[0, 5]:5.0f}')
         start += args.block
+    if args.steps:
+        _print_steps(np.array(headings), data['t'], data['truth'][:, 2], begin, args.steps)
     return 0
+
+
+def _print_steps(headings: np.ndarray, t: np.ndarray, truth_yaw: np.ndarray, begin: int,
+                 count: int) -> None:
+    """The ``count`` largest one-sample steps of the published heading from the scored start."""
+    scored = headings[max(begin - 1, 0):]
+    steps = np.abs(np.angle(np.exp(1j * np.diff(scored[:, 1]))))
+    true_steps = np.abs(np.angle(np.exp(1j * np.diff(truth_yaw[begin:]))))
+    print(f'largest true LF heading step from the scored start: {np.max(true_steps):.5f} rad')
+    print(' t [s]  step [rad]  / largest true  gate g_psi before → after')
+    for i in np.argsort(steps)[::-1][:count]:
+        print(f'{scored[i + 1, 0]:6.0f}  {steps[i]:10.5f}  {steps[i] / np.max(true_steps):14.2f}'
+              f'  {scored[i, 2]:.2f} → {scored[i + 1, 2]:.2f}')
 
 
 if __name__ == '__main__':

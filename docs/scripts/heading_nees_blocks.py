@@ -13,26 +13,28 @@ largest one-sample steps of the published heading (the benchmark's output-step t
 them with the largest true LF step) with the heading gate gain before and after each. Why
 (docs/BENCHMARKS.md, forty-fifth session): with the heading gated by the yaw moment the held-out
 heading NEES of rao_supply rose 1.36 → 2.13 while its heading error fell to 0.28×, and its
-largest heading output step rose 2.5 → 3.36× the largest true LF step. Development seeds only (as
-`method_probe.py`): held-out seeds 11–30 are refused.
+largest heading output step rose 2.5 → 3.36× the largest true LF step. Development seeds only
+(`method_probe.DEVELOPMENT_SEEDS`; the recording is `method_probe.fair_case`'s, events
+undelayed as in `odometry_bench`).
 """
 from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
 import math
+from pathlib import Path
 import sys
 
 import numpy as np
 
-from lf_predictor_ros.benchmark.estimators import param_overrides, predictor_params
-from lf_predictor_ros.benchmark.suite import make_recording, make_setup, scored_start
-from lf_predictor_ros.core.heading import wrap_angle
-from lf_predictor_ros.core.lf_state import LfStateEstimator
-from lf_predictor_ros.core.odometry import OdometryParams
-from sim_ros.simulation import load_scenario
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import method_probe  # noqa: E402 - the sibling script
 
-HELD_OUT = range(11, 31)
+from lf_predictor_ros.benchmark.estimators import param_overrides, predictor_params  # noqa: E402
+from lf_predictor_ros.benchmark.suite import scored_start  # noqa: E402
+from lf_predictor_ros.core.heading import unwrap_heading, wrap_angle  # noqa: E402
+from lf_predictor_ros.core.lf_state import LfStateEstimator  # noqa: E402
+from lf_predictor_ros.core.odometry import OdometryParams  # noqa: E402
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -49,12 +51,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--steps', type=int, default=0,
                         help='also list this many largest one-sample heading output steps')
     args = parser.parse_args(argv)
-    if args.seed in HELD_OUT:
-        parser.error(f'seed {args.seed} is held out (11–30): use a development seed')
-    scenario = load_scenario(args.scenario)
+    if args.seed not in method_probe.DEVELOPMENT_SEEDS:
+        parser.error(f'seed {args.seed} is not a development seed (method_probe.py)')
+    scenario, _, _, recording = method_probe.fair_case(args.scenario, args.seed, args.duration)
     params = predictor_params(scenario, param_overrides(args.param) if args.param else None)
-    setup = make_setup(scenario, args.seed, params)
-    data = make_recording(scenario, args.seed, args.duration, setup).data()
+    data = recording.data()
     begin = scored_start(params, len(data['t']))
     estimator = LfStateEstimator(params, OdometryParams(), background=False)
     # (t, error, std, gain, on network, guard trips so far) per sample from the scored start,
@@ -77,7 +78,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         estimator.close()
     table = np.array(rows)
-    truth_yaw = np.unwrap(data['truth'][:, 2])
+    truth_yaw = unwrap_heading(data['truth'][:, 2])
     rate = np.gradient(truth_yaw, data['t'])
     print(f'{args.scenario} seed {args.seed}, {args.param or "default"}; heading NEES over the '
           f'run {np.mean((table[:, 1] / table[:, 2]) ** 2):.2f}')
@@ -104,8 +105,8 @@ def _print_steps(headings: np.ndarray, t: np.ndarray, truth_yaw: np.ndarray, beg
                  count: int) -> None:
     """The ``count`` largest one-sample steps of the published heading from the scored start."""
     scored = headings[max(begin - 1, 0):]
-    steps = np.abs(np.angle(np.exp(1j * np.diff(scored[:, 1]))))
-    true_steps = np.abs(np.angle(np.exp(1j * np.diff(truth_yaw[begin:]))))
+    steps = np.abs(wrap_angle(np.diff(scored[:, 1])))
+    true_steps = np.abs(wrap_angle(np.diff(truth_yaw[begin:])))
     print(f'largest true LF heading step from the scored start: {np.max(true_steps):.5f} rad')
     print(' t [s]  step [rad]  / largest true  gate g_psi before → after')
     for i in np.argsort(steps)[::-1][:count]:

@@ -557,6 +557,7 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                            'pose_lag_prior': odometry.pose_lag_prior,
                            'pose_twin_gain': odometry.pose_twin_gain,
                            'pose_twin_fit': odometry.pose_twin_fit,
+                           'pose_heading_speed_lag': odometry.pose_heading_speed_lag,
                            'twist_cov_scale': odometry.twist_cov_scale,
                            'twist_reference_cutoff': odometry.twist_reference_cutoff,
                            'pose_reference_cutoff': odometry.pose_reference_cutoff,

@@ -259,7 +259,8 @@ class LfStateEstimator:
                 self._controller_read if reading else None, self.predictor.targets_peak_damping,
                 reference, odometry.params.pose_twin_fit,
                 odometry.params.twist_reference_cutoff, odometry.params.pose_reference_cutoff,
-                odometry.params.twist_likelihood_fit, odometry.params.twist_attenuation)
+                odometry.params.twist_likelihood_fit, odometry.params.twist_attenuation,
+                odometry.params.pose_heading_speed_lag)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -291,7 +292,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            remembered: ControllerRead | None = None,
            peak_damping: float = math.nan, reference: FloatArray | None = None,
            twin_fit: bool = False, twist_cutoff: float = 0.0, pose_cutoff: float = 0.0,
-           twist_likelihood: bool = False, twist_attenuation: bool = False) -> Learned:
+           twist_likelihood: bool = False, twist_attenuation: bool = False,
+           heading_speed: bool = False) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -313,7 +315,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     against the reference low-passed below ``pose_cutoff`` · ``wave_peak_freq``;
     ``twist_likelihood``: the twist model by maximum likelihood; ``twist_attenuation``: with
     ``twist_cutoff`` > 0 the twist models add what the reference's zero-phase filter, the
-    targets' or with ``reference`` the narrow notch's, took below the cutoff).
+    targets' or with ``reference`` the narrow notch's, took below the cutoff;
+    ``heading_speed``: the heading's lag part also from the horizontal speed).
     The read returned is the one in force afterwards: this read if it succeeded,
     ``remembered`` if it failed for lack of data, else None.
     """
@@ -352,7 +355,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     return memory, calibrate(published, times, values if reference is None else reference,
                              params.ndof, params.sample_time, min_samples, lag_prior,
                              twin_fit, cutoff, pose_edge, twist_likelihood,
-                             reference_filter), in_force
+                             reference_filter, heading_speed), in_force
 
 
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,

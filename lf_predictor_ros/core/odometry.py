@@ -28,7 +28,9 @@ thrust, and gives an ``OdometryEstimate``:
   outside the scale: m the motion gate twin's offset the gate left out of the output (what the
   holding network lags a move or a turn by), L its running level (``TWIN_LEVEL_TIME``), C per
   DOF the least-squares slope of e² on that excess against the targets (``pose_twin_fit``, on
-  by default: 0 where the offset has not explained the error; off: C = 1).
+  by default: 0 where the offset has not explained the error; off: C = 1). With
+  ``pose_heading_speed_lag`` (3 DOF) the heading's lag part also adds K_ψ (w_N² + w_E²), the
+  horizontal LF speed's share of the heading error (`fit_speed_gain`).
   Twist: the same model with the twist's change per second, low-passed over
   ``twist_accel_time``, as regressor (no prior), times ``twist_cov_scale``. The scales are
   calibrated on simulations against the truth (the targets are not the truth). Before the
@@ -160,6 +162,14 @@ class OdometryParams:
         "and DOF where the twin's untaken offset has explained the error (false: C_i = 1; "
         'adopted on fresh development seeds 373–380, runs inside their pose NEES bounds 16 → '
         '19 of 32, docs/BENCHMARKS.md "Thirty-third session")', ''))
+    pose_heading_speed_lag: bool = field(default=False, metadata=field_doc(
+        "3 DOF: the heading's lag part also grows with the horizontal LF speed, E[e_ψ²] = "
+        'σ²_hold + T_ψ² r² + K_ψ (w_N² + w_E²), K_ψ the clipped least-squares slope of what the '
+        "yaw-rate model leaves of e_ψ² on the squared speed, fitted with T_ψ at every "
+        "calibration: the heading row of the network reads every regressor, so a setpoint move "
+        "moves its heading too (docs/BENCHMARKS.md, forty-fifth session: on rao_supply seed 755 "
+        "most of the heading NEES came from a 15 m north move); inside pose_cov_scale and "
+        'pose_lag_scale like the other lag parts; false: the yaw rate alone', ''))
     twist_cov_scale: float = field(default=0.61, metadata=field_doc(
         'published twist covariance = this × (holding part + K² a²) of the twist error model '
         'fitted against the target velocity (a: the twist change, twist_accel_time; '
@@ -367,17 +377,26 @@ class ErrorModel:
             earth-frame velocity [m/s], yaw rate [rad/s]; twist: acceleration [m/s², rad/s²]).
         twin_gain: C_i per DOF (pose, ``pose_twin_fit``): variance added per unit of the
             untaken twin offset's excess (`fit_twin_gain`); None: not fitted.
+        speed_gain: K_ψ [rad²·s²/m²] (3-DOF pose, ``pose_heading_speed_lag``): heading
+            variance added per squared horizontal LF speed w_N² + w_E²; 0: none.
     """
 
     moment: FloatArray
     hold: FloatArray
     gain: FloatArray
     twin_gain: FloatArray | None = None
+    speed_gain: float = 0.0
 
     def covariance(self, rates: FloatArray, lag_scale: float) -> FloatArray:
-        """Σ_hold + lag_scale · diag(T_i² w_i²) for the regressor w (ndof,)."""
+        """Σ_hold + lag_scale · (diag(T_i² w_i²) + K_ψ (w_N² + w_E²) on the heading).
+
+        For the regressor w (ndof,); the heading term only with 3 DOF and ``speed_gain`` > 0.
+        """
         cov = self.hold.copy()
         cov.flat[::cov.shape[0] + 1] += lag_scale * self.gain * rates * rates
+        if self.speed_gain > 0.0 and cov.shape[0] == 3:
+            speed2 = float(rates[0]) ** 2 + float(rates[1]) ** 2
+            cov[2, 2] += lag_scale * self.speed_gain * speed2
         return cov
 
 
@@ -595,7 +614,8 @@ class LfOdometry:
             params.min_calibration_samples, params.pose_lag_prior, params.pose_twin_fit,
             params.twist_reference_cutoff * scale, params.pose_reference_cutoff * scale,
             params.twist_likelihood_fit,
-            reference_filter if params.twist_attenuation else None))
+            reference_filter if params.twist_attenuation else None,
+            params.pose_heading_speed_lag))
 
     def published(self) -> list[Published]:
         """A copy of the published history the covariances are calibrated on (oldest first)."""
@@ -1006,7 +1026,8 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
               sample_time: float, min_samples: int, lag_prior: float = 0.0,
               twin_fit: bool = False, twist_cutoff: float = 0.0, pose_cutoff: float = 0.0,
               twist_likelihood: bool = False,
-              reference_filter: FloatArray | None = None) -> Covariances | None:
+              reference_filter: FloatArray | None = None,
+              heading_speed: bool = False) -> Covariances | None:
     """Pose error models and twist covariances against the targets (module docstring).
 
     Every published estimate whose stamp is a target instant (not the first or last) is
@@ -1021,8 +1042,9 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
     model (`fit_error_model` on each estimate's regressor ``Published.lag``, prior lag time
     ``lag_prior`` [s]) and the twist error's second moment (bias included); with ``twin_fit``
     also the untaken twin offset's coefficient C of every DOF (`fit_twin_gain` on the matches
-    that carry ``Published.twin_excess``, pooled over the sources). None when nothing matches.
-    Pure: runs on a worker.
+    that carry ``Published.twin_excess``, pooled over the sources); with ``heading_speed``
+    (3 DOF) the heading's speed term K_ψ (`fit_error_model`), from every source like T_i.
+    None when nothing matches. Pure: runs on a worker.
     """
     stamps = np.asarray(times, dtype=np.float64)
     values = np.array(targets, dtype=np.float64).reshape(stamps.shape[0], -1)
@@ -1047,7 +1069,7 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
     twist_err = twists - velocity[idx]
     rates = np.array([p.lag for p in rows])
     sources = np.array([p.source for p in rows])
-    pooled = fit_error_model(pose_err, rates, lag_prior)
+    pooled = fit_error_model(pose_err, rates, lag_prior, heading_speed=heading_speed)
     if twin_fit:
         with_excess = [k for k, p in enumerate(rows) if p.twin_excess is not None]
         excess = np.array([rows[k].twin_excess for k in with_excess]).reshape(-1, ndof)
@@ -1062,7 +1084,8 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
         if np.count_nonzero(mask) >= min_samples:
             # the lag time from every source (more motion to fit it), the holding part per source
             pose_cov[source] = replace(
-                fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain),
+                fit_error_model(pose_err[mask], rates[mask], gain=pooled.gain,
+                                heading_speed=heading_speed, speed_gain=pooled.speed_gain),
                 twin_gain=pooled.twin_gain)
             twist_cov[source] = fit_twist(twist_err[mask], accel[mask])
     if reference_filter is not None and twist_cutoff > 0.0:
@@ -1147,7 +1170,8 @@ def low_passed(series: ArrayLike, sample_time: float, cutoff: float) -> FloatArr
 
 
 def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,
-                    gain: FloatArray | None = None) -> ErrorModel:
+                    gain: FloatArray | None = None, heading_speed: bool = False,
+                    speed_gain: float | None = None) -> ErrorModel:
     """Fit E[e_i²] = σ²_hold,i + T_i² w_i² per DOF (module docstring); errors, regressor (m, n).
 
     T_i² = the least-squares slope of e_i² on w_i² (clipped at 0), shrunk towards the prior
@@ -1156,7 +1180,8 @@ def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,
     gives the prior and a window with motion its own fit. σ²_hold,i = mean e_i² − T_i² mean w_i²,
     at least ``HOLD_FLOOR_FRACTION`` · mean e_i². Σ_hold keeps the correlations of the mean e eᵀ.
     A given ``gain`` (T_i² [s²], e.g. fitted on every source) is used as it is: only σ²_hold is
-    fitted.
+    fitted. With ``heading_speed`` and 3 DOF the heading also gets K_ψ (`fit_speed_gain`;
+    a given ``speed_gain`` is used as it is) and its σ²_hold nets out K_ψ · mean (w_N² + w_E²).
     """
     e = np.asarray(errors, dtype=np.float64)
     w = np.asarray(rates, dtype=np.float64)
@@ -1181,7 +1206,36 @@ def fit_error_model(errors: ArrayLike, rates: ArrayLike, lag_prior: float = 0.0,
                                  still=bool(sxx[i] <= 1e-12 * e.shape[0] *
                                             float(np.mean(w2[:, i] ** 2))))
         hold[i] = max(float(mean_e2[i]) - gains[i] * float(mean_w2[i]), floor)
-    return ErrorModel(moment=moment, hold=_hold_matrix(moment, hold), gain=gains)
+    speed = 0.0
+    if heading_speed and n == 3:
+        speed2 = w2[:, 0] + w2[:, 1]
+        left = e2[:, 2] - gains[2] * w2[:, 2]  # what the yaw-rate model leaves of e_ψ²
+        speed = fit_speed_gain(left, speed2) if speed_gain is None else float(speed_gain)
+        hold[2] = max(float(np.mean(left)) - speed * float(np.mean(speed2)),
+                      HOLD_FLOOR_FRACTION * float(mean_e2[2]))
+    return ErrorModel(moment=moment, hold=_hold_matrix(moment, hold), gain=gains,
+                      speed_gain=speed)
+
+
+def fit_speed_gain(left: ArrayLike, speed2: ArrayLike) -> float:
+    """K_ψ ≥ 0: the least-squares slope of ``left`` (m,) on ``speed2`` (m,), clipped at 0.
+
+    ``left``: the squared heading error less the yaw-rate lag part T_ψ² r² [rad²]; ``speed2``:
+    the squared horizontal LF speed w_N² + w_E² [m²/s²]. No spread of ``speed2`` (a window
+    without a move): 0. The inputs are not modified.
+    """
+    y = np.asarray(left, dtype=np.float64)
+    x = np.asarray(speed2, dtype=np.float64)
+    if y.ndim != 1 or x.shape != y.shape:
+        raise ValueError(f'left and speed2 must be (m,) arrays of one length, got {y.shape} '
+                         f'and {x.shape}')
+    if y.shape[0] < 2:
+        return 0.0
+    dx = x - float(np.mean(x))
+    sxx = float(np.sum(dx * dx))
+    if sxx <= 1e-12 * y.shape[0] * float(np.mean(x * x)):
+        return 0.0
+    return max(float(np.sum(dx * (y - float(np.mean(y))))) / sxx, 0.0)
 
 
 def _hold_matrix(moment: FloatArray, hold: FloatArray) -> FloatArray:

@@ -416,7 +416,7 @@ def test_wide_notch_targets_are_replaced_by_the_narrow_reference_for_calibration
 def test_the_reference_cutoffs_are_fractions_of_the_wave_peak_frequency(
         monkeypatch: pytest.MonkeyPatch, omega: float | None,
         expected: tuple[float, float]) -> None:
-    """_learn hands calibrate the cutoffs · ω0 [rad/s], the likelihood-fit flag and the filter.
+    """_learn hands calibrate the cutoffs · ω0 [rad/s], the fit flags and the filter.
 
     Before the first ω0 there is no low-pass (cutoffs 0) and no filter to attenuate with; with
     ``twist_attenuation`` and an ω0 the filter is the targets' own.
@@ -426,13 +426,15 @@ def test_the_reference_cutoffs_are_fractions_of_the_wave_peak_frequency(
 
     received: list[tuple[float, float, bool]] = []
     filters: list[np.ndarray | None] = []
+    speeds: list[bool] = []
 
     def spy(history: object, times: object, targets: object, ndof: int, sample_time: float,
             min_samples: int, lag_prior: float, twin_fit: bool, twist_cutoff: float,
             pose_cutoff: float, twist_likelihood: bool,
-            reference_filter: np.ndarray | None) -> None:
+            reference_filter: np.ndarray | None, heading_speed: bool) -> None:
         received.append((twist_cutoff, pose_cutoff, twist_likelihood))
         filters.append(reference_filter)
+        speeds.append(heading_speed)
 
     monkeypatch.setattr(lf_state, 'calibrate', spy)
     params = PredictorParams(ndof=1, sample_time=1.0)
@@ -441,8 +443,9 @@ def test_the_reference_cutoffs_are_fractions_of_the_wave_peak_frequency(
     for attenuation in (False, True):
         lf_state._learn(params, times, values, np.zeros((100, 1)), omega, [], 60.0, 60, 0.0,
                         twist_cutoff=0.5, pose_cutoff=0.25, twist_likelihood=True,
-                        twist_attenuation=attenuation)
+                        twist_attenuation=attenuation, heading_speed=attenuation)
     assert received == 2 * [(pytest.approx(expected[0]), pytest.approx(expected[1]), True)]
+    assert speeds == [False, True]  # pose_heading_speed_lag reaches the calibration
     assert filters[0] is None
     if omega is None:
         assert filters[1] is None

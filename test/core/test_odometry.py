@@ -22,6 +22,7 @@ from lf_predictor_ros.core.odometry import (
     calibrate,
     fit_error_model,
     fit_error_model_likelihood,
+    fit_speed_gain,
     fit_twin_gain,
     low_passed,
     normalized_error_squared,
@@ -142,6 +143,85 @@ def test_pose_error_model_recovers_lag_time_and_holding_std() -> None:
     cov = model.covariance(np.array([0.2, 0.0, 0.005]), 1.0)
     np.testing.assert_allclose(np.diag(cov), np.diag(model.hold) + model.gain *
                                np.array([0.04, 0.0, 2.5e-5]))
+
+
+def test_heading_speed_lag_recovers_the_heading_error_a_move_makes() -> None:
+    """Heading errors √(σ² + T² r² + K s²)·noise, s² = w_N² + w_E², K = 0.004 rad²·s²/m².
+
+    With ``heading_speed`` the fit recovers K within 10 % and T_ψ, σ_ψ as before (σ² nets out
+    K · mean s²); north and east are untouched; without it K is 0 and the heading's holding part
+    absorbs the move; a given K is used as it is; 1 DOF never gets one.
+    """
+    rng = np.random.default_rng(5)
+    m = 40000
+    rates = rng.uniform(-1.0, 1.0, size=(m, 3)) * np.array([0.2, 0.2, 0.003])
+    sigma2, lag2, speed_gain = 0.01 ** 2, 16.0, 0.004
+    speed2 = rates[:, 0] ** 2 + rates[:, 1] ** 2
+    errors = rng.normal(size=(m, 3)) * np.array([0.1, 0.05, 1.0])
+    errors[:, 2] *= np.sqrt(sigma2 + lag2 * rates[:, 2] ** 2 + speed_gain * speed2)
+    fitted = fit_error_model(errors, rates, heading_speed=True)
+    plain = fit_error_model(errors, rates)
+    assert math.isclose(fitted.speed_gain, speed_gain, rel_tol=0.1)
+    assert math.isclose(fitted.gain[2], lag2, rel_tol=0.1)
+    assert math.isclose(fitted.hold[2, 2], sigma2, rel_tol=0.15)
+    np.testing.assert_array_equal(fitted.gain, plain.gain)
+    np.testing.assert_array_equal(np.diag(fitted.hold)[:2], np.diag(plain.hold)[:2])
+    assert plain.speed_gain == 0.0
+    assert plain.hold[2, 2] > sigma2 + 0.5 * speed_gain * float(np.mean(speed2))
+    # the published heading variance at a move of 0.3 m/s north: + lag_scale · K · 0.09
+    w = np.array([0.3, 0.0, 0.0])
+    cov = fitted.covariance(w, 8.0)
+    assert math.isclose(cov[2, 2] - fitted.hold[2, 2], 8.0 * fitted.speed_gain * 0.09,
+                        rel_tol=1e-12)
+    np.testing.assert_allclose(np.diag(cov)[:2], np.diag(fitted.hold)[:2] +
+                               8.0 * fitted.gain[:2] * w[:2] ** 2)
+    given = fit_error_model(errors[:500], rates[:500], gain=fitted.gain, heading_speed=True,
+                            speed_gain=0.01)
+    assert given.speed_gain == 0.01
+    one = fit_error_model(errors[:, :1], rates[:, :1], heading_speed=True)
+    assert one.speed_gain == 0.0
+
+
+def test_speed_gain_is_a_clipped_slope() -> None:
+    """e² = 1e-4 + 0.002 s² exactly: K = 0.002; an error that falls with s²: 0; no move: 0."""
+    s2 = np.linspace(0.0, 0.1, 200)
+    assert math.isclose(fit_speed_gain(1e-4 + 0.002 * s2, s2), 0.002, rel_tol=1e-9)
+    assert fit_speed_gain(1e-3 - 0.002 * s2, s2) == 0.0
+    assert fit_speed_gain(1e-4 + 0.002 * s2, np.full(200, 0.05)) == 0.0
+    assert fit_speed_gain(np.ones(1), np.ones(1)) == 0.0
+    with pytest.raises(ValueError, match='one length'):
+        fit_speed_gain(s2, s2[:10])
+
+
+def test_calibration_fits_the_heading_speed_gain_on_every_source() -> None:
+    """calibrate(..., heading_speed=True): heading errors √(1e-4 + 0.01 s²) against the targets.
+
+    The pooled K ≈ 0.01 is shared by both sources (each keeps its own holding part); without
+    the option K is 0; the odometry's learn() passes pose_heading_speed_lag.
+    """
+    n = 800
+    times = np.arange(float(n))
+    targets = np.zeros((n, 3))
+    speed = np.zeros(n)
+    speed[200:500] = np.linspace(0.0, 0.4, 300)
+    history = []
+    for k in range(n):
+        error = np.array([0.1, 0.1, math.sqrt(1e-4 + 0.01 * speed[k] ** 2)])
+        history.append(Published(float(k), targets[k] + error, np.zeros(3),
+                                 'network' if k % 2 else 'fallback', np.zeros(3),
+                                 np.array([speed[k], 0.0, 0.0])))
+    fitted = calibrate(history, times, targets, 3, H, 60, 0.0, heading_speed=True)
+    plain = calibrate(history, times, targets, 3, H, 60, 0.0)
+    assert fitted is not None and plain is not None
+    for source in ('all', 'network', 'fallback'):
+        assert math.isclose(fitted[0][source].speed_gain, 0.01, rel_tol=1e-6)
+        assert math.isclose(fitted[0][source].hold[2, 2], 1e-4, rel_tol=1e-6)
+        assert plain[0][source].speed_gain == 0.0
+    odo = LfOdometry(3, H, OdometryParams(pose_heading_speed_lag=True))
+    odo._history.extend(history)
+    odo.learn(times, targets, None)
+    assert odo._pose_cov is not None
+    assert math.isclose(odo._pose_cov['all'].speed_gain, 0.01, rel_tol=1e-6)
 
 
 def test_published_pose_covariance_adds_the_untaken_twin_offsets_excess() -> None:

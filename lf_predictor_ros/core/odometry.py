@@ -168,8 +168,10 @@ class OdometryParams:
         "yaw-rate model leaves of e_ψ² on the squared speed, fitted with T_ψ at every "
         "calibration: the heading row of the network reads every regressor, so a setpoint move "
         "moves its heading too (docs/BENCHMARKS.md, forty-fifth session: on rao_supply seed 755 "
-        "most of the heading NEES came from a 15 m north move); inside pose_cov_scale and "
-        'pose_lag_scale like the other lag parts; false: the yaw rate alone', ''))
+        'most of the heading NEES came from a 15 m north move); inside pose_cov_scale, not '
+        'pose_lag_scale (on development seeds 755–758 × 8 made the heading too cautious: '
+        'rao_supply heading NEES 1.73 → 0.49, × 1: 1.11, docs/BENCHMARKS.md forty-sixth '
+        'session); false: the yaw rate alone', ''))
     twist_cov_scale: float = field(default=0.61, metadata=field_doc(
         'published twist covariance = this × (holding part + K² a²) of the twist error model '
         'fitted against the target velocity (a: the twist change, twist_accel_time; '
@@ -388,15 +390,16 @@ class ErrorModel:
     speed_gain: float = 0.0
 
     def covariance(self, rates: FloatArray, lag_scale: float) -> FloatArray:
-        """Σ_hold + lag_scale · (diag(T_i² w_i²) + K_ψ (w_N² + w_E²) on the heading).
+        """Σ_hold + lag_scale · diag(T_i² w_i²), + K_ψ (w_N² + w_E²) on the heading.
 
-        For the regressor w (ndof,); the heading term only with 3 DOF and ``speed_gain`` > 0.
+        For the regressor w (ndof,); the heading term (not scaled by ``lag_scale``) only with
+        3 DOF and ``speed_gain`` > 0.
         """
         cov = self.hold.copy()
         cov.flat[::cov.shape[0] + 1] += lag_scale * self.gain * rates * rates
         if self.speed_gain > 0.0 and cov.shape[0] == 3:
             speed2 = float(rates[0]) ** 2 + float(rates[1]) ** 2
-            cov[2, 2] += lag_scale * self.speed_gain * speed2
+            cov[2, 2] += self.speed_gain * speed2
         return cov
 
 

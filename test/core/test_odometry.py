@@ -168,11 +168,10 @@ def test_heading_speed_lag_recovers_the_heading_error_a_move_makes() -> None:
     np.testing.assert_array_equal(np.diag(fitted.hold)[:2], np.diag(plain.hold)[:2])
     assert plain.speed_gain == 0.0
     assert plain.hold[2, 2] > sigma2 + 0.5 * speed_gain * float(np.mean(speed2))
-    # the published heading variance at a move of 0.3 m/s north: + lag_scale · K · 0.09
+    # the published heading variance at a move of 0.3 m/s north: + K · 0.09 (not × lag_scale)
     w = np.array([0.3, 0.0, 0.0])
     cov = fitted.covariance(w, 8.0)
-    assert math.isclose(cov[2, 2] - fitted.hold[2, 2], 8.0 * fitted.speed_gain * 0.09,
-                        rel_tol=1e-12)
+    assert math.isclose(cov[2, 2] - fitted.hold[2, 2], fitted.speed_gain * 0.09, rel_tol=1e-12)
     np.testing.assert_allclose(np.diag(cov)[:2], np.diag(fitted.hold)[:2] +
                                8.0 * fitted.gain[:2] * w[:2] ** 2)
     given = fit_error_model(errors[:500], rates[:500], gain=fitted.gain, heading_speed=True,

@@ -29,6 +29,13 @@ more wave motion than the holding network's (it follows any ramp, so it cannot l
 the slow part of a wave group), and in a DP loop whatever the gate lets through of it shows as
 wave-band thrust. A move or a turn changes the difference slowly, so the low-pass keeps it.
 
+The gate stays shut until its history holds ``GATE_MIN_FILL`` of the window. With
+``PredictorParams.motion_gate_fade_in`` F > 0 its gains are then multiplied by a ramp from 0 to
+1 over F (the gain g of the module's formula, times min(1, n / (F / h)) for the n-th sample
+since the warm-up ended): that end falls wherever it falls, in a move as easily as in calm, and
+without the ramp the gain steps from 0 to 1 there and the whole twin offset reaches the output
+in one sample.
+
 With ``PredictorParams.motion_gate_validation`` the data decide, per DOF, whether the gate may
 act at all (`gate_validated`): at every new target window (the zero-phase LF targets of the last
 training window, thesis §4.2.2) the gated output the gate *would* have published is compared
@@ -147,16 +154,24 @@ class MotionGate:
     """The gain g of the module docstring, updated once per predictor sample."""
 
     def __init__(self, ndof: int, sample_time: float, time_constant: float = GATE_TIME,
-                 window: float = GATE_WINDOW, ratio: float = GATE_RATIO) -> None:
-        """Create for ``ndof`` DOFs at ``sample_time`` [s]; times in s (all > 0)."""
+                 window: float = GATE_WINDOW, ratio: float = GATE_RATIO,
+                 fade_in: float = 0.0) -> None:
+        """Create for ``ndof`` DOFs at ``sample_time`` [s]; times in s (all > 0).
+
+        ``fade_in`` [s] ≥ 0: the gains rise from 0 over this time once the warm-up is over
+        (module docstring; 0: at once).
+        """
         if ndof not in (1, 3):
             raise ValueError(f'MotionGate needs ndof 1 or 3, got {ndof!r}')
         for name, value in (('sample_time', sample_time), ('time_constant', time_constant),
                             ('window', window), ('ratio', ratio)):
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'MotionGate {name} must be finite and > 0, got {value!r}')
+        if not (math.isfinite(fade_in) and fade_in >= 0.0):
+            raise ValueError(f'MotionGate fade_in must be finite and >= 0 s, got {fade_in!r}')
         self.ndof = ndof
         self.ratio = ratio
+        self._fade_samples = int(round(fade_in / sample_time))
         self._alpha = min(1.0, sample_time / time_constant)
         self._squares = np.zeros((max(1, int(round(window / sample_time))), ndof))
         self._min_count = max(1, int(math.ceil(GATE_MIN_FILL * self._squares.shape[0])))
@@ -166,6 +181,7 @@ class MotionGate:
         """Forget everything: the motion seen and the usual velocity (a new vessel or sea)."""
         self.restart()
         self._count = 0  # filled rows of the ring buffer ``_squares``
+        self._opened = 0  # samples since the warm-up ended, up to the fade-in's length
         self._index = 0  # next row to write
         # the filled rows of ``_squares`` per DOF, sorted (NaN left out and counted): their
         # median without sorting the window at every sample
@@ -196,7 +212,11 @@ class MotionGate:
         self._store(square.tolist())
         if self._count < self._min_count:
             return np.zeros(self.ndof)
-        return _gate_gain_floats(square.tolist(), self._usual(), self.ratio)
+        gain = _gate_gain_floats(square.tolist(), self._usual(), self.ratio)
+        if self._opened < self._fade_samples:  # motion_gate_fade_in: the ramp
+            self._opened += 1
+            gain = gain * (self._opened / self._fade_samples)
+        return gain
 
     def _store(self, square: list[float]) -> None:
         """Write one row of squares into the ring buffer and the sorted columns."""

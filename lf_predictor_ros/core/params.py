@@ -125,6 +125,15 @@ class PredictorParams:
             'with motion_gate: dead zone a of the gain g, used as clip((g − a)/(1 − a), 0, 1): '
             'the small gains of a vessel holding position are shut (no wave motion of the twin '
             'leaks through them), a move (g → 1) is not touched; in [0, 1), 0 = off'))
+    motion_gate_fade_in: float = field(
+        default=0.0, metadata=_doc(
+            'with motion_gate: when the gate has first seen enough of the usual motion '
+            '(GATE_MIN_FILL of the training window, core/motion_gate.py) its gains rise from 0 '
+            'over this time instead of at once: the end of that warm-up falls, whenever it '
+            'falls, in the middle of a move as easily as in calm, and the gain stepping 0 → 1 '
+            'there put the whole twin offset into one sample (rao_supply 772, 782: 1.6–2.0 m, '
+            '3.1–4.1× the largest true LF step; docs/BENCHMARKS.md forty-sixth session); '
+            '0 = at once', 's'))
     motion_gate_validation: bool = field(
         default=False, metadata=_doc(
             'with motion_gate: the gate acts on a DOF only while its output was closer to the '
@@ -505,7 +514,7 @@ class PredictorParams:
                      'wave_augmentation', 'switch_blend_time', 'motion_gate_smoothing',
                      'output_notch_zeta', 'notch_lower_edge', 'notch_zeta_broadband',
                      'motion_gate_yaw_notch', 'motion_gate_yaw_moment_ratio',
-                     'motion_gate_yaw_hold'):
+                     'motion_gate_yaw_hold', 'motion_gate_fade_in'):
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')

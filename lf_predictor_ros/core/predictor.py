@@ -315,7 +315,8 @@ class AdaptivePredictor:
                 worker_name='lf-predictor-twin-training')
             self._gate = MotionGate(params.ndof, params.sample_time,
                                     time_constant=params.motion_gate_time,
-                                    window=params.training_window)
+                                    window=params.training_window,
+                                    fade_in=params.motion_gate_fade_in)
         self._roughness = (RoughnessGuard(params.ndof, params.sample_time,
                                           params.roughness_guard_time)
                            if params.roughness_guard_time > 0.0 else None)

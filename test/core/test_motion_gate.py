@@ -101,6 +101,49 @@ def test_gate_stays_shut_while_holding_and_opens_in_a_move() -> None:
     assert np.all(gate.update(pose + 150 * velocity) > 0.0)
 
 
+def test_a_fade_in_ramps_the_gains_when_the_warm_up_ends_in_a_move() -> None:
+    """The warm-up (a quarter of the window: 150 samples) ends while the vessel moves.
+
+    Without a fade-in the gain steps from 0 to its full value (> 0.9) in one sample; with
+    ``fade_in`` 10 s at h = 1 s the n-th sample after the warm-up gets n/10 of the same gain,
+    the tenth and every later one all of it. ``reset`` fades in again; a bad fade-in is refused
+    and the predictor hands its parameter over.
+    """
+    rng = np.random.default_rng(4)
+    poses = np.cumsum(rng.normal(0.0, [0.01, 0.01, 0.0002], size=(200, 3)), axis=0)
+    velocity = np.array([0.3, -0.2, 0.005])  # [m/s, m/s, rad/s]: the move from sample 120
+    poses[120:] += np.arange(1, 81)[:, None] * velocity
+    runs = {}
+    for fade_in in (0.0, 10.0):
+        gate = MotionGate(3, 1.0, time_constant=10.0, window=600.0, fade_in=fade_in)
+        runs[fade_in] = np.array([gate.update(pose) for pose in poses])
+    plain, faded = runs[0.0], runs[10.0]
+    np.testing.assert_array_equal(plain[:149], 0.0)
+    assert np.all(plain[149] > 0.9)  # the step the fade-in is for
+    for n in range(1, 11):
+        np.testing.assert_allclose(faded[148 + n], plain[148 + n] * n / 10.0, rtol=1e-12)
+    np.testing.assert_array_equal(faded[158:], plain[158:])
+    np.testing.assert_array_equal(faded[:149], 0.0)
+    gate = MotionGate(3, 1.0, time_constant=10.0, window=600.0, fade_in=10.0)
+    for pose in poses:
+        gate.update(pose)
+    gate.reset()
+    again = np.array([gate.update(pose) for pose in poses[:151]])
+    np.testing.assert_allclose(again[149:], faded[149:151], rtol=1e-12)
+    for bad in (-1.0, math.inf, math.nan):
+        with pytest.raises(ValueError, match='fade_in must be finite and >= 0'):
+            MotionGate(3, 1.0, fade_in=bad)
+    with pytest.raises(ValueError, match='motion_gate_fade_in must be ≥ 0'):
+        PredictorParams(motion_gate_fade_in=-1.0)
+    predictor = AdaptivePredictor(SMALL.replace(motion_gate=True, motion_gate_fade_in=4.0),
+                                  background=False)
+    try:
+        assert predictor._gate is not None and predictor._gate._fade_samples == round(
+            4.0 / SMALL.sample_time)
+    finally:
+        predictor.close()
+
+
 def test_motion_gate_time_sets_how_soon_a_move_opens_the_gate() -> None:
     """At T = h the first step of a move opens the gate; at T = 10 h only 1/10 of it counts."""
     first_gains = {}

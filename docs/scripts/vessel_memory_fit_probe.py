@@ -1,0 +1,65 @@
+"""Exploratory: the vessel memory's learned LF model over a fair recording, against the truth.
+
+    OMP_NUM_THREADS=1 python docs/scripts/vessel_memory_fit_probe.py rao_supply 771
+
+`LfStateEstimator` (shipped defaults, no worker thread) streamed over `method_probe.fair_case`
+(scheduled events delayed as `method_probe.py` delays them), printing at every new vessel memory
+its dead reckoner and, once a model is fitted, the diagonals of G (≈ M⁻¹) and F (≈ −M⁻¹D),
+next to the simulator's true M⁻¹ and −M⁻¹D. No ``thrust_command`` is fed (an offline
+recording), so the controller's gains cannot be read and G is fitted. The forty-sixth session
+used it to ask whether a learned model could carry an observer through the manoeuvres
+(docs/BENCHMARKS.md). Development seeds only, as `method_probe.py`.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+import sys
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import method_probe as mp  # noqa: E402 - the sibling script
+
+from lf_predictor_ros.benchmark.benchmark import SCHEDULE_SPREAD  # noqa: E402
+from lf_predictor_ros.benchmark.suite import predictor_params  # noqa: E402
+from lf_predictor_ros.core.lf_state import LfStateEstimator  # noqa: E402
+
+
+def main(argv: list[str]) -> int:
+    """Stream one development case and print the memories (module docstring)."""
+    if len(argv) != 2 or not argv[1].isdigit():
+        print('usage: vessel_memory_fit_probe.py SCENARIO SEED', file=sys.stderr)
+        return 2
+    sc, seed = argv[0], int(argv[1])
+    if seed not in mp.DEVELOPMENT_SEEDS:
+        print(f'seed {seed} is not a development seed (held-out seeds: `benchmark`)',
+              file=sys.stderr)
+        return 2
+    torch.set_num_threads(1)
+    np.set_printoptions(precision=4, linewidth=150)
+    scenario, base, setup, rec = mp.fair_case(sc, seed, 1800.0, SCHEDULE_SPREAD)
+    d = rec.data()
+    t, y, u = d['t'], d['y'], d['u']
+    est = LfStateEstimator(predictor_params(scenario), background=False)
+    M = np.asarray(setup.model.mass, dtype=float)
+    D = np.asarray(setup.model.damping, dtype=float)
+    n = est.ndof
+    Minv = np.linalg.inv(M[:n, :n])
+    print('true M^-1 diag', np.diag(Minv), 'true -M^-1 D diag', np.diag(-Minv @ D[:n, :n]))
+    last = None
+    for k in range(len(t)):
+        est.update(t[k], y[k], u[k])
+        mem = est.memory
+        if mem is not None and mem is not last:
+            last = mem
+            if mem.model is not None:
+                print(f't {t[k]:6.0f} reckoner {mem.reckoner:18s} G diag '
+                      f'{np.diag(mem.model.input_gain)} F diag {np.diag(mem.model.damping)}')
+            else:
+                print(f't {t[k]:6.0f} reckoner {mem.reckoner} no model')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))

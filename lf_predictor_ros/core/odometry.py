@@ -171,7 +171,9 @@ class OdometryParams:
         'most of the heading NEES came from a 15 m north move); inside pose_cov_scale, not '
         'pose_lag_scale (on development seeds 755–758 × 8 made the heading too cautious: '
         'rao_supply heading NEES 1.73 → 0.49, × 1: 1.11, docs/BENCHMARKS.md forty-sixth '
-        'session); false: the yaw rate alone', ''))
+        'session); off by default: on fresh seeds 787–794 it brought rao_supply to 1.06 but made '
+        "threedof_open_loop's heading too cautious (NEES 0.73 → 0.37); false: the yaw rate "
+        'alone', ''))
     twist_cov_scale: float = field(default=0.61, metadata=field_doc(
         'published twist covariance = this × (holding part + K² a²) of the twist error model '
         'fitted against the target velocity (a: the twist change, twist_accel_time; '

@@ -132,7 +132,9 @@ class PredictorParams:
             'over this time instead of at once: the end of that warm-up falls, whenever it '
             'falls, in the middle of a move as easily as in calm, and the gain stepping 0 → 1 '
             'there put the whole twin offset into one sample (rao_supply 772, 782: 1.6–2.0 m, '
-            '3.1–4.1× the largest true LF step; docs/BENCHMARKS.md forty-sixth session); '
+            '3.1–4.1× the largest true LF step; docs/BENCHMARKS.md forty-sixth session). '
+            'Off by default: on rao_supply that warm-up ends inside the setpoint move on most '
+            'seeds, and 10 s cost 8 % of its open-loop north error (30 s: 23 %); '
             '0 = at once', 's'))
     motion_gate_validation: bool = field(
         default=False, metadata=_doc(

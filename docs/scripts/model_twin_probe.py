@@ -18,6 +18,12 @@ to the observer in the manoeuvres, where a model turns the thrust into motion at
 observer with a 30 % wrong model beats it by 1.6× in the RAO loops. This asks how much of that a
 model twin could bring, before anyone builds one on the learned vessel memory. It uses the true
 model: an upper bound for that direction, never a candidate. Development seeds only.
+
+``MODEL_TWIN=none`` keeps the package's twin. ``ORACLE_TIMING=1`` also gives the gate the
+schedule: within ``ORACLE_WINDOW`` s after each setpoint event of the (delayed) schedule the
+north and east gains are 1 (the heading's stays the yaw moment's), elsewhere the gate's own
+(the offset is still the 5 s low-passed twin − holding). Another upper bound: a gate that knew
+when every manoeuvre starts and how long it lasts.
 """
 from __future__ import annotations
 
@@ -33,9 +39,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import method_probe  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.benchmark import baseline_tuning, estimators, suite  # noqa: E402
+from lf_predictor_ros.core.motion_gate import shifted  # noqa: E402
 from lf_predictor_ros.core.predictor import AdaptivePredictor  # noqa: E402
 
-MODELS = ('true', 'mistuned')
+MODELS = ('true', 'mistuned', 'none')
+ORACLE_WINDOW = 200.0  # [s] a manoeuvre's length after its setpoint event (ORACLE_TIMING)
 
 
 class ModelTwin:
@@ -85,19 +93,40 @@ class ModelTwin:
         """Nothing to stop."""
 
 
-def with_model_twin(make: Any, which: str) -> Any:
-    """`estimators.make_estimator`, each adaptive predictor's twin a `ModelTwin`."""
+def oracle_timed(predictor: AdaptivePredictor, starts: list[float]) -> None:
+    """Make the predictor's gate serve north and east fully in each manoeuvre window."""
+    gated = predictor._gated
+
+    def timed(t: float, out: np.ndarray, pose: np.ndarray, force: np.ndarray) -> np.ndarray:
+        result: np.ndarray = gated(t, out, pose, force)
+        offset = predictor._scaled_offset
+        if offset is not None and any(a <= t < a + ORACLE_WINDOW for a in starts):
+            gains = np.array(predictor._gain, dtype=np.float64)
+            gains[:2] = 1.0
+            result = shifted(out, gains * offset, predictor.ndof)
+        return result
+
+    setattr(predictor, '_gated', timed)  # noqa: B010 - the patch, this instance only
+
+
+def with_model_twin(make: Any, which: str, timing: bool) -> Any:
+    """`estimators.make_estimator`, each adaptive predictor's twin a `ModelTwin` (and timed)."""
 
     def make_estimator(name: str, setup: Any) -> Any:
         stream = make(name, setup)
         predictor = stream.estimator
-        if name == 'adaptive' and isinstance(predictor, AdaptivePredictor) and \
-                predictor._moving is not None:
+        if name != 'adaptive' or not isinstance(predictor, AdaptivePredictor) or \
+                predictor._moving is None:
+            return stream
+        if which != 'none':
             predictor._moving.close()
             observer = baseline_tuning.make_observer(
                 setup.baselines.get('observer', {}), setup.model, setup.ndof, setup.sample_time,
                 predictor._fallback_freq(), mistuned=which == 'mistuned')
             predictor._moving = ModelTwin(observer, predictor)  # type: ignore[assignment]
+        if timing:
+            oracle_timed(predictor, [float(row[0]) for row in
+                                     setup.scenario.controller.setpoint_schedule])
         return stream
 
     return make_estimator
@@ -107,7 +136,9 @@ if __name__ == '__main__':
     which = os.environ.get('MODEL_TWIN', '')
     if which not in MODELS:
         sys.exit(f'set MODEL_TWIN to one of {MODELS}')
-    patched = with_model_twin(estimators.make_estimator, which)
+    oracle_timing = os.environ.get('ORACLE_TIMING', '') == '1'
+    patched = with_model_twin(estimators.make_estimator, which, oracle_timing)
     setattr(suite, 'make_estimator', patched)  # noqa: B010 - the patch
-    print(f'# the motion gate twin: a passive observer on the {which} model', flush=True)
+    print(f'# the motion gate twin: {which} model (none: the package twin); oracle timing '
+          f'{oracle_timing}', flush=True)
     sys.exit(method_probe.main(sys.argv[1:]))

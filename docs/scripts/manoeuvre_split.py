@@ -18,7 +18,7 @@ from pathlib import Path
 import re
 import sys
 
-from lf_predictor_ros.benchmark.suite import load_scenario
+from sim_ros.simulation import load_scenario
 
 WINDOW = 200.0  # [s] a manoeuvre's length after its setpoint event
 BLOCK = re.compile(r'\s+(\d+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)')

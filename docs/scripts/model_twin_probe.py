@@ -9,9 +9,10 @@ positions) replaced by the tuned passive observer of the benchmark (`baseline_tu
 make_observer`, the scenario's `config/baselines` gains) on the simulator's **true** model
 (``MODEL_TWIN=true``) or on the model `observer_mistuned` uses (``MODEL_TWIN=mistuned``: M ×1.3,
 D ×0.7), retuned to the predictor's own ω0 estimate (not the true ω0; the wave band's centre
-until the first estimate, as the cascade fallback). The gate itself (its gains, the 5 s
-low-pass of the offset, the yaw-moment heading gain) is unchanged: it still blends the holding
-network with the twin only in moves and turns.
+until the first estimate, as the cascade fallback). The gate itself (its gains, the low-pass
+of the offset, the yaw-moment heading gain) is unchanged: it still blends the holding network
+with the twin only in moves and turns; a variant's ``motion_gate_smoothing: 0`` takes the
+offset's low-pass away, as it does in the package.
 
 Why (docs/BENCHMARKS.md, forty-sixth session): the learned filter loses its remaining position
 to the observer in the manoeuvres, where a model turns the thrust into motion at once, and an
@@ -22,8 +23,9 @@ model: an upper bound for that direction, never a candidate. Development seeds o
 ``MODEL_TWIN=none`` keeps the package's twin. ``ORACLE_TIMING=1`` also gives the gate the
 schedule: within ``ORACLE_WINDOW`` s after each setpoint event of the (delayed) schedule the
 north and east gains are 1 (the heading's stays the yaw moment's), elsewhere the gate's own
-(the offset is still the 5 s low-passed twin − holding). Another upper bound: a gate that knew
-when every manoeuvre starts and how long it lasts.
+(the offset as the gate filters it). Another upper bound: a gate that knew when every
+manoeuvre starts and how long it lasts. The forty-sixth session ran every combination on
+rao_supply and rao_swell 771–786 (docs/BENCHMARKS.md).
 """
 from __future__ import annotations
 

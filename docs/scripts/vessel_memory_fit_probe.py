@@ -4,7 +4,8 @@
 
 `LfStateEstimator` (shipped defaults, no worker thread) streamed over `method_probe.fair_case`
 (scheduled events delayed as `method_probe.py` delays them), printing at every new vessel memory
-its dead reckoner and, once a model is fitted, the diagonals of G (≈ M⁻¹) and F (≈ −M⁻¹D),
+its dead reckoner (without a model: the memory's message, why) and, once a model is fitted,
+the diagonals of G (≈ M⁻¹) and F (≈ −M⁻¹D),
 next to the simulator's true M⁻¹ and −M⁻¹D. No ``thrust_command`` is fed (an offline
 recording), so the controller's gains cannot be read and G is fitted. The forty-sixth session
 used it to ask whether a learned model could carry an observer through the manoeuvres
@@ -57,7 +58,7 @@ def main(argv: list[str]) -> int:
                 print(f't {t[k]:6.0f} reckoner {mem.reckoner:18s} G diag '
                       f'{np.diag(mem.model.input_gain)} F diag {np.diag(mem.model.damping)}')
             else:
-                print(f't {t[k]:6.0f} reckoner {mem.reckoner} no model')
+                print(f't {t[k]:6.0f} reckoner {mem.reckoner} no model: {mem.message}')
     return 0
 
 

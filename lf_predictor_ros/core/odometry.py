@@ -1227,7 +1227,8 @@ def fit_speed_gain(left: ArrayLike, speed2: ArrayLike) -> float:
 
     ``left``: the squared heading error less the yaw-rate lag part T_ψ² r² [rad²]; ``speed2``:
     the squared horizontal LF speed w_N² + w_E² [m²/s²]. No spread of ``speed2`` (a window
-    without a move): 0. The inputs are not modified.
+    without a move): 0. `_lag_gain` without a prior, as `fit_error_model` fits T_i². The inputs
+    are not modified.
     """
     y = np.asarray(left, dtype=np.float64)
     x = np.asarray(speed2, dtype=np.float64)
@@ -1238,9 +1239,9 @@ def fit_speed_gain(left: ArrayLike, speed2: ArrayLike) -> float:
         return 0.0
     dx = x - float(np.mean(x))
     sxx = float(np.sum(dx * dx))
-    if sxx <= 1e-12 * y.shape[0] * float(np.mean(x * x)):
-        return 0.0
-    return max(float(np.sum(dx * (y - float(np.mean(y))))) / sxx, 0.0)
+    sxy = float(np.sum(dx * (y - float(np.mean(y)))))
+    still = sxx <= 1e-12 * y.shape[0] * float(np.mean(x * x))
+    return _lag_gain(sxx, sxy, float(np.mean(y)), float(np.mean(x)), 0.0, 0.0, still=still)
 
 
 def _hold_matrix(moment: FloatArray, hold: FloatArray) -> FloatArray:

@@ -37,8 +37,8 @@ class YawMomentTrigger:
 
     def __init__(self, sample_time: float, ratio: float, hold: float) -> None:
         """Create for samples ``sample_time`` [s] apart; ``ratio`` ρ [-] > 0, ``hold`` [s] ≥ 0."""
-        for name, value, low in (('sample_time', sample_time, 0.0), ('ratio', ratio, 0.0)):
-            if not (math.isfinite(value) and value > low):
+        for name, value in (('sample_time', sample_time), ('ratio', ratio)):
+            if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'YawMomentTrigger {name} must be finite and > 0, got '
                                  f'{value!r}')
         if not (math.isfinite(hold) and hold >= 0.0):

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import uniform_filter1d
 
-from lf_predictor_ros.core.lf_dynamics import as_series, earth_to_body
+from lf_predictor_ros.core.lf_dynamics import as_series, body_to_earth, earth_to_body
 
 FloatArray = NDArray[np.float64]
 
@@ -81,10 +81,49 @@ class ControllerGains:
         return self.damping ** 2 / (4.0 * self.stiffness)
 
 
+def block_bounds(length: int, block: int, minimum: int) -> list[tuple[int, int]]:
+    """[start, end) of consecutive blocks covering ``length`` samples, each ≥ ``minimum``.
+
+    Blocks of ``block`` samples (at least ``minimum``); a remainder shorter than ``minimum``
+    joins the last block; a series shorter than ``minimum`` has no block.
+    """
+    size = max(block, minimum)
+    if length < minimum:
+        return []
+    full = length // size
+    edges = [i * size for i in range(max(full, 1))]
+    if full >= 1 and length - full * size >= minimum:
+        edges.append(full * size)
+    return list(zip(edges, edges[1:] + [length], strict=True))
+
+
+def median_implied_inertia(blocks: Sequence[ControllerGains]
+                           ) -> tuple[FloatArray | None, NDArray[np.int64]]:
+    """Per DOF the median of Kd² / (4 Kp) over the blocks where that DOF is believed.
+
+    One read per block of the history and the median over them (forty-seventh session): a
+    setpoint move or a turn corrupts the read of the block it falls in (its R² drops to
+    0.4–0.7 and the inertia is off by 0.02–20×), and pooled over the whole history it had
+    corrupted every later read. Returns (the inertia, or None unless every DOF is believed in
+    at least one block; the count of believed blocks per DOF).
+    """
+    if not blocks:
+        return None, np.zeros(0, dtype=np.int64)
+    believed = np.array([b.believed() for b in blocks])
+    counts = believed.sum(axis=0).astype(np.int64)
+    if not np.all(counts > 0):
+        return None, counts
+    with np.errstate(divide='ignore', invalid='ignore'):
+        inertia = np.array([b.damping ** 2 / (4.0 * b.stiffness) for b in blocks])
+    median = np.array([float(np.median(inertia[believed[:, i], i]))
+                       for i in range(believed.shape[1])])
+    return median, counts
+
+
 def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
                          sample_time: float, highpass_time: float = HIGHPASS_TIME,
-                         max_shift: int = MAX_SHIFT, run_starts: Sequence[int] = ()
-                         ) -> ControllerGains:
+                         max_shift: int = MAX_SHIFT, run_starts: Sequence[int] = (),
+                         earth_highpass: bool = False) -> ControllerGains:
     """Least squares of the high-passed thrust on −(body-frame pose), −ν and −∫pose, per DOF.
 
     The series may be several contiguous runs one after the other (``run_starts``): each run is
@@ -101,6 +140,13 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
         max_shift: largest shift of the thrust against the estimates tried [samples].
         run_starts: the row where each run after the first starts, increasing, in (0, m);
             empty: one run.
+        earth_highpass: 3 DOF: high-pass the pose, its integral, the velocity and the thrust in
+            the earth frame (where the setpoint, the integrator's force and the environment are
+            constant) and rotate them into the body frame afterwards; False: rotate first, as
+            before the forty-seventh session. In a turn away from the setpoint's origin the
+            body-frame pose R(ψ)ᵀη swings with ψ and the body-frame moving mean cannot take the
+            setpoint out (rao_supply, 45° turn: sway inertia read 16× too large; earth frame
+            0.7–0.8×, docs/BENCHMARKS.md, forty-seventh session). 1 DOF: no difference.
 
     Raises:
         ValueError: bad shapes, non-finite values, bad run starts, a run shorter than
@@ -128,7 +174,12 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
     window = max(3, int(round(highpass_time / sample_time)))
     runs = []  # per run: high-passed position, integral, velocity, thrust
     for first, end in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
-        body = earth_to_body(eta[first:end], eta[first:end], n)  # R(ψ)ᵀ[N, E], ψ: PD's error
+        pose = eta[first:end]
+        if earth_highpass and n == 3:
+            runs.append(_earth_highpassed(pose, nu[first:end], tau[first:end], sample_time,
+                                          window))
+            continue
+        body = earth_to_body(pose, pose, n)  # R(ψ)ᵀ[N, E], ψ: PD's error
         runs.append((_highpass(body, window),
                      _highpass(np.cumsum(body, axis=0) * sample_time, window),
                      _highpass(nu[first:end], window), _highpass(tau[first:end], window)))
@@ -169,6 +220,20 @@ def _fit_pid(position: FloatArray, integral: FloatArray, velocity: FloatArray,
         stiffness[i], damping[i] = coef[0], coef[1]
         r_squared[i] = 1.0 - float(np.sum((y - phi @ coef) ** 2)) / total
     return ControllerGains(stiffness, damping, r_squared, shift)
+
+
+def _earth_highpassed(eta: FloatArray, nu: FloatArray, tau: FloatArray, sample_time: float,
+                      window: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """3 DOF: (position, integral, velocity, thrust) high-passed in the earth frame, in the body.
+
+    Each signal is turned into the earth frame (the pose already is; ν and τ by R(ψ)), its
+    moving mean removed there, and the rest turned into the body frame by R(ψ)ᵀ at its sample.
+    """
+    def body(earth: FloatArray) -> FloatArray:
+        return earth_to_body(eta, _highpass(earth, window), 3)
+
+    return (body(eta), body(np.cumsum(eta, axis=0) * sample_time),
+            body(body_to_earth(eta, nu)), body(body_to_earth(eta, tau)))
 
 
 def _highpass(values: FloatArray, window: int) -> FloatArray:

@@ -306,7 +306,7 @@ def dead_reckon_step(model: LfDynamics | None, reckoner: DeadReckoner, eta: Floa
                                                         np.asarray(force, dtype=np.float64))
     else:
         nu_a = nu_a.copy()
-    return eta_a + sample_time * _body_to_earth(eta_a, nu_a), nu_a
+    return eta_a + sample_time * body_to_earth(eta_a, nu_a), nu_a
 
 
 @dataclass(frozen=True)
@@ -563,7 +563,12 @@ def _batch_acceleration(model: LfDynamics, eta: FloatArray, nu: FloatArray,
     return nu @ model.damping.T + force @ model.input_gain.T + basis @ model.bias.T
 
 
-def _body_to_earth(eta: FloatArray, nu: FloatArray) -> FloatArray:
+def body_to_earth(eta: FloatArray, nu: FloatArray) -> FloatArray:
+    """R(ψ) v for body-frame rows v = [x, y, yaw] (rates, forces), ψ from the poses ``eta``.
+
+    Any leading shape (..., 3); 1 DOF (shape (..., 1)): v unchanged. The inverse of
+    `earth_to_body`.
+    """
     if eta.shape[-1] == 1:
         return nu
     c, s = np.cos(eta[..., 2]), np.sin(eta[..., 2])

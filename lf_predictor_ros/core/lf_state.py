@@ -29,7 +29,14 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from lf_predictor_ros.core.controller_gains import MAX_SHIFT, MIN_SAMPLES, fit_controller_gains
+from lf_predictor_ros.core.controller_gains import (
+    MAX_SHIFT,
+    MIN_SAMPLES,
+    ControllerGains,
+    block_bounds,
+    fit_controller_gains,
+    median_implied_inertia,
+)
 from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.lf_dynamics import VesselMemory, learn_vessel_memory
 from lf_predictor_ros.core.odometry import (
@@ -260,7 +267,9 @@ class LfStateEstimator:
                 reference, odometry.params.pose_twin_fit,
                 odometry.params.twist_reference_cutoff, odometry.params.pose_reference_cutoff,
                 odometry.params.twist_likelihood_fit, odometry.params.twist_attenuation,
-                odometry.params.pose_heading_speed_lag)
+                odometry.params.pose_heading_speed_lag,
+                odometry.params.controller_read_block_time,
+                odometry.params.controller_read_earth_frame)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -293,7 +302,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            peak_damping: float = math.nan, reference: FloatArray | None = None,
            twin_fit: bool = False, twist_cutoff: float = 0.0, pose_cutoff: float = 0.0,
            twist_likelihood: bool = False, twist_attenuation: bool = False,
-           heading_speed: bool = False) -> Learned:
+           heading_speed: bool = False, controller_block_time: float = 0.0,
+           controller_earth_frame: bool = False) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -316,7 +326,9 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     ``twist_likelihood``: the twist model by maximum likelihood; ``twist_attenuation``: with
     ``twist_cutoff`` > 0 the twist models add what the reference's zero-phase filter, the
     targets' or with ``reference`` the narrow notch's, took below the cutoff;
-    ``heading_speed``: the heading's lag part also from the horizontal speed).
+    ``heading_speed``: the heading's lag part also from the horizontal speed;
+    ``controller_block_time``, ``controller_earth_frame``: how the controller is read,
+    `implied_input_gain`'s ``block_time`` and ``earth_highpass``).
     The read returned is the one in force afterwards: this read if it succeeded,
     ``remembered`` if it failed for lack of data, else None.
     """
@@ -325,7 +337,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     source = 'vessel_inertia' if input_gain is not None else ''
     read: ControllerRead | None = None
     if commands is not None:
-        read = implied_input_gain(published, *commands, params.sample_time)
+        read = implied_input_gain(published, *commands, params.sample_time,
+                                  controller_block_time, controller_earth_frame)
     elif remembered is not None:
         read = ControllerRead(None, 'controller gains: no commands', 'no_data')
     in_force: ControllerRead | None = read if read is not None and read.outcome == 'read' \
@@ -359,7 +372,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
 
 
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,
-                       sample_time: float) -> ControllerRead:
+                       sample_time: float, block_time: float = 0.0,
+                       earth_highpass: bool = False) -> ControllerRead:
     """1/M_ii implied by the DP controller acting on the published estimates.
 
     ``times``, ``forces``: the controller's commands and their stamps (a controller stamps its
@@ -373,6 +387,11 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     or lost sample or command). Every run of at least ``MIN_SAMPLES`` + 2 ``MAX_SHIFT`` pairs
     is used, pooled into one fit (no high-pass, integral or shift crosses a break); shorter
     runs are left out. So one short break costs only the samples around it, not the read.
+
+    ``block_time`` > 0 [s]: each run is cut into blocks of that length (`block_bounds`), each
+    block read on its own, and the inertia is per DOF the median over the blocks whose PD law
+    is believed (`median_implied_inertia`): a manoeuvre then spoils one block, not every read
+    after it. ``earth_highpass``: the high-pass in the earth frame (`fit_controller_gains`).
     """
     if not published or times.shape[0] == 0:
         return ControllerRead(None, 'controller gains: no data', 'no_data')
@@ -391,12 +410,22 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
         return ControllerRead(None, f'controller gains: longest contiguous run {longest} '
                                     f'samples, too few (need {need})', 'no_data')
     rows = np.concatenate([np.arange(a, b) for a, b in runs])
-    starts = np.cumsum([b - a for a, b in runs])[:-1].tolist()
     poses = np.array([published[k].pose for k in rows])
     twists = np.array([published[k].twist for k in rows])
+    paired = forces[index[rows]]
+    lengths = [b - a for a, b in runs]
     try:
-        gains = fit_controller_gains(poses, twists, forces[index[rows]], sample_time,
-                                     run_starts=starts)
+        if block_time > 0.0:
+            block = int(round(block_time / sample_time))
+            offsets = np.r_[0, np.cumsum(lengths)].tolist()
+            blocks = [(offsets[j] + a, offsets[j] + b) for j, length in enumerate(lengths)
+                      for a, b in block_bounds(length, block, need)]
+            reads = [fit_controller_gains(poses[a:b], twists[a:b], paired[a:b], sample_time,
+                                          earth_highpass=earth_highpass) for a, b in blocks]
+            return _median_read(reads, float(stamps[rows[-1]]), rows.size, block_time)
+        gains = fit_controller_gains(poses, twists, paired, sample_time,
+                                     run_starts=np.cumsum(lengths)[:-1].tolist(),
+                                     earth_highpass=earth_highpass)
     except ValueError as exc:  # non-finite values: nothing learned about the controller
         return ControllerRead(None, f'controller gains: {exc}', 'no_data')
     inertia = gains.implied_inertia()
@@ -407,6 +436,19 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     return ControllerRead(1.0 / inertia, (f"controller-implied inertia "
                                           f"{', '.join(f'{v:.3g}' for v in inertia)} "
                                           f'(R² {r2}; {used})'), 'read', float(stamps[rows[-1]]))
+
+
+def _median_read(reads: list[ControllerGains], stamp: float, samples: int,
+                 block_time: float) -> ControllerRead:
+    """The read of `implied_input_gain` from one `ControllerGains` per block."""
+    inertia, counts = median_implied_inertia(reads)
+    believed = ', '.join(f'{c}' for c in counts)
+    what = f'{believed} of {len(reads)} blocks of {block_time:.0f} s believed'
+    if inertia is None:
+        return ControllerRead(None, f'controller gains not read ({what})', 'no_fit')
+    return ControllerRead(1.0 / inertia, (f"controller-implied inertia "
+                                          f"{', '.join(f'{v:.3g}' for v in inertia)} "
+                                          f'(median; {what}; {samples} samples)'), 'read', stamp)
 
 
 def _input_gain(inertia: tuple[float, ...], ndof: int) -> FloatArray | None:

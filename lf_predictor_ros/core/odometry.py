@@ -254,6 +254,15 @@ class OdometryParams:
         'under which that controller is critically damped (core.controller_gains); too few '
         'contiguous commands: the last successful read; no read yet, or commands the PD law does '
         "not explain (R² < 0.5, which also forgets the last read): the memory's choice", ''))
+    controller_read_block_time: float = field(default=0.0, metadata=field_doc(
+        "with controller_inertia: read the controller's gains per block of this length and "
+        'take per DOF the median over the blocks whose PD law is believed (a setpoint move or a '
+        'turn spoils only its own block); 0 = one read pooled over the whole history (forty-'
+        'seventh session, docs/BENCHMARKS.md)', 's'))
+    controller_read_earth_frame: bool = field(default=False, metadata=field_doc(
+        'with controller_inertia, 3 DOF: high-pass the estimates and the commands in the earth '
+        'frame before turning them into the body frame (a turn away from the setpoint origin '
+        'then does not swing the pose the read regresses on); false: in the body frame', ''))
     dead_reckoner: str = field(default='auto', metadata=field_doc(
         "dead reckoner through a pose dropout: 'auto' (the vessel memory's choice by the "
         "open-loop drift test; hold when the test cannot tell), 'model' (the learned LF model "
@@ -333,6 +342,10 @@ class OdometryParams:
         if self.dead_reckoner not in ('auto', *DEAD_RECKONERS):
             raise ValueError(f"dead_reckoner must be 'auto' or one of {DEAD_RECKONERS}, got "
                              f'{self.dead_reckoner!r}')
+        if not (math.isfinite(self.controller_read_block_time) and
+                self.controller_read_block_time >= 0.0):
+            raise ValueError('controller_read_block_time must be a finite number >= 0 [s] (0: one '
+                             f'pooled read), got {self.controller_read_block_time}')
         if self.min_calibration_samples < 1:
             raise ValueError('min_calibration_samples must be >= 1, got '
                              f'{self.min_calibration_samples}')

@@ -8,7 +8,9 @@ from scipy.signal import lfilter
 from lf_predictor_ros.core.controller_gains import (
     MIN_R_SQUARED,
     ControllerGains,
+    block_bounds,
     fit_controller_gains,
+    median_implied_inertia,
 )
 from lf_predictor_ros.core.lf_dynamics import body_velocity
 from sim_ros.control.pid import PidState, gains_from_bandwidth, pid_step
@@ -116,6 +118,71 @@ def test_runs_are_pooled_without_crossing_a_break() -> None:
     for starts in ([0], [200, 150], [400], [50]):  # not increasing in (0, m), or a short run
         with pytest.raises(ValueError, match='run_starts|too few'):
             fit_controller_gains(eta, nu, tau, H, run_starts=starts)
+
+
+def test_a_turn_away_from_the_origin_is_read_in_the_earth_frame() -> None:
+    """Held 15 m N / 10 m E of the origin, a 45° turn: the body-frame pose swings with ψ.
+
+    High-passed in the body frame the sway inertia comes out 2.6× (measured); high-passed in
+    the earth frame, where the setpoint is constant, surge and sway are within 20 % of M_ii
+    (0.84 / 1.08 measured; surge sees cos²ψ Kp_N + sin²ψ Kp_E after the turn). The heading's
+    read is the same either way (the setpoint ramp through the PID's setpoint filter corrupts
+    it in both: what the median over blocks is for).
+    """
+    m = 600
+    turn = np.clip((np.arange(m) - 250) / 100.0, 0.0, 1.0) * np.pi / 4
+    eta = _lf_track(12, m=m) + np.column_stack([np.full(m, 15.0), np.full(m, 10.0), turn])
+    nu = body_velocity(eta, H)
+    design = gains_from_bandwidth(MASS, BANDWIDTH, 1.0)
+    state = PidState()
+    tau = np.zeros_like(eta)
+    for k in range(m):
+        tau[k], state = pid_step(state, design, eta[k], np.array([15.0, 10.0, turn[k]]), H,
+                                 velocity_body=nu[k])
+    body = fit_controller_gains(eta, nu, tau, H)
+    earth = fit_controller_gains(eta, nu, tau, H, earth_highpass=True)
+
+    def ratio(gains: ControllerGains) -> np.ndarray:
+        return gains.damping ** 2 / (4.0 * gains.stiffness) / MASS
+
+    assert ratio(body)[1] > 2.0
+    np.testing.assert_allclose(ratio(earth)[:2], 1.0, rtol=0.2)
+    assert np.all(earth.r_squared[:2] > 0.98)
+    assert ratio(earth)[2] == pytest.approx(ratio(body)[2], rel=1e-9)
+    # 1 DOF: the earth frame is the body frame
+    one = fit_controller_gains(eta[:, :1], nu[:, :1], tau[:, :1], H)
+    same = fit_controller_gains(eta[:, :1], nu[:, :1], tau[:, :1], H, earth_highpass=True)
+    np.testing.assert_array_equal(one.damping, same.damping)
+
+
+@pytest.mark.parametrize(('length', 'expected'), [
+    (1000, [(0, 300), (300, 600), (600, 1000)]),  # a short remainder joins the last block
+    (1024, [(0, 300), (300, 600), (600, 900), (900, 1024)]),  # one of the minimum is a block
+    (400, [(0, 400)]), (200, [(0, 200)]), (124, [(0, 124)]), (123, []),
+])
+def test_block_bounds(length: int, expected: list[tuple[int, int]]) -> None:
+    assert block_bounds(length, 300, 124) == expected
+    assert block_bounds(length, 50, 124) == block_bounds(length, 124, 124)  # never < minimum
+
+
+def test_median_over_believed_blocks() -> None:
+    """Per DOF the median of Kd²/(4 Kp) over the believed blocks; a spoilt block is outvoted."""
+    def block(kp: list[float], kd: list[float], r2: list[float]) -> ControllerGains:
+        return ControllerGains(np.array(kp), np.array(kd), np.array(r2), 0)
+
+    good = block([1.0, 4.0, 1.0], [2.0, 8.0, 4.0], [0.99, 0.99, 0.99])  # M 1, 4, 4
+    spoilt = block([0.01, 4.0, 1.0], [2.0, 80.0, 4.0], [0.9, 0.9, 0.3])  # 100, 400, (not)
+    inertia, counts = median_implied_inertia([good, spoilt, good])
+    assert inertia is not None and counts.tolist() == [3, 3, 2]
+    np.testing.assert_allclose(inertia, [1.0, 4.0, 4.0])
+    # two blocks: the median is their mean (the spoilt one is not outvoted)
+    inertia, _ = median_implied_inertia([good, spoilt])
+    assert inertia is not None and inertia[0] == pytest.approx(50.5)
+    # a DOF believed in no block: no inertia, the counts say which
+    inertia, counts = median_implied_inertia([spoilt, spoilt])
+    assert inertia is None and counts.tolist() == [2, 2, 0]
+    inertia, counts = median_implied_inertia([])
+    assert inertia is None and counts.size == 0
 
 
 @pytest.mark.parametrize('bad', ['nan', 'shape', 'short', 'sample_time'])

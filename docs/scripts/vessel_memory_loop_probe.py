@@ -1,0 +1,79 @@
+"""Exploratory: the vessel memory's learned LF model in a DP loop with the commands fed.
+
+    OMP_NUM_THREADS=1 python docs/scripts/vessel_memory_loop_probe.py rao_supply 771 [1800]
+
+The loop is `odometry_bench`'s lf_odom loop (the predictor's pose to the PID, the D term from
+lf_odom's twist, the PID's commands fed to the estimator as ``thrust_command``), so the memory
+can read the controller's implied inertia (``OdometryParams.controller_inertia``). Printed at
+every new vessel memory: its dead reckoner, where the thrust gain came from (``known_gain``;
+'' = fitted), and the diagonals of G (≈ M⁻¹) and F (≈ −M⁻¹D) as ratios to the simulator's
+true M⁻¹ and −M⁻¹D. The offline twin of this probe is `vessel_memory_fit_probe.py` (no commands,
+G fitted). Development seeds only, as `method_probe.py`.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+import sys
+from typing import Any
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import method_probe as mp  # noqa: E402 - the sibling script
+
+from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
+from lf_predictor_ros.benchmark.suite import make_setup, predictor_params  # noqa: E402
+from lf_predictor_ros.core.lf_state import LfStateEstimator  # noqa: E402
+from lf_predictor_ros.core.odometry import OdometryParams  # noqa: E402
+from sim_ros.simulation import load_scenario  # noqa: E402
+
+
+def main(argv: list[str]) -> int:
+    """Run one development loop and print the memories (module docstring)."""
+    if len(argv) not in (2, 3) or not argv[1].isdigit():
+        print('usage: vessel_memory_loop_probe.py SCENARIO SEED [DURATION]', file=sys.stderr)
+        return 2
+    sc, seed = argv[0], int(argv[1])
+    duration = float(argv[2]) if len(argv) == 3 else 1800.0
+    if seed not in mp.DEVELOPMENT_SEEDS:
+        print(f'seed {seed} is not a development seed (held-out seeds: `benchmark`)',
+              file=sys.stderr)
+        return 2
+    torch.set_num_threads(1)
+    np.set_printoptions(precision=3, linewidth=150)
+    scenario = load_scenario(sc)
+    params = predictor_params(scenario)
+    setup = make_setup(scenario, seed, params)
+    n = params.ndof
+    mass = np.asarray(setup.model.mass, dtype=float)[:n, :n]
+    damping = np.asarray(setup.model.damping, dtype=float)[:n, :n]
+    true_g = np.diag(np.linalg.inv(mass))
+    true_f = np.diag(-np.linalg.inv(mass) @ damping)
+    print(f'{sc} {seed}: true M^-1 diag {true_g}, true -M^-1 D diag {true_f}')
+    seen: list[Any] = [None]
+
+    class Probe(LfStateEstimator):
+        def update(self, t: float, *args: Any, **kwargs: Any) -> Any:
+            out = super().update(t, *args, **kwargs)
+            mem = self.memory
+            if mem is not None and mem is not seen[0]:
+                seen[0] = mem
+                if mem.model is None:
+                    print(f't {t:6.0f} reckoner {mem.reckoner:18s} no model: {mem.message}')
+                else:
+                    g = np.diag(mem.model.input_gain) / true_g
+                    f = np.diag(mem.model.damping) / true_f
+                    note = mem.message.partition('; ')[2]
+                    print(f't {t:6.0f} reckoner {mem.reckoner:18s} gain from '
+                          f'{mem.known_gain or "fit":12s} G/true {g} F/true {f}  {note}')
+            return out
+
+    ob.LfStateEstimator = Probe  # type: ignore[attr-defined]
+    run = ob._odometry_loop(scenario, seed, duration, params, OdometryParams())
+    print(f'loop done: aborted_at {run.aborted_at}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))

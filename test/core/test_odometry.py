@@ -659,6 +659,10 @@ def test_forced_model_dead_reckoner_follows_the_thrust() -> None:
     for bad in ((1e6, 0.0, 1e9), (1e6, 1e6), (1e6, -1e6, 1e9), (math.inf, 1e6, 1e9)):
         with pytest.raises(ValueError, match='vessel_inertia'):
             OdometryParams(vessel_inertia=bad)
+    for bad_time in (-1.0, math.nan, math.inf):
+        with pytest.raises(ValueError, match='controller_read_block_time must be a finite'):
+            OdometryParams(controller_read_block_time=bad_time)
+    assert OdometryParams(controller_read_block_time=300.0).controller_read_block_time == 300.0
 
 
 def test_reacquisition_inside_the_gate_is_immediate_and_outside_waits() -> None:

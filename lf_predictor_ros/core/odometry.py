@@ -254,12 +254,13 @@ class OdometryParams:
         'under which that controller is critically damped (core.controller_gains); too few '
         'contiguous commands: the last successful read; no read yet, or commands the PD law does '
         "not explain (R² < 0.5, which also forgets the last read): the memory's choice", ''))
-    controller_read_block_time: float = field(default=0.0, metadata=field_doc(
+    controller_read_block_time: float = field(default=300.0, metadata=field_doc(
         "with controller_inertia: read the controller's gains per block of this length and "
         'take per DOF the median over the blocks whose PD law is believed (a setpoint move or a '
-        'turn spoils only its own block); 0 = one read pooled over the whole history (forty-'
-        'seventh session, docs/BENCHMARKS.md)', 's'))
-    controller_read_earth_frame: bool = field(default=False, metadata=field_doc(
+        'turn spoils only its own block); 0 = one read pooled over the whole history, as before '
+        'the forty-seventh session (its rule on fresh seeds: rao_supply 0.39× the excursion '
+        'after a dropout, docs/BENCHMARKS.md)', 's'))
+    controller_read_earth_frame: bool = field(default=True, metadata=field_doc(
         'with controller_inertia, 3 DOF: high-pass the estimates and the commands in the earth '
         'frame before turning them into the body frame (a turn away from the setpoint origin '
         'then does not swing the pose the read regresses on); false: in the body frame', ''))

@@ -57,6 +57,9 @@ unwrapped, central differences).
    estimate's stamp) contains the truth, and at the end of the dropout the published horizontal
    standard deviation √(P_NN + P_EE) next to the horizontal error.
 
+The dropouts of items 3 and 5 come at the same times in every seed unless ``--dropout-spread``
+delays each seed's by its own draw (``dropout_shift_for_seed``; the JSON's ``dropout_shift``).
+
 Usage (2 Dask workers; ``--scheduler none`` runs in this process)::
 
     python -m lf_predictor_ros.benchmark.odometry_bench run --seeds 1 2 --no-loops \\
@@ -98,6 +101,7 @@ from lf_predictor_ros.benchmark.suite import (
     make_recording,
     make_setup,
     run_closed_loops,
+    schedule_shift_for_seed,
     scored_start,
 )
 from lf_predictor_ros.core.heading import wrap_angle
@@ -126,6 +130,9 @@ LOOP_ODOM = 'adaptive_odom_d'  # the same with the D term from the odometry twis
 LOOP_OBSERVER = 'observer'  # the tuned passive observer (PID finite-difference D term)
 DROPOUT_LOOP_LENGTH = 60.0  # [s] dropouts of item 5 (within the 120 s timeout)
 AFTER_DROPOUT = 120.0  # [s] scored after each dropout of item 5
+# The seed's own random stream for the dropouts' delay (``--dropout-spread``), apart from the
+# sea's, the noise's and the scenario schedule's draws.
+DROPOUT_SHIFT_STREAM = 0xD809
 
 
 # ---------------------------------------------------------------- statistics
@@ -207,17 +214,32 @@ def pid_velocity(poses: FloatArray, sample_time: float, ndof: int) -> FloatArray
 
 def default_dropouts(params: PredictorParams, duration: float,
                      count: int = DROPOUT_COUNT, length: float = DROPOUT_LENGTH,
-                     ) -> tuple[tuple[float, float], ...]:
+                     shift: float = 0.0) -> tuple[tuple[float, float], ...]:
     """``count`` dropouts of ``length`` s, evenly spread after the scored start (≥ first training).
 
-    Raises ValueError when they do not fit with at least 60 s of tracking between them.
+    ``shift`` [s] delays every dropout (``dropout_shift_for_seed``: the phase against the
+    scenario's manoeuvres). Raises ValueError when they do not fit with at least 60 s of
+    tracking between them, the shift included.
     """
+    if not (math.isfinite(shift) and shift >= 0.0):
+        raise ValueError(f'the dropout shift must be finite and >= 0 s, got {shift!r}')
     begin = scored_start(params, 10**9) * params.sample_time + 20.0
     spacing = (duration - begin) / count
-    if spacing < length + 60.0:
-        raise ValueError(f'{count} dropouts of {length:.0f} s do not fit after the first training '
-                         f'({begin:.0f} s) in {duration:.0f} s: lengthen the run')
-    return tuple((float(round(begin + i * spacing)), length) for i in range(count))
+    if spacing < length + 60.0 + shift:
+        raise ValueError(f'{count} dropouts of {length:.0f} s (delayed {shift:.0f} s) do not fit '
+                         f'after the first training ({begin:.0f} s) in {duration:.0f} s: lengthen '
+                         'the run or narrow the spread')
+    return tuple((float(round(begin + shift + i * spacing)), length) for i in range(count))
+
+
+def dropout_shift_for_seed(seed: int, spread: float) -> float:
+    """The dropouts' delay [s] for ``seed``: U(0, ``spread``) (``DROPOUT_SHIFT_STREAM``).
+
+    With fixed dropout times every seed drops its poses at the same phase of the setpoint
+    schedule: on rao_swell the first dropout always starts with the −45° turn and the other
+    two while holding (docs/BENCHMARKS.md, forty-seventh session). A spread samples the phase.
+    """
+    return schedule_shift_for_seed(seed, spread, DROPOUT_SHIFT_STREAM)
 
 
 def _wrap_error(estimate: FloatArray, truth: FloatArray, ndof: int) -> FloatArray:
@@ -480,9 +502,9 @@ def dropout_coverage(log: Sequence[OdometryEstimate], run: ClosedLoopRun, ndof: 
 
 def _dropout_loops(scenario: Scenario, seed: int, duration: float, params: PredictorParams,
                    odometry: OdometryParams, setup: Any, ideal: SimRecord,
-                   odom_run: ClosedLoopRun) -> dict[str, Any]:
+                   odom_run: ClosedLoopRun, shift: float = 0.0) -> dict[str, Any]:
     """Item 5 of the module docstring (``odom_run``: item 4's loop without dropouts)."""
-    dropouts = default_dropouts(params, duration, length=DROPOUT_LOOP_LENGTH)
+    dropouts = default_dropouts(params, duration, length=DROPOUT_LOOP_LENGTH, shift=shift)
     log: list[OdometryEstimate] = []
     odom_with = _odometry_loop(scenario, seed, duration, params, odometry, dropouts, log)
     runs = {'lf_odom': (odom_with, odom_run),
@@ -503,7 +525,7 @@ def _dropout_loops(scenario: Scenario, seed: int, duration: float, params: Predi
 
 def _loop_runs(scenario_name: str, seed: int, duration: float, params: PredictorParams,
                odometry: OdometryParams, setup: Any, warmup: float,
-               dropout_loops: bool = False) -> dict[str, Any]:
+               dropout_loops: bool = False, dropout_shift: float = 0.0) -> dict[str, Any]:
     """Items 4 and (``dropout_loops``) 5 of the module docstring."""
     scenario = load_scenario(scenario_name)
     h = params.sample_time
@@ -524,7 +546,7 @@ def _loop_runs(scenario_name: str, seed: int, duration: float, params: Predictor
         out[name]['stability_reason'] = verdict.get('reason')
     if dropout_loops:
         out['dropout_loops'] = _dropout_loops(scenario, seed, duration, params, odometry, setup,
-                                              ideal, odom_run)
+                                              ideal, odom_run, dropout_shift)
     return out
 
 
@@ -533,8 +555,13 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                       params_overrides: dict[str, Any] | None = None,
                       dropouts: Sequence[tuple[float, float]] | None = None,
                       loops: bool = True, dead_reckoning: bool = True,
-                      tracking: bool = True, dropout_loops: bool = False) -> dict[str, Any]:
-    """Every measurement of the module docstring on one (scenario, seed); JSON-ready."""
+                      tracking: bool = True, dropout_loops: bool = False,
+                      dropout_spread: float = 0.0) -> dict[str, Any]:
+    """Every measurement of the module docstring on one (scenario, seed); JSON-ready.
+
+    ``dropout_spread`` [s]: the default dropouts of items 3 and 5 are delayed by the seed's
+    U(0, spread) draw (`dropout_shift_for_seed`); 0: at the same times in every seed.
+    """
     begin_time = time.monotonic()
     scenario = load_scenario(scenario_name)
     params = predictor_params(scenario, params_overrides)
@@ -545,8 +572,9 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
     setup = replace(setup, wave_peak_freq=float(np.median(data['omega'])))
     total = float(data['t'][-1])
     begin = scored_start(params, len(data['t']))
+    shift = dropout_shift_for_seed(seed, dropout_spread)
     if dropouts is None:
-        dropouts = default_dropouts(params, total)
+        dropouts = default_dropouts(params, total, shift=shift)
     first = first_training_samples(params) * params.sample_time
     if any(a < first for a, _ in dropouts):
         raise ValueError(f'dropouts must start after the first training ({first:.0f} s)')
@@ -565,6 +593,7 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                            'twist_attenuation': odometry.twist_attenuation,
                            'twist_bandwidth': odometry.twist_bandwidth,
                            'dead_reckoning_timeout': odometry.dead_reckoning_timeout,
+                           'dropout_shift': shift,
                            'recording': recording.provenance.to_dict()}
     if tracking:
         seen = recording_seen_truth(recording, params.sample_time)
@@ -573,7 +602,7 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
         out['dead_reckoning'] = _dropout_run(params, odometry, data, dropouts, setup)
     if loops and scenario.controller.enabled:
         out['closed_loop'] = _loop_runs(scenario_name, seed, total, params, odometry, setup,
-                                        float(data['t'][begin]), dropout_loops)
+                                        float(data['t'][begin]), dropout_loops, shift)
     out['seconds'] = round(time.monotonic() - begin_time, 1)
     return out
 
@@ -595,6 +624,7 @@ class OdometrySpec:
     params_overrides: dict[str, Any] = field(default_factory=dict)
     dropout_loops: bool = False
     odometry_overrides: dict[str, Any] = field(default_factory=dict)
+    dropout_spread: float = 0.0
 
     @property
     def key(self) -> str:
@@ -607,7 +637,7 @@ class OdometrySpec:
                      self.twist_cov_scale, self.twist_bandwidth, self.pose_lag_scale, self.loops,
                      self.dead_reckoning, self.tracking,
                      tuple(sorted(self.params_overrides.items())), self.dropout_loops,
-                     tuple(sorted(self.odometry_overrides.items()))))
+                     tuple(sorted(self.odometry_overrides.items())), self.dropout_spread))
 
 
 def run_spec(spec: OdometrySpec) -> dict[str, Any]:
@@ -628,7 +658,8 @@ def run_spec(spec: OdometrySpec) -> dict[str, Any]:
                              odometry=OdometryParams(**values),
                              params_overrides=dict(spec.params_overrides) or None,
                              loops=spec.loops, dead_reckoning=spec.dead_reckoning,
-                             tracking=spec.tracking, dropout_loops=spec.dropout_loops)
+                             tracking=spec.tracking, dropout_loops=spec.dropout_loops,
+                             dropout_spread=spec.dropout_spread)
 
 
 def run_specs(specs: Sequence[OdometrySpec], scheduler: str | None = None,
@@ -966,6 +997,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                      help='skip the dropout run (item 3)')
     run.add_argument('--dropout-loops', action='store_true',
                      help='also the closed loops through pose dropouts (item 5; with the loops)')
+    run.add_argument('--dropout-spread', type=float, default=0.0, metavar='SECONDS',
+                     help="delay each seed's dropouts (items 3 and 5) by its own U(0, SECONDS) "
+                     'draw, so the seeds sample their phase against the setpoint schedule '
+                     '(default 0: the same times in every seed, as before the forty-seventh '
+                     'session)')
     run.add_argument('--odometry', nargs='*', default=[], metavar='FIELD=VALUE',
                      help='OdometryParams overrides, e.g. dead_reckoner=model (YAML values)')
     run.add_argument('--param', action='append', default=[], metavar='FIELD=VALUE',
@@ -984,6 +1020,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         for name in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
             os.environ.setdefault(name, '1')
         loop_seeds = set(args.seeds if args.loop_seeds is None else args.loop_seeds)
+        if not (math.isfinite(args.dropout_spread) and args.dropout_spread >= 0.0):
+            parser.error(f'--dropout-spread must be a finite number >= 0 [s], got '
+                         f'{args.dropout_spread}')
         overrides = _odometry_overrides(args.odometry)
         if overrides is None:
             parser.error(f'--odometry takes FIELD=VALUE with FIELD an OdometryParams field and '
@@ -996,7 +1035,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                               bandwidth, lag, not args.no_loops and seed in loop_seeds,
                               not args.no_dead_reckoning, not args.no_tracking,
                               params_overrides=params, dropout_loops=args.dropout_loops,
-                              odometry_overrides=overrides)
+                              odometry_overrides=overrides, dropout_spread=args.dropout_spread)
                  for bandwidth in args.twist_bandwidth for lag in args.pose_lag_scale
                  for s in args.scenarios for seed in args.seeds]
         results = run_specs(specs, args.scheduler, args.workers)

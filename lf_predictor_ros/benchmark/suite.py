@@ -493,11 +493,13 @@ def scored_start(params: PredictorParams, samples: int) -> int:
     return min(first_training_samples(params) + 2 * params.retrain_samples, samples // 2)
 
 
-def schedule_shift_for_seed(seed: int, spread: float) -> float:
+def schedule_shift_for_seed(seed: int, spread: float,
+                            stream: int = SCHEDULE_SHIFT_STREAM) -> float:
     """The scheduled events' delay [s] for ``seed``: U(0, ``spread``), 0 when spread is 0.
 
-    Drawn from its own stream (``SCHEDULE_SHIFT_STREAM``), so the sea, the noise and every other
-    draw of the seed are unchanged. Every held-out seed has the same event times otherwise, and
+    Drawn from its own stream (``stream``, by default ``SCHEDULE_SHIFT_STREAM``; the odometry
+    bench's dropouts draw from another), so the sea, the noise and every other draw of the seed
+    are unchanged. Every held-out seed has the same event times otherwise, and
     the predictor retrains at the same instants in every run: the benchmark's intervals would
     not cover the phase between trainings and manoeuvres (docs/BENCHMARKS.md, twenty-first
     session).
@@ -506,7 +508,7 @@ def schedule_shift_for_seed(seed: int, spread: float) -> float:
         raise ValueError(f'the schedule shift spread must be finite and >= 0 s, got {spread!r}')
     if spread == 0.0:
         return 0.0
-    return float(np.random.default_rng((seed, SCHEDULE_SHIFT_STREAM)).uniform(0.0, spread))
+    return float(np.random.default_rng((seed, stream)).uniform(0.0, spread))
 
 
 def run_case(scenario_name: str, seed: int, *, duration: float | None = None,

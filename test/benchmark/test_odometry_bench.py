@@ -21,6 +21,7 @@ from lf_predictor_ros.benchmark.odometry_bench import (
     dropout_coverage,
     dropout_deviation,
     dropout_mean_table,
+    dropout_shift_for_seed,
     dropout_trust_table,
     integrated_autocorrelation_time,
     pid_velocity,
@@ -28,6 +29,7 @@ from lf_predictor_ros.benchmark.odometry_bench import (
     run_odometry_case,
     true_twist,
 )
+from lf_predictor_ros.benchmark.suite import schedule_shift_for_seed
 from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from sim_ros.simulation import ClosedLoopRun, SimRecord
@@ -94,6 +96,25 @@ def test_default_dropouts_after_first_training() -> None:
     assert len(drops) == 3 and drops[0][0] >= 480.0
     pairs = zip(drops[:-1], drops[1:], strict=True)
     assert all(a + length + 60.0 <= b for (a, length), (b, _) in pairs)
+    # a shift delays every dropout by the same time; one that no longer fits is refused
+    shifted = default_dropouts(params, 1800.0, shift=100.0)
+    assert [a for a, _ in shifted] == [a + 100.0 for a, _ in drops]
+    spacing = drops[1][0] - drops[0][0]
+    with pytest.raises(ValueError, match='do not fit'):
+        default_dropouts(params, 1800.0, shift=spacing - 130.0 - 59.0)
+    for bad in (-1.0, math.nan):
+        with pytest.raises(ValueError, match='dropout shift'):
+            default_dropouts(params, 1800.0, shift=bad)
+
+
+def test_dropout_shift_is_the_seeds_own_draw() -> None:
+    """U(0, spread) per seed, reproducible, apart from the schedule's draw; 0 without spread."""
+    shifts = [dropout_shift_for_seed(seed, 300.0) for seed in range(11, 31)]
+    assert all(0.0 <= v < 300.0 for v in shifts) and len(set(shifts)) == 20
+    assert 100.0 < float(np.mean(shifts)) < 200.0  # U(0, 300): mean 150, sd of the mean 19
+    assert dropout_shift_for_seed(11, 300.0) == shifts[0]
+    assert dropout_shift_for_seed(11, 300.0) != schedule_shift_for_seed(11, 300.0)
+    assert dropout_shift_for_seed(11, 0.0) == 0.0
 
 
 def test_smoke_short_onedof_run() -> None:
@@ -237,6 +258,15 @@ def test_param_reaches_every_case_and_a_bad_one_stops_before_a_run(
         with pytest.raises(SystemExit):
             odometry_bench.main(['run', '--seeds', '3', '--param', bad, '-o', str(out)])
     assert len(seen) == 2 + len(odometry_bench.DEFAULT_SCENARIOS)  # no run was started
+    assert all(spec.dropout_spread == 0.0 for spec in seen)
+    assert odometry_bench.main(['run', '--scenarios', 'rao_swell', '--seeds', '3',
+                                '--dropout-spread', '200', '-o', str(out)]) == 0
+    assert seen[-1].dropout_spread == 200.0 and seen[-1].key != seen[0].key
+    for bad_spread in ('-1', 'nan'):
+        with pytest.raises(SystemExit):
+            odometry_bench.main(['run', '--seeds', '3', '--dropout-spread', bad_spread, '-o',
+                                 str(out)])
+    assert len(seen) == 3 + len(odometry_bench.DEFAULT_SCENARIOS)
 
 
 def test_true_twist_is_the_body_velocity_across_the_heading_wrap() -> None:

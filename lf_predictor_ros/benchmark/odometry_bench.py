@@ -560,7 +560,8 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
     """Every measurement of the module docstring on one (scenario, seed); JSON-ready.
 
     ``dropout_spread`` [s]: the default dropouts of items 3 and 5 are delayed by the seed's
-    U(0, spread) draw (`dropout_shift_for_seed`); 0: at the same times in every seed.
+    U(0, spread) draw (`dropout_shift_for_seed`; given ``dropouts`` of item 3 are not moved);
+    0: at the same times in every seed.
     """
     begin_time = time.monotonic()
     scenario = load_scenario(scenario_name)

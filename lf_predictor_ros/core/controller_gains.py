@@ -78,7 +78,13 @@ class ControllerGains:
         """
         if not np.all(self.believed()):
             return None
-        return self.damping ** 2 / (4.0 * self.stiffness)
+        return self.inertia_per_dof()
+
+    def inertia_per_dof(self) -> FloatArray:
+        """Kd_i² / (4 Kp_i) of every DOF, believed or not (inf or NaN where Kp_i = 0)."""
+        with np.errstate(divide='ignore', invalid='ignore'):
+            result: FloatArray = self.damping ** 2 / (4.0 * self.stiffness)
+        return result
 
 
 def block_bounds(length: int, block: int, minimum: int) -> list[tuple[int, int]]:
@@ -113,8 +119,7 @@ def median_implied_inertia(blocks: Sequence[ControllerGains]
     counts = believed.sum(axis=0).astype(np.int64)
     if not np.all(counts > 0):
         return None, counts
-    with np.errstate(divide='ignore', invalid='ignore'):
-        inertia = np.array([b.damping ** 2 / (4.0 * b.stiffness) for b in blocks])
+    inertia = np.array([b.inertia_per_dof() for b in blocks])
     median = np.array([float(np.median(inertia[believed[:, i], i]))
                        for i in range(believed.shape[1])])
     return median, counts

@@ -1,6 +1,6 @@
 """Exploratory: the vessel memory's learned LF model over a fair recording, against the truth.
 
-    OMP_NUM_THREADS=1 python docs/scripts/vessel_memory_fit_probe.py rao_supply 771
+    OMP_NUM_THREADS=1 python docs/scripts/vessel_memory_fit_probe.py rao_supply:771
 
 `LfStateEstimator` (shipped defaults, no worker thread) streamed over `method_probe.fair_case`
 (scheduled events delayed as `method_probe.py` delays them), printing at every new vessel memory
@@ -17,7 +17,6 @@ from pathlib import Path
 import sys
 
 import numpy as np
-import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import method_probe as mp  # noqa: E402 - the sibling script
@@ -27,17 +26,8 @@ from lf_predictor_ros.benchmark.suite import predictor_params  # noqa: E402
 from lf_predictor_ros.core.lf_state import LfStateEstimator  # noqa: E402
 
 
-def main(argv: list[str]) -> int:
+def probe(sc: str, seed: int) -> None:
     """Stream one development case and print the memories (module docstring)."""
-    if len(argv) != 2 or not argv[1].isdigit():
-        print('usage: vessel_memory_fit_probe.py SCENARIO SEED', file=sys.stderr)
-        return 2
-    sc, seed = argv[0], int(argv[1])
-    if seed not in mp.DEVELOPMENT_SEEDS:
-        print(f'seed {seed} is not a development seed (held-out seeds: `benchmark`)',
-              file=sys.stderr)
-        return 2
-    torch.set_num_threads(1)
     np.set_printoptions(precision=4, linewidth=150)
     scenario, base, setup, rec = mp.fair_case(sc, seed, 1800.0, SCHEDULE_SPREAD)
     d = rec.data()
@@ -59,8 +49,13 @@ def main(argv: list[str]) -> int:
                       f'{np.diag(mem.model.input_gain)} F diag {np.diag(mem.model.damping)}')
             else:
                 print(f't {t[k]:6.0f} reckoner {mem.reckoner} no model: {mem.message}')
-    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """CLI: SCENARIO:SEED … (development seeds only; `method_probe.run_cases`)."""
+    return mp.run_cases(argv, (__doc__ or '').splitlines()[0], mp.DEVELOPMENT_SEEDS,
+                        'only development seeds', probe)
 
 
 if __name__ == '__main__':
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(main())

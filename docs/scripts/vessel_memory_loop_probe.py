@@ -1,6 +1,6 @@
 """Exploratory: the vessel memory's learned LF model in a DP loop with the commands fed.
 
-    OMP_NUM_THREADS=1 python docs/scripts/vessel_memory_loop_probe.py rao_supply 771 [1800]
+    OMP_NUM_THREADS=1 python docs/scripts/vessel_memory_loop_probe.py rao_supply:771 rao_swell:772
 
 The loop is `odometry_bench`'s lf_odom loop (the predictor's pose to the PID, the D term from
 lf_odom's twist, the PID's commands fed to the estimator as ``thrust_command``), so the memory
@@ -17,7 +17,6 @@ import sys
 from typing import Any
 
 import numpy as np
-import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import method_probe as mp  # noqa: E402 - the sibling script
@@ -28,19 +27,11 @@ from lf_predictor_ros.core.lf_state import LfStateEstimator  # noqa: E402
 from lf_predictor_ros.core.odometry import OdometryParams  # noqa: E402
 from sim_ros.simulation import load_scenario  # noqa: E402
 
+DURATION = 1800.0  # [s] simulated per loop
 
-def main(argv: list[str]) -> int:
+
+def probe(sc: str, seed: int, duration: float = DURATION) -> None:
     """Run one development loop and print the memories (module docstring)."""
-    if len(argv) not in (2, 3) or not argv[1].isdigit():
-        print('usage: vessel_memory_loop_probe.py SCENARIO SEED [DURATION]', file=sys.stderr)
-        return 2
-    sc, seed = argv[0], int(argv[1])
-    duration = float(argv[2]) if len(argv) == 3 else 1800.0
-    if seed not in mp.DEVELOPMENT_SEEDS:
-        print(f'seed {seed} is not a development seed (held-out seeds: `benchmark`)',
-              file=sys.stderr)
-        return 2
-    torch.set_num_threads(1)
     np.set_printoptions(precision=3, linewidth=150)
     scenario = load_scenario(sc)
     params = predictor_params(scenario)
@@ -72,8 +63,13 @@ def main(argv: list[str]) -> int:
     ob.LfStateEstimator = Probe  # type: ignore[attr-defined]
     run = ob._odometry_loop(scenario, seed, duration, params, OdometryParams())
     print(f'loop done: aborted_at {run.aborted_at}')
-    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """CLI: SCENARIO:SEED … (development seeds only; `method_probe.run_cases`)."""
+    return mp.run_cases(argv, (__doc__ or '').splitlines()[0], mp.DEVELOPMENT_SEEDS,
+                        'only development seeds', probe)
 
 
 if __name__ == '__main__':
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(main())

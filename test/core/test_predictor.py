@@ -2,8 +2,10 @@
 
 Small Algorithm 4.1 windows at h = 1 s (Δ 20, N 200, ε 10, α 60, β 40 samples, γ 480 samples:
 the shortest γ the spectral resolution rule accepts) so a test sees several trainings in a few
-hundred samples. Inline mode (background=False) is deterministic; the background tests measure
-the wall time of every `update` while a long training runs on the worker thread.
+hundred samples. Inline mode (background=False) is deterministic; the background tests check
+that `update` is served while a training runs on the worker thread (one holds the training until
+the test releases it) and print the wall time of every `update`, which they do not bound: the
+latency is a benchmark (`benchmark/latency.py`).
 """
 from __future__ import annotations
 
@@ -54,7 +56,9 @@ LONG = SMALL.replace(trainer='adam', max_epochs=1_000_000, max_train_seconds=2.0
 # can stall a thread for a good part of a second; the bug they catch waits out all 10 s).
 STOPPABLE = LONG.replace(max_train_seconds=10.0)
 STOP_BOUND = 5.0  # [s]
-LATENCY_BOUND = 0.050  # [s] generous bound on one update while a training runs
+# [s] how long a held training waits for the test's release: a predict path that waited for
+# the training would stall this long, and the training would end before the checks
+HOLD_TIMEOUT = 60.0
 SENSOR_PERIOD = 0.002  # [s] pause between two updates in the background tests
 
 
@@ -334,7 +338,10 @@ def test_background_training_never_blocks_update_and_swaps_atomically(
               f'max {worst:.3f} ms over {lat.size} calls; first training '
               f'{train_seconds[first_swap]:.2f} s, {first_swap - FIRST_TRAINING} updates served '
               'meanwhile')
-        assert worst < LATENCY_BOUND * 1e3
+        # no bound on the wall time here: a full garbage collection or a loaded CI machine stalls
+        # any thread now and then (258 ms once in CI); the latency is a benchmark
+        # (benchmark/latency.py), and test_update_never_waits_for_a_held_training checks that
+        # nothing on the predict path waits for the training
         # the first training starts at sample 120 and keeps running for ~2 s: every update in
         # between is served (by the cascade) while the worker is alive, none waits for it
         assert all(running[FIRST_TRAINING - 1:first_swap])
@@ -343,6 +350,47 @@ def test_background_training_never_blocks_update_and_swaps_atomically(
         assert train_seconds[first_swap] == pytest.approx(2.0, abs=0.6)  # max_train_seconds
         check_atomic_swap(spy, models, records)
     finally:
+        predictor.close()
+
+
+def test_update_never_waits_for_a_held_training(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A training held inside the worker (with the training lock taken) stalls no update.
+
+    The training waits for the test's release; if `update` waited for the worker, for its lock
+    or for the outcome, the first update after the start would wait out ``HOLD_TIMEOUT`` and the
+    training would have finished before the checks below: no wall-clock bound is needed.
+    """
+    started, release, finished = threading.Event(), threading.Event(), threading.Event()
+    original = predictor_module.run_retraining
+
+    def held(*args: Any, **kwargs: Any) -> retraining.RetrainResult:
+        started.set()
+        release.wait(timeout=HOLD_TIMEOUT)
+        try:
+            return original(*args, **kwargs)
+        finally:
+            finished.set()
+
+    monkeypatch.setattr(predictor_module, 'run_retraining', held)
+    n = FIRST_TRAINING + 3 * DELTA
+    t, pose, force = synthetic_onedof(n, seed=23)
+    predictor = AdaptivePredictor(SMALL.replace(motion_gate=False), background=True)
+    try:
+        feed_to_first_training(predictor, t, pose, force)
+        assert started.wait(HOLD_TIMEOUT), 'the first training starts at sample 120'
+        outputs = []
+        for i in range(FIRST_TRAINING, n):  # three retrain periods while the training is held
+            outputs.append(predictor.update(float(t[i]), pose[i], force[i]))
+            assert not finished.is_set(), f'update {i} waited for the held training'
+        assert predictor.counters['overruns'] == 1  # the retraining due at 140 found it busy
+        assert predictor.model is None and predictor.status().state == 'warming_up'
+        assert np.all(np.isfinite(np.array(outputs)))  # served by the cascade meanwhile
+        release.set()
+        assert predictor.wait_for_training(HOLD_TIMEOUT)
+        predictor.update(float(t[-1]) + 1.0, pose[-1], force[-1])  # collects the outcome
+        assert predictor.counters['trainings'] == 1 and predictor.model is not None
+    finally:
+        release.set()
         predictor.close()
 
 

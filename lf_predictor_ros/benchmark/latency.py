@@ -7,7 +7,8 @@ supply-vessel pose + thrust messages by calling its subscription callbacks at `-
 time, and times every pose callback (wall clock, `time.perf_counter`). Callbacks are split into
 "idle" and "while training" (the core's worker thread busy). Prints p50 / p99 / max, the number
 of trainings, and the CPU time of the process and its children (the ω0 fit's) per simulated
-hour.
+hour, and the garbage collector's full collections and its longest run (a collection in any
+thread stalls the callback: the GIL).
 
 With input faster than the sample time h (1 s), most callbacks only store the pose; the one that
 completes a grid sample runs the whole step (checks, predictor, odometry, publishing). At 100 Hz
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
+import gc
 import os
 from pathlib import Path
 import resource
@@ -39,6 +41,7 @@ from rclpy.utilities import try_shutdown
 
 from lf_predictor_ros.nodes.conversions import pose_to_msg, wrench_to_msg
 from lf_predictor_ros.nodes.predictor_node import PredictorNode
+from lf_predictor_ros.nodes.runner import freeze_startup_heap
 from sim_ros.simulation import load_scenario, simulate
 
 
@@ -75,8 +78,45 @@ def _descendants_cpu_seconds() -> float:
     return total / os.sysconf('SC_CLK_TCK')
 
 
-def measure(rate_hz: float, minutes: float, speed: float) -> dict[str, float]:
-    """Run one input rate; return latency percentiles [ms] and CPU use."""
+class CollectionTimer:
+    """Times the garbage collector's runs (any thread; each stalls every thread: the GIL)."""
+
+    def __init__(self) -> None:
+        """Not yet recording: `start` registers the callback."""
+        self.seconds: list[float] = []  # duration of each collection [s]
+        self.generations: list[int] = []
+        self._start = 0.0
+
+    def __call__(self, phase: str, info: dict[str, int]) -> None:
+        """`gc.callbacks` hook."""
+        if phase == 'start':
+            self._start = time.perf_counter()
+        else:
+            self.seconds.append(time.perf_counter() - self._start)
+            self.generations.append(info['generation'])
+
+    def start(self) -> None:
+        """Record from now on."""
+        gc.callbacks.append(self)
+
+    def stop(self) -> None:
+        """Stop recording."""
+        if self in gc.callbacks:
+            gc.callbacks.remove(self)
+
+    def summary(self) -> dict[str, float]:
+        """Number of full (generation 2) collections and the longest collection [ms]."""
+        return {'gc_full': float(sum(1 for g in self.generations if g == 2)),
+                'gc_max_ms': max(self.seconds, default=0.0) * 1e3}
+
+
+def measure(rate_hz: float, minutes: float, speed: float,
+            freeze: bool = True) -> dict[str, float]:
+    """Run one input rate; return latency percentiles [ms] and CPU use.
+
+    ``freeze``: freeze the heap after building the node, as the node executables do
+    (`nodes.runner.freeze_startup_heap`); False measures the node without it.
+    """
     scenario = load_scenario('supply_closed_loop')
     record = simulate(scenario, seed=11, duration=minutes * 60.0)
     times = np.arange(record.t[0], record.t[-1], 1.0 / rate_hz)  # resample to the input rate
@@ -86,6 +126,10 @@ def measure(rate_hz: float, minutes: float, speed: float) -> dict[str, float]:
     context = Context()
     rclpy.init(context=context)
     node = PredictorNode(context=context, parameter_overrides=[Parameter('ndof', value=3)])
+    if freeze:
+        freeze_startup_heap()
+    collections = CollectionTimer()
+    collections.start()
     idle: list[float] = []
     busy: list[float] = []
     idle_steps: list[float] = []
@@ -112,8 +156,11 @@ def measure(rate_hz: float, minutes: float, speed: float) -> dict[str, float]:
         predictor = node.predictor
         counters = predictor.counters if predictor is not None else {}
     finally:
+        collections.stop()
         node.destroy_node()
         try_shutdown(context=context)
+        if freeze:
+            gc.unfreeze()  # the next rate starts from the same heap
     cpu, wall = _cpu_seconds() - cpu0, time.monotonic() - wall0
     simulated_hours = (times[-1] - times[0]) / 3600.0
 
@@ -126,7 +173,8 @@ def measure(rate_hz: float, minutes: float, speed: float) -> dict[str, float]:
             'busy_step_p50_ms': pct(busy_steps, 50), 'busy_step_p90_ms': pct(busy_steps, 90),
             'steps_while_training': len(busy_steps),
             'callbacks_while_training': len(busy), 'trainings': counters.get('trainings', 0),
-            'cpu_s_per_sim_hour': cpu / simulated_hours, 'cpu_share': cpu / wall}
+            'cpu_s_per_sim_hour': cpu / simulated_hours, 'cpu_share': cpu / wall,
+            **collections.summary()}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -136,9 +184,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--minutes', type=float, default=30.0, help='simulated minutes per rate')
     parser.add_argument('--speed', type=float, default=20.0, help='× real time feed')
     parser.add_argument('--rates', type=float, nargs='*', default=[10.0, 100.0])
+    parser.add_argument('--no-gc-freeze', dest='freeze', action='store_false',
+                        help='do not freeze the heap after building the node (as before 2026-12)')
     args = parser.parse_args(argv)
     for rate in args.rates:
-        result = measure(rate, args.minutes, args.speed)
+        result = measure(rate, args.minutes, args.speed, args.freeze)
         print(' '.join(f'{k}={v:.4g}' if isinstance(v, float) else f'{k}={v}'
                        for k, v in result.items()), flush=True)
     return 0

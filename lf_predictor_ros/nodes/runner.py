@@ -9,10 +9,16 @@ the context shut down (`try_shutdown`, safe when a signal already did it). A nod
 itself (``until``'s future, e.g. the simulator at the end of its scenario) first waits up to
 ``FLUSH_TIMEOUT`` for its subscribers to acknowledge what its reliable publishers sent, so the
 last messages of a run are not lost with the publisher.
+
+Once the node is built, the heap is frozen (`freeze_startup_heap`): the objects of the imports
+and the node itself (some 200 000 with torch and rclpy) leave the garbage collector's
+generations, so a full collection no longer walks them. Such a collection holds the GIL, and
+with it every callback, for 0.1–0.26 s (measured: docs/BENCHMARKS.md, forty-eighth session).
 """
 from __future__ import annotations
 
 from collections.abc import Callable
+import gc
 import time
 
 import rclpy
@@ -40,8 +46,20 @@ def spin_node(make_node: Callable[[], Node], *,
     except (KeyboardInterrupt, ExternalShutdownException):
         try_shutdown()
         return 0
+    freeze_startup_heap()
     spin_until_shutdown(node, until)
     return 0
+
+
+def freeze_startup_heap() -> None:
+    """Collect once, then move every object alive to the collector's permanent generation.
+
+    For a long-running process after its start: what the imports and the node's construction
+    made lives as long as the process, and a full collection no longer visits it. Objects made
+    later are collected as before. Undone by `gc.unfreeze`.
+    """
+    gc.collect()
+    gc.freeze()
 
 
 def spin_until_shutdown(node: Node, until: Callable[[Node], Future | None] | None = None) -> None:

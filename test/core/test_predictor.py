@@ -347,7 +347,10 @@ def test_background_training_never_blocks_update_and_swaps_atomically(
         assert all(running[FIRST_TRAINING - 1:first_swap])
         assert first_swap - FIRST_TRAINING >= 100
         assert predictor.counters['overruns'] >= 1
-        assert train_seconds[first_swap] == pytest.approx(2.0, abs=0.6)  # max_train_seconds
+        # max_train_seconds 2 s: without it 10⁶ epochs; a loaded machine may stretch the last
+        # epoch (the bound of the prompt-stop tests)
+        seconds = train_seconds[first_swap]
+        assert seconds is not None and 1.4 <= seconds < 2.0 + STOP_BOUND
         check_atomic_swap(spy, models, records)
     finally:
         predictor.close()

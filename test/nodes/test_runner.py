@@ -1,6 +1,7 @@
-"""nodes/runner.py: a node that ends by itself flushes its reliable publishers first."""
+"""nodes/runner.py: flushing at a node's own end; freezing the heap once the node is built."""
 from __future__ import annotations
 
+import gc
 from typing import Any
 
 import pytest
@@ -61,3 +62,45 @@ def test_flush_reports_a_subscriber_that_never_acknowledges_within_the_timeout(
         node.destroy_node()
     finally:
         rclpy.try_shutdown()
+
+
+def test_freeze_startup_heap_takes_every_live_object_out_of_the_collections() -> None:
+    """What lives at the call is frozen (a full collection skips it); what comes later is not."""
+    before = [1.0]
+    try:
+        runner.freeze_startup_heap()
+        assert gc.get_freeze_count() > 1000  # pytest, rclpy, numpy: thousands of objects
+        assert not any(obj is before for obj in gc.get_objects())
+        after = [2.0]
+        assert any(obj is after for obj in gc.get_objects())  # collected as before
+    finally:
+        gc.unfreeze()
+    assert gc.get_freeze_count() == 0
+    assert any(obj is before for obj in gc.get_objects())
+
+
+def test_spin_node_freezes_the_heap_after_building_the_node_and_before_spinning(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The node's own objects are frozen too; a rejected configuration freezes nothing."""
+    calls: list[str] = []
+    monkeypatch.setattr(runner, 'freeze_startup_heap', lambda: calls.append('freeze'))
+    monkeypatch.setattr(runner, 'spin_until_shutdown', lambda node, until: calls.append('spin'))
+
+    def make() -> Any:
+        calls.append('make')
+        return object()
+
+    assert runner.spin_node(make, config_errors=(ValueError,), logger_name='freeze_test') == 0
+    assert calls == ['make', 'freeze', 'spin']
+
+    def invalid() -> Any:
+        raise ValueError('bad parameter')
+
+    calls.clear()
+    rclpy.init()
+    try:
+        assert runner.spin_node(invalid, config_errors=(ValueError,),
+                                logger_name='freeze_test') == 1
+    finally:
+        rclpy.try_shutdown()
+    assert calls == []

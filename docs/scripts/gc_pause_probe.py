@@ -19,6 +19,7 @@ import time
 import rclpy
 from rclpy.context import Context
 from rclpy.parameter import Parameter
+from rclpy.utilities import try_shutdown
 
 from lf_predictor_ros.nodes.predictor_node import PredictorNode
 from lf_predictor_ros.nodes.runner import freeze_startup_heap
@@ -39,7 +40,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     context = Context()
     rclpy.init(context=context)
-    node = PredictorNode(context=context, parameter_overrides=[Parameter('ndof', value=3)])
+    ndof = Parameter('ndof', value=3)  # type: ignore[no-untyped-call]  # rclpy: unannotated
+    node = PredictorNode(context=context, parameter_overrides=[ndof])
     try:
         tracked = len(gc.get_objects())
         before = [full_collection_ms() for _ in range(args.repeats)]
@@ -51,7 +53,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         gc.unfreeze()
         node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        try_shutdown(context=context)
     return 0
 
 

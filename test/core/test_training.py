@@ -211,7 +211,8 @@ def test_max_seconds_is_honoured() -> None:
     result = train(NnarmaxNet(NARX_SPEC), u, y, y, None, settings)
     print(f'max_seconds 0.3: stopped after {result.seconds:.3f} s, {result.epochs} epochs')
     assert result.stopped_reason == 'max_seconds' and not result.converged
-    assert 0.3 <= result.seconds < 0.3 + 2.0  # without the limit: 10⁷ epochs
+    # without the limit: 10⁷ epochs; the upper bound leaves a loaded machine 10 s of stalls
+    assert 0.3 <= result.seconds < 10.0
     # it trained until the limit (how many epochs fit in 0.3 s is the machine's load: 9 with
     # two benchmark processes on the two cores, more than 10 idle; speed is not tested here)
     assert result.epochs >= 1 and len(result.loss_history) == result.epochs
@@ -232,7 +233,7 @@ def test_stop_event_aborts_a_running_training() -> None:
     elapsed = time.monotonic() - start
     print(f'stop_event set at 0.2 s: training returned after {elapsed:.3f} s')
     assert result.stopped_reason == 'stop_event'
-    assert 0.2 <= elapsed < 0.2 + 2.0  # without the event: max_seconds, 30 s
+    assert 0.2 <= elapsed < 10.0  # without the event: max_seconds, 30 s
     already_set = threading.Event()
     already_set.set()
     result = train(NnarmaxNet(NARX_SPEC), u, y, y, None, TrainSettings(), stop_event=already_set)

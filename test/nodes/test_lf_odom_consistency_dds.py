@@ -233,7 +233,7 @@ def test_lf_odom_frames_stamps_calibration_and_counters(run: Run) -> None:
     assert int(report['callback_errors']) == 0 and int(report['ref_rejected']) == 0
     assert int(report['samples']) == n
     assert run.level == 0
-    assert run.feed_seconds < 60.0, run.feed_seconds
+    print(f'fed in {run.feed_seconds:.1f} s wall')  # a cost, not asserted (docs/BENCHMARKS.md)
 
 
 @pytest.mark.dds

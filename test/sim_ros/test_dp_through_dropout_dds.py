@@ -74,7 +74,9 @@ WINDOWS: dict[str, Any] = {'retrain_period': 20.0, 'training_window': 200.0,
                            'transient_length': 10.0, 'filter_window': 60.0,
                            'append_length': 40.0, 'estimation_window': 600.0,
                            'max_train_seconds': 10.0}
-WALL_LIMIT = 60.0  # [s wall] of the closed loop
+# [s wall] the longest wait for the closed loop to finish (about 11 s paced; a hang detector,
+# not a speed bound: the loop's wall time is printed, not asserted)
+WALL_LIMIT = 90.0
 # [s wall] the simulator's wait for a command: long enough that a slow callback under load does
 # not release the lockstep (a timeout changes the loop's course: measured in the full suite,
 # 2 timeouts at 0.25 s, 5.1 m before the dropout against 1.73 m alone with 1). Before the pacing
@@ -223,7 +225,7 @@ def _closed_loop(tmp_path_factory: pytest.TempPathFactory, seed: int,
         relay.simulator = simulator
         executor.add_node(simulator)
         start = time.monotonic()
-        executor.spin_until_future_complete(simulator.done, timeout_sec=WALL_LIMIT + 30.0)
+        executor.spin_until_future_complete(simulator.done, timeout_sec=WALL_LIMIT)
         wall = time.monotonic() - start
         end = time.monotonic() + 0.5
         while time.monotonic() < end:  # drain the last messages and diagnostics
@@ -257,7 +259,6 @@ def test_dp_controller_on_lf_odom_holds_the_vessel_through_a_30_s_pose_dropout(
     loop: Loop = request.getfixturevalue(which)
     assert loop.finished, f'the simulator did not finish within {loop.wall:.0f} s'
     print(f'closed loop through the dropout: {loop.wall:.1f} s wall for {DURATION:.0f} s sim')
-    assert loop.wall < WALL_LIMIT
 
     # the relay really dropped 30 s of poses, and nothing else
     assert loop.dropped == [float(t) for t in range(int(DROP_START), int(DROP_END))]

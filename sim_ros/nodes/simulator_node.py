@@ -427,6 +427,10 @@ class SimulatorNode(Node):
         self._lockstep_timeouts += 1
         self._lockstep_timeout_times.append(float(self._sim.t))
         self._resync_pacer = True
+        self.get_logger().warning(
+            f'lockstep: no command for t={float(self._sim.t):.1f} s within '
+            f'{self.config.lockstep_timeout} s wall; stepping on with the held command '
+            f'({self._lockstep_timeouts} so far)', throttle_duration_sec=5.0)
         return True
 
     def _advance(self) -> None:

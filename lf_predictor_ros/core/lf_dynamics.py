@@ -252,8 +252,8 @@ def _fit_known_gain(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, eta: Fl
 
 
 def balanced_at(model: LfDynamics, heading: float, nu: ArrayLike, force: ArrayLike,
-                dofs: ArrayLike | None = None) -> LfDynamics:
-    """The model with its environment term re-set so that ν̇ = 0 at (ν, τ, ψ); a new model.
+                dofs: ArrayLike | None = None, accel: ArrayLike | None = None) -> LfDynamics:
+    """The model with its environment term re-set so that ν̇ = ``accel`` at (ν, τ, ψ); new.
 
     The environment force the window's fit gives is a mean over 20 minutes; the one acting when
     the fixes stop is the one the thrust was balancing then (in station keeping τ ≈ −b(t)), as
@@ -262,12 +262,15 @@ def balanced_at(model: LfDynamics, heading: float, nu: ArrayLike, force: ArrayLi
     earth-fixed force (so it turns with the vessel), R(ψ) G⁻¹ (−F ν − G τ) [N]; yaw a constant
     moment. A thrust gain ≤ 0 in surge or sway (not a damped, thrust-driven vessel) gives the
     model back unchanged. ``dofs`` (n booleans, default all): the DOFs re-set; the others keep
-    the fitted term (surge and sway go together: one earth-fixed force).
+    the fitted term (surge and sway go together: one earth-fixed force). ``accel``: ν̇ at that
+    point (n), e.g. a setpoint move's acceleration, so that the thrust that caused it is not
+    taken for environment: B β(ψ) = ν̇ − (F ν + G τ); None: 0 (at rest).
     """
     n = model.ndof
     nu_a = np.asarray(nu, dtype=np.float64).reshape(n)
     tau = np.asarray(force, dtype=np.float64).reshape(-1)[:n]
-    required = -(model.damping @ nu_a + model.input_gain @ tau)  # environment's ν̇ now
+    nu_dot = np.zeros(n) if accel is None else np.asarray(accel, dtype=np.float64).reshape(n)
+    required = nu_dot - (model.damping @ nu_a + model.input_gain @ tau)  # environment's ν̇ now
     if n == 1:
         bias = required[:, None]
     else:

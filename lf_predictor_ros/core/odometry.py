@@ -112,6 +112,10 @@ TWIN_LEVEL_FACTOR = 2.0  # [-]
 # ``pose_reference_cutoff``, ``twist_reference_cutoff``: Butterworth order of the zero-phase
 # low-pass on the calibration reference (forward and backward: the magnitude response squared).
 REFERENCE_LOW_PASS_ORDER = 4
+# ``dead_reckoning_motion_balance``: a DOF is balanced against its motion only when its twist
+# through both low-passes exceeds this many standard deviations of the published twist (a
+# two-sided 95 % test of "at rest") [-].
+MOTION_BALANCE_SIGMAS = 2.0
 # ``twist_attenuation``: frequencies where the targets' zero-phase filter keeps less than this
 # share of the power are left out of the attenuated variance (there the reference holds too
 # little of the LF motion to say what was taken; the ×(1 − G)/G correction is at most 4).
@@ -239,6 +243,13 @@ class OdometryParams:
         'lf_dynamics.balanced_at); 0: that DOF keeps the environment fitted over the window '
         '(yaw: the heading oscillation of a DP loop leaks into a 30 s mean; chosen from '
         '30 / 120 / 300 / 0 s on tuning seeds 1–2, docs/BENCHMARKS.md)', 's, s, s'))
+    dead_reckoning_motion_balance: bool = field(default=False, metadata=field_doc(
+        'the environment force a dead reckoning starts from is balanced against the motion too, '
+        'in the DOFs that are moving (slow twist > 2 published std): the thrust, the twist and '
+        'the twist change through the same two cascaded low-passes (dead_reckoning_force_time), '
+        'so the force that accelerated a setpoint move is not taken for environment '
+        '(lf_dynamics.balanced_at with accel); false: balanced at rest',
+        ''))
     twist_model: bool = field(default=False, metadata=field_doc(
         "the twist Kalman filter predicts with the vessel memory's model whenever its thrust "
         'gain is given or implied by the controller (else only when the drift test chose it)',
@@ -473,6 +484,10 @@ class LfOdometry:
         self._blend: tuple[float, FloatArray] | None = None  # (start time, DR pose − fix)
         self._slow_twist: FloatArray | None = None  # low-passed twist, start of dead reckoning
         self._slow_force: FloatArray | None = None  # thrust low-passed per DOF (force time)
+        # dead_reckoning_motion_balance: [thrust, twist] through one low-pass (force time), and
+        # through two; None until the first fix
+        self._balance_once: FloatArray | None = None
+        self._balance_twice: FloatArray | None = None
         # the memory's model balanced at the DR start, and the memory it was made from
         self._dr_model: tuple[VesselMemory, LfDynamics | None] | None = None
         self.counters = {'dead_reckoning_episodes': 0, 'lost': 0, 'reacquired': 0,
@@ -561,6 +576,8 @@ class LfOdometry:
         applied = clipped[:self.ndof]
         self._slow_force = applied.copy() if self._slow_force is None else \
             low_pass_step(self._slow_force, applied, self._force_rate())
+        if self.params.dead_reckoning_motion_balance:
+            self._track_balance(applied, twist)
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
                                             self._pose_covariance(source, lag, excess))
         out = OdometryEstimate(
@@ -821,8 +838,57 @@ class LfOdometry:
         if not memory.dp_controlled or x is None or self._slow_force is None:
             return memory.model
         heading = float(x[2]) if self.ndof == 3 else 0.0
-        dofs = np.array(self.params.dead_reckoning_force_time[:self.ndof]) > 0.0
+        times = np.array(self.params.dead_reckoning_force_time[:self.ndof])
+        dofs = times > 0.0
+        moving = self._moving_dofs(dofs)
+        if moving is not None and self._balance_twice is not None and \
+                self._balance_once is not None:
+            n = self.ndof
+            force, nu = self._balance_twice[:n], self._balance_twice[n:]
+            # the second low-pass's derivative: (once − twice) / T, the twist change through
+            # both low-passes, as the thrust and the twist went through them
+            accel = (self._balance_once[n:] - nu) / np.where(dofs, times, 1.0)
+            return balanced_at(memory.model, heading, np.where(moving, nu, 0.0),
+                               np.where(moving, force, self._slow_force), dofs,
+                               np.where(moving, accel, 0.0))
         return balanced_at(memory.model, heading, np.zeros(self.ndof), self._slow_force, dofs)
+
+    def _moving_dofs(self, dofs: NDArray[np.bool_]) -> NDArray[np.bool_] | None:
+        """``dead_reckoning_motion_balance``: the DOFs balanced against the motion, or None.
+
+        A DOF is moving when its twist through both low-passes exceeds ``MOTION_BALANCE_SIGMAS``
+        of the published twist's standard deviation; surge and sway go together (one
+        earth-fixed force). Holding station the slow twist is mostly the estimate's own error,
+        and balancing against it cost 4–10 % in dropouts (docs/BENCHMARKS.md, forty-eighth
+        session); in a setpoint move the move's acceleration must not pass for environment.
+        """
+        if not self.params.dead_reckoning_motion_balance or self._balance_twice is None or \
+                self._last_output is None:
+            return None
+        n = self.ndof
+        std = np.sqrt(np.maximum(np.diag(self._last_output.twist_cov)[:n], 0.0))
+        moving = (np.abs(self._balance_twice[n:]) > MOTION_BALANCE_SIGMAS * std) & dofs
+        if n == 3:
+            moving[:2] = bool(moving[0] or moving[1]) and bool(dofs[0] or dofs[1])
+        return moving if bool(np.any(moving)) else None
+
+    def _track_balance(self, force: FloatArray, twist: FloatArray) -> None:
+        """``dead_reckoning_motion_balance``: [thrust, twist] through one and two low-passes.
+
+        For a linear model ν̇ = F ν + G τ + b with b constant, the same linear filter on both
+        sides keeps the equation: LP(ν̇) = F LP(ν) + G LP(τ) + b. With a first-order low-pass
+        of time constant T applied twice, LP₂(ν̇) = d/dt LP₂(ν) = (LP₁(ν) − LP₂(ν)) / T, so b
+        follows from filtered quantities only, whatever the vessel was doing (a setpoint move's
+        acceleration included); the second pass keeps the wave-band twist out of the rate.
+        """
+        rate = self._force_rate()
+        sample = np.concatenate([force, twist])
+        both = np.concatenate([rate, rate])
+        if self._balance_once is None or self._balance_twice is None:
+            self._balance_once, self._balance_twice = sample.copy(), sample.copy()
+            return
+        self._balance_once = low_pass_step(self._balance_once, sample, both)
+        self._balance_twice = low_pass_step(self._balance_twice, self._balance_once, both)
 
     def _dead_reckon_to(self, t: float, tau: FloatArray) -> None:
         tau = self._plausible(tau)

@@ -255,3 +255,18 @@ def test_balanced_at_puts_the_model_in_equilibrium_with_an_earth_fixed_force() -
     surge = balanced_at(model, heading, nu, force, dofs=[True, False, False])
     np.testing.assert_array_equal(surge.bias[:2], balanced.bias[:2])
     np.testing.assert_array_equal(surge.bias[2], model.bias[2])
+
+def test_balanced_at_with_an_acceleration_leaves_the_model_accelerating_so() -> None:
+    """``accel``: ν̇ at the balance point is that acceleration (a move's), not 0."""
+    model = LfDynamics(damping=-np.diag(DAMPING / MASS), input_gain=np.diag(1.0 / MASS),
+                       bias=np.ones((3, 3)) * 1e-3, residual_std=np.full(3, 1e-4))
+    nu, force, heading = np.array([0.2, -0.05, 2e-3]), np.array([3e5, -2e4, 1e6]), -0.4
+    accel = np.array([0.01, -0.002, 1e-4])
+    moving = balanced_at(model, heading, nu, force, accel=accel)
+    np.testing.assert_allclose(moving.acceleration(nu, force, heading), accel, atol=1e-15)
+    # the environment differs from the one balanced at rest by the force of that acceleration
+    rest = balanced_at(model, heading, nu, force)
+    np.testing.assert_allclose(moving.acceleration(nu, force, heading) -
+                               rest.acceleration(nu, force, heading), accel, atol=1e-15)
+    np.testing.assert_array_equal(balanced_at(model, heading, nu, force, accel=np.zeros(3)).bias,
+                                  rest.bias)

@@ -816,6 +816,92 @@ def test_dead_reckoning_starts_from_the_balance_the_thrust_held() -> None:
     assert out.pose[0] == pytest.approx(u.sum(), rel=1e-6)
 
 
+def _surge_move(times: np.ndarray, thrust: np.ndarray, damping: float, gain: float,
+                environment: float) -> tuple[np.ndarray, np.ndarray]:
+    """North position and surge speed of u̇ = −d u + g (τ + b) at heading 0 (exact, τ held)."""
+    north, speed = np.zeros(times.size), np.zeros(times.size)
+    for k in range(1, times.size):
+        dt = times[k] - times[k - 1]
+        target = gain * (thrust[k - 1] + environment) / damping  # the speed it tends to
+        decay = math.exp(-damping * dt)
+        speed[k] = target + (speed[k - 1] - target) * decay
+        north[k] = north[k - 1] + target * dt + (speed[k - 1] - target) * (1 - decay) / damping
+    return north, speed
+
+
+@pytest.mark.parametrize('motion_balance', [False, True])
+def test_dead_reckoning_in_a_move_with_the_motion_balance(motion_balance: bool) -> None:
+    """``dead_reckoning_motion_balance``: the thrust that accelerates a move is not environment.
+
+    A vessel u̇ = −0.01 u + 1e-6 (τ + b), b = −1 kN, holds station on τ = 1 kN; at 100 s a move
+    adds 3 kN. The fixes stop 60 s into the move (u ≈ 0.135 m/s, still accelerating) and the
+    thrust stays. Balanced at rest, the 30 s low-passed thrust (≈ 3.6 kN) is taken for the
+    environment: the dead reckoning sees 0.4 kN of net force instead of 3 kN and falls 3.8 m
+    behind the vessel's 10.6 m in 60 s. Balanced against the motion (two low-passes of thrust
+    and twist), the environment comes out near the true −1 kN and the dead reckoning follows the
+    vessel to 0.10 m (measured).
+    """
+    damping, gain, environment = 0.01, 1e-6, -1e3
+    times = np.arange(0.0, 221.0)
+    thrust = np.where(times < 100.0, 1e3, 4e3)
+    north, _ = _surge_move(times, thrust, damping, gain, environment)
+    model = LfDynamics(np.diag([-damping, -0.01, -0.01]), np.diag([gain, 1e-6, 1e-9]),
+                       np.zeros((3, 3)), np.full(3, 1e-4))  # fitted environment: none
+    horizons = np.arange(1.0, 61.0)
+    ms = np.tile((horizons / 60.0) ** 2, (3, 1)).T
+    memory = VesselMemory(model, 'model', DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test',
+                          np.full(3, 1e-3), dp_controlled=True)
+    # the DR starts from the twist itself (no start low-pass): the balance alone is compared
+    odo = LfOdometry(3, H, OdometryParams(dead_reckoner='model', dead_reckoning_velocity_time=H,
+                                          dead_reckoning_motion_balance=motion_balance,
+                                          prior_pose_std=(1e-3, 1e-3, 1e-4)))
+    odo._memory = memory  # noqa: SLF001 - a known vessel memory
+    stop = 160
+    for k in range(stop + 1):
+        odo.track(float(times[k]), np.array([north[k], 0.0, 0.0]), np.array([thrust[k], 0, 0]))
+    for k in range(stop + 1, times.size):
+        out = odo.coast(float(times[k]), np.array([thrust[k], 0.0, 0.0]))
+        assert out is not None and out.mode == 'dead_reckoning'
+    error = abs(out.pose[0] - north[-1])
+    travelled = north[-1] - north[stop]
+    print(f'motion balance {motion_balance}: {travelled:.2f} m travelled in the dropout, dead '
+          f'reckoning {error:.3f} m off')
+    assert travelled > 8.0
+    if motion_balance:
+        assert error < 0.05 * travelled  # measured 0.10 m of 10.6 m
+    else:
+        assert error > 0.25 * travelled  # balanced at rest: measured 3.8 m
+
+
+def test_the_motion_balance_leaves_a_vessel_at_rest_balanced_at_rest() -> None:
+    """Holding station (slow twist below 2 published std) both balances dead-reckon alike.
+
+    Poses with a 0.05 m, 0.6 rad/s wave wiggle and a steady thrust: the twist filter sees the
+    wave-band velocity, the slow twist stays near 0, so no DOF counts as moving and the dead
+    reckoning is the one balanced at rest to the last bit.
+    """
+    model = LfDynamics(np.diag([-0.01, -0.01, -0.01]), np.diag([1e-6, 1e-6, 1e-9]),
+                       np.zeros((3, 3)), np.full(3, 1e-4))
+    horizons = np.arange(1.0, 61.0)
+    ms = np.tile((horizons / 60.0) ** 2, (3, 1)).T
+    memory = VesselMemory(model, 'model', DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test',
+                          np.full(3, 1e-3), dp_controlled=True)
+    held = np.array([2e3, -1e3, 0.0])
+    poses = []
+    for motion_balance in (False, True):
+        odo = LfOdometry(3, H, OdometryParams(dead_reckoner='model',
+                                              dead_reckoning_motion_balance=motion_balance))
+        odo._memory = memory  # noqa: SLF001 - a known vessel memory
+        for k in range(300):
+            wiggle = 0.05 * math.sin(0.6 * k)
+            odo.track(float(k), np.array([wiggle, -wiggle, 0.0]), held)
+        for k in range(1, 61):
+            out = odo.coast(300.0 + k, held)
+            assert out is not None
+        poses.append(out.pose)
+    np.testing.assert_array_equal(poses[0], poses[1])
+
+
 @pytest.mark.parametrize('bad', [(30.0, 30.0), (30.0, -1.0, 0.0), (30.0, math.nan, 0.0)])
 def test_dead_reckoning_force_time_is_checked(bad: tuple[float, ...]) -> None:
     with pytest.raises(ValueError, match='dead_reckoning_force_time'):

@@ -1,0 +1,97 @@
+"""Exploratory: lf_odom's dead reckoning against the truth through each dropout of one loop.
+
+    OMP_NUM_THREADS=1 python docs/scripts/move_dropout_probe.py rao_supply:777 \
+        [--spread 500] [--odometry dead_reckoning_motion_balance=true]
+
+Runs `odometry_bench`'s lf_odom dropout loop (the predictor's pose to the PID, the D term from
+lf_odom's twist, the commands fed; 3600 s, the dropouts of ``--spread``) once and prints, every
+10 s of each dropout, the dead-reckoned pose, the true LF pose, the dead-reckoned twist and the
+published pose std, and the dead reckoner in use; before each dropout, what its environment
+balance starts from (the last twist, its low-passed value, the published twist std).
+Development seeds only, as `method_probe.py`.
+"""
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from pathlib import Path
+import sys
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import method_probe as mp  # noqa: E402
+
+from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
+from lf_predictor_ros.benchmark.estimators import predictor_params  # noqa: E402
+from lf_predictor_ros.core.lf_dynamics import LfDynamics  # noqa: E402
+from lf_predictor_ros.core.odometry import (  # noqa: E402
+    LfOdometry,
+    OdometryEstimate,
+    OdometryParams,
+)
+from sim_ros.simulation import load_scenario  # noqa: E402
+
+DURATION = 3600.0  # [s] the odometry bench's loop length
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point."""
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('cases', nargs='+', help='SCENARIO:SEED (development seeds)')
+    parser.add_argument('--spread', type=float, default=500.0, help='--dropout-spread [s]')
+    parser.add_argument('--odometry', nargs='*', default=[], help='OdometryParams FIELD=VALUE')
+    args = parser.parse_args(argv)
+    try:
+        cases = mp.parse_cases(args.cases, mp.DEVELOPMENT_SEEDS)
+    except ValueError as exc:
+        parser.error(str(exc))
+    overrides = ob._odometry_overrides(args.odometry) or {}  # noqa: SLF001 - the CLI's parser
+    odometry = OdometryParams(**overrides)
+
+    def one(scenario_name: str, seed: int) -> None:
+        scenario = load_scenario(scenario_name)
+        params = predictor_params(scenario, None)
+        shift = ob.dropout_shift_for_seed(seed, args.spread)
+        dropouts = ob.default_dropouts(params, DURATION, length=ob.DROPOUT_LOOP_LENGTH,
+                                       shift=shift)
+        log: list[OdometryEstimate] = []
+        original = LfOdometry._balanced_model
+
+        def traced(odometry: LfOdometry) -> LfDynamics | None:
+            """The balance at a dead reckoning's start, and what it was made from."""
+            last = odometry._last_output  # noqa: SLF001 - the last tracking estimate
+            if last is not None:
+                std = np.sqrt(np.diag(last.twist_cov))
+                slow = odometry._slow_twist  # noqa: SLF001
+                print(f'  balance at t={last.stamp:.0f}: twist {np.round(last.twist, 3)}, '
+                      f'low-passed {None if slow is None else np.round(slow, 3)}, published '
+                      f'twist std {np.round(std, 3)}')
+            return original(odometry)
+
+        LfOdometry._balanced_model = traced  # type: ignore[method-assign, assignment]
+        run = ob._odometry_loop(scenario, seed, DURATION, params, odometry,  # noqa: SLF001
+                                dropouts, log)
+        record = run.record
+        print(f'{scenario_name}:{seed} dropouts (start, length) {dropouts}')
+        for start, length in dropouts:
+            estimates = [o for o in log if start <= o.stamp <= start + length + 1]
+            print(f'  dropout {start:.0f}–{start + length:.0f} s: dead reckoner '
+                  f'{estimates[0].reckoner if estimates else None}')
+            for out in estimates[::10]:
+                k = int(np.argmin(np.abs(record.t - out.stamp)))
+                std = np.sqrt(np.diag(out.pose_cov))
+                print(f'    t={out.stamp:.0f} estimate {np.round(out.pose, 2)} truth '
+                      f'{np.round(record.truth_lf_pose[k], 2)} twist {np.round(out.twist, 3)} '
+                      f'std {np.round(std, 2)}')
+
+    torch.set_num_threads(1)
+    for scenario_name, seed in cases:
+        one(scenario_name, seed)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -113,8 +113,8 @@ TWIN_LEVEL_FACTOR = 2.0  # [-]
 # low-pass on the calibration reference (forward and backward: the magnitude response squared).
 REFERENCE_LOW_PASS_ORDER = 4
 # ``dead_reckoning_motion_balance``: a DOF is balanced against its motion only when its twist
-# through one low-pass exceeds this many standard deviations of the published twist (a
-# two-sided 95 % test of "at rest") [-].
+# through one low-pass exceeds this many holding standard deviations of the twist (a two-sided
+# 95 % test of "at rest") [-].
 MOTION_BALANCE_SIGMAS = 2.0
 # ``twist_attenuation``: frequencies where the targets' zero-phase filter keeps less than this
 # share of the power are left out of the attenuated variance (there the reference holds too
@@ -245,7 +245,7 @@ class OdometryParams:
         '30 / 120 / 300 / 0 s on tuning seeds 1–2, docs/BENCHMARKS.md)', 's, s, s'))
     dead_reckoning_motion_balance: bool = field(default=False, metadata=field_doc(
         'the environment force a dead reckoning starts from is balanced against the motion too, '
-        'in the DOFs that are moving (low-passed twist > 2 published std): the thrust, the '
+        'in the DOFs that are moving (low-passed twist > 2 holding std): the thrust, the '
         'twist and the twist change through the same two cascaded low-passes '
         '(dead_reckoning_force_time), '
         'so the force that accelerated a setpoint move is not taken for environment '
@@ -858,8 +858,10 @@ class LfOdometry:
         """``dead_reckoning_motion_balance``: the DOFs balanced against the motion, or None.
 
         A DOF is moving when its twist through one low-pass exceeds ``MOTION_BALANCE_SIGMAS``
-        of the published twist's standard deviation (through both, 20 s into a move it was
-        still below: the gate stayed shut); surge and sway go together (one earth-fixed force).
+        of the twist's holding standard deviation (the calibrated twist covariance without its
+        acceleration part, which grows in a move: against the published std the gate stayed
+        shut 20 s into one; before a calibration the published std); surge and sway go
+        together (one earth-fixed force).
         Holding station the slow twist is mostly the estimate's own error, and balancing against
         it cost 3–10 % in dropouts (docs/BENCHMARKS.md, forty-eighth session); in a setpoint
         move the move's acceleration must not pass for environment.
@@ -868,7 +870,12 @@ class LfOdometry:
                 self._last_output is None:
             return None
         n = self.ndof
-        std = np.sqrt(np.maximum(np.diag(self._last_output.twist_cov)[:n], 0.0))
+        if self._twist_cov:  # the holding part: the published std grows with a move's rate
+            model = self._twist_cov['all']
+            variance = self.params.twist_cov_scale * np.diag(model.covariance(np.zeros(n), 1.0))
+        else:
+            variance = np.diag(self._last_output.twist_cov)[:n]
+        std = np.sqrt(np.maximum(variance, 0.0))
         moving = (np.abs(self._balance_once[n:]) > MOTION_BALANCE_SIGMAS * std) & dofs
         if n == 3:
             moving[:2] = bool(moving[0] or moving[1]) and bool(dofs[0] or dofs[1])

@@ -11,9 +11,10 @@ itself (``until``'s future, e.g. the simulator at the end of its scenario) first
 last messages of a run are not lost with the publisher.
 
 Once the node is built, the heap is frozen (`freeze_startup_heap`): the objects of the imports
-and the node itself (some 200 000 with torch and rclpy) leave the garbage collector's
-generations, so a full collection no longer walks them. Such a collection holds the GIL, and
-with it every callback, for 0.1–0.26 s (measured: docs/BENCHMARKS.md, forty-eighth session).
+and the node itself (343 000 in the predictor node, with torch and rclpy) leave the garbage
+collector's generations, so a full collection no longer walks them. Such a collection holds the
+GIL, and with it every callback, for 0.1–0.26 s (measured: docs/BENCHMARKS.md, forty-eighth
+session).
 """
 from __future__ import annotations
 

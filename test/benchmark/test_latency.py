@@ -1,6 +1,7 @@
-"""The latency benchmark's CPU account (benchmark/latency.py)."""
+"""The latency benchmark's CPU account and collection timer (benchmark/latency.py)."""
 from __future__ import annotations
 
+import gc
 import os
 from pathlib import Path
 import signal
@@ -10,7 +11,7 @@ import time
 
 import pytest
 
-from lf_predictor_ros.benchmark.latency import _descendants_cpu_seconds
+from lf_predictor_ros.benchmark.latency import CollectionTimer, _descendants_cpu_seconds
 
 BURN = 0.6  # [s] CPU time the grandchild spends
 
@@ -34,3 +35,22 @@ def test_the_cpu_of_a_live_grandchild_is_counted() -> None:
     finally:
         os.killpg(child.pid, signal.SIGKILL)
         child.wait()
+
+
+def test_the_collection_timer_counts_full_collections_while_it_records() -> None:
+    timer = CollectionTimer()
+    gc.collect()  # before start: not counted
+    timer.start()
+    try:
+        gc.collect()  # a full collection (generation 2)
+        gc.collect(0)
+    finally:
+        timer.stop()
+    gc.collect()  # after stop: not counted
+    assert timer not in gc.callbacks
+    assert timer.generations.count(2) == 1 and 0 in timer.generations
+    assert len(timer.seconds) == len(timer.generations) >= 2
+    summary = timer.summary()
+    assert summary['gc_full'] == 1.0
+    assert summary['gc_max_ms'] == pytest.approx(max(timer.seconds) * 1e3)
+    assert CollectionTimer().summary() == {'gc_full': 0.0, 'gc_max_ms': 0.0}

@@ -245,12 +245,10 @@ class OdometryParams:
         '30 / 120 / 300 / 0 s on tuning seeds 1–2, docs/BENCHMARKS.md)', 's, s, s'))
     dead_reckoning_motion_balance: bool = field(default=False, metadata=field_doc(
         'the environment force a dead reckoning starts from is balanced against the motion too, '
-        'in the DOFs that are moving (low-passed twist > 2 holding std): the thrust, the '
-        'twist and the twist change through the same two cascaded low-passes '
-        '(dead_reckoning_force_time), '
-        'so the force that accelerated a setpoint move is not taken for environment '
-        '(lf_dynamics.balanced_at with accel); false: balanced at rest',
-        ''))
+        'in the DOFs that are moving (low-passed twist > 2 holding std): the thrust, the twist '
+        'and the twist change through the same two cascaded low-passes '
+        '(dead_reckoning_force_time), so the force that accelerated a setpoint move is not taken '
+        'for environment (lf_dynamics.balanced_at with accel); false: balanced at rest', ''))
     twist_model: bool = field(default=False, metadata=field_doc(
         "the twist Kalman filter predicts with the vessel memory's model whenever its thrust "
         'gain is given or implied by the controller (else only when the drift test chose it)',
@@ -485,9 +483,9 @@ class LfOdometry:
         self._blend: tuple[float, FloatArray] | None = None  # (start time, DR pose − fix)
         self._slow_twist: FloatArray | None = None  # low-passed twist, start of dead reckoning
         self._slow_force: FloatArray | None = None  # thrust low-passed per DOF (force time)
-        # dead_reckoning_motion_balance: [thrust, twist] through one low-pass (force time), and
-        # through two; None until the first fix
-        self._balance_once: FloatArray | None = None
+        # dead_reckoning_motion_balance: the twist through one low-pass (force time; the
+        # thrust's is _slow_force), and [thrust, twist] through two; None until the first fix
+        self._twist_once: FloatArray | None = None
         self._balance_twice: FloatArray | None = None
         # the memory's model balanced at the DR start, and the memory it was made from
         self._dr_model: tuple[VesselMemory, LfDynamics | None] | None = None
@@ -578,7 +576,7 @@ class LfOdometry:
         self._slow_force = applied.copy() if self._slow_force is None else \
             low_pass_step(self._slow_force, applied, self._force_rate())
         if self.params.dead_reckoning_motion_balance:
-            self._track_balance(applied, twist)
+            self._track_balance(twist)
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
                                             self._pose_covariance(source, lag, excess))
         out = OdometryEstimate(
@@ -842,13 +840,13 @@ class LfOdometry:
         times = np.array(self.params.dead_reckoning_force_time[:self.ndof])
         dofs = times > 0.0
         moving = self._moving_dofs(dofs)
-        if moving is not None and self._balance_twice is not None and \
-                self._balance_once is not None:
+        if moving is not None and self._twist_once is not None and \
+                self._balance_twice is not None:
             n = self.ndof
             force, nu = self._balance_twice[:n], self._balance_twice[n:]
             # the second low-pass's derivative: (once − twice) / T, the twist change through
             # both low-passes, as the thrust and the twist went through them
-            accel = (self._balance_once[n:] - nu) / np.where(dofs, times, 1.0)
+            accel = (self._twist_once - nu) / np.where(dofs, times, 1.0)
             return balanced_at(memory.model, heading, np.where(moving, nu, 0.0),
                                np.where(moving, force, self._slow_force), dofs,
                                np.where(moving, accel, 0.0))
@@ -866,7 +864,7 @@ class LfOdometry:
         it cost 3–10 % in dropouts (docs/BENCHMARKS.md, forty-eighth session); in a setpoint
         move the move's acceleration must not pass for environment.
         """
-        if not self.params.dead_reckoning_motion_balance or self._balance_once is None or \
+        if not self.params.dead_reckoning_motion_balance or self._twist_once is None or \
                 self._last_output is None:
             return None
         n = self.ndof
@@ -876,12 +874,12 @@ class LfOdometry:
         else:
             variance = np.diag(self._last_output.twist_cov)[:n]
         std = np.sqrt(np.maximum(variance, 0.0))
-        moving = (np.abs(self._balance_once[n:]) > MOTION_BALANCE_SIGMAS * std) & dofs
+        moving = (np.abs(self._twist_once) > MOTION_BALANCE_SIGMAS * std) & dofs
         if n == 3:
-            moving[:2] = bool(moving[0] or moving[1]) and bool(dofs[0] or dofs[1])
+            moving[:2] = bool(moving[0] or moving[1])
         return moving if bool(np.any(moving)) else None
 
-    def _track_balance(self, force: FloatArray, twist: FloatArray) -> None:
+    def _track_balance(self, twist: FloatArray) -> None:
         """``dead_reckoning_motion_balance``: [thrust, twist] through one and two low-passes.
 
         For a linear model ν̇ = F ν + G τ + b with b constant, the same linear filter on both
@@ -889,15 +887,18 @@ class LfOdometry:
         of time constant T applied twice, LP₂(ν̇) = d/dt LP₂(ν) = (LP₁(ν) − LP₂(ν)) / T, so b
         follows from filtered quantities only, whatever the vessel was doing (a setpoint move's
         acceleration included); the second pass keeps the wave-band twist out of the rate.
+        The thrust's first pass is ``_slow_force``, updated before this call.
         """
+        assert self._slow_force is not None  # set by track() just before
         rate = self._force_rate()
-        sample = np.concatenate([force, twist])
-        both = np.concatenate([rate, rate])
-        if self._balance_once is None or self._balance_twice is None:
-            self._balance_once, self._balance_twice = sample.copy(), sample.copy()
+        if self._twist_once is None or self._balance_twice is None:
+            self._twist_once = twist.copy()
+            self._balance_twice = np.concatenate([self._slow_force, twist])
             return
-        self._balance_once = low_pass_step(self._balance_once, sample, both)
-        self._balance_twice = low_pass_step(self._balance_twice, self._balance_once, both)
+        self._twist_once = low_pass_step(self._twist_once, twist, rate)
+        self._balance_twice = low_pass_step(self._balance_twice,
+                                            np.concatenate([self._slow_force, self._twist_once]),
+                                            np.concatenate([rate, rate]))
 
     def _dead_reckon_to(self, t: float, tau: FloatArray) -> None:
         tau = self._plausible(tau)

@@ -59,6 +59,8 @@ unwrapped, central differences).
 
 The dropouts of items 3 and 5 come at the same times in every seed unless ``--dropout-spread``
 delays each seed's by its own draw (``dropout_shift_for_seed``; the JSON's ``dropout_shift``).
+``--dropout-moves LOW HIGH`` instead starts item 5's dropouts U(LOW, HIGH) s after each setpoint
+change (``move_dropouts``; scenarios with a setpoint schedule): the dead reckoning in moves.
 
 Usage (2 Dask workers; ``--scheduler none`` runs in this process)::
 
@@ -133,6 +135,9 @@ AFTER_DROPOUT = 120.0  # [s] scored after each dropout of item 5
 # The seed's own random stream for the dropouts' delay (``--dropout-spread``), apart from the
 # sea's, the noise's and the scenario schedule's draws.
 DROPOUT_SHIFT_STREAM = 0xD809
+# The seed's own stream for the delays of dropouts placed in setpoint moves (``--dropout-moves``)
+MOVE_DELAY_STREAM = 0xD80A
+MOVE_DROPOUT_GAP = 60.0  # [s] least tracking between two dropouts placed in moves
 
 
 # ---------------------------------------------------------------- statistics
@@ -240,6 +245,45 @@ def dropout_shift_for_seed(seed: int, spread: float) -> float:
     two while holding (docs/BENCHMARKS.md, forty-seventh session). A spread samples the phase.
     """
     return schedule_shift_for_seed(seed, spread, DROPOUT_SHIFT_STREAM)
+
+
+def move_dropouts(scenario: Scenario, params: PredictorParams, seed: int, duration: float,
+                  delay: tuple[float, float], length: float = DROPOUT_LOOP_LENGTH
+                  ) -> tuple[tuple[float, float], ...]:
+    """Pose dropouts that start inside the setpoint moves: one per ``setpoint_schedule`` row.
+
+    Row i's dropout starts at its time plus a delay drawn U(``delay``) for ``seed`` from its own
+    stream (``MOVE_DELAY_STREAM``; one draw per row, so skipping a row moves no other). A
+    dropout early in a move is where lf_odom's dead reckoning fails worst (forty-eighth
+    session); the spread schedule (`dropout_shift_for_seed`) rarely puts one there. Rows are
+    skipped whose dropout would start before the first training, end later than
+    ``AFTER_DROPOUT`` before ``duration``, or start less than ``MOVE_DROPOUT_GAP`` after the
+    previous dropout's end. Raises ValueError when the scenario has no schedule, the delay
+    interval is invalid, or no row is left.
+    """
+    low, high = (float(v) for v in delay)
+    if not (math.isfinite(low) and math.isfinite(high) and 0.0 <= low <= high):
+        raise ValueError(f'the move delay must be two finite seconds 0 <= low <= high, got '
+                         f'{delay!r}')
+    rows = scenario.controller.setpoint_schedule
+    if not rows:
+        raise ValueError(f'scenario {scenario.name!r} has no setpoint schedule: place '
+                         'its dropouts with --dropout-spread instead of --dropout-moves')
+    draws = np.random.default_rng((seed, MOVE_DELAY_STREAM)).uniform(low, high, len(rows))
+    first = first_training_samples(params) * params.sample_time
+    out: list[tuple[float, float]] = []
+    for row, draw in zip(rows, draws, strict=True):
+        start = float(round(float(row[0]) + float(draw), 1))
+        if start < first or start + length + AFTER_DROPOUT > duration:
+            continue
+        if out and start < out[-1][0] + out[-1][1] + MOVE_DROPOUT_GAP:
+            continue
+        out.append((start, length))
+    if not out:
+        raise ValueError(f'no setpoint move of {scenario.name!r} leaves room for a '
+                         f'{length:.0f} s dropout after the first training ({first:.0f} s) in '
+                         f'{duration:.0f} s: lengthen the run')
+    return tuple(out)
 
 
 def _wrap_error(estimate: FloatArray, truth: FloatArray, ndof: int) -> FloatArray:
@@ -502,9 +546,17 @@ def dropout_coverage(log: Sequence[OdometryEstimate], run: ClosedLoopRun, ndof: 
 
 def _dropout_loops(scenario: Scenario, seed: int, duration: float, params: PredictorParams,
                    odometry: OdometryParams, setup: Any, ideal: SimRecord,
-                   odom_run: ClosedLoopRun, shift: float = 0.0) -> dict[str, Any]:
-    """Item 5 of the module docstring (``odom_run``: item 4's loop without dropouts)."""
-    dropouts = default_dropouts(params, duration, length=DROPOUT_LOOP_LENGTH, shift=shift)
+                   odom_run: ClosedLoopRun, shift: float = 0.0,
+                   move_delay: tuple[float, float] | None = None) -> dict[str, Any]:
+    """Item 5 of the module docstring (``odom_run``: item 4's loop without dropouts).
+
+    ``move_delay``: the dropouts start in the setpoint moves (`move_dropouts`) instead of at the
+    spread schedule's times.
+    """
+    if move_delay is None:
+        dropouts = default_dropouts(params, duration, length=DROPOUT_LOOP_LENGTH, shift=shift)
+    else:
+        dropouts = move_dropouts(scenario, params, seed, duration, move_delay)
     log: list[OdometryEstimate] = []
     odom_with = _odometry_loop(scenario, seed, duration, params, odometry, dropouts, log)
     runs = {'lf_odom': (odom_with, odom_run),
@@ -525,7 +577,8 @@ def _dropout_loops(scenario: Scenario, seed: int, duration: float, params: Predi
 
 def _loop_runs(scenario_name: str, seed: int, duration: float, params: PredictorParams,
                odometry: OdometryParams, setup: Any, warmup: float,
-               dropout_loops: bool = False, dropout_shift: float = 0.0) -> dict[str, Any]:
+               dropout_loops: bool = False, dropout_shift: float = 0.0,
+               move_delay: tuple[float, float] | None = None) -> dict[str, Any]:
     """Items 4 and (``dropout_loops``) 5 of the module docstring."""
     scenario = load_scenario(scenario_name)
     h = params.sample_time
@@ -546,7 +599,7 @@ def _loop_runs(scenario_name: str, seed: int, duration: float, params: Predictor
         out[name]['stability_reason'] = verdict.get('reason')
     if dropout_loops:
         out['dropout_loops'] = _dropout_loops(scenario, seed, duration, params, odometry, setup,
-                                              ideal, odom_run, dropout_shift)
+                                              ideal, odom_run, dropout_shift, move_delay)
     return out
 
 
@@ -556,12 +609,14 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                       dropouts: Sequence[tuple[float, float]] | None = None,
                       loops: bool = True, dead_reckoning: bool = True,
                       tracking: bool = True, dropout_loops: bool = False,
-                      dropout_spread: float = 0.0) -> dict[str, Any]:
+                      dropout_spread: float = 0.0,
+                      dropout_moves: tuple[float, float] | None = None) -> dict[str, Any]:
     """Every measurement of the module docstring on one (scenario, seed); JSON-ready.
 
     ``dropout_spread`` [s]: the default dropouts of items 3 and 5 are delayed by the seed's
     U(0, spread) draw (`dropout_shift_for_seed`; given ``dropouts`` of item 3 are not moved);
-    0: at the same times in every seed.
+    0: at the same times in every seed. ``dropout_moves`` (low, high) [s]: item 5's dropouts
+    start that long after each setpoint change instead (`move_dropouts`; item 3 unchanged).
     """
     begin_time = time.monotonic()
     scenario = load_scenario(scenario_name)
@@ -595,6 +650,7 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                            'twist_bandwidth': odometry.twist_bandwidth,
                            'dead_reckoning_timeout': odometry.dead_reckoning_timeout,
                            'dropout_shift': shift,
+                           'dropout_moves': None if dropout_moves is None else list(dropout_moves),
                            'recording': recording.provenance.to_dict()}
     if tracking:
         seen = recording_seen_truth(recording, params.sample_time)
@@ -603,7 +659,8 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
         out['dead_reckoning'] = _dropout_run(params, odometry, data, dropouts, setup)
     if loops and scenario.controller.enabled:
         out['closed_loop'] = _loop_runs(scenario_name, seed, total, params, odometry, setup,
-                                        float(data['t'][begin]), dropout_loops, shift)
+                                        float(data['t'][begin]), dropout_loops, shift,
+                                        dropout_moves)
     out['seconds'] = round(time.monotonic() - begin_time, 1)
     return out
 
@@ -626,6 +683,7 @@ class OdometrySpec:
     dropout_loops: bool = False
     odometry_overrides: dict[str, Any] = field(default_factory=dict)
     dropout_spread: float = 0.0
+    dropout_moves: tuple[float, float] | None = None
 
     @property
     def key(self) -> str:
@@ -638,7 +696,8 @@ class OdometrySpec:
                      self.twist_cov_scale, self.twist_bandwidth, self.pose_lag_scale, self.loops,
                      self.dead_reckoning, self.tracking,
                      tuple(sorted(self.params_overrides.items())), self.dropout_loops,
-                     tuple(sorted(self.odometry_overrides.items())), self.dropout_spread))
+                     tuple(sorted(self.odometry_overrides.items())), self.dropout_spread,
+                     self.dropout_moves))
 
 
 def run_spec(spec: OdometrySpec) -> dict[str, Any]:
@@ -660,7 +719,8 @@ def run_spec(spec: OdometrySpec) -> dict[str, Any]:
                              params_overrides=dict(spec.params_overrides) or None,
                              loops=spec.loops, dead_reckoning=spec.dead_reckoning,
                              tracking=spec.tracking, dropout_loops=spec.dropout_loops,
-                             dropout_spread=spec.dropout_spread)
+                             dropout_spread=spec.dropout_spread,
+                             dropout_moves=spec.dropout_moves)
 
 
 def run_specs(specs: Sequence[OdometrySpec], scheduler: str | None = None,
@@ -1003,6 +1063,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                      'draw, so the seeds sample their phase against the setpoint schedule '
                      '(default 0: the same times in every seed, as before the forty-seventh '
                      'session)')
+    run.add_argument('--dropout-moves', nargs=2, type=float, default=None,
+                     metavar=('LOW', 'HIGH'),
+                     help="item 5's dropouts start U(LOW, HIGH) s after each setpoint change "
+                     '(scenarios with a setpoint schedule; the seed draws the delays) instead '
+                     'of at the spread schedule: the dead reckoning in moves')
     run.add_argument('--odometry', nargs='*', default=[], metavar='FIELD=VALUE',
                      help='OdometryParams overrides, e.g. dead_reckoner=model (YAML values)')
     run.add_argument('--param', action='append', default=[], metavar='FIELD=VALUE',
@@ -1024,6 +1089,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not (math.isfinite(args.dropout_spread) and args.dropout_spread >= 0.0):
             parser.error(f'--dropout-spread must be a finite number >= 0 [s], got '
                          f'{args.dropout_spread}')
+        moves = None if args.dropout_moves is None else tuple(args.dropout_moves)
+        if moves is not None and not (all(math.isfinite(v) for v in moves)
+                                      and 0.0 <= moves[0] <= moves[1]):
+            parser.error(f'--dropout-moves takes LOW HIGH with 0 <= LOW <= HIGH [s], got '
+                         f'{args.dropout_moves}')
+        if moves is not None:
+            for name in args.scenarios:
+                if not load_scenario(name).controller.setpoint_schedule:
+                    parser.error(f'--dropout-moves: scenario {name} has no setpoint schedule')
         overrides = _odometry_overrides(args.odometry)
         if overrides is None:
             parser.error(f'--odometry takes FIELD=VALUE with FIELD an OdometryParams field and '
@@ -1036,7 +1110,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                               bandwidth, lag, not args.no_loops and seed in loop_seeds,
                               not args.no_dead_reckoning, not args.no_tracking,
                               params_overrides=params, dropout_loops=args.dropout_loops,
-                              odometry_overrides=overrides, dropout_spread=args.dropout_spread)
+                              odometry_overrides=overrides, dropout_spread=args.dropout_spread,
+                              dropout_moves=moves)
                  for bandwidth in args.twist_bandwidth for lag in args.pose_lag_scale
                  for s in args.scenarios for seed in args.seeds]
         results = run_specs(specs, args.scheduler, args.workers)

@@ -24,6 +24,7 @@ from lf_predictor_ros.benchmark.odometry_bench import (
     dropout_shift_for_seed,
     dropout_trust_table,
     integrated_autocorrelation_time,
+    move_dropouts,
     pid_velocity,
     report,
     run_odometry_case,
@@ -32,7 +33,7 @@ from lf_predictor_ros.benchmark.odometry_bench import (
 from lf_predictor_ros.benchmark.suite import schedule_shift_for_seed
 from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
-from sim_ros.simulation import ClosedLoopRun, SimRecord
+from sim_ros.simulation import ClosedLoopRun, SimRecord, load_scenario
 
 
 def test_autocorrelation_time_white_and_ar1() -> None:
@@ -115,6 +116,39 @@ def test_dropout_shift_is_the_seeds_own_draw() -> None:
     assert dropout_shift_for_seed(11, 300.0) == shifts[0]
     assert dropout_shift_for_seed(11, 300.0) != schedule_shift_for_seed(11, 300.0)
     assert dropout_shift_for_seed(11, 0.0) == 0.0
+
+
+def test_move_dropouts_start_in_each_setpoint_move() -> None:
+    """rao_supply's six rows (600 … 3100 s): one dropout each, U(20, 60) s into the move."""
+    scenario = load_scenario('rao_supply')
+    params = PredictorParams(ndof=3)
+    rows = [row[0] for row in scenario.controller.setpoint_schedule]
+    drops = move_dropouts(scenario, params, 11, 3600.0, (20.0, 60.0))
+    assert [length for _, length in drops] == [60.0] * len(rows)
+    delays = [a - t for (a, _), t in zip(drops, rows, strict=True)]
+    assert all(20.0 <= d <= 60.0 for d in delays) and len(set(delays)) == len(rows)
+    assert move_dropouts(scenario, params, 11, 3600.0, (20.0, 60.0)) == drops
+    assert move_dropouts(scenario, params, 12, 3600.0, (20.0, 60.0)) != drops
+    fixed = move_dropouts(scenario, params, 11, 3600.0, (30.0, 30.0))
+    assert [a for a, _ in fixed] == [t + 30.0 for t in rows]
+    # the run's end: the 3100 s row's dropout plus 120 s after it needs 3100 + 30 + 180 s
+    assert [a for a, _ in move_dropouts(scenario, params, 11, 3300.0, (30.0, 30.0))] == \
+        [t + 30.0 for t in rows[:-1]]
+    # a row before the first training (360 s) is skipped; rows too close: the later skipped
+    early = dataclasses.replace(scenario, controller=dataclasses.replace(
+        scenario.controller, setpoint_schedule=((100.0, 1.0, 0.0, 0.0), (600.0, 5.0, 0.0, 0.0),
+                                                (700.0, 9.0, 0.0, 0.0),
+                                                (760.0, 9.0, 9.0, 0.0))))
+    assert move_dropouts(early, params, 11, 3600.0, (10.0, 10.0)) == ((610.0, 60.0),
+                                                                      (770.0, 60.0))
+    holding = load_scenario('supply_closed_loop')
+    with pytest.raises(ValueError, match='no setpoint schedule'):
+        move_dropouts(holding, params, 11, 3600.0, (20.0, 60.0))
+    for bad in ((60.0, 20.0), (-1.0, 5.0), (0.0, math.nan)):
+        with pytest.raises(ValueError, match='move delay'):
+            move_dropouts(scenario, params, 11, 3600.0, bad)
+    with pytest.raises(ValueError, match='leaves room'):
+        move_dropouts(scenario, params, 11, 700.0, (20.0, 60.0))
 
 
 def test_smoke_short_onedof_run() -> None:
@@ -267,6 +301,18 @@ def test_param_reaches_every_case_and_a_bad_one_stops_before_a_run(
             odometry_bench.main(['run', '--seeds', '3', '--dropout-spread', bad_spread, '-o',
                                  str(out)])
     assert len(seen) == 3 + len(odometry_bench.DEFAULT_SCENARIOS)
+    assert odometry_bench.main(['run', '--scenarios', 'rao_supply', '--seeds', '3',
+                                '--dropout-loops', '--dropout-moves', '20', '60', '-o',
+                                str(out)]) == 0
+    assert seen[-1].dropout_moves == (20.0, 60.0) and seen[-1].key != seen[-2].key
+    for bad_moves in (['60', '20'], ['-1', '5'], ['nan', '5']):
+        with pytest.raises(SystemExit):
+            odometry_bench.main(['run', '--scenarios', 'rao_supply', '--seeds', '3',
+                                 '--dropout-moves', *bad_moves, '-o', str(out)])
+    with pytest.raises(SystemExit):  # no setpoint schedule
+        odometry_bench.main(['run', '--scenarios', 'supply_closed_loop', '--seeds', '3',
+                             '--dropout-moves', '20', '60', '-o', str(out)])
+    assert len(seen) == 4 + len(odometry_bench.DEFAULT_SCENARIOS)
 
 
 def test_true_twist_is_the_body_velocity_across_the_heading_wrap() -> None:

@@ -1,13 +1,16 @@
 """Exploratory: rao_supply's dropout loops with the dead reckoner's model patched (an oracle).
 
-    OMP_NUM_THREADS=1 python docs/scripts/dead_reckoning_oracle_probe.py VARIANT OUT.json SEED …
+    OMP_NUM_THREADS=1 python docs/scripts/dead_reckoning_oracle_probe.py VARIANT OUT.json SEED … \
+        [--moves LOW HIGH] [--odometry FIELD=VALUE …]
 
 VARIANT: ``true_damping`` (the fit's damping replaced by the simulator's supply vessel, 1/T =
 1/87.8, 1/44.5, 1/11.6 s), ``floorT`` (the least damping rate 1/T instead of 1/1000 s, e.g.
 ``floor200``) or ``marginK`` (the dead reckoner's force clip at K × the window's largest force
 instead of 2, e.g. ``margin1e9``: no clip). Then `odometry_bench run` of rao_supply on the
 development SEEDs, 3600 s, lf_odom's loops through 3 × 60 s dropouts with a 500 s phase spread,
-one worker in this process (so the patch holds). Upper bounds and checks, never settings.
+one worker in this process (so the patch holds); ``--moves``: the dropouts in the setpoint moves
+instead (`odometry_bench --dropout-moves`), ``--odometry``: passed on. Upper bounds and checks,
+never settings.
 """
 from __future__ import annotations
 
@@ -48,12 +51,21 @@ def main(argv: list[str]) -> int:
     if len(argv) < 3:
         print(__doc__)
         return 2
-    variant, out, *seeds = argv
+    variant, out, *rest = argv
+    extra: list[str] = []
+    if '--odometry' in rest:
+        at = rest.index('--odometry')
+        rest, extra = rest[:at], rest[at:]
+    schedule = ['--dropout-spread', '500']
+    if '--moves' in rest:
+        at = rest.index('--moves')
+        schedule = ['--dropout-moves', *rest[at + 1:at + 3]]
+        rest = rest[:at] + rest[at + 3:]
     patch(variant)
-    return odometry_bench.main(['run', '--scenarios', 'rao_supply', '--seeds', *seeds,
+    return odometry_bench.main(['run', '--scenarios', 'rao_supply', '--seeds', *rest,
                                 '--duration', '3600', '--no-tracking', '--no-dead-reckoning',
-                                '--dropout-loops', '--dropout-spread', '500', '--workers', '1',
-                                '--scheduler', 'none', '-o', out])
+                                '--dropout-loops', *schedule, '--workers', '1',
+                                '--scheduler', 'none', *extra, '-o', out])
 
 
 if __name__ == '__main__':

@@ -1,10 +1,11 @@
 """Exploratory: lf_odom's dead reckoning against the truth through each dropout of one loop.
 
     OMP_NUM_THREADS=1 python docs/scripts/move_dropout_probe.py rao_supply:777 \
-        [--spread 500] [--odometry dead_reckoning_motion_balance=true]
+        [--spread 500 | --moves 10 60] [--odometry dead_reckoning_motion_balance=true]
 
 Runs `odometry_bench`'s lf_odom dropout loop (the predictor's pose to the PID, the D term from
-lf_odom's twist, the commands fed; 3600 s, the dropouts of ``--spread``) once and prints, every
+lf_odom's twist, the commands fed; 3600 s, the dropouts of ``--spread``, or of ``--moves``:
+`odometry_bench.move_dropouts`, in the setpoint moves) once and prints, every
 10 s of each dropout, the dead-reckoned pose, the true LF pose, the dead-reckoned twist and the
 published pose std, and the dead reckoner in use; before each dropout, what its environment
 balance starts from (the last twist, its low-passed value, the published twist std).
@@ -42,6 +43,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('cases', nargs='+', help='SCENARIO:SEED (development seeds)')
     parser.add_argument('--spread', type=float, default=500.0, help='--dropout-spread [s]')
+    parser.add_argument('--moves', nargs=2, type=float, default=None, metavar=('LOW', 'HIGH'),
+                        help='dropouts U(LOW, HIGH) s into each setpoint move instead')
     parser.add_argument('--odometry', nargs='*', default=[], help='OdometryParams FIELD=VALUE')
     args = parser.parse_args(argv)
     try:
@@ -55,8 +58,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         scenario = load_scenario(scenario_name)
         params = predictor_params(scenario, None)
         shift = ob.dropout_shift_for_seed(seed, args.spread)
-        dropouts = ob.default_dropouts(params, DURATION, length=ob.DROPOUT_LOOP_LENGTH,
-                                       shift=shift)
+        if args.moves is None:
+            dropouts = ob.default_dropouts(params, DURATION, length=ob.DROPOUT_LOOP_LENGTH,
+                                           shift=shift)
+        else:
+            dropouts = ob.move_dropouts(scenario, params, seed, DURATION, tuple(args.moves))
         log: list[OdometryEstimate] = []
         original = LfOdometry._balanced_model
 
@@ -69,6 +75,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 print(f'  balance at t={last.stamp:.0f}: twist {np.round(last.twist, 3)}, '
                       f'low-passed {None if slow is None else np.round(slow, 3)}, published '
                       f'twist std {np.round(std, 3)}')
+            memory = odometry.memory
+            if memory is not None and memory.model is not None:
+                model = memory.model
+                print(f'  model: 1/damping rate {np.round(-1.0 / np.diag(model.damping), 1)} s, '
+                      f'thrust gain {np.diag(model.input_gain)} (known: {memory.known_gain})')
             return original(odometry)
 
         LfOdometry._balanced_model = traced  # type: ignore[method-assign, assignment]

@@ -431,7 +431,8 @@ def drift_test(model: LfDynamics | None, reckoner: DeadReckoner, targets: ArrayL
 
 def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: float,
                         horizon: float, input_gain: ArrayLike | None = None,
-                        targets_filter: FloatArray | None = None) -> VesselMemory:
+                        targets_filter: FloatArray | None = None,
+                        force_margin: float = FORCE_MARGIN) -> VesselMemory:
     """Fit the LF dynamics on the older part of a window; pick the dead reckoner on the newest.
 
     The fit uses the oldest 1 − ``VALIDATION_FRACTION`` of the window; each dead reckoner is
@@ -444,8 +445,12 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     hold kept 0.95 rad; docs/BENCHMARKS.md, issue 14).
 
     ``input_gain``: a known thrust gain (`fit_lf_dynamics`). ``targets_filter``: the SOS the
-    targets were zero-phase filtered with (`paired_forces`).
+    targets were zero-phase filtered with (`paired_forces`). ``force_margin``: the memory's
+    ``force_limit`` is this multiple of the window's largest force per DOF; 0: no limit.
     """
+    if not (math.isfinite(force_margin) and (force_margin == 0.0 or force_margin >= 1.0)):
+        raise ValueError(f'force_margin must be 0 (no limit) or a finite number >= 1, got '
+                         f'{force_margin!r}')
     eta_t = as_series(targets, 'targets')
     tau = paired_forces(forces, targets_filter)
     split, test_horizon = _held_out_split(eta_t.shape[0], sample_time, horizon)
@@ -480,7 +485,8 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
             chosen = 'hold' if chosen == 'model' else chosen
     accel = np.gradient(body_velocity(eta_t, sample_time), sample_time, axis=0)
     largest = np.max(np.abs(tau), axis=0)
-    force_limit = np.where(largest > 0.0, FORCE_MARGIN * largest, np.inf)
+    force_limit = np.where((largest > 0.0) & (force_margin > 0.0), force_margin * largest,
+                           np.inf)
     return VesselMemory(model, chosen, curves[chosen], rms, message, np.std(accel, axis=0),
                         force_limit, dict(curves))
 

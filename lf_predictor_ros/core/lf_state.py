@@ -38,7 +38,7 @@ from lf_predictor_ros.core.controller_gains import (
     median_implied_inertia,
 )
 from lf_predictor_ros.core.estimator import EstimatorStatus
-from lf_predictor_ros.core.lf_dynamics import VesselMemory, learn_vessel_memory
+from lf_predictor_ros.core.lf_dynamics import FORCE_MARGIN, VesselMemory, learn_vessel_memory
 from lf_predictor_ros.core.odometry import (
     Covariances,
     EstimateSource,
@@ -269,7 +269,8 @@ class LfStateEstimator:
                 odometry.params.twist_likelihood_fit, odometry.params.twist_attenuation,
                 odometry.params.pose_heading_speed_lag,
                 odometry.params.controller_read_block_time,
-                odometry.params.controller_read_earth_frame)
+                odometry.params.controller_read_earth_frame,
+                odometry.params.dead_reckoning_force_margin)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -303,7 +304,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            twin_fit: bool = False, twist_cutoff: float = 0.0, pose_cutoff: float = 0.0,
            twist_likelihood: bool = False, twist_attenuation: bool = False,
            heading_speed: bool = False, controller_block_time: float = 0.0,
-           controller_earth_frame: bool = False) -> Learned:
+           controller_earth_frame: bool = False,
+           force_margin: float = FORCE_MARGIN) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -328,7 +330,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     targets' or with ``reference`` the narrow notch's, took below the cutoff;
     ``heading_speed``: the heading's lag part also from the horizontal speed;
     ``controller_block_time``, ``controller_earth_frame``: how the controller is read,
-    `implied_input_gain`'s ``block_time`` and ``earth_highpass``).
+    `implied_input_gain`'s ``block_time`` and ``earth_highpass``; ``force_margin``: the
+    memory's force limit, `learn_vessel_memory`'s).
     The read returned is the one in force afterwards: this read if it succeeded,
     ``remembered`` if it failed for lack of data, else None.
     """
@@ -352,7 +355,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
         input_gain, source = in_force.gain, 'controller'
     try:
         memory: VesselMemory | None = learn_vessel_memory(values, forces, params.sample_time,
-                                                          horizon, input_gain, sos)
+                                                          horizon, input_gain, sos,
+                                                          force_margin)
     except ValueError:
         memory = None
     if memory is not None and (source or note):

@@ -249,6 +249,17 @@ class OdometryParams:
         'and the twist change through the same two cascaded low-passes '
         '(dead_reckoning_force_time), so the force that accelerated a setpoint move is not taken '
         'for environment (lf_dynamics.balanced_at with accel); false: balanced at rest', ''))
+    dead_reckoning_force_margin: float = field(default=2.0, metadata=field_doc(
+        'the thrust the odometry believes (dead reckoning, twist prediction, environment '
+        'balance) is clipped per DOF to this multiple of the largest thrust in the vessel '
+        "memory's window, so a corrupt thrust message cannot fling the estimate away; 0: no clip "
+        '(a DP turn can command several times the yaw moment of the station keeping before it)',
+        '-'))
+    dead_reckoning_moving_twist: bool = field(default=False, metadata=field_doc(
+        'in the DOFs that are moving when a dead reckoning starts (low-passed twist > 2 holding '
+        'std, as dead_reckoning_motion_balance), it starts from the current twist instead of '
+        'the one low-passed over dead_reckoning_velocity_time: in a setpoint move that average '
+        'lags the speed; false: the low-passed twist in every DOF', ''))
     twist_model: bool = field(default=False, metadata=field_doc(
         "the twist Kalman filter predicts with the vessel memory's model whenever its thrust "
         'gain is given or implied by the controller (else only when the drift test chose it)',
@@ -324,6 +335,11 @@ class OdometryParams:
                 self.twist_reference_cutoff >= 0.0):
             raise ValueError('twist_reference_cutoff must be a finite number >= 0 (× ω0; 0: the '
                              f'reference velocity as it is), got {self.twist_reference_cutoff}')
+        margin = self.dead_reckoning_force_margin
+        if not (isinstance(margin, (int, float)) and math.isfinite(margin) and
+                (margin == 0.0 or margin >= 1.0)):
+            raise ValueError('dead_reckoning_force_margin must be 0 (no clip) or a finite number '
+                             f">= 1 (× the window's largest thrust), got {margin!r}")
         if not (math.isfinite(self.dead_reckoning_velocity_time) and
                 self.dead_reckoning_velocity_time > 0.0):
             raise ValueError('dead_reckoning_velocity_time must be a positive number of seconds, '
@@ -575,7 +591,7 @@ class LfOdometry:
         applied = clipped[:self.ndof]
         self._slow_force = applied.copy() if self._slow_force is None else \
             low_pass_step(self._slow_force, applied, self._force_rate())
-        if self.params.dead_reckoning_motion_balance:
+        if self.params.dead_reckoning_motion_balance or self.params.dead_reckoning_moving_twist:
             self._track_balance(twist)
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
                                             self._pose_covariance(source, lag, excess))
@@ -608,7 +624,7 @@ class LfOdometry:
             self._dr_eta0 = self._require_state()[:self.ndof].copy()
             self._dr_cov0 = (self._last_output.pose_cov.copy(), self._last_output.twist_cov.copy())
             if self._slow_twist is not None and self._x is not None:
-                self._x = np.concatenate([self._x[:self.ndof], self._slow_twist])
+                self._x = np.concatenate([self._x[:self.ndof], self._start_twist(self._x)])
         elapsed = t - self._last_fix
         if elapsed > self.params.dead_reckoning_timeout:
             if self._mode != 'lost':
@@ -839,7 +855,7 @@ class LfOdometry:
         heading = float(x[2]) if self.ndof == 3 else 0.0
         times = np.array(self.params.dead_reckoning_force_time[:self.ndof])
         dofs = times > 0.0
-        moving = self._moving_dofs(dofs)
+        moving = self._moving_dofs(dofs) if self.params.dead_reckoning_motion_balance else None
         if moving is not None and self._twist_once is not None and \
                 self._balance_twice is not None:
             n = self.ndof
@@ -864,7 +880,8 @@ class LfOdometry:
         it cost 3–10 % in dropouts (docs/BENCHMARKS.md, forty-eighth session); in a setpoint
         move the move's acceleration must not pass for environment.
         """
-        if not self.params.dead_reckoning_motion_balance or self._twist_once is None or \
+        if not (self.params.dead_reckoning_motion_balance or
+                self.params.dead_reckoning_moving_twist) or self._twist_once is None or \
                 self._last_output is None:
             return None
         n = self.ndof
@@ -878,6 +895,20 @@ class LfOdometry:
         if n == 3:
             moving[:2] = bool(moving[0] or moving[1])
         return moving if bool(np.any(moving)) else None
+
+    def _start_twist(self, state: FloatArray) -> FloatArray:
+        """The twist a dead reckoning starts from (a new array).
+
+        The low-passed twist; with ``dead_reckoning_moving_twist`` the current one of ``state``
+        in the DOFs that are moving (`_moving_dofs`).
+        """
+        assert self._slow_twist is not None
+        n = self.ndof
+        moving = self._moving_dofs(np.ones(n, dtype=bool)) \
+            if self.params.dead_reckoning_moving_twist else None
+        if moving is None:
+            return self._slow_twist.copy()
+        return np.where(moving, state[n:], self._slow_twist)
 
     def _track_balance(self, twist: FloatArray) -> None:
         """``dead_reckoning_motion_balance``: [thrust, twist] through one and two low-passes.

@@ -123,6 +123,24 @@ def test_learned_model_wins_on_an_excited_vessel_and_drifts_little() -> None:
     assert np.all(memory.drift.variance(120.0) >= memory.drift.variance(30.0))
 
 
+def test_force_limit_is_the_margin_times_the_windows_largest_force() -> None:
+    """``force_margin``: the memory believes forces up to that × the window's largest; 0: all."""
+    poses, forces = _vessel_run(2)
+    largest = np.max(np.abs(forces), axis=0)
+    default = learn_vessel_memory(poses, forces, H, horizon=120.0)
+    np.testing.assert_allclose(default.force_limit, 2.0 * largest)  # FORCE_MARGIN
+    wide = learn_vessel_memory(poses, forces, H, horizon=120.0, force_margin=10.0)
+    np.testing.assert_allclose(wide.force_limit, 10.0 * largest)
+    unclipped = learn_vessel_memory(poses, forces, H, horizon=120.0, force_margin=0.0)
+    assert np.all(np.isinf(unclipped.force_limit))
+    turn = np.array([0.0, 0.0, 5.0 * largest[2]])  # a turn's moment, 5 × the window's
+    assert default.plausible_force(turn)[2] == pytest.approx(2.0 * largest[2])
+    assert unclipped.plausible_force(turn)[2] == turn[2]
+    for bad in (0.5, -1.0, math.nan, math.inf):
+        with pytest.raises(ValueError, match='force_margin'):
+            learn_vessel_memory(poses, forces, H, horizon=120.0, force_margin=bad)
+
+
 def test_thrust_that_does_not_move_the_vessel_is_not_trusted() -> None:
     """Forces unrelated to the motion (e.g. wrong channel): the model must not be chosen."""
     poses, _ = _vessel_run(3)

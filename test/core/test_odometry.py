@@ -873,12 +873,52 @@ def test_dead_reckoning_in_a_move_with_the_motion_balance(motion_balance: bool) 
         assert error > 0.25 * travelled  # balanced at rest: measured 3.8 m
 
 
-def test_the_motion_balance_leaves_a_vessel_at_rest_balanced_at_rest() -> None:
-    """Holding station (slow twist below 2 published std) both balances dead-reckon alike.
+@pytest.mark.parametrize('moving_twist', [False, True])
+def test_dead_reckoning_in_a_move_starts_from_the_current_twist(moving_twist: bool) -> None:
+    """``dead_reckoning_moving_twist``: a move's dead reckoning starts from its current speed.
+
+    The vessel of the motion-balance test, fixes stopping 60 s into the move (true speed
+    0.137 m/s one step later, still accelerating). Its twist low-passed over the default 30 s
+    lags the speed (measured 0.086 m/s); the Kalman filter's current twist is within 10 % of it
+    (measured 0.137 m/s).
+    """
+    damping, gain, environment = 0.01, 1e-6, -1e3
+    times = np.arange(0.0, 162.0)
+    thrust = np.where(times < 100.0, 1e3, 4e3)
+    north, speed = _surge_move(times, thrust, damping, gain, environment)
+    model = LfDynamics(np.diag([-damping, -0.01, -0.01]), np.diag([gain, 1e-6, 1e-9]),
+                       np.zeros((3, 3)), np.full(3, 1e-4))
+    horizons = np.arange(1.0, 61.0)
+    ms = np.tile((horizons / 60.0) ** 2, (3, 1)).T
+    memory = VesselMemory(model, 'model', DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test',
+                          np.full(3, 1e-3), dp_controlled=True)
+    odo = LfOdometry(3, H, OdometryParams(dead_reckoner='model',
+                                          dead_reckoning_moving_twist=moving_twist,
+                                          prior_pose_std=(1e-3, 1e-3, 1e-4)))
+    odo._memory = memory  # noqa: SLF001 - a known vessel memory
+    stop = 160
+    for k in range(stop + 1):
+        odo.track(float(times[k]), np.array([north[k], 0.0, 0.0]), np.array([thrust[k], 0, 0]))
+    out = odo.coast(float(times[stop + 1]), np.array([thrust[stop + 1], 0.0, 0.0]))
+    assert out is not None and out.mode == 'dead_reckoning'
+    start = out.twist[0]
+    print(f'moving twist {moving_twist}: true speed {speed[stop + 1]:.3f} m/s, dead reckoning '
+          f'from {start:.3f} m/s')
+    assert speed[stop + 1] > 0.12
+    if moving_twist:
+        assert abs(start - speed[stop + 1]) < 0.1 * speed[stop + 1]
+    else:
+        assert start < 0.7 * speed[stop + 1]
+
+
+@pytest.mark.parametrize('option', ['dead_reckoning_motion_balance',
+                                    'dead_reckoning_moving_twist'])
+def test_the_motion_options_leave_a_vessel_at_rest_as_it_was(option: str) -> None:
+    """Holding station (slow twist below 2 holding std) either motion option changes nothing.
 
     Poses with a 0.05 m, 0.6 rad/s wave wiggle and a steady thrust: the twist filter sees the
     wave-band velocity, the slow twist stays near 0, so no DOF counts as moving and the dead
-    reckoning is the one balanced at rest to the last bit.
+    reckoning is the one balanced at rest, from the low-passed twist, to the last bit.
     """
     model = LfDynamics(np.diag([-0.01, -0.01, -0.01]), np.diag([1e-6, 1e-6, 1e-9]),
                        np.zeros((3, 3)), np.full(3, 1e-4))
@@ -888,9 +928,8 @@ def test_the_motion_balance_leaves_a_vessel_at_rest_balanced_at_rest() -> None:
                           np.full(3, 1e-3), dp_controlled=True)
     held = np.array([2e3, -1e3, 0.0])
     poses = []
-    for motion_balance in (False, True):
-        odo = LfOdometry(3, H, OdometryParams(dead_reckoner='model',
-                                              dead_reckoning_motion_balance=motion_balance))
+    for enabled in (False, True):
+        odo = LfOdometry(3, H, OdometryParams(dead_reckoner='model', **{option: enabled}))
         odo._memory = memory  # noqa: SLF001 - a known vessel memory
         for k in range(300):
             wiggle = 0.05 * math.sin(0.6 * k)
@@ -900,6 +939,14 @@ def test_the_motion_balance_leaves_a_vessel_at_rest_balanced_at_rest() -> None:
             assert out is not None
         poses.append(out.pose)
     np.testing.assert_array_equal(poses[0], poses[1])
+
+
+@pytest.mark.parametrize('bad', [0.5, -1.0, math.nan, math.inf])
+def test_dead_reckoning_force_margin_is_checked(bad: float) -> None:
+    with pytest.raises(ValueError, match='dead_reckoning_force_margin'):
+        OdometryParams(dead_reckoning_force_margin=bad)
+    assert OdometryParams().dead_reckoning_force_margin == 2.0
+    assert OdometryParams(dead_reckoning_force_margin=0.0).dead_reckoning_force_margin == 0.0
 
 
 @pytest.mark.parametrize('bad', [(30.0, 30.0), (30.0, -1.0, 0.0), (30.0, math.nan, 0.0)])

@@ -367,8 +367,9 @@ class VesselMemory:
         message: why a reckoner was chosen or the model refused.
         accel_std: std of the LF acceleration ν̇ of the targets per DOF [m/s², rad/s²] (the
             process noise of a constant-velocity model).
-        force_limit: largest force per DOF the model is used with (``FORCE_MARGIN`` × the
-            largest in the window; inf if the window had none) [N, N, N·m].
+        force_limit: largest force per DOF the model is used with (`learn_vessel_memory`'s
+            ``force_margin``, by default ``FORCE_MARGIN``, × the largest in the window; inf if
+            the window had none or the margin is 0) [N, N, N·m].
         drift_curves: the drift curve of every tested reckoner (``curve``).
         known_gain: where the thrust gain 1/M_ii of a known-gain fit came from: '' (fitted),
             'vessel_inertia' (given) or 'controller' (`core.controller_gains`).

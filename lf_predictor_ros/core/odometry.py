@@ -249,17 +249,19 @@ class OdometryParams:
         'and the twist change through the same two cascaded low-passes '
         '(dead_reckoning_force_time), so the force that accelerated a setpoint move is not taken '
         'for environment (lf_dynamics.balanced_at with accel); false: balanced at rest', ''))
-    dead_reckoning_force_margin: float = field(default=2.0, metadata=field_doc(
+    dead_reckoning_force_margin: float = field(default=0.0, metadata=field_doc(
         'the thrust the odometry believes (dead reckoning, twist prediction, environment '
         'balance) is clipped per DOF to this multiple of the largest thrust in the vessel '
-        "memory's window, so a corrupt thrust message cannot fling the estimate away; 0: no clip "
-        '(a DP turn can command several times the yaw moment of the station keeping before it)',
-        '-'))
-    dead_reckoning_moving_twist: bool = field(default=False, metadata=field_doc(
+        "memory's window (against corrupt thrust messages); 0: no clip. A DP turn commands up "
+        'to 26x the yaw moment of the station keeping before it: clipped at 2x, the dead '
+        'reckoning lagged the turn and loops were lost (docs/BENCHMARKS.md, forty-ninth '
+        'session); an absurd thrust still cannot make the state non-finite', '-'))
+    dead_reckoning_moving_twist: bool = field(default=True, metadata=field_doc(
         'in the DOFs that are moving when a dead reckoning starts (low-passed twist > 2 holding '
         'std, as dead_reckoning_motion_balance), it starts from the current twist instead of '
         'the one low-passed over dead_reckoning_velocity_time: in a setpoint move that average '
-        'lags the speed; false: the low-passed twist in every DOF', ''))
+        'lags the speed; false: the low-passed twist in every DOF (docs/BENCHMARKS.md, '
+        'forty-ninth session)', ''))
     twist_model: bool = field(default=False, metadata=field_doc(
         "the twist Kalman filter predicts with the vessel memory's model whenever its thrust "
         'gain is given or implied by the controller (else only when the drift test chose it)',

@@ -770,6 +770,33 @@ def test_absurd_thrust_never_makes_the_state_non_finite() -> None:
     assert odo.is_late(50.0) and not odo.is_late(70.0)
 
 
+def test_absurd_thrust_without_a_clip_keeps_every_output_finite() -> None:
+    """No force limit (the default ``dead_reckoning_force_margin: 0``): outputs stay finite.
+
+    An absurd thrust while tracking and then while dead reckoning leaves every published value
+    finite.
+    """
+    from lf_predictor_ros.core.lf_dynamics import LfDynamics
+
+    odo = LfOdometry(3, H)
+    _track_line(odo, 0.0, 0.0, 50)
+    model = LfDynamics(damping=-0.01 * np.eye(3), input_gain=1e-6 * np.eye(3),
+                       bias=np.zeros((3, 3)), residual_std=np.full(3, 1e-4))
+    memory = _hold_memory()
+    odo._memory = VesselMemory(model, 'model', memory.drift, {}, 'test',  # noqa: SLF001
+                               memory.accel_std, dp_controlled=True)
+    absurd = np.array([1e308, -1e308, 1e308])
+    for k in range(50, 55):
+        out = odo.track(float(k), np.zeros(3), absurd)
+        assert out is not None and np.all(np.isfinite(out.pose))
+        assert np.all(np.isfinite(out.twist)) and np.all(np.isfinite(out.twist_cov))
+    for k in range(55, 70):
+        out = odo.coast(float(k), absurd)
+        assert out is not None and np.all(np.isfinite(out.pose))
+        assert np.all(np.isfinite(out.pose_cov)) and np.all(np.isfinite(out.twist))
+    assert odo.counters['implausible_thrust'] == 0  # nothing clipped
+
+
 def test_dead_reckoning_starts_from_the_balance_the_thrust_held() -> None:
     """Under a DP controller the window's mean environment is replaced by the balanced one.
 
@@ -945,8 +972,8 @@ def test_the_motion_options_leave_a_vessel_at_rest_as_it_was(option: str) -> Non
 def test_dead_reckoning_force_margin_is_checked(bad: float) -> None:
     with pytest.raises(ValueError, match='dead_reckoning_force_margin'):
         OdometryParams(dead_reckoning_force_margin=bad)
-    assert OdometryParams().dead_reckoning_force_margin == 2.0
-    assert OdometryParams(dead_reckoning_force_margin=0.0).dead_reckoning_force_margin == 0.0
+    assert OdometryParams().dead_reckoning_force_margin == 0.0  # no clip (forty-ninth session)
+    assert OdometryParams(dead_reckoning_force_margin=2.0).dead_reckoning_force_margin == 2.0
 
 
 @pytest.mark.parametrize('bad', [(30.0, 30.0), (30.0, -1.0, 0.0), (30.0, math.nan, 0.0)])

@@ -736,18 +736,28 @@ def test_nees_of_a_known_covariance() -> None:
         normalized_error_squared(errors, np.eye(2))
 
 
-def test_absurd_thrust_never_makes_the_state_non_finite() -> None:
-    """A finite but absurd force (1e308 N) through a learned model: counted, state stays finite."""
-    from lf_predictor_ros.core.lf_dynamics import LfDynamics
+ABSURD_THRUST = np.array([1e308, -1e308, 1e308])  # [N, N, N·m] finite, absurd
 
+
+def _odometry_on_a_model(force_limit: np.ndarray | None,
+                         dp_controlled: bool = False) -> tuple[LfOdometry, LfDynamics]:
+    """An odometry tracked 50 s on a line, then given a memory with a simple model."""
     odo = LfOdometry(3, H)
     _track_line(odo, 0.0, 0.0, 50)
     model = LfDynamics(damping=-0.01 * np.eye(3), input_gain=1e-6 * np.eye(3),
                        bias=np.zeros((3, 3)), residual_std=np.full(3, 1e-4))
     memory = _hold_memory()
+    limit = np.full(3, np.inf) if force_limit is None else force_limit
     odo._memory = VesselMemory(model, 'model', memory.drift, {}, 'test',  # noqa: SLF001
-                               memory.accel_std, np.array([2e5, 2e5, 2e7]))
-    absurd = np.array([1e308, -1e308, 1e308])
+                               memory.accel_std, limit, dp_controlled=dp_controlled)
+    return odo, model
+
+
+def test_absurd_thrust_never_makes_the_state_non_finite() -> None:
+    """A finite but absurd force (1e308 N) through a learned model: counted, state stays finite."""
+    odo, model = _odometry_on_a_model(np.array([2e5, 2e5, 2e7]))
+    memory = _hold_memory()
+    absurd = ABSURD_THRUST
     out = odo.track(50.0, np.zeros(3), absurd)
     assert out is not None and np.all(np.isfinite(out.twist))
     for k in range(51, 60):
@@ -776,16 +786,8 @@ def test_absurd_thrust_without_a_clip_keeps_every_output_finite() -> None:
     An absurd thrust while tracking and then while dead reckoning leaves every published value
     finite.
     """
-    from lf_predictor_ros.core.lf_dynamics import LfDynamics
-
-    odo = LfOdometry(3, H)
-    _track_line(odo, 0.0, 0.0, 50)
-    model = LfDynamics(damping=-0.01 * np.eye(3), input_gain=1e-6 * np.eye(3),
-                       bias=np.zeros((3, 3)), residual_std=np.full(3, 1e-4))
-    memory = _hold_memory()
-    odo._memory = VesselMemory(model, 'model', memory.drift, {}, 'test',  # noqa: SLF001
-                               memory.accel_std, dp_controlled=True)
-    absurd = np.array([1e308, -1e308, 1e308])
+    odo, _ = _odometry_on_a_model(None, dp_controlled=True)
+    absurd = ABSURD_THRUST
     for k in range(50, 55):
         out = odo.track(float(k), np.zeros(3), absurd)
         assert out is not None and np.all(np.isfinite(out.pose))
@@ -843,6 +845,23 @@ def test_dead_reckoning_starts_from_the_balance_the_thrust_held() -> None:
     assert out.pose[0] == pytest.approx(u.sum(), rel=1e-6)
 
 
+def _surge_memory(damping: float, gain: float) -> VesselMemory:
+    """A DP-controlled vessel memory with the surge model u̇ = −d u + g τ (no environment)."""
+    model = LfDynamics(np.diag([-damping, -0.01, -0.01]), np.diag([gain, 1e-6, 1e-9]),
+                       np.zeros((3, 3)), np.full(3, 1e-4))
+    horizons = np.arange(1.0, 61.0)
+    ms = np.tile((horizons / 60.0) ** 2, (3, 1)).T
+    return VesselMemory(model, 'model', DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test',
+                        np.full(3, 1e-3), dp_controlled=True)
+
+
+def _track_surge(odo: LfOdometry, times: np.ndarray, north: np.ndarray,
+                 thrust: np.ndarray) -> None:
+    """Fixes of a surge-only run at ``times`` (heading 0), with its thrust."""
+    for k in range(times.size):
+        odo.track(float(times[k]), np.array([north[k], 0.0, 0.0]), np.array([thrust[k], 0, 0]))
+
+
 def _surge_move(times: np.ndarray, thrust: np.ndarray, damping: float, gain: float,
                 environment: float) -> tuple[np.ndarray, np.ndarray]:
     """North position and surge speed of u̇ = −d u + g (τ + b) at heading 0 (exact, τ held)."""
@@ -872,20 +891,14 @@ def test_dead_reckoning_in_a_move_with_the_motion_balance(motion_balance: bool) 
     times = np.arange(0.0, 221.0)
     thrust = np.where(times < 100.0, 1e3, 4e3)
     north, _ = _surge_move(times, thrust, damping, gain, environment)
-    model = LfDynamics(np.diag([-damping, -0.01, -0.01]), np.diag([gain, 1e-6, 1e-9]),
-                       np.zeros((3, 3)), np.full(3, 1e-4))  # fitted environment: none
-    horizons = np.arange(1.0, 61.0)
-    ms = np.tile((horizons / 60.0) ** 2, (3, 1)).T
-    memory = VesselMemory(model, 'model', DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test',
-                          np.full(3, 1e-3), dp_controlled=True)
+    memory = _surge_memory(damping, gain)  # fitted environment: none
     # the DR starts from the twist itself (no start low-pass): the balance alone is compared
     odo = LfOdometry(3, H, OdometryParams(dead_reckoner='model', dead_reckoning_velocity_time=H,
                                           dead_reckoning_motion_balance=motion_balance,
                                           prior_pose_std=(1e-3, 1e-3, 1e-4)))
     odo._memory = memory  # noqa: SLF001 - a known vessel memory
     stop = 160
-    for k in range(stop + 1):
-        odo.track(float(times[k]), np.array([north[k], 0.0, 0.0]), np.array([thrust[k], 0, 0]))
+    _track_surge(odo, times[:stop + 1], north, thrust)
     for k in range(stop + 1, times.size):
         out = odo.coast(float(times[k]), np.array([thrust[k], 0.0, 0.0]))
         assert out is not None and out.mode == 'dead_reckoning'
@@ -913,19 +926,13 @@ def test_dead_reckoning_in_a_move_starts_from_the_current_twist(moving_twist: bo
     times = np.arange(0.0, 162.0)
     thrust = np.where(times < 100.0, 1e3, 4e3)
     north, speed = _surge_move(times, thrust, damping, gain, environment)
-    model = LfDynamics(np.diag([-damping, -0.01, -0.01]), np.diag([gain, 1e-6, 1e-9]),
-                       np.zeros((3, 3)), np.full(3, 1e-4))
-    horizons = np.arange(1.0, 61.0)
-    ms = np.tile((horizons / 60.0) ** 2, (3, 1)).T
-    memory = VesselMemory(model, 'model', DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test',
-                          np.full(3, 1e-3), dp_controlled=True)
+    memory = _surge_memory(damping, gain)  # fitted environment: none
     odo = LfOdometry(3, H, OdometryParams(dead_reckoner='model',
                                           dead_reckoning_moving_twist=moving_twist,
                                           prior_pose_std=(1e-3, 1e-3, 1e-4)))
     odo._memory = memory  # noqa: SLF001 - a known vessel memory
     stop = 160
-    for k in range(stop + 1):
-        odo.track(float(times[k]), np.array([north[k], 0.0, 0.0]), np.array([thrust[k], 0, 0]))
+    _track_surge(odo, times[:stop + 1], north, thrust)
     out = odo.coast(float(times[stop + 1]), np.array([thrust[stop + 1], 0.0, 0.0]))
     assert out is not None and out.mode == 'dead_reckoning'
     start = out.twist[0]

@@ -871,7 +871,7 @@ class LfOdometry:
         return balanced_at(memory.model, heading, np.zeros(self.ndof), self._slow_force, dofs)
 
     def _moving_dofs(self, dofs: NDArray[np.bool_]) -> NDArray[np.bool_] | None:
-        """``dead_reckoning_motion_balance``: the DOFs balanced against the motion, or None.
+        """The DOFs moving now (the motion balance's and the moving twist's gate), or None.
 
         A DOF is moving when its twist through one low-pass exceeds ``MOTION_BALANCE_SIGMAS``
         of the twist's holding standard deviation (the calibrated twist covariance without its
@@ -913,7 +913,7 @@ class LfOdometry:
         return np.where(moving, state[n:], self._slow_twist)
 
     def _track_balance(self, twist: FloatArray) -> None:
-        """``dead_reckoning_motion_balance``: [thrust, twist] through one and two low-passes.
+        """[thrust, twist] through one and two low-passes (motion balance; the motion gate).
 
         For a linear model ν̇ = F ν + G τ + b with b constant, the same linear filter on both
         sides keeps the equation: LP(ν̇) = F LP(ν) + G LP(τ) + b. With a first-order low-pass

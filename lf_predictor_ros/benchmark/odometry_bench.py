@@ -1089,15 +1089,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not (math.isfinite(args.dropout_spread) and args.dropout_spread >= 0.0):
             parser.error(f'--dropout-spread must be a finite number >= 0 [s], got '
                          f'{args.dropout_spread}')
-        moves = None if args.dropout_moves is None else tuple(args.dropout_moves)
-        if moves is not None and not (all(math.isfinite(v) for v in moves)
-                                      and 0.0 <= moves[0] <= moves[1]):
-            parser.error(f'--dropout-moves takes LOW HIGH with 0 <= LOW <= HIGH [s], got '
-                         f'{args.dropout_moves}')
-        if moves is not None:
-            for name in args.scenarios:
-                if not load_scenario(name).controller.setpoint_schedule:
-                    parser.error(f'--dropout-moves: scenario {name} has no setpoint schedule')
+        moves: tuple[float, float] | None = None if args.dropout_moves is None else \
+            (float(args.dropout_moves[0]), float(args.dropout_moves[1]))
+        if moves is not None:  # every scenario's schedule checked before any run
+            try:
+                for name in args.scenarios:
+                    scenario = load_scenario(name)
+                    move_dropouts(scenario, predictor_params(scenario, None),
+                                  args.seeds[0] if args.seeds else 0, args.duration, moves)
+            except ValueError as exc:
+                parser.error(f'--dropout-moves LOW HIGH: {exc}')
         overrides = _odometry_overrides(args.odometry)
         if overrides is None:
             parser.error(f'--odometry takes FIELD=VALUE with FIELD an OdometryParams field and '

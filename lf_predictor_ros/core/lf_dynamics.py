@@ -449,9 +449,7 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     targets were zero-phase filtered with (`paired_forces`). ``force_margin``: the memory's
     ``force_limit`` is this multiple of the window's largest force per DOF; 0: no limit.
     """
-    if not (math.isfinite(force_margin) and (force_margin == 0.0 or force_margin >= 1.0)):
-        raise ValueError(f'force_margin must be 0 (no limit) or a finite number >= 1, got '
-                         f'{force_margin!r}')
+    check_force_margin(force_margin, 'force_margin')
     eta_t = as_series(targets, 'targets')
     tau = paired_forces(forces, targets_filter)
     split, test_horizon = _held_out_split(eta_t.shape[0], sample_time, horizon)
@@ -614,6 +612,14 @@ def as_series(values: ArrayLike, name: str) -> FloatArray:
     if array.ndim != 2 or not np.all(np.isfinite(array)):
         raise ValueError(f'{name} must be a finite (m,) or (m, n) array, got shape {array.shape}')
     return array
+
+
+def check_force_margin(value: float, name: str) -> None:
+    """A thrust clip margin: 0 (no clip) or a finite multiple >= 1; ValueError naming ``name``."""
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and
+            (value == 0.0 or value >= 1.0)):
+        raise ValueError(f"{name} must be 0 (no clip) or a finite number >= 1 (× the window's "
+                         f'largest thrust), got {value!r}')
 
 
 def _check_sample_time(sample_time: float) -> None:

@@ -76,6 +76,7 @@ from lf_predictor_ros.core.lf_dynamics import (
     VesselMemory,
     balanced_at,
     body_velocity,
+    check_force_margin,
     dead_reckon_step,
     heading_basis,
 )
@@ -337,11 +338,7 @@ class OdometryParams:
                 self.twist_reference_cutoff >= 0.0):
             raise ValueError('twist_reference_cutoff must be a finite number >= 0 (× ω0; 0: the '
                              f'reference velocity as it is), got {self.twist_reference_cutoff}')
-        margin = self.dead_reckoning_force_margin
-        if not (isinstance(margin, (int, float)) and math.isfinite(margin) and
-                (margin == 0.0 or margin >= 1.0)):
-            raise ValueError('dead_reckoning_force_margin must be 0 (no clip) or a finite number '
-                             f">= 1 (× the window's largest thrust), got {margin!r}")
+        check_force_margin(self.dead_reckoning_force_margin, 'dead_reckoning_force_margin')
         if not (math.isfinite(self.dead_reckoning_velocity_time) and
                 self.dead_reckoning_velocity_time > 0.0):
             raise ValueError('dead_reckoning_velocity_time must be a positive number of seconds, '
@@ -882,9 +879,7 @@ class LfOdometry:
         it cost 3–10 % in dropouts (docs/BENCHMARKS.md, forty-eighth session); in a setpoint
         move the move's acceleration must not pass for environment.
         """
-        if not (self.params.dead_reckoning_motion_balance or
-                self.params.dead_reckoning_moving_twist) or self._twist_once is None or \
-                self._last_output is None:
+        if self._twist_once is None or self._last_output is None:
             return None
         n = self.ndof
         if self._twist_cov:  # the holding part: the published std grows with a move's rate
@@ -913,7 +908,9 @@ class LfOdometry:
         return np.where(moving, state[n:], self._slow_twist)
 
     def _track_balance(self, twist: FloatArray) -> None:
-        """[thrust, twist] through one and two low-passes (motion balance; the motion gate).
+        """The twist through one low-pass (the motion gate); with the balance, two passes.
+
+        With ``dead_reckoning_motion_balance``, [thrust, twist] also go through a second pass.
 
         For a linear model ν̇ = F ν + G τ + b with b constant, the same linear filter on both
         sides keeps the equation: LP(ν̇) = F LP(ν) + G LP(τ) + b. With a first-order low-pass
@@ -924,14 +921,13 @@ class LfOdometry:
         """
         assert self._slow_force is not None  # set by track() just before
         rate = self._force_rate()
-        if self._twist_once is None or self._balance_twice is None:
-            self._twist_once = twist.copy()
-            self._balance_twice = np.concatenate([self._slow_force, twist])
-            return
-        self._twist_once = low_pass_step(self._twist_once, twist, rate)
-        self._balance_twice = low_pass_step(self._balance_twice,
-                                            np.concatenate([self._slow_force, self._twist_once]),
-                                            np.concatenate([rate, rate]))
+        self._twist_once = twist.copy() if self._twist_once is None else \
+            low_pass_step(self._twist_once, twist, rate)
+        if not self.params.dead_reckoning_motion_balance:
+            return  # the moving twist's gate needs the first pass only
+        once = np.concatenate([self._slow_force, self._twist_once])
+        self._balance_twice = once if self._balance_twice is None else \
+            low_pass_step(self._balance_twice, once, np.concatenate([rate, rate]))
 
     def _dead_reckon_to(self, t: float, tau: FloatArray) -> None:
         tau = self._plausible(tau)

@@ -117,6 +117,8 @@ REFERENCE_LOW_PASS_ORDER = 4
 # through one low-pass exceeds this many holding standard deviations of the twist (a two-sided
 # 95 % test of "at rest") [-].
 MOTION_BALANCE_SIGMAS = 2.0
+# Holding samples kept beyond dead_reckoning_holding_lead (dead_reckoning_holding_balance) [s].
+HOLDING_MARGIN = 10.0
 # ``twist_attenuation``: frequencies where the targets' zero-phase filter keeps less than this
 # share of the power are left out of the attenuated variance (there the reference holds too
 # little of the LF motion to say what was taken; the ×(1 − G)/G correction is at most 4).
@@ -250,6 +252,18 @@ class OdometryParams:
         'and the twist change through the same two cascaded low-passes '
         '(dead_reckoning_force_time), so the force that accelerated a setpoint move is not taken '
         'for environment (lf_dynamics.balanced_at with accel); false: balanced at rest', ''))
+    dead_reckoning_holding_balance: bool = field(default=False, metadata=field_doc(
+        'in the DOFs that are moving when a dead reckoning starts (as dead_reckoning_moving_'
+        'twist), the environment force is the thrust low-passed over dead_reckoning_force_time '
+        'as it was while the vessel last held station there, dead_reckoning_holding_lead '
+        'seconds before the move was seen (surge/sway as one earth-fixed force), instead of its '
+        'current value, which has taken in the thrust that drives the move (the model then '
+        'brakes the dead-reckoned move while the vessel goes on: docs/BENCHMARKS.md, fiftieth '
+        'session); false: the current value', ''))
+    dead_reckoning_holding_lead: float = field(default=10.0, metadata=field_doc(
+        'with dead_reckoning_holding_balance: how long before the motion gate opened the held '
+        'thrust is taken (the gate sees a move only after its low-pass has taken in some of '
+        'it)', 's'))
     dead_reckoning_force_margin: float = field(default=0.0, metadata=field_doc(
         'the thrust the odometry believes (dead reckoning, twist prediction, environment '
         'balance) is clipped per DOF to this multiple of the largest thrust in the vessel '
@@ -263,6 +277,14 @@ class OdometryParams:
         'the one low-passed over dead_reckoning_velocity_time: in a setpoint move that average '
         'lags the speed; false: the low-passed twist in every DOF (docs/BENCHMARKS.md, '
         'forty-ninth session)', ''))
+    dead_reckoning_excursion_std: float = field(default=0.0, metadata=field_doc(
+        "the model's relative error in a manoeuvre: while dead reckoning, the covariance adds "
+        "(this × the displacement the memory's model dead-reckons since the dropout began)², "
+        'horizontally isotropic, and (this × its heading change)² (twist: the same on the '
+        "model's twist), plus the square of what a reckoner other than the model misses of "
+        "that displacement; the drift curve is learned holding station, where the thrust and "
+        'the displacement are small, and held the truth in a setpoint move only half the time '
+        '(docs/BENCHMARKS.md, fiftieth session); 0 = off', '-'))
     twist_model: bool = field(default=False, metadata=field_doc(
         "the twist Kalman filter predicts with the vessel memory's model whenever its thrust "
         'gain is given or implied by the controller (else only when the drift test chose it)',
@@ -339,11 +361,17 @@ class OdometryParams:
             raise ValueError('twist_reference_cutoff must be a finite number >= 0 (× ω0; 0: the '
                              f'reference velocity as it is), got {self.twist_reference_cutoff}')
         check_force_margin(self.dead_reckoning_force_margin, 'dead_reckoning_force_margin')
+        if not (math.isfinite(self.dead_reckoning_excursion_std) and
+                self.dead_reckoning_excursion_std >= 0.0):
+            raise ValueError('dead_reckoning_excursion_std must be a finite number >= 0 (a '
+                             'fraction of the dead-reckoned displacement; 0: off), got '
+                             f'{self.dead_reckoning_excursion_std}')
         if not (math.isfinite(self.dead_reckoning_velocity_time) and
                 self.dead_reckoning_velocity_time > 0.0):
             raise ValueError('dead_reckoning_velocity_time must be a positive number of seconds, '
                              f'got {self.dead_reckoning_velocity_time}')
-        for name in ('reacquire_time', 'reacquire_blend_time', 'twist_bandwidth'):
+        for name in ('reacquire_time', 'reacquire_blend_time', 'twist_bandwidth',
+                     'dead_reckoning_holding_lead'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f'{name} must be a finite number >= 0 s, got {value}')
@@ -504,6 +532,13 @@ class LfOdometry:
         self._balance_twice: FloatArray | None = None
         # the memory's model balanced at the DR start, and the memory it was made from
         self._dr_model: tuple[VesselMemory, LfDynamics | None] | None = None
+        # dead_reckoning_excursion_std: the model's own dead reckoning [η, ν] since the DR
+        # started, beside a reckoner that is not the model (None: none, or it is the model)
+        self._dr_shadow: FloatArray | None = None
+        # dead_reckoning_holding_balance: (t, low-passed thrust) while holding station, per
+        # group ('horizontal': earth-fixed [N, E] [N]; 'yaw' [N·m]; 1 DOF: 'horizontal' surge)
+        self._holding: dict[str, deque[tuple[float, FloatArray]]] = {
+            'horizontal': deque(), 'yaw': deque()}
         self.counters = {'dead_reckoning_episodes': 0, 'lost': 0, 'reacquired': 0,
                          'reacquired_outside_gate': 0, 'fixes_held_back': 0, 'calibrations': 0,
                          'memory_updates': 0, 'numeric_failures': 0,
@@ -576,6 +611,7 @@ class LfOdometry:
         self._last_fix = t
         self._pending_since = None
         self._dr_model = None
+        self._dr_shadow = None
         x = self._require_state()
         twist = x[self.ndof:].copy()
         accel = self._twist_change(t, twist)
@@ -590,8 +626,11 @@ class LfOdometry:
         applied = clipped[:self.ndof]
         self._slow_force = applied.copy() if self._slow_force is None else \
             low_pass_step(self._slow_force, applied, self._force_rate())
-        if self.params.dead_reckoning_motion_balance or self.params.dead_reckoning_moving_twist:
+        if self.params.dead_reckoning_motion_balance or self.params.dead_reckoning_moving_twist \
+                or self.params.dead_reckoning_holding_balance:
             self._track_balance(twist)
+        if self.params.dead_reckoning_holding_balance:
+            self._track_holding(t, float(x[2]) if self.ndof == 3 else 0.0)
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
                                             self._pose_covariance(source, lag, excess))
         out = OdometryEstimate(
@@ -624,6 +663,7 @@ class LfOdometry:
             self._dr_cov0 = (self._last_output.pose_cov.copy(), self._last_output.twist_cov.copy())
             if self._slow_twist is not None and self._x is not None:
                 self._x = np.concatenate([self._x[:self.ndof], self._start_twist(self._x)])
+            self._dr_shadow = self._require_state().copy()
         elapsed = t - self._last_fix
         if elapsed > self.params.dead_reckoning_timeout:
             if self._mode != 'lost':
@@ -865,7 +905,65 @@ class LfOdometry:
             return balanced_at(memory.model, heading, np.where(moving, nu, 0.0),
                                np.where(moving, force, self._slow_force), dofs,
                                np.where(moving, accel, 0.0))
-        return balanced_at(memory.model, heading, np.zeros(self.ndof), self._slow_force, dofs)
+        force = self._slow_force
+        if self.params.dead_reckoning_holding_balance:
+            force = self._holding_force(heading, dofs)
+        return balanced_at(memory.model, heading, np.zeros(self.ndof), force, dofs)
+
+    def _track_holding(self, t: float, heading: float) -> None:
+        """Remember the low-passed thrust of the DOF groups that are holding station now.
+
+        Each group keeps its holding samples of the last ``dead_reckoning_holding_lead`` +
+        ``HOLDING_MARGIN`` seconds (`_holding_force` takes the one that lead before the newest).
+        """
+        assert self._slow_force is not None
+        n = self.ndof
+        moving = self._moving_dofs(np.ones(n, dtype=bool))
+        force = self._slow_force
+        groups = [('horizontal', 0, force[:1].copy() if n == 1 else
+                   _body_to_earth_force(force[:2], heading))]
+        if n == 3:
+            groups.append(('yaw', 2, force[2:].copy()))
+        keep = self.params.dead_reckoning_holding_lead + HOLDING_MARGIN
+        for name, dof, value in groups:
+            if moving is not None and moving[dof]:
+                continue
+            history = self._holding[name]
+            history.append((t, value))
+            while history and history[0][0] < t - keep:
+                history.popleft()
+
+    def _holding_force(self, heading: float, dofs: NDArray[np.bool_]) -> FloatArray:
+        """The thrust a dead reckoning balances: in the moving groups, the held one (new array).
+
+        The held value is the newest holding sample at least ``dead_reckoning_holding_lead``
+        seconds older than the group's newest (else its oldest); surge/sway turned from the
+        earth frame into the body frame at ``heading``.
+        """
+        assert self._slow_force is not None
+        n = self.ndof
+        force = self._slow_force.copy()
+        moving = self._moving_dofs(dofs)
+        if moving is None:
+            return force
+        lead = self.params.dead_reckoning_holding_lead
+        for name, dof in (('horizontal', 0), ('yaw', 2))[:1 if n == 1 else 2]:
+            history = self._holding[name]
+            if not moving[dof] or not history:
+                continue
+            newest = history[-1][0]
+            held = history[0][1]
+            for stamp, value in reversed(history):
+                if stamp <= newest - lead:
+                    held = value
+                    break
+            if name == 'yaw':
+                force[2] = held[0]
+            elif n == 1:
+                force[0] = held[0]
+            else:
+                force[:2] = _earth_to_body_force(held, heading)
+        return force
 
     def _moving_dofs(self, dofs: NDArray[np.bool_]) -> NDArray[np.bool_] | None:
         """The DOFs moving now (the motion balance's and the moving twist's gate), or None.
@@ -941,16 +1039,24 @@ class LfOdometry:
             self._dr_model = (memory, self._balanced_model())  # a new memory: balanced anew
         model = None if self._dr_model is None else self._dr_model[1]
         eta, nu = x[:n], x[n:]
+        reckoner = self.reckoner
+        shadow = self._dr_shadow if (self.params.dead_reckoning_excursion_std > 0.0 and
+                                     model is not None and reckoner != 'model') else None
         with np.errstate(over='ignore', invalid='ignore'):  # checked below
             for _ in range(steps):
                 a, _b = self._transition(x, tau[:n], h)
                 self._p = a @ self._p @ a.T + self._process_noise(h)
-                eta, nu = dead_reckon_step(model, self.reckoner, eta, nu, tau[:n], h)
+                eta, nu = dead_reckon_step(model, reckoner, eta, nu, tau[:n], h)
+                if shadow is not None:
+                    shadow = np.concatenate(dead_reckon_step(model, 'model', shadow[:n],
+                                                             shadow[n:], tau[:n], h))
         if not _finite(eta, nu):
             # an absurd (finite) thrust overflowed the model: hold the last finite pose
             self.counters['numeric_failures'] += 1
             eta, nu = x[:n], np.zeros(n)
         self._x, self._t = np.concatenate([eta, nu]), t
+        # the model's own dead reckoning (the state itself when the reckoner is the model)
+        self._dr_shadow = self._x.copy() if shadow is None or not _finite(shadow) else shadow
 
     def _dead_reckoned(self, t: float, elapsed: float) -> OdometryEstimate:
         n = self.ndof
@@ -976,6 +1082,12 @@ class LfOdometry:
         else:  # no vessel memory yet: the constant-velocity Kalman propagation
             pose_cov[:n, :n] = np.maximum(pose_cov[:n, :n], self._p[:n, :n])
             twist_cov[:n, :n] = np.maximum(twist_cov[:n, :n], self._p[n:, n:])
+        if self.params.dead_reckoning_excursion_std > 0.0 and self._dr_shadow is not None:
+            pose_part, twist_part = excursion_covariance(
+                x[:n] - eta0, self._dr_shadow[:n] - eta0, x[n:], self._dr_shadow[n:],
+                self.params.dead_reckoning_excursion_std)
+            pose_cov[:n, :n] += pose_part
+            twist_cov[:n, :n] += twist_part
         twist = self._full(x[n:])
         return OdometryEstimate(stamp=t, pose=pose, pose_cov=pose_cov, twist=twist,
                                 twist_cov=twist_cov, mode='dead_reckoning',
@@ -1218,6 +1330,31 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
         twist_cov = {key: replace(model, hold=model.hold + taken)
                      for key, model in twist_cov.items()}
     return pose_cov, twist_cov
+
+
+def excursion_covariance(displacement: ArrayLike, model_displacement: ArrayLike,
+                         twist: ArrayLike, model_twist: ArrayLike, relative_std: float
+                         ) -> tuple[FloatArray, FloatArray]:
+    """The dead reckoning's manoeuvre covariance (``dead_reckoning_excursion_std``).
+
+    ``displacement`` and ``model_displacement``: the pose change since the dropout began of the
+    reckoner in use and of the memory's model (n,) [m, m, rad]; ``twist``, ``model_twist``:
+    their body-frame twists (n,). The model is believed to within ``relative_std`` of what it
+    dead-reckons (its thrust gain and damping come from station keeping, which hardly excites
+    them): k² |d_NE|² on north and east alike (rotation invariant) and k² d_ψ² on heading; what
+    the reckoner in use misses of the model's displacement, m = d_reckoner − d_model, is a known
+    offset and adds m mᵀ. The same for the twist. Returns (pose part, twist part), each (n, n),
+    positive semi-definite; both are 0 for a reckoner that is the model and does not move.
+    """
+    parts = []
+    for own, model in ((displacement, model_displacement), (twist, model_twist)):
+        d = np.asarray(model, dtype=np.float64)
+        miss = np.asarray(own, dtype=np.float64) - d
+        spread = relative_std ** 2 * d ** 2
+        if d.size == 3:
+            spread[:2] = relative_std ** 2 * float(d[0] ** 2 + d[1] ** 2)
+        parts.append(np.outer(miss, miss) + np.diag(spread))
+    return parts[0], parts[1]
 
 
 def attenuated_variance(velocity: ArrayLike, sample_time: float, reference_filter: FloatArray,
@@ -1485,6 +1622,18 @@ def _finite(*arrays: FloatArray) -> bool:
 def _second_moment(errors: FloatArray) -> FloatArray:
     """Mean of e eᵀ (bias included: a biased estimate must not look confident)."""
     return np.asarray(errors.T @ errors / errors.shape[0], dtype=np.float64)
+
+
+def _body_to_earth_force(force: FloatArray, heading: float) -> FloatArray:
+    """Body [X, Y] → earth [N, E] (R(ψ) f, Fossen 2011 eq. 2.18, planar)."""
+    c, s = math.cos(heading), math.sin(heading)
+    return np.array([c * force[0] - s * force[1], s * force[0] + c * force[1]])
+
+
+def _earth_to_body_force(force: FloatArray, heading: float) -> FloatArray:
+    """Earth [N, E] → body [X, Y] (R(ψ)ᵀ f)."""
+    c, s = math.cos(heading), math.sin(heading)
+    return np.array([c * force[0] + s * force[1], -s * force[0] + c * force[1]])
 
 
 def _kinematic_transition(heading: float, h: float, ndof: int) -> tuple[FloatArray, FloatArray]:

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from lf_predictor_ros.core import odometry as odometry_module
 from lf_predictor_ros.core.filters import design_wave_filter, frequency_response
 from lf_predictor_ros.core.lf_dynamics import DriftCurve, LfDynamics, VesselMemory
 from lf_predictor_ros.core.odometry import (
@@ -20,6 +21,7 @@ from lf_predictor_ros.core.odometry import (
     Published,
     attenuated_variance,
     calibrate,
+    excursion_covariance,
     fit_error_model,
     fit_error_model_likelihood,
     fit_speed_gain,
@@ -875,9 +877,9 @@ def _surge_move(times: np.ndarray, thrust: np.ndarray, damping: float, gain: flo
     return north, speed
 
 
-@pytest.mark.parametrize('motion_balance', [False, True])
-def test_dead_reckoning_in_a_move_with_the_motion_balance(motion_balance: bool) -> None:
-    """``dead_reckoning_motion_balance``: the thrust that accelerates a move is not environment.
+@pytest.mark.parametrize('balance', ['rest', 'motion', 'holding'])
+def test_dead_reckoning_in_a_move_with_the_motion_balance(balance: str) -> None:
+    """The motion and holding balances: the thrust that accelerates a move is not environment.
 
     A vessel u̇ = −0.01 u + 1e-6 (τ + b), b = −1 kN, holds station on τ = 1 kN; at 100 s a move
     adds 3 kN. The fixes stop 60 s into the move (u ≈ 0.135 m/s, still accelerating) and the
@@ -885,7 +887,9 @@ def test_dead_reckoning_in_a_move_with_the_motion_balance(motion_balance: bool) 
     environment: the dead reckoning sees 0.4 kN of net force instead of 3 kN and falls 3.8 m
     behind the vessel's 10.6 m in 60 s. Balanced against the motion (two low-passes of thrust
     and twist), the environment comes out near the true −1 kN and the dead reckoning follows the
-    vessel to 0.10 m (measured).
+    vessel to 0.10 m (measured). Held from before the move (``dead_reckoning_holding_balance``,
+    10 s before the motion gate opened), the environment is the −1 kN the vessel held station
+    against: 0.16 m (measured).
     """
     damping, gain, environment = 0.01, 1e-6, -1e3
     times = np.arange(0.0, 221.0)
@@ -894,7 +898,8 @@ def test_dead_reckoning_in_a_move_with_the_motion_balance(motion_balance: bool) 
     memory = _surge_memory(damping, gain)  # fitted environment: none
     # the DR starts from the twist itself (no start low-pass): the balance alone is compared
     odo = LfOdometry(3, H, OdometryParams(dead_reckoner='model', dead_reckoning_velocity_time=H,
-                                          dead_reckoning_motion_balance=motion_balance,
+                                          dead_reckoning_motion_balance=balance == 'motion',
+                                          dead_reckoning_holding_balance=balance == 'holding',
                                           prior_pose_std=(1e-3, 1e-3, 1e-4)))
     odo._memory = memory  # noqa: SLF001 - a known vessel memory
     stop = 160
@@ -904,10 +909,10 @@ def test_dead_reckoning_in_a_move_with_the_motion_balance(motion_balance: bool) 
         assert out is not None and out.mode == 'dead_reckoning'
     error = abs(out.pose[0] - north[-1])
     travelled = north[-1] - north[stop]
-    print(f'motion balance {motion_balance}: {travelled:.2f} m travelled in the dropout, dead '
+    print(f'balance {balance}: {travelled:.2f} m travelled in the dropout, dead '
           f'reckoning {error:.3f} m off')
     assert travelled > 8.0
-    if motion_balance:
+    if balance != 'rest':
         assert error < 0.05 * travelled  # measured 0.10 m of 10.6 m
     else:
         assert error > 0.25 * travelled  # balanced at rest: measured 3.8 m
@@ -1007,3 +1012,113 @@ def test_twist_model_option_uses_a_given_or_implied_gain() -> None:
     odo = LfOdometry(3, H, OdometryParams(twist_model=True))
     odo._memory = dataclasses.replace(memory, known_gain='')  # noqa: SLF001 - fitted gain
     assert odo._transition(x, tau, 1.0)[1][3] == 0.0  # noqa: SLF001
+
+
+def test_excursion_covariance_is_the_spread_of_the_models_displacement_and_the_miss() -> None:
+    """k² |d_NE|² on north and east, k² d_ψ² on heading, plus the reckoner's miss m mᵀ."""
+    model = np.array([3.0, 4.0, 0.5])
+    pose, twist = excursion_covariance(np.zeros(3), model, np.zeros(3), np.zeros(3), 0.5)
+    miss = -model
+    expected = np.outer(miss, miss) + np.diag([6.25, 6.25, 0.0625])
+    np.testing.assert_allclose(pose, expected, rtol=1e-12)
+    np.testing.assert_allclose(twist, np.zeros((3, 3)), atol=0.0)
+    assert np.all(np.linalg.eigvalsh(pose) >= -1e-12)
+    # the reckoner is the model: no miss, only the spread; rotation invariant horizontally
+    same, _ = excursion_covariance(model, model, model, model, 0.5)
+    np.testing.assert_allclose(same, np.diag([6.25, 6.25, 0.0625]), rtol=1e-12)
+    turned, _ = excursion_covariance([5.0, 0.0, 0.5], [5.0, 0.0, 0.5], np.zeros(3), np.zeros(3),
+                                     0.5)
+    np.testing.assert_allclose(turned, same, rtol=1e-12)
+    one, one_twist = excursion_covariance([1.0], [3.0], [0.2], [0.1], 0.5)
+    np.testing.assert_allclose(one, [[4.0 + 2.25]], rtol=1e-12)
+    np.testing.assert_allclose(one_twist, [[0.01 + 0.0025]], rtol=1e-12)
+
+
+def _coast_a_surge_push(reckoner: str, excursion_std: float) -> tuple[np.ndarray, np.ndarray]:
+    """Hold station on a known model, then coast 60 s with 1e3 N more surge thrust.
+
+    Returns the last dead-reckoned (pose, pose covariance).
+    """
+    model = LfDynamics(np.diag([-0.01, -0.01, -0.01]), np.diag([1e-6, 1e-6, 1e-9]),
+                       np.zeros((3, 3)), np.full(3, 1e-4))
+    horizons = np.arange(1.0, 61.0)
+    ms = np.tile((horizons / 60.0) ** 2, (3, 1)).T
+    memory = VesselMemory(model, 'hold', DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test',
+                          np.full(3, 1e-3), dp_controlled=True)
+    held = np.array([2e3, 0.0, 0.0])
+    odo = LfOdometry(3, H, OdometryParams(dead_reckoner=reckoner,
+                                          dead_reckoning_excursion_std=excursion_std))
+    odo._memory = memory  # noqa: SLF001 - a known vessel memory
+    for k in range(200):
+        odo.track(float(k), np.zeros(3), held)
+    for k in range(1, 61):
+        out = odo.coast(200.0 + k, held + np.array([1e3, 0.0, 0.0]))
+        assert out is not None
+    return out.pose, out.pose_cov
+
+
+def test_dead_reckoning_excursion_std_spreads_the_models_displacement() -> None:
+    """``dead_reckoning_excursion_std``: the covariance holds what the model says a push does.
+
+    The model dead-reckons the push d north: 61 steps of 1 s (the last fix was at 199 s) of
+    u_k = 0.1 (1 − 0.99^k) m/s, d = Σ u_k = 1.563 m. On the model, k = 0.5 adds
+    0.25 d² to north and east; holding, the held pose misses all of d, so north gets d² + 0.25
+    d² more. k = 0 leaves the covariance as it was.
+    """
+    pose_model, cov_model = _coast_a_surge_push('model', 0.0)
+    d = float(pose_model[0])
+    expected = sum(0.1 * (1.0 - 0.99 ** k) for k in range(1, 62))
+    assert d == pytest.approx(expected, rel=1e-9)
+    pose_spread, cov_spread = _coast_a_surge_push('model', 0.5)
+    np.testing.assert_allclose(pose_spread, pose_model, atol=1e-12)  # only the covariance
+    added = np.diag(cov_spread - cov_model)
+    np.testing.assert_allclose(added, [0.25 * d ** 2, 0.25 * d ** 2, 0.0], rtol=1e-6, atol=1e-9)
+    pose_hold, cov_hold = _coast_a_surge_push('hold', 0.0)
+    assert abs(pose_hold[0]) < 1e-9
+    _, cov_hold_spread = _coast_a_surge_push('hold', 0.5)
+    added = np.diag(cov_hold_spread - cov_hold)
+    np.testing.assert_allclose(added, [1.25 * d ** 2, 0.25 * d ** 2, 0.0], rtol=1e-6, atol=1e-9)
+
+
+@pytest.mark.parametrize('bad', [-0.1, math.nan, math.inf])
+def test_dead_reckoning_excursion_std_is_checked(bad: float) -> None:
+    with pytest.raises(ValueError, match='dead_reckoning_excursion_std'):
+        OdometryParams(dead_reckoning_excursion_std=bad)
+
+
+def test_holding_balance_in_one_dof_follows_the_move() -> None:
+    """``dead_reckoning_holding_balance`` with ``ndof`` 1: the surge move of the balance test.
+
+    Balanced on the thrust held 10 s before the gate opened, the dead reckoning ends within 5 %
+    of the 10.6 m the vessel travels in the 60 s dropout (as in 3 DOF).
+    """
+    damping, gain, environment = 0.01, 1e-6, -1e3
+    times = np.arange(0.0, 221.0)
+    thrust = np.where(times < 100.0, 1e3, 4e3)
+    north, _ = _surge_move(times, thrust, damping, gain, environment)
+    model = LfDynamics(np.array([[-damping]]), np.array([[gain]]), np.zeros((1, 1)),
+                       np.full(1, 1e-4))
+    horizons = np.arange(1.0, 61.0)
+    ms = ((horizons / 60.0) ** 2)[:, None]
+    memory = VesselMemory(model, 'model', DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test',
+                          np.full(1, 1e-3), dp_controlled=True)
+    odo = LfOdometry(1, H, OdometryParams(dead_reckoner='model', dead_reckoning_velocity_time=H,
+                                          dead_reckoning_holding_balance=True,
+                                          prior_pose_std=(1e-3, 1e-3, 1e-4)))
+    odo._memory = memory  # noqa: SLF001 - a known vessel memory
+    stop = 160
+    _track_surge(odo, times[:stop + 1], north, thrust)
+    for k in range(stop + 1, times.size):
+        out = odo.coast(float(times[k]), np.array([thrust[k], 0.0, 0.0]))
+        assert out is not None
+    assert abs(out.pose[0] - north[-1]) < 0.05 * (north[-1] - north[stop])
+
+
+def test_force_frame_turns_are_inverse_and_right_handed() -> None:
+    """R(ψ) f and R(ψ)ᵀ f for the holding balance: surge thrust at ψ = 90° pushes east."""
+    np.testing.assert_allclose(odometry_module._body_to_earth_force(  # noqa: SLF001
+        np.array([2.0, 0.0]), math.pi / 2), [0.0, 2.0], atol=1e-12)
+    force = np.array([1.5, -0.7])
+    back = odometry_module._earth_to_body_force(  # noqa: SLF001
+        odometry_module._body_to_earth_force(force, 0.8), 0.8)  # noqa: SLF001
+    np.testing.assert_allclose(back, force, rtol=1e-12)

@@ -264,6 +264,12 @@ class OdometryParams:
         'with dead_reckoning_holding_balance: how long before the motion gate opened the held '
         'thrust is taken (the gate sees a move only after its low-pass has taken in some of '
         'it)', 's'))
+    dead_reckoning_holding_max_turn: float = field(default=math.inf, metadata=field_doc(
+        'with dead_reckoning_holding_balance: the held thrust is used only if the heading has '
+        'turned by at most this much since it was held (the environment a vessel holds against '
+        'depends on its heading to wind, current and waves: after a turn the thrust held before '
+        'it balanced another environment); else the current low-passed thrust; inf = always',
+        'rad'))
     dead_reckoning_force_margin: float = field(default=0.0, metadata=field_doc(
         'the thrust the odometry believes (dead reckoning, twist prediction, environment '
         'balance) is clipped per DOF to this multiple of the largest thrust in the vessel '
@@ -370,6 +376,9 @@ class OdometryParams:
                 self.dead_reckoning_velocity_time > 0.0):
             raise ValueError('dead_reckoning_velocity_time must be a positive number of seconds, '
                              f'got {self.dead_reckoning_velocity_time}')
+        if not (self.dead_reckoning_holding_max_turn >= 0.0):  # inf allowed, NaN not
+            raise ValueError('dead_reckoning_holding_max_turn must be >= 0 rad (inf: any turn), '
+                             f'got {self.dead_reckoning_holding_max_turn}')
         for name in ('reacquire_time', 'reacquire_blend_time', 'twist_bandwidth',
                      'dead_reckoning_holding_lead'):
             value = getattr(self, name)
@@ -535,9 +544,10 @@ class LfOdometry:
         # dead_reckoning_excursion_std: the model's own dead reckoning [η, ν] since the DR
         # started, beside a reckoner that is not the model (None: none, or it is the model)
         self._dr_shadow: FloatArray | None = None
-        # dead_reckoning_holding_balance: (t, low-passed thrust) while holding station, per
-        # group ('horizontal': earth-fixed [N, E] [N]; 'yaw' [N·m]; 1 DOF: 'horizontal' surge)
-        self._holding: dict[str, deque[tuple[float, FloatArray]]] = {
+        # dead_reckoning_holding_balance: (t, low-passed thrust, heading [rad]) while holding
+        # station, per group ('horizontal': earth-fixed [N, E] [N]; 'yaw' [N·m]; 1 DOF:
+        # 'horizontal' surge)
+        self._holding: dict[str, deque[tuple[float, FloatArray, float]]] = {
             'horizontal': deque(), 'yaw': deque()}
         self.counters = {'dead_reckoning_episodes': 0, 'lost': 0, 'reacquired': 0,
                          'reacquired_outside_gate': 0, 'fixes_held_back': 0, 'calibrations': 0,
@@ -929,7 +939,7 @@ class LfOdometry:
             if moving is not None and moving[dof]:
                 continue
             history = self._holding[name]
-            history.append((t, value))
+            history.append((t, value, heading))
             while history and history[0][0] < t - keep:
                 history.popleft()
 
@@ -938,7 +948,8 @@ class LfOdometry:
 
         The held value is the newest holding sample at least ``dead_reckoning_holding_lead``
         seconds older than the group's newest (else its oldest); surge/sway turned from the
-        earth frame into the body frame at ``heading``.
+        earth frame into the body frame at ``heading``. A group whose heading has turned by more
+        than ``dead_reckoning_holding_max_turn`` since that sample keeps the current thrust.
         """
         assert self._slow_force is not None
         n = self.ndof
@@ -952,11 +963,13 @@ class LfOdometry:
             if not moving[dof] or not history:
                 continue
             newest = history[-1][0]
-            held = history[0][1]
-            for stamp, value in reversed(history):
+            _, held, then = history[0]
+            for stamp, value, at in reversed(history):
                 if stamp <= newest - lead:
-                    held = value
+                    held, then = value, at
                     break
+            if abs(wrap_angle(heading - then)) > self.params.dead_reckoning_holding_max_turn:
+                continue  # held against another environment: the current thrust
             if name == 'yaw':
                 force[2] = held[0]
             elif n == 1:

@@ -1122,3 +1122,38 @@ def test_force_frame_turns_are_inverse_and_right_handed() -> None:
     back = odometry_module._earth_to_body_force(  # noqa: SLF001
         odometry_module._body_to_earth_force(force, 0.8), 0.8)  # noqa: SLF001
     np.testing.assert_allclose(back, force, rtol=1e-12)
+
+
+def test_holding_balance_is_not_used_after_a_turn_beyond_the_limit() -> None:
+    """``dead_reckoning_holding_max_turn``: a thrust held at another heading is not believed.
+
+    The surge move of the balance test, its heading turned by 0.5 rad 40 s into the move (after
+    the last holding sample; the fixes turn, the thrust is the same): with a limit of 0.3 rad
+    the dead reckoning is exactly the one balanced on the current thrust; with no limit it is
+    the holding balance's (a different pose).
+    """
+    damping, gain, environment = 0.01, 1e-6, -1e3
+    times = np.arange(0.0, 221.0)
+    thrust = np.where(times < 100.0, 1e3, 4e3)
+    north, _ = _surge_move(times, thrust, damping, gain, environment)
+    heading = np.where(times < 140.0, 0.0, 0.5)
+    poses = {}
+    for label, holding, max_turn in (('rest', False, math.inf), ('limited', True, 0.3),
+                                     ('unlimited', True, math.inf)):
+        odo = LfOdometry(3, H, OdometryParams(
+            dead_reckoner='model', dead_reckoning_velocity_time=H,
+            dead_reckoning_holding_balance=holding, dead_reckoning_holding_max_turn=max_turn,
+            prior_pose_std=(1e-3, 1e-3, 1e-4)))
+        odo._memory = _surge_memory(damping, gain)  # noqa: SLF001 - a known vessel memory
+        stop = 160
+        for k in range(stop + 1):
+            odo.track(float(times[k]), np.array([north[k], 0.0, heading[k]]),
+                      np.array([thrust[k], 0.0, 0.0]))
+        for k in range(stop + 1, times.size):
+            out = odo.coast(float(times[k]), np.array([thrust[k], 0.0, 0.0]))
+            assert out is not None
+        poses[label] = out.pose
+    np.testing.assert_array_equal(poses['limited'], poses['rest'])
+    assert np.linalg.norm(poses['unlimited'][:2] - poses['rest'][:2]) > 1.0
+    with pytest.raises(ValueError, match='dead_reckoning_holding_max_turn'):
+        OdometryParams(dead_reckoning_holding_max_turn=math.nan)

@@ -22,7 +22,6 @@ covariance also lets a reacquisition through sooner. Development seeds only, as
 """
 from __future__ import annotations
 
-import argparse
 from collections import defaultdict
 from collections.abc import Sequence
 from pathlib import Path
@@ -34,7 +33,7 @@ from scipy import stats
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import method_probe as mp  # noqa: E402
+import move_dropout_probe as probe  # noqa: E402
 
 from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
 from lf_predictor_ros.benchmark.estimators import predictor_params  # noqa: E402
@@ -69,11 +68,7 @@ def one_case(scenario_name: str, seed: int, odometry: OdometryParams,
     """
     scenario = load_scenario(scenario_name)
     params = predictor_params(scenario, None)
-    if moves is None:
-        dropouts = ob.default_dropouts(params, DURATION, length=ob.DROPOUT_LOOP_LENGTH,
-                                       shift=ob.dropout_shift_for_seed(seed, spread))
-    else:
-        dropouts = ob.move_dropouts(scenario, params, seed, DURATION, moves)
+    dropouts = probe.dropouts_of(scenario, params, seed, spread, moves)
     seen: dict[str, Any] = {}
     spreads: dict[float, np.ndarray] = {}
     original_cov = odometry_module.excursion_covariance
@@ -130,21 +125,10 @@ def one_case(scenario_name: str, seed: int, odometry: OdometryParams,
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point."""
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('cases', nargs='+', help='SCENARIO:SEED (development seeds)')
-    parser.add_argument('--spread', type=float, default=500.0, help='--dropout-spread [s]')
-    parser.add_argument('--moves', nargs=2, type=float, default=None, metavar=('LOW', 'HIGH'),
-                        help='dropouts U(LOW, HIGH) s into each setpoint move instead')
-    parser.add_argument('--odometry', nargs='*', default=[], help='OdometryParams FIELD=VALUE')
+    parser = probe.dropout_parser(__doc__)
     parser.add_argument('--k', nargs='+', type=float, default=[0.0, 0.5, 1.0, 1.5, 2.0],
                         help='dead_reckoning_excursion_std values to score')
-    args = parser.parse_args(argv)
-    try:
-        cases = mp.parse_cases(args.cases, mp.DEVELOPMENT_SEEDS)
-    except ValueError as exc:
-        parser.error(str(exc))
-    overrides = ob._odometry_overrides(args.odometry) or {}  # noqa: SLF001 - the CLI's parser
+    args, cases, overrides = probe.parse_dropout_args(parser, argv)
     overrides['dead_reckoning_excursion_std'] = TINY_K
     odometry = OdometryParams(**overrides)
     moves = None if args.moves is None else (float(args.moves[0]), float(args.moves[1]))

@@ -17,6 +17,7 @@ import argparse
 from collections.abc import Sequence
 from pathlib import Path
 import sys
+from typing import Any
 
 import numpy as np
 import torch
@@ -32,37 +33,55 @@ from lf_predictor_ros.core.odometry import (  # noqa: E402
     OdometryEstimate,
     OdometryParams,
 )
-from sim_ros.simulation import load_scenario  # noqa: E402
+from lf_predictor_ros.core.params import PredictorParams  # noqa: E402
+from sim_ros.simulation import Scenario, load_scenario  # noqa: E402
 
 DURATION = 3600.0  # [s] the odometry bench's loop length
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point."""
-    parser = argparse.ArgumentParser(description=__doc__,
+def dropout_parser(description: str | None) -> argparse.ArgumentParser:
+    """The probes' common arguments: cases, ``--spread``, ``--moves``, ``--odometry``."""
+    parser = argparse.ArgumentParser(description=description,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('cases', nargs='+', help='SCENARIO:SEED (development seeds)')
     parser.add_argument('--spread', type=float, default=500.0, help='--dropout-spread [s]')
     parser.add_argument('--moves', nargs=2, type=float, default=None, metavar=('LOW', 'HIGH'),
                         help='dropouts U(LOW, HIGH) s into each setpoint move instead')
     parser.add_argument('--odometry', nargs='*', default=[], help='OdometryParams FIELD=VALUE')
+    return parser
+
+
+def parse_dropout_args(parser: argparse.ArgumentParser, argv: Sequence[str] | None
+                       ) -> tuple[argparse.Namespace, list[tuple[str, int]], dict[str, Any]]:
+    """(arguments, development cases, OdometryParams overrides); a bad case exits."""
     args = parser.parse_args(argv)
     try:
         cases = mp.parse_cases(args.cases, mp.DEVELOPMENT_SEEDS)
     except ValueError as exc:
         parser.error(str(exc))
     overrides = ob._odometry_overrides(args.odometry) or {}  # noqa: SLF001 - the CLI's parser
+    return args, cases, overrides
+
+
+def dropouts_of(scenario: Scenario, params: PredictorParams, seed: int, spread: float,
+                moves: Sequence[float] | None) -> list[tuple[float, float]]:
+    """The bench's dropouts of a case: the spread schedule, or ``moves`` (LOW, HIGH) s in."""
+    if moves is None:
+        return list(ob.default_dropouts(params, DURATION, length=ob.DROPOUT_LOOP_LENGTH,
+                                        shift=ob.dropout_shift_for_seed(seed, spread)))
+    return list(ob.move_dropouts(scenario, params, seed, DURATION,
+                                 (float(moves[0]), float(moves[1]))))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point."""
+    args, cases, overrides = parse_dropout_args(dropout_parser(__doc__), argv)
     odometry = OdometryParams(**overrides)
 
     def one(scenario_name: str, seed: int) -> None:
         scenario = load_scenario(scenario_name)
         params = predictor_params(scenario, None)
-        shift = ob.dropout_shift_for_seed(seed, args.spread)
-        if args.moves is None:
-            dropouts = ob.default_dropouts(params, DURATION, length=ob.DROPOUT_LOOP_LENGTH,
-                                           shift=shift)
-        else:
-            dropouts = ob.move_dropouts(scenario, params, seed, DURATION, tuple(args.moves))
+        dropouts = dropouts_of(scenario, params, seed, args.spread, args.moves)
         log: list[OdometryEstimate] = []
         original = LfOdometry._balanced_model
 

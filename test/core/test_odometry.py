@@ -3,13 +3,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import cast
 
 import numpy as np
 import pytest
 
 from lf_predictor_ros.core import odometry as odometry_module
 from lf_predictor_ros.core.filters import design_wave_filter, frequency_response
-from lf_predictor_ros.core.lf_dynamics import DriftCurve, LfDynamics, VesselMemory
+from lf_predictor_ros.core.lf_dynamics import DeadReckoner, DriftCurve, LfDynamics, VesselMemory
 from lf_predictor_ros.core.odometry import (
     HOLD_FLOOR_FRACTION,
     TWIN_LEVEL_FACTOR,
@@ -17,6 +18,7 @@ from lf_predictor_ros.core.odometry import (
     UNESTIMATED_VARIANCE,
     ErrorModel,
     LfOdometry,
+    OdometryEstimate,
     OdometryParams,
     Published,
     attenuated_variance,
@@ -39,6 +41,15 @@ def _hold_memory(drift_std_at_60: float = 1.0) -> VesselMemory:
     ms = np.tile((drift_std_at_60 * horizons / 60.0) ** 2, (3, 1)).T
     return VesselMemory(None, 'hold', DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test',
                         np.full(3, 1e-3))
+
+
+def _dp_memory(model: LfDynamics, reckoner: str = 'model') -> VesselMemory:
+    """A DP-controlled 3-DOF vessel memory on ``model``, its drift std 1 m at 60 s."""
+    horizons = np.arange(1.0, 61.0)
+    ms = np.tile((horizons / 60.0) ** 2, (3, 1)).T
+    return VesselMemory(model, cast(DeadReckoner, reckoner),
+                        DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test', np.full(3, 1e-3),
+                        dp_controlled=True)
 
 
 def _track_line(odo: LfOdometry, speed: float, heading: float, seconds: int,
@@ -851,10 +862,7 @@ def _surge_memory(damping: float, gain: float) -> VesselMemory:
     """A DP-controlled vessel memory with the surge model u̇ = −d u + g τ (no environment)."""
     model = LfDynamics(np.diag([-damping, -0.01, -0.01]), np.diag([gain, 1e-6, 1e-9]),
                        np.zeros((3, 3)), np.full(3, 1e-4))
-    horizons = np.arange(1.0, 61.0)
-    ms = np.tile((horizons / 60.0) ** 2, (3, 1)).T
-    return VesselMemory(model, 'model', DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test',
-                        np.full(3, 1e-3), dp_controlled=True)
+    return _dp_memory(model)
 
 
 def _track_surge(odo: LfOdometry, times: np.ndarray, north: np.ndarray,
@@ -862,6 +870,16 @@ def _track_surge(odo: LfOdometry, times: np.ndarray, north: np.ndarray,
     """Fixes of a surge-only run at ``times`` (heading 0), with its thrust."""
     for k in range(times.size):
         odo.track(float(times[k]), np.array([north[k], 0.0, 0.0]), np.array([thrust[k], 0, 0]))
+
+
+def _track_then_coast(odo: LfOdometry, times: np.ndarray, north: np.ndarray,
+                      thrust: np.ndarray, stop: int) -> OdometryEstimate:
+    """Fixes of a surge-only run up to sample ``stop``, then dead reckoning to its end."""
+    _track_surge(odo, times[:stop + 1], north, thrust)
+    for k in range(stop + 1, times.size):
+        out = odo.coast(float(times[k]), np.array([thrust[k], 0.0, 0.0]))
+        assert out is not None and out.mode == 'dead_reckoning'
+    return out
 
 
 def _surge_move(times: np.ndarray, thrust: np.ndarray, damping: float, gain: float,
@@ -903,10 +921,7 @@ def test_dead_reckoning_in_a_move_with_the_motion_balance(balance: str) -> None:
                                           prior_pose_std=(1e-3, 1e-3, 1e-4)))
     odo._memory = memory  # noqa: SLF001 - a known vessel memory
     stop = 160
-    _track_surge(odo, times[:stop + 1], north, thrust)
-    for k in range(stop + 1, times.size):
-        out = odo.coast(float(times[k]), np.array([thrust[k], 0.0, 0.0]))
-        assert out is not None and out.mode == 'dead_reckoning'
+    out = _track_then_coast(odo, times, north, thrust, stop)
     error = abs(out.pose[0] - north[-1])
     travelled = north[-1] - north[stop]
     print(f'balance {balance}: {travelled:.2f} m travelled in the dropout, dead '
@@ -961,10 +976,7 @@ def test_the_motion_options_leave_a_vessel_at_rest_as_it_was(option: str) -> Non
     """
     model = LfDynamics(np.diag([-0.01, -0.01, -0.01]), np.diag([1e-6, 1e-6, 1e-9]),
                        np.zeros((3, 3)), np.full(3, 1e-4))
-    horizons = np.arange(1.0, 61.0)
-    ms = np.tile((horizons / 60.0) ** 2, (3, 1)).T
-    memory = VesselMemory(model, 'model', DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test',
-                          np.full(3, 1e-3), dp_controlled=True)
+    memory = _dp_memory(model, 'model')
     held = np.array([2e3, -1e3, 0.0])
     poses = []
     for enabled in (False, True):
@@ -1041,10 +1053,7 @@ def _coast_a_surge_push(reckoner: str, excursion_std: float) -> tuple[np.ndarray
     """
     model = LfDynamics(np.diag([-0.01, -0.01, -0.01]), np.diag([1e-6, 1e-6, 1e-9]),
                        np.zeros((3, 3)), np.full(3, 1e-4))
-    horizons = np.arange(1.0, 61.0)
-    ms = np.tile((horizons / 60.0) ** 2, (3, 1)).T
-    memory = VesselMemory(model, 'hold', DriftCurve(horizons, ms, 1e-4 * ms, 10), {}, 'test',
-                          np.full(3, 1e-3), dp_controlled=True)
+    memory = _dp_memory(model, 'hold')
     held = np.array([2e3, 0.0, 0.0])
     odo = LfOdometry(3, H, OdometryParams(dead_reckoner=reckoner,
                                           dead_reckoning_excursion_std=excursion_std))
@@ -1107,10 +1116,7 @@ def test_holding_balance_in_one_dof_follows_the_move() -> None:
                                           prior_pose_std=(1e-3, 1e-3, 1e-4)))
     odo._memory = memory  # noqa: SLF001 - a known vessel memory
     stop = 160
-    _track_surge(odo, times[:stop + 1], north, thrust)
-    for k in range(stop + 1, times.size):
-        out = odo.coast(float(times[k]), np.array([thrust[k], 0.0, 0.0]))
-        assert out is not None
+    out = _track_then_coast(odo, times, north, thrust, stop)
     assert abs(out.pose[0] - north[-1]) < 0.05 * (north[-1] - north[stop])
 
 

@@ -43,7 +43,10 @@ thrust, and gives an ``OdometryEstimate``:
   it is shown, so a frozen wave-band twist would push the vessel away). The pose continues from the
   last published pose (no step); its covariance is the last tracking covariance + the drift
   variance measured by the vessel memory's own dead-reckoning tests at the elapsed time + the
-  velocity uncertainty propagated (elapsed² · R Σ_ν Rᵀ). After ``dead_reckoning_timeout`` nothing
+  velocity uncertainty propagated (elapsed² · R Σ_ν Rᵀ); with ``dead_reckoning_excursion_std``
+  k > 0 (off by default) also k² times the square of the displacement the model dead-reckons
+  since the dropout began (`excursion_covariance`: the drift curve is learned holding station
+  and is too small in a manoeuvre). After ``dead_reckoning_timeout`` nothing
   is published (mode 'lost'): no guesses;
 - **reacquisition gated by plausibility**: a fix whose squared Mahalanobis distance to the
   dead-reckoned pose is within ``reacquire_gate`` is accepted at once; a fix far from it is

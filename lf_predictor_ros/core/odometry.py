@@ -934,7 +934,7 @@ class LfOdometry:
         moving = self._moving_dofs(np.ones(n, dtype=bool))
         force = self._slow_force
         groups = [('horizontal', 0, force[:1].copy() if n == 1 else
-                   _body_to_earth_force(force[:2], heading))]
+                   _rotation_block(heading, 3)[:2, :2] @ force[:2])]  # R(ψ) f
         if n == 3:
             groups.append(('yaw', 2, force[2:].copy()))
         keep = self.params.dead_reckoning_holding_lead + HOLDING_MARGIN
@@ -978,7 +978,7 @@ class LfOdometry:
             elif n == 1:
                 force[0] = held[0]
             else:
-                force[:2] = _earth_to_body_force(held, heading)
+                force[:2] = _rotation_block(heading, 3)[:2, :2].T @ held  # R(ψ)ᵀ f
         return force
 
     def _moving_dofs(self, dofs: NDArray[np.bool_]) -> NDArray[np.bool_] | None:
@@ -1640,18 +1640,6 @@ def _second_moment(errors: FloatArray) -> FloatArray:
     return np.asarray(errors.T @ errors / errors.shape[0], dtype=np.float64)
 
 
-def _body_to_earth_force(force: FloatArray, heading: float) -> FloatArray:
-    """Body [X, Y] → earth [N, E] (R(ψ) f, Fossen 2011 eq. 2.18, planar)."""
-    c, s = math.cos(heading), math.sin(heading)
-    return np.array([c * force[0] - s * force[1], s * force[0] + c * force[1]])
-
-
-def _earth_to_body_force(force: FloatArray, heading: float) -> FloatArray:
-    """Earth [N, E] → body [X, Y] (R(ψ)ᵀ f)."""
-    c, s = math.cos(heading), math.sin(heading)
-    return np.array([c * force[0] + s * force[1], -s * force[0] + c * force[1]])
-
-
 def _kinematic_transition(heading: float, h: float, ndof: int) -> tuple[FloatArray, FloatArray]:
     """`LfOdometry._transition` without the memory's model: (A, 0), A = [[I, h R], [0, I]].
 
@@ -1670,6 +1658,7 @@ def _kinematic_transition(heading: float, h: float, ndof: int) -> tuple[FloatArr
 
 
 def _rotation_block(heading: float, ndof: int) -> FloatArray:
+    """R(ψ) of the planar pose (Fossen 2011 eq. 2.18, 3 DOF); 1 DOF: [[1]]."""
     if ndof == 1:
         return np.eye(1)
     c, s = math.cos(heading), math.sin(heading)

@@ -1122,11 +1122,12 @@ def test_holding_balance_in_one_dof_follows_the_move() -> None:
 
 def test_force_frame_turns_are_inverse_and_right_handed() -> None:
     """R(ψ) f and R(ψ)ᵀ f for the holding balance: surge thrust at ψ = 90° pushes east."""
-    np.testing.assert_allclose(odometry_module._body_to_earth_force(  # noqa: SLF001
-        np.array([2.0, 0.0]), math.pi / 2), [0.0, 2.0], atol=1e-12)
+    def turn(heading: float) -> np.ndarray:
+        return odometry_module._rotation_block(heading, 3)[:2, :2]  # noqa: SLF001
+
+    np.testing.assert_allclose(turn(math.pi / 2) @ np.array([2.0, 0.0]), [0.0, 2.0], atol=1e-12)
     force = np.array([1.5, -0.7])
-    back = odometry_module._earth_to_body_force(  # noqa: SLF001
-        odometry_module._body_to_earth_force(force, 0.8), 0.8)  # noqa: SLF001
+    back = turn(0.8).T @ (turn(0.8) @ force)
     np.testing.assert_allclose(back, force, rtol=1e-12)
 
 

@@ -545,7 +545,8 @@ class LfOdometry:
         # the memory's model balanced at the DR start, and the memory it was made from
         self._dr_model: tuple[VesselMemory, LfDynamics | None] | None = None
         # dead_reckoning_excursion_std: the model's own dead reckoning [η, ν] since the DR
-        # started, beside a reckoner that is not the model (None: none, or it is the model)
+        # started, beside a reckoner that is not the model (None: the option is off, there is
+        # no model, or the reckoner is the model)
         self._dr_shadow: FloatArray | None = None
         # dead_reckoning_holding_balance: (t, low-passed thrust, heading [rad]) while holding
         # station, per group ('horizontal': earth-fixed [N, E] [N]; 'yaw' [N·m]; 1 DOF:
@@ -676,7 +677,7 @@ class LfOdometry:
             self._dr_cov0 = (self._last_output.pose_cov.copy(), self._last_output.twist_cov.copy())
             if self._slow_twist is not None and self._x is not None:
                 self._x = np.concatenate([self._x[:self.ndof], self._start_twist(self._x)])
-            self._dr_shadow = self._require_state().copy()
+            self._dr_shadow = None
         elapsed = t - self._last_fix
         if elapsed > self.params.dead_reckoning_timeout:
             if self._mode != 'lost':
@@ -1056,8 +1057,10 @@ class LfOdometry:
         model = None if self._dr_model is None else self._dr_model[1]
         eta, nu = x[:n], x[n:]
         reckoner = self.reckoner
-        shadow = self._dr_shadow if (self.params.dead_reckoning_excursion_std > 0.0 and
-                                     model is not None and reckoner != 'model') else None
+        shadow = None  # the model's own dead reckoning beside another reckoner
+        if self.params.dead_reckoning_excursion_std > 0.0 and model is not None and \
+                reckoner != 'model':
+            shadow = x.copy() if self._dr_shadow is None else self._dr_shadow
         with np.errstate(over='ignore', invalid='ignore'):  # checked below
             for _ in range(steps):
                 a, _b = self._transition(x, tau[:n], h)
@@ -1071,8 +1074,7 @@ class LfOdometry:
             self.counters['numeric_failures'] += 1
             eta, nu = x[:n], np.zeros(n)
         self._x, self._t = np.concatenate([eta, nu]), t
-        # the model's own dead reckoning (the state itself when the reckoner is the model)
-        self._dr_shadow = self._x.copy() if shadow is None or not _finite(shadow) else shadow
+        self._dr_shadow = shadow if shadow is not None and _finite(shadow) else None
 
     def _dead_reckoned(self, t: float, elapsed: float) -> OdometryEstimate:
         n = self.ndof
@@ -1098,9 +1100,11 @@ class LfOdometry:
         else:  # no vessel memory yet: the constant-velocity Kalman propagation
             pose_cov[:n, :n] = np.maximum(pose_cov[:n, :n], self._p[:n, :n])
             twist_cov[:n, :n] = np.maximum(twist_cov[:n, :n], self._p[n:, n:])
-        if self.params.dead_reckoning_excursion_std > 0.0 and self._dr_shadow is not None:
+        if self.params.dead_reckoning_excursion_std > 0.0:
+            # the model's dead reckoning: the state itself unless another reckoner is in use
+            modelled = x if self._dr_shadow is None else self._dr_shadow
             pose_part, twist_part = excursion_covariance(
-                x[:n] - eta0, self._dr_shadow[:n] - eta0, x[n:], self._dr_shadow[n:],
+                x[:n] - eta0, modelled[:n] - eta0, x[n:], modelled[n:],
                 self.params.dead_reckoning_excursion_std)
             pose_cov[:n, :n] += pose_part
             twist_cov[:n, :n] += twist_part

@@ -273,6 +273,12 @@ class OdometryParams:
         'depends on its heading to wind, current and waves: after a turn the thrust held before '
         'it balanced another environment); else the current low-passed thrust; inf = always',
         'rad'))
+    dead_reckoning_holding_max_age: float = field(default=math.inf, metadata=field_doc(
+        'with dead_reckoning_holding_balance: the held thrust is used only if the group last '
+        'held station at most this long before the balance (a move seen that long ago is no '
+        'longer young: its thrust has become the environment the vessel holds against, and the '
+        'held thrust may belong to another place or sea); else the current low-passed thrust; '
+        'inf = any age', 's'))
     dead_reckoning_force_margin: float = field(default=0.0, metadata=field_doc(
         'the thrust the odometry believes (dead reckoning, twist prediction, environment '
         'balance) is clipped per DOF to this multiple of the largest thrust in the vessel '
@@ -382,6 +388,9 @@ class OdometryParams:
         if not (self.dead_reckoning_holding_max_turn >= 0.0):  # inf allowed, NaN not
             raise ValueError('dead_reckoning_holding_max_turn must be >= 0 rad (inf: any turn), '
                              f'got {self.dead_reckoning_holding_max_turn}')
+        if not (self.dead_reckoning_holding_max_age >= 0.0):  # inf allowed, NaN not
+            raise ValueError('dead_reckoning_holding_max_age must be >= 0 s (inf: any age), '
+                             f'got {self.dead_reckoning_holding_max_age}')
         for name in ('reacquire_time', 'reacquire_blend_time', 'twist_bandwidth',
                      'dead_reckoning_holding_lead'):
             value = getattr(self, name)
@@ -953,7 +962,9 @@ class LfOdometry:
         The held value is the newest holding sample at least ``dead_reckoning_holding_lead``
         seconds older than the group's newest (else its oldest); surge/sway turned from the
         earth frame into the body frame at ``heading``. A group whose heading has turned by more
-        than ``dead_reckoning_holding_max_turn`` since that sample keeps the current thrust.
+        than ``dead_reckoning_holding_max_turn`` since that sample, or whose newest holding
+        sample is more than ``dead_reckoning_holding_max_age`` seconds old, keeps the current
+        thrust.
         """
         assert self._slow_force is not None
         n = self.ndof
@@ -967,6 +978,9 @@ class LfOdometry:
             if not moving[dof] or not history:
                 continue
             newest = history[-1][0]
+            max_age = self.params.dead_reckoning_holding_max_age
+            if self._t is not None and self._t - newest > max_age:
+                continue  # the move is no longer young: the current thrust
             _, held, then = history[0]
             for stamp, value, at in reversed(history):
                 if stamp <= newest - lead:

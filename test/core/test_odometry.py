@@ -1164,3 +1164,52 @@ def test_holding_balance_is_not_used_after_a_turn_beyond_the_limit() -> None:
     assert np.linalg.norm(poses['unlimited'][:2] - poses['rest'][:2]) > 1.0
     with pytest.raises(ValueError, match='dead_reckoning_holding_max_turn'):
         OdometryParams(dead_reckoning_holding_max_turn=math.nan)
+
+
+def _holding_coast(max_age: float, stop: int = 160) -> tuple[np.ndarray, float]:
+    """The surge move of the balance test dead-reckoned from ``stop`` with the holding balance.
+
+    Returns (final pose, age [s] of the newest holding sample when the dead reckoning began).
+    """
+    damping, gain, environment = 0.01, 1e-6, -1e3
+    times = np.arange(0.0, 221.0)
+    thrust = np.where(times < 100.0, 1e3, 4e3)
+    north, _ = _surge_move(times, thrust, damping, gain, environment)
+    holding = max_age >= 0.0
+    odo = LfOdometry(3, H, OdometryParams(
+        dead_reckoner='model', dead_reckoning_velocity_time=H,
+        dead_reckoning_holding_balance=holding,
+        dead_reckoning_holding_max_age=max_age if holding else math.inf,
+        prior_pose_std=(1e-3, 1e-3, 1e-4)))
+    odo._memory = _surge_memory(damping, gain)  # noqa: SLF001 - a known vessel memory
+    for k in range(stop + 1):
+        odo.track(float(times[k]), np.array([north[k], 0.0, 0.0]),
+                  np.array([thrust[k], 0.0, 0.0]))
+    history = odo._holding['horizontal']  # noqa: SLF001
+    age = float(times[stop] - history[-1][0]) if history else math.nan
+    for k in range(stop + 1, times.size):
+        out = odo.coast(float(times[k]), np.array([thrust[k], 0.0, 0.0]))
+        assert out is not None
+    return out.pose, age
+
+
+def test_holding_balance_is_not_used_when_the_move_is_old() -> None:
+    """``dead_reckoning_holding_max_age``: a move seen longer ago keeps the current thrust.
+
+    The gate opens some seconds into the surge move (after t = 100 s), so the newest holding
+    sample is that old at the dropout (t = 160 s): a limit 1 s below that age gives exactly the
+    dead reckoning balanced on the current thrust; 1 s above it, exactly the holding balance's
+    with no limit (which differs from the current thrust's by more than 1 m).
+    """
+    rest, _ = _holding_coast(-1.0)
+    unlimited, age = _holding_coast(math.inf)
+    assert 20.0 < age < 60.0  # the gate opened 0–40 s into the move
+    below, _ = _holding_coast(age - 1.0)
+    above, _ = _holding_coast(age + 1.0)
+    np.testing.assert_array_equal(below, rest)
+    np.testing.assert_array_equal(above, unlimited)
+    assert np.linalg.norm(unlimited[:2] - rest[:2]) > 1.0
+    with pytest.raises(ValueError, match='dead_reckoning_holding_max_age'):
+        OdometryParams(dead_reckoning_holding_max_age=math.nan)
+    with pytest.raises(ValueError, match='dead_reckoning_holding_max_age'):
+        OdometryParams(dead_reckoning_holding_max_age=-1.0)

@@ -4,13 +4,13 @@
         [--moves LOW HIGH] [--odometry FIELD=VALUE …]
 
 VARIANT: ``true_damping`` (the fit's damping replaced by the simulator's supply vessel, 1/T =
-1/87.8, 1/44.5, 1/11.6 s), ``floorT`` (the least damping rate 1/T instead of 1/1000 s, e.g.
-``floor200``) or ``marginK`` (the dead reckoner's force clip at K × the window's largest force
-instead of 2, e.g. ``margin1e9``: no clip). Then `odometry_bench run` of rao_supply on the
-development SEEDs, 3600 s, lf_odom's loops through 3 × 60 s dropouts with a 500 s phase spread,
-one worker in this process (so the patch holds); ``--moves``: the dropouts in the setpoint moves
-instead (`odometry_bench --dropout-moves`), ``--odometry``: passed on. Upper bounds and checks,
-never settings.
+1/87.8, 1/44.5, 1/11.6 s) or ``floorT`` (the least damping rate 1/T instead of 1/1000 s, e.g.
+``floor200``); the dead reckoner's force clip is ``--odometry dead_reckoning_force_margin=K``
+(the former ``marginK`` variant patched a module default the odometry no longer reads). Then
+`odometry_bench run` of rao_supply on the development SEEDs, 3600 s, lf_odom's loops through
+3 × 60 s dropouts with a 500 s phase spread, one worker in this process (so the patch holds);
+``--moves``: the dropouts in the setpoint moves instead (`odometry_bench --dropout-moves`),
+``--odometry``: passed on. Upper bounds and checks, never settings.
 """
 from __future__ import annotations
 
@@ -27,9 +27,7 @@ TRUE_DAMPING_RATE = np.array([1 / 87.77, 1 / 44.53, 1 / 11.56])
 
 def patch(variant: str) -> None:
     """Patch `lf_dynamics` for ``variant`` (module docstring); ValueError for an unknown one."""
-    if variant.startswith('margin'):
-        lf_dynamics.FORCE_MARGIN = float(variant[len('margin'):])
-    elif variant.startswith('floor'):
+    if variant.startswith('floor'):
         lf_dynamics.MIN_DAMPING_RATE = 1.0 / float(variant[len('floor'):])
     elif variant == 'true_damping':
         original = lf_dynamics._fit_known_gain  # noqa: SLF001
@@ -43,7 +41,8 @@ def patch(variant: str) -> None:
 
         lf_dynamics._fit_known_gain = patched  # type: ignore[assignment]  # noqa: SLF001
     else:
-        raise ValueError(f'unknown variant {variant!r}: true_damping, floorT or marginK')
+        raise ValueError(f'unknown variant {variant!r}: true_damping or floorT (the force clip: '
+                         '--odometry dead_reckoning_force_margin=K)')
 
 
 def main(argv: list[str]) -> int:

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from lf_predictor_ros.core.lf_dynamics import (
+    FORCE_MARGIN,
     DriftCurve,
     LfDynamics,
     balanced_at,
@@ -17,6 +18,7 @@ from lf_predictor_ros.core.lf_dynamics import (
     learn_vessel_memory,
     paired_forces,
 )
+from lf_predictor_ros.core.odometry import OdometryParams
 
 H = 1.0  # s
 MASS = np.array([5e6, 6e6, 4e9])  # kg, kg, kg·m²
@@ -127,15 +129,16 @@ def test_force_limit_is_the_margin_times_the_windows_largest_force() -> None:
     """``force_margin``: the memory believes forces up to that × the window's largest; 0: all."""
     poses, forces = _vessel_run(2)
     largest = np.max(np.abs(forces), axis=0)
-    default = learn_vessel_memory(poses, forces, H, horizon=120.0)
-    np.testing.assert_allclose(default.force_limit, 2.0 * largest)  # FORCE_MARGIN
+    clipped = learn_vessel_memory(poses, forces, H, horizon=120.0, force_margin=2.0)
+    np.testing.assert_allclose(clipped.force_limit, 2.0 * largest)
     wide = learn_vessel_memory(poses, forces, H, horizon=120.0, force_margin=10.0)
     np.testing.assert_allclose(wide.force_limit, 10.0 * largest)
-    unclipped = learn_vessel_memory(poses, forces, H, horizon=120.0, force_margin=0.0)
-    assert np.all(np.isinf(unclipped.force_limit))
+    default = learn_vessel_memory(poses, forces, H, horizon=120.0)  # FORCE_MARGIN: no clip,
+    assert np.all(np.isinf(default.force_limit))  # as the odometry's default
+    assert OdometryParams().dead_reckoning_force_margin == FORCE_MARGIN == 0.0
     turn = np.array([0.0, 0.0, 5.0 * largest[2]])  # a turn's moment, 5 × the window's
-    assert default.plausible_force(turn)[2] == pytest.approx(2.0 * largest[2])
-    assert unclipped.plausible_force(turn)[2] == turn[2]
+    assert clipped.plausible_force(turn)[2] == pytest.approx(2.0 * largest[2])
+    assert default.plausible_force(turn)[2] == turn[2]
     for bad in (0.5, -1.0, math.nan, math.inf):
         with pytest.raises(ValueError, match='force_margin'):
             learn_vessel_memory(poses, forces, H, horizon=120.0, force_margin=bad)

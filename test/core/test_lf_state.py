@@ -92,12 +92,14 @@ def test_a_given_vessel_inertia_is_the_thrust_gain_of_the_memory() -> None:
     assert memory is not None and memory.model is not None
     assert memory.model.input_gain[0, 0] == 1.0 / mass
     assert memory.model.damping[0, 0] == pytest.approx(-damping / mass, rel=0.05)
-    # dead_reckoning_force_margin reaches the memory (2 × the window's largest force; 0: none)
-    assert memory.force_limit[0] == pytest.approx(2.0 * np.max(np.abs(np.array(forces)[:, 0])))
-    unclipped, _, _ = _learn(PredictorParams(ndof=1, sample_time=h), np.arange(1200.0),
-                             np.array(poses), np.array(forces)[:, :1], None, [], 120.0, 60, 1.2,
-                             gain, force_margin=0.0)
-    assert unclipped is not None and np.all(np.isinf(unclipped.force_limit))
+    # dead_reckoning_force_margin reaches the memory (by default 0: no clip; 2: 2 × the window's
+    # largest force)
+    assert np.all(np.isinf(memory.force_limit))
+    clipped, _, _ = _learn(PredictorParams(ndof=1, sample_time=h), np.arange(1200.0),
+                           np.array(poses), np.array(forces)[:, :1], None, [], 120.0, 60, 1.2,
+                           gain, force_margin=2.0)
+    assert clipped is not None
+    assert clipped.force_limit[0] == pytest.approx(2.0 * np.max(np.abs(np.array(forces)[:, 0])))
 
 
 def _published_pd_loop(m: int, t0: float = 0.0) -> tuple[list[Published], np.ndarray,

@@ -10,7 +10,8 @@ dead reckoning cannot change), once per case, with ``dead_reckoning_excursion_st
 loop of k = 0 to within rounding; the miss term of a reckoner other than the model is in the
 published covariance already). Per case it prints the bench's lf_odom `during` (the mean over
 the dropouts of the worst horizontal distance of the true LF pose from the loop's reference
-during each; `odometry_bench.dropout_deviation`) and whether the loop aborted. For every
+during each; `odometry_bench.dropout_deviation`), its worst heading difference (`during_heading`)
+and whether the loop aborted. For every
 dead-reckoned estimate it records the displacement the memory's model dead-reckoned since the
 dropout began (the arguments of `odometry.excursion_covariance`) and recomputes, for each k of
 ``--k``, the published pose covariance with k² diag(|d_NE|², |d_NE|², d_ψ²) added: printed per
@@ -61,10 +62,11 @@ def _spread(model_displacement: np.ndarray) -> np.ndarray:
 
 def one_case(scenario_name: str, seed: int, odometry: OdometryParams,
              spread: float, moves: tuple[float, float] | None,
-             ks: Sequence[float]) -> tuple[list[list[float]], float, bool]:
-    """One loop: (per dropout the truth-in-ellipse fraction per k, mean `during` [m], aborted).
+             ks: Sequence[float]) -> tuple[list[list[float]], float, float, bool]:
+    """One loop: (truth-in-ellipse fractions, mean `during` [m], heading [rad], aborted).
 
-    The fractions: rows are dropouts, columns the values of ``ks``.
+    The fractions: rows are dropouts, columns the values of ``ks``. The heading: the mean worst
+    heading difference during the dropouts (`during_heading`; NaN in 1 DOF).
     """
     scenario = load_scenario(scenario_name)
     params = predictor_params(scenario, None)
@@ -120,7 +122,8 @@ def one_case(scenario_name: str, seed: int, odometry: OdometryParams,
     deviation = ob.dropout_deviation(run, _loop_reference(scenario, run.record, ideal), ndof,
                                      dropouts)
     during = float(np.mean([row['during'] for row in deviation]))
-    return rows, during, run.aborted_at is not None
+    heading = float(np.mean([row.get('during_heading', np.nan) for row in deviation]))
+    return rows, during, heading, run.aborted_at is not None
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -135,12 +138,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     torch.set_num_threads(1)
     per_scenario: dict[str, list[list[float]]] = defaultdict(list)
     runs: dict[str, list[tuple[float, bool]]] = defaultdict(list)
+    headings: dict[str, list[float]] = defaultdict(list)
     for scenario_name, seed in cases:
-        rows, during, aborted = one_case(scenario_name, seed, odometry, args.spread, moves,
-                                         args.k)
+        rows, during, heading, aborted = one_case(scenario_name, seed, odometry, args.spread,
+                                                  moves, args.k)
         per_scenario[scenario_name].extend(rows)
         runs[scenario_name].append((during, aborted))
-        print(f'{scenario_name}:{seed}: during {during:.2f} m{" ABORTED" if aborted else ""}; '
+        headings[scenario_name].append(heading)
+        print(f'{scenario_name}:{seed}: during {during:.2f} m, heading {heading:.3f} rad'
+              f'{" ABORTED" if aborted else ""}; '
               'trust ' + ', '.join(f'k={k:g} {np.mean([r[j] for r in rows]):.3f}'
                                    for j, k in enumerate(args.k)), flush=True)
     for scenario_name, rows in per_scenario.items():
@@ -148,6 +154,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         durings = [d for d, _ in runs[scenario_name]]
         lost = sum(a for _, a in runs[scenario_name])
         print(f'{scenario_name}: during per run {np.nanmean(durings):.2f} m (runs not aborted), '
+              f'heading {np.nanmean(headings[scenario_name]):.3f} rad, '
               f'{lost}/{len(durings)} aborted; {table.shape[0]} dropouts, trust ' + ', '.join(
                   f'k={k:g} {table[:, j].mean():.3f}' for j, k in enumerate(args.k)))
     return 0

@@ -331,6 +331,13 @@ class OdometryParams:
         "driven by the thrust; the memory's choice while no model is fitted), "
         "'constant_velocity' or 'hold' (tuning seeds, DP loops through 60 s dropouts: auto; "
         "model unsafe on rao_supply; docs/BENCHMARKS.md)", ''))
+    dead_reckoning_keep_model: bool = field(default=False, metadata=field_doc(
+        'a new vessel memory whose LF model was refused (a window whose fit failed, e.g. a turn '
+        'with a thrust gain of the wrong sign and no controller read) does not replace one '
+        'with a model: the vessel has not changed, and without a model a dropout in a turn '
+        "falls back to 'hold', whose held heading error the PID keeps turning against "
+        '(docs/BENCHMARKS.md, fifty-first session); counted in memories_kept; false: the '
+        'newest memory is always used', ''))
     reacquire_gate: float = field(default=CHI2_3DOF_999, metadata=field_doc(
         'a fix within this squared Mahalanobis distance of the dead-reckoned pose is accepted '
         'at once', ''))
@@ -565,7 +572,7 @@ class LfOdometry:
         self.counters = {'dead_reckoning_episodes': 0, 'lost': 0, 'reacquired': 0,
                          'reacquired_outside_gate': 0, 'fixes_held_back': 0, 'calibrations': 0,
                          'memory_updates': 0, 'numeric_failures': 0,
-                         'implausible_thrust': 0}
+                         'implausible_thrust': 0, 'memories_kept': 0}
         # per-sample values that depend only on the parameters, the calibration, the memory
         # (and h): (the objects they were made from, the read-only value)
         self._r_cache: tuple[OdometryParams, dict[str, ErrorModel], FloatArray] | None = None
@@ -735,8 +742,15 @@ class LfOdometry:
         return list(self._history)
 
     def apply_learned(self, memory: VesselMemory | None, covariances: Covariances | None) -> None:
-        """Put a vessel memory and a calibration in use (None: keep the previous one)."""
-        if memory is not None:
+        """Put a vessel memory and a calibration in use (None: keep the previous one).
+
+        With ``dead_reckoning_keep_model`` a memory without a model keeps the one in use if
+        that has a model (counted in ``memories_kept``).
+        """
+        if memory is not None and memory.model is None and self._memory is not None and \
+                self._memory.model is not None and self.params.dead_reckoning_keep_model:
+            self.counters['memories_kept'] += 1
+        elif memory is not None:
             self._memory = memory
             self.counters['memory_updates'] += 1
         if covariances is not None:

@@ -1213,3 +1213,26 @@ def test_holding_balance_is_not_used_when_the_move_is_old() -> None:
         OdometryParams(dead_reckoning_holding_max_age=math.nan)
     with pytest.raises(ValueError, match='dead_reckoning_holding_max_age'):
         OdometryParams(dead_reckoning_holding_max_age=-1.0)
+
+
+@pytest.mark.parametrize('keep', [False, True])
+def test_a_memory_without_a_model_keeps_the_one_with_a_model_when_asked(keep: bool) -> None:
+    """``dead_reckoning_keep_model``: a refused fit does not take the model away.
+
+    Off (default), the newest memory is used: its reckoner ('hold') reckons the dropout. On, the
+    memory with a model stays in use and is counted in ``memories_kept``; a memory with a model
+    still replaces it.
+    """
+    odo = LfOdometry(3, H, OdometryParams(dead_reckoning_keep_model=keep))
+    with_model = _surge_memory(0.01, 1e-6)
+    refused = dataclasses.replace(_dp_memory(with_model.model, reckoner='hold'), model=None)
+    odo.apply_learned(with_model, None)
+    assert odo.reckoner == 'model'
+    odo.apply_learned(refused, None)
+    assert odo.memory is (with_model if keep else refused)
+    assert odo.reckoner == ('model' if keep else 'hold')
+    assert odo.counters['memories_kept'] == int(keep)
+    assert odo.counters['memory_updates'] == 2 - int(keep)
+    newer = _surge_memory(0.02, 2e-6)
+    odo.apply_learned(newer, None)
+    assert odo.memory is newer

@@ -632,8 +632,9 @@ def test_forced_model_dead_reckoner_follows_the_thrust() -> None:
                           drift_curves=curves)  # type: ignore[arg-type]
     force = np.array([1e4, 0.0, 0.0])
     outs = {}
-    for choice in ('auto', 'model'):
-        odo = LfOdometry(3, H, OdometryParams(dead_reckoner=choice))
+    for choice in ('auto', 'model'):  # the drift curve alone (no manoeuvre term)
+        odo = LfOdometry(3, H, OdometryParams(dead_reckoner=choice,
+                                              dead_reckoning_excursion_std=0.0))
         _track_line(odo, 0.0, 0.0, 100)
         odo._memory = memory  # noqa: SLF001 - a known vessel memory
         last = odo.track(100.0, [0.0, 0.0, 0.0], np.zeros(3))
@@ -1087,6 +1088,19 @@ def test_dead_reckoning_excursion_std_spreads_the_models_displacement() -> None:
     _, cov_hold_spread = _coast_a_surge_push('hold', 0.5)
     added = np.diag(cov_hold_spread - cov_hold)
     np.testing.assert_allclose(added, [1.25 * d ** 2, 0.25 * d ** 2, 0.0], rtol=1e-6, atol=1e-9)
+
+
+def test_excursion_covariance_stays_finite_for_an_absurd_displacement() -> None:
+    """Displacements beyond ``MAX_EXCURSION`` count as that much: finite, no overflow."""
+    big = odometry_module.MAX_EXCURSION
+    pose, twist = odometry_module.excursion_covariance(
+        [1e300, 0.0, 0.0], [-1e300, 0.0, 0.0], [math.inf, 0.0, 0.0], [0.0, 0.0, 0.0], 2.0)
+    assert np.all(np.isfinite(pose)) and np.all(np.isfinite(twist))
+    assert pose[0, 0] == pytest.approx((2.0 * big) ** 2 + 4.0 * big ** 2)  # miss² + k² d²
+    assert twist[0, 0] == pytest.approx(big ** 2)  # miss² only: the model's twist is 0
+    small, _ = odometry_module.excursion_covariance([3.0, 4.0, 0.0], [3.0, 4.0, 0.0],
+                                                    np.zeros(3), np.zeros(3), 2.0)
+    np.testing.assert_allclose(np.diag(small), [100.0, 100.0, 0.0])  # k² |d_NE|² = 4 · 25
 
 
 @pytest.mark.parametrize('bad', [-0.1, math.nan, math.inf])

@@ -296,16 +296,17 @@ class OdometryParams:
         'the one low-passed over dead_reckoning_velocity_time: in a setpoint move that average '
         'lags the speed; false: the low-passed twist in every DOF (docs/BENCHMARKS.md, '
         'forty-ninth session)', ''))
-    dead_reckoning_excursion_std: float = field(default=2.0, metadata=field_doc(
+    dead_reckoning_excursion_std: float = field(default=0.0, metadata=field_doc(
         "the model's relative error in a manoeuvre: while dead reckoning, the covariance adds "
         "(this × the displacement the memory's model dead-reckons since the dropout began)², "
         'horizontally isotropic, and (this × its heading change)² (twist: the same on the '
         "model's twist), plus the square of what a reckoner other than the model misses of "
         "that displacement; the drift curve is learned holding station, where the thrust and "
         'the displacement are small, and held the truth in a setpoint move only half the time '
-        '(docs/BENCHMARKS.md, fiftieth session); 2 (fifty-first session, rule D on fresh seeds: '
-        'the truth inside the 95 % ellipse 0.66 -> 0.91 and 0.46 -> 0.87 of the time in the '
-        'moves, the loops no worse); 0 = off', '-'))
+        '(docs/BENCHMARKS.md, fiftieth session); 2 made it 0.87-0.91 in the loop through '
+        'dropouts in the moves, but the published std 6-154x the error in the open-loop '
+        'dead-reckoning row, where the recorded thrust drives the model far while the error '
+        'stays small (fifty-first session); 0 = off', '-'))
     twist_model: bool = field(default=False, metadata=field_doc(
         "the twist Kalman filter predicts with the vessel memory's model whenever its thrust "
         'gain is given or implied by the controller (else only when the drift test chose it)',

@@ -8,9 +8,8 @@ A cheap screen of `odometry_bench run --dropout-loops`: only lf_odom's loop with
 is run (not the observer's loops nor the loops without dropouts, which an option of lf_odom's
 dead reckoning cannot change), once per case, with ``dead_reckoning_excursion_std`` = 1e-9 (the
 loop of k = 0 to within rounding; the miss term of a reckoner other than the model is in the
-published covariance already; since the fifty-first session the default is k = 2, whose loop
-differs from this one only after a reacquisition: the first dropout of every run is the same).
-Per case it prints the bench's lf_odom `during` (the mean over
+published covariance already; a loop with k > 0 differs from this one only after a
+reacquisition: the first dropout of every run is the same). Per case it prints the bench's lf_odom `during` (the mean over
 the dropouts of the worst horizontal distance of the true LF pose from the loop's reference
 during each; `odometry_bench.dropout_deviation`), its worst heading difference (`during_heading`)
 and whether the loop aborted. For every

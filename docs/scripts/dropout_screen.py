@@ -9,11 +9,11 @@ is run (not the observer's loops nor the loops without dropouts, which an option
 dead reckoning cannot change), once per case, with ``dead_reckoning_excursion_std`` = 1e-9 (the
 loop of k = 0 to within rounding; the miss term of a reckoner other than the model is in the
 published covariance already; a loop with k > 0 differs from this one only after a
-reacquisition: the first dropout of every run is the same). Per case it prints the bench's lf_odom `during` (the mean over
-the dropouts of the worst horizontal distance of the true LF pose from the loop's reference
-during each; `odometry_bench.dropout_deviation`), its worst heading difference (`during_heading`)
-and whether the loop aborted. For every
-dead-reckoned estimate it records the displacement the memory's model dead-reckoned since the
+reacquisition: the first dropout of every run is the same). Per case it prints the bench's
+lf_odom `during` (the mean over the dropouts of the worst horizontal distance of the true LF
+pose from the loop's reference during each; `odometry_bench.dropout_deviation`), its worst
+heading difference (`during_heading`) and whether the loop aborted. For every dead-reckoned
+estimate it records the displacement the memory's model dead-reckoned since the
 dropout began (the arguments of `odometry.excursion_covariance`) and recomputes, for each k of
 ``--k``, the published pose covariance with k² diag(|d_NE|², |d_NE|², d_ψ²) added: printed per
 case and per scenario is the bench's trust measure, the mean over dropouts of the fraction of

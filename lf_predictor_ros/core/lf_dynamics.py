@@ -54,10 +54,11 @@ TEST_START_SPACING = 20.0
 VALIDATION_FRACTION = 1.0 / 3.0
 # Fewer starts than this: the drift statistics are not trusted and no choice is made.
 MIN_TEST_STARTS = 4
-# `learn_vessel_memory`'s default ``force_margin``: a force beyond this multiple of the largest
-# one in the learned window is not believed by the dead reckoner (clipped); 0: no clip, the
-# default of the odometry's ``dead_reckoning_force_margin`` (a DP turn commands up to 26× the yaw
-# moment of the station keeping before it; clipped at 2×, loops were lost: docs/BENCHMARKS.md) [-].
+# The default force margin (`learn_vessel_memory`'s ``force_margin``, the odometry's
+# ``dead_reckoning_force_margin``): a force beyond this multiple of the largest one in the
+# learned window is not believed by the dead reckoner (clipped); 0: no clip (a DP turn commands
+# up to 26× the yaw moment of the station keeping before it; clipped at 2×, loops were lost:
+# docs/BENCHMARKS.md) [-].
 FORCE_MARGIN = 0.0
 # The thrust counts as informative when it cuts the held-out dead-reckoning drift by at least
 # this fraction: an unrelated thrust changes it by chance by ≈ 1 % (onedof_excited, random

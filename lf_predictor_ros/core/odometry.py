@@ -74,6 +74,7 @@ from lf_predictor_ros.core.filters import frequency_response, low_pass_step, zer
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_dynamics import (
     DEAD_RECKONERS,
+    FORCE_MARGIN,
     DeadReckoner,
     LfDynamics,
     VesselMemory,
@@ -283,7 +284,7 @@ class OdometryParams:
         'longer young: its thrust has become the environment the vessel holds against, and the '
         'held thrust may belong to another place or sea); else the current low-passed thrust; '
         'inf = any age', 's'))
-    dead_reckoning_force_margin: float = field(default=0.0, metadata=field_doc(
+    dead_reckoning_force_margin: float = field(default=FORCE_MARGIN, metadata=field_doc(
         'the thrust the odometry believes (dead reckoning, twist prediction, environment '
         'balance) is clipped per DOF to this multiple of the largest thrust in the vessel '
         "memory's window (against corrupt thrust messages); 0: no clip. A DP turn commands up "

@@ -36,7 +36,8 @@ unwrapped, central differences).
    fix, and whether the 95 % covariance ellipse (eᵀ P⁻¹ e ≤ χ²₀.₉₅(n)) contains the truth, next
    to the oracle Kalman filter predicting only (its ``update`` with a NaN pose propagates
    without a measurement update) through the same dropouts and to holding the last published
-   pose.
+   pose. With ``--dead-reckoning-commands`` the thrust also reaches the estimator as the DP
+   controller's commands, as a replayed bag with ``thrust_command`` would feed them.
 4. **Closed loop with the D term from lf_odom**: `recordings.run_loop` with the predictor in
    the loop, once with the PID's own finite-difference D term (the suite's ``adaptive`` loop) and
    once with ``velocity`` = the twist of `LfStateEstimator`; metrics as the suite computes them
@@ -356,8 +357,14 @@ def _tracking_run(params: PredictorParams, odometry: OdometryParams,
 
 def _dropout_run(params: PredictorParams, odometry: OdometryParams,
                  data: dict[str, FloatArray], dropouts: Sequence[tuple[float, float]],
-                 setup: Any) -> dict[str, Any]:
-    """Item 3 of the module docstring."""
+                 setup: Any, commands: bool = False) -> dict[str, Any]:
+    """Item 3 of the module docstring.
+
+    ``commands``: every sample's thrust also reaches the estimator as the DP controller's
+    command for that instant (``LfStateEstimator.command``), as a bag with ``thrust_command``
+    replays: the recording's controller acted on another estimator, and the controller read
+    may still find its PD law on this one's estimates (the memory is then ``dp_controlled``).
+    """
     n = params.ndof
     t, y, u, truth, omega = data['t'], data['y'], data['u'], data['truth'], data['omega']
     est = LfStateEstimator(params, odometry, background=False)
@@ -372,6 +379,8 @@ def _dropout_run(params: PredictorParams, odometry: OdometryParams,
         for k in range(len(t)):
             tk = float(t[k])
             drop = next(((a, length) for a, length in dropouts if a <= tk < a + length), None)
+            if commands:
+                est.command(tk, u[k])
             if drop is None:
                 if in_dropout_prev:
                     est.restart_segment()
@@ -610,13 +619,16 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                       loops: bool = True, dead_reckoning: bool = True,
                       tracking: bool = True, dropout_loops: bool = False,
                       dropout_spread: float = 0.0,
-                      dropout_moves: tuple[float, float] | None = None) -> dict[str, Any]:
+                      dropout_moves: tuple[float, float] | None = None,
+                      dead_reckoning_commands: bool = False) -> dict[str, Any]:
     """Every measurement of the module docstring on one (scenario, seed); JSON-ready.
 
     ``dropout_spread`` [s]: the default dropouts of items 3 and 5 are delayed by the seed's
     U(0, spread) draw (`dropout_shift_for_seed`; given ``dropouts`` of item 3 are not moved);
     0: at the same times in every seed. ``dropout_moves`` (low, high) [s]: item 5's dropouts
     start that long after each setpoint change instead (`move_dropouts`; item 3 unchanged).
+    ``dead_reckoning_commands``: item 3 also feeds the thrust as the controller's commands
+    (`_dropout_run`'s ``commands``).
     """
     begin_time = time.monotonic()
     scenario = load_scenario(scenario_name)
@@ -656,7 +668,9 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
         seen = recording_seen_truth(recording, params.sample_time)
         out['tracking'] = _tracking_run(params, odometry, data, begin, seen)
     if dead_reckoning:
-        out['dead_reckoning'] = _dropout_run(params, odometry, data, dropouts, setup)
+        out['dead_reckoning'] = _dropout_run(params, odometry, data, dropouts, setup,
+                                             dead_reckoning_commands)
+        out['dead_reckoning']['commands'] = dead_reckoning_commands
     if loops and scenario.controller.enabled:
         out['closed_loop'] = _loop_runs(scenario_name, seed, total, params, odometry, setup,
                                         float(data['t'][begin]), dropout_loops, shift,
@@ -684,6 +698,7 @@ class OdometrySpec:
     odometry_overrides: dict[str, Any] = field(default_factory=dict)
     dropout_spread: float = 0.0
     dropout_moves: tuple[float, float] | None = None
+    dead_reckoning_commands: bool = False
 
     @property
     def key(self) -> str:
@@ -697,7 +712,7 @@ class OdometrySpec:
                      self.dead_reckoning, self.tracking,
                      tuple(sorted(self.params_overrides.items())), self.dropout_loops,
                      tuple(sorted(self.odometry_overrides.items())), self.dropout_spread,
-                     self.dropout_moves))
+                     self.dropout_moves, self.dead_reckoning_commands))
 
 
 def run_spec(spec: OdometrySpec) -> dict[str, Any]:
@@ -720,7 +735,8 @@ def run_spec(spec: OdometrySpec) -> dict[str, Any]:
                              loops=spec.loops, dead_reckoning=spec.dead_reckoning,
                              tracking=spec.tracking, dropout_loops=spec.dropout_loops,
                              dropout_spread=spec.dropout_spread,
-                             dropout_moves=spec.dropout_moves)
+                             dropout_moves=spec.dropout_moves,
+                             dead_reckoning_commands=spec.dead_reckoning_commands)
 
 
 def run_specs(specs: Sequence[OdometrySpec], scheduler: str | None = None,
@@ -1056,6 +1072,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                      help='skip the run without dropouts (items 1 and 2)')
     run.add_argument('--no-dead-reckoning', action='store_true',
                      help='skip the dropout run (item 3)')
+    run.add_argument('--dead-reckoning-commands', action='store_true',
+                     help="item 3 also feeds the recorded thrust as the DP controller's "
+                     'commands (thrust_command in a replayed bag; the controller read may then '
+                     'mark the memory dp_controlled)')
     run.add_argument('--dropout-loops', action='store_true',
                      help='also the closed loops through pose dropouts (item 5; with the loops)')
     run.add_argument('--dropout-spread', type=float, default=0.0, metavar='SECONDS',
@@ -1112,7 +1132,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                               not args.no_dead_reckoning, not args.no_tracking,
                               params_overrides=params, dropout_loops=args.dropout_loops,
                               odometry_overrides=overrides, dropout_spread=args.dropout_spread,
-                              dropout_moves=moves)
+                              dropout_moves=moves,
+                              dead_reckoning_commands=args.dead_reckoning_commands)
                  for bandwidth in args.twist_bandwidth for lag in args.pose_lag_scale
                  for s in args.scenarios for seed in args.seeds]
         results = run_specs(specs, args.scheduler, args.workers)

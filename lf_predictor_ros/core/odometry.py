@@ -125,6 +125,10 @@ MOTION_BALANCE_SIGMAS = 2.0
 # absurd, finite thrust the dead reckoning has followed), so that the covariance stays finite
 # [m, m, rad; m/s, m/s, rad/s].
 MAX_EXCURSION = 1e6
+# ``dead_reckoning_excursion_band``: the time constant of the thrust's running mean and
+# variance (first-order, per DOF) that the band is centred on and scaled by; a few LF periods
+# of a DP loop, so that the variance holds the station-keeping thrust's own fluctuation [s].
+EXCURSION_FORCE_TIME = 60.0
 # Holding samples kept beyond dead_reckoning_holding_lead (dead_reckoning_holding_balance) [s].
 HOLDING_MARGIN = 10.0
 # ``twist_attenuation``: frequencies where the targets' zero-phase filter keeps less than this
@@ -308,6 +312,16 @@ class OdometryParams:
         'dropouts in the moves, but the published std 6-154x the error in the open-loop '
         'dead-reckoning row, where the recorded thrust drives the model far while the error '
         'stays small (fifty-first session); 0 = off', '-'))
+    dead_reckoning_excursion_band: float = field(default=0.0, metadata=field_doc(
+        "with dead_reckoning_excursion_std: the displacement the term scales is the model's "
+        "answer to the thrust beyond what station keeping needed, and only under a DP "
+        "controller's thrust (the memory's dp_controlled): the memory's model balanced at rest "
+        'against the thrust averaged over EXCURSION_FORCE_TIME before the dropout, driven by '
+        'the thrust beyond ± this × the std of the thrust about that average while tracking, '
+        'per DOF (holding station a DP thrust balances the environment and moves nothing; a '
+        "setpoint move's thrust leaves the band); no term without a DP controller (the drift "
+        "curve is learned on the thrust that moves such a vessel); 0: the model's answer to the "
+        'whole thrust, as before the fifty-second session', '-'))
     twist_model: bool = field(default=False, metadata=field_doc(
         "the twist Kalman filter predicts with the vessel memory's model whenever its thrust "
         'gain is given or implied by the controller (else only when the drift test chose it)',
@@ -396,6 +410,11 @@ class OdometryParams:
             raise ValueError('dead_reckoning_excursion_std must be a finite number >= 0 (a '
                              'fraction of the dead-reckoned displacement; 0: off), got '
                              f'{self.dead_reckoning_excursion_std}')
+        if not (math.isfinite(self.dead_reckoning_excursion_band) and
+                self.dead_reckoning_excursion_band >= 0.0):
+            raise ValueError('dead_reckoning_excursion_band must be a finite number >= 0 '
+                             '(thrust stds; 0: the whole thrust), got '
+                             f'{self.dead_reckoning_excursion_band}')
         if not (math.isfinite(self.dead_reckoning_velocity_time) and
                 self.dead_reckoning_velocity_time > 0.0):
             raise ValueError('dead_reckoning_velocity_time must be a positive number of seconds, '
@@ -572,6 +591,11 @@ class LfOdometry:
         # started, beside a reckoner that is not the model (None: the option is off, there is
         # no model, or the reckoner is the model)
         self._dr_shadow: FloatArray | None = None
+        # dead_reckoning_excursion_band: the thrust's running (mean, variance) while tracking
+        # (EXCURSION_FORCE_TIME), and at the DR start (centre, half-width) of the band and the
+        # model balanced at rest against the centre (None: no DP controller or no model)
+        self._thrust_stats: tuple[FloatArray, FloatArray] | None = None
+        self._dr_band: tuple[FloatArray, FloatArray, LfDynamics] | None = None
         # dead_reckoning_holding_balance: (t, low-passed thrust, heading [rad]) while holding
         # station, per group ('horizontal': earth-fixed [N, E] [N]; 'yaw' [N·m]; 1 DOF:
         # 'horizontal' surge)
@@ -650,6 +674,7 @@ class LfOdometry:
         self._pending_since = None
         self._dr_model = None
         self._dr_shadow = None
+        self._dr_band = None
         x = self._require_state()
         twist = x[self.ndof:].copy()
         accel = self._twist_change(t, twist)
@@ -667,6 +692,9 @@ class LfOdometry:
         if self.params.dead_reckoning_motion_balance or self.params.dead_reckoning_moving_twist \
                 or self.params.dead_reckoning_holding_balance:
             self._track_balance(twist)
+        if self.params.dead_reckoning_excursion_band > 0.0:
+            self._thrust_stats = thrust_statistics_step(
+                self._thrust_stats, applied, min(1.0, self.sample_time / EXCURSION_FORCE_TIME))
         if self.params.dead_reckoning_holding_balance:
             self._track_holding(t, float(x[2]) if self.ndof == 3 else 0.0)
         published, pose_cov = self._blended(t, np.array(pose[:3], dtype=np.float64),
@@ -702,6 +730,7 @@ class LfOdometry:
             if self._slow_twist is not None and self._x is not None:
                 self._x = np.concatenate([self._x[:self.ndof], self._start_twist(self._x)])
             self._dr_shadow = None
+            self._dr_band = self._excess_band()
         elapsed = t - self._last_fix
         if elapsed > self.params.dead_reckoning_timeout:
             if self._mode != 'lost':
@@ -955,6 +984,26 @@ class LfOdometry:
             force = self._holding_force(heading, dofs)
         return balanced_at(memory.model, heading, np.zeros(self.ndof), force, dofs)
 
+    def _excess_band(self) -> tuple[FloatArray, FloatArray, LfDynamics] | None:
+        """At a DR start (``dead_reckoning_excursion_band``): centre, half-width, model; or None.
+
+        None when the band is off, without a model, without a DP controller's thrust
+        (``memory.dp_controlled``) or before the first fix. The centre is the thrust's running
+        mean, the half-width the band × its running std, and the model the memory's, balanced
+        at rest against the centre in every DOF (`lf_dynamics.balanced_at`): it does not move
+        while the thrust stays in the band.
+        """
+        memory, x, stats = self._memory, self._x, self._thrust_stats
+        if self.params.dead_reckoning_excursion_band <= 0.0 or memory is None or \
+                memory.model is None or not memory.dp_controlled or stats is None or x is None:
+            return None
+        n = self.ndof
+        mean, var = stats
+        heading = float(x[2]) if n == 3 else 0.0
+        model = balanced_at(memory.model, heading, np.zeros(n), mean)
+        return (mean.copy(), self.params.dead_reckoning_excursion_band * np.sqrt(var),
+                model)
+
     def _track_holding(self, t: float, heading: float) -> None:
         """Remember the low-passed thrust of the DOF groups that are holding station now.
 
@@ -1093,9 +1142,12 @@ class LfOdometry:
         model = None if self._dr_model is None else self._dr_model[1]
         eta, nu = x[:n], x[n:]
         reckoner = self.reckoner
-        shadow = None  # the model's own dead reckoning beside another reckoner
-        if self.params.dead_reckoning_excursion_std > 0.0 and model is not None and \
-                reckoner != 'model':
+        # the model's own dead reckoning beside another reckoner, or (the band) its answer to
+        # the thrust beyond the station-keeping band: the displacement the excursion term scales
+        shadow, shadow_model, band = None, model, self._dr_band
+        if self.params.dead_reckoning_excursion_std > 0.0 and (
+                band is not None if self.params.dead_reckoning_excursion_band > 0.0 else
+                model is not None and reckoner != 'model'):
             shadow = x.copy() if self._dr_shadow is None else self._dr_shadow
         with np.errstate(over='ignore', invalid='ignore'):  # checked below
             for _ in range(steps):
@@ -1103,8 +1155,11 @@ class LfOdometry:
                 self._p = a @ self._p @ a.T + self._process_noise(h)
                 eta, nu = dead_reckon_step(model, reckoner, eta, nu, tau[:n], h)
                 if shadow is not None:
-                    shadow = np.concatenate(dead_reckon_step(model, 'model', shadow[:n],
-                                                             shadow[n:], tau[:n], h))
+                    force = tau[:n]
+                    if band is not None:
+                        force, shadow_model = band_excess(force, band[0], band[1]), band[2]
+                    shadow = np.concatenate(dead_reckon_step(shadow_model, 'model', shadow[:n],
+                                                             shadow[n:], force, h))
         if not _finite(eta, nu):
             # an absurd (finite) thrust overflowed the model: hold the last finite pose
             self.counters['numeric_failures'] += 1
@@ -1136,8 +1191,11 @@ class LfOdometry:
         else:  # no vessel memory yet: the constant-velocity Kalman propagation
             pose_cov[:n, :n] = np.maximum(pose_cov[:n, :n], self._p[:n, :n])
             twist_cov[:n, :n] = np.maximum(twist_cov[:n, :n], self._p[n:, n:])
-        if self.params.dead_reckoning_excursion_std > 0.0:
+        band_off = self.params.dead_reckoning_excursion_band <= 0.0
+        if self.params.dead_reckoning_excursion_std > 0.0 and (
+                band_off or self._dr_shadow is not None):
             # the model's dead reckoning: the state itself unless another reckoner is in use
+            # (the band: always the shadow; none without a DP controller, no term)
             modelled = x if self._dr_shadow is None else self._dr_shadow
             pose_part, twist_part = excursion_covariance(
                 x[:n] - eta0, modelled[:n] - eta0, x[n:], modelled[n:],
@@ -1386,6 +1444,37 @@ def calibrate(history: Sequence[Published], times: ArrayLike, targets: ArrayLike
         twist_cov = {key: replace(model, hold=model.hold + taken)
                      for key, model in twist_cov.items()}
     return pose_cov, twist_cov
+
+
+def thrust_statistics_step(stats: tuple[FloatArray, FloatArray] | None, force: ArrayLike,
+                           weight: float) -> tuple[FloatArray, FloatArray]:
+    """One step of the thrust's exponentially weighted running mean and variance; new arrays.
+
+    ``stats`` (mean, variance) per DOF, None: the first sample (its mean, variance 0);
+    ``weight`` in (0, 1] the new sample's weight. With d = f − mean: mean + w d and
+    (1 − w)(variance + w d²), the incremental form of the weighted variance (Finch 2009,
+    "Incremental calculation of weighted mean and variance", §9).
+    """
+    f = np.array(force, dtype=np.float64)
+    if stats is None:
+        return f, np.zeros_like(f)
+    mean, var = stats
+    d = f - mean
+    return mean + weight * d, (1.0 - weight) * (var + weight * d * d)
+
+
+def band_excess(force: ArrayLike, centre: ArrayLike, half_width: ArrayLike) -> FloatArray:
+    """The centre plus the part of ``force`` − ``centre`` beyond ± ``half_width`` (per DOF).
+
+    A dead zone: a force inside the band gives the centre, one outside it the centre plus its
+    distance beyond the band's edge (continuous). New array; the inputs are not modified.
+    """
+    f = np.asarray(force, dtype=np.float64)
+    c = np.asarray(centre, dtype=np.float64)
+    d = f - c
+    beyond = np.maximum(np.abs(d) - np.asarray(half_width, dtype=np.float64), 0.0)
+    out: FloatArray = c + np.sign(d) * beyond
+    return out
 
 
 def excursion_covariance(displacement: ArrayLike, model_displacement: ArrayLike,

@@ -176,6 +176,28 @@ def test_smoke_short_onedof_run() -> None:
     assert 'Dead-reckoning drift' in report([case]) and '| pose_seen |' in report([case])
 
 
+def test_dead_reckoning_commands_feed_every_samples_thrust_as_the_command(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``dead_reckoning_commands``: item 3 logs each grid sample's thrust as a command."""
+    fed: list[tuple[float, np.ndarray]] = []
+    original = odometry_bench.LfStateEstimator.command
+
+    def spy(self: odometry_bench.LfStateEstimator, t: float, force: np.ndarray) -> bool:
+        fed.append((t, np.array(force)))
+        return original(self, t, force)
+
+    monkeypatch.setattr(odometry_bench.LfStateEstimator, 'command', spy)
+    for commands in (False, True):
+        fed.clear()
+        case = run_odometry_case('onedof_feedback', 1, 700.0, odometry=OdometryParams(),
+                                 params_overrides={'max_epochs': 2}, dropouts=((540.0, 40.0),),
+                                 loops=False, tracking=False, dead_reckoning_commands=commands)
+        assert case['dead_reckoning']['commands'] is commands
+        samples = int(round(case['duration'] / 1.0))  # h = 1 s
+        assert len(fed) == (samples if commands else 0)
+    assert [t for t, _ in fed] == sorted(t for t, _ in fed)
+
+
 def _run_on(t: np.ndarray, truth: np.ndarray, thrust: np.ndarray | None = None) -> ClosedLoopRun:
     zeros = np.zeros_like(truth)
     thrust = zeros if thrust is None else thrust

@@ -22,6 +22,7 @@ from lf_predictor_ros.core.odometry import (
     OdometryParams,
     Published,
     attenuated_variance,
+    band_excess,
     calibrate,
     excursion_covariance,
     fit_error_model,
@@ -31,6 +32,7 @@ from lf_predictor_ros.core.odometry import (
     low_passed,
     normalized_error_squared,
     reference_velocity,
+    thrust_statistics_step,
 )
 
 H = 1.0
@@ -1107,6 +1109,98 @@ def test_excursion_covariance_stays_finite_for_an_absurd_displacement() -> None:
 def test_dead_reckoning_excursion_std_is_checked(bad: float) -> None:
     with pytest.raises(ValueError, match='dead_reckoning_excursion_std'):
         OdometryParams(dead_reckoning_excursion_std=bad)
+
+
+@pytest.mark.parametrize('bad', [-0.1, math.nan, math.inf])
+def test_dead_reckoning_excursion_band_is_checked(bad: float) -> None:
+    with pytest.raises(ValueError, match='dead_reckoning_excursion_band'):
+        OdometryParams(dead_reckoning_excursion_band=bad)
+
+
+def test_thrust_statistics_step_is_the_weighted_mean_and_variance() -> None:
+    """Two samples: weights 1 − w and w, variance w (1 − w) Δ²; a long white series: σ²."""
+    first = np.array([1.0, -2.0])
+    mean, var = thrust_statistics_step(None, first, 0.1)
+    np.testing.assert_array_equal(mean, first)
+    np.testing.assert_array_equal(var, [0.0, 0.0])
+    second = np.array([3.0, 2.0])
+    mean2, var2 = thrust_statistics_step((mean, var), second, 0.1)
+    np.testing.assert_allclose(mean2, 0.9 * first + 0.1 * second, rtol=1e-12)
+    np.testing.assert_allclose(var2, 0.1 * 0.9 * (second - first) ** 2, rtol=1e-12)
+    np.testing.assert_array_equal(mean, first)  # the inputs are not modified
+    rng = np.random.default_rng(5)
+    stats = None
+    for f in rng.normal(10.0, 2.0, size=(20000, 1)):
+        stats = thrust_statistics_step(stats, f, 0.01)
+    assert stats is not None
+    assert stats[0][0] == pytest.approx(10.0, abs=0.5)  # the mean's std: 2 √(w/2) = 0.14
+    assert stats[1][0] == pytest.approx(4.0, rel=0.25)  # its relative std: about √(w) = 0.1
+
+
+def test_band_excess_is_a_continuous_dead_zone() -> None:
+    centre, half = np.array([100.0, 0.0, 5.0]), np.array([10.0, 10.0, 0.0])
+    np.testing.assert_allclose(band_excess([105.0, -9.9, 5.0], centre, half), centre)
+    np.testing.assert_allclose(band_excess([125.0, -30.0, 7.0], centre, half),
+                               [115.0, -20.0, 7.0])
+    np.testing.assert_allclose(band_excess([110.0, 10.0, 5.0], centre, half), centre)  # edges
+
+
+def _coast_with_band(reckoner: str, push: float, swing: float, excursion_std: float,
+                     dp_controlled: bool = True) -> tuple[LfOdometry, np.ndarray]:
+    """`_coast_a_surge_push` with the band 2 and a held thrust that swings.
+
+    The held surge thrust alternates ± ``swing`` about 2e3 N while tracking, the coast adds
+    ``push`` N. Returns the odometry and the last dead-reckoned pose covariance.
+    """
+    model = LfDynamics(np.diag([-0.01, -0.01, -0.01]), np.diag([1e-6, 1e-6, 1e-9]),
+                       np.zeros((3, 3)), np.full(3, 1e-4))
+    odo = LfOdometry(3, H, OdometryParams(dead_reckoner=reckoner,
+                                          dead_reckoning_excursion_std=excursion_std,
+                                          dead_reckoning_excursion_band=2.0))
+    odo._memory = dataclasses.replace(  # noqa: SLF001 - a known vessel memory
+        _dp_memory(model, 'hold'), dp_controlled=dp_controlled)
+    for k in range(200):
+        odo.track(float(k), np.zeros(3), np.array([2e3 + swing * (-1) ** k, 0.0, 0.0]))
+    for k in range(1, 61):
+        out = odo.coast(200.0 + k, np.array([2e3 + push, 0.0, 0.0]))
+        assert out is not None
+    return odo, out.pose_cov
+
+
+def _band_added(push: float, swing: float, dp_controlled: bool = True
+                ) -> tuple[LfOdometry, np.ndarray]:
+    """The hold reckoner's odometry with k = 0.5 and what k = 0.5 added to its pose variances."""
+    odo, cov = _coast_with_band('hold', push, swing, 0.5, dp_controlled)
+    _, base = _coast_with_band('hold', push, swing, 0.0, dp_controlled)
+    return odo, np.diag(cov - base)
+
+
+def test_dead_reckoning_excursion_band_scales_the_thrust_beyond_the_band() -> None:
+    """The band: the model's answer to the thrust beyond centre ± 2 std, not to all of it.
+
+    The model is linear and starts at rest, so its displacement is proportional to the excess
+    force; `_coast_a_surge_push`'s push of 1e3 N moves it d = 1.563 m. A steady held thrust
+    (std 0): the band is the centre, the whole push counts, as without the band (hold misses
+    all of d: north + 1.25 d², east + 0.25 d²). A held thrust alternating ±600 N: a push of
+    1e3 N stays inside the band (half-width ≈ 1200 N) and adds nothing; one of 3e3 N counts
+    only beyond the edge. Without a DP controller's thrust the band adds nothing.
+    """
+    d = sum(0.1 * (1.0 - 0.99 ** k) for k in range(1, 62))
+    _, added = _band_added(1e3, 0.0)
+    np.testing.assert_allclose(added, [1.25 * d ** 2, 0.25 * d ** 2, 0.0], rtol=1e-6, atol=1e-9)
+    odo, added = _band_added(1e3, 600.0)
+    band = odo._dr_band  # noqa: SLF001 - the band frozen at the DR start
+    assert band is not None
+    assert band[1][0] == pytest.approx(1200.0, rel=0.02)  # 2 × the alternating thrust's std
+    np.testing.assert_allclose(added, np.zeros(3), atol=1e-9)
+    odo, added = _band_added(3e3, 600.0)
+    band = odo._dr_band  # noqa: SLF001
+    assert band is not None
+    d_beyond = d * (2e3 + 3e3 - (band[0][0] + band[1][0])) / 1e3  # the push beyond the edge
+    np.testing.assert_allclose(added, [1.25 * d_beyond ** 2, 0.25 * d_beyond ** 2, 0.0],
+                               rtol=1e-3)
+    _, added = _band_added(3e3, 600.0, dp_controlled=False)
+    np.testing.assert_allclose(added, np.zeros(3), atol=1e-12)
 
 
 def test_holding_balance_in_one_dof_follows_the_move() -> None:

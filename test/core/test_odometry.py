@@ -1135,6 +1135,9 @@ def test_thrust_statistics_step_is_the_weighted_mean_and_variance() -> None:
     assert stats is not None
     assert stats[0][0] == pytest.approx(10.0, abs=0.5)  # the mean's std: 2 √(w/2) = 0.14
     assert stats[1][0] == pytest.approx(4.0, rel=0.25)  # its relative std: about √(w) = 0.1
+    absurd = thrust_statistics_step(stats, [1e300], 0.01)  # d² overflows: the sample is left out
+    np.testing.assert_array_equal(absurd[0], stats[0])
+    np.testing.assert_array_equal(absurd[1], stats[1])
 
 
 def test_band_excess_is_a_continuous_dead_zone() -> None:

@@ -48,6 +48,12 @@ MAX_GROWTH_RATE = 1.0 / 200.0
 # Least damping rate of a diagonal fit, 1/(time constant): LF time constants of DP vessels are
 # 10–200 s (supply vessel 88 / 44 / 11.5 s, Fossen 2011 §7.3); 1000 s is far beyond [1/s].
 MIN_DAMPING_RATE = 1.0 / 1000.0
+# A fitted F with an eigenvalue of modulus ≥ this / h is refused: a time constant shorter than
+# the sample time is no vessel's LF dynamics, and the explicit dead-reckoning step
+# ν⁺ = (1 + h f) ν flips the velocity's sign every step from f = −1/h and grows without bound
+# below −2/h (a controller read 10⁴× off gave f = −314 1/s on onedof_feedback, and the dead
+# reckoning reached 10⁷³ m in 30 s: docs/BENCHMARKS.md, fifty-second session) [-].
+MAX_DAMPING_STEP = 1.0
 # Spacing of the dead-reckoning test starts in the validation part of the window [s].
 TEST_START_SPACING = 20.0
 # Fraction of the window (its newest part) kept out of the fit for the dead-reckoning test [-].
@@ -137,6 +143,10 @@ class LfDynamics:
         """Largest real part of the eigenvalues of F [1/s] (< 0: a damped vessel)."""
         return float(np.max(np.linalg.eigvals(self.damping).real))
 
+    def fastest_rate(self) -> float:
+        """Largest modulus of the eigenvalues of F [1/s] (1 / the shortest time constant)."""
+        return float(np.max(np.abs(np.linalg.eigvals(self.damping))))
+
 
 def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
                     ridge: float = RIDGE, input_gain: ArrayLike | None = None) -> LfDynamics:
@@ -161,8 +171,9 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
 
     Raises:
         ValueError: bad shapes, too few samples, non-finite data, or a fit that is not a damped
-            vessel (growth rate above ``MAX_GROWTH_RATE``, or a thrust that does not push the
-            vessel its way, G_ii ≤ 0): collect more (excited) data.
+            vessel (growth rate above ``MAX_GROWTH_RATE``, a time constant shorter than
+            h / ``MAX_DAMPING_STEP``, or a thrust that does not push the vessel its way,
+            G_ii ≤ 0): collect more (excited) data, or check a given or read thrust gain.
     """
     eta = as_series(targets, 'targets')
     tau = as_series(forces, 'forces')
@@ -189,6 +200,11 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
     if model.growth_rate() > MAX_GROWTH_RATE:
         raise ValueError(f'the fitted LF dynamics grow at {model.growth_rate():.3g} 1/s (> '
                          f'{MAX_GROWTH_RATE:.3g}): not a damped vessel, not used')
+    if model.fastest_rate() * sample_time >= MAX_DAMPING_STEP:
+        raise ValueError(f'the fitted LF dynamics have a rate of {model.fastest_rate():.3g} 1/s '
+                         f'(a time constant below the sample time {sample_time:g} s): not a '
+                         'vessel, not used (a thrust gain far too large, e.g. a wrong '
+                         'controller read, gives this)')
     if np.any((np.diag(model.input_gain) <= 0.0) & (np.std(tau, axis=0) > 0.0)):
         raise ValueError(f'the fitted thrust gain {np.diag(model.input_gain)} has an entry <= 0 '
                          '(the thrust would push the vessel the other way): not used')

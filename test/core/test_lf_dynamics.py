@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from lf_predictor_ros.core import lf_dynamics
 from lf_predictor_ros.core.lf_dynamics import (
     FORCE_MARGIN,
     DriftCurve,
@@ -98,6 +99,22 @@ def test_known_inertia_fits_damping_and_one_earth_fixed_force(seed: int,
                                atol=1e-9)
     with pytest.raises(ValueError, match='input_gain'):
         fit_lf_dynamics(poses, forces, H, input_gain=[1e-7, 0.0, 1e-9])
+
+
+def test_a_thrust_gain_far_too_large_gives_a_refused_fit() -> None:
+    """A known gain 10³× the truth makes F absorb it (rate ≈ 25 1/s ≫ 1/h): refused.
+
+    At 10× the damping rates are 0.10 / 0.13 / 0.25 1/s (time constants 4–10 s, still a
+    vessel's); the explicit dead-reckoning step stays bounded only for rates below 2/h.
+    """
+    poses, forces = _vessel_run(1)
+    model = fit_lf_dynamics(poses, forces, H, input_gain=10.0 / MASS)
+    assert model.fastest_rate() == pytest.approx(0.25, rel=0.05)
+    assert model.fastest_rate() * H < lf_dynamics.MAX_DAMPING_STEP
+    with pytest.raises(ValueError, match='time constant below the sample time'):
+        fit_lf_dynamics(poses, forces, H, input_gain=1e3 / MASS)
+    with pytest.raises(ValueError, match='time constant below the sample time'):
+        fit_lf_dynamics(poses[:, :1], forces[:, :1], H, input_gain=[1e4 / MASS[0]])
 
 
 def test_fit_refuses_bad_input_with_a_message() -> None:

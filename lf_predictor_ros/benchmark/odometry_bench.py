@@ -36,8 +36,10 @@ unwrapped, central differences).
    fix, and whether the 95 % covariance ellipse (eᵀ P⁻¹ e ≤ χ²₀.₉₅(n)) contains the truth, next
    to the oracle Kalman filter predicting only (its ``update`` with a NaN pose propagates
    without a measurement update) through the same dropouts and to holding the last published
-   pose. With ``--dead-reckoning-commands`` the thrust also reaches the estimator as the DP
-   controller's commands, as a replayed bag with ``thrust_command`` would feed them.
+   pose. With ``--dead-reckoning-commands`` the recorded thrust also reaches the estimator as
+   the DP controller's commands (the recording keeps only the applied thrust: a stand-in for
+   a bag whose ``thrust_command`` came from a controller on another estimator, with the
+   actuator lag in it, which the read does not expect: `lf_state.implied_input_gain`).
 4. **Closed loop with the D term from lf_odom**: `recordings.run_loop` with the predictor in
    the loop, once with the PID's own finite-difference D term (the suite's ``adaptive`` loop) and
    once with ``velocity`` = the twist of `LfStateEstimator`; metrics as the suite computes them
@@ -360,10 +362,11 @@ def _dropout_run(params: PredictorParams, odometry: OdometryParams,
                  setup: Any, commands: bool = False) -> dict[str, Any]:
     """Item 3 of the module docstring.
 
-    ``commands``: every sample's thrust also reaches the estimator as the DP controller's
-    command for that instant (``LfStateEstimator.command``), as a bag with ``thrust_command``
-    replays: the recording's controller acted on another estimator, and the controller read
-    may still find its PD law on this one's estimates (the memory is then ``dp_controlled``).
+    ``commands``: every sample's applied thrust also reaches the estimator as the DP
+    controller's command for that instant (``LfStateEstimator.command``), a stand-in for a bag
+    with ``thrust_command`` (the recording keeps no commands): the recording's controller acted
+    on another estimator, and the controller read may still find a PD law on this one's
+    estimates (the memory is then ``dp_controlled``), with the actuator lag in it.
     """
     n = params.ndof
     t, y, u, truth, omega = data['t'], data['y'], data['u'], data['truth'], data['omega']
@@ -1073,9 +1076,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     run.add_argument('--no-dead-reckoning', action='store_true',
                      help='skip the dropout run (item 3)')
     run.add_argument('--dead-reckoning-commands', action='store_true',
-                     help="item 3 also feeds the recorded thrust as the DP controller's "
-                     'commands (thrust_command in a replayed bag; the controller read may then '
-                     'mark the memory dp_controlled)')
+                     help="item 3 also feeds the recorded (applied) thrust as the DP "
+                     "controller's commands, a stand-in for a replayed bag's thrust_command (the "
+                     'controller read may then mark the memory dp_controlled)')
     run.add_argument('--dropout-loops', action='store_true',
                      help='also the closed loops through pose dropouts (item 5; with the loops)')
     run.add_argument('--dropout-spread', type=float, default=0.0, metavar='SECONDS',

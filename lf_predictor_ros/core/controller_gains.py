@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+import math
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -49,6 +50,15 @@ MAX_SHIFT = 2
 MIN_R_SQUARED = 0.5
 # Fewer samples than this give no gains [-].
 MIN_SAMPLES = 120
+# A DOF's gains are believed only if the natural frequency they imply, ω_n = 2 Kp / Kd (= √(Kp/M)
+# with M = Kd² / (4 Kp)), is below this × the wave peak frequency ω0, when ω0 is known: a DP
+# controller acts below the wave band, behind a wave filter that exists to keep it there (the
+# MSS DP PID's ω_n is 0.1–0.2 rad/s, anchors §5; ω0 of the sea states here 0.5–1.2 rad/s). A
+# faster PD law is not the controller acting on these estimates: the applied thrust of a
+# controller on another estimator read as commands gave ω_n = 1.2–7.6 rad/s at ω0 = 0.8 rad/s
+# on onedof_feedback, an inertia 10⁴× too small and a dead reckoning kilometres off
+# (docs/BENCHMARKS.md, fifty-second session) [-].
+MAX_NATURAL_FREQ_RATIO = 1.0
 
 
 @dataclass(frozen=True)
@@ -67,16 +77,21 @@ class ControllerGains:
     r_squared: FloatArray
     shift: int
 
-    def believed(self) -> NDArray[np.bool_]:
-        """Per DOF: a PD law that explains the thrust, with positive gains."""
-        return (self.r_squared >= MIN_R_SQUARED) & (self.stiffness > 0.0) & (self.damping > 0.0)
+    def believed(self, max_natural_freq: float = math.inf) -> NDArray[np.bool_]:
+        """Per DOF: a PD law that explains the thrust, with positive gains.
 
-    def implied_inertia(self) -> FloatArray | None:
+        And whose natural frequency 2 Kp / Kd is below ``max_natural_freq`` [rad/s] (inf: no
+        bound; `implied_input_gain` passes ``MAX_NATURAL_FREQ_RATIO`` × ω0).
+        """
+        return (self.r_squared >= MIN_R_SQUARED) & (self.stiffness > 0.0) & \
+            (self.damping > 0.0) & (2.0 * self.stiffness < max_natural_freq * self.damping)
+
+    def implied_inertia(self, max_natural_freq: float = math.inf) -> FloatArray | None:
         """M_i = Kd_i² / (4 Kp_i) per DOF (module docstring), or None unless every DOF is believed.
 
-        [kg, kg, kg·m²].
+        [kg, kg, kg·m²]. ``max_natural_freq``: as `believed`.
         """
-        if not np.all(self.believed()):
+        if not np.all(self.believed(max_natural_freq)):
             return None
         return self.inertia_per_dof()
 
@@ -103,7 +118,8 @@ def block_bounds(length: int, block: int, minimum: int) -> list[tuple[int, int]]
     return list(zip(edges, edges[1:] + [length], strict=True))
 
 
-def median_implied_inertia(blocks: Sequence[ControllerGains]
+def median_implied_inertia(blocks: Sequence[ControllerGains],
+                           max_natural_freq: float = math.inf
                            ) -> tuple[FloatArray | None, NDArray[np.int64]]:
     """Per DOF the median of Kd² / (4 Kp) over the blocks where that DOF is believed.
 
@@ -111,11 +127,12 @@ def median_implied_inertia(blocks: Sequence[ControllerGains]
     setpoint move or a turn corrupts the read of the block it falls in (its R² drops to
     0.4–0.7 and the inertia is off by 0.02–20×), and pooled over the whole history it had
     corrupted every later read. Returns (the inertia, or None unless every DOF is believed in
-    at least one block; the count of believed blocks per DOF).
+    at least one block; the count of believed blocks per DOF). ``max_natural_freq``: as
+    `ControllerGains.believed`.
     """
     if not blocks:
         return None, np.zeros(0, dtype=np.int64)
-    believed = np.array([b.believed() for b in blocks])
+    believed = np.array([b.believed(max_natural_freq) for b in blocks])
     counts = believed.sum(axis=0).astype(np.int64)
     if not np.all(counts > 0):
         return None, counts

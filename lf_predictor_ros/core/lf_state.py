@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lf_predictor_ros.core.controller_gains import (
+    MAX_NATURAL_FREQ_RATIO,
     MAX_SHIFT,
     MIN_SAMPLES,
     ControllerGains,
@@ -340,8 +341,9 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     source = 'vessel_inertia' if input_gain is not None else ''
     read: ControllerRead | None = None
     if commands is not None:
+        bound = math.inf if wave_peak_freq is None else MAX_NATURAL_FREQ_RATIO * wave_peak_freq
         read = implied_input_gain(published, *commands, params.sample_time,
-                                  controller_block_time, controller_earth_frame)
+                                  controller_block_time, controller_earth_frame, bound)
     elif remembered is not None:
         read = ControllerRead(None, 'controller gains: no commands', 'no_data')
     in_force: ControllerRead | None = read if read is not None and read.outcome == 'read' \
@@ -377,7 +379,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
 
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,
                        sample_time: float, block_time: float = 0.0,
-                       earth_highpass: bool = False) -> ControllerRead:
+                       earth_highpass: bool = False,
+                       max_natural_freq: float = math.inf) -> ControllerRead:
     """1/M_ii implied by the DP controller acting on the published estimates.
 
     ``times``, ``forces``: the controller's commands and their stamps (a controller stamps its
@@ -396,6 +399,9 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     block read on its own, and the inertia is per DOF the median over the blocks whose PD law
     is believed (`median_implied_inertia`): a manoeuvre then spoils one block, not every read
     after it. ``earth_highpass``: the high-pass in the earth frame (`fit_controller_gains`).
+    ``max_natural_freq`` [rad/s]: a DOF whose gains imply a natural frequency 2 Kp / Kd at or
+    above it is not believed (`ControllerGains.believed`; the learning job passes
+    ``MAX_NATURAL_FREQ_RATIO`` × ω0; inf: no bound).
     """
     if not published or times.shape[0] == 0:
         return ControllerRead(None, 'controller gains: no data', 'no_data')
@@ -426,13 +432,14 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
                       for a, b in block_bounds(length, block, need)]
             reads = [fit_controller_gains(poses[a:b], twists[a:b], paired[a:b], sample_time,
                                           earth_highpass=earth_highpass) for a, b in blocks]
-            return _median_read(reads, float(stamps[rows[-1]]), rows.size, block_time)
+            return _median_read(reads, float(stamps[rows[-1]]), rows.size, block_time,
+                                max_natural_freq)
         gains = fit_controller_gains(poses, twists, paired, sample_time,
                                      run_starts=np.cumsum(lengths)[:-1].tolist(),
                                      earth_highpass=earth_highpass)
     except ValueError as exc:  # non-finite values: nothing learned about the controller
         return ControllerRead(None, f'controller gains: {exc}', 'no_data')
-    inertia = gains.implied_inertia()
+    inertia = gains.implied_inertia(max_natural_freq)
     r2 = ', '.join(f'{v:.2f}' for v in gains.r_squared)
     if inertia is None:
         return ControllerRead(None, f'controller gains not read (R² {r2})', 'no_fit')
@@ -443,9 +450,9 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
 
 
 def _median_read(reads: list[ControllerGains], stamp: float, samples: int,
-                 block_time: float) -> ControllerRead:
+                 block_time: float, max_natural_freq: float = math.inf) -> ControllerRead:
     """The read of `implied_input_gain` from one `ControllerGains` per block."""
-    inertia, counts = median_implied_inertia(reads)
+    inertia, counts = median_implied_inertia(reads, max_natural_freq)
     believed = ', '.join(f'{c}' for c in counts)
     what = f'{believed} of {len(reads)} blocks of {block_time:.0f} s believed'
     if inertia is None:

@@ -185,6 +185,27 @@ def test_median_over_believed_blocks() -> None:
     assert inertia is None and counts.size == 0
 
 
+def test_a_pd_law_faster_than_the_wave_band_is_not_believed() -> None:
+    """ω_n = 2 Kp / Kd (= √(Kp / M), M = Kd² / (4 Kp)) at or above the bound: not believed.
+
+    The MSS PID's ω_n = 0.1 / 0.1 / 0.15 rad/s (ζ = 1) passes a bound of 0.8 rad/s (ω0 of
+    onedof_feedback × ``MAX_NATURAL_FREQ_RATIO``) and fails one of 0.12 in yaw only.
+    """
+    eta = _lf_track(1)
+    nu = body_velocity(eta, H)
+    gains = fit_controller_gains(eta, nu, _pid_thrust(eta, nu, 1.0), H)
+    np.testing.assert_allclose(2.0 * gains.stiffness / gains.damping, BANDWIDTH, rtol=0.05)
+    assert gains.believed(0.8).tolist() == [True, True, True]
+    assert gains.believed(0.12).tolist() == [True, True, False]
+    assert gains.implied_inertia(0.12) is None
+    assert gains.implied_inertia(0.8) is not None
+    block = ControllerGains(np.array([4.0]), np.array([1.0]), np.array([0.9]), 0)  # ω_n 8
+    assert median_implied_inertia([block], 8.0)[0] is None  # at the bound: not believed
+    inertia, counts = median_implied_inertia([block], 8.01)
+    assert inertia is not None and counts.tolist() == [1]
+    np.testing.assert_allclose(inertia, [1.0 / 16.0])  # Kd² / (4 Kp)
+
+
 @pytest.mark.parametrize('bad', ['nan', 'shape', 'short', 'sample_time'])
 def test_bad_input_is_refused_with_a_message(bad: str) -> None:
     eta = _lf_track(6)

@@ -144,6 +144,16 @@ def test_implied_input_gain_reads_the_controller_on_every_long_enough_run() -> N
     assert read.gain is not None and read.stamp == 1199.0
     np.testing.assert_allclose(read.gain, [8.0e4 / 3.0e5 ** 2], rtol=1e-6)
     assert '; 600 samples in 2 runs)' in read.note
+    # ω_n = 2 Kp / Kd = 0.133 rad/s: believed below a bound above it, not below one under it
+    # (a PD law faster than the wave band is not the controller on these estimates)
+    assert implied_input_gain(published, times, forces, 1.0, max_natural_freq=0.14).gain \
+        is not None
+    refused = implied_input_gain(published, times, forces, 1.0, max_natural_freq=0.13)
+    assert refused.gain is None and refused.outcome == 'no_fit'
+    refused = implied_input_gain(published, times, forces, 1.0, block_time=200.0,
+                                 max_natural_freq=0.13)
+    assert refused.gain is None and refused.outcome == 'no_fit'
+    assert '0 of 2 blocks of 200 s believed' in refused.note
     # a command lost every 100 samples: no run of 124, nothing read for lack of data
     kept = np.setdiff1d(np.arange(400), [100, 200, 300])
     read = implied_input_gain(published, times[kept], forces[kept], 1.0)

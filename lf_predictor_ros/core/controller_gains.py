@@ -53,7 +53,7 @@ MIN_SAMPLES = 120
 # A DOF's gains are believed only if the natural frequency they imply, ω_n = 2 Kp / Kd (= √(Kp/M)
 # with M = Kd² / (4 Kp)), is below this × the wave peak frequency ω0, when ω0 is known: a DP
 # controller acts below the wave band, behind a wave filter that exists to keep it there (the
-# MSS DP PID's ω_n is 0.1–0.2 rad/s, anchors §5; ω0 of the sea states here 0.5–1.2 rad/s). A
+# MSS DP PID's ω_n is 0.1–0.2 rad/s, anchors §5; ω0 of the sea states here ≥ 0.48 rad/s). A
 # faster PD law is not the controller acting on these estimates: the applied thrust of a
 # controller on another estimator read as commands gave ω_n = 1.2–7.6 rad/s at ω0 = 0.8 rad/s
 # on onedof_feedback, an inertia 10⁴× too small and a dead reckoning kilometres off

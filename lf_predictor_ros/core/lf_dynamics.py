@@ -50,7 +50,7 @@ MAX_GROWTH_RATE = 1.0 / 200.0
 MIN_DAMPING_RATE = 1.0 / 1000.0
 # A fitted F with an eigenvalue of modulus ≥ this / h is refused: a time constant shorter than
 # the sample time is no vessel's LF dynamics, and the explicit dead-reckoning step
-# ν⁺ = (1 + h f) ν flips the velocity's sign every step from f = −1/h and grows without bound
+# ν⁺ = (1 + h f) ν flips the velocity's sign every step below f = −1/h and grows without bound
 # below −2/h (a controller read 10⁴× off gave f = −314 1/s on onedof_feedback, and the dead
 # reckoning reached 10⁷³ m in 30 s: docs/BENCHMARKS.md, fifty-second session) [-].
 MAX_DAMPING_STEP = 1.0

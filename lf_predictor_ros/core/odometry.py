@@ -1150,22 +1150,22 @@ class LfOdometry:
         reckoner = self.reckoner
         # the model's own dead reckoning beside another reckoner, or (the band) its answer to
         # the thrust beyond the station-keeping band: the displacement the excursion term scales
-        shadow, shadow_model, band = None, model, self._dr_band
+        band = self._dr_band  # None unless the band is on and a DP controller was read
+        band_off = self.params.dead_reckoning_excursion_band <= 0.0
+        shadow = None
         if self.params.dead_reckoning_excursion_std > 0.0 and (
-                band is not None if self.params.dead_reckoning_excursion_band > 0.0 else
-                model is not None and reckoner != 'model'):
+                band is not None or band_off and model is not None and reckoner != 'model'):
             shadow = x.copy() if self._dr_shadow is None else self._dr_shadow
+        shadow_model, shadow_force = (model, tau[:n]) if band is None else \
+            (band[2], band_excess(tau[:n], band[0], band[1]))
         with np.errstate(over='ignore', invalid='ignore'):  # checked below
             for _ in range(steps):
                 a, _b = self._transition(x, tau[:n], h)
                 self._p = a @ self._p @ a.T + self._process_noise(h)
                 eta, nu = dead_reckon_step(model, reckoner, eta, nu, tau[:n], h)
                 if shadow is not None:
-                    force = tau[:n]
-                    if band is not None:
-                        force, shadow_model = band_excess(force, band[0], band[1]), band[2]
                     shadow = np.concatenate(dead_reckon_step(shadow_model, 'model', shadow[:n],
-                                                             shadow[n:], force, h))
+                                                             shadow[n:], shadow_force, h))
         if not _finite(eta, nu):
             # an absurd (finite) thrust overflowed the model: hold the last finite pose
             self.counters['numeric_failures'] += 1
@@ -1463,17 +1463,18 @@ def thrust_statistics_step(stats: tuple[FloatArray, FloatArray] | None, force: A
     them non-finite (an absurd thrust) leaves them as they were (a finite absurd one widens
     the band until it decays: the excursion term then adds nothing, the covariance of k = 0).
     """
-    f = np.array(force, dtype=np.float64)
+    f = np.asarray(force, dtype=np.float64).tolist()  # plain floats: on the tracking path
     if stats is None:
-        return (f, np.zeros_like(f)) if np.all(np.isfinite(f)) else \
-            (np.zeros_like(f), np.zeros_like(f))
-    mean, var = stats
-    with np.errstate(over='ignore', invalid='ignore'):
-        d = f - mean
-        new = mean + weight * d, (1.0 - weight) * (var + weight * d * d)
-    if not (np.all(np.isfinite(new[0])) and np.all(np.isfinite(new[1]))):
-        return mean.copy(), var.copy()
-    return new
+        finite = all(math.isfinite(v) for v in f)
+        return np.array(f if finite else [0.0] * len(f)), np.zeros(len(f))
+    mean, var = stats[0].tolist(), stats[1].tolist()
+    new_var = [(1.0 - weight) * (v + weight * (x - m) * (x - m))
+               for m, v, x in zip(mean, var, f, strict=True)]
+    new_mean = low_pass_step(mean, f, weight)  # mean + w d
+    if not (all(math.isfinite(v) for v in new_var) and
+            all(math.isfinite(v) for v in new_mean.tolist())):
+        return np.array(mean), np.array(var)
+    return new_mean, np.array(new_var)
 
 
 def band_excess(force: ArrayLike, centre: ArrayLike, half_width: ArrayLike) -> FloatArray:

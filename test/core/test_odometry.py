@@ -1049,23 +1049,31 @@ def test_excursion_covariance_is_the_spread_of_the_models_displacement_and_the_m
     np.testing.assert_allclose(one_twist, [[0.01 + 0.0025]], rtol=1e-12)
 
 
-def _coast_a_surge_push(reckoner: str, excursion_std: float) -> tuple[np.ndarray, np.ndarray]:
-    """Hold station on a known model, then coast 60 s with 1e3 N more surge thrust.
+def _coast_push(params: OdometryParams, push: float = 1e3, swing: float = 0.0,
+                dp_controlled: bool = True) -> tuple[LfOdometry, OdometryEstimate]:
+    """Hold station on a known model, then coast 60 s with ``push`` N more surge thrust.
 
-    Returns the last dead-reckoned (pose, pose covariance).
+    While tracking (200 s) the surge thrust alternates ± ``swing`` about 2e3 N. Returns the
+    odometry and its last dead-reckoned estimate.
     """
     model = LfDynamics(np.diag([-0.01, -0.01, -0.01]), np.diag([1e-6, 1e-6, 1e-9]),
                        np.zeros((3, 3)), np.full(3, 1e-4))
-    memory = _dp_memory(model, 'hold')
-    held = np.array([2e3, 0.0, 0.0])
-    odo = LfOdometry(3, H, OdometryParams(dead_reckoner=reckoner,
-                                          dead_reckoning_excursion_std=excursion_std))
-    odo._memory = memory  # noqa: SLF001 - a known vessel memory
+    odo = LfOdometry(3, H, params)
+    odo._memory = dataclasses.replace(  # noqa: SLF001 - a known vessel memory
+        _dp_memory(model, 'hold'), dp_controlled=dp_controlled)
     for k in range(200):
-        odo.track(float(k), np.zeros(3), held)
+        odo.track(float(k), np.zeros(3), np.array([2e3 + swing * (-1) ** k, 0.0, 0.0]))
     for k in range(1, 61):
-        out = odo.coast(200.0 + k, held + np.array([1e3, 0.0, 0.0]))
+        out = odo.coast(200.0 + k, np.array([2e3 + push, 0.0, 0.0]))
         assert out is not None
+    return odo, out
+
+
+def _coast_a_surge_push(reckoner: str, excursion_std: float) -> tuple[np.ndarray, np.ndarray]:
+    """`_coast_push` of 1e3 N on the whole thrust (no band): (pose, pose covariance)."""
+    _, out = _coast_push(OdometryParams(dead_reckoner=reckoner,
+                                        dead_reckoning_excursion_std=excursion_std,
+                                        dead_reckoning_excursion_band=0.0))
     return out.pose, out.pose_cov
 
 
@@ -1148,34 +1156,16 @@ def test_band_excess_is_a_continuous_dead_zone() -> None:
     np.testing.assert_allclose(band_excess([110.0, 10.0, 5.0], centre, half), centre)  # edges
 
 
-def _coast_with_band(reckoner: str, push: float, swing: float, excursion_std: float,
-                     dp_controlled: bool = True) -> tuple[LfOdometry, np.ndarray]:
-    """`_coast_a_surge_push` with the band 2 and a held thrust that swings.
-
-    The held surge thrust alternates ± ``swing`` about 2e3 N while tracking, the coast adds
-    ``push`` N. Returns the odometry and the last dead-reckoned pose covariance.
-    """
-    model = LfDynamics(np.diag([-0.01, -0.01, -0.01]), np.diag([1e-6, 1e-6, 1e-9]),
-                       np.zeros((3, 3)), np.full(3, 1e-4))
-    odo = LfOdometry(3, H, OdometryParams(dead_reckoner=reckoner,
-                                          dead_reckoning_excursion_std=excursion_std,
-                                          dead_reckoning_excursion_band=2.0))
-    odo._memory = dataclasses.replace(  # noqa: SLF001 - a known vessel memory
-        _dp_memory(model, 'hold'), dp_controlled=dp_controlled)
-    for k in range(200):
-        odo.track(float(k), np.zeros(3), np.array([2e3 + swing * (-1) ** k, 0.0, 0.0]))
-    for k in range(1, 61):
-        out = odo.coast(200.0 + k, np.array([2e3 + push, 0.0, 0.0]))
-        assert out is not None
-    return odo, out.pose_cov
-
-
 def _band_added(push: float, swing: float, dp_controlled: bool = True
                 ) -> tuple[LfOdometry, np.ndarray]:
-    """The hold reckoner's odometry with k = 0.5 and what k = 0.5 added to its pose variances."""
-    odo, cov = _coast_with_band('hold', push, swing, 0.5, dp_controlled)
-    _, base = _coast_with_band('hold', push, swing, 0.0, dp_controlled)
-    return odo, np.diag(cov - base)
+    """Hold reckoner, k = 0.5, band 2: the odometry and what k added to its pose variances."""
+    def params(k: float) -> OdometryParams:
+        return OdometryParams(dead_reckoner='hold', dead_reckoning_excursion_std=k,
+                              dead_reckoning_excursion_band=2.0)
+
+    odo, out = _coast_push(params(0.5), push, swing, dp_controlled)
+    _, base = _coast_push(params(0.0), push, swing, dp_controlled)
+    return odo, np.diag(out.pose_cov - base.pose_cov)
 
 
 def test_dead_reckoning_excursion_band_scales_the_thrust_beyond_the_band() -> None:

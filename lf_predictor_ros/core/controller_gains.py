@@ -101,6 +101,15 @@ class ControllerGains:
             result: FloatArray = self.damping ** 2 / (4.0 * self.stiffness)
         return result
 
+    def natural_freq(self) -> FloatArray:
+        """ω_n = 2 Kp_i / Kd_i of every DOF, believed or not (= √(Kp/M) at M = Kd²/(4 Kp)).
+
+        [rad/s]; inf or NaN where Kd_i = 0.
+        """
+        with np.errstate(divide='ignore', invalid='ignore'):
+            result: FloatArray = 2.0 * self.stiffness / self.damping
+        return result
+
 
 def block_bounds(length: int, block: int, minimum: int) -> list[tuple[int, int]]:
     """[start, end) of consecutive blocks covering ``length`` samples, each ≥ ``minimum``.
@@ -140,6 +149,54 @@ def median_implied_inertia(blocks: Sequence[ControllerGains],
     median = np.array([float(np.median(inertia[believed[:, i], i]))
                        for i in range(believed.shape[1])])
     return median, counts
+
+
+def median_natural_freq(blocks: Sequence[ControllerGains],
+                        max_natural_freq: float = math.inf) -> FloatArray | None:
+    """Per DOF the median of 2 Kp / Kd over the believed blocks (`median_implied_inertia`'s).
+
+    None unless every DOF is believed in at least one block [rad/s].
+    """
+    if not blocks:
+        return None
+    believed = np.array([b.believed(max_natural_freq) for b in blocks])
+    if not np.all(believed.sum(axis=0) > 0):
+        return None
+    freq = np.array([b.natural_freq() for b in blocks])
+    return np.array([float(np.median(freq[believed[:, i], i]))
+                     for i in range(believed.shape[1])])
+
+
+def damping_corrected_inertia(inertia: ArrayLike, natural_freq: ArrayLike,
+                              damping_rate: ArrayLike) -> FloatArray:
+    """The inertia under which the controller *and the vessel's own damping* are critical.
+
+    The read (`ControllerGains.implied_inertia`) assumes the controller's Kd alone damps the
+    loop: M_r = Kd² / (4 Kp). A controller designed as the MSS DP PID, Kd = 2 ζ ω_n M − D
+    (`sim_ros.control.pid.gains_from_bandwidth`; Fossen 2011 §12.2.6 with the vessel's linear
+    damping D taken off), makes the closed loop M s² + (D + Kd) s + Kp critical instead, and
+    M_r = M (1 − D / (2 ω_n M))²: 0.61 M in yaw for the supply vessel (T = M/D = 11.5 s, ω_n =
+    0.2 rad/s), and a dead reckoning that turns 1.6× too fast (docs/BENCHMARKS.md, fifty-third
+    session). With the read's ω_r = 2 Kp / Kd (``natural_freq``; Kd = 2 ω_r M_r, Kp = ω_r²
+    M_r) and the vessel's damping rate f = D / M (``damping_rate``, e.g. the vessel memory's
+    −F_ii), (Kd + f M)² = 4 Kp M gives, with x = M / M_r and a = f / ω_r,
+    a² x² − 4 (1 − a) x + 4 = 0, whose smaller root x = 2 / ((1 − a) + √(1 − 2 a)) is 1 at
+    a = 0 (no damping: the read as it is). Above a = 1/2 no inertia makes the loop critical
+    (the damping alone over-damps it); a is clipped there (x = 4, the closest to critical).
+    Negative or non-finite rates count as 0. Per DOF; a new array [kg, kg, kg·m²].
+    """
+    m_r = np.array(inertia, dtype=np.float64)
+    freq = np.asarray(natural_freq, dtype=np.float64)
+    rate = np.asarray(damping_rate, dtype=np.float64)
+    if not (m_r.shape == freq.shape == rate.shape):
+        raise ValueError(f'inertia, natural_freq and damping_rate must have one entry per DOF, '
+                         f'got shapes {m_r.shape}, {freq.shape}, {rate.shape}')
+    with np.errstate(divide='ignore', invalid='ignore'):
+        a = np.where(np.isfinite(rate) & (rate > 0.0) & np.isfinite(freq) & (freq > 0.0),
+                     rate / freq, 0.0)
+    a = np.clip(a, 0.0, 0.5)
+    result: FloatArray = m_r * 2.0 / ((1.0 - a) + np.sqrt(1.0 - 2.0 * a))
+    return result
 
 
 def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,

@@ -149,7 +149,8 @@ class LfDynamics:
 
 
 def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
-                    ridge: float = RIDGE, input_gain: ArrayLike | None = None) -> LfDynamics:
+                    ridge: float = RIDGE, input_gain: ArrayLike | None = None,
+                    damping_rate: ArrayLike | None = None) -> LfDynamics:
     """Least-squares fit of ν̇ = F ν + G τ + B β(ψ) on an LF pose series and its body forces.
 
     F and G are diagonal: each DOF is fitted on its own velocity and force (+ the environment
@@ -168,6 +169,9 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
         input_gain: a known diagonal thrust gain G_ii = 1 / M_ii per DOF (M the vessel's inertia
             with added mass) [1/kg, 1/(kg·m²)], or None to fit it; with it only the damping and
             the environment terms are fitted (`_fit_known_gain`).
+        damping_rate: with ``input_gain``, known damping rates f_i = D_ii / M_ii per DOF
+            (F = −diag(f)) [1/s], or None to fit them; with both only the environment is
+            fitted.
 
     Raises:
         ValueError: bad shapes, too few samples, non-finite data, or a fit that is not a damped
@@ -193,8 +197,13 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
     if known is not None and (known.shape != (n,) or not np.all(np.isfinite(known)) or
                               np.any(known <= 0.0)):
         raise ValueError(f'input_gain must be {n} positive finite numbers 1/M_ii, got {known}')
+    rate = None if damping_rate is None else np.asarray(damping_rate, dtype=np.float64)
+    if rate is not None and (known is None or rate.shape != (n,) or
+                             not np.all(np.isfinite(rate)) or np.any(rate <= 0.0)):
+        raise ValueError(f'damping_rate must be {n} positive finite numbers D_ii/M_ii [1/s] '
+                         f'and needs input_gain, got {rate}')
     coef, residual_std = _fit_diagonal(phi, nu, nu_dot, ridge) if known is None else \
-        _fit_known_gain(nu, nu_dot, tau, eta, known, ridge)
+        _fit_known_gain(nu, nu_dot, tau, eta, known, ridge, rate)
     model = LfDynamics(damping=coef[:, :n], input_gain=coef[:, n:2 * n], bias=coef[:, 2 * n:],
                        residual_std=residual_std)
     if model.growth_rate() > MAX_GROWTH_RATE:
@@ -233,8 +242,11 @@ def _fit_diagonal(phi: FloatArray, nu: FloatArray, nu_dot: FloatArray,
 
 
 def _fit_known_gain(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, eta: FloatArray,
-                    gain: FloatArray, ridge: float) -> tuple[FloatArray, FloatArray]:
+                    gain: FloatArray, ridge: float, rate: FloatArray | None = None
+                    ) -> tuple[FloatArray, FloatArray]:
     """Damping and environment with a known diagonal thrust gain G (coefficient rows as `phi`).
+
+    With known damping rates ``rate`` (f_i, F = −diag(f)) only the environment is fitted.
 
     Surge and sway share one earth-fixed environment force b = [b_N, b_E] (Fossen 2011 eq. 7.8,
     R(ψ)ᵀ b): u̇ − G_u τ_u = f_u u + G_u (b_N cos ψ + b_E sin ψ), v̇ − G_v τ_v = f_v v +
@@ -245,7 +257,13 @@ def _fit_known_gain(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, eta: Fl
     n = gain.shape[0]
     coef = np.zeros((n, 3 * n if n == 3 else 3))
     residual = nu_dot - tau * gain
+    if rate is not None:
+        residual = residual + nu * rate  # ν̇ − G τ − F ν, F = −diag(f): the environment's part
     if n == 1:
+        if rate is not None:
+            bias = float(np.mean(residual))
+            coef[0, 0], coef[0, 1], coef[0, 2] = -rate[0], gain[0], bias
+            return coef, np.std(residual - bias, axis=0)
         own, std = _ridge(np.column_stack([nu[:, 0], np.ones(nu.shape[0])]), residual, ridge)
         coef[0, 0], coef[0, 1], coef[0, 2] = min(float(own[0, 0]), -MIN_DAMPING_RATE), gain[0], \
             own[0, 1]
@@ -254,16 +272,24 @@ def _fit_known_gain(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, eta: Fl
     zero = np.zeros_like(c)
     phi = np.vstack([np.column_stack([nu[:, 0], zero, gain[0] * c, gain[0] * s]),
                      np.column_stack([zero, nu[:, 1], -gain[1] * s, gain[1] * c])])
-    own, _ = _ridge(phi, np.concatenate([residual[:, 0], residual[:, 1]])[:, None], ridge)
-    f_u, f_v, b_north, b_east = own[0]
-    yaw, _ = _ridge(np.column_stack([nu[:, 2], np.ones(nu.shape[0])]), residual[:, 2:3], ridge)
+    if rate is None:
+        own, _ = _ridge(phi, np.concatenate([residual[:, 0], residual[:, 1]])[:, None], ridge)
+        f_u, f_v, b_north, b_east = own[0]
+        yaw, _ = _ridge(np.column_stack([nu[:, 2], np.ones(nu.shape[0])]), residual[:, 2:3],
+                        ridge)
+        f_r, n_env = float(yaw[0, 0]), float(yaw[0, 1])
+    else:
+        own, _ = _ridge(phi[:, 2:], np.concatenate([residual[:, 0], residual[:, 1]])[:, None],
+                        ridge)
+        (b_north, b_east), (f_u, f_v, f_r) = own[0], -rate
+        n_env = float(np.mean(residual[:, 2]))
     coef[0, 0] = min(float(f_u), -MIN_DAMPING_RATE)
     coef[1, 1] = min(float(f_v), -MIN_DAMPING_RATE)
-    coef[2, 2] = min(float(yaw[0, 0]), -MIN_DAMPING_RATE)
+    coef[2, 2] = min(f_r, -MIN_DAMPING_RATE)
     coef[np.arange(3), 3 + np.arange(3)] = gain
     coef[0, 7:9] = gain[0] * b_north, gain[0] * b_east  # u̇: cos ψ, sin ψ
     coef[1, 7:9] = gain[1] * b_east, -gain[1] * b_north  # v̇: cos ψ, sin ψ
-    coef[2, 6] = yaw[0, 1]
+    coef[2, 6] = n_env
     basis = heading_basis(eta[:, 2], 3)
     fitted = nu @ np.diag(np.diag(coef[:, :3])) + tau * gain + basis @ coef[:, 6:].T
     return coef, np.std(nu_dot - fitted, axis=0)
@@ -393,6 +419,10 @@ class VesselMemory:
             'vessel_inertia' (given) or 'controller' (`core.controller_gains`).
         dp_controlled: the thrust was read as a DP controller's (its PD law explains the
             commands on the published estimates): its LF part balances the environment.
+        damping_score: with a damping memory (``OdometryParams.dead_reckoning_damping_memory``),
+            per DOF the standard deviation of the target body velocity of the window whose fit
+            gave the model's damping rate (the excitation it was identified with) [m/s, m/s,
+            rad/s]; None otherwise.
     """
 
     model: LfDynamics | None
@@ -405,6 +435,7 @@ class VesselMemory:
     drift_curves: dict[DeadReckoner, DriftCurve] = field(default_factory=dict)
     known_gain: str = ''
     dp_controlled: bool = False
+    damping_score: FloatArray | None = None
 
     def curve(self, reckoner: DeadReckoner) -> DriftCurve:
         """The drift curve of ``reckoner`` (the chosen one's if it was not tested)."""
@@ -451,7 +482,8 @@ def drift_test(model: LfDynamics | None, reckoner: DeadReckoner, targets: ArrayL
 def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: float,
                         horizon: float, input_gain: ArrayLike | None = None,
                         targets_filter: FloatArray | None = None,
-                        force_margin: float = FORCE_MARGIN) -> VesselMemory:
+                        force_margin: float = FORCE_MARGIN,
+                        damping_rate: ArrayLike | None = None) -> VesselMemory:
     """Fit the LF dynamics on the older part of a window; pick the dead reckoner on the newest.
 
     The fit uses the oldest 1 − ``VALIDATION_FRACTION`` of the window; each dead reckoner is
@@ -466,6 +498,7 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     ``input_gain``: a known thrust gain (`fit_lf_dynamics`). ``targets_filter``: the SOS the
     targets were zero-phase filtered with (`paired_forces`). ``force_margin``: the memory's
     ``force_limit`` is this multiple of the window's largest force per DOF; 0: no limit.
+    ``damping_rate``: known damping rates with ``input_gain`` (`fit_lf_dynamics`).
     """
     check_force_margin(force_margin, 'force_margin')
     eta_t = as_series(targets, 'targets')
@@ -475,7 +508,7 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     message = ''
     try:
         model = fit_lf_dynamics(eta_t[:split], tau[:split], sample_time,
-                                input_gain=input_gain)
+                                input_gain=input_gain, damping_rate=damping_rate)
     except ValueError as exc:
         message = f'LF dynamics not fitted: {exc}'
     curves = {name: drift_test(model, name, eta_t[split:], tau[split:], sample_time,
@@ -496,7 +529,8 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
         message = message or 'too few dead-reckoning tests: hold kept'
     if model is not None:
         try:
-            model = fit_lf_dynamics(eta_t, tau, sample_time, input_gain=input_gain)
+            model = fit_lf_dynamics(eta_t, tau, sample_time, input_gain=input_gain,
+                                    damping_rate=damping_rate)
         except ValueError as exc:
             model, message = None, f'LF dynamics not refitted: {exc}'
             chosen = 'hold' if chosen == 'model' else chosen

@@ -35,11 +35,18 @@ from lf_predictor_ros.core.controller_gains import (
     MIN_SAMPLES,
     ControllerGains,
     block_bounds,
+    damping_corrected_inertia,
     fit_controller_gains,
     median_implied_inertia,
+    median_natural_freq,
 )
 from lf_predictor_ros.core.estimator import EstimatorStatus
-from lf_predictor_ros.core.lf_dynamics import FORCE_MARGIN, VesselMemory, learn_vessel_memory
+from lf_predictor_ros.core.lf_dynamics import (
+    FORCE_MARGIN,
+    VesselMemory,
+    body_velocity,
+    learn_vessel_memory,
+)
 from lf_predictor_ros.core.odometry import (
     Covariances,
     EstimateSource,
@@ -69,23 +76,30 @@ class ControllerRead:
             long enough: says nothing about the controller); 'no_fit' (enough data, but the PD
             law with positive gains does not explain every DOF: another controller, or none).
         stamp: the newest published estimate the read used [s] (None unless read).
+        natural_freq: 2 Kp / Kd per DOF of the read (the median over the believed blocks)
+            [rad/s] (None unless read).
     """
 
     gain: FloatArray | None
     note: str
     outcome: ReadOutcome
     stamp: float | None = None
+    natural_freq: FloatArray | None = None
 
     def __post_init__(self) -> None:
-        """Keep a read-only copy of the gain (a read is handed between threads)."""
-        if self.gain is not None:
-            gain = np.array(self.gain, dtype=np.float64)
-            gain.setflags(write=False)
-            object.__setattr__(self, 'gain', gain)
+        """Keep read-only copies of the arrays (a read is handed between threads)."""
+        for name in ('gain', 'natural_freq'):
+            value = getattr(self, name)
+            if value is not None:
+                copy = np.array(value, dtype=np.float64)
+                copy.setflags(write=False)
+                object.__setattr__(self, name, copy)
 
 
 # what a vessel-memory job returns: the memory, the calibration, the controller read in force
 Learned = tuple[VesselMemory | None, Covariances | None, ControllerRead | None]
+# the damping memory: per DOF the damping rate kept and the excitation it was identified with
+KeptDamping = tuple[FloatArray, FloatArray]
 
 
 class LfStateEstimator:
@@ -109,6 +123,8 @@ class LfStateEstimator:
         self._memory_error: str | None = None
         # the last successful controller read (held here, handed to the worker by value)
         self._controller_read: ControllerRead | None = None
+        # the damping rates kept across windows (``dead_reckoning_damping_memory``)
+        self._kept_damping: KeptDamping | None = None
         # the controller's commands, kept across segments (matched to the published estimates)
         self._command_times: deque[float] = deque(maxlen=self._capacity)
         self._commands: deque[FloatArray] = deque(maxlen=self._capacity)
@@ -184,6 +200,7 @@ class LfStateEstimator:
                              f'{self.sample_time} s: start a new one (reset)')
         self.odometry = odometry
         self._controller_read = previous.controller_read
+        self._kept_damping = previous._kept_damping
         self._command_times.extend(previous._command_times)
         self._commands.extend(previous._commands)
 
@@ -193,6 +210,7 @@ class LfStateEstimator:
         self.odometry.reset()
         self._job = None
         self._controller_read = None
+        self._kept_damping = None
         self._command_times.clear()
         self._commands.clear()
         self._restart_buffers()
@@ -271,7 +289,10 @@ class LfStateEstimator:
                 odometry.params.pose_heading_speed_lag,
                 odometry.params.controller_read_block_time,
                 odometry.params.controller_read_earth_frame,
-                odometry.params.dead_reckoning_force_margin)
+                odometry.params.dead_reckoning_force_margin,
+                odometry.params.controller_read_damping,
+                self._kept_damping if odometry.params.dead_reckoning_damping_memory else None,
+                odometry.params.dead_reckoning_damping_memory)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -293,6 +314,8 @@ class LfStateEstimator:
         memory, covariances, controller_read = result
         self.odometry.apply_learned(memory, covariances)
         self._controller_read = controller_read
+        if memory is not None and memory.model is not None and memory.damping_score is not None:
+            self._kept_damping = (-np.diag(memory.model.damping), memory.damping_score)
         self._memory_error = None
 
 
@@ -306,7 +329,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            twist_likelihood: bool = False, twist_attenuation: bool = False,
            heading_speed: bool = False, controller_block_time: float = 0.0,
            controller_earth_frame: bool = False,
-           force_margin: float = FORCE_MARGIN) -> Learned:
+           force_margin: float = FORCE_MARGIN, controller_damping: bool = False,
+           kept_damping: KeptDamping | None = None, damping_memory: bool = False) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -332,7 +356,12 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     ``heading_speed``: the heading's lag part also from the horizontal speed;
     ``controller_block_time``, ``controller_earth_frame``: how the controller is read,
     `implied_input_gain`'s ``block_time`` and ``earth_highpass``; ``force_margin``: the
-    memory's force limit, `learn_vessel_memory`'s).
+    memory's force limit, `learn_vessel_memory`'s; ``controller_damping``: a read gain is
+    corrected for the vessel's own damping rates (`controller_gains.damping_corrected_inertia`)
+    and the memory learned again on it; ``damping_memory`` (with a known or read gain): per DOF
+    the damping rate of the window with the larger target velocity std, this one's or
+    ``kept_damping``'s, and the memory learned again with those rates fixed
+    (`_damping_chosen`).
     The read returned is the one in force afterwards: this read if it succeeded,
     ``remembered`` if it failed for lack of data, else None.
     """
@@ -361,6 +390,13 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                                                           force_margin)
     except ValueError:
         memory = None
+    correct = controller_damping and source == 'controller' and in_force is not None
+    if (correct or damping_memory) and memory is not None and memory.model is not None and \
+            input_gain is not None:
+        memory, note = _damping_chosen(
+            memory, input_gain, in_force.natural_freq if correct and in_force else None,
+            kept_damping, damping_memory, note,
+            (values, forces, params.sample_time, horizon, sos, force_margin))
     if memory is not None and (source or note):
         memory = replace(memory, known_gain=source if memory.model is not None else '',
                          dp_controlled=in_force is not None,
@@ -375,6 +411,52 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                              params.ndof, params.sample_time, min_samples, lag_prior,
                              twin_fit, cutoff, pose_edge, twist_likelihood,
                              reference_filter, heading_speed), in_force
+
+
+def _damping_chosen(memory: VesselMemory, input_gain: FloatArray,
+                    natural_freq: FloatArray | None, kept: KeptDamping | None,
+                    damping_memory: bool, note: str,
+                    learn_args: tuple[FloatArray, FloatArray, float, float, FloatArray | None,
+                                      float]) -> tuple[VesselMemory | None, str]:
+    """The memory learned again with the damping rates chosen and the read gain corrected.
+
+    The first memory's rates f = −F_ii were fitted on this window alone; a window in which a
+    DOF hardly moves cannot identify its damping (rao_supply's yaw time constant came out
+    33–240 s between turns, 8–12 s in windows with a turn, the truth 11.6 s: docs/BENCHMARKS.md,
+    fifty-third session). With ``damping_memory`` each DOF takes the rate of the window whose
+    target body velocity had the larger standard deviation, this one or ``kept``'s, and the
+    memory is learned again with those rates fixed (it carries their scores in
+    ``damping_score``). With ``natural_freq`` (the read's 2 Kp / Kd) the read inertia is
+    corrected for those rates (`controller_gains.damping_corrected_inertia`). The note says
+    what changed. The first memory stands if the second cannot be learned.
+    """
+    assert memory.model is not None
+    values, forces, sample_time, horizon, sos, force_margin = learn_args
+    n = input_gain.shape[0]
+    rate = -np.diag(memory.model.damping)
+    score = np.std(body_velocity(values, sample_time), axis=0)
+    parts = []
+    if damping_memory and kept is not None and kept[0].shape == (n,):
+        older = kept[1] > score
+        rate, score = np.where(older, kept[0], rate), np.where(older, kept[1], score)
+        if np.any(older):
+            parts.append('damping rates kept ' + ', '.join(
+                f'{v:.3g}' if o else '–' for v, o in zip(rate, older, strict=True)) + ' 1/s')
+    gain = input_gain
+    if natural_freq is not None:
+        inertia = 1.0 / input_gain
+        corrected = damping_corrected_inertia(inertia, natural_freq[:n], rate)
+        gain = 1.0 / corrected
+        parts.append('inertia × ' + ', '.join(f'{v:.2f}' for v in corrected / inertia) +
+                     ' for the damping')
+    try:
+        again = learn_vessel_memory(values, forces, sample_time, horizon, gain, sos,
+                                    force_margin, rate if damping_memory else None)
+    except ValueError:
+        return memory, note
+    if damping_memory:
+        again = replace(again, damping_score=score)
+    return again, '; '.join([note, *parts]) if parts else note
 
 
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,
@@ -446,7 +528,8 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     used = f'{rows.size} samples' + (f' in {len(runs)} runs' if len(runs) > 1 else '')
     return ControllerRead(1.0 / inertia, (f"controller-implied inertia "
                                           f"{', '.join(f'{v:.3g}' for v in inertia)} "
-                                          f'(R² {r2}; {used})'), 'read', float(stamps[rows[-1]]))
+                                          f'(R² {r2}; {used})'), 'read', float(stamps[rows[-1]]),
+                          gains.natural_freq())
 
 
 def _median_read(reads: list[ControllerGains], stamp: float, samples: int,
@@ -459,7 +542,8 @@ def _median_read(reads: list[ControllerGains], stamp: float, samples: int,
         return ControllerRead(None, f'controller gains not read ({what})', 'no_fit')
     return ControllerRead(1.0 / inertia, (f"controller-implied inertia "
                                           f"{', '.join(f'{v:.3g}' for v in inertia)} "
-                                          f'(median; {what}; {samples} samples)'), 'read', stamp)
+                                          f'(median; {what}; {samples} samples)'), 'read', stamp,
+                          median_natural_freq(reads, max_natural_freq))
 
 
 def _input_gain(inertia: tuple[float, ...], ndof: int) -> FloatArray | None:

@@ -349,6 +349,21 @@ class OdometryParams:
         'turn spoils only its own block); 0 = one read pooled over the whole history, as before '
         'the forty-seventh session (its rule on fresh seeds: rao_supply 0.39× the excursion '
         'after a dropout, docs/BENCHMARKS.md)', 's'))
+    controller_read_damping: bool = field(default=False, metadata=field_doc(
+        "with controller_inertia: the read inertia is the one under which the controller's Kd "
+        "and the vessel's own damping (the vessel memory's fitted rate) together are critical, "
+        'as for a DP PID designed with Kd = 2 zeta omega_n M - D (the MSS PID, and the '
+        'simulator here); Kd^2/(4 Kp) alone reads such a yaw inertia 0.6x too small, and the '
+        'dead reckoning turns too fast in a turn (core.controller_gains.'
+        'damping_corrected_inertia; docs/BENCHMARKS.md, fifty-third session)', ''))
+    dead_reckoning_damping_memory: bool = field(default=False, metadata=field_doc(
+        'with a known or read thrust gain: the vessel memory keeps per DOF the damping rate of '
+        'the window in which that DOF moved most (target velocity std) across windows and '
+        'dropouts, instead of each window fitting its own: a window in which the heading hardly '
+        'moves cannot identify the yaw damping (rao_supply: 33-240 s between turns, 8-12 s '
+        'with a turn, truth 11.6 s), and a dead reckoning through the next turn on too little '
+        'damping turned the estimate twice as fast as the vessel (docs/BENCHMARKS.md, '
+        'fifty-third session)', ''))
     controller_read_earth_frame: bool = field(default=True, metadata=field_doc(
         'with controller_inertia, 3 DOF: high-pass the estimates and the commands in the earth '
         'frame before turning them into the body frame (a turn away from the setpoint origin '

@@ -9,8 +9,10 @@ from lf_predictor_ros.core.controller_gains import (
     MIN_R_SQUARED,
     ControllerGains,
     block_bounds,
+    damping_corrected_inertia,
     fit_controller_gains,
     median_implied_inertia,
+    median_natural_freq,
 )
 from lf_predictor_ros.core.lf_dynamics import body_velocity
 from sim_ros.control.pid import PidState, gains_from_bandwidth, pid_step
@@ -231,3 +233,39 @@ def test_inputs_are_not_modified() -> None:
     fit_controller_gains(eta, nu, tau, H)
     for before, after in zip(copies, (eta, nu, tau), strict=True):
         np.testing.assert_array_equal(before, after)
+
+
+def test_the_damping_correction_recovers_the_inertia_of_a_pid_that_takes_the_damping_off() -> None:
+    """Kd = 2 ω M − D (the MSS PID): Kd²/(4 Kp) is M (1 − D/(2 ω M))²; corrected, M exactly.
+
+    The supply vessel's yaw (M 4.45e9 kg·m², D/M = 1/11.6 s, ω_n 0.2 rad/s) reads 0.61 M.
+    """
+    mass = np.array([6.7644e6, 1.13412e7, 4.4524e9])
+    rate = np.array([1 / 87.8, 1 / 44.5, 1 / 11.6])  # D_ii / M_ii [1/s]
+    omega = np.array([0.1, 0.1, 0.2])
+    gains = gains_from_bandwidth(mass, omega, 1.0, rate * mass)
+    block = ControllerGains(gains.kp, gains.kd, np.ones(3), 0)
+    read = block.inertia_per_dof()
+    np.testing.assert_allclose(read / mass, (1.0 - rate / (2.0 * omega)) ** 2, rtol=1e-12)
+    assert read[2] / mass[2] == pytest.approx(0.61, abs=0.01)
+    np.testing.assert_allclose(block.natural_freq(), 2.0 * gains.kp / gains.kd)
+    np.testing.assert_allclose(damping_corrected_inertia(read, block.natural_freq(), rate), mass,
+                               rtol=1e-12)
+    # no damping (or none known): the read as it is
+    np.testing.assert_array_equal(damping_corrected_inertia(read, block.natural_freq(),
+                                                            [0.0, -1.0, np.nan]), read)
+    # a rate above half the read's ω_n: no inertia makes the loop critical; clipped (× 4)
+    np.testing.assert_allclose(damping_corrected_inertia([1.0], [0.2], [0.5]), [4.0])
+    with pytest.raises(ValueError, match='one entry per DOF'):
+        damping_corrected_inertia(read, block.natural_freq()[:2], rate)
+
+
+def test_the_median_natural_frequency_is_over_the_believed_blocks_only() -> None:
+    good = ControllerGains(np.array([1.0, 4.0]), np.array([10.0, 20.0]), np.ones(2), 0)
+    other = ControllerGains(np.array([2.0, 4.0]), np.array([10.0, 40.0]), np.ones(2), 0)
+    spoilt = ControllerGains(np.array([9.0, 9.0]), np.array([1.0, 1.0]), np.zeros(2), 0)
+    freq = median_natural_freq([good, other, spoilt])
+    assert freq is not None
+    np.testing.assert_allclose(freq, [0.3, 0.3])  # medians of (0.2, 0.4) and (0.4, 0.2)
+    assert median_natural_freq([spoilt]) is None
+    assert median_natural_freq([]) is None

@@ -308,3 +308,34 @@ def test_balanced_at_with_an_acceleration_leaves_the_model_accelerating_so() -> 
                                rest.acceleration(nu, force, heading), accel, atol=1e-15)
     np.testing.assert_array_equal(balanced_at(model, heading, nu, force, accel=np.zeros(3)).bias,
                                   rest.bias)
+
+
+def test_a_known_damping_rate_is_kept_and_only_the_environment_fitted() -> None:
+    """fit_lf_dynamics with input_gain and damping_rate: F = −diag(f) exactly; B recovered."""
+    h = 1.0
+    model = LfDynamics(damping=np.diag([-1 / 80.0, -1 / 40.0, -1 / 12.0]),
+                       input_gain=np.diag([1.5e-7, 9e-8, 2.2e-10]),
+                       bias=np.array([[0.0, 2e-4, -1e-4], [0.0, 1e-4, 2e-4], [3e-4, 0.0, 0.0]]),
+                       residual_std=np.zeros(3))
+    rng = np.random.default_rng(4)
+    m = 3000
+    tau = np.column_stack([rng.standard_normal(m) * 2e5, rng.standard_normal(m) * 2e5,
+                           rng.standard_normal(m) * 5e7])
+    tau = np.apply_along_axis(lambda x: np.convolve(x, np.ones(30) / 30.0, 'same'), 0, tau)
+    eta, nu = np.zeros(3), np.zeros(3)
+    poses = np.empty((m, 3))
+    for k in range(m):
+        poses[k] = eta
+        eta, nu = dead_reckon_step(model, 'model', eta, nu, tau[k], h)
+    gain = np.diag(model.input_gain)
+    fitted = fit_lf_dynamics(poses, tau, h, input_gain=gain, damping_rate=[1 / 80, 1 / 40, 1 / 12])
+    np.testing.assert_array_equal(np.diag(fitted.damping), [-1 / 80, -1 / 40, -1 / 12])
+    np.testing.assert_array_equal(np.diag(fitted.input_gain), gain)
+    assert fitted.bias[2, 0] == pytest.approx(3e-4, rel=0.05)
+    with pytest.raises(ValueError, match='needs input_gain'):
+        fit_lf_dynamics(poses, tau, h, damping_rate=[1 / 80, 1 / 40, 1 / 12])
+    with pytest.raises(ValueError, match='damping_rate must be 3 positive'):
+        fit_lf_dynamics(poses, tau, h, input_gain=gain, damping_rate=[1 / 80, 0.0, 1 / 12])
+    memory = learn_vessel_memory(poses, tau, h, 120.0, gain, damping_rate=[0.02, 0.03, 0.1])
+    assert memory.model is not None
+    np.testing.assert_array_equal(np.diag(memory.model.damping), [-0.02, -0.03, -0.1])

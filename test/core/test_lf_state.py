@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from lf_predictor_ros.core.lf_dynamics import body_velocity
+from lf_predictor_ros.core.lf_dynamics import DriftCurve, LfDynamics, VesselMemory, body_velocity
 from lf_predictor_ros.core.lf_state import LfStateEstimator, implied_input_gain
 from lf_predictor_ros.core.odometry import (
     LfOdometry,
@@ -233,6 +233,60 @@ def test_the_controller_implied_inertia_reaches_the_memory_unless_one_is_given()
     assert kept is read and memory is not None and memory.model is not None
     assert memory.known_gain == 'vessel_inertia' and memory.model.input_gain[0, 0] == given[0]
     assert memory.dp_controlled and 'remembered' in memory.message
+
+
+def test_the_damping_memory_keeps_the_rate_of_the_most_excited_window() -> None:
+    """dead_reckoning_damping_memory: per DOF the rate of the window that moved most."""
+    from lf_predictor_ros.core.lf_state import _learn
+
+    published, stamps, commands = _published_pd_loop(1200)
+    rng = np.random.default_rng(1)
+    poses = np.cumsum(np.cumsum(rng.normal(size=(1200, 1)) * 1e-3, axis=0), axis=0)
+    params = PredictorParams(ndof=1, sample_time=1.0)
+    args = (params, stamps, poses, commands, None, published, 120.0, 60, 1.2, None,
+            (stamps, commands))
+    own, _, _ = _learn(*args, damping_memory=True)
+    assert own is not None and own.model is not None and own.damping_score is not None
+    score = float(np.std(body_velocity(poses, 1.0)))
+    assert own.damping_score[0] == pytest.approx(score, rel=1e-12)
+    free, _, _ = _learn(*args)
+    assert free is not None and free.model is not None and free.damping_score is None
+    assert own.model.damping[0, 0] == pytest.approx(free.model.damping[0, 0], rel=1e-9)
+    # a window that moved more before: its rate is kept, with its score
+    kept, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([10 * score])),
+                        damping_memory=True)
+    assert kept is not None and kept.model is not None and kept.damping_score is not None
+    assert kept.model.damping[0, 0] == -0.05 and kept.damping_score[0] == 10 * score
+    assert 'damping rates kept 0.05 1/s' in kept.message
+    # one that moved less: this window's own rate
+    less, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([0.1 * score])),
+                        damping_memory=True)
+    assert less is not None and less.model is not None
+    assert less.model.damping[0, 0] == own.model.damping[0, 0]
+    # off: the kept rates are not looked at
+    off, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([10 * score])))
+    assert off is not None and off.model is not None
+    assert off.model.damping[0, 0] == free.model.damping[0, 0]
+
+
+def test_the_estimator_keeps_the_damping_across_memories_until_reset() -> None:
+    est = LfStateEstimator(PredictorParams(ndof=1), background=False)
+    try:
+        model = LfDynamics(np.array([[-0.02]]), np.array([[1e-6]]), np.zeros((1, 1)),
+                           np.zeros(1))
+        memory = VesselMemory(model, 'model', DriftCurve(np.zeros(0), np.zeros((0, 1)),
+                                                          np.zeros((0, 1)), 0),
+                              {}, '', np.zeros(1), damping_score=np.array([0.3]))
+        est._apply((memory, None, None))  # noqa: SLF001 - what a finished job hands over
+        assert est._kept_damping is not None  # noqa: SLF001
+        np.testing.assert_array_equal(est._kept_damping[0], [0.02])  # noqa: SLF001
+        np.testing.assert_array_equal(est._kept_damping[1], [0.3])  # noqa: SLF001
+        est._apply((None, None, None))  # noqa: SLF001 - a memory that could not be learned
+        assert est._kept_damping is not None  # noqa: SLF001
+        est.reset()
+        assert est._kept_damping is None  # noqa: SLF001
+    finally:
+        est.close()
 
 
 class _WindowPredictor:

@@ -420,9 +420,9 @@ class VesselMemory:
         dp_controlled: the thrust was read as a DP controller's (its PD law explains the
             commands on the published estimates): its LF part balances the environment.
         damping_score: with a damping memory (``OdometryParams.dead_reckoning_damping_memory``),
-            per DOF the standard deviation of the target body velocity of the window whose fit
-            gave the model's damping rate (the excitation it was identified with) [m/s, m/s,
-            rad/s]; None otherwise.
+            per DOF the velocity energy Σ ν_i² of the target body velocity of the window whose
+            fit gave the model's damping rate (the excitation it was identified with) [m²/s²,
+            m²/s², rad²/s²]; None otherwise.
     """
 
     model: LfDynamics | None

@@ -48,6 +48,7 @@ from lf_predictor_ros.core.lf_dynamics import (
     learn_vessel_memory,
 )
 from lf_predictor_ros.core.odometry import (
+    DAMPING_MEMORY_DOFS,
     Covariances,
     EstimateSource,
     LfOdometry,
@@ -291,8 +292,8 @@ class LfStateEstimator:
                 odometry.params.controller_read_earth_frame,
                 odometry.params.dead_reckoning_force_margin,
                 odometry.params.controller_read_damping,
-                self._kept_damping if odometry.params.dead_reckoning_damping_memory else None,
-                odometry.params.dead_reckoning_damping_memory)
+                self._kept_damping,
+                DAMPING_MEMORY_DOFS[odometry.params.dead_reckoning_damping_memory][:self.ndof])
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -330,7 +331,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            heading_speed: bool = False, controller_block_time: float = 0.0,
            controller_earth_frame: bool = False,
            force_margin: float = FORCE_MARGIN, controller_damping: bool = False,
-           kept_damping: KeptDamping | None = None, damping_memory: bool = False) -> Learned:
+           kept_damping: KeptDamping | None = None,
+           damping_memory: tuple[bool, ...] = ()) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -358,9 +360,9 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     `implied_input_gain`'s ``block_time`` and ``earth_highpass``; ``force_margin``: the
     memory's force limit, `learn_vessel_memory`'s; ``controller_damping``: a read gain is
     corrected for the vessel's own damping rates (`controller_gains.damping_corrected_inertia`)
-    and the memory learned again on it; ``damping_memory`` (with a known or read gain): per DOF
-    the damping rate of the window with the larger target velocity std, this one's or
-    ``kept_damping``'s, and the memory learned again with those rates fixed
+    and the memory learned again on it; ``damping_memory`` (with a known or read gain; per DOF,
+    empty: none): in those DOFs the damping rate of the window with the more velocity energy,
+    this one's or ``kept_damping``'s, and the memory learned again with those rates fixed
     (`_damping_chosen`).
     The read returned is the one in force afterwards: this read if it succeeded,
     ``remembered`` if it failed for lack of data, else None.
@@ -391,7 +393,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     except ValueError:
         memory = None
     correct = controller_damping and source == 'controller' and in_force is not None
-    if (correct or damping_memory) and memory is not None and memory.model is not None and \
+    if (correct or any(damping_memory)) and memory is not None and memory.model is not None and \
             input_gain is not None:
         memory, note = _damping_chosen(
             memory, input_gain, in_force.natural_freq if correct and in_force else None,
@@ -415,7 +417,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
 
 def _damping_chosen(memory: VesselMemory, input_gain: FloatArray,
                     natural_freq: FloatArray | None, kept: KeptDamping | None,
-                    damping_memory: bool, note: str,
+                    damping_memory: tuple[bool, ...], note: str,
                     learn_args: tuple[FloatArray, FloatArray, float, float, FloatArray | None,
                                       float]) -> tuple[VesselMemory | None, str]:
     """The memory learned again with the damping rates chosen and the read gain corrected.
@@ -423,21 +425,23 @@ def _damping_chosen(memory: VesselMemory, input_gain: FloatArray,
     The first memory's rates f = −F_ii were fitted on this window alone; a window in which a
     DOF hardly moves cannot identify its damping (rao_supply's yaw time constant came out
     33–240 s between turns, 8–12 s in windows with a turn, the truth 11.6 s: docs/BENCHMARKS.md,
-    fifty-third session). With ``damping_memory`` each DOF takes the rate of the window whose
-    target body velocity had the larger standard deviation, this one or ``kept``'s, and the
-    memory is learned again with those rates fixed (it carries their scores in
-    ``damping_score``). With ``natural_freq`` (the read's 2 Kp / Kd) the read inertia is
-    corrected for those rates (`controller_gains.damping_corrected_inertia`). The note says
-    what changed. The first memory stands if the second cannot be learned.
+    fifty-third session). In the DOFs of ``damping_memory`` the rate is the one of the window
+    with the more velocity energy Σ ν_i² over the target body velocity (the information a
+    least-squares fit of f_i has, for a given residual), this one or ``kept``'s, and the memory
+    is learned again with those rates fixed (it carries the energies in ``damping_score``; the
+    other DOFs keep this window's fitted rate). With ``natural_freq`` (the read's 2 Kp / Kd)
+    the read inertia is corrected for the rates (`controller_gains.damping_corrected_inertia`).
+    The note says what changed. The first memory stands if the second cannot be learned.
     """
     assert memory.model is not None
     values, forces, sample_time, horizon, sos, force_margin = learn_args
     n = input_gain.shape[0]
     rate = -np.diag(memory.model.damping)
-    score = np.std(body_velocity(values, sample_time), axis=0)
+    score = np.sum(body_velocity(values, sample_time) ** 2, axis=0)
+    dofs = np.array(damping_memory, dtype=bool)
     parts = []
-    if damping_memory and kept is not None and kept[0].shape == (n,):
-        older = kept[1] > score
+    if kept is not None and dofs.shape == (n,) and kept[0].shape == (n,):
+        older = dofs & (kept[1] > score)
         rate, score = np.where(older, kept[0], rate), np.where(older, kept[1], score)
         if np.any(older):
             parts.append('damping rates kept ' + ', '.join(
@@ -449,14 +453,15 @@ def _damping_chosen(memory: VesselMemory, input_gain: FloatArray,
         gain = 1.0 / corrected
         parts.append('inertia × ' + ', '.join(f'{v:.2f}' for v in corrected / inertia) +
                      ' for the damping')
+    memorized = bool(np.any(dofs))
     try:
         again = learn_vessel_memory(values, forces, sample_time, horizon, gain, sos,
-                                    force_margin, rate if damping_memory else None)
+                                    force_margin, rate if memorized else None)
     except ValueError:
         return memory, note
-    if damping_memory:
+    if memorized:
         again = replace(again, damping_score=score)
-    return again, '; '.join([note, *parts]) if parts else note
+    return again, '; '.join(part for part in (note, *parts) if part)
 
 
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,

@@ -124,6 +124,10 @@ REFERENCE_LOW_PASS_ORDER = 4
 # through one low-pass exceeds this many holding standard deviations of the twist (a two-sided
 # 95 % test of "at rest") [-].
 MOTION_BALANCE_SIGMAS = 2.0
+# ``dead_reckoning_damping_memory``: the DOFs (surge, sway, yaw) whose damping rate the vessel
+# memory keeps across windows, per choice.
+DAMPING_MEMORY_DOFS: dict[str, tuple[bool, bool, bool]] = {
+    'off': (False, False, False), 'yaw': (False, False, True), 'all': (True, True, True)}
 # `excursion_covariance` takes displacements and twists up to this size per DOF (larger ones: an
 # absurd, finite thrust the dead reckoning has followed), so that the covariance stays finite
 # [m, m, rad; m/s, m/s, rad/s].
@@ -356,13 +360,14 @@ class OdometryParams:
         'simulator here); Kd^2/(4 Kp) alone reads such a yaw inertia 0.6x too small, and the '
         'dead reckoning turns too fast in a turn (core.controller_gains.'
         'damping_corrected_inertia; docs/BENCHMARKS.md, fifty-third session)', ''))
-    dead_reckoning_damping_memory: bool = field(default=False, metadata=field_doc(
-        'with a known or read thrust gain: the vessel memory keeps per DOF the damping rate of '
-        'the window in which that DOF moved most (target velocity std) across windows and '
-        'dropouts, instead of each window fitting its own: a window in which the heading hardly '
-        'moves cannot identify the yaw damping (rao_supply: 33-240 s between turns, 8-12 s '
-        'with a turn, truth 11.6 s), and a dead reckoning through the next turn on too little '
-        'damping turned the estimate twice as fast as the vessel (docs/BENCHMARKS.md, '
+    dead_reckoning_damping_memory: str = field(default='off', metadata=field_doc(
+        "with a known or read thrust gain, 'yaw' or 'all' (DOFs): the vessel memory keeps per "
+        'DOF the damping rate of the window that identified it best (the most velocity energy, '
+        'sum of the squared target velocity) across windows and dropouts, instead of each '
+        'window fitting its own: a window in which the heading hardly moves cannot identify '
+        'the yaw damping (rao_supply: 33-240 s between turns, 8-12 s with a turn, truth '
+        '11.6 s), and a dead reckoning through the next turn on too little damping turned the '
+        "estimate twice as fast as the vessel; 'off': each window its own (docs/BENCHMARKS.md, "
         'fifty-third session)', ''))
     controller_read_earth_frame: bool = field(default=True, metadata=field_doc(
         'with controller_inertia, 3 DOF: high-pass the estimates and the commands in the earth '
@@ -469,6 +474,10 @@ class OdometryParams:
             raise ValueError('vessel_inertia must be 3 finite numbers, all 0 (learn) or all > 0 '
                              f'[kg, kg, kg·m²], got {self.vessel_inertia}')
         object.__setattr__(self, 'vessel_inertia', inertia)
+        if self.dead_reckoning_damping_memory not in DAMPING_MEMORY_DOFS:
+            raise ValueError(f'dead_reckoning_damping_memory must be one of '
+                             f'{tuple(DAMPING_MEMORY_DOFS)}, got '
+                             f'{self.dead_reckoning_damping_memory!r}')
         if self.dead_reckoner not in ('auto', *DEAD_RECKONERS):
             raise ValueError(f"dead_reckoner must be 'auto' or one of {DEAD_RECKONERS}, got "
                              f'{self.dead_reckoner!r}')

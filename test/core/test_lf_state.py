@@ -236,7 +236,7 @@ def test_the_controller_implied_inertia_reaches_the_memory_unless_one_is_given()
 
 
 def test_the_damping_memory_keeps_the_rate_of_the_most_excited_window() -> None:
-    """dead_reckoning_damping_memory: per DOF the rate of the window that moved most."""
+    """dead_reckoning_damping_memory: per DOF the rate of the window with more velocity energy."""
     from lf_predictor_ros.core.lf_state import _learn
 
     published, stamps, commands = _published_pd_loop(1200)
@@ -245,28 +245,59 @@ def test_the_damping_memory_keeps_the_rate_of_the_most_excited_window() -> None:
     params = PredictorParams(ndof=1, sample_time=1.0)
     args = (params, stamps, poses, commands, None, published, 120.0, 60, 1.2, None,
             (stamps, commands))
-    own, _, _ = _learn(*args, damping_memory=True)
+    own, _, _ = _learn(*args, damping_memory=(True,))
     assert own is not None and own.model is not None and own.damping_score is not None
-    score = float(np.std(body_velocity(poses, 1.0)))
+    score = float(np.sum(body_velocity(poses, 1.0) ** 2))
     assert own.damping_score[0] == pytest.approx(score, rel=1e-12)
     free, _, _ = _learn(*args)
     assert free is not None and free.model is not None and free.damping_score is None
     assert own.model.damping[0, 0] == pytest.approx(free.model.damping[0, 0], rel=1e-9)
     # a window that moved more before: its rate is kept, with its score
     kept, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([10 * score])),
-                        damping_memory=True)
+                        damping_memory=(True,))
     assert kept is not None and kept.model is not None and kept.damping_score is not None
     assert kept.model.damping[0, 0] == -0.05 and kept.damping_score[0] == 10 * score
     assert 'damping rates kept 0.05 1/s' in kept.message
     # one that moved less: this window's own rate
     less, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([0.1 * score])),
-                        damping_memory=True)
+                        damping_memory=(True,))
     assert less is not None and less.model is not None
     assert less.model.damping[0, 0] == own.model.damping[0, 0]
-    # off: the kept rates are not looked at
-    off, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([10 * score])))
+    # off for this DOF: the kept rates are not looked at
+    off, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([10 * score])),
+                       damping_memory=(False,))
     assert off is not None and off.model is not None
     assert off.model.damping[0, 0] == free.model.damping[0, 0]
+
+
+def test_the_damping_memory_of_the_yaw_alone_keeps_surge_and_sway_as_fitted() -> None:
+    """'yaw': only the heading's damping rate comes from the kept window (3 DOF, known G)."""
+    from lf_predictor_ros.core.lf_dynamics import dead_reckon_step, learn_vessel_memory
+    from lf_predictor_ros.core.lf_state import _damping_chosen
+    from lf_predictor_ros.core.odometry import DAMPING_MEMORY_DOFS
+
+    model = LfDynamics(np.diag([-1 / 80.0, -1 / 40.0, -1 / 12.0]),
+                       np.diag([1.5e-7, 9e-8, 2.2e-10]), np.zeros((3, 3)), np.zeros(3))
+    rng = np.random.default_rng(5)
+    tau = np.apply_along_axis(lambda x: np.convolve(x, np.ones(30) / 30.0, 'same'), 0,
+                              rng.standard_normal((1500, 3)) * np.array([2e5, 2e5, 5e7]))
+    eta, nu = np.zeros(3), np.zeros(3)
+    poses = np.empty((1500, 3))
+    for k in range(1500):
+        poses[k] = eta
+        eta, nu = dead_reckon_step(model, 'model', eta, nu, tau[k], 1.0)
+    gain = np.diag(model.input_gain)
+    memory = learn_vessel_memory(poses, tau, 1.0, 120.0, gain)
+    assert memory.model is not None
+    own = -np.diag(memory.model.damping)
+    kept = (np.array([0.5, 0.5, 0.5]), np.full(3, np.inf))
+    chosen, note = _damping_chosen(memory, gain, None, kept, DAMPING_MEMORY_DOFS['yaw'], '',
+                                   (poses, tau, 1.0, 120.0, None, 0.0))
+    assert chosen is not None and chosen.model is not None and chosen.damping_score is not None
+    np.testing.assert_allclose(-np.diag(chosen.model.damping), [own[0], own[1], 0.5])
+    assert chosen.damping_score[2] == np.inf and note == 'damping rates kept –, –, 0.5 1/s'
+    with pytest.raises(ValueError, match='dead_reckoning_damping_memory must be one of'):
+        OdometryParams(dead_reckoning_damping_memory='heading')
 
 
 def test_the_estimator_keeps_the_damping_across_memories_until_reset() -> None:

@@ -357,9 +357,10 @@ class OdometryParams:
         "with controller_inertia: the read inertia is the one under which the controller's Kd "
         "and the vessel's own damping (the vessel memory's fitted rate) together are critical, "
         'as for a DP PID designed with Kd = 2 zeta omega_n M - D (the MSS PID, and the '
-        'simulator here); Kd^2/(4 Kp) alone reads such a yaw inertia 0.6x too small, and the '
-        'dead reckoning turns too fast in a turn (core.controller_gains.'
-        'damping_corrected_inertia; docs/BENCHMARKS.md, fifty-third session)', ''))
+        'simulator here); Kd^2/(4 Kp) alone reads such a yaw inertia 0.6x too small '
+        '(core.controller_gains.damping_corrected_inertia). Off: with the fitted or kept '
+        'damping rates it over-corrected in the screen (the heading overshot turns by up to '
+        '2 rad; docs/BENCHMARKS.md, fifty-third session)', ''))
     dead_reckoning_damping_memory: str = field(default='off', metadata=field_doc(
         "with a known or read thrust gain, 'yaw' or 'all' (DOFs): the vessel memory keeps per "
         'DOF the damping rate of the window that identified it best (the most velocity energy, '

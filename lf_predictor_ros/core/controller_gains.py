@@ -25,7 +25,7 @@ east m, heading rad] with the heading unwrapped, ν and τ in ``base_link_fsd``.
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 import math
 
@@ -84,7 +84,7 @@ class ControllerGains:
         bound; `implied_input_gain` passes ``MAX_NATURAL_FREQ_RATIO`` × ω0).
         """
         return (self.r_squared >= MIN_R_SQUARED) & (self.stiffness > 0.0) & \
-            (self.damping > 0.0) & (2.0 * self.stiffness < max_natural_freq * self.damping)
+            (self.damping > 0.0) & (self.natural_freq() < max_natural_freq)
 
     def implied_inertia(self, max_natural_freq: float = math.inf) -> FloatArray | None:
         """M_i = Kd_i² / (4 Kp_i) per DOF (module docstring), or None unless every DOF is believed.
@@ -139,16 +139,7 @@ def median_implied_inertia(blocks: Sequence[ControllerGains],
     at least one block; the count of believed blocks per DOF). ``max_natural_freq``: as
     `ControllerGains.believed`.
     """
-    if not blocks:
-        return None, np.zeros(0, dtype=np.int64)
-    believed = np.array([b.believed(max_natural_freq) for b in blocks])
-    counts = believed.sum(axis=0).astype(np.int64)
-    if not np.all(counts > 0):
-        return None, counts
-    inertia = np.array([b.inertia_per_dof() for b in blocks])
-    median = np.array([float(np.median(inertia[believed[:, i], i]))
-                       for i in range(believed.shape[1])])
-    return median, counts
+    return _median_believed(blocks, ControllerGains.inertia_per_dof, max_natural_freq)
 
 
 def median_natural_freq(blocks: Sequence[ControllerGains],
@@ -157,14 +148,26 @@ def median_natural_freq(blocks: Sequence[ControllerGains],
 
     None unless every DOF is believed in at least one block [rad/s].
     """
+    return _median_believed(blocks, ControllerGains.natural_freq, max_natural_freq)[0]
+
+
+def _median_believed(blocks: Sequence[ControllerGains],
+                     quantity: Callable[[ControllerGains], FloatArray],
+                     max_natural_freq: float) -> tuple[FloatArray | None, NDArray[np.int64]]:
+    """Per DOF the median of ``quantity`` over the blocks that believe that DOF; the counts.
+
+    (None, counts) unless every DOF is believed in at least one block.
+    """
     if not blocks:
-        return None
+        return None, np.zeros(0, dtype=np.int64)
     believed = np.array([b.believed(max_natural_freq) for b in blocks])
-    if not np.all(believed.sum(axis=0) > 0):
-        return None
-    freq = np.array([b.natural_freq() for b in blocks])
-    return np.array([float(np.median(freq[believed[:, i], i]))
-                     for i in range(believed.shape[1])])
+    counts = believed.sum(axis=0).astype(np.int64)
+    if not np.all(counts > 0):
+        return None, counts
+    values = np.array([quantity(b) for b in blocks])
+    median = np.array([float(np.median(values[believed[:, i], i]))
+                       for i in range(believed.shape[1])])
+    return median, counts
 
 
 def damping_corrected_inertia(inertia: ArrayLike, natural_freq: ArrayLike,

@@ -392,12 +392,12 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                                                           force_margin)
     except ValueError:
         memory = None
-    correct = controller_damping and source == 'controller' and in_force is not None
-    if (correct or any(damping_memory)) and memory is not None and memory.model is not None and \
-            input_gain is not None:
+    read_freq = in_force.natural_freq if controller_damping and source == 'controller' and \
+        in_force is not None else None
+    if (read_freq is not None or any(damping_memory)) and memory is not None and \
+            memory.model is not None and input_gain is not None:
         memory, note = _damping_chosen(
-            memory, input_gain, in_force.natural_freq if correct and in_force else None,
-            kept_damping, damping_memory, note,
+            memory, input_gain, read_freq, kept_damping, damping_memory, note,
             (values, forces, params.sample_time, horizon, sos, force_margin))
     if memory is not None and (source or note):
         memory = replace(memory, known_gain=source if memory.model is not None else '',
@@ -431,7 +431,8 @@ def _damping_chosen(memory: VesselMemory, input_gain: FloatArray,
     is learned again with those rates fixed (it carries the energies in ``damping_score``; the
     other DOFs keep this window's fitted rate). With ``natural_freq`` (the read's 2 Kp / Kd)
     the read inertia is corrected for the rates (`controller_gains.damping_corrected_inertia`).
-    The note says what changed. The first memory stands if the second cannot be learned.
+    The note says what changed. The first memory stands, scored, if nothing changed (no rate
+    kept, no correction) or if the second cannot be learned.
     """
     assert memory.model is not None
     values, forces, sample_time, horizon, sos, force_margin = learn_args
@@ -454,6 +455,8 @@ def _damping_chosen(memory: VesselMemory, input_gain: FloatArray,
         parts.append('inertia × ' + ', '.join(f'{v:.2f}' for v in corrected / inertia) +
                      ' for the damping')
     memorized = bool(np.any(dofs))
+    if not parts:  # this window's own fit in every DOF: nothing to learn again
+        return (replace(memory, damping_score=score) if memorized else memory), note
     try:
         again = learn_vessel_memory(values, forces, sample_time, horizon, gain, sos,
                                     force_margin, rate if memorized else None)

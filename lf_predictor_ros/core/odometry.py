@@ -295,6 +295,12 @@ class OdometryParams:
         'longer young: its thrust has become the environment the vessel holds against, and the '
         'held thrust may belong to another place or sea); else the current low-passed thrust; '
         'inf = any age', 's'))
+    dead_reckoning_holding_still: bool = field(default=False, metadata=field_doc(
+        "with dead_reckoning_holding_balance: a DOF group's thrust counts as held only while "
+        'every DOF holds station (no turn while the position holds, no move while the heading '
+        'holds): the surge/sway thrust at the end of a turn, while the vessel still swings, '
+        'is not the thrust it held station with (a spread dropout at the end of a turn, '
+        'docs/BENCHMARKS.md, fifty-fourth session); false: each group on its own', ''))
     dead_reckoning_force_margin: float = field(default=FORCE_MARGIN, metadata=field_doc(
         'the thrust the odometry believes (dead reckoning, twist prediction, environment '
         'balance) is clipped per DOF to this multiple of the largest thrust in the vessel '
@@ -1039,7 +1045,8 @@ class LfOdometry:
         """Remember the low-passed thrust of the DOF groups that are holding station now.
 
         Each group keeps its holding samples of the last ``dead_reckoning_holding_lead`` +
-        ``HOLDING_MARGIN`` seconds (`_holding_force` takes the one that lead before the newest).
+        ``HOLDING_MARGIN`` seconds (`_holding_force` takes the one that lead before the newest);
+        with ``dead_reckoning_holding_still`` a group's sample only while no DOF is moving.
         """
         assert self._slow_force is not None
         n = self.ndof
@@ -1050,8 +1057,9 @@ class LfOdometry:
         if n == 3:
             groups.append(('yaw', 2, force[2:].copy()))
         keep = self.params.dead_reckoning_holding_lead + HOLDING_MARGIN
+        still_only = self.params.dead_reckoning_holding_still
         for name, dof, value in groups:
-            if moving is not None and moving[dof]:
+            if moving is not None and (moving[dof] or still_only and bool(np.any(moving))):
                 continue
             history = self._holding[name]
             history.append((t, value, heading))

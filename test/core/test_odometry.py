@@ -1316,6 +1316,31 @@ def test_holding_balance_is_not_used_when_the_move_is_old() -> None:
         OdometryParams(dead_reckoning_holding_max_age=-1.0)
 
 
+@pytest.mark.parametrize('still', [False, True])
+def test_holding_still_keeps_no_group_while_another_moves(still: bool) -> None:
+    """``dead_reckoning_holding_still``: no group's thrust counts as held while any DOF moves.
+
+    The surge move of the balance test (from t = 100 s; the heading never moves): each group on
+    its own, yaw keeps holding through the move (its newest sample is the last fix, t = 160 s);
+    with the option, yaw stops holding when the horizontal gate opens, at the same instant as
+    the horizontal group.
+    """
+    damping, gain, environment = 0.01, 1e-6, -1e3
+    times = np.arange(0.0, 161.0)
+    thrust = np.where(times < 100.0, 1e3, 4e3)
+    north, _ = _surge_move(times, thrust, damping, gain, environment)
+    odo = LfOdometry(3, H, OdometryParams(
+        dead_reckoner='model', dead_reckoning_velocity_time=H,
+        dead_reckoning_holding_balance=True, dead_reckoning_holding_still=still,
+        prior_pose_std=(1e-3, 1e-3, 1e-4)))
+    odo._memory = _surge_memory(damping, gain)  # noqa: SLF001 - a known vessel memory
+    _track_surge(odo, times, north, thrust)
+    horizontal = odo._holding['horizontal'][-1][0]  # noqa: SLF001
+    yaw = odo._holding['yaw'][-1][0]  # noqa: SLF001
+    assert 100.0 < horizontal < 150.0  # the gate opened some seconds into the move
+    assert yaw == (horizontal if still else 160.0)
+
+
 @pytest.mark.parametrize('keep', [False, True])
 def test_a_memory_without_a_model_keeps_the_one_with_a_model_when_asked(keep: bool) -> None:
     """``dead_reckoning_keep_model``: a refused fit does not take the model away.

@@ -271,31 +271,32 @@ class OdometryParams:
         'and the twist change through the same two cascaded low-passes '
         '(dead_reckoning_force_time), so the force that accelerated a setpoint move is not taken '
         'for environment (lf_dynamics.balanced_at with accel); false: balanced at rest', ''))
-    dead_reckoning_holding_balance: bool = field(default=False, metadata=field_doc(
+    dead_reckoning_holding_balance: bool = field(default=True, metadata=field_doc(
         'in the DOFs that are moving when a dead reckoning starts (as dead_reckoning_moving_'
         'twist), the environment force is the thrust low-passed over dead_reckoning_force_time '
         'as it was while the vessel last held station there, dead_reckoning_holding_lead '
         'seconds before the move was seen (surge/sway as one earth-fixed force), instead of its '
         'current value, which has taken in the thrust that drives the move (the model then '
         'brakes the dead-reckoned move while the vessel goes on: docs/BENCHMARKS.md, fiftieth '
-        'session); false: the current value', ''))
+        'session; the default with its limits since the fifty-fourth, rule J); false: the '
+        'current value', ''))
     dead_reckoning_holding_lead: float = field(default=10.0, metadata=field_doc(
         'with dead_reckoning_holding_balance: how long before the motion gate opened the held '
         'thrust is taken (the gate sees a move only after its low-pass has taken in some of '
         'it)', 's'))
-    dead_reckoning_holding_max_turn: float = field(default=math.inf, metadata=field_doc(
+    dead_reckoning_holding_max_turn: float = field(default=0.9, metadata=field_doc(
         'with dead_reckoning_holding_balance: the held thrust is used only if the heading has '
         'turned by at most this much since it was held (the environment a vessel holds against '
         'depends on its heading to wind, current and waves: after a turn the thrust held before '
         'it balanced another environment); else the current low-passed thrust; inf = always',
         'rad'))
-    dead_reckoning_holding_max_age: float = field(default=math.inf, metadata=field_doc(
+    dead_reckoning_holding_max_age: float = field(default=60.0, metadata=field_doc(
         'with dead_reckoning_holding_balance: the held thrust is used only if the group last '
         'held station at most this long before the balance (a move seen that long ago is no '
         'longer young: its thrust has become the environment the vessel holds against, and the '
         'held thrust may belong to another place or sea); else the current low-passed thrust; '
         'inf = any age', 's'))
-    dead_reckoning_holding_still: bool = field(default=False, metadata=field_doc(
+    dead_reckoning_holding_still: bool = field(default=True, metadata=field_doc(
         "with dead_reckoning_holding_balance: a DOF group's thrust counts as held only while "
         'every DOF holds station (no turn while the position holds, no move while the heading '
         'holds): the surge/sway thrust at the end of a turn, while the vessel still swings, '
@@ -367,7 +368,7 @@ class OdometryParams:
         '(core.controller_gains.damping_corrected_inertia). Off: with the fitted or kept '
         'damping rates it over-corrected in the screen (the heading overshot turns by up to '
         '2 rad; docs/BENCHMARKS.md, fifty-third session)', ''))
-    dead_reckoning_damping_memory: str = field(default='off', metadata=field_doc(
+    dead_reckoning_damping_memory: str = field(default='yaw', metadata=field_doc(
         "with a known or read thrust gain, 'yaw' or 'all' (DOFs): the vessel memory keeps per "
         'DOF the damping rate of the window that identified it best (the most velocity energy, '
         'sum of the squared target velocity) across windows and dropouts, instead of each '
@@ -375,7 +376,7 @@ class OdometryParams:
         'the yaw damping (rao_supply: 33-240 s between turns, 8-12 s with a turn, truth '
         '11.6 s), and a dead reckoning through the next turn on too little damping turned the '
         "estimate twice as fast as the vessel; 'off': each window its own (docs/BENCHMARKS.md, "
-        'fifty-third session)', ''))
+        "fifty-third session; 'yaw' the default since the fifty-fourth, rule J)", ''))
     controller_read_earth_frame: bool = field(default=True, metadata=field_doc(
         'with controller_inertia, 3 DOF: high-pass the estimates and the commands in the earth '
         'frame before turning them into the body frame (a turn away from the setpoint origin '
@@ -386,13 +387,13 @@ class OdometryParams:
         "driven by the thrust; the memory's choice while no model is fitted), "
         "'constant_velocity' or 'hold' (tuning seeds, DP loops through 60 s dropouts: auto; "
         "model unsafe on rao_supply; docs/BENCHMARKS.md)", ''))
-    dead_reckoning_keep_model: bool = field(default=False, metadata=field_doc(
+    dead_reckoning_keep_model: bool = field(default=True, metadata=field_doc(
         'a new vessel memory whose LF model was refused (a window whose fit failed, e.g. a turn '
         'with a thrust gain of the wrong sign and no controller read) does not replace one '
         'with a model: the vessel has not changed, and without a model a dropout in a turn '
         "falls back to 'hold', whose held heading error the PID keeps turning against "
-        '(docs/BENCHMARKS.md, fifty-first session); counted in memories_kept; false: the '
-        'newest memory is always used', ''))
+        '(docs/BENCHMARKS.md, fifty-first session; the default since the fifty-fourth, rule '
+        'J); counted in memories_kept; false: the newest memory is always used', ''))
     reacquire_gate: float = field(default=CHI2_3DOF_999, metadata=field_doc(
         'a fix within this squared Mahalanobis distance of the dead-reckoned pose is accepted '
         'at once', ''))

@@ -45,7 +45,9 @@ from lf_predictor_ros.core.lf_dynamics import (
     FORCE_MARGIN,
     VesselMemory,
     body_velocity,
+    fit_lf_dynamics,
     learn_vessel_memory,
+    paired_forces,
 )
 from lf_predictor_ros.core.odometry import (
     DAMPING_MEMORY_DOFS,
@@ -362,8 +364,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     corrected for the vessel's own damping rates (`controller_gains.damping_corrected_inertia`)
     and the memory learned again on it; ``damping_memory`` (with a known or read gain; per DOF,
     empty: none): in those DOFs the damping rate of the window with the more velocity energy,
-    this one's or ``kept_damping``'s, and the memory learned again with those rates fixed
-    (`_damping_chosen`).
+    this one's or ``kept_damping``'s, and the memory learned with those rates fixed
+    (`_damping_chosen`, decided before the memory is learned, so it is learned once).
     The read returned is the one in force afterwards: this read if it succeeded,
     ``remembered`` if it failed for lack of data, else None.
     """
@@ -386,19 +388,22 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
         note = f'{remembered.note}, remembered{since} ({read.note})'
     if input_gain is None and in_force is not None:
         input_gain, source = in_force.gain, 'controller'
-    try:
-        memory: VesselMemory | None = learn_vessel_memory(values, forces, params.sample_time,
-                                                          horizon, input_gain, sos,
-                                                          force_margin)
-    except ValueError:
-        memory = None
     read_freq = in_force.natural_freq if controller_damping and source == 'controller' and \
         in_force is not None else None
-    if (read_freq is not None or any(damping_memory)) and memory is not None and \
-            memory.model is not None and input_gain is not None:
-        memory, note = _damping_chosen(
-            memory, input_gain, read_freq, kept_damping, damping_memory, note,
-            (values, forces, params.sample_time, horizon, sos, force_margin))
+    gain, rate, score = input_gain, None, None
+    if (read_freq is not None or any(damping_memory)) and input_gain is not None:
+        gain, rate, score, parts = _damping_chosen(values, forces, params.sample_time, sos,
+                                                   input_gain, read_freq, kept_damping,
+                                                   damping_memory)
+        note = '; '.join(part for part in (note, *parts) if part)
+    try:
+        memory: VesselMemory | None = learn_vessel_memory(values, forces, params.sample_time,
+                                                          horizon, gain, sos, force_margin,
+                                                          rate)
+    except ValueError:
+        memory = None
+    if memory is not None and score is not None:
+        memory = replace(memory, damping_score=score)
     if memory is not None and (source or note):
         memory = replace(memory, known_gain=source if memory.model is not None else '',
                          dp_controlled=in_force is not None,
@@ -415,31 +420,37 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                              reference_filter, heading_speed), in_force
 
 
-def _damping_chosen(memory: VesselMemory, input_gain: FloatArray,
+def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
+                    sos: FloatArray | None, input_gain: FloatArray,
                     natural_freq: FloatArray | None, kept: KeptDamping | None,
-                    damping_memory: tuple[bool, ...], note: str,
-                    learn_args: tuple[FloatArray, FloatArray, float, float, FloatArray | None,
-                                      float]) -> tuple[VesselMemory | None, str]:
-    """The memory learned again with the damping rates chosen and the read gain corrected.
+                    damping_memory: tuple[bool, ...]
+                    ) -> tuple[FloatArray, FloatArray | None, FloatArray | None, list[str]]:
+    """The thrust gain and damping rates the window's memory is learned with, before it is.
 
-    The first memory's rates f = −F_ii were fitted on this window alone; a window in which a
-    DOF hardly moves cannot identify its damping (rao_supply's yaw time constant came out
+    Returns (gain, fixed damping rates or None, damping scores or None, notes). The window's own
+    rates f = −F_ii come from one least-squares fit on the whole window with ``input_gain``
+    (`fit_lf_dynamics`, the refit `learn_vessel_memory` would make; no drift tests). A window in
+    which a DOF hardly moves cannot identify its damping (rao_supply's yaw time constant came out
     33–240 s between turns, 8–12 s in windows with a turn, the truth 11.6 s: docs/BENCHMARKS.md,
     fifty-third session). In the DOFs of ``damping_memory`` the rate is the one of the window
     with the more velocity energy Σ ν_i² over the target body velocity (the information a
-    least-squares fit of f_i has, for a given residual), this one or ``kept``'s, and the memory
-    is learned again with those rates fixed (it carries the energies in ``damping_score``; the
-    other DOFs keep this window's fitted rate). With ``natural_freq`` (the read's 2 Kp / Kd)
-    the read inertia is corrected for the rates (`controller_gains.damping_corrected_inertia`).
-    The note says what changed. The first memory stands, scored, if nothing changed (no rate
-    kept, no correction) or if the second cannot be learned.
+    least-squares fit of f_i has, for a given residual), this one or ``kept``'s; the memory is
+    then learned once with those rates fixed (the scores go to its ``damping_score``; the other
+    DOFs keep this window's fitted rate). With ``natural_freq`` (the read's 2 Kp / Kd) the read
+    inertia is corrected for the rates (`controller_gains.damping_corrected_inertia`). When
+    nothing changes (no rate kept, no correction), or the window cannot be fitted, the memory is
+    learned as without this: ``input_gain``, no fixed rates.
     """
-    assert memory.model is not None
-    values, forces, sample_time, horizon, sos, force_margin = learn_args
     n = input_gain.shape[0]
-    rate = -np.diag(memory.model.damping)
-    score = np.sum(body_velocity(values, sample_time) ** 2, axis=0)
     dofs = np.array(damping_memory, dtype=bool)
+    memorized = bool(np.any(dofs))
+    try:
+        model = fit_lf_dynamics(values, paired_forces(forces, sos), sample_time,
+                                input_gain=input_gain)
+    except ValueError:
+        return input_gain, None, None, []
+    rate = -np.diag(model.damping)
+    score = np.sum(body_velocity(values, sample_time) ** 2, axis=0)
     parts = []
     if kept is not None and dofs.shape == (n,) and kept[0].shape == (n,):
         older = dofs & (kept[1] > score)
@@ -454,17 +465,8 @@ def _damping_chosen(memory: VesselMemory, input_gain: FloatArray,
         gain = 1.0 / corrected
         parts.append('inertia × ' + ', '.join(f'{v:.2f}' for v in corrected / inertia) +
                      ' for the damping')
-    memorized = bool(np.any(dofs))
-    if not parts:  # this window's own fit in every DOF: nothing to learn again
-        return (replace(memory, damping_score=score) if memorized else memory), note
-    try:
-        again = learn_vessel_memory(values, forces, sample_time, horizon, gain, sos,
-                                    force_margin, rate if memorized else None)
-    except ValueError:
-        return memory, note
-    if memorized:
-        again = replace(again, damping_score=score)
-    return again, '; '.join(part for part in (note, *parts) if part)
+    fixed = rate if memorized and parts else None  # nothing kept or corrected: its own fit
+    return gain, fixed, score if memorized else None, parts
 
 
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,

@@ -1,6 +1,7 @@
 """LF state estimator (core.lf_state): predictor + vessel memory + odometry on a simulated run."""
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 
 import numpy as np
@@ -291,8 +292,11 @@ def test_the_damping_memory_of_the_yaw_alone_keeps_surge_and_sway_as_fitted() ->
     assert memory.model is not None
     own = -np.diag(memory.model.damping)
     kept = (np.array([0.5, 0.5, 0.5]), np.full(3, np.inf))
-    chosen, note = _damping_chosen(memory, gain, None, kept, DAMPING_MEMORY_DOFS['yaw'], '',
-                                   (poses, tau, 1.0, 120.0, None, 0.0))
+    fixed_gain, rate, score, parts = _damping_chosen(poses, tau, 1.0, None, gain, None, kept,
+                                                     DAMPING_MEMORY_DOFS['yaw'])
+    chosen = replace(learn_vessel_memory(poses, tau, 1.0, 120.0, fixed_gain, None, 0.0, rate),
+                     damping_score=score)
+    note = '; '.join(parts)
     assert chosen is not None and chosen.model is not None and chosen.damping_score is not None
     np.testing.assert_allclose(-np.diag(chosen.model.damping), [own[0], own[1], 0.5])
     assert chosen.damping_score[2] == np.inf and note == 'damping rates kept –, –, 0.5 1/s'

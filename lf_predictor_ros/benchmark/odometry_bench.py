@@ -63,7 +63,9 @@ unwrapped, central differences).
 The dropouts of items 3 and 5 come at the same times in every seed unless ``--dropout-spread``
 delays each seed's by its own draw (``dropout_shift_for_seed``; the JSON's ``dropout_shift``).
 ``--dropout-moves LOW HIGH`` instead starts item 5's dropouts U(LOW, HIGH) s after each setpoint
-change (``move_dropouts``; scenarios with a setpoint schedule): the dead reckoning in moves.
+change (``move_dropouts``; scenarios with a setpoint schedule): the dead reckoning in moves; a
+negative LOW (above −60 s, the dropout's length) starts some before the change, so that the move
+or turn begins inside the dropout.
 
 Usage (2 Dask workers; ``--scheduler none`` runs in this process)::
 
@@ -258,15 +260,19 @@ def move_dropouts(scenario: Scenario, params: PredictorParams, seed: int, durati
     Row i's dropout starts at its time plus a delay drawn U(``delay``) for ``seed`` from its own
     stream (``MOVE_DELAY_STREAM``; one draw per row, so skipping a row moves no other). A
     dropout early in a move is where lf_odom's dead reckoning fails worst (forty-eighth
-    session); the spread schedule (`dropout_shift_for_seed`) rarely puts one there. Rows are
+    session); the spread schedule (`dropout_shift_for_seed`) rarely puts one there. A negative
+    delay (down to, not including, −``length``) starts the dropout before the setpoint change,
+    so that the move or turn begins inside it: no fix shows the vessel starting to move (fifty-
+    fifth session). Rows are
     skipped whose dropout would start before the first training, end later than
     ``AFTER_DROPOUT`` before ``duration``, or start less than ``MOVE_DROPOUT_GAP`` after the
     previous dropout's end. Raises ValueError when the scenario has no schedule, the delay
     interval is invalid, or no row is left.
     """
     low, high = (float(v) for v in delay)
-    if not (math.isfinite(low) and math.isfinite(high) and 0.0 <= low <= high):
-        raise ValueError(f'the move delay must be two finite seconds 0 <= low <= high, got '
+    if not (math.isfinite(low) and math.isfinite(high) and -length < low <= high):
+        raise ValueError(f'the move delay must be two finite seconds -{length:g} < low <= high '
+                         f'(a dropout must contain its setpoint change or follow it), got '
                          f'{delay!r}')
     rows = scenario.controller.setpoint_schedule
     if not rows:
@@ -1090,7 +1096,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                      metavar=('LOW', 'HIGH'),
                      help="item 5's dropouts start U(LOW, HIGH) s after each setpoint change "
                      '(scenarios with a setpoint schedule; the seed draws the delays) instead '
-                     'of at the spread schedule: the dead reckoning in moves')
+                     'of at the spread schedule: the dead reckoning in moves; -60 < LOW <= HIGH '
+                     '(a negative LOW: the move begins inside the dropout)')
     run.add_argument('--odometry', nargs='*', default=[], metavar='FIELD=VALUE',
                      help='OdometryParams overrides, e.g. dead_reckoner=model (YAML values)')
     run.add_argument('--param', action='append', default=[], metavar='FIELD=VALUE',

@@ -144,11 +144,24 @@ def test_move_dropouts_start_in_each_setpoint_move() -> None:
     holding = load_scenario('supply_closed_loop')
     with pytest.raises(ValueError, match='no setpoint schedule'):
         move_dropouts(holding, params, 11, 3600.0, (20.0, 60.0))
-    for bad in ((60.0, 20.0), (-1.0, 5.0), (0.0, math.nan)):
+    for bad in ((60.0, 20.0), (-60.0, 5.0), (-70.0, -65.0), (0.0, math.nan)):
         with pytest.raises(ValueError, match='move delay'):
             move_dropouts(scenario, params, 11, 3600.0, bad)
     with pytest.raises(ValueError, match='leaves room'):
         move_dropouts(scenario, params, 11, 700.0, (20.0, 60.0))
+
+
+def test_move_dropouts_with_a_negative_delay_contain_their_setpoint_change() -> None:
+    """A delay in (−60, 0) s: the dropout starts before the change and the move begins inside."""
+    scenario = load_scenario('rao_supply')
+    params = PredictorParams(ndof=3)
+    rows = [row[0] for row in scenario.controller.setpoint_schedule]
+    drops = move_dropouts(scenario, params, 11, 3600.0, (-20.0, -5.0))
+    assert len(drops) == len(rows)
+    for (start, length), t in zip(drops, rows, strict=True):
+        assert t - 20.0 <= start <= t - 5.0 and start < t < start + length
+    straddle = move_dropouts(scenario, params, 11, 3600.0, (-59.9, -59.9))
+    assert [a for a, _ in straddle] == [round(t - 59.9, 1) for t in rows]
 
 
 def test_smoke_short_onedof_run() -> None:
@@ -327,7 +340,7 @@ def test_param_reaches_every_case_and_a_bad_one_stops_before_a_run(
                                 '--dropout-loops', '--dropout-moves', '20', '60', '-o',
                                 str(out)]) == 0
     assert seen[-1].dropout_moves == (20.0, 60.0) and seen[-1].key != seen[-2].key
-    for bad_moves in (['60', '20'], ['-1', '5'], ['nan', '5']):
+    for bad_moves in (['60', '20'], ['-60', '5'], ['nan', '5']):
         with pytest.raises(SystemExit):
             odometry_bench.main(['run', '--scenarios', 'rao_supply', '--seeds', '3',
                                  '--dropout-moves', *bad_moves, '-o', str(out)])

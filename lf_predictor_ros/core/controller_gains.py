@@ -59,6 +59,11 @@ MIN_SAMPLES = 120
 # on onedof_feedback, an inertia 10⁴× too small and a dead reckoning kilometres off
 # (docs/BENCHMARKS.md, fifty-second session) [-].
 MAX_NATURAL_FREQ_RATIO = 1.0
+# The frames the stiffness Kp may act in (`fit_controller_gains`): 'body', Kp on the body-frame
+# error R(ψ)ᵀ(η − η_d) (Fossen 2011 §12.2.6); 'earth', Kp on the earth-frame error, turned
+# into the body frame afterwards, τ = −R(ψ)ᵀ Kp (η − η_d) − Kd ν (the MSS DP PID, anchors §5,
+# and `sim_ros.control.pid`); 'auto', whichever explains the thrust better.
+STIFFNESS_FRAMES = ('body', 'earth', 'auto')
 
 
 @dataclass(frozen=True)
@@ -66,16 +71,19 @@ class ControllerGains:
     """The PD part of a DP controller as seen in its thrust, one entry per DOF.
 
     Attributes:
-        stiffness: Kp [N/m, N/m, N·m/rad] (body frame).
+        stiffness: Kp [N/m, N/m, N·m/rad] (body frame; with ``stiffness_frame`` 'earth', on
+            the north, east and heading errors).
         damping: Kd [N·s/m, N·s/m, N·m·s/rad].
         r_squared: fraction of the high-passed thrust variance the PD law explains [-].
         shift: samples the thrust lags the estimates by (negative: leads).
+        stiffness_frame: 'body' or 'earth' (`STIFFNESS_FRAMES`): the frame Kp acts in.
     """
 
     stiffness: FloatArray
     damping: FloatArray
     r_squared: FloatArray
     shift: int
+    stiffness_frame: str = 'body'
 
     def believed(self, max_natural_freq: float = math.inf) -> NDArray[np.bool_]:
         """Per DOF: a PD law that explains the thrust, with positive gains.
@@ -170,6 +178,34 @@ def _median_believed(blocks: Sequence[ControllerGains],
     return median, counts
 
 
+def fitted_damping_scale(natural_freq: ArrayLike, damping_rate: ArrayLike) -> FloatArray:
+    """(1 + f / (2 ω_r))² per DOF: M / M_r when the fitted damping *force* makes the loop critical.
+
+    The read (`ControllerGains.implied_inertia`) gives M_r = Kd² / (4 Kp) and ω_r = 2 Kp / Kd
+    (``natural_freq``). A window's fit with the read gain 1/M_r finds a damping rate f
+    (``damping_rate``); what the data fix is the damping force per velocity D = f M_r (and the
+    steady gain G / f), not f itself: with a gain k × too large the fitted rate comes out k ×
+    too large (rao_supply's loop on the true LF pose, read gain 1.12 / 1.24 / 1.59× in surge /
+    sway / yaw: fitted rates 2.1 / 2.0 / 1.6× the simulator's; docs/BENCHMARKS.md, fifty-fifth
+    session). A PID designed as Kd = 2 ζ ω_n M − D (the MSS design with the vessel's damping
+    taken off, `sim_ros.control.pid`) makes M s² + (Kd + D) s + Kp critical, so M = (Kd + D)² /
+    (4 Kp) = M_r (1 + D / Kd)² = M_r (1 + f / (2 ω_r))² (Kd = 2 ω_r M_r). Unlike
+    `damping_corrected_inertia`, which takes f as the vessel's own rate and is steep near
+    f = ω_r / 2, this is smooth in f and exact for the simulator's yaw (fitted f 0.14 1/s, ω_r
+    0.255 rad/s: × 1.62, the true 1/0.61). Non-finite or negative rates or frequencies: 1.
+    """
+    freq = np.asarray(natural_freq, dtype=np.float64)
+    rate = np.asarray(damping_rate, dtype=np.float64)
+    if freq.shape != rate.shape:
+        raise ValueError(f'natural_freq and damping_rate must have one entry per DOF, got '
+                         f'shapes {freq.shape} and {rate.shape}')
+    with np.errstate(divide='ignore', invalid='ignore'):
+        ratio = np.where(np.isfinite(rate) & (rate > 0.0) & np.isfinite(freq) & (freq > 0.0),
+                         rate / (2.0 * freq), 0.0)
+    scale: FloatArray = (1.0 + ratio) ** 2
+    return scale
+
+
 def damping_corrected_inertia(inertia: ArrayLike, natural_freq: ArrayLike,
                               damping_rate: ArrayLike) -> FloatArray:
     """The inertia under which the controller *and the vessel's own damping* are critical.
@@ -205,7 +241,8 @@ def damping_corrected_inertia(inertia: ArrayLike, natural_freq: ArrayLike,
 def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
                          sample_time: float, highpass_time: float = HIGHPASS_TIME,
                          max_shift: int = MAX_SHIFT, run_starts: Sequence[int] = (),
-                         earth_highpass: bool = False) -> ControllerGains:
+                         earth_highpass: bool = False,
+                         stiffness_frame: str = 'body') -> ControllerGains:
     """Least squares of the high-passed thrust on −(body-frame pose), −ν and −∫pose, per DOF.
 
     The series may be several contiguous runs one after the other (``run_starts``): each run is
@@ -229,6 +266,14 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
             body-frame pose R(ψ)ᵀη swings with ψ and the body-frame moving mean cannot take the
             setpoint out (rao_supply, 45° turn: sway inertia read 16× too large; earth frame
             0.7–0.8×, docs/BENCHMARKS.md, forty-seventh session). 1 DOF: no difference.
+        stiffness_frame: 3 DOF, the frame the controller's Kp and Ki act in (`STIFFNESS_FRAMES`).
+            'body': per DOF as above. 'earth': τ = −R(ψ)ᵀ (Kp e + Ki ∫e) − Kd ν with diagonal
+            Kp and Ki on the earth-frame error e = η − η_d, surge and sway in one least squares
+            (their rows share Kp_N, Kp_E); the yaw row as in 'body'. A PID designed so, Kp_i =
+            M_ii ω_n², has in the body frame the stiffness R(ψ)ᵀ Kp R(ψ): at ψ = 90° surge sees
+            Kp_E = M_22 ω_n², and Kd_u² / (4 Kp) reads M_11² / M_22 (0.6 M_11 on the supply
+            vessel), sway M_22² / M_11 (1.67 M_22) (docs/BENCHMARKS.md, fifty-fifth session).
+            'auto': both, the one whose R² summed over the DOFs is larger. 1 DOF: 'body'.
 
     Raises:
         ValueError: bad shapes, non-finite values, bad run starts, a run shorter than
@@ -245,6 +290,11 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
     if not (np.isfinite(sample_time) and sample_time > 0.0 and highpass_time > sample_time):
         raise ValueError(f'sample_time must be > 0 and highpass_time > sample_time [s], got '
                          f'{sample_time} and {highpass_time}')
+    if stiffness_frame not in STIFFNESS_FRAMES:
+        raise ValueError(f'stiffness_frame must be one of {STIFFNESS_FRAMES}, got '
+                         f'{stiffness_frame!r}')
+    frames = ('body',) if n != 3 else ('body', 'earth') if stiffness_frame == 'auto' else \
+        (stiffness_frame,)
     m = eta.shape[0]
     bounds = np.r_[0, np.array(run_starts, dtype=np.int64).reshape(-1), m]
     if np.any(np.diff(bounds) <= 0):
@@ -254,31 +304,40 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
         raise ValueError(f'runs of {np.diff(bounds).tolist()} samples: a run with fewer than '
                          f'{need} is too few to read controller gains: use longer runs')
     window = max(3, int(round(highpass_time / sample_time)))
-    runs = []  # per run: high-passed position, integral, velocity, thrust
+    # per run: high-passed position, integral, velocity, thrust (body frame); with an earth
+    # stiffness also the earth-frame high-passed position and integral and the heading
+    runs: list[tuple[FloatArray, ...]] = []
     for first, end in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
         pose = eta[first:end]
+        run: tuple[FloatArray, ...]
         if earth_highpass and n == 3:
-            runs.append(_earth_highpassed(pose, nu[first:end], tau[first:end], sample_time,
-                                          window))
-            continue
-        body = earth_to_body(pose, pose, n)  # R(ψ)ᵀ[N, E], ψ: PD's error
-        runs.append((_highpass(body, window),
-                     _highpass(np.cumsum(body, axis=0) * sample_time, window),
-                     _highpass(nu[first:end], window), _highpass(tau[first:end], window)))
+            run = _earth_highpassed(pose, nu[first:end], tau[first:end], sample_time, window)
+        else:
+            body = earth_to_body(pose, pose, n)  # R(ψ)ᵀ[N, E], ψ: PD's error
+            run = (_highpass(body, window),
+                   _highpass(np.cumsum(body, axis=0) * sample_time, window),
+                   _highpass(nu[first:end], window), _highpass(tau[first:end], window))
+        if 'earth' in frames:
+            run = (*run, _highpass(pose, window),
+                   _highpass(np.cumsum(pose, axis=0) * sample_time, window), pose[:, 2:])
+        runs.append(run)
     best: ControllerGains | None = None
     for shift in range(-max_shift, max_shift + 1):
         # thrust[k + shift] was computed from the estimate at k, both in the same run
         parts = []
-        for run_position, run_integral, run_velocity, run_thrust in runs:
-            k = run_thrust.shape[0]
+        for run in runs:
+            k = run[3].shape[0]
             lo, hi = max(0, -shift), min(k, k - shift)
-            parts.append((run_position[lo:hi], run_integral[lo:hi], run_velocity[lo:hi],
-                          run_thrust[lo + shift:hi + shift]))
-        position, integral, velocity, thrust = (np.concatenate(column)
-                                                for column in zip(*parts, strict=True))
-        gains = _fit_pid(position, integral, velocity, thrust, shift)
-        if best is None or float(np.sum(gains.r_squared)) > float(np.sum(best.r_squared)):
-            best = gains
+            parts.append(tuple(column[lo + shift:hi + shift] if j == 3 else column[lo:hi]
+                               for j, column in enumerate(run)))
+        columns = [np.concatenate(column) for column in zip(*parts, strict=True)]
+        position, integral, velocity, thrust = columns[:4]
+        for frame in frames:
+            gains = _fit_pid(position, integral, velocity, thrust, shift) if frame == 'body' \
+                else _fit_pid_earth(position, integral, velocity, thrust, columns[4], columns[5],
+                                    columns[6], shift)
+            if best is None or float(np.sum(gains.r_squared)) > float(np.sum(best.r_squared)):
+                best = gains
     assert best is not None
     return best
 
@@ -302,6 +361,41 @@ def _fit_pid(position: FloatArray, integral: FloatArray, velocity: FloatArray,
         stiffness[i], damping[i] = coef[0], coef[1]
         r_squared[i] = 1.0 - float(np.sum((y - phi @ coef) ** 2)) / total
     return ControllerGains(stiffness, damping, r_squared, shift)
+
+
+def _fit_pid_earth(position: FloatArray, integral: FloatArray, velocity: FloatArray,
+                   thrust: FloatArray, earth_position: FloatArray, earth_integral: FloatArray,
+                   heading: FloatArray, shift: int) -> ControllerGains:
+    """3 DOF: the least squares of τ = −R(ψ)ᵀ (Kp e + Ki ∫e) − Kd ν with Kp, Ki diagonal.
+
+    Surge and sway in one regression on the earth-frame north / east errors ``earth_position``
+    and their integrals ``earth_integral`` (high-passed) turned by the heading ψ at each sample
+    (unknowns Kp_N, Kp_E, Kd_u, Kd_v, Ki_N, Ki_E); R² per DOF from that fit's residuals in its
+    row. Yaw on its own, as `_fit_pid` (a rotation about the down axis leaves it alone).
+    """
+    psi = heading[:, 0]
+    c, s = np.cos(psi), np.sin(psi)
+    e_n, e_e = earth_position[:, 0], earth_position[:, 1]
+    i_n, i_e = earth_integral[:, 0], earth_integral[:, 1]
+    zero = np.zeros_like(psi)
+    surge = np.column_stack([c * e_n, s * e_e, velocity[:, 0], zero, c * i_n, s * i_e])
+    sway = np.column_stack([-s * e_n, c * e_e, zero, velocity[:, 1], -s * i_n, c * i_e])
+    phi = -np.vstack([surge, sway])
+    y = np.concatenate([thrust[:, 0], thrust[:, 1]])
+    stiffness, damping, r_squared = np.zeros(3), np.zeros(3), np.zeros(3)
+    rows = psi.shape[0]
+    if np.all(np.any(phi != 0.0, axis=0)):
+        coef, *_ = np.linalg.lstsq(phi, y, rcond=None)
+        stiffness[:2], damping[:2] = coef[:2], coef[2:4]
+        residual = y - phi @ coef
+        for i in range(2):
+            part = slice(i * rows, (i + 1) * rows)
+            total = float(np.sum(y[part] ** 2))
+            if total > 0.0:
+                r_squared[i] = 1.0 - float(np.sum(residual[part] ** 2)) / total
+    yaw = _fit_pid(position[:, 2:], integral[:, 2:], velocity[:, 2:], thrust[:, 2:], shift)
+    stiffness[2], damping[2], r_squared[2] = yaw.stiffness[0], yaw.damping[0], yaw.r_squared[0]
+    return ControllerGains(stiffness, damping, r_squared, shift, 'earth')
 
 
 def _earth_highpassed(eta: FloatArray, nu: FloatArray, tau: FloatArray, sample_time: float,

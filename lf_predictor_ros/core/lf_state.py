@@ -37,6 +37,7 @@ from lf_predictor_ros.core.controller_gains import (
     block_bounds,
     damping_corrected_inertia,
     fit_controller_gains,
+    fitted_damping_scale,
     median_implied_inertia,
     median_natural_freq,
 )
@@ -295,7 +296,9 @@ class LfStateEstimator:
                 odometry.params.dead_reckoning_force_margin,
                 odometry.params.controller_read_damping,
                 self._kept_damping,
-                DAMPING_MEMORY_DOFS[odometry.params.dead_reckoning_damping_memory][:self.ndof])
+                DAMPING_MEMORY_DOFS[odometry.params.dead_reckoning_damping_memory][:self.ndof],
+                odometry.params.controller_read_stiffness_frame,
+                odometry.params.controller_read_fitted_damping)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -318,7 +321,12 @@ class LfStateEstimator:
         self.odometry.apply_learned(memory, covariances)
         self._controller_read = controller_read
         if memory is not None and memory.model is not None and memory.damping_score is not None:
-            self._kept_damping = (-np.diag(memory.model.damping), memory.damping_score)
+            rate = -np.diag(memory.model.damping)
+            if self.odometry.params.controller_read_fitted_damping:
+                # kept as the damping force per velocity D_i = f_i / G_i, which a later window
+                # turns into a rate under its own read gain (`_damping_chosen`)
+                rate = rate / np.diag(memory.model.input_gain)
+            self._kept_damping = (rate, memory.damping_score)
         self._memory_error = None
 
 
@@ -334,7 +342,9 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            controller_earth_frame: bool = False,
            force_margin: float = FORCE_MARGIN, controller_damping: bool = False,
            kept_damping: KeptDamping | None = None,
-           damping_memory: tuple[bool, ...] = ()) -> Learned:
+           damping_memory: tuple[bool, ...] = (),
+           controller_stiffness_frame: str = 'body',
+           controller_fitted_damping: bool = False) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -358,8 +368,9 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     ``twist_cutoff`` > 0 the twist models add what the reference's zero-phase filter, the
     targets' or with ``reference`` the narrow notch's, took below the cutoff;
     ``heading_speed``: the heading's lag part also from the horizontal speed;
-    ``controller_block_time``, ``controller_earth_frame``: how the controller is read,
-    `implied_input_gain`'s ``block_time`` and ``earth_highpass``; ``force_margin``: the
+    ``controller_block_time``, ``controller_earth_frame``, ``controller_stiffness_frame``: how
+    the controller is read, `implied_input_gain`'s ``block_time``, ``earth_highpass`` and
+    ``stiffness_frame``; ``force_margin``: the
     memory's force limit, `learn_vessel_memory`'s; ``controller_damping``: a read gain is
     corrected for the vessel's own damping rates (`controller_gains.damping_corrected_inertia`)
     and the memory learned again on it; ``damping_memory`` (with a known or read gain; per DOF,
@@ -376,7 +387,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     if commands is not None:
         bound = math.inf if wave_peak_freq is None else MAX_NATURAL_FREQ_RATIO * wave_peak_freq
         read = implied_input_gain(published, *commands, params.sample_time,
-                                  controller_block_time, controller_earth_frame, bound)
+                                  controller_block_time, controller_earth_frame, bound,
+                                  controller_stiffness_frame)
     elif remembered is not None:
         read = ControllerRead(None, 'controller gains: no commands', 'no_data')
     in_force: ControllerRead | None = read if read is not None and read.outcome == 'read' \
@@ -388,13 +400,14 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
         note = f'{remembered.note}, remembered{since} ({read.note})'
     if input_gain is None and in_force is not None:
         input_gain, source = in_force.gain, 'controller'
-    read_freq = in_force.natural_freq if controller_damping and source == 'controller' and \
+    correcting = controller_damping or controller_fitted_damping
+    read_freq = in_force.natural_freq if correcting and source == 'controller' and \
         in_force is not None else None
     gain, rate, score = input_gain, None, None
     if (read_freq is not None or any(damping_memory)) and input_gain is not None:
         gain, rate, score, parts = _damping_chosen(values, forces, params.sample_time, sos,
                                                    input_gain, read_freq, kept_damping,
-                                                   damping_memory)
+                                                   damping_memory, controller_fitted_damping)
         note = '; '.join(part for part in (note, *parts) if part)
     try:
         memory: VesselMemory | None = learn_vessel_memory(values, forces, params.sample_time,
@@ -423,7 +436,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
 def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
                     sos: FloatArray | None, input_gain: FloatArray,
                     natural_freq: FloatArray | None, kept: KeptDamping | None,
-                    damping_memory: tuple[bool, ...]
+                    damping_memory: tuple[bool, ...], fitted_damping: bool = False
                     ) -> tuple[FloatArray, FloatArray | None, FloatArray | None, list[str]]:
     """The thrust gain and damping rates the window's memory is learned with, before it is.
 
@@ -437,7 +450,9 @@ def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
     least-squares fit of f_i has, for a given residual), this one or ``kept``'s; the memory is
     then learned once with those rates fixed (the scores go to its ``damping_score``; the other
     DOFs keep this window's fitted rate). With ``natural_freq`` (the read's 2 Kp / Kd) the read
-    inertia is corrected for the rates (`controller_gains.damping_corrected_inertia`). When
+    inertia is corrected for the rates (`controller_gains.damping_corrected_inertia`; with
+    ``fitted_damping``, `controller_gains.fitted_damping_scale`, which also scales the rates by
+    the same factor, keeping the fitted G / f). When
     nothing changes (no rate kept, no correction), or the window cannot be fitted, the memory is
     learned as without this: ``input_gain``, no fixed rates.
     """
@@ -454,12 +469,20 @@ def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
     parts = []
     if kept is not None and dofs.shape == (n,) and kept[0].shape == (n,):
         older = dofs & (kept[1] > score)
-        rate, score = np.where(older, kept[0], rate), np.where(older, kept[1], score)
+        # with ``fitted_damping`` the kept values are damping forces per velocity D_i: the rate
+        # they make under this window's gain
+        kept_rate = kept[0] * input_gain if fitted_damping else kept[0]
+        rate, score = np.where(older, kept_rate, rate), np.where(older, kept[1], score)
         if np.any(older):
             parts.append('damping rates kept ' + ', '.join(
                 f'{v:.3g}' if o else '–' for v, o in zip(rate, older, strict=True)) + ' 1/s')
     gain = input_gain
-    if natural_freq is not None:
+    if natural_freq is not None and fitted_damping:
+        scale = fitted_damping_scale(natural_freq[:n], rate)
+        gain, rate = input_gain / scale, rate / scale
+        parts.append('inertia × ' + ', '.join(f'{v:.2f}' for v in scale) +
+                     ' for the fitted damping')
+    elif natural_freq is not None:
         inertia = 1.0 / input_gain
         corrected = damping_corrected_inertia(inertia, natural_freq[:n], rate)
         gain = 1.0 / corrected
@@ -472,7 +495,8 @@ def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
 def implied_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,
                        sample_time: float, block_time: float = 0.0,
                        earth_highpass: bool = False,
-                       max_natural_freq: float = math.inf) -> ControllerRead:
+                       max_natural_freq: float = math.inf,
+                       stiffness_frame: str = 'body') -> ControllerRead:
     """1/M_ii implied by the DP controller acting on the published estimates.
 
     ``times``, ``forces``: the controller's commands and their stamps (a controller stamps its
@@ -490,7 +514,8 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     ``block_time`` > 0 [s]: each run is cut into blocks of that length (`block_bounds`), each
     block read on its own, and the inertia is per DOF the median over the blocks whose PD law
     is believed (`median_implied_inertia`): a manoeuvre then spoils one block, not every read
-    after it. ``earth_highpass``: the high-pass in the earth frame (`fit_controller_gains`).
+    after it. ``earth_highpass``, ``stiffness_frame``: the high-pass in the earth frame and the
+    frame of the controller's stiffness (`fit_controller_gains`).
     ``max_natural_freq`` [rad/s]: a DOF whose gains imply a natural frequency 2 Kp / Kd at or
     above it is not believed (`ControllerGains.believed`; the learning job passes
     ``MAX_NATURAL_FREQ_RATIO`` × ω0; inf: no bound).
@@ -523,19 +548,22 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
             blocks = [(offsets[j] + a, offsets[j] + b) for j, length in enumerate(lengths)
                       for a, b in block_bounds(length, block, need)]
             reads = [fit_controller_gains(poses[a:b], twists[a:b], paired[a:b], sample_time,
-                                          earth_highpass=earth_highpass) for a, b in blocks]
+                                          earth_highpass=earth_highpass,
+                                          stiffness_frame=stiffness_frame) for a, b in blocks]
             return _median_read(reads, float(stamps[rows[-1]]), rows.size, block_time,
                                 max_natural_freq)
         gains = fit_controller_gains(poses, twists, paired, sample_time,
                                      run_starts=np.cumsum(lengths)[:-1].tolist(),
-                                     earth_highpass=earth_highpass)
+                                     earth_highpass=earth_highpass,
+                                     stiffness_frame=stiffness_frame)
     except ValueError as exc:  # non-finite values: nothing learned about the controller
         return ControllerRead(None, f'controller gains: {exc}', 'no_data')
     inertia = gains.implied_inertia(max_natural_freq)
     r2 = ', '.join(f'{v:.2f}' for v in gains.r_squared)
     if inertia is None:
         return ControllerRead(None, f'controller gains not read (R² {r2})', 'no_fit')
-    used = f'{rows.size} samples' + (f' in {len(runs)} runs' if len(runs) > 1 else '')
+    used = f'{rows.size} samples' + (f' in {len(runs)} runs' if len(runs) > 1 else '') + \
+        ('; stiffness in the earth frame' if gains.stiffness_frame == 'earth' else '')
     return ControllerRead(1.0 / inertia, (f"controller-implied inertia "
                                           f"{', '.join(f'{v:.3g}' for v in inertia)} "
                                           f'(R² {r2}; {used})'), 'read', float(stamps[rows[-1]]),
@@ -547,7 +575,9 @@ def _median_read(reads: list[ControllerGains], stamp: float, samples: int,
     """The read of `implied_input_gain` from one `ControllerGains` per block."""
     inertia, counts = median_implied_inertia(reads, max_natural_freq)
     believed = ', '.join(f'{c}' for c in counts)
-    what = f'{believed} of {len(reads)} blocks of {block_time:.0f} s believed'
+    earth = sum(read.stiffness_frame == 'earth' for read in reads)
+    what = f'{believed} of {len(reads)} blocks of {block_time:.0f} s believed' + \
+        (f', {earth} with the stiffness in the earth frame' if earth else '')
     if inertia is None:
         return ControllerRead(None, f'controller gains not read ({what})', 'no_fit')
     return ControllerRead(1.0 / inertia, (f"controller-implied inertia "

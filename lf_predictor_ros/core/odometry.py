@@ -72,6 +72,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import signal
 
+from lf_predictor_ros.core.controller_gains import STIFFNESS_FRAMES
 from lf_predictor_ros.core.field_meta import field_doc
 from lf_predictor_ros.core.filters import frequency_response, low_pass_step, zero_phase
 from lf_predictor_ros.core.heading import wrap_angle
@@ -368,6 +369,14 @@ class OdometryParams:
         '(core.controller_gains.damping_corrected_inertia). Off: with the fitted or kept '
         'damping rates it over-corrected in the screen (the heading overshot turns by up to '
         '2 rad; docs/BENCHMARKS.md, fifty-third session)', ''))
+    controller_read_fitted_damping: bool = field(default=False, metadata=field_doc(
+        'with controller_inertia: the read inertia is the one under which Kd and the damping '
+        "force the window's fit found (D = f M_r, which the data fix whatever gain is assumed) "
+        'together are critical, M = M_r (1 + f/(2 omega_r))^2, and the damping rates are scaled '
+        "by the same factor (the fit's steady gain G/f kept): smooth in f, unlike "
+        "controller_read_damping, which takes the fitted rate as the vessel's own "
+        '(core.controller_gains.fitted_damping_scale; docs/BENCHMARKS.md, fifty-fifth '
+        'session). Overrides controller_read_damping', ''))
     dead_reckoning_damping_memory: str = field(default='yaw', metadata=field_doc(
         "with a known or read thrust gain, 'yaw' or 'all' (DOFs): the vessel memory keeps per "
         'DOF the damping rate of the window that identified it best (the most velocity energy, '
@@ -381,6 +390,14 @@ class OdometryParams:
         'with controller_inertia, 3 DOF: high-pass the estimates and the commands in the earth '
         'frame before turning them into the body frame (a turn away from the setpoint origin '
         'then does not swing the pose the read regresses on); false: in the body frame', ''))
+    controller_read_stiffness_frame: str = field(default='body', metadata=field_doc(
+        "with controller_inertia, 3 DOF: the frame the controller's stiffness Kp acts in. "
+        "'body': Kp on the body-frame error R(psi)^T (eta - eta_d), per DOF; 'earth': a "
+        'diagonal Kp on the earth-frame error, turned into the body frame afterwards (the MSS '
+        'DP PID and the simulator here), surge and sway read together; after a 90 deg turn '
+        'the body read pairs surge Kd with the east Kp and reads the surge inertia 0.6x '
+        "(supply vessel); 'auto': the one that explains the thrust better (R^2) "
+        '(docs/BENCHMARKS.md, fifty-fifth session)', ''))
     dead_reckoner: str = field(default='auto', metadata=field_doc(
         "dead reckoner through a pose dropout: 'auto' (the vessel memory's choice by the "
         "open-loop drift test; hold when the test cannot tell), 'model' (the learned LF model "
@@ -486,6 +503,9 @@ class OdometryParams:
             raise ValueError(f'dead_reckoning_damping_memory must be one of '
                              f'{tuple(DAMPING_MEMORY_DOFS)}, got '
                              f'{self.dead_reckoning_damping_memory!r}')
+        if self.controller_read_stiffness_frame not in STIFFNESS_FRAMES:
+            raise ValueError(f'controller_read_stiffness_frame must be one of '
+                             f'{STIFFNESS_FRAMES}, got {self.controller_read_stiffness_frame!r}')
         if self.dead_reckoner not in ('auto', *DEAD_RECKONERS):
             raise ValueError(f"dead_reckoner must be 'auto' or one of {DEAD_RECKONERS}, got "
                              f'{self.dead_reckoner!r}')

@@ -11,10 +11,11 @@ from lf_predictor_ros.core.controller_gains import (
     block_bounds,
     damping_corrected_inertia,
     fit_controller_gains,
+    fitted_damping_scale,
     median_implied_inertia,
     median_natural_freq,
 )
-from lf_predictor_ros.core.lf_dynamics import body_velocity
+from lf_predictor_ros.core.lf_dynamics import body_velocity, earth_to_body
 from sim_ros.control.pid import PidState, gains_from_bandwidth, pid_step
 
 H = 1.0  # s
@@ -73,6 +74,70 @@ def test_heading_turned_body_frame_and_a_lagging_thrust() -> None:
     np.testing.assert_allclose(gains.stiffness, mixed, rtol=0.1)
     np.testing.assert_allclose(gains.damping, design.kd, rtol=0.08)
     assert gains.implied_inertia() is not None
+
+
+@pytest.mark.parametrize('earth_highpass', [False, True])
+def test_the_earth_frame_stiffness_reads_the_mss_pid_at_any_heading(earth_highpass: bool
+                                                                      ) -> None:
+    """τ = −R(ψ)ᵀ Kp e − Kd ν at ψ = 2 rad: Kp_N, Kp_E and the inertia M_ii, not their mix.
+
+    The body-frame read pairs Kd_u = 2 ω M_11 with cos²ψ Kp_N + sin²ψ Kp_E, so Kd² / (4 Kp)
+    is M_11² / (cos²ψ M_11 + sin²ψ M_22) (ω the same in surge and sway).
+    """
+    eta = _lf_track(2, heading=2.0)
+    nu = body_velocity(eta, H)
+    tau = _pid_thrust(eta, nu, 1.0, lag=1)
+    design = gains_from_bandwidth(MASS, BANDWIDTH, 1.0)
+    body = fit_controller_gains(eta, nu, tau, H, earth_highpass=earth_highpass)
+    earth = fit_controller_gains(eta, nu, tau, H, earth_highpass=earth_highpass,
+                                 stiffness_frame='earth')
+    auto = fit_controller_gains(eta, nu, tau, H, earth_highpass=earth_highpass,
+                                stiffness_frame='auto')
+    assert (body.stiffness_frame, earth.stiffness_frame) == ('body', 'earth')
+    assert earth.shift == 1
+    np.testing.assert_allclose(earth.stiffness, design.kp, rtol=0.05)
+    np.testing.assert_allclose(earth.damping, design.kd, rtol=0.08)  # yaw as the body read's
+    assert np.all(earth.r_squared > 0.95)
+    assert np.all(earth.r_squared[:2] > body.r_squared[:2])
+    inertia = earth.implied_inertia()
+    assert inertia is not None
+    np.testing.assert_allclose(inertia[:2], MASS[:2], rtol=0.1)
+    c2, s2 = np.cos(2.0) ** 2, np.sin(2.0) ** 2
+    mixed = np.array([MASS[0] ** 2 / (c2 * MASS[0] + s2 * MASS[1]),
+                      MASS[1] ** 2 / (s2 * MASS[0] + c2 * MASS[1])])
+    np.testing.assert_allclose(body.inertia_per_dof()[:2], mixed, rtol=0.12)
+    assert auto.stiffness_frame == 'earth'
+    np.testing.assert_array_equal(auto.stiffness, earth.stiffness)
+    # the yaw row is the same regression in either frame
+    assert earth.stiffness[2] == pytest.approx(body.stiffness[2], rel=1e-9)
+
+
+def test_auto_keeps_the_body_frame_for_a_pd_law_on_the_body_frame_error() -> None:
+    """τ = −Kp R(ψ)ᵀ e − Kd ν (Fossen 2011 §12.2.6): 'auto' reads it in the body frame."""
+    eta = _lf_track(4, heading=0.8)
+    nu = body_velocity(eta, H)
+    kp, kd = np.array([4e4, 9e4, 6e7]), np.array([9e5, 2e6, 1.2e9])
+    error = eta - np.array([0.0, 0.0, 0.8])
+    tau = -earth_to_body(eta, error, 3) * kp - kd * nu
+    auto = fit_controller_gains(eta, nu, tau, H, stiffness_frame='auto')
+    assert auto.stiffness_frame == 'body'
+    np.testing.assert_allclose(auto.stiffness, kp, rtol=0.02)
+    np.testing.assert_allclose(auto.damping, kd, rtol=0.02)
+    earth = fit_controller_gains(eta, nu, tau, H, stiffness_frame='earth')
+    assert float(np.sum(earth.r_squared)) < float(np.sum(auto.r_squared))
+    # near heading 0 (±0.01 rad) the two frames are one: the same gains to 0.5 %
+    eta0 = _lf_track(4)
+    nu0 = body_velocity(eta0, H)
+    tau0 = -eta0 * kp - kd * nu0
+    zero_body = fit_controller_gains(eta0, nu0, tau0, H)
+    zero_earth = fit_controller_gains(eta0, nu0, tau0, H, stiffness_frame='earth')
+    np.testing.assert_allclose(zero_earth.stiffness, zero_body.stiffness, rtol=5e-3)
+    np.testing.assert_allclose(zero_earth.damping, zero_body.damping, rtol=5e-3)
+    # 1 DOF: the frame does not apply
+    one = fit_controller_gains(eta0[:, :1], nu0[:, :1], tau0[:, :1], H, stiffness_frame='earth')
+    assert one.stiffness_frame == 'body'
+    with pytest.raises(ValueError, match='stiffness_frame'):
+        fit_controller_gains(eta0, nu0, tau0, H, stiffness_frame='north')
 
 
 def test_unrelated_thrust_gives_no_inertia() -> None:
@@ -258,6 +323,35 @@ def test_the_damping_correction_recovers_the_inertia_of_a_pid_that_takes_the_dam
     np.testing.assert_allclose(damping_corrected_inertia([1.0], [0.2], [0.5]), [4.0])
     with pytest.raises(ValueError, match='one entry per DOF'):
         damping_corrected_inertia(read, block.natural_freq()[:2], rate)
+
+
+def test_the_fitted_damping_scale_recovers_the_inertia_of_a_pid_that_takes_the_damping_off(
+        ) -> None:
+    """Kd = 2 ω M − D: a fit with the read gain 1/M_r finds f = D / M_r; the scale is M / M_r.
+
+    (1 + f / (2 ω_r))² = (1 + D / Kd)² = M / M_r exactly (Kd = 2 ω_r M_r), and f / scale = D / M,
+    the vessel's own rate: the supply vessel's yaw read at 0.51 M_33 (ω_n 0.15 rad/s here) comes
+    back to M_33.
+    """
+    damping = np.array([7.7e4, 2.55e5, 3.85e8])  # D_ii of the supply vessel [N·s/m, N·m·s]
+    design = gains_from_bandwidth(MASS, BANDWIDTH, 1.0, damping)
+    read = ControllerGains(design.kp, design.kd, np.ones(3), 0)
+    m_r = read.inertia_per_dof()
+    fitted_rate = damping / m_r  # what a fit with the read gain finds for the damping force D
+    scale = fitted_damping_scale(read.natural_freq(), fitted_rate)
+    np.testing.assert_allclose(m_r * scale, MASS, rtol=1e-12)
+    np.testing.assert_allclose(fitted_rate / scale, damping / MASS, rtol=1e-12)
+    np.testing.assert_allclose(m_r / MASS, (1.0 - damping / (2.0 * BANDWIDTH * MASS)) ** 2,
+                               rtol=1e-12)  # the read's M (1 − D / (2 ω M))²: yaw 0.51 here
+    # a read of a PID that keeps Kd = 2 ω M finds f = D / M and is scaled by (1 + D/(2ωM))²
+    plain = gains_from_bandwidth(MASS, BANDWIDTH, 1.0)
+    scale = fitted_damping_scale(2.0 * plain.kp / plain.kd, damping / MASS)
+    np.testing.assert_allclose(scale, (1.0 + damping / (2.0 * BANDWIDTH * MASS)) ** 2)
+    # no damping, a negative or non-finite rate or frequency: no correction
+    np.testing.assert_array_equal(
+        fitted_damping_scale([0.1, np.nan, 0.1, -0.1], [0.0, 0.05, -0.02, 0.05]), np.ones(4))
+    with pytest.raises(ValueError, match='one entry per DOF'):
+        fitted_damping_scale([0.1, 0.1], [0.01])
 
 
 def test_the_median_natural_frequency_is_over_the_believed_blocks_only() -> None:

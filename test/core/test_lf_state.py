@@ -304,8 +304,55 @@ def test_the_damping_memory_of_the_yaw_alone_keeps_surge_and_sway_as_fitted() ->
         OdometryParams(dead_reckoning_damping_memory='heading')
 
 
-def test_the_estimator_keeps_the_damping_across_memories_until_reset() -> None:
-    est = LfStateEstimator(PredictorParams(ndof=1), background=False)
+def test_the_fitted_damping_scales_gain_and_rates_and_keeps_the_damping_force() -> None:
+    """controller_read_fitted_damping: gain G_r / s and rates f / s, s = (1 + f / (2 ω_r))².
+
+    The rates f are those a fit with the read gain finds (this window's) or, where a kept window
+    scored more, the kept damping force D turned into a rate under this read gain (D G_r).
+    """
+    from lf_predictor_ros.core.controller_gains import fitted_damping_scale
+    from lf_predictor_ros.core.lf_dynamics import dead_reckon_step, fit_lf_dynamics
+    from lf_predictor_ros.core.lf_state import _damping_chosen
+    from lf_predictor_ros.core.odometry import DAMPING_MEMORY_DOFS
+
+    model = LfDynamics(np.diag([-1 / 80.0, -1 / 40.0, -1 / 12.0]),
+                       np.diag([1.5e-7, 9e-8, 2.2e-10]), np.zeros((3, 3)), np.zeros(3))
+    rng = np.random.default_rng(6)
+    tau = np.apply_along_axis(lambda x: np.convolve(x, np.ones(30) / 30.0, 'same'), 0,
+                              rng.standard_normal((1500, 3)) * np.array([2e5, 2e5, 5e7]))
+    eta, nu = np.zeros(3), np.zeros(3)
+    poses = np.empty((1500, 3))
+    for k in range(1500):
+        poses[k] = eta
+        eta, nu = dead_reckon_step(model, 'model', eta, nu, tau[k], 1.0)
+    read_gain = 1.6 * np.diag(model.input_gain)  # a read 1.6× too strong
+    freq = np.array([0.1, 0.1, 0.25])  # the read's ω_r = 2 Kp / Kd [rad/s]
+    raw = -np.diag(fit_lf_dynamics(poses, tau, 1.0, input_gain=read_gain).damping)
+    memory_all = DAMPING_MEMORY_DOFS['all']
+    gain, rate, _, parts = _damping_chosen(poses, tau, 1.0, None, read_gain, freq, None,
+                                           memory_all, True)
+    scale = fitted_damping_scale(freq, raw)
+    assert rate is not None and np.all(scale > 1.0)
+    np.testing.assert_allclose(gain, read_gain / scale, rtol=1e-12)
+    np.testing.assert_allclose(rate, raw / scale, rtol=1e-12)
+    assert 'for the fitted damping' in '; '.join(parts)
+    # the yaw's kept damping force (scored higher) becomes a rate under this window's gain
+    kept = (np.array([1e5, 1e5, 3e8]), np.array([0.0, 0.0, np.inf]))
+    gain, rate, _, _ = _damping_chosen(poses, tau, 1.0, None, read_gain, freq, kept,
+                                       memory_all, True)
+    raw_kept = np.array([raw[0], raw[1], 3e8 * read_gain[2]])
+    scale = fitted_damping_scale(freq, raw_kept)
+    assert rate is not None
+    np.testing.assert_allclose(rate, raw_kept / scale, rtol=1e-12)
+    np.testing.assert_allclose(gain, read_gain / scale, rtol=1e-12)
+
+
+@pytest.mark.parametrize(('fitted', 'kept'), [(False, 0.02), (True, 0.02 / 1e-6)])
+def test_the_estimator_keeps_the_damping_across_memories_until_reset(fitted: bool,
+                                                                      kept: float) -> None:
+    """The kept damping: the rate f, or with controller_read_fitted_damping the force D = f / G."""
+    odometry = OdometryParams(controller_read_fitted_damping=fitted)
+    est = LfStateEstimator(PredictorParams(ndof=1), odometry, background=False)
     try:
         model = LfDynamics(np.array([[-0.02]]), np.array([[1e-6]]), np.zeros((1, 1)),
                            np.zeros(1))
@@ -314,7 +361,7 @@ def test_the_estimator_keeps_the_damping_across_memories_until_reset() -> None:
                               {}, '', np.zeros(1), damping_score=np.array([0.3]))
         est._apply((memory, None, None))  # noqa: SLF001 - what a finished job hands over
         assert est._kept_damping is not None  # noqa: SLF001
-        np.testing.assert_array_equal(est._kept_damping[0], [0.02])  # noqa: SLF001
+        np.testing.assert_allclose(est._kept_damping[0], [kept], rtol=1e-12)  # noqa: SLF001
         np.testing.assert_array_equal(est._kept_damping[1], [0.3])  # noqa: SLF001
         est._apply((None, None, None))  # noqa: SLF001 - a memory that could not be learned
         assert est._kept_damping is not None  # noqa: SLF001

@@ -271,15 +271,13 @@ def test_the_damping_memory_keeps_the_rate_of_the_most_excited_window() -> None:
     assert off.model.damping[0, 0] == free.model.damping[0, 0]
 
 
-def test_the_damping_memory_of_the_yaw_alone_keeps_surge_and_sway_as_fitted() -> None:
-    """'yaw': only the heading's damping rate comes from the kept window (3 DOF, known G)."""
-    from lf_predictor_ros.core.lf_dynamics import dead_reckon_step, learn_vessel_memory
-    from lf_predictor_ros.core.lf_state import _damping_chosen
-    from lf_predictor_ros.core.odometry import DAMPING_MEMORY_DOFS
+def _open_loop_vessel(seed: int) -> tuple[LfDynamics, np.ndarray, np.ndarray]:
+    """A 3-DOF model (T = 80 / 40 / 12 s) driven 1500 s by smooth random thrust: model, η, τ."""
+    from lf_predictor_ros.core.lf_dynamics import dead_reckon_step
 
     model = LfDynamics(np.diag([-1 / 80.0, -1 / 40.0, -1 / 12.0]),
                        np.diag([1.5e-7, 9e-8, 2.2e-10]), np.zeros((3, 3)), np.zeros(3))
-    rng = np.random.default_rng(5)
+    rng = np.random.default_rng(seed)
     tau = np.apply_along_axis(lambda x: np.convolve(x, np.ones(30) / 30.0, 'same'), 0,
                               rng.standard_normal((1500, 3)) * np.array([2e5, 2e5, 5e7]))
     eta, nu = np.zeros(3), np.zeros(3)
@@ -287,6 +285,16 @@ def test_the_damping_memory_of_the_yaw_alone_keeps_surge_and_sway_as_fitted() ->
     for k in range(1500):
         poses[k] = eta
         eta, nu = dead_reckon_step(model, 'model', eta, nu, tau[k], 1.0)
+    return model, poses, tau
+
+
+def test_the_damping_memory_of_the_yaw_alone_keeps_surge_and_sway_as_fitted() -> None:
+    """'yaw': only the heading's damping rate comes from the kept window (3 DOF, known G)."""
+    from lf_predictor_ros.core.lf_dynamics import learn_vessel_memory
+    from lf_predictor_ros.core.lf_state import _damping_chosen
+    from lf_predictor_ros.core.odometry import DAMPING_MEMORY_DOFS
+
+    model, poses, tau = _open_loop_vessel(5)
     gain = np.diag(model.input_gain)
     memory = learn_vessel_memory(poses, tau, 1.0, 120.0, gain)
     assert memory.model is not None
@@ -311,20 +319,11 @@ def test_the_fitted_damping_scales_gain_and_rates_and_keeps_the_damping_force() 
     scored more, the kept damping force D turned into a rate under this read gain (D G_r).
     """
     from lf_predictor_ros.core.controller_gains import fitted_damping_scale
-    from lf_predictor_ros.core.lf_dynamics import dead_reckon_step, fit_lf_dynamics
+    from lf_predictor_ros.core.lf_dynamics import fit_lf_dynamics
     from lf_predictor_ros.core.lf_state import _damping_chosen
     from lf_predictor_ros.core.odometry import DAMPING_MEMORY_DOFS
 
-    model = LfDynamics(np.diag([-1 / 80.0, -1 / 40.0, -1 / 12.0]),
-                       np.diag([1.5e-7, 9e-8, 2.2e-10]), np.zeros((3, 3)), np.zeros(3))
-    rng = np.random.default_rng(6)
-    tau = np.apply_along_axis(lambda x: np.convolve(x, np.ones(30) / 30.0, 'same'), 0,
-                              rng.standard_normal((1500, 3)) * np.array([2e5, 2e5, 5e7]))
-    eta, nu = np.zeros(3), np.zeros(3)
-    poses = np.empty((1500, 3))
-    for k in range(1500):
-        poses[k] = eta
-        eta, nu = dead_reckon_step(model, 'model', eta, nu, tau[k], 1.0)
+    model, poses, tau = _open_loop_vessel(6)
     read_gain = 1.6 * np.diag(model.input_gain)  # a read 1.6× too strong
     freq = np.array([0.1, 0.1, 0.25])  # the read's ω_r = 2 Kp / Kd [rad/s]
     raw = -np.diag(fit_lf_dynamics(poses, tau, 1.0, input_gain=read_gain).damping)

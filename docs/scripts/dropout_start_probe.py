@@ -1,0 +1,170 @@
+"""Exploratory: lf_odom's loop against the observer's at each dropout start, and the error after.
+
+    OMP_NUM_THREADS=1 python docs/scripts/dropout_start_probe.py rao_supply:885 \
+        --moves -30 -5 [--oracle] [--odometry FIELD=VALUE …]
+
+For each development case runs `odometry_bench`'s lf_odom dropout loop and the tuned observer's
+loop with the dropouts of ``--moves`` (`odometry_bench.move_dropouts`) and prints per dropout:
+the environment force each estimator balances at the start (lf_odom: minus its holding or
+low-passed thrust; the observer: R(ψ)ᵀ b̂) against the truth's M ν̇ + D ν − τ averaged over the
+30 s before (the simulator's supply-vessel M and D), the start twist against the true LF body
+velocity, the vessel memory's model (time constants, thrust gain / the true 1/M_ii), and both
+estimators' error against their own loop's true LF pose 10, 30 and 59 s in. ``--oracle``: the
+simulator's damping rates in the fit and the read corrected for them
+(`dead_reckoning_oracle_probe.patch('true_damping')` and ``controller_read_damping``). Supply
+vessel scenarios only (rao_supply, rao_swell); development seeds only; the fifty-fifth
+session's section of docs/BENCHMARKS.md.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+import sys
+from typing import Any
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import dead_reckoning_oracle_probe as oracle_probe  # noqa: E402
+import method_probe as mp  # noqa: E402
+
+from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
+from lf_predictor_ros.benchmark.estimators import make_estimator, predictor_params  # noqa: E402
+from lf_predictor_ros.benchmark.recordings import run_loop  # noqa: E402
+from lf_predictor_ros.benchmark.suite import make_setup  # noqa: E402
+from lf_predictor_ros.core.lf_dynamics import LfDynamics, body_velocity  # noqa: E402
+from lf_predictor_ros.core.odometry import LfOdometry, OdometryEstimate, OdometryParams  # noqa: E402,E501
+from sim_ros.physics.vessels import SUPPLY_D, SUPPLY_M  # noqa: E402
+from sim_ros.simulation import SimRecord, load_scenario  # noqa: E402
+
+DURATION = 3600.0  # [s] the odometry bench's loop length
+FloatArray = np.ndarray
+
+
+def true_environment(record: SimRecord, t0: float, span: float = 30.0
+                     ) -> tuple[FloatArray, FloatArray]:
+    """(M ν̇ + D ν − τ averaged over [t0 − span, t0] [N, N, N·m], the true ν at t0), body frame."""
+    h = float(record.t[1] - record.t[0])
+    nu = body_velocity(record.truth_lf_pose, h)
+    env = np.gradient(nu, h, axis=0) @ SUPPLY_M.T + nu @ SUPPLY_D.T - record.thrust
+    keep = (record.t >= t0 - span) & (record.t <= t0)
+    return env[keep].mean(axis=0), nu[keep][-1]
+
+
+def nearest(log: dict[float, Any], t: float, before: bool = False) -> Any:
+    """The entry of ``log`` nearest to ``t`` (at or before it with ``before``), within 1 s."""
+    keys = [k for k in log if k <= t] if before else list(log)
+    if not keys:
+        return None
+    k = min(keys, key=lambda q: abs(q - t))
+    return log[k] if abs(k - t) <= 1.0 else None
+
+
+def one(name: str, seed: int, moves: tuple[float, float], odometry: OdometryParams) -> None:
+    """Both loops of one case, printed per dropout."""
+    scenario = load_scenario(name)
+    params = predictor_params(scenario, None)
+    drops = ob.move_dropouts(scenario, params, seed, DURATION, moves)
+    starts: dict[float, dict[str, Any]] = {}
+    original = LfOdometry._balanced_model
+
+    def traced(self: LfOdometry) -> LfDynamics | None:
+        x, last = self._x, self._last_output  # noqa: SLF001
+        if last is not None and x is not None and self._slow_force is not None:  # noqa: SLF001
+            dofs = np.array(self.params.dead_reckoning_force_time[:3]) > 0.0
+            force = self._holding_force(float(x[2]), dofs) if \
+                self.params.dead_reckoning_holding_balance else self._slow_force  # noqa: SLF001
+            memory = self.memory
+            starts[float(last.stamp)] = {
+                'twist': np.array(last.twist), 'force': np.array(force),
+                'model': None if memory is None else memory.model}
+        return original(self)
+
+    LfOdometry._balanced_model = traced  # type: ignore[method-assign]
+    log: list[OdometryEstimate] = []
+    try:
+        odom_run = ob._odometry_loop(scenario, seed, DURATION, params, odometry,  # noqa: SLF001
+                                     drops, log)
+    finally:
+        LfOdometry._balanced_model = original  # type: ignore[method-assign]
+    stream = make_estimator(ob.LOOP_OBSERVER, make_setup(scenario, seed, params))
+    observed: dict[float, tuple[FloatArray, FloatArray, FloatArray]] = {}
+
+    def step(t: float, pose: FloatArray, force: FloatArray, omega: float) -> FloatArray:
+        estimator = stream.estimator
+        if ob._in_dropout(t, drops):  # noqa: SLF001
+            out = np.asarray(estimator.coast(t, force), dtype=np.float64)
+        else:
+            out = np.asarray(stream.step(t, pose, force, omega), dtype=np.float64)
+        observed[round(t, 1)] = (out.copy(), estimator.velocity.copy(), estimator.bias.copy())
+        return out
+
+    obs_run = run_loop(scenario, seed, DURATION, params.sample_time, step)
+    print(f'{name}:{seed} dropouts {drops}')
+    true_gain = np.diag(np.linalg.inv(SUPPLY_M))
+    for start, _ in drops:
+        env_l, nu_l = true_environment(odom_run.record, start)
+        env_o, nu_o = true_environment(obs_run.record, start)
+        print(f' dropout at {start:.0f} s')
+        info = starts[min(starts, key=lambda q: abs(q - start))] if starts else None
+        if info is not None:
+            print(f'   lf_odom: environment {np.round(-info["force"] / 1e3, 1)} kN, true '
+                  f'{np.round(env_l / 1e3, 1)} | twist {np.round(info["twist"], 3)}, true '
+                  f'{np.round(nu_l, 3)}')
+            model = info['model']
+            if model is not None:
+                print(f'     model T {np.round(-1.0 / np.diag(model.damping), 1)} s, gain / true '
+                      f'{np.round(np.diag(model.input_gain) / true_gain, 2)}')
+        before = nearest(observed, start - 0.5, before=True)
+        if before is not None:
+            eta, nu, bias = before
+            c, s = np.cos(eta[2]), np.sin(eta[2])
+            body_bias = np.array([c * bias[0] + s * bias[1], -s * bias[0] + c * bias[1],
+                                  bias[2]])
+            print(f'   observer: environment {np.round(body_bias / 1e3, 1)} kN, true '
+                  f'{np.round(env_o / 1e3, 1)} | velocity {np.round(nu, 3)}, true '
+                  f'{np.round(nu_o, 3)}')
+        for dt in (10.0, 30.0, 59.0):
+            errors = []
+            for run, estimate in ((odom_run, next((o.pose for o in log
+                                                   if abs(o.stamp - (start + dt)) < 0.6), None)),
+                                  (obs_run, None if (o := nearest(observed, start + dt)) is None
+                                   else o[0])):
+                k = int(np.argmin(np.abs(run.record.t - (start + dt))))
+                if estimate is None:
+                    errors.append(np.full(3, np.nan))
+                    continue
+                error = np.array(estimate) - run.record.truth_lf_pose[k]
+                error[2] = np.angle(np.exp(1j * error[2]))
+                errors.append(error)
+            print(f'   +{dt:.0f} s error: lf_odom {np.round(errors[0], 2)}, observer '
+                  f'{np.round(errors[1], 2)}')
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point."""
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('cases', nargs='+', help='SCENARIO:SEED (development seeds)')
+    parser.add_argument('--moves', nargs=2, type=float, required=True, metavar=('LOW', 'HIGH'))
+    parser.add_argument('--oracle', action='store_true')
+    parser.add_argument('--odometry', nargs='*', default=[], help='OdometryParams FIELD=VALUE')
+    args = parser.parse_args(argv)
+    try:
+        cases = mp.parse_cases(args.cases, mp.DEVELOPMENT_SEEDS)
+    except ValueError as exc:
+        parser.error(str(exc))
+    overrides = ob._odometry_overrides(args.odometry) or {}  # noqa: SLF001 - the CLI's parser
+    if args.oracle:
+        oracle_probe.patch('true_damping')
+        overrides['controller_read_damping'] = True
+    odometry = OdometryParams(**overrides)
+    torch.set_num_threads(1)
+    for name, seed in cases:
+        one(name, seed, (float(args.moves[0]), float(args.moves[1])), odometry)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,10 +1,11 @@
 """Exploratory: lf_odom's loop against the observer's at each dropout start, and the error after.
 
     OMP_NUM_THREADS=1 python docs/scripts/dropout_start_probe.py rao_supply:885 \
-        --moves -30 -5 [--oracle] [--odometry FIELD=VALUE …]
+        [--spread 500 | --moves -30 -5] [--oracle] [--odometry FIELD=VALUE …]
 
 For each development case runs `odometry_bench`'s lf_odom dropout loop and the tuned observer's
-loop with the dropouts of ``--moves`` (`odometry_bench.move_dropouts`) and prints per dropout:
+loop with the dropouts of ``--spread`` or ``--moves`` (`move_dropout_probe.dropouts_of`, the
+arguments of `move_dropout_probe.dropout_parser`) and prints per dropout:
 the environment force each estimator balances at the start (lf_odom: minus its holding or
 low-passed thrust; the observer: R(ψ)ᵀ b̂) against the truth's M ν̇ + D ν − τ averaged over the
 30 s before (the simulator's supply-vessel M and D), the start twist against the true LF body
@@ -17,7 +18,6 @@ session's section of docs/BENCHMARKS.md.
 """
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 import sys
 from typing import Any
@@ -27,7 +27,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import dead_reckoning_oracle_probe as oracle_probe  # noqa: E402
-import method_probe as mp  # noqa: E402
+import move_dropout_probe as mdp  # noqa: E402
 
 from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
 from lf_predictor_ros.benchmark.estimators import make_estimator, predictor_params  # noqa: E402
@@ -38,7 +38,7 @@ from lf_predictor_ros.core.odometry import LfOdometry, OdometryEstimate, Odometr
 from sim_ros.physics.vessels import SUPPLY_D, SUPPLY_M  # noqa: E402
 from sim_ros.simulation import SimRecord, load_scenario  # noqa: E402
 
-DURATION = 3600.0  # [s] the odometry bench's loop length
+DURATION = mdp.DURATION  # [s] the odometry bench's loop length
 FloatArray = np.ndarray
 
 
@@ -61,11 +61,12 @@ def nearest(log: dict[float, Any], t: float, before: bool = False) -> Any:
     return log[k] if abs(k - t) <= 1.0 else None
 
 
-def one(name: str, seed: int, moves: tuple[float, float], odometry: OdometryParams) -> None:
-    """Both loops of one case, printed per dropout."""
+def one(name: str, seed: int, spread: float, moves: list[float] | None,
+        odometry: OdometryParams) -> None:
+    """Both loops of one case, printed per dropout (``spread``, ``moves``: `mdp.dropouts_of`)."""
     scenario = load_scenario(name)
     params = predictor_params(scenario, None)
-    drops = ob.move_dropouts(scenario, params, seed, DURATION, moves)
+    drops = mdp.dropouts_of(scenario, params, seed, spread, moves)
     starts: dict[float, dict[str, Any]] = {}
     original = LfOdometry._balanced_model
 
@@ -144,25 +145,17 @@ def one(name: str, seed: int, moves: tuple[float, float], odometry: OdometryPara
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point."""
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('cases', nargs='+', help='SCENARIO:SEED (development seeds)')
-    parser.add_argument('--moves', nargs=2, type=float, required=True, metavar=('LOW', 'HIGH'))
-    parser.add_argument('--oracle', action='store_true')
-    parser.add_argument('--odometry', nargs='*', default=[], help='OdometryParams FIELD=VALUE')
-    args = parser.parse_args(argv)
-    try:
-        cases = mp.parse_cases(args.cases, mp.DEVELOPMENT_SEEDS)
-    except ValueError as exc:
-        parser.error(str(exc))
-    overrides = ob._odometry_overrides(args.odometry) or {}  # noqa: SLF001 - the CLI's parser
+    parser = mdp.dropout_parser(__doc__)
+    parser.add_argument('--oracle', action='store_true',
+                        help="the simulator's damping and the read corrected for it")
+    args, cases, overrides = mdp.parse_dropout_args(parser, argv)
     if args.oracle:
         oracle_probe.patch('true_damping')
         overrides['controller_read_damping'] = True
     odometry = OdometryParams(**overrides)
     torch.set_num_threads(1)
     for name, seed in cases:
-        one(name, seed, (float(args.moves[0]), float(args.moves[1])), odometry)
+        one(name, seed, args.spread, args.moves, odometry)
     return 0
 
 

@@ -6,14 +6,14 @@
 For each development case runs `odometry_bench`'s lf_odom dropout loop and the tuned observer's
 loop with the dropouts of ``--spread`` or ``--moves`` (`move_dropout_probe.dropouts_of`, the
 arguments of `move_dropout_probe.dropout_parser`) and prints per dropout:
-the environment force each estimator balances at the start (lf_odom: minus its holding or
-low-passed thrust; the observer: R(ψ)ᵀ b̂) against the truth's M ν̇ + D ν − τ averaged over the
-30 s before (the simulator's supply-vessel M and D), the start twist against the true LF body
-velocity, the vessel memory's model (time constants, thrust gain / the true 1/M_ii), and both
-estimators' error against their own loop's true LF pose 10, 30 and 59 s in. ``--oracle``: the
-simulator's damping rates in the fit and the read corrected for them
-(`dead_reckoning_oracle_probe.patch('true_damping')` and ``controller_read_damping``). Supply
-vessel scenarios only (rao_supply, rao_swell); development seeds only; the fifty-fifth
+the environment force each estimator dead-reckons with at the start (lf_odom: G⁻¹ B β(ψ) of its
+balanced model, the fitted term in a DOF it does not balance; the observer: R(ψ)ᵀ b̂) against the
+truth's M ν̇ + D ν − τ averaged over the 30 s before (the simulator's supply-vessel M and D), the
+start twist against the true LF body velocity, the vessel memory's model (time constants, thrust
+gain / the true 1/M_ii), and both estimators' error against their own loop's true LF pose 10, 30
+and 59 s in. ``--oracle``: the simulator's damping rates in the fit and the read corrected for
+them (`dead_reckoning_oracle_probe.patch('true_damping')` and ``controller_read_damping``).
+Supply vessel scenarios only (rao_supply, rao_swell); development seeds only; the fifty-fifth
 session's section of docs/BENCHMARKS.md.
 """
 from __future__ import annotations
@@ -33,7 +33,7 @@ from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
 from lf_predictor_ros.benchmark.estimators import make_estimator, predictor_params  # noqa: E402
 from lf_predictor_ros.benchmark.recordings import run_loop  # noqa: E402
 from lf_predictor_ros.benchmark.suite import make_setup  # noqa: E402
-from lf_predictor_ros.core.lf_dynamics import LfDynamics, body_velocity  # noqa: E402
+from lf_predictor_ros.core.lf_dynamics import LfDynamics, body_velocity, heading_basis  # noqa: E402,E501
 from lf_predictor_ros.core.odometry import LfOdometry, OdometryEstimate, OdometryParams  # noqa: E402,E501
 from sim_ros.physics.vessels import SUPPLY_D, SUPPLY_M  # noqa: E402
 from sim_ros.simulation import SimRecord, load_scenario  # noqa: E402
@@ -71,16 +71,18 @@ def one(name: str, seed: int, spread: float, moves: list[float] | None,
     original = LfOdometry._balanced_model
 
     def traced(self: LfOdometry) -> LfDynamics | None:
+        balanced = original(self)
         x, last = self._x, self._last_output  # noqa: SLF001
-        if last is not None and x is not None and self._slow_force is not None:  # noqa: SLF001
-            dofs = np.array(self.params.dead_reckoning_force_time[:3]) > 0.0
-            force = self._holding_force(float(x[2]), dofs) if \
-                self.params.dead_reckoning_holding_balance else self._slow_force  # noqa: SLF001
+        if last is not None and x is not None and balanced is not None:
+            # the environment the dead reckoning balances, as a body force: G⁻¹ B β(ψ) (a DOF
+            # whose dead_reckoning_force_time is 0, yaw by default, keeps the window's fit)
             memory = self.memory
+            accel = balanced.bias @ heading_basis(float(x[2]), 3)
             starts[float(last.stamp)] = {
-                'twist': np.array(last.twist), 'force': np.array(force),
+                'twist': np.array(last.twist),
+                'environment': accel / np.diag(balanced.input_gain),
                 'model': None if memory is None else memory.model}
-        return original(self)
+        return balanced
 
     LfOdometry._balanced_model = traced  # type: ignore[method-assign]
     log: list[OdometryEstimate] = []
@@ -110,7 +112,7 @@ def one(name: str, seed: int, spread: float, moves: list[float] | None,
         print(f' dropout at {start:.0f} s')
         info = starts[min(starts, key=lambda q: abs(q - start))] if starts else None
         if info is not None:
-            print(f'   lf_odom: environment {np.round(-info["force"] / 1e3, 1)} kN, true '
+            print(f'   lf_odom: environment {np.round(info["environment"] / 1e3, 1)} kN, true '
                   f'{np.round(env_l / 1e3, 1)} | twist {np.round(info["twist"], 3)}, true '
                   f'{np.round(nu_l, 3)}')
             model = info['model']

@@ -159,6 +159,17 @@ def median_natural_freq(blocks: Sequence[ControllerGains],
     return _median_believed(blocks, ControllerGains.natural_freq, max_natural_freq)[0]
 
 
+def believed_medians(blocks: Sequence[ControllerGains], max_natural_freq: float = math.inf
+                     ) -> tuple[FloatArray, FloatArray]:
+    """Per DOF the medians of the inertia and of 2 Kp / Kd over the blocks believing it.
+
+    NaN in a DOF no block believes (`median_implied_inertia` gives None then): what a read
+    still says about the DOFs that are believed. Returns (inertia, natural frequency).
+    """
+    return (_per_dof_medians(blocks, ControllerGains.inertia_per_dof, max_natural_freq)[0],
+            _per_dof_medians(blocks, ControllerGains.natural_freq, max_natural_freq)[0])
+
+
 def _median_believed(blocks: Sequence[ControllerGains],
                      quantity: Callable[[ControllerGains], FloatArray],
                      max_natural_freq: float) -> tuple[FloatArray | None, NDArray[np.int64]]:
@@ -166,14 +177,20 @@ def _median_believed(blocks: Sequence[ControllerGains],
 
     (None, counts) unless every DOF is believed in at least one block.
     """
+    median, counts = _per_dof_medians(blocks, quantity, max_natural_freq)
+    return (median if counts.size and np.all(counts > 0) else None), counts
+
+
+def _per_dof_medians(blocks: Sequence[ControllerGains],
+                     quantity: Callable[[ControllerGains], FloatArray],
+                     max_natural_freq: float) -> tuple[FloatArray, NDArray[np.int64]]:
+    """Per DOF the median of ``quantity`` over the blocks believing it (NaN: none); counts."""
     if not blocks:
-        return None, np.zeros(0, dtype=np.int64)
+        return np.zeros(0), np.zeros(0, dtype=np.int64)
     believed = np.array([b.believed(max_natural_freq) for b in blocks])
     counts = believed.sum(axis=0).astype(np.int64)
-    if not np.all(counts > 0):
-        return None, counts
     values = np.array([quantity(b) for b in blocks])
-    median = np.array([float(np.median(values[believed[:, i], i]))
+    median = np.array([float(np.median(values[believed[:, i], i])) if counts[i] else math.nan
                        for i in range(believed.shape[1])])
     return median, counts
 

@@ -34,6 +34,7 @@ from lf_predictor_ros.core.controller_gains import (
     MAX_SHIFT,
     MIN_SAMPLES,
     ControllerGains,
+    believed_medians,
     block_bounds,
     damping_corrected_inertia,
     fit_controller_gains,
@@ -79,9 +80,13 @@ class ControllerRead:
         outcome: 'read'; 'no_data' (no commands or published estimates, or no contiguous run
             long enough: says nothing about the controller); 'no_fit' (enough data, but the PD
             law with positive gains does not explain every DOF: another controller, or none).
-        stamp: the newest published estimate the read used [s] (None unless read).
+        stamp: the newest published estimate the read used [s] (None unless read or partly
+            read).
         natural_freq: 2 Kp / Kd per DOF of the read (the median over the believed blocks)
             [rad/s] (None unless read).
+        partial_gain, partial_freq: a block read ('no_fit') that believes some DOFs but not all:
+            1/M_ii and 2 Kp / Kd of the believed DOFs, NaN in the others (None otherwise;
+            `_learn`'s ``controller_keep_dofs``).
     """
 
     gain: FloatArray | None
@@ -89,16 +94,20 @@ class ControllerRead:
     outcome: ReadOutcome
     stamp: float | None = None
     natural_freq: FloatArray | None = None
+    partial_gain: FloatArray | None = None
+    partial_freq: FloatArray | None = None
 
     def __post_init__(self) -> None:
         """Keep read-only copies of the arrays (a read is handed between threads)."""
-        for name in ('gain', 'natural_freq'):
+        for name in ('gain', 'natural_freq', 'partial_gain', 'partial_freq'):
             value = getattr(self, name)
             if value is not None:
                 copy = np.array(value, dtype=np.float64)
                 copy.setflags(write=False)
                 object.__setattr__(self, name, copy)
 
+
+BODY_DOFS = ('surge', 'sway', 'yaw')  # the DOFs a controller read is per
 
 # what a vessel-memory job returns: the memory, the calibration, the controller read in force
 Learned = tuple[VesselMemory | None, Covariances | None, ControllerRead | None]
@@ -298,7 +307,8 @@ class LfStateEstimator:
                 self._kept_damping,
                 DAMPING_MEMORY_DOFS[odometry.params.dead_reckoning_damping_memory][:self.ndof],
                 odometry.params.controller_read_stiffness_frame,
-                odometry.params.controller_read_fitted_damping)
+                odometry.params.controller_read_fitted_damping,
+                odometry.params.controller_read_keep_dofs)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -344,7 +354,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            kept_damping: KeptDamping | None = None,
            damping_memory: tuple[bool, ...] = (),
            controller_stiffness_frame: str = 'body',
-           controller_fitted_damping: bool = False) -> Learned:
+           controller_fitted_damping: bool = False,
+           controller_keep_dofs: bool = False) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -377,8 +388,13 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     empty: none): in those DOFs the damping rate of the window with the more velocity energy,
     this one's or ``kept_damping``'s, and the memory learned with those rates fixed
     (`_damping_chosen`, decided before the memory is learned, so it is learned once).
+    ``controller_keep_dofs``: a read that believes some DOFs but not all (``no_fit`` with a
+    ``partial_gain``) takes the remembered read's value in the others (`_kept_per_dof`) instead
+    of forgetting it: a PD law still explains the thrust in the believed DOFs, so the controller
+    has not changed, and a turn or a move spoils a DOF's blocks, not the controller.
     The read returned is the one in force afterwards: this read if it succeeded,
-    ``remembered`` if it failed for lack of data, else None.
+    ``remembered`` if it failed for lack of data, with ``controller_keep_dofs`` the two
+    combined if it failed in some DOFs, else None.
     """
     sos = None if wave_peak_freq is None else target_filter(params, wave_peak_freq,
                                                             peak_damping)
@@ -398,6 +414,11 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
         in_force = remembered
         since = '' if remembered.stamp is None else f' from t={remembered.stamp:.1f} s'
         note = f'{remembered.note}, remembered{since} ({read.note})'
+    if controller_keep_dofs and read is not None and read.outcome == 'no_fit' and \
+            read.partial_gain is not None and remembered is not None and \
+            remembered.gain is not None and remembered.gain.shape == read.partial_gain.shape:
+        in_force = _kept_per_dof(read, remembered)
+        note = in_force.note
     if input_gain is None and in_force is not None:
         input_gain, source = in_force.gain, 'controller'
     correcting = controller_damping or controller_fitted_damping
@@ -431,6 +452,24 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                              params.ndof, params.sample_time, min_samples, lag_prior,
                              twin_fit, cutoff, pose_edge, twist_likelihood,
                              reference_filter, heading_speed), in_force
+
+
+def _kept_per_dof(read: ControllerRead, remembered: ControllerRead) -> ControllerRead:
+    """``read``'s believed DOFs (``partial_gain`` finite), ``remembered``'s in the others.
+
+    The natural frequency likewise (None unless both have one); the note names the DOFs kept.
+    """
+    assert read.partial_gain is not None and remembered.gain is not None
+    fresh = np.isfinite(read.partial_gain)
+    gain = np.where(fresh, read.partial_gain, remembered.gain)
+    freq = None
+    if read.partial_freq is not None and remembered.natural_freq is not None:
+        freq = np.where(fresh, read.partial_freq, remembered.natural_freq)
+    kept = ', '.join(BODY_DOFS[i] for i in np.flatnonzero(~fresh))
+    since = '' if remembered.stamp is None else f' from t={remembered.stamp:.1f} s'
+    inertia = ', '.join(f'{v:.3g}' for v in 1.0 / gain)
+    return ControllerRead(gain, f'controller-implied inertia {inertia} ({read.note}; {kept} '
+                                f'remembered{since})', 'read', read.stamp, freq)
 
 
 def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
@@ -579,7 +618,11 @@ def _median_read(reads: list[ControllerGains], stamp: float, samples: int,
     what = f'{believed} of {len(reads)} blocks of {block_time:.0f} s believed' + \
         (f', {earth} with the stiffness in the earth frame' if earth else '')
     if inertia is None:
-        return ControllerRead(None, f'controller gains not read ({what})', 'no_fit')
+        partial_inertia, partial_freq = believed_medians(reads, max_natural_freq)
+        partial = bool(np.any(np.isfinite(partial_inertia)))
+        return ControllerRead(None, f'controller gains not read ({what})', 'no_fit', stamp,
+                              partial_gain=1.0 / partial_inertia if partial else None,
+                              partial_freq=partial_freq if partial else None)
     return ControllerRead(1.0 / inertia, (f"controller-implied inertia "
                                           f"{', '.join(f'{v:.3g}' for v in inertia)} "
                                           f'(median; {what}; {samples} samples)'), 'read', stamp,

@@ -1,6 +1,8 @@
 """The DP controller's gains read from its thrust; the inertia they imply."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from scipy.signal import lfilter
@@ -8,6 +10,7 @@ from scipy.signal import lfilter
 from lf_predictor_ros.core.controller_gains import (
     MIN_R_SQUARED,
     ControllerGains,
+    believed_medians,
     block_bounds,
     damping_corrected_inertia,
     fit_controller_gains,
@@ -363,3 +366,18 @@ def test_the_median_natural_frequency_is_over_the_believed_blocks_only() -> None
     np.testing.assert_allclose(freq, [0.3, 0.3])  # medians of (0.2, 0.4) and (0.4, 0.2)
     assert median_natural_freq([spoilt]) is None
     assert median_natural_freq([]) is None
+
+
+def test_believed_medians_are_nan_in_a_dof_no_block_believes() -> None:
+    """The medians per believed DOF even where `median_implied_inertia` gives None."""
+    good = ControllerGains(np.array([1.0, 4.0, 1.0]), np.array([2.0, 8.0, 4.0]),
+                           np.array([0.99, 0.99, 0.2]), 0)
+    other = ControllerGains(np.array([1.0, 2.0, 1.0]), np.array([4.0, 8.0, 4.0]),
+                            np.array([0.99, 0.99, 0.1]), 0)
+    assert median_implied_inertia([good, other])[0] is None
+    inertia, freq = believed_medians([good, other])
+    np.testing.assert_allclose(inertia[:2], [2.5, 6.0])  # means of (1, 4) and (4, 8)
+    np.testing.assert_allclose(freq[:2], [0.75, 0.75])  # of (1, 0.5) and (1, 0.5)
+    assert math.isnan(inertia[2]) and math.isnan(freq[2])
+    empty = believed_medians([])
+    assert empty[0].size == 0 and empty[1].size == 0

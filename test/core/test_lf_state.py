@@ -634,3 +634,70 @@ def test_the_reference_cutoffs_are_fractions_of_the_wave_peak_frequency(
         assert filters[1] is None
     else:
         np.testing.assert_array_equal(filters[1], target_filter(params, omega))
+
+
+def _published_pd_loop_3dof(m: int) -> tuple[list[Published], np.ndarray, np.ndarray]:
+    """3-DOF estimates at heading ≈ 0: a PD thrust in surge and sway, noise in yaw.
+
+    Kp 2e4 / 3e4, Kd 3e5 / 6e5 (inertia Kd² / (4 Kp) 1.125e6 / 3e6 kg); the yaw commands are
+    noise no PD law explains (as after a turn that spoils every yaw block).
+    """
+    rng = np.random.default_rng(11)
+    a = np.exp(-1.0 / 30.0)
+    x = np.zeros((m, 3))
+    for k in range(1, m):
+        x[k] = a * x[k - 1] + (1 - a) * rng.standard_normal(3) * np.array([5.0, 5.0, 0.01])
+    v = np.gradient(x, axis=0)
+    stamps = np.arange(m, dtype=np.float64)
+    published = [Published(float(s), p.copy(), w.copy(), 'network', np.zeros(3), w.copy())
+                 for s, p, w in zip(stamps, x, v, strict=True)]
+    commands = np.column_stack([-2.0e4 * x[:, 0] - 3.0e5 * v[:, 0],
+                                -3.0e4 * x[:, 1] - 6.0e5 * v[:, 1],
+                                rng.standard_normal(m) * 1e7])
+    return published, stamps, commands
+
+
+def test_a_read_spoilt_in_one_dof_keeps_the_remembered_inertia_there() -> None:
+    """controller_read_keep_dofs: the believed DOFs read anew, the spoilt one remembered."""
+    from lf_predictor_ros.core.lf_state import ControllerRead, _kept_per_dof, _learn
+
+    published, stamps, commands = _published_pd_loop_3dof(600)
+    read = implied_input_gain(published, stamps, commands, 1.0, block_time=150.0)
+    assert read.outcome == 'no_fit' and read.gain is None and read.stamp == 599.0
+    assert 'controller gains not read (4, 4, 0 of 4 blocks of 150 s believed)' in read.note
+    assert read.partial_gain is not None and read.partial_freq is not None
+    np.testing.assert_allclose(read.partial_gain[:2], [1.0 / 1.125e6, 1.0 / 3.0e6], rtol=1e-3)
+    np.testing.assert_allclose(read.partial_freq[:2], [2 * 2.0e4 / 3.0e5, 2 * 3.0e4 / 6.0e5],
+                               rtol=1e-3)
+    assert math.isnan(read.partial_gain[2]) and math.isnan(read.partial_freq[2])
+    remembered = ControllerRead(np.array([1e-7, 2e-7, 3e-10]), 'controller-implied inertia',
+                                'read', 100.0, np.array([0.1, 0.1, 0.2]))
+    kept = _kept_per_dof(read, remembered)
+    assert kept.outcome == 'read' and kept.stamp == 599.0
+    assert kept.gain is not None and kept.natural_freq is not None
+    np.testing.assert_array_equal(kept.gain, [read.partial_gain[0], read.partial_gain[1], 3e-10])
+    np.testing.assert_array_equal(kept.natural_freq,
+                                  [read.partial_freq[0], read.partial_freq[1], 0.2])
+    assert kept.note.endswith('; yaw remembered from t=100.0 s)')
+    # through the memory job: with the option the combined read is in force and marks the
+    # memory DP-controlled; without it the read is forgotten (as before)
+    params = PredictorParams(ndof=3, sample_time=1.0)
+    values = np.array([p.pose for p in published])
+    args = (params, stamps, values, commands, None, published, 120.0, 60, 1.2, None,
+            (stamps, commands), remembered)
+    memory, _, in_force = _learn(*args, controller_block_time=150.0, controller_keep_dofs=True)
+    assert in_force is not None and in_force.gain is not None
+    np.testing.assert_array_equal(in_force.gain, kept.gain)
+    assert memory is not None and memory.dp_controlled
+    assert 'yaw remembered from t=100.0 s' in memory.message
+    if memory.model is not None:
+        np.testing.assert_allclose(np.diag(memory.model.input_gain), kept.gain, rtol=1e-12)
+    memory, _, in_force = _learn(*args, controller_block_time=150.0)
+    assert in_force is None and memory is not None and not memory.dp_controlled
+    # a read no DOF believes, or no remembered read: nothing to combine
+    noise = np.random.default_rng(3).standard_normal(commands.shape) * 1e6
+    nothing = implied_input_gain(published, stamps, noise, 1.0, block_time=150.0)
+    assert nothing.outcome == 'no_fit' and nothing.partial_gain is None
+    _, _, in_force = _learn(*args[:10], (stamps, commands), None, controller_block_time=150.0,
+                            controller_keep_dofs=True)
+    assert in_force is None

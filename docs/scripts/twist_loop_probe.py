@@ -22,7 +22,8 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import method_probe as mp  # noqa: E402 - the sibling script
+import move_dropout_probe as mdp  # noqa: E402 - the sibling scripts
+import vessel_memory_loop_probe as vml  # noqa: E402
 
 from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
 from lf_predictor_ros.benchmark.suite import make_setup, predictor_params  # noqa: E402
@@ -47,12 +48,8 @@ def probe(sc: str, seed: int, overrides: dict[str, Any], duration: float, block:
     np.set_printoptions(precision=3, linewidth=160)
     scenario = load_scenario(sc)
     params = predictor_params(scenario)
-    setup = make_setup(scenario, seed, params)
     n = params.ndof
-    mass = np.asarray(setup.model.mass, dtype=float)[:n, :n]
-    damping = np.asarray(setup.model.damping, dtype=float)[:n, :n]
-    true_g = np.diag(np.linalg.inv(mass))
-    true_f = np.diag(-np.linalg.inv(mass) @ damping)
+    true_g, true_f = vml.true_rates(make_setup(scenario, seed, params), n)
     print(f'{sc} {seed} {overrides}', flush=True)
     seen: list[Any] = [None]
     twists: list[tuple[float, np.ndarray]] = []
@@ -65,13 +62,7 @@ def probe(sc: str, seed: int, overrides: dict[str, Any], duration: float, block:
             mem = self.memory
             if mem is not None and mem is not seen[0]:
                 seen[0] = mem
-                if mem.model is None:
-                    print(f't {t:6.0f} reckoner {mem.reckoner:18s} no model')
-                else:
-                    g = np.diag(mem.model.input_gain) / true_g
-                    f = np.diag(mem.model.damping) / true_f
-                    print(f't {t:6.0f} reckoner {mem.reckoner:18s} gain from '
-                          f'{mem.known_gain or "fit":12s} G/true {g} F/true {f}', flush=True)
+                print(vml.memory_line(t, mem, true_g, true_f), flush=True)
             return out
 
     ob.LfStateEstimator = Probe  # type: ignore[attr-defined]
@@ -110,12 +101,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--odometry', nargs='*', default=[], help='OdometryParams FIELD=VALUE')
     parser.add_argument('--duration', type=float, default=3600.0, help='simulated s')
     parser.add_argument('--block', type=float, default=300.0, help='block length [s]')
-    args = parser.parse_args(argv)
-    try:
-        cases = mp.parse_cases(args.cases, mp.DEVELOPMENT_SEEDS)
-    except ValueError as exc:
-        parser.error(str(exc))
-    overrides = ob._odometry_overrides(args.odometry) or {}  # noqa: SLF001 - the CLI's parser
+    args, cases, overrides = mdp.parse_dropout_args(parser, argv)
     torch.set_num_threads(1)
     for scenario, seed in cases:
         probe(scenario, seed, overrides, args.duration, args.block)

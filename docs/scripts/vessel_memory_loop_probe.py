@@ -23,6 +23,7 @@ import method_probe as mp  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
 from lf_predictor_ros.benchmark.suite import make_setup, predictor_params  # noqa: E402
+from lf_predictor_ros.core.lf_dynamics import VesselMemory  # noqa: E402
 from lf_predictor_ros.core.lf_state import LfStateEstimator  # noqa: E402
 from lf_predictor_ros.core.odometry import OdometryParams  # noqa: E402
 from sim_ros.simulation import load_scenario  # noqa: E402
@@ -30,17 +31,29 @@ from sim_ros.simulation import load_scenario  # noqa: E402
 DURATION = 1800.0  # [s] simulated per loop
 
 
+def true_rates(setup: Any, ndof: int) -> tuple[np.ndarray, np.ndarray]:
+    """The simulator's diag(M⁻¹) and diag(−M⁻¹ D) of the estimated DOFs (``setup.model``)."""
+    mass = np.asarray(setup.model.mass, dtype=float)[:ndof, :ndof]
+    damping = np.asarray(setup.model.damping, dtype=float)[:ndof, :ndof]
+    return np.diag(np.linalg.inv(mass)), np.diag(-np.linalg.inv(mass) @ damping)
+
+
+def memory_line(t: float, mem: VesselMemory, true_g: np.ndarray, true_f: np.ndarray) -> str:
+    """One memory: its reckoner, where its gain came from, G and F against the truth."""
+    if mem.model is None:
+        return f't {t:6.0f} reckoner {mem.reckoner:18s} no model: {mem.message}'
+    g = np.diag(mem.model.input_gain) / true_g
+    f = np.diag(mem.model.damping) / true_f
+    return (f't {t:6.0f} reckoner {mem.reckoner:18s} gain from '
+            f'{mem.known_gain or "fit":12s} G/true {g} F/true {f}')
+
+
 def probe(sc: str, seed: int, duration: float = DURATION) -> None:
     """Run one development loop and print the memories (module docstring)."""
     np.set_printoptions(precision=3, linewidth=150)
     scenario = load_scenario(sc)
     params = predictor_params(scenario)
-    setup = make_setup(scenario, seed, params)
-    n = params.ndof
-    mass = np.asarray(setup.model.mass, dtype=float)[:n, :n]
-    damping = np.asarray(setup.model.damping, dtype=float)[:n, :n]
-    true_g = np.diag(np.linalg.inv(mass))
-    true_f = np.diag(-np.linalg.inv(mass) @ damping)
+    true_g, true_f = true_rates(make_setup(scenario, seed, params), params.ndof)
     print(f'{sc} {seed}: true M^-1 diag {true_g}, true -M^-1 D diag {true_f}')
     seen: list[Any] = [None]
 
@@ -50,14 +63,8 @@ def probe(sc: str, seed: int, duration: float = DURATION) -> None:
             mem = self.memory
             if mem is not None and mem is not seen[0]:
                 seen[0] = mem
-                if mem.model is None:
-                    print(f't {t:6.0f} reckoner {mem.reckoner:18s} no model: {mem.message}')
-                else:
-                    g = np.diag(mem.model.input_gain) / true_g
-                    f = np.diag(mem.model.damping) / true_f
-                    note = mem.message.partition('; ')[2]
-                    print(f't {t:6.0f} reckoner {mem.reckoner:18s} gain from '
-                          f'{mem.known_gain or "fit":12s} G/true {g} F/true {f}  {note}')
+                note = mem.message.partition('; ')[2] if mem.model is not None else ''
+                print(f'{memory_line(t, mem, true_g, true_f)}  {note}'.rstrip())
             return out
 
     ob.LfStateEstimator = Probe  # type: ignore[attr-defined]

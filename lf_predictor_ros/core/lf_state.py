@@ -16,7 +16,8 @@ training does.
 for lack of data (no run of contiguous estimates with commands long enough, no commands) keeps
 the remembered gain, and its memory says so (``remembered from t=…``); a read that fails because
 the PD law does not explain the commands (R² too low: the controller may have changed) forgets
-it, as does ``reset``.
+it, as does ``reset``; with ``controller_read_keep_dofs`` a read that still explains them in
+some DOFs keeps the remembered gain only in the DOFs no block believes (a turn spoils yaw's).
 """
 from __future__ import annotations
 

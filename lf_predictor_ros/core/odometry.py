@@ -316,6 +316,13 @@ class OdometryParams:
         'the one low-passed over dead_reckoning_velocity_time: in a setpoint move that average '
         'lags the speed; false: the low-passed twist in every DOF (docs/BENCHMARKS.md, '
         'forty-ninth session)', ''))
+    dead_reckoning_moving_gate: float = field(default=0.0, metadata=field_doc(
+        'a DOF also counts as moving (the holding balance, the moving twist) when its current '
+        'twist exceeds this many holding std, not only its low-passed twist 2 std: the '
+        'low-pass lags the start of a move (rao_swell 1051, 28 s into a move at 1.1 m/s: '
+        "low-passed 0.10 / 0.16 m/s against 2 std of 0.21 / 0.17, current 0.71; the move's "
+        'thrust was balanced as environment and the loop was lost; docs/BENCHMARKS.md, '
+        'fifty-sixth session); 0: off', ''))
     dead_reckoning_excursion_std: float = field(default=2.0, metadata=field_doc(
         "the model's relative error in a manoeuvre: while dead reckoning, the covariance adds "
         "(this × the displacement the memory's model dead-reckons since the dropout began)², "
@@ -463,6 +470,10 @@ class OdometryParams:
             raise ValueError('twist_reference_cutoff must be a finite number >= 0 (× ω0; 0: the '
                              f'reference velocity as it is), got {self.twist_reference_cutoff}')
         check_force_margin(self.dead_reckoning_force_margin, 'dead_reckoning_force_margin')
+        if not (math.isfinite(self.dead_reckoning_moving_gate) and
+                self.dead_reckoning_moving_gate >= 0.0):
+            raise ValueError('dead_reckoning_moving_gate must be a finite number >= 0 (holding '
+                             f'std; 0: off), got {self.dead_reckoning_moving_gate}')
         if not (math.isfinite(self.dead_reckoning_excursion_std) and
                 self.dead_reckoning_excursion_std >= 0.0):
             raise ValueError('dead_reckoning_excursion_std must be a finite number >= 0 (a '
@@ -1140,8 +1151,9 @@ class LfOdometry:
         A DOF is moving when its twist through one low-pass exceeds ``MOTION_BALANCE_SIGMAS``
         of the twist's holding standard deviation (the calibrated twist covariance without its
         acceleration part, which grows in a move: against the published std the gate stayed
-        shut 20 s into one; before a calibration the published std); surge and sway go
-        together (one earth-fixed force).
+        shut 20 s into one; before a calibration the published std), or with
+        ``dead_reckoning_moving_gate`` > 0 when the current twist (the last published) exceeds
+        that many; surge and sway go together (one earth-fixed force).
         Holding station the slow twist is mostly the estimate's own error, and balancing against
         it cost 3–10 % in dropouts (docs/BENCHMARKS.md, forty-eighth session); in a setpoint
         move the move's acceleration must not pass for environment.
@@ -1155,7 +1167,11 @@ class LfOdometry:
         else:
             variance = np.diag(self._last_output.twist_cov)[:n]
         std = np.sqrt(np.maximum(variance, 0.0))
-        moving = (np.abs(self._twist_once) > MOTION_BALANCE_SIGMAS * std) & dofs
+        moving = np.abs(self._twist_once) > MOTION_BALANCE_SIGMAS * std
+        gate = self.params.dead_reckoning_moving_gate
+        if gate > 0.0:  # the current twist, the last one published
+            moving |= np.abs(self._last_output.twist[:n]) > gate * std
+        moving &= dofs
         if n == 3:
             moving[:2] = bool(moving[0] or moving[1])
         return moving if bool(np.any(moving)) else None

@@ -1120,6 +1120,12 @@ def test_dead_reckoning_excursion_std_is_checked(bad: float) -> None:
 
 
 @pytest.mark.parametrize('bad', [-0.1, math.nan, math.inf])
+def test_dead_reckoning_moving_gate_is_checked(bad: float) -> None:
+    with pytest.raises(ValueError, match='dead_reckoning_moving_gate'):
+        OdometryParams(dead_reckoning_moving_gate=bad)
+
+
+@pytest.mark.parametrize('bad', [-0.1, math.nan, math.inf])
 def test_dead_reckoning_excursion_band_is_checked(bad: float) -> None:
     with pytest.raises(ValueError, match='dead_reckoning_excursion_band'):
         OdometryParams(dead_reckoning_excursion_band=bad)
@@ -1362,3 +1368,32 @@ def test_a_memory_without_a_model_keeps_the_one_with_a_model_when_asked(keep: bo
     newer = _surge_memory(0.02, 2e-6)
     odo.apply_learned(newer, None)
     assert odo.memory is newer
+
+
+@pytest.mark.parametrize('gate', [0.0, 4.0])
+def test_the_moving_gate_on_the_current_twist_sees_a_move_the_low_pass_lags(gate: float
+                                                                           ) -> None:
+    """``dead_reckoning_moving_gate``: the current twist opens the motion gate as well.
+
+    Holding std 0.1 m/s, 0.1 m/s, 0.01 rad/s (before a calibration: the published twist std).
+    Early in a move the low-passed twist is 0.1 m/s in surge (below 2 std) while the current
+    twist is 0.7 m/s: only with the gate (4 std = 0.4 m/s) are surge and sway moving (one
+    earth-fixed force); yaw, 0.02 rad/s now (2 std), stays at rest either way.
+    """
+    odo = LfOdometry(3, H, OdometryParams(dead_reckoning_moving_gate=gate))
+    for k in range(3):
+        odo.track(float(k), np.zeros(3), np.zeros(3))
+    last = odo._last_output  # noqa: SLF001 - the gate's inputs set by hand
+    assert last is not None
+    odo._last_output = dataclasses.replace(  # noqa: SLF001
+        last, twist=np.array([0.7, 0.05, 0.02]), twist_cov=np.diag([0.01, 0.01, 1e-4]))
+    odo._twist_once = np.array([0.1, 0.05, 0.0])  # noqa: SLF001
+    moving = odo._moving_dofs(np.ones(3, dtype=bool))  # noqa: SLF001
+    if gate == 0.0:
+        assert moving is None
+    else:
+        assert moving is not None and moving.tolist() == [True, True, False]
+    # the low-passed twist alone above 2 std opens it with or without the gate
+    odo._twist_once = np.array([0.25, 0.0, 0.0])  # noqa: SLF001
+    moving = odo._moving_dofs(np.ones(3, dtype=bool))  # noqa: SLF001
+    assert moving is not None and moving.tolist() == [True, True, False]

@@ -384,13 +384,13 @@ class OdometryParams:
         "controller_read_damping, which takes the fitted rate as the vessel's own "
         '(core.controller_gains.fitted_damping_scale; docs/BENCHMARKS.md, fifty-fifth '
         'session). Overrides controller_read_damping', ''))
-    controller_read_keep_dofs: bool = field(default=False, metadata=field_doc(
+    controller_read_keep_dofs: bool = field(default=True, metadata=field_doc(
         'with controller_inertia: a read whose blocks believe some DOFs but in another none '
         "(a turn spoils yaw's blocks) keeps the last successful read's inertia in that DOF "
         'instead of forgetting the read (a PD law still explains the thrust in the others: the '
         'controller has not changed); false: forgotten, the thrust gain is then fitted, and a '
         'fitted yaw environment extrapolated to -91 MN m after a turn (rao_supply 1008; '
-        'docs/BENCHMARKS.md, fifty-sixth session)', ''))
+        'docs/BENCHMARKS.md, fifty-sixth session; the default since then, rule M)', ''))
     dead_reckoning_damping_memory: str = field(default='yaw', metadata=field_doc(
         "with a known or read thrust gain, 'yaw' or 'all' (DOFs): the vessel memory keeps per "
         'DOF the damping rate of the window that identified it best (the most velocity energy, '

@@ -323,6 +323,13 @@ class OdometryParams:
         "low-passed 0.10 / 0.16 m/s against 2 std of 0.21 / 0.17, current 0.71; the move's "
         'thrust was balanced as environment and the loop was lost; docs/BENCHMARKS.md, '
         'fifty-sixth session); 0: off', ''))
+    dead_reckoning_moving_gate_slow: float = field(default=0.0, metadata=field_doc(
+        'with dead_reckoning_moving_gate: the current twist opens the gate only where the '
+        'low-passed twist also exceeds this many holding std (surge and sway as one group): '
+        'the move has begun. Holding station the current twist has heavier tails than its '
+        'holding std (rao_supply 1077: 5-7.7 std in surge at rest, the low-passed 0.03-0.55), '
+        'and the bare gate moved dropouts that begin before a turn by a few per cent the wrong '
+        'way (rule N, docs/BENCHMARKS.md, fifty-sixth session); 0: the current twist alone', ''))
     dead_reckoning_excursion_std: float = field(default=2.0, metadata=field_doc(
         "the model's relative error in a manoeuvre: while dead reckoning, the covariance adds "
         "(this × the displacement the memory's model dead-reckons since the dropout began)², "
@@ -474,6 +481,11 @@ class OdometryParams:
                 self.dead_reckoning_moving_gate >= 0.0):
             raise ValueError('dead_reckoning_moving_gate must be a finite number >= 0 (holding '
                              f'std; 0: off), got {self.dead_reckoning_moving_gate}')
+        if not (math.isfinite(self.dead_reckoning_moving_gate_slow) and
+                self.dead_reckoning_moving_gate_slow >= 0.0):
+            raise ValueError('dead_reckoning_moving_gate_slow must be a finite number >= 0 '
+                             '(holding std of the low-passed twist; 0: the current twist '
+                             f'alone), got {self.dead_reckoning_moving_gate_slow}')
         if not (math.isfinite(self.dead_reckoning_excursion_std) and
                 self.dead_reckoning_excursion_std >= 0.0):
             raise ValueError('dead_reckoning_excursion_std must be a finite number >= 0 (a '
@@ -1153,7 +1165,8 @@ class LfOdometry:
         acceleration part, which grows in a move: against the published std the gate stayed
         shut 20 s into one; before a calibration the published std), or with
         ``dead_reckoning_moving_gate`` > 0 when the current twist (the last published) exceeds
-        that many; surge and sway go together (one earth-fixed force).
+        that many and, with ``dead_reckoning_moving_gate_slow`` > 0, the low-passed twist that
+        many (the move has begun); surge and sway go together (one earth-fixed force).
         Holding station the slow twist is mostly the estimate's own error, and balancing against
         it cost 3–10 % in dropouts (docs/BENCHMARKS.md, forty-eighth session); in a setpoint
         move the move's acceleration must not pass for environment.
@@ -1170,7 +1183,14 @@ class LfOdometry:
         moving = np.abs(self._twist_once) > MOTION_BALANCE_SIGMAS * std
         gate = self.params.dead_reckoning_moving_gate
         if gate > 0.0:  # the current twist, the last one published
-            moving |= np.abs(self._last_output.twist[:n]) > gate * std
+            fast = np.abs(self._last_output.twist[:n]) > gate * std
+            slow_gate = self.params.dead_reckoning_moving_gate_slow
+            slow = np.abs(self._twist_once) > slow_gate * std if slow_gate > 0.0 \
+                else np.ones(n, dtype=bool)
+            if n == 3:
+                fast[:2] = bool(fast[0] or fast[1])
+                slow[:2] = bool(slow[0] or slow[1])
+            moving |= fast & slow
         moving &= dofs
         if n == 3:
             moving[:2] = bool(moving[0] or moving[1])

@@ -1126,6 +1126,12 @@ def test_dead_reckoning_moving_gate_is_checked(bad: float) -> None:
 
 
 @pytest.mark.parametrize('bad', [-0.1, math.nan, math.inf])
+def test_dead_reckoning_moving_gate_slow_is_checked(bad: float) -> None:
+    with pytest.raises(ValueError, match='dead_reckoning_moving_gate_slow'):
+        OdometryParams(dead_reckoning_moving_gate_slow=bad)
+
+
+@pytest.mark.parametrize('bad', [-0.1, math.nan, math.inf])
 def test_dead_reckoning_excursion_band_is_checked(bad: float) -> None:
     with pytest.raises(ValueError, match='dead_reckoning_excursion_band'):
         OdometryParams(dead_reckoning_excursion_band=bad)
@@ -1397,3 +1403,31 @@ def test_the_moving_gate_on_the_current_twist_sees_a_move_the_low_pass_lags(gate
     odo._twist_once = np.array([0.25, 0.0, 0.0])  # noqa: SLF001
     moving = odo._moving_dofs(np.ones(3, dtype=bool))  # noqa: SLF001
     assert moving is not None and moving.tolist() == [True, True, False]
+
+
+@pytest.mark.parametrize('slow_twist, opens', [([0.05, 0.11, 0.0], True),
+                                               ([0.09, 0.05, 0.0], False)])
+def test_the_moving_gate_with_a_slow_gate_waits_for_the_move_to_begin(
+        slow_twist: list[float], opens: bool) -> None:
+    """``dead_reckoning_moving_gate_slow``: the current twist counts once the low pass moves.
+
+    Holding std 0.1 m/s, 0.1 m/s, 0.01 rad/s; current twist 0.7 m/s in surge (7 std, above the
+    gate of 4). With a slow gate of 1 std the horizontal group opens when the low-passed twist
+    of surge *or* sway is above 0.1 m/s (sway 0.11: a move that has begun), and stays shut when
+    both are below (0.09, 0.05: a spike of the current twist while holding station); a yaw rate
+    of 5 std now with a low-passed one of 0 stays shut.
+    """
+    odo = LfOdometry(3, H, OdometryParams(dead_reckoning_moving_gate=4.0,
+                                          dead_reckoning_moving_gate_slow=1.0))
+    for k in range(3):
+        odo.track(float(k), np.zeros(3), np.zeros(3))
+    last = odo._last_output  # noqa: SLF001 - the gate's inputs set by hand
+    assert last is not None
+    odo._last_output = dataclasses.replace(  # noqa: SLF001
+        last, twist=np.array([0.7, 0.0, 0.05]), twist_cov=np.diag([0.01, 0.01, 1e-4]))
+    odo._twist_once = np.array(slow_twist)  # noqa: SLF001
+    moving = odo._moving_dofs(np.ones(3, dtype=bool))  # noqa: SLF001
+    if opens:
+        assert moving is not None and moving.tolist() == [True, True, False]
+    else:
+        assert moving is None

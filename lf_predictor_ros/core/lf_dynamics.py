@@ -150,7 +150,8 @@ class LfDynamics:
 
 def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
                     ridge: float = RIDGE, input_gain: ArrayLike | None = None,
-                    damping_rate: ArrayLike | None = None) -> LfDynamics:
+                    damping_rate: ArrayLike | None = None,
+                    earth_fixed: bool = False) -> LfDynamics:
     """Least-squares fit of ν̇ = F ν + G τ + B β(ψ) on an LF pose series and its body forces.
 
     F and G are diagonal: each DOF is fitted on its own velocity and force (+ the environment
@@ -172,6 +173,10 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
         damping_rate: with ``input_gain``, known damping rates f_i = D_ii / M_ii per DOF
             (F = −diag(f)) [1/s], or None to fit them; with both only the environment is
             fitted.
+        earth_fixed: without ``input_gain``, 3 DOF: the environment as with a known gain (one
+            earth-fixed force, a constant yaw moment; `_fit_earth_fixed`) instead of a free
+            [1, cos ψ, sin ψ] per DOF, which a window at one heading cannot identify: fitted
+            there, it extrapolates to absurd forces at another heading.
 
     Raises:
         ValueError: bad shapes, too few samples, non-finite data, or a fit that is not a damped
@@ -202,8 +207,12 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
                              not np.all(np.isfinite(rate)) or np.any(rate <= 0.0)):
         raise ValueError(f'damping_rate must be {n} positive finite numbers D_ii/M_ii [1/s] '
                          f'and needs input_gain, got {rate}')
-    coef, residual_std = _fit_diagonal(phi, nu, nu_dot, ridge) if known is None else \
-        _fit_known_gain(nu, nu_dot, tau, eta, known, ridge, rate)
+    if known is not None:
+        coef, residual_std = _fit_known_gain(nu, nu_dot, tau, eta, known, ridge, rate)
+    elif earth_fixed and n == 3:
+        coef, residual_std = _fit_earth_fixed(nu, nu_dot, tau, eta, ridge)
+    else:
+        coef, residual_std = _fit_diagonal(phi, nu, nu_dot, ridge)
     model = LfDynamics(damping=coef[:, :n], input_gain=coef[:, n:2 * n], bias=coef[:, 2 * n:],
                        residual_std=residual_std)
     if model.growth_rate() > MAX_GROWTH_RATE:
@@ -239,6 +248,30 @@ def _fit_diagonal(phi: FloatArray, nu: FloatArray, nu_dot: FloatArray,
             own[0, 1:] = rest[0]
         coef[i, columns] = own[0]
     return coef, residual_std
+
+
+def _fit_earth_fixed(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, eta: FloatArray,
+                     ridge: float) -> tuple[FloatArray, FloatArray]:
+    """3 DOF, no known gain: F and G with a constant environment, then the earth-fixed one.
+
+    First each DOF on its own velocity, force and a constant (`_fit_diagonal`): at one heading
+    a constant is the environment, and over a turn it stands in for it. Then, with those
+    thrust gains and damping rates, the environment as `_fit_known_gain` fits it: one
+    earth-fixed force for surge and sway (Fossen 2011 eq. 7.8), a constant yaw moment. A free
+    [1, cos ψ, sin ψ] per DOF on a window at one heading is nearly collinear: on a simulated DP
+    window at ψ ≈ 0.3 rad its yaw term, evaluated 0.5 rad away, was −55 MN m against a true
+    0.2 MN m (test_lf_dynamics).
+    """
+    n = nu.shape[1]
+    constant = np.hstack([nu, tau, np.ones((nu.shape[0], 1))])
+    first, _ = _fit_diagonal(constant, nu, nu_dot, ridge)
+    gain = np.diag(first[:, n:2 * n]).copy()
+    if np.any(gain <= 0.0):  # the thrust would push the vessel the other way (or no thrust)
+        coef = np.zeros((n, 3 * n))
+        coef[:, :2 * n] = first[:, :2 * n]
+        coef[:, 2 * n] = first[:, 2 * n]
+        return coef, np.std(nu_dot - constant @ first.T, axis=0)
+    return _fit_known_gain(nu, nu_dot, tau, eta, gain, ridge, -np.diag(first[:, :n]))
 
 
 def _fit_known_gain(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, eta: FloatArray,
@@ -483,7 +516,8 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
                         horizon: float, input_gain: ArrayLike | None = None,
                         targets_filter: FloatArray | None = None,
                         force_margin: float = FORCE_MARGIN,
-                        damping_rate: ArrayLike | None = None) -> VesselMemory:
+                        damping_rate: ArrayLike | None = None,
+                        earth_fixed: bool = False) -> VesselMemory:
     """Fit the LF dynamics on the older part of a window; pick the dead reckoner on the newest.
 
     The fit uses the oldest 1 − ``VALIDATION_FRACTION`` of the window; each dead reckoner is
@@ -499,6 +533,7 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     targets were zero-phase filtered with (`paired_forces`). ``force_margin``: the memory's
     ``force_limit`` is this multiple of the window's largest force per DOF; 0: no limit.
     ``damping_rate``: known damping rates with ``input_gain`` (`fit_lf_dynamics`).
+    ``earth_fixed``: without ``input_gain``, the environment's form (`fit_lf_dynamics`).
     """
     check_force_margin(force_margin, 'force_margin')
     eta_t = as_series(targets, 'targets')
@@ -508,7 +543,8 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     message = ''
     try:
         model = fit_lf_dynamics(eta_t[:split], tau[:split], sample_time,
-                                input_gain=input_gain, damping_rate=damping_rate)
+                                input_gain=input_gain, damping_rate=damping_rate,
+                                earth_fixed=earth_fixed)
     except ValueError as exc:
         message = f'LF dynamics not fitted: {exc}'
     curves = {name: drift_test(model, name, eta_t[split:], tau[split:], sample_time,
@@ -530,7 +566,7 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     if model is not None:
         try:
             model = fit_lf_dynamics(eta_t, tau, sample_time, input_gain=input_gain,
-                                    damping_rate=damping_rate)
+                                    damping_rate=damping_rate, earth_fixed=earth_fixed)
         except ValueError as exc:
             model, message = None, f'LF dynamics not refitted: {exc}'
             chosen = 'hold' if chosen == 'model' else chosen

@@ -309,7 +309,8 @@ class LfStateEstimator:
                 DAMPING_MEMORY_DOFS[odometry.params.dead_reckoning_damping_memory][:self.ndof],
                 odometry.params.controller_read_stiffness_frame,
                 odometry.params.controller_read_fitted_damping,
-                odometry.params.controller_read_keep_dofs)
+                odometry.params.controller_read_keep_dofs,
+                odometry.params.free_fit_earth_fixed)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -356,7 +357,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            damping_memory: tuple[bool, ...] = (),
            controller_stiffness_frame: str = 'body',
            controller_fitted_damping: bool = False,
-           controller_keep_dofs: bool = False) -> Learned:
+           controller_keep_dofs: bool = False, earth_fixed: bool = False) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -393,6 +394,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     ``partial_gain``) takes the remembered read's value in the others (`_kept_per_dof`) instead
     of forgetting it: a PD law still explains the thrust in the believed DOFs, so the controller
     has not changed, and a turn or a move spoils a DOF's blocks, not the controller.
+    ``earth_fixed``: without a known or read gain, the fit's environment is one earth-fixed
+    force and a constant yaw moment (`lf_dynamics.fit_lf_dynamics`).
     The read returned is the one in force afterwards: this read if it succeeded,
     ``remembered`` if it failed for lack of data, with ``controller_keep_dofs`` the two
     combined if it failed in some DOFs, else None.
@@ -434,7 +437,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     try:
         memory: VesselMemory | None = learn_vessel_memory(values, forces, params.sample_time,
                                                           horizon, gain, sos, force_margin,
-                                                          rate)
+                                                          rate, earth_fixed)
     except ValueError:
         memory = None
     if memory is not None and score is not None:

@@ -16,6 +16,7 @@ from lf_predictor_ros.core.lf_dynamics import (
     dead_reckon_step,
     drift_test,
     fit_lf_dynamics,
+    heading_basis,
     learn_vessel_memory,
     paired_forces,
 )
@@ -99,6 +100,36 @@ def test_known_inertia_fits_damping_and_one_earth_fixed_force(seed: int,
                                atol=1e-9)
     with pytest.raises(ValueError, match='input_gain'):
         fit_lf_dynamics(poses, forces, H, input_gain=[1e-7, 0.0, 1e-9])
+
+
+@pytest.mark.parametrize('earth_fixed', [False, True])
+def test_the_free_fit_extrapolates_to_another_heading_only_earth_fixed(earth_fixed: bool
+                                                                       ) -> None:
+    """A window at a steady heading ψ = 0.3 rad, no known gain, evaluated 90° away.
+
+    With ``earth_fixed`` the gains and damping come from a fit with a constant environment
+    and the environment is one earth-fixed force: R(ψ)ᵀ b at ψ = 0.3 + π/2 within 5 % of
+    |b| in surge and sway. The free [1, cos ψ, sin ψ] per DOF gets the force at 0.3 rad (the
+    sum there is identified) but not at the new heading: its surge force there has the
+    wrong sign (+21 kN against −15 kN). The gains are the same either way (1/M within 5 %).
+    """
+    poses, forces = _vessel_run(4, yaw_scale=0.1, heading=0.3)
+    model = fit_lf_dynamics(poses, forces, H, earth_fixed=earth_fixed)
+    np.testing.assert_allclose(np.diag(model.input_gain), 1.0 / MASS, rtol=0.05)
+    scale = float(np.hypot(*ENV_FORCE))
+    for heading in (0.3, 0.3 + math.pi / 2):
+        c, s = math.cos(heading), math.sin(heading)
+        expected = np.array([c * ENV_FORCE[0] + s * ENV_FORCE[1],
+                             -s * ENV_FORCE[0] + c * ENV_FORCE[1]])  # R(ψ)ᵀ b
+        force = (model.bias @ heading_basis(heading, 3))[:2] * MASS[:2]
+        error = float(np.max(np.abs(force - expected)))
+        if earth_fixed or heading == 0.3:
+            assert error < 0.05 * scale
+        else:
+            assert error > scale
+    if earth_fixed:  # the form of `_fit_known_gain`: no constant in surge/sway, none in yaw's
+        assert model.bias[:2, 0].tolist() == [0.0, 0.0]
+        assert model.bias[2, 1:].tolist() == [0.0, 0.0]
 
 
 def test_a_thrust_gain_far_too_large_gives_a_refused_fit() -> None:

@@ -236,6 +236,39 @@ def test_the_controller_implied_inertia_reaches_the_memory_unless_one_is_given()
     assert memory.dp_controlled and 'remembered' in memory.message
 
 
+@pytest.mark.parametrize('earth_fixed', [False, True])
+def test_free_fit_earth_fixed_reaches_the_fit_without_a_gain(earth_fixed: bool) -> None:
+    """_learn's ``earth_fixed`` (``free_fit_earth_fixed``): the free fit's environment form.
+
+    A 3-DOF mass–damper at a steady heading with an earth-fixed force, no gain given, no
+    commands: with the option the memory's surge/sway environment has no constant term and
+    yaw's no heading terms (`lf_dynamics._fit_earth_fixed`); without it all are fitted.
+    """
+    from lf_predictor_ros.core.lf_state import _learn
+
+    rng = np.random.default_rng(3)
+    mass, damping = np.array([5e6, 6e6, 4e9]), np.array([5e4, 1e5, 1e8])
+    env = np.array([2e4, -1e4])  # N, north / east
+    eta, nu, tau = np.array([0.0, 0.0, 0.3]), np.zeros(3), np.zeros(3)
+    poses, forces = [], []
+    for _ in range(1200):
+        tau = tau + 0.02 * (rng.normal(size=3) * np.array([3e5, 3e5, 3e6]) - tau)
+        c, s = math.cos(eta[2]), math.sin(eta[2])
+        env_body = np.array([c * env[0] + s * env[1], -s * env[0] + c * env[1], 0.0])
+        poses.append(eta.copy())
+        forces.append(tau.copy())
+        nu = nu + (tau - damping * nu + env_body) / mass
+        eta = eta + np.array([c * nu[0] - s * nu[1], s * nu[0] + c * nu[1], nu[2]])
+    memory, _, read = _learn(PredictorParams(ndof=3, sample_time=1.0), np.arange(1200.0),
+                             np.array(poses), np.array(forces), None, [], 120.0, 60, 1.2,
+                             earth_fixed=earth_fixed)
+    assert read is None and memory is not None and memory.model is not None
+    assert memory.known_gain == ''
+    bias = memory.model.bias
+    assert (bias[:2, 0].tolist() == [0.0, 0.0]) is earth_fixed
+    assert (bias[2, 1:].tolist() == [0.0, 0.0]) is earth_fixed
+
+
 def test_the_damping_memory_keeps_the_rate_of_the_most_excited_window() -> None:
     """dead_reckoning_damping_memory: per DOF the rate of the window with more velocity energy."""
     from lf_predictor_ros.core.lf_state import _learn

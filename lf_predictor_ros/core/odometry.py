@@ -398,14 +398,16 @@ class OdometryParams:
         'controller has not changed); false: forgotten, the thrust gain is then fitted, and a '
         'fitted yaw environment extrapolated to -91 MN m after a turn (rao_supply 1008; '
         'docs/BENCHMARKS.md, fifty-sixth session; the default since then, rule M)', ''))
-    free_fit_earth_fixed: bool = field(default=False, metadata=field_doc(
+    free_fit_earth_fixed: bool = field(default=True, metadata=field_doc(
         'without a known or read thrust gain (no vessel_inertia, no controller read in force), '
         "3 DOF: the vessel memory's environment is one earth-fixed force and a constant yaw "
         'moment, as with a known gain, fitted after the gains and damping rates (those with a '
         'constant environment); false: a free [1, cos psi, sin psi] per DOF, which a window at '
         'one heading cannot identify and which extrapolates to absurd forces at another (-55 MN '
-        'm of yaw 0.5 rad away on a simulated window; -91 MN m on rao_supply 1008; '
-        'docs/BENCHMARKS.md, fifty-seventh session)', ''))
+        'm of yaw 0.5 rad away on a simulated window; -91 MN m on rao_supply 1008); the '
+        "default since the fifty-seventh session (rule O: the excited open-loop vessel's "
+        'dead reckoning 0.61x at 120 s on fresh seeds, DP loops unchanged; docs/BENCHMARKS.md)',
+        ''))
     dead_reckoning_damping_memory: str = field(default='yaw', metadata=field_doc(
         "with a known or read thrust gain, 'yaw' or 'all' (DOFs): the vessel memory keeps per "
         'DOF the damping rate of the window that identified it best (the most velocity energy, '

@@ -136,7 +136,7 @@ def block_bounds(length: int, block: int, minimum: int) -> list[tuple[int, int]]
 
 
 def median_implied_inertia(blocks: Sequence[ControllerGains],
-                           max_natural_freq: float = math.inf
+                           max_natural_freq: float = math.inf, pair_ratio: float = math.inf
                            ) -> tuple[FloatArray | None, NDArray[np.int64]]:
     """Per DOF the median of Kd² / (4 Kp) over the blocks where that DOF is believed.
 
@@ -145,49 +145,79 @@ def median_implied_inertia(blocks: Sequence[ControllerGains],
     0.4–0.7 and the inertia is off by 0.02–20×), and pooled over the whole history it had
     corrupted every later read. Returns (the inertia, or None unless every DOF is believed in
     at least one block; the count of believed blocks per DOF). ``max_natural_freq``: as
-    `ControllerGains.believed`.
+    `ControllerGains.believed`. ``pair_ratio``: a DOF that exactly two blocks believe, with
+    inertias more than this factor apart, is believed by neither (`_believed_blocks`).
     """
-    return _median_believed(blocks, ControllerGains.inertia_per_dof, max_natural_freq)
+    return _median_believed(blocks, ControllerGains.inertia_per_dof, max_natural_freq,
+                            pair_ratio)
 
 
 def median_natural_freq(blocks: Sequence[ControllerGains],
-                        max_natural_freq: float = math.inf) -> FloatArray | None:
+                        max_natural_freq: float = math.inf,
+                        pair_ratio: float = math.inf) -> FloatArray | None:
     """Per DOF the median of 2 Kp / Kd over the believed blocks (`median_implied_inertia`'s).
 
     None unless every DOF is believed in at least one block [rad/s].
     """
-    return _median_believed(blocks, ControllerGains.natural_freq, max_natural_freq)[0]
+    return _median_believed(blocks, ControllerGains.natural_freq, max_natural_freq,
+                            pair_ratio)[0]
 
 
-def believed_medians(blocks: Sequence[ControllerGains], max_natural_freq: float = math.inf
-                     ) -> tuple[FloatArray, FloatArray]:
+def believed_medians(blocks: Sequence[ControllerGains], max_natural_freq: float = math.inf,
+                     pair_ratio: float = math.inf) -> tuple[FloatArray, FloatArray]:
     """Per DOF the medians of the inertia and of 2 Kp / Kd over the blocks believing it.
 
     NaN in a DOF no block believes (`median_implied_inertia` gives None then): what a read
     still says about the DOFs that are believed. Returns (inertia, natural frequency).
     """
-    return (_per_dof_medians(blocks, ControllerGains.inertia_per_dof, max_natural_freq)[0],
-            _per_dof_medians(blocks, ControllerGains.natural_freq, max_natural_freq)[0])
+    return (_per_dof_medians(blocks, ControllerGains.inertia_per_dof, max_natural_freq,
+                             pair_ratio)[0],
+            _per_dof_medians(blocks, ControllerGains.natural_freq, max_natural_freq,
+                             pair_ratio)[0])
 
 
 def _median_believed(blocks: Sequence[ControllerGains],
                      quantity: Callable[[ControllerGains], FloatArray],
-                     max_natural_freq: float) -> tuple[FloatArray | None, NDArray[np.int64]]:
+                     max_natural_freq: float, pair_ratio: float = math.inf
+                     ) -> tuple[FloatArray | None, NDArray[np.int64]]:
     """Per DOF the median of ``quantity`` over the blocks that believe that DOF; the counts.
 
     (None, counts) unless every DOF is believed in at least one block.
     """
-    median, counts = _per_dof_medians(blocks, quantity, max_natural_freq)
+    median, counts = _per_dof_medians(blocks, quantity, max_natural_freq, pair_ratio)
     return (median if counts.size and np.all(counts > 0) else None), counts
+
+
+def _believed_blocks(blocks: Sequence[ControllerGains], max_natural_freq: float,
+                     pair_ratio: float) -> NDArray[np.bool_]:
+    """Per block and DOF: believed (`ControllerGains.believed`), and not a disagreeing pair.
+
+    The median of two blocks is their mean: when a turn or a move spoils one of them and it
+    still passes (rao_swell 1104 at 540 s, 51 s into the first turn after start-up: yaw
+    inertia 2.4e10 from two blocks against 2.6e9 from the block before the turn, the truth
+    4.3e9; the dead-reckoned heading 1.3 rad off), no majority says which. A DOF that exactly
+    two blocks believe, with inertias more than ``pair_ratio`` apart, is then believed by
+    neither (inf: never); with three or more the median outvotes one spoilt block.
+    """
+    believed = np.array([b.believed(max_natural_freq) for b in blocks])
+    if math.isinf(pair_ratio):
+        return believed
+    inertia = np.array([b.inertia_per_dof() for b in blocks])
+    for i in np.flatnonzero(believed.sum(axis=0) == 2):
+        low, high = np.sort(inertia[believed[:, i], i])
+        if high > pair_ratio * low:
+            believed[:, i] = False
+    return believed
 
 
 def _per_dof_medians(blocks: Sequence[ControllerGains],
                      quantity: Callable[[ControllerGains], FloatArray],
-                     max_natural_freq: float) -> tuple[FloatArray, NDArray[np.int64]]:
+                     max_natural_freq: float, pair_ratio: float = math.inf
+                     ) -> tuple[FloatArray, NDArray[np.int64]]:
     """Per DOF the median of ``quantity`` over the blocks believing it (NaN: none); counts."""
     if not blocks:
         return np.zeros(0), np.zeros(0, dtype=np.int64)
-    believed = np.array([b.believed(max_natural_freq) for b in blocks])
+    believed = _believed_blocks(blocks, max_natural_freq, pair_ratio)
     counts = believed.sum(axis=0).astype(np.int64)
     values = np.array([quantity(b) for b in blocks])
     median = np.array([float(np.median(values[believed[:, i], i])) if counts[i] else math.nan

@@ -310,7 +310,8 @@ class LfStateEstimator:
                 odometry.params.controller_read_stiffness_frame,
                 odometry.params.controller_read_fitted_damping,
                 odometry.params.controller_read_keep_dofs,
-                odometry.params.free_fit_earth_fixed)
+                odometry.params.free_fit_earth_fixed,
+                odometry.params.controller_read_pair_ratio or math.inf)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -357,7 +358,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            damping_memory: tuple[bool, ...] = (),
            controller_stiffness_frame: str = 'body',
            controller_fitted_damping: bool = False,
-           controller_keep_dofs: bool = False, earth_fixed: bool = False) -> Learned:
+           controller_keep_dofs: bool = False, earth_fixed: bool = False,
+           controller_pair_ratio: float = math.inf) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -394,6 +396,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     ``partial_gain``) takes the remembered read's value in the others (`_kept_per_dof`) instead
     of forgetting it: a PD law still explains the thrust in the believed DOFs, so the controller
     has not changed, and a turn or a move spoils a DOF's blocks, not the controller.
+    ``controller_pair_ratio``: `implied_input_gain`'s ``pair_ratio``.
     ``earth_fixed``: without a known or read gain, the fit's environment is one earth-fixed
     force and a constant yaw moment (`lf_dynamics.fit_lf_dynamics`).
     The read returned is the one in force afterwards: this read if it succeeded,
@@ -408,7 +411,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
         bound = math.inf if wave_peak_freq is None else MAX_NATURAL_FREQ_RATIO * wave_peak_freq
         read = implied_input_gain(published, *commands, params.sample_time,
                                   controller_block_time, controller_earth_frame, bound,
-                                  controller_stiffness_frame)
+                                  controller_stiffness_frame, controller_pair_ratio)
     elif remembered is not None:
         read = ControllerRead(None, 'controller gains: no commands', 'no_data')
     in_force: ControllerRead | None = read if read is not None and read.outcome == 'read' \
@@ -539,7 +542,8 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
                        sample_time: float, block_time: float = 0.0,
                        earth_highpass: bool = False,
                        max_natural_freq: float = math.inf,
-                       stiffness_frame: str = 'body') -> ControllerRead:
+                       stiffness_frame: str = 'body',
+                       pair_ratio: float = math.inf) -> ControllerRead:
     """1/M_ii implied by the DP controller acting on the published estimates.
 
     ``times``, ``forces``: the controller's commands and their stamps (a controller stamps its
@@ -561,7 +565,9 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     frame of the controller's stiffness (`fit_controller_gains`).
     ``max_natural_freq`` [rad/s]: a DOF whose gains imply a natural frequency 2 Kp / Kd at or
     above it is not believed (`ControllerGains.believed`; the learning job passes
-    ``MAX_NATURAL_FREQ_RATIO`` × ω0; inf: no bound).
+    ``MAX_NATURAL_FREQ_RATIO`` × ω0; inf: no bound). ``pair_ratio``: with blocks, a DOF two
+    blocks believe with inertias more than this factor apart is not believed
+    (`controller_gains.median_implied_inertia`; inf: never).
     """
     if not published or times.shape[0] == 0:
         return ControllerRead(None, 'controller gains: no data', 'no_data')
@@ -594,7 +600,7 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
                                           earth_highpass=earth_highpass,
                                           stiffness_frame=stiffness_frame) for a, b in blocks]
             return _median_read(reads, float(stamps[rows[-1]]), rows.size, block_time,
-                                max_natural_freq)
+                                max_natural_freq, pair_ratio)
         gains = fit_controller_gains(poses, twists, paired, sample_time,
                                      run_starts=np.cumsum(lengths)[:-1].tolist(),
                                      earth_highpass=earth_highpass,
@@ -614,15 +620,16 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
 
 
 def _median_read(reads: list[ControllerGains], stamp: float, samples: int,
-                 block_time: float, max_natural_freq: float = math.inf) -> ControllerRead:
+                 block_time: float, max_natural_freq: float = math.inf,
+                 pair_ratio: float = math.inf) -> ControllerRead:
     """The read of `implied_input_gain` from one `ControllerGains` per block."""
-    inertia, counts = median_implied_inertia(reads, max_natural_freq)
+    inertia, counts = median_implied_inertia(reads, max_natural_freq, pair_ratio)
     believed = ', '.join(f'{c}' for c in counts)
     earth = sum(read.stiffness_frame == 'earth' for read in reads)
     what = f'{believed} of {len(reads)} blocks of {block_time:.0f} s believed' + \
         (f', {earth} with the stiffness in the earth frame' if earth else '')
     if inertia is None:
-        partial_inertia, partial_freq = believed_medians(reads, max_natural_freq)
+        partial_inertia, partial_freq = believed_medians(reads, max_natural_freq, pair_ratio)
         partial = bool(np.any(np.isfinite(partial_inertia)))
         return ControllerRead(None, f'controller gains not read ({what})', 'no_fit', stamp,
                               partial_gain=1.0 / partial_inertia if partial else None,
@@ -630,7 +637,7 @@ def _median_read(reads: list[ControllerGains], stamp: float, samples: int,
     return ControllerRead(1.0 / inertia, (f"controller-implied inertia "
                                           f"{', '.join(f'{v:.3g}' for v in inertia)} "
                                           f'(median; {what}; {samples} samples)'), 'read', stamp,
-                          median_natural_freq(reads, max_natural_freq))
+                          median_natural_freq(reads, max_natural_freq, pair_ratio))
 
 
 def _input_gain(inertia: tuple[float, ...], ndof: int) -> FloatArray | None:

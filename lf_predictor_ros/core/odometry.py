@@ -398,6 +398,14 @@ class OdometryParams:
         'controller has not changed); false: forgotten, the thrust gain is then fitted, and a '
         'fitted yaw environment extrapolated to -91 MN m after a turn (rao_supply 1008; '
         'docs/BENCHMARKS.md, fifty-sixth session; the default since then, rule M)', ''))
+    controller_read_pair_ratio: float = field(default=0.0, metadata=field_doc(
+        'with controller_inertia and controller_read_block_time: a DOF that exactly two '
+        'blocks believe, with implied inertias more than this factor apart, is not read from '
+        'them (with controller_read_keep_dofs the remembered read stands in there): the '
+        'median of two is their mean, and a turn that spoils one block and still passes '
+        'ruins it (rao_swell 1104, 51 s into the first turn: yaw inertia 5.5x the truth, the '
+        'heading through a dropout 1.3 rad off; docs/BENCHMARKS.md, fifty-seventh session); '
+        '0: off', ''))
     free_fit_earth_fixed: bool = field(default=True, metadata=field_doc(
         'without a known or read thrust gain (no vessel_inertia, no controller read in force), '
         "3 DOF: the vessel memory's environment is one earth-fixed force and a constant yaw "
@@ -491,6 +499,10 @@ class OdometryParams:
                 self.dead_reckoning_moving_gate >= 0.0):
             raise ValueError('dead_reckoning_moving_gate must be a finite number >= 0 (holding '
                              f'std; 0: off), got {self.dead_reckoning_moving_gate}')
+        if not (math.isfinite(self.controller_read_pair_ratio) and
+                (self.controller_read_pair_ratio == 0.0 or self.controller_read_pair_ratio > 1.0)):
+            raise ValueError('controller_read_pair_ratio must be 0 (off) or a finite factor > 1, '
+                             f'got {self.controller_read_pair_ratio}')
         if not (math.isfinite(self.dead_reckoning_moving_gate_slow) and
                 self.dead_reckoning_moving_gate_slow >= 0.0):
             raise ValueError('dead_reckoning_moving_gate_slow must be a finite number >= 0 '

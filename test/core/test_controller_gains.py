@@ -255,6 +255,34 @@ def test_median_over_believed_blocks() -> None:
     assert inertia is None and counts.size == 0
 
 
+def test_two_blocks_far_apart_are_not_believed_with_a_pair_ratio() -> None:
+    """``pair_ratio``: a DOF exactly two blocks believe, inertias further apart, is not read.
+
+    good: M = 1, 4, 4; spoilt: 100, 400 (not believed in yaw). With pair_ratio 3, surge and sway
+    (100× apart) are believed by neither of the two blocks, so no inertia, and the medians are
+    NaN there; yaw (one block) stands. Two blocks 1.5× apart are read as before (their mean),
+    and with three blocks the median outvotes the spoilt one whatever the ratio.
+    """
+    def block(kp: list[float], kd: list[float], r2: list[float]) -> ControllerGains:
+        return ControllerGains(np.array(kp), np.array(kd), np.array(r2), 0)
+
+    good = block([1.0, 4.0, 1.0], [2.0, 8.0, 4.0], [0.99, 0.99, 0.99])  # M 1, 4, 4
+    spoilt = block([0.01, 4.0, 1.0], [2.0, 80.0, 4.0], [0.9, 0.9, 0.3])  # 100, 400, (not)
+    near = block([1.0, 4.0, 1.0], [2.0 * math.sqrt(1.5), 8.0, 4.0], [0.99, 0.99, 0.99])
+    inertia, counts = median_implied_inertia([good, spoilt], pair_ratio=3.0)
+    assert inertia is None and counts.tolist() == [0, 0, 1]
+    partial, freq = believed_medians([good, spoilt], pair_ratio=3.0)
+    assert math.isnan(partial[0]) and math.isnan(partial[1]) and partial[2] == 4.0
+    assert math.isnan(freq[0]) and freq[2] == pytest.approx(0.5)
+    assert median_natural_freq([good, spoilt], pair_ratio=3.0) is None
+    inertia, counts = median_implied_inertia([good, near], pair_ratio=3.0)
+    assert inertia is not None and counts.tolist() == [2, 2, 2]
+    np.testing.assert_allclose(inertia, [1.25, 4.0, 4.0])  # mean of 1 and 1.5 in surge
+    inertia, counts = median_implied_inertia([good, spoilt, good], pair_ratio=3.0)
+    assert inertia is not None and counts.tolist() == [3, 3, 2]
+    np.testing.assert_allclose(inertia, [1.0, 4.0, 4.0])
+
+
 def test_a_pd_law_faster_than_the_wave_band_is_not_believed() -> None:
     """ω_n = 2 Kp / Kd (= √(Kp / M), M = Kd² / (4 Kp)) at or above the bound: not believed.
 

@@ -1125,6 +1125,12 @@ def test_dead_reckoning_moving_gate_is_checked(bad: float) -> None:
         OdometryParams(dead_reckoning_moving_gate=bad)
 
 
+@pytest.mark.parametrize('bad', [-0.1, 0.5, 1.0, math.nan, math.inf])
+def test_controller_read_pair_ratio_is_checked(bad: float) -> None:
+    with pytest.raises(ValueError, match='controller_read_pair_ratio'):
+        OdometryParams(controller_read_pair_ratio=bad)
+
+
 @pytest.mark.parametrize('bad', [-0.1, math.nan, math.inf])
 def test_dead_reckoning_moving_gate_slow_is_checked(bad: float) -> None:
     with pytest.raises(ValueError, match='dead_reckoning_moving_gate_slow'):

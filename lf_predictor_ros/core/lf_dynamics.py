@@ -260,7 +260,8 @@ def _fit_earth_fixed(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, eta: F
     earth-fixed force for surge and sway (Fossen 2011 eq. 7.8), a constant yaw moment. A free
     [1, cos ψ, sin ψ] per DOF on a window at one heading is nearly collinear: on a simulated DP
     window at ψ ≈ 0.3 rad its yaw term, evaluated 0.5 rad away, was −55 MN m against a true
-    0.2 MN m (test_lf_dynamics).
+    0.2 MN m (docs/BENCHMARKS.md, fifty-seventh session; the steady-heading case is
+    test_the_free_fit_extrapolates_to_another_heading_only_earth_fixed).
     """
     n = nu.shape[1]
     constant = np.hstack([nu, tau, np.ones((nu.shape[0], 1))])

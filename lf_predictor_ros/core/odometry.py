@@ -398,14 +398,15 @@ class OdometryParams:
         'controller has not changed); false: forgotten, the thrust gain is then fitted, and a '
         'fitted yaw environment extrapolated to -91 MN m after a turn (rao_supply 1008; '
         'docs/BENCHMARKS.md, fifty-sixth session; the default since then, rule M)', ''))
-    controller_read_pair_ratio: float = field(default=0.0, metadata=field_doc(
+    controller_read_pair_ratio: float = field(default=3.0, metadata=field_doc(
         'with controller_inertia and controller_read_block_time: a DOF that exactly two '
         'blocks believe, with implied inertias more than this factor apart, is not read from '
         'them (with controller_read_keep_dofs the remembered read stands in there): the '
         'median of two is their mean, and a turn that spoils one block and still passes '
         'ruins it (rao_swell 1104, 51 s into the first turn: yaw inertia 5.5x the truth, the '
-        'heading through a dropout 1.3 rad off; docs/BENCHMARKS.md, fifty-seventh session); '
-        '0: off', ''))
+        'heading through a dropout 1.3 rad off); 0: off. 3 (taken, not tuned) is the default '
+        'since the fifty-seventh session (rule P: the heading failures in the moves 5 -> 4 of '
+        '176 on fresh seeds, the distance 1.004x; docs/BENCHMARKS.md)', '-'))
     free_fit_earth_fixed: bool = field(default=True, metadata=field_doc(
         'without a known or read thrust gain (no vessel_inertia, no controller read in force), '
         "3 DOF: the vessel memory's environment is one earth-fixed force and a constant yaw "

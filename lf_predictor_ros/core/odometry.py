@@ -1206,17 +1206,12 @@ class LfOdometry:
         moving = np.abs(self._twist_once) > MOTION_BALANCE_SIGMAS * std
         gate = self.params.dead_reckoning_moving_gate
         if gate > 0.0:  # the current twist, the last one published
-            fast = np.abs(self._last_output.twist[:n]) > gate * std
             slow_gate = self.params.dead_reckoning_moving_gate_slow
-            slow = np.abs(self._twist_once) > slow_gate * std if slow_gate > 0.0 \
+            begun = np.abs(self._twist_once) > slow_gate * std if slow_gate > 0.0 \
                 else np.ones(n, dtype=bool)
-            if n == 3:
-                fast[:2] = bool(fast[0] or fast[1])
-                slow[:2] = bool(slow[0] or slow[1])
-            moving |= fast & slow
-        moving &= dofs
-        if n == 3:
-            moving[:2] = bool(moving[0] or moving[1])
+            moving |= _horizontal_group(np.abs(self._last_output.twist[:n]) > gate * std) & \
+                _horizontal_group(begun)
+        moving = _horizontal_group(moving & dofs)
         return moving if bool(np.any(moving)) else None
 
     def _start_twist(self, state: FloatArray) -> FloatArray:
@@ -1919,6 +1914,18 @@ def _kinematic_transition(heading: float, h: float, ndof: int) -> tuple[FloatArr
         a[0, 5] = a[1, 5] = a[2, 3] = a[2, 4] = h * 0.0
         a[2, 5] = h * 1.0
     return a, np.zeros(2 * ndof)
+
+
+
+def _horizontal_group(dofs: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """Per DOF flags with surge and sway joined (3 DOF: either one sets both; a new array).
+
+    Surge and sway share one earth-fixed environment force, so they move or rest together.
+    """
+    grouped = dofs.copy()
+    if grouped.shape[0] == 3:
+        grouped[:2] = bool(grouped[0] or grouped[1])
+    return grouped
 
 
 def _rotation_block(heading: float, ndof: int) -> FloatArray:

@@ -46,6 +46,7 @@ from lf_predictor_ros.core.controller_gains import (
 from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.lf_dynamics import (
     FORCE_MARGIN,
+    MIN_DAMPING_RATE,
     VesselMemory,
     body_velocity,
     fit_lf_dynamics,
@@ -311,7 +312,8 @@ class LfStateEstimator:
                 odometry.params.controller_read_fitted_damping,
                 odometry.params.controller_read_keep_dofs,
                 odometry.params.free_fit_earth_fixed,
-                odometry.params.controller_read_pair_ratio or math.inf)
+                odometry.params.controller_read_pair_ratio or math.inf,
+                odometry.params.dead_reckoning_damping_refuse_bound)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -359,7 +361,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            controller_stiffness_frame: str = 'body',
            controller_fitted_damping: bool = False,
            controller_keep_dofs: bool = False, earth_fixed: bool = False,
-           controller_pair_ratio: float = math.inf) -> Learned:
+           controller_pair_ratio: float = math.inf,
+           damping_refuse_bound: bool = False) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -397,6 +400,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     of forgetting it: a PD law still explains the thrust in the believed DOFs, so the controller
     has not changed, and a turn or a move spoils a DOF's blocks, not the controller.
     ``controller_pair_ratio``: `implied_input_gain`'s ``pair_ratio``.
+    ``damping_refuse_bound``: `_damping_chosen`'s ``refuse_bound``.
     ``earth_fixed``: without a known or read gain, the fit's environment is one earth-fixed
     force and a constant yaw moment (`lf_dynamics.fit_lf_dynamics`).
     The read returned is the one in force afterwards: this read if it succeeded,
@@ -435,7 +439,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     if (read_freq is not None or any(damping_memory)) and input_gain is not None:
         gain, rate, score, parts = _damping_chosen(values, forces, params.sample_time, sos,
                                                    input_gain, read_freq, kept_damping,
-                                                   damping_memory, controller_fitted_damping)
+                                                   damping_memory, controller_fitted_damping,
+                                                   damping_refuse_bound)
         note = '; '.join(part for part in (note, *parts) if part)
     try:
         memory: VesselMemory | None = learn_vessel_memory(values, forces, params.sample_time,
@@ -482,7 +487,8 @@ def _kept_per_dof(read: ControllerRead, remembered: ControllerRead) -> Controlle
 def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
                     sos: FloatArray | None, input_gain: FloatArray,
                     natural_freq: FloatArray | None, kept: KeptDamping | None,
-                    damping_memory: tuple[bool, ...], fitted_damping: bool = False
+                    damping_memory: tuple[bool, ...], fitted_damping: bool = False,
+                    refuse_bound: bool = False
                     ) -> tuple[FloatArray, FloatArray | None, FloatArray | None, list[str]]:
     """The thrust gain and damping rates the window's memory is learned with, before it is.
 
@@ -495,7 +501,12 @@ def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
     with the more velocity energy Σ ν_i² over the target body velocity (the information a
     least-squares fit of f_i has, for a given residual), this one or ``kept``'s; the memory is
     then learned once with those rates fixed (the scores go to its ``damping_score``; the other
-    DOFs keep this window's fitted rate). With ``natural_freq`` (the read's 2 Kp / Kd) the read
+    DOFs keep this window's fitted rate). With ``refuse_bound``, a rate this window's fit held
+    at its bound (``MIN_DAMPING_RATE``: the data asked for no damping or a negative one, so the
+    window did not identify it) never replaces a kept one, whatever its velocity energy: on
+    rao_supply 1124 a window without a turn, after one the dropout had hidden, had 1.5× the
+    start-up window's energy and its bound replaced a rate of 0.09 1/s (docs/BENCHMARKS.md,
+    fifty-eighth session). With ``natural_freq`` (the read's 2 Kp / Kd) the read
     inertia is corrected for the rates (`controller_gains.damping_corrected_inertia`; with
     ``fitted_damping``, `controller_gains.fitted_damping_scale`, which also scales the rates by
     the same factor, keeping the fitted G / f). When
@@ -514,7 +525,7 @@ def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
     score = np.sum(body_velocity(values, sample_time) ** 2, axis=0)
     parts = []
     if kept is not None and dofs.shape == (n,) and kept[0].shape == (n,):
-        older = dofs & (kept[1] > score)
+        older = dofs & ((kept[1] > score) | (refuse_bound & (rate <= MIN_DAMPING_RATE)))
         # with ``fitted_damping`` the kept values are damping forces per velocity D_i: the rate
         # they make under this window's gain
         kept_rate = kept[0] * input_gain if fitted_damping else kept[0]

@@ -426,6 +426,13 @@ class OdometryParams:
         '11.6 s), and a dead reckoning through the next turn on too little damping turned the '
         "estimate twice as fast as the vessel; 'off': each window its own (docs/BENCHMARKS.md, "
         "fifty-third session; 'yaw' the default since the fifty-fourth, rule J)", ''))
+    dead_reckoning_damping_refuse_bound: bool = field(default=False, metadata=field_doc(
+        'with dead_reckoning_damping_memory: a rate that a window fitted at its lower bound '
+        '(1/1000 1/s: the data asked for no damping or a negative one, i.e. the window did not '
+        'identify it) never replaces the kept rate, whatever its velocity energy; false: the '
+        'energy decides alone (rao_supply 1124: a window without a turn, after one a dropout '
+        'had hidden, replaced 0.09 1/s by the bound, and the heading through the next turn '
+        'ended 1.5 rad off; docs/BENCHMARKS.md, fifty-eighth session)', ''))
     controller_read_earth_frame: bool = field(default=True, metadata=field_doc(
         'with controller_inertia, 3 DOF: high-pass the estimates and the commands in the earth '
         'frame before turning them into the body frame (a turn away from the setpoint origin '

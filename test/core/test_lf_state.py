@@ -345,6 +345,47 @@ def test_the_damping_memory_of_the_yaw_alone_keeps_surge_and_sway_as_fitted() ->
         OdometryParams(dead_reckoning_damping_memory='heading')
 
 
+def test_the_damping_memory_can_refuse_a_rate_at_the_bound() -> None:
+    """dead_reckoning_damping_refuse_bound: a rate fitted at its bound is never kept over one.
+
+    The window's yaw grows (0.002 1/s), so its fit holds the rate at the bound; with the option
+    it does not replace a kept rate, however much more it moved.
+    """
+    from lf_predictor_ros.core.lf_dynamics import (
+        MIN_DAMPING_RATE,
+        dead_reckon_step,
+        fit_lf_dynamics,
+    )
+    from lf_predictor_ros.core.lf_state import _damping_chosen
+    from lf_predictor_ros.core.odometry import DAMPING_MEMORY_DOFS
+
+    model = LfDynamics(np.diag([-1 / 80.0, -1 / 40.0, 0.002]),
+                       np.diag([1.5e-7, 9e-8, 2.2e-10]), np.zeros((3, 3)), np.zeros(3))
+    rng = np.random.default_rng(5)
+    tau = np.apply_along_axis(lambda x: np.convolve(x, np.ones(30) / 30.0, 'same'), 0,
+                              rng.standard_normal((1500, 3)) * np.array([2e5, 2e5, 5e5]))
+    eta, nu = np.zeros(3), np.zeros(3)
+    poses = np.empty((1500, 3))
+    for k in range(1500):
+        poses[k] = eta
+        eta, nu = dead_reckon_step(model, 'model', eta, nu, tau[k], 1.0)
+    gain = np.diag(model.input_gain)
+    yaw = DAMPING_MEMORY_DOFS['yaw']
+    own = _damping_chosen(poses, tau, 1.0, None, gain, None, None, yaw)
+    assert own[1] is None and own[2] is not None  # nothing kept: the window's own fit
+    kept = (np.array([0.5, 0.5, 0.0862]), own[2] / 10.0)  # a window that moved less
+    energy = _damping_chosen(poses, tau, 1.0, None, gain, None, kept, yaw)
+    assert energy[1] is None and energy[3] == []  # the energy alone: this window's bound
+    _, rate, score, parts = _damping_chosen(poses, tau, 1.0, None, gain, None, kept, yaw,
+                                            refuse_bound=True)
+    assert rate is not None and score is not None
+    assert rate[2] == 0.0862 and score[2] == kept[1][2]
+    assert rate[0] == pytest.approx(1 / 80.0, rel=0.05) and rate[1] != 0.5  # not kept
+    assert parts == ['damping rates kept –, –, 0.0862 1/s']
+    fitted = fit_lf_dynamics(poses, tau, 1.0, input_gain=gain)
+    assert -fitted.damping[2, 2] == MIN_DAMPING_RATE  # the bound the window's fit held
+
+
 def test_the_fitted_damping_scales_gain_and_rates_and_keeps_the_damping_force() -> None:
     """controller_read_fitted_damping: gain G_r / s and rates f / s, s = (1 + f / (2 ω_r))².
 

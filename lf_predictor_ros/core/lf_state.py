@@ -55,6 +55,7 @@ from lf_predictor_ros.core.lf_dynamics import (
 )
 from lf_predictor_ros.core.odometry import (
     DAMPING_MEMORY_DOFS,
+    FITTED_DAMPING_DOFS,
     Covariances,
     EstimateSource,
     LfOdometry,
@@ -313,7 +314,9 @@ class LfStateEstimator:
                 odometry.params.controller_read_keep_dofs,
                 odometry.params.free_fit_earth_fixed,
                 odometry.params.controller_read_pair_ratio or math.inf,
-                odometry.params.dead_reckoning_damping_refuse_bound)
+                odometry.params.dead_reckoning_damping_refuse_bound,
+                FITTED_DAMPING_DOFS[odometry.params.controller_read_fitted_damping_dofs][
+                    :self.ndof])
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -362,7 +365,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            controller_fitted_damping: bool = False,
            controller_keep_dofs: bool = False, earth_fixed: bool = False,
            controller_pair_ratio: float = math.inf,
-           damping_refuse_bound: bool = False) -> Learned:
+           damping_refuse_bound: bool = False,
+           controller_fitted_dofs: tuple[bool, ...] = ()) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -400,7 +404,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     of forgetting it: a PD law still explains the thrust in the believed DOFs, so the controller
     has not changed, and a turn or a move spoils a DOF's blocks, not the controller.
     ``controller_pair_ratio``: `implied_input_gain`'s ``pair_ratio``.
-    ``damping_refuse_bound``: `_damping_chosen`'s ``refuse_bound``.
+    ``damping_refuse_bound``, ``controller_fitted_dofs``: `_damping_chosen`'s
+    ``refuse_bound`` and ``fitted_dofs``.
     ``earth_fixed``: without a known or read gain, the fit's environment is one earth-fixed
     force and a constant yaw moment (`lf_dynamics.fit_lf_dynamics`).
     The read returned is the one in force afterwards: this read if it succeeded,
@@ -440,7 +445,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
         gain, rate, score, parts = _damping_chosen(values, forces, params.sample_time, sos,
                                                    input_gain, read_freq, kept_damping,
                                                    damping_memory, controller_fitted_damping,
-                                                   damping_refuse_bound)
+                                                   damping_refuse_bound,
+                                                   controller_fitted_dofs)
         note = '; '.join(part for part in (note, *parts) if part)
     try:
         memory: VesselMemory | None = learn_vessel_memory(values, forces, params.sample_time,
@@ -488,7 +494,7 @@ def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
                     sos: FloatArray | None, input_gain: FloatArray,
                     natural_freq: FloatArray | None, kept: KeptDamping | None,
                     damping_memory: tuple[bool, ...], fitted_damping: bool = False,
-                    refuse_bound: bool = False
+                    refuse_bound: bool = False, fitted_dofs: tuple[bool, ...] = ()
                     ) -> tuple[FloatArray, FloatArray | None, FloatArray | None, list[str]]:
     """The thrust gain and damping rates the window's memory is learned with, before it is.
 
@@ -509,7 +515,8 @@ def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
     fifty-eighth session). With ``natural_freq`` (the read's 2 Kp / Kd) the read
     inertia is corrected for the rates (`controller_gains.damping_corrected_inertia`; with
     ``fitted_damping``, `controller_gains.fitted_damping_scale`, which also scales the rates by
-    the same factor, keeping the fitted G / f). When
+    the same factor, keeping the fitted G / f), in the DOFs of ``fitted_dofs`` (empty: all;
+    the others keep the read gain and their rate). When
     nothing changes (no rate kept, no correction), or the window cannot be fitted, the memory is
     learned as without this: ``input_gain``, no fixed rates.
     """
@@ -536,6 +543,8 @@ def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
     gain = input_gain
     if natural_freq is not None and fitted_damping:
         scale = fitted_damping_scale(natural_freq[:n], rate)
+        if len(fitted_dofs) == n:
+            scale = np.where(np.array(fitted_dofs, dtype=bool), scale, 1.0)
         gain, rate = input_gain / scale, rate / scale
         parts.append('inertia × ' + ', '.join(f'{v:.2f}' for v in scale) +
                      ' for the fitted damping')

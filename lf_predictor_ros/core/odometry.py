@@ -129,6 +129,10 @@ MOTION_BALANCE_SIGMAS = 2.0
 # memory keeps across windows, per choice.
 DAMPING_MEMORY_DOFS: dict[str, tuple[bool, bool, bool]] = {
     'off': (False, False, False), 'yaw': (False, False, True), 'all': (True, True, True)}
+# ``controller_read_fitted_damping_dofs``: the DOFs (surge, sway, yaw) whose read inertia
+# ``controller_read_fitted_damping`` corrects, per choice.
+FITTED_DAMPING_DOFS: dict[str, tuple[bool, bool, bool]] = {
+    'yaw': (False, False, True), 'all': (True, True, True)}
 # `excursion_covariance` takes displacements and twists up to this size per DOF (larger ones: an
 # absurd, finite thrust the dead reckoning has followed), so that the covariance stays finite
 # [m, m, rad; m/s, m/s, rad/s].
@@ -391,6 +395,13 @@ class OdometryParams:
         "controller_read_damping, which takes the fitted rate as the vessel's own "
         '(core.controller_gains.fitted_damping_scale; docs/BENCHMARKS.md, fifty-fifth '
         'session). Overrides controller_read_damping', ''))
+    controller_read_fitted_damping_dofs: str = field(default='all', metadata=field_doc(
+        "with controller_read_fitted_damping: the DOFs it corrects, 'all' or 'yaw' (surge and "
+        'sway then keep the read inertia and their fitted rates): the yaw read is 0.6x for a '
+        "PID that takes the vessel's damping off Kd (the simulator's yaw rate 0.086 1/s "
+        'against omega_r 0.255 rad/s), while surge and sway are read 1.1-1.3x and their '
+        'fitted rates often sit at the bound or vary 10x between windows (docs/BENCHMARKS.md, '
+        'fifty-eighth session)', ''))
     controller_read_keep_dofs: bool = field(default=True, metadata=field_doc(
         'with controller_inertia: a read whose blocks believe some DOFs but in another none '
         "(a turn spoils yaw's blocks) keeps the last successful read's inertia in that DOF "
@@ -559,6 +570,10 @@ class OdometryParams:
             raise ValueError('vessel_inertia must be 3 finite numbers, all 0 (learn) or all > 0 '
                              f'[kg, kg, kg·m²], got {self.vessel_inertia}')
         object.__setattr__(self, 'vessel_inertia', inertia)
+        if self.controller_read_fitted_damping_dofs not in FITTED_DAMPING_DOFS:
+            raise ValueError(f'controller_read_fitted_damping_dofs must be one of '
+                             f'{sorted(FITTED_DAMPING_DOFS)}, got '
+                             f'{self.controller_read_fitted_damping_dofs!r}')
         if self.dead_reckoning_damping_memory not in DAMPING_MEMORY_DOFS:
             raise ValueError(f'dead_reckoning_damping_memory must be one of '
                              f'{tuple(DAMPING_MEMORY_DOFS)}, got '

@@ -395,7 +395,7 @@ def test_the_fitted_damping_scales_gain_and_rates_and_keeps_the_damping_force() 
     from lf_predictor_ros.core.controller_gains import fitted_damping_scale
     from lf_predictor_ros.core.lf_dynamics import fit_lf_dynamics
     from lf_predictor_ros.core.lf_state import _damping_chosen
-    from lf_predictor_ros.core.odometry import DAMPING_MEMORY_DOFS
+    from lf_predictor_ros.core.odometry import DAMPING_MEMORY_DOFS, FITTED_DAMPING_DOFS
 
     model, poses, tau = _open_loop_vessel(6)
     read_gain = 1.6 * np.diag(model.input_gain)  # a read 1.6× too strong
@@ -418,6 +418,15 @@ def test_the_fitted_damping_scales_gain_and_rates_and_keeps_the_damping_force() 
     assert rate is not None
     np.testing.assert_allclose(rate, raw_kept / scale, rtol=1e-12)
     np.testing.assert_allclose(gain, read_gain / scale, rtol=1e-12)
+    # controller_read_fitted_damping_dofs 'yaw': surge and sway keep the read gain and rate
+    gain, rate, _, _ = _damping_chosen(poses, tau, 1.0, None, read_gain, freq, None,
+                                       memory_all, True, fitted_dofs=FITTED_DAMPING_DOFS['yaw'])
+    scale = fitted_damping_scale(freq, raw)
+    assert rate is not None
+    np.testing.assert_allclose(gain, read_gain / [1.0, 1.0, scale[2]], rtol=1e-12)
+    np.testing.assert_allclose(rate, raw / [1.0, 1.0, scale[2]], rtol=1e-12)
+    with pytest.raises(ValueError, match='controller_read_fitted_damping_dofs must be one of'):
+        OdometryParams(controller_read_fitted_damping_dofs='off')
 
 
 @pytest.mark.parametrize(('fitted', 'kept'), [(False, 0.02), (True, 0.02 / 1e-6)])

@@ -316,7 +316,8 @@ class LfStateEstimator:
                 odometry.params.controller_read_pair_ratio or math.inf,
                 odometry.params.dead_reckoning_damping_refuse_bound,
                 FITTED_DAMPING_DOFS[odometry.params.controller_read_fitted_damping_dofs][
-                    :self.ndof])
+                    :self.ndof],
+                odometry.params.dead_reckoning_damping_turn)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -366,7 +367,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            controller_keep_dofs: bool = False, earth_fixed: bool = False,
            controller_pair_ratio: float = math.inf,
            damping_refuse_bound: bool = False,
-           controller_fitted_dofs: tuple[bool, ...] = ()) -> Learned:
+           controller_fitted_dofs: tuple[bool, ...] = (),
+           damping_turn: float = 0.0) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -404,8 +406,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     of forgetting it: a PD law still explains the thrust in the believed DOFs, so the controller
     has not changed, and a turn or a move spoils a DOF's blocks, not the controller.
     ``controller_pair_ratio``: `implied_input_gain`'s ``pair_ratio``.
-    ``damping_refuse_bound``, ``controller_fitted_dofs``: `_damping_chosen`'s
-    ``refuse_bound`` and ``fitted_dofs``.
+    ``damping_refuse_bound``, ``controller_fitted_dofs``, ``damping_turn``: `_damping_chosen`'s
+    ``refuse_bound``, ``fitted_dofs`` and ``turn``.
     ``earth_fixed``: without a known or read gain, the fit's environment is one earth-fixed
     force and a constant yaw moment (`lf_dynamics.fit_lf_dynamics`).
     The read returned is the one in force afterwards: this read if it succeeded,
@@ -446,7 +448,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                                                    input_gain, read_freq, kept_damping,
                                                    damping_memory, controller_fitted_damping,
                                                    damping_refuse_bound,
-                                                   controller_fitted_dofs)
+                                                   controller_fitted_dofs, damping_turn)
         note = '; '.join(part for part in (note, *parts) if part)
     try:
         memory: VesselMemory | None = learn_vessel_memory(values, forces, params.sample_time,
@@ -494,7 +496,8 @@ def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
                     sos: FloatArray | None, input_gain: FloatArray,
                     natural_freq: FloatArray | None, kept: KeptDamping | None,
                     damping_memory: tuple[bool, ...], fitted_damping: bool = False,
-                    refuse_bound: bool = False, fitted_dofs: tuple[bool, ...] = ()
+                    refuse_bound: bool = False, fitted_dofs: tuple[bool, ...] = (),
+                    turn: float = 0.0
                     ) -> tuple[FloatArray, FloatArray | None, FloatArray | None, list[str]]:
     """The thrust gain and damping rates the window's memory is learned with, before it is.
 
@@ -512,13 +515,19 @@ def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
     window did not identify it) never replaces a kept one, whatever its velocity energy: on
     rao_supply 1124 a window without a turn, after one the dropout had hidden, had 1.5× the
     start-up window's energy and its bound replaced a rate of 0.09 1/s (docs/BENCHMARKS.md,
-    fifty-eighth session). With ``natural_freq`` (the read's 2 Kp / Kd) the read
-    inertia is corrected for the rates (`controller_gains.damping_corrected_inertia`; with
-    ``fitted_damping``, `controller_gains.fitted_damping_scale`, which also scales the rates by
-    the same factor, keeping the fitted G / f), in the DOFs of ``fitted_dofs`` (empty: all;
-    the others keep the read gain and their rate). When
-    nothing changes (no rate kept, no correction), or the window cannot be fitted, the memory is
-    learned as without this: ``input_gain``, no fixed rates.
+    fifty-eighth session). With ``turn`` > 0 [rad] (3 DOF), the yaw's score is its energy only
+    in a window whose heading spans at least ``turn`` (one that saw a turn), else 0, and a
+    kept rate is replaced only by a window that scores more: a window without a turn fills an
+    empty memory but never replaces a kept rate (rao_supply 1116: a window without a turn, its
+    end in a 15 m move, had 5× the kept window's energy and fitted 2.9× the true yaw rate,
+    the sway–yaw coupling of the move that the diagonal model lacks).
+    With ``natural_freq`` (the read's 2 Kp / Kd) the read inertia is corrected for the rates
+    (`controller_gains.damping_corrected_inertia`; with ``fitted_damping``,
+    `controller_gains.fitted_damping_scale`, which also scales the rates by the same factor,
+    keeping the fitted G / f), in the DOFs of ``fitted_dofs`` (empty: all; the others keep the
+    read gain and their rate). When nothing changes (no rate kept, no correction), or the
+    window cannot be fitted, the memory is learned as without this: ``input_gain``, no fixed
+    rates.
     """
     n = input_gain.shape[0]
     dofs = np.array(damping_memory, dtype=bool)
@@ -530,9 +539,13 @@ def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
         return input_gain, None, None, []
     rate = -np.diag(model.damping)
     score = np.sum(body_velocity(values, sample_time) ** 2, axis=0)
+    gated = turn > 0.0 and n == 3
+    if gated and np.ptp(values[:, 2]) < turn:
+        score[2] = 0.0
     parts = []
     if kept is not None and dofs.shape == (n,) and kept[0].shape == (n,):
-        older = dofs & ((kept[1] > score) | (refuse_bound & (rate <= MIN_DAMPING_RATE)))
+        outscored = kept[1] >= score if gated else kept[1] > score
+        older = dofs & (outscored | (refuse_bound & (rate <= MIN_DAMPING_RATE)))
         # with ``fitted_damping`` the kept values are damping forces per velocity D_i: the rate
         # they make under this window's gain
         kept_rate = kept[0] * input_gain if fitted_damping else kept[0]

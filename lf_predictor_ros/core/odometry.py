@@ -444,6 +444,14 @@ class OdometryParams:
         'energy decides alone (rao_supply 1124: a window without a turn, after one a dropout '
         'had hidden, replaced 0.09 1/s by the bound, and the heading through the next turn '
         'ended 1.5 rad off; docs/BENCHMARKS.md, fifty-eighth session)', ''))
+    dead_reckoning_damping_turn: float = field(default=0.0, metadata=field_doc(
+        'with dead_reckoning_damping_memory, 3 DOF: the kept yaw damping rate is replaced '
+        'only by a window whose heading spans at least this much (a turn) and that moved more '
+        'than the kept one; a window without a turn fills an empty memory only. A window '
+        'without a turn cannot identify the yaw damping, and its velocity energy does not '
+        'say so: a window at the end of a move (sway-yaw coupling) fitted 2.9x the true rate '
+        'with 5x the energy of the start-up window it replaced (rao_supply 1116); 0: off, the '
+        'energy decides alone (docs/BENCHMARKS.md, fifty-eighth session)', 'rad'))
     controller_read_earth_frame: bool = field(default=True, metadata=field_doc(
         'with controller_inertia, 3 DOF: high-pass the estimates and the commands in the earth '
         'frame before turning them into the body frame (a turn away from the setpoint origin '
@@ -570,6 +578,10 @@ class OdometryParams:
             raise ValueError('vessel_inertia must be 3 finite numbers, all 0 (learn) or all > 0 '
                              f'[kg, kg, kg·m²], got {self.vessel_inertia}')
         object.__setattr__(self, 'vessel_inertia', inertia)
+        if not (math.isfinite(self.dead_reckoning_damping_turn) and
+                0.0 <= self.dead_reckoning_damping_turn <= math.pi):
+            raise ValueError('dead_reckoning_damping_turn must be in [0, pi] rad (0: off), '
+                             f'got {self.dead_reckoning_damping_turn}')
         if self.controller_read_fitted_damping_dofs not in FITTED_DAMPING_DOFS:
             raise ValueError(f'controller_read_fitted_damping_dofs must be one of '
                              f'{sorted(FITTED_DAMPING_DOFS)}, got '

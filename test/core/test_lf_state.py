@@ -345,6 +345,39 @@ def test_the_damping_memory_of_the_yaw_alone_keeps_surge_and_sway_as_fitted() ->
         OdometryParams(dead_reckoning_damping_memory='heading')
 
 
+def test_the_damping_memory_keeps_the_yaw_rate_of_a_turn() -> None:
+    """dead_reckoning_damping_turn: without a turn a window scores 0 in yaw and never replaces."""
+    from lf_predictor_ros.core.lf_state import _damping_chosen
+    from lf_predictor_ros.core.odometry import DAMPING_MEMORY_DOFS
+
+    model, poses, tau = _open_loop_vessel(5)
+    gain, yaw = np.diag(model.input_gain), DAMPING_MEMORY_DOFS['yaw']
+    span = float(np.ptp(poses[:, 2]))
+    energy = float(np.sum(body_velocity(poses, 1.0)[:, 2] ** 2))
+    assert span > 0.1 and energy > 0.0
+    # no turn (the heading spans less than ``turn``): nothing kept, the window's own rate, score 0
+    _, rate, score, _ = _damping_chosen(poses, tau, 1.0, None, gain, None, None, yaw,
+                                        turn=span + 0.1)
+    assert rate is None and score is not None and score[2] == 0.0
+    # ... and a kept rate of another window without a turn stands (ties keep the older)
+    kept = (np.array([0.5, 0.5, 0.07]), np.zeros(3))
+    _, rate, score, _ = _damping_chosen(poses, tau, 1.0, None, gain, None, kept, yaw,
+                                        turn=span + 0.1)
+    assert rate is not None and score is not None and rate[2] == 0.07 and score[2] == 0.0
+    # without the option the energy replaces it
+    _, rate, score, _ = _damping_chosen(poses, tau, 1.0, None, gain, None, kept, yaw)
+    assert rate is None and score is not None and score[2] == pytest.approx(energy)
+    # a turn: the energy decides as without the option
+    _, rate, score, _ = _damping_chosen(poses, tau, 1.0, None, gain, None, kept, yaw,
+                                        turn=span / 2)
+    assert rate is None and score is not None and score[2] == pytest.approx(energy)
+    more = (kept[0], np.full(3, 10 * energy))
+    _, rate, _, _ = _damping_chosen(poses, tau, 1.0, None, gain, None, more, yaw, turn=span / 2)
+    assert rate is not None and rate[2] == 0.07
+    with pytest.raises(ValueError, match='dead_reckoning_damping_turn must be in'):
+        OdometryParams(dead_reckoning_damping_turn=-0.1)
+
+
 def test_the_damping_memory_can_refuse_a_rate_at_the_bound() -> None:
     """dead_reckoning_damping_refuse_bound: a rate fitted at its bound is never kept over one.
 

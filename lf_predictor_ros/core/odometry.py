@@ -444,14 +444,16 @@ class OdometryParams:
         'energy decides alone (rao_supply 1124: a window without a turn, after one a dropout '
         'had hidden, replaced 0.09 1/s by the bound, and the heading through the next turn '
         'ended 1.5 rad off; docs/BENCHMARKS.md, fifty-eighth session)', ''))
-    dead_reckoning_damping_turn: float = field(default=0.0, metadata=field_doc(
+    dead_reckoning_damping_turn: float = field(default=0.3, metadata=field_doc(
         'with dead_reckoning_damping_memory, 3 DOF: the kept yaw damping rate is replaced '
         'only by a window whose heading spans at least this much (a turn) and that moved more '
         'than the kept one; a window without a turn fills an empty memory only. A window '
         'without a turn cannot identify the yaw damping, and its velocity energy does not '
         'say so: a window at the end of a move (sway-yaw coupling) fitted 2.9x the true rate '
         'with 5x the energy of the start-up window it replaced (rao_supply 1116); 0: off, the '
-        'energy decides alone (docs/BENCHMARKS.md, fifty-eighth session)', 'rad'))
+        'energy decides alone. 0.3 rad (taken, not tuned: between the settling after a turn '
+        'and the smallest setpoint turn) is the default since the fifty-eighth session (rule '
+        'Q; docs/BENCHMARKS.md)', 'rad'))
     controller_read_earth_frame: bool = field(default=True, metadata=field_doc(
         'with controller_inertia, 3 DOF: high-pass the estimates and the commands in the earth '
         'frame before turning them into the body frame (a turn away from the setpoint origin '

@@ -304,15 +304,20 @@ def test_the_damping_memory_keeps_the_rate_of_the_most_excited_window() -> None:
     assert off.model.damping[0, 0] == free.model.damping[0, 0]
 
 
-def _open_loop_vessel(seed: int) -> tuple[LfDynamics, np.ndarray, np.ndarray]:
-    """A 3-DOF model (T = 80 / 40 / 12 s) driven 1500 s by smooth random thrust: model, η, τ."""
+def _open_loop_vessel(seed: int, yaw: float = -1 / 12.0, yaw_moment: float = 5e7
+                      ) -> tuple[LfDynamics, np.ndarray, np.ndarray]:
+    """A 3-DOF model (T = 80 / 40 / 12 s) driven 1500 s by smooth random thrust: model, η, τ.
+
+    ``yaw``: the yaw's F_33 [1/s] (> 0: a yaw that grows); ``yaw_moment``: the thrust's yaw
+    scale [N m].
+    """
     from lf_predictor_ros.core.lf_dynamics import dead_reckon_step
 
-    model = LfDynamics(np.diag([-1 / 80.0, -1 / 40.0, -1 / 12.0]),
+    model = LfDynamics(np.diag([-1 / 80.0, -1 / 40.0, yaw]),
                        np.diag([1.5e-7, 9e-8, 2.2e-10]), np.zeros((3, 3)), np.zeros(3))
     rng = np.random.default_rng(seed)
     tau = np.apply_along_axis(lambda x: np.convolve(x, np.ones(30) / 30.0, 'same'), 0,
-                              rng.standard_normal((1500, 3)) * np.array([2e5, 2e5, 5e7]))
+                              rng.standard_normal((1500, 3)) * np.array([2e5, 2e5, yaw_moment]))
     eta, nu = np.zeros(3), np.zeros(3)
     poses = np.empty((1500, 3))
     for k in range(1500):
@@ -384,24 +389,11 @@ def test_the_damping_memory_can_refuse_a_rate_at_the_bound() -> None:
     The window's yaw grows (0.002 1/s), so its fit holds the rate at the bound; with the option
     it does not replace a kept rate, however much more it moved.
     """
-    from lf_predictor_ros.core.lf_dynamics import (
-        MIN_DAMPING_RATE,
-        dead_reckon_step,
-        fit_lf_dynamics,
-    )
+    from lf_predictor_ros.core.lf_dynamics import MIN_DAMPING_RATE, fit_lf_dynamics
     from lf_predictor_ros.core.lf_state import _damping_chosen
     from lf_predictor_ros.core.odometry import DAMPING_MEMORY_DOFS
 
-    model = LfDynamics(np.diag([-1 / 80.0, -1 / 40.0, 0.002]),
-                       np.diag([1.5e-7, 9e-8, 2.2e-10]), np.zeros((3, 3)), np.zeros(3))
-    rng = np.random.default_rng(5)
-    tau = np.apply_along_axis(lambda x: np.convolve(x, np.ones(30) / 30.0, 'same'), 0,
-                              rng.standard_normal((1500, 3)) * np.array([2e5, 2e5, 5e5]))
-    eta, nu = np.zeros(3), np.zeros(3)
-    poses = np.empty((1500, 3))
-    for k in range(1500):
-        poses[k] = eta
-        eta, nu = dead_reckon_step(model, 'model', eta, nu, tau[k], 1.0)
+    model, poses, tau = _open_loop_vessel(5, yaw=0.002, yaw_moment=5e5)
     gain = np.diag(model.input_gain)
     yaw = DAMPING_MEMORY_DOFS['yaw']
     own = _damping_chosen(poses, tau, 1.0, None, gain, None, None, yaw)

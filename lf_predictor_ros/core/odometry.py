@@ -584,17 +584,11 @@ class OdometryParams:
                 0.0 <= self.dead_reckoning_damping_turn <= math.pi):
             raise ValueError('dead_reckoning_damping_turn must be in [0, pi] rad (0: off), '
                              f'got {self.dead_reckoning_damping_turn}')
-        if self.controller_read_fitted_damping_dofs not in FITTED_DAMPING_DOFS:
-            raise ValueError(f'controller_read_fitted_damping_dofs must be one of '
-                             f'{sorted(FITTED_DAMPING_DOFS)}, got '
-                             f'{self.controller_read_fitted_damping_dofs!r}')
-        if self.dead_reckoning_damping_memory not in DAMPING_MEMORY_DOFS:
-            raise ValueError(f'dead_reckoning_damping_memory must be one of '
-                             f'{tuple(DAMPING_MEMORY_DOFS)}, got '
-                             f'{self.dead_reckoning_damping_memory!r}')
-        if self.controller_read_stiffness_frame not in STIFFNESS_FRAMES:
-            raise ValueError(f'controller_read_stiffness_frame must be one of '
-                             f'{STIFFNESS_FRAMES}, got {self.controller_read_stiffness_frame!r}')
+        for name, choices in (('controller_read_fitted_damping_dofs', tuple(FITTED_DAMPING_DOFS)),
+                              ('dead_reckoning_damping_memory', tuple(DAMPING_MEMORY_DOFS)),
+                              ('controller_read_stiffness_frame', tuple(STIFFNESS_FRAMES))):
+            if getattr(self, name) not in choices:
+                raise ValueError(f'{name} must be one of {choices}, got {getattr(self, name)!r}')
         if self.dead_reckoner not in ('auto', *DEAD_RECKONERS):
             raise ValueError(f"dead_reckoner must be 'auto' or one of {DEAD_RECKONERS}, got "
                              f'{self.dead_reckoner!r}')
@@ -1950,7 +1944,6 @@ def _kinematic_transition(heading: float, h: float, ndof: int) -> tuple[FloatArr
         a[0, 5] = a[1, 5] = a[2, 3] = a[2, 4] = h * 0.0
         a[2, 5] = h * 1.0
     return a, np.zeros(2 * ndof)
-
 
 
 def _horizontal_group(dofs: NDArray[np.bool_]) -> NDArray[np.bool_]:

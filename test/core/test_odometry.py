@@ -1437,3 +1437,11 @@ def test_the_moving_gate_with_a_slow_gate_waits_for_the_move_to_begin(
         assert moving is not None and moving.tolist() == [True, True, False]
     else:
         assert moving is None
+
+
+@pytest.mark.parametrize('name', ['controller_read_fitted_damping_dofs',
+                                  'dead_reckoning_damping_memory',
+                                  'controller_read_stiffness_frame'])
+def test_a_choice_outside_its_choices_is_refused(name: str) -> None:
+    with pytest.raises(ValueError, match=f"{name} must be one of .*, got 'heading'"):
+        OdometryParams(**{name: 'heading'})

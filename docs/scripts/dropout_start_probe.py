@@ -13,6 +13,10 @@ start twist against the true LF body velocity, the vessel memory's model (time c
 gain / the true 1/M_ii), and both estimators' error against their own loop's true LF pose 10, 30
 and 59 s in. ``--oracle``: the simulator's damping rates in the fit and the read corrected for
 them (`dead_reckoning_oracle_probe.patch('true_damping')` and ``controller_read_damping``).
+``--log-damping``: every damping choice of lf_odom's vessel memory (`lf_state._damping_chosen`),
+one line each: the window's heading range, the window's own rates (its fit with the read gain),
+the rates and scores chosen, and the thrust gain / the true 1/M_ii (the fifty-eighth session's
+traces).
 Supply vessel scenarios only (rao_supply, rao_swell); development seeds only; the fifty-fifth
 session's section of docs/BENCHMARKS.md.
 """
@@ -33,7 +37,14 @@ from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
 from lf_predictor_ros.benchmark.estimators import make_estimator, predictor_params  # noqa: E402
 from lf_predictor_ros.benchmark.recordings import run_loop  # noqa: E402
 from lf_predictor_ros.benchmark.suite import make_setup  # noqa: E402
-from lf_predictor_ros.core.lf_dynamics import LfDynamics, body_velocity, heading_basis  # noqa: E402,E501
+from lf_predictor_ros.core import lf_state  # noqa: E402
+from lf_predictor_ros.core.lf_dynamics import (  # noqa: E402
+    LfDynamics,
+    body_velocity,
+    fit_lf_dynamics,
+    heading_basis,
+    paired_forces,
+)
 from lf_predictor_ros.core.odometry import LfOdometry, OdometryEstimate, OdometryParams  # noqa: E402,E501
 from sim_ros.physics.vessels import SUPPLY_D, SUPPLY_M  # noqa: E402
 from sim_ros.simulation import SimRecord, load_scenario  # noqa: E402
@@ -145,16 +156,47 @@ def one(name: str, seed: int, spread: float, moves: list[float] | None,
                   f'{np.round(errors[1], 2)}')
 
 
+def log_damping_choices() -> None:
+    """Wrap `lf_state._damping_chosen` to print every choice (``--log-damping``)."""
+    original = lf_state._damping_chosen  # noqa: SLF001
+    true_gain = np.diag(np.linalg.inv(SUPPLY_M))
+
+    def logged(values: FloatArray, forces: FloatArray, sample_time: float, sos: Any,
+               input_gain: FloatArray, natural_freq: Any, kept: Any, *args: Any,
+               **kwargs: Any) -> Any:
+        gain, rate, score, parts = original(values, forces, sample_time, sos, input_gain,
+                                            natural_freq, kept, *args, **kwargs)
+        try:
+            own = -np.diag(fit_lf_dynamics(values, paired_forces(forces, sos), sample_time,
+                                           input_gain=input_gain).damping)
+        except ValueError:
+            own = None
+        heading = values[:, 2] if values.shape[1] == 3 else np.zeros(1)
+        print(f'   damping choice: window {values.shape[0] * sample_time:.0f} s, heading '
+              f'{heading.min():.2f}…{heading.max():.2f} rad | own rates '
+              f'{None if own is None else np.round(own, 3)} | chosen '
+              f'{None if rate is None else np.round(rate, 3)} 1/s, scores '
+              f'{None if score is None else np.array2string(score, precision=2)} | gain / true '
+              f'{np.round(gain / true_gain[:gain.shape[0]], 2)} | {"; ".join(parts)}')
+        return gain, rate, score, parts
+
+    lf_state._damping_chosen = logged  # noqa: SLF001
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point."""
     parser = mdp.dropout_parser(__doc__)
     parser.add_argument('--oracle', action='store_true',
                         help="the simulator's damping and the read corrected for it")
+    parser.add_argument('--log-damping', action='store_true',
+                        help="print every damping choice of lf_odom's vessel memory")
     args, cases, overrides = mdp.parse_dropout_args(parser, argv)
     if args.oracle:
         oracle_probe.patch('true_damping')
         overrides['controller_read_damping'] = True
     odometry = OdometryParams(**overrides)
+    if args.log_damping:
+        log_damping_choices()
     torch.set_num_threads(1)
     for name, seed in cases:
         one(name, seed, args.spread, args.moves, odometry)

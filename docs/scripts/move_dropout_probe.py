@@ -59,7 +59,10 @@ def parse_dropout_args(parser: argparse.ArgumentParser, argv: Sequence[str] | No
         cases = mp.parse_cases(args.cases, mp.DEVELOPMENT_SEEDS)
     except ValueError as exc:
         parser.error(str(exc))
-    overrides = ob._odometry_overrides(args.odometry) or {}  # noqa: SLF001 - the CLI's parser
+    overrides = ob._odometry_overrides(args.odometry)  # noqa: SLF001 - the CLI's parser
+    if overrides is None:  # a bad field was silently dropped before: the run was the default's
+        parser.error('--odometry takes FIELD=VALUE with FIELD an OdometryParams field and a '
+                     f'valid value, got {args.odometry}')
     return args, cases, overrides
 
 

@@ -74,6 +74,20 @@ ReadOutcome = Literal['read', 'no_data', 'no_fit']
 
 
 @dataclass(frozen=True)
+class ReadPool:
+    """The controller's block reads kept across windows (``controller_read_pool_blocks``).
+
+    Attributes:
+        end: stamp of the newest published estimate a pooled block used [s]; later reads take
+            only blocks of estimates after it, so every sample is read once.
+        blocks: one `ControllerGains` per full block, oldest first.
+    """
+
+    end: float
+    blocks: tuple[ControllerGains, ...]
+
+
+@dataclass(frozen=True)
 class ControllerRead:
     """One attempt to read the DP controller's implied thrust gain (`implied_input_gain`).
 
@@ -90,6 +104,7 @@ class ControllerRead:
         partial_gain, partial_freq: a block read ('no_fit') that believes some DOFs but not all:
             1/M_ii and 2 Kp / Kd of the believed DOFs, NaN in the others (None otherwise;
             `_learn`'s ``controller_keep_dofs``).
+        pool: the pooled block reads after this read (`pooled_input_gain`; None without).
     """
 
     gain: FloatArray | None
@@ -99,6 +114,7 @@ class ControllerRead:
     natural_freq: FloatArray | None = None
     partial_gain: FloatArray | None = None
     partial_freq: FloatArray | None = None
+    pool: ReadPool | None = None
 
     def __post_init__(self) -> None:
         """Keep read-only copies of the arrays (a read is handed between threads)."""
@@ -141,6 +157,8 @@ class LfStateEstimator:
         self._controller_read: ControllerRead | None = None
         # the damping rates kept across windows (``dead_reckoning_damping_memory``)
         self._kept_damping: KeptDamping | None = None
+        # the controller's block reads kept across windows (``controller_read_pool_blocks``)
+        self._read_pool: ReadPool | None = None
         # the controller's commands, kept across segments (matched to the published estimates)
         self._command_times: deque[float] = deque(maxlen=self._capacity)
         self._commands: deque[FloatArray] = deque(maxlen=self._capacity)
@@ -217,6 +235,7 @@ class LfStateEstimator:
         self.odometry = odometry
         self._controller_read = previous.controller_read
         self._kept_damping = previous._kept_damping
+        self._read_pool = previous._read_pool
         self._command_times.extend(previous._command_times)
         self._commands.extend(previous._commands)
 
@@ -227,6 +246,7 @@ class LfStateEstimator:
         self._job = None
         self._controller_read = None
         self._kept_damping = None
+        self._read_pool = None
         self._command_times.clear()
         self._commands.clear()
         self._restart_buffers()
@@ -317,7 +337,8 @@ class LfStateEstimator:
                 odometry.params.dead_reckoning_damping_refuse_bound,
                 FITTED_DAMPING_DOFS[odometry.params.controller_read_fitted_damping_dofs][
                     :self.ndof],
-                odometry.params.dead_reckoning_damping_turn)
+                odometry.params.dead_reckoning_damping_turn, self._read_pool,
+                odometry.params.controller_read_pool_blocks)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -339,6 +360,8 @@ class LfStateEstimator:
         memory, covariances, controller_read = result
         self.odometry.apply_learned(memory, covariances)
         self._controller_read = controller_read
+        if controller_read is not None and controller_read.pool is not None:
+            self._read_pool = controller_read.pool
         if memory is not None and memory.model is not None and memory.damping_score is not None:
             rate = -np.diag(memory.model.damping)
             if self.odometry.params.controller_read_fitted_damping:
@@ -368,7 +391,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            controller_pair_ratio: float = math.inf,
            damping_refuse_bound: bool = False,
            controller_fitted_dofs: tuple[bool, ...] = (),
-           damping_turn: float = 0.0) -> Learned:
+           damping_turn: float = 0.0, read_pool: ReadPool | None = None,
+           pool_blocks: int = 0) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -408,6 +432,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     ``controller_pair_ratio``: `implied_input_gain`'s ``pair_ratio``.
     ``damping_refuse_bound``, ``controller_fitted_dofs``, ``damping_turn``: `_damping_chosen`'s
     ``refuse_bound``, ``fitted_dofs`` and ``turn``.
+    ``pool_blocks`` > 0: the controller is read from the last that many blocks ever read
+    (`pooled_input_gain`, continuing ``read_pool``); the read returned carries the pool after.
     ``earth_fixed``: without a known or read gain, the fit's environment is one earth-fixed
     force and a constant yaw moment (`lf_dynamics.fit_lf_dynamics`).
     The read returned is the one in force afterwards: this read if it succeeded,
@@ -418,11 +444,18 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                                                             peak_damping)
     source = 'vessel_inertia' if input_gain is not None else ''
     read: ControllerRead | None = None
+    pool: ReadPool | None = None
     if commands is not None:
         bound = math.inf if wave_peak_freq is None else MAX_NATURAL_FREQ_RATIO * wave_peak_freq
-        read = implied_input_gain(published, *commands, params.sample_time,
-                                  controller_block_time, controller_earth_frame, bound,
-                                  controller_stiffness_frame, controller_pair_ratio)
+        if pool_blocks > 0:
+            read, pool = pooled_input_gain(published, *commands, params.sample_time,
+                                           controller_block_time, read_pool, pool_blocks,
+                                           controller_earth_frame, bound,
+                                           controller_stiffness_frame, controller_pair_ratio)
+        else:
+            read = implied_input_gain(published, *commands, params.sample_time,
+                                      controller_block_time, controller_earth_frame, bound,
+                                      controller_stiffness_frame, controller_pair_ratio)
     elif remembered is not None:
         read = ControllerRead(None, 'controller gains: no commands', 'no_data')
     in_force: ControllerRead | None = read if read is not None and read.outcome == 'read' \
@@ -468,6 +501,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     if twist_attenuation and wave_peak_freq is not None:
         # `retraining.narrow_reference` filters with the narrow notch, the targets with ``sos``
         reference_filter = sos if reference is None else target_filter(params, wave_peak_freq)
+    if pool is not None and in_force is not None:
+        in_force = replace(in_force, pool=pool)
     return memory, calibrate(published, times, values if reference is None else reference,
                              params.ndof, params.sample_time, min_samples, lag_prior,
                              twin_fit, cutoff, pose_edge, twist_likelihood,
@@ -604,15 +639,8 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     """
     if not published or times.shape[0] == 0:
         return ControllerRead(None, 'controller gains: no data', 'no_data')
-    stamps = np.array([p.stamp for p in published])
-    index = np.searchsorted(times, stamps - 0.5 * sample_time)
-    index = np.clip(index, 0, times.shape[0] - 1)
-    matched = np.abs(times[index] - stamps) < 0.5 * sample_time
-    # blocks of equal `matched` without a gap in the stamps: [edges[j], edges[j + 1])
-    edges = np.flatnonzero(np.r_[True, (np.diff(stamps) > 1.5 * sample_time) |
-                                 (matched[1:] != matched[:-1]), True])
+    stamps, index, runs = _paired_runs(published, times, sample_time)
     need = MIN_SAMPLES + 2 * MAX_SHIFT
-    runs = [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True) if matched[a]]
     longest = max((b - a for a, b in runs), default=0)
     runs = [(a, b) for a, b in runs if b - a >= need]
     if not runs:
@@ -650,6 +678,72 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
                                           f"{', '.join(f'{v:.3g}' for v in inertia)} "
                                           f'(R² {r2}; {used})'), 'read', float(stamps[rows[-1]]),
                           gains.natural_freq())
+
+
+def _paired_runs(published: list[Published], times: FloatArray, sample_time: float
+                 ) -> tuple[FloatArray, NDArray[np.intp], list[tuple[int, int]]]:
+    """The published estimates paired with the commands stamped like them.
+
+    Returns (the estimates' stamps, the index of each one's command, the contiguous runs
+    [start, end) of paired estimates): a run is broken by a gap in the stamps or by an estimate
+    without a command.
+    """
+    stamps = np.array([p.stamp for p in published])
+    index = np.searchsorted(times, stamps - 0.5 * sample_time)
+    index = np.clip(index, 0, times.shape[0] - 1)
+    matched = np.abs(times[index] - stamps) < 0.5 * sample_time
+    # blocks of equal `matched` without a gap in the stamps: [edges[j], edges[j + 1])
+    edges = np.flatnonzero(np.r_[True, (np.diff(stamps) > 1.5 * sample_time) |
+                                 (matched[1:] != matched[:-1]), True])
+    runs = [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True) if matched[a]]
+    return stamps, index, runs
+
+
+def pooled_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,
+                      sample_time: float, block_time: float, pool: ReadPool | None,
+                      pool_blocks: int, earth_highpass: bool = False,
+                      max_natural_freq: float = math.inf, stiffness_frame: str = 'body',
+                      pair_ratio: float = math.inf) -> tuple[ControllerRead, ReadPool]:
+    """`implied_input_gain` from the last ``pool_blocks`` blocks ever read, each read once.
+
+    The controller of a DP vessel does not change from one window to the next, but its read
+    did: the history of one window holds 2–4 blocks of ``block_time``, most with a setpoint move
+    or a turn in them, and their median moved the read yaw inertia by 0.4–2.5× between two
+    dropouts of one loop (rao_supply 1148, docs/BENCHMARKS.md, fifty-ninth session). Here only
+    the full blocks of paired estimates after ``pool.end`` are read (a run's tail shorter than
+    a block waits for the next read; one cut by a gap is left out), appended to the pool, and
+    the read is `_median_read` over the newest ``pool_blocks`` of them. Returns (the read, the
+    pool after it); 'no_data' until the first full block.
+    """
+    end = -math.inf if pool is None else pool.end
+    kept: tuple[ControllerGains, ...] = () if pool is None else pool.blocks
+    if not published or times.shape[0] == 0:
+        return ControllerRead(None, 'controller gains: no data', 'no_data'), \
+            ReadPool(end, kept)
+    stamps, index, runs = _paired_runs(published, times, sample_time)
+    block = max(int(round(block_time / sample_time)), MIN_SAMPLES + 2 * MAX_SHIFT)
+    poses = np.array([p.pose for p in published])
+    twists = np.array([p.twist for p in published])
+    new: list[ControllerGains] = []
+    for a, b in runs:
+        first = a + int(np.searchsorted(stamps[a:b], end, side='right'))
+        for start in range(first, b - block + 1, block):
+            rows = slice(start, start + block)
+            try:
+                new.append(fit_controller_gains(poses[rows], twists[rows],
+                                                forces[index[rows]], sample_time,
+                                                earth_highpass=earth_highpass,
+                                                stiffness_frame=stiffness_frame))
+            except ValueError:  # non-finite values: this block says nothing
+                pass
+            end = float(stamps[start + block - 1])
+    after = ReadPool(end, (kept + tuple(new))[-pool_blocks:])
+    if not after.blocks:
+        return ControllerRead(None, f'controller gains: no full block of {block} paired '
+                                    'samples yet', 'no_data'), after
+    read = _median_read(list(after.blocks), end, block * len(after.blocks), block_time,
+                        max_natural_freq, pair_ratio)
+    return replace(read, note=f'{read.note}; pooled, {len(new)} new'), after
 
 
 def _median_read(reads: list[ControllerGains], stamp: float, samples: int,

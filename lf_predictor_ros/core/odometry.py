@@ -402,6 +402,14 @@ class OdometryParams:
         'against omega_r 0.255 rad/s), while surge and sway are read 1.1-1.3x and their '
         'fitted rates often sit at the bound or vary 10x between windows (docs/BENCHMARKS.md, '
         'fifty-eighth session)', ''))
+    controller_read_pool_blocks: int = field(default=0, metadata=field_doc(
+        'with controller_inertia and controller_read_block_time > 0: the controller is read '
+        'from the newest this many blocks ever read (each block of published estimates read '
+        "once, kept across windows) instead of the blocks in one window's history; 0: off. "
+        "The controller does not change between windows, but one window's 2-4 blocks, most "
+        'with a move or a turn in them, moved the read yaw inertia 0.4-2.5x between two '
+        'dropouts of one loop (core.lf_state.pooled_input_gain; docs/BENCHMARKS.md, '
+        'fifty-ninth session)', ''))
     controller_read_keep_dofs: bool = field(default=True, metadata=field_doc(
         'with controller_inertia: a read whose blocks believe some DOFs but in another none '
         "(a turn spoils yaw's blocks) keeps the last successful read's inertia in that DOF "
@@ -596,6 +604,12 @@ class OdometryParams:
                 self.controller_read_block_time >= 0.0):
             raise ValueError('controller_read_block_time must be a finite number >= 0 [s] (0: one '
                              f'pooled read), got {self.controller_read_block_time}')
+        if self.controller_read_pool_blocks < 0 or (self.controller_read_pool_blocks > 0 and
+                                                    self.controller_read_block_time <= 0.0):
+            raise ValueError('controller_read_pool_blocks must be 0 (off) or a count > 0 with '
+                             'controller_read_block_time > 0, got '
+                             f'{self.controller_read_pool_blocks} (block time '
+                             f'{self.controller_read_block_time} s)')
         if self.min_calibration_samples < 1:
             raise ValueError('min_calibration_samples must be >= 1, got '
                              f'{self.min_calibration_samples}')

@@ -9,7 +9,11 @@ import pytest
 import torch
 
 from lf_predictor_ros.core.lf_dynamics import DriftCurve, LfDynamics, VesselMemory, body_velocity
-from lf_predictor_ros.core.lf_state import LfStateEstimator, implied_input_gain
+from lf_predictor_ros.core.lf_state import (
+    LfStateEstimator,
+    implied_input_gain,
+    pooled_input_gain,
+)
 from lf_predictor_ros.core.odometry import (
     LfOdometry,
     OdometryParams,
@@ -201,6 +205,55 @@ def test_a_block_read_outvotes_a_spoilt_stretch_of_commands() -> None:
     assert 'controller gains not read (0 of 4 blocks of 150 s believed)' in read.note
 
 
+def test_a_pooled_read_reads_every_block_once_and_outvotes_a_wrong_one() -> None:
+    """``pool_blocks``: full blocks only, each read once across windows; median over the pool.
+
+    The last block's thrust is doubled (Kp and Kd twice: a block read 2× the inertia that the
+    PD law still explains). A window of its two newest blocks reads the median of M and 2 M,
+    1.5 M; the pool of all four, three of them right, reads M exactly.
+    """
+    published, times, forces = _published_pd_loop(600)
+    truth = 8.0e4 / 3.0e5 ** 2  # 4 Kp / Kd²
+    forces[450:600] *= 2.0
+    window = implied_input_gain(published[300:], times[300:], forces[300:], 1.0,
+                                block_time=150.0)
+    assert window.gain is not None and window.gain[0] == pytest.approx(truth / 1.5, rel=1e-6)
+    # 250 samples: one full block, the 100-sample tail waits for the next read
+    read, pool = pooled_input_gain(published[:250], times[:250], forces[:250], 1.0, 150.0,
+                                   None, 8)
+    assert read.outcome == 'read' and read.gain is not None and read.stamp == 149.0
+    assert pool.end == 149.0 and len(pool.blocks) == 1
+    np.testing.assert_allclose(read.gain, [truth], rtol=1e-6)
+    assert '(median; 1 of 1 blocks of 150 s believed; 150 samples); pooled, 1 new' in read.note
+    # the newest 300 samples only (the window's history): blocks 150–299 (its first half
+    # missing from this history: left out), 300–449, 450–599 → two new
+    read, pool = pooled_input_gain(published[300:], times[300:], forces[300:], 1.0, 150.0,
+                                   pool, 8)
+    assert pool.end == 599.0 and len(pool.blocks) == 3 and 'pooled, 2 new' in read.note
+    assert read.gain is not None and read.gain[0] == pytest.approx(truth, rel=1e-6)
+    # the same history again: nothing new is read, the same blocks, the same read
+    again, same = pooled_input_gain(published, times, forces, 1.0, 150.0, pool, 8)
+    assert same.end == 599.0 and all(a is b for a, b in zip(same.blocks, pool.blocks,
+                                                             strict=True))
+    assert 'pooled, 0 new' in again.note and again.gain is not None
+    assert again.gain[0] == pytest.approx(truth, rel=1e-6)
+    # from scratch on the whole history: 4 blocks, median of M, M, M, 2 M
+    read, pool = pooled_input_gain(published, times, forces, 1.0, 150.0, None, 8)
+    assert len(pool.blocks) == 4 and read.gain is not None
+    assert read.gain[0] == pytest.approx(truth, rel=1e-6)
+    # a pool of 2 keeps the newest two: the window's answer again
+    read, small = pooled_input_gain(published, times, forces, 1.0, 150.0, None, 2)
+    assert len(small.blocks) == 2 and read.gain is not None
+    assert read.gain[0] == pytest.approx(truth / 1.5, rel=1e-6)
+    # no full block yet, or no data: nothing read, the pool unchanged
+    read, empty = pooled_input_gain(published[:100], times[:100], forces[:100], 1.0, 150.0,
+                                    None, 8)
+    assert read.gain is None and read.outcome == 'no_data' and empty.blocks == ()
+    assert 'no full block of 150 paired samples yet' in read.note
+    read, kept = pooled_input_gain([], times, forces, 1.0, 150.0, pool, 8)
+    assert read.outcome == 'no_data' and kept.blocks == pool.blocks and kept.end == pool.end
+
+
 def test_the_controller_implied_inertia_reaches_the_memory_unless_one_is_given() -> None:
     """_learn with the controller's commands: G = 4 Kp / Kd², known_gain 'controller'."""
     from lf_predictor_ros.core.lf_state import _learn
@@ -216,6 +269,17 @@ def test_the_controller_implied_inertia_reaches_the_memory_unless_one_is_given()
     assert memory.model.input_gain[0, 0] == pytest.approx(8.0e4 / 3.0e5 ** 2, rel=1e-6)
     assert 'controller-implied inertia' in memory.message
     assert read is not None and read.outcome == 'read' and read.stamp == 1199.0
+    assert read.pool is None
+    # pooled (controller_read_pool_blocks): the read carries its pool, which the next continues
+    memory, _, pooled = _learn(*args, None, (stamps, commands), controller_block_time=300.0,
+                               pool_blocks=8)
+    assert pooled is not None and pooled.pool is not None and len(pooled.pool.blocks) == 4
+    assert memory is not None and memory.model is not None
+    assert memory.model.input_gain[0, 0] == pytest.approx(8.0e4 / 3.0e5 ** 2, rel=1e-6)
+    _, _, again = _learn(*args, None, (stamps, commands), controller_block_time=300.0,
+                         read_pool=pooled.pool, pool_blocks=8)
+    assert again is not None and again.pool is not None and len(again.pool.blocks) == 4
+    assert 'pooled, 0 new' in again.note
     given = np.array([1.0 / 2e6])
     memory, _, _ = _learn(*args, given, (stamps, commands))
     assert memory is not None and memory.model is not None

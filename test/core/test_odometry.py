@@ -1131,6 +1131,13 @@ def test_controller_read_pair_ratio_is_checked(bad: float) -> None:
         OdometryParams(controller_read_pair_ratio=bad)
 
 
+@pytest.mark.parametrize(('blocks', 'block_time'), [(-1, 300.0), (8, 0.0)])
+def test_controller_read_pool_blocks_is_checked(blocks: int, block_time: float) -> None:
+    with pytest.raises(ValueError, match='controller_read_pool_blocks'):
+        OdometryParams(controller_read_pool_blocks=blocks, controller_read_block_time=block_time)
+    assert OdometryParams(controller_read_pool_blocks=8).controller_read_pool_blocks == 8
+
+
 @pytest.mark.parametrize('bad', [-0.1, math.nan, math.inf])
 def test_dead_reckoning_moving_gate_slow_is_checked(bad: float) -> None:
     with pytest.raises(ValueError, match='dead_reckoning_moving_gate_slow'):

@@ -712,8 +712,10 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
     dropouts of one loop (rao_supply 1148, docs/BENCHMARKS.md, fifty-ninth session). Here only
     the full blocks of paired estimates after ``pool.end`` are read (a run's tail shorter than
     a block waits for the next read; one cut by a gap is left out), appended to the pool, and
-    the read is `_median_read` over the newest ``pool_blocks`` of them. Returns (the read, the
-    pool after it); 'no_data' until the first full block.
+    the read is `_median_read` over the newest ``pool_blocks`` of them. Until the pool holds a
+    block the read is `implied_input_gain`'s on the history, so it never comes later than
+    without the pool (a first full block of 300 s had left the DDS dropout tests, whose dropout
+    begins at 200 s, without a read). Returns (the read, the pool after it).
     """
     end = -math.inf if pool is None else pool.end
     kept: tuple[ControllerGains, ...] = () if pool is None else pool.blocks
@@ -739,8 +741,10 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
             end = float(stamps[start + block - 1])
     after = ReadPool(end, (kept + tuple(new))[-pool_blocks:])
     if not after.blocks:
-        return ControllerRead(None, f'controller gains: no full block of {block} paired '
-                                    'samples yet', 'no_data'), after
+        read = implied_input_gain(published, times, forces, sample_time, block_time,
+                                  earth_highpass, max_natural_freq, stiffness_frame, pair_ratio)
+        return replace(read, note=f'{read.note}; no full block of {block} samples pooled '
+                                  'yet'), after
     read = _median_read(list(after.blocks), end, block * len(after.blocks), block_time,
                         max_natural_freq, pair_ratio)
     return replace(read, note=f'{read.note}; pooled, {len(new)} new'), after

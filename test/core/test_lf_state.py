@@ -245,11 +245,18 @@ def test_a_pooled_read_reads_every_block_once_and_outvotes_a_wrong_one() -> None
     read, small = pooled_input_gain(published, times, forces, 1.0, 150.0, None, 2)
     assert len(small.blocks) == 2 and read.gain is not None
     assert read.gain[0] == pytest.approx(truth / 1.5, rel=1e-6)
-    # no full block yet, or no data: nothing read, the pool unchanged
+    # no full block yet: the history's read (`implied_input_gain`), nothing pooled; too short
+    # for that too, or no data: nothing read, the pool unchanged
+    read, empty = pooled_input_gain(published[:140], times[:140], forces[:140], 1.0, 150.0,
+                                    None, 8)
+    assert read.outcome == 'read' and read.gain is not None and read.stamp == 139.0
+    assert read.gain[0] == pytest.approx(truth, rel=1e-6) and empty.blocks == ()
+    assert '(median; 1 of 1 blocks of 150 s believed; 140 samples); no full block of 150 ' \
+        'samples pooled yet' in read.note
     read, empty = pooled_input_gain(published[:100], times[:100], forces[:100], 1.0, 150.0,
                                     None, 8)
     assert read.gain is None and read.outcome == 'no_data' and empty.blocks == ()
-    assert 'no full block of 150 paired samples yet' in read.note
+    assert 'too few (need 124); no full block' in read.note
     read, kept = pooled_input_gain([], times, forces, 1.0, 150.0, pool, 8)
     assert read.outcome == 'no_data' and kept.blocks == pool.blocks and kept.end == pool.end
 

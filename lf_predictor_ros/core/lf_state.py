@@ -501,8 +501,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     if twist_attenuation and wave_peak_freq is not None:
         # `retraining.narrow_reference` filters with the narrow notch, the targets with ``sos``
         reference_filter = sos if reference is None else target_filter(params, wave_peak_freq)
-    if pool is not None and in_force is not None:
-        in_force = replace(in_force, pool=pool)
+    if pool is not None and in_force is not None and in_force.pool is not pool:
+        in_force = replace(in_force, pool=pool)  # a remembered read that carries it stays itself
     return memory, calibrate(published, times, values if reference is None else reference,
                              params.ndof, params.sample_time, min_samples, lag_prior,
                              twin_fit, cutoff, pose_edge, twist_likelihood,
@@ -721,7 +721,7 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
     kept: tuple[ControllerGains, ...] = () if pool is None else pool.blocks
     if not published or times.shape[0] == 0:
         return ControllerRead(None, 'controller gains: no data', 'no_data'), \
-            ReadPool(end, kept)
+            pool if pool is not None else ReadPool(end, kept)
     stamps, index, runs = _paired_runs(published, times, sample_time)
     block = max(int(round(block_time / sample_time)), MIN_SAMPLES + 2 * MAX_SHIFT)
     poses = np.array([p.pose for p in published])
@@ -739,7 +739,8 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
             except ValueError:  # non-finite values: this block says nothing
                 pass
             end = float(stamps[start + block - 1])
-    after = ReadPool(end, (kept + tuple(new))[-pool_blocks:])
+    after = pool if pool is not None and not new else \
+        ReadPool(end, (kept + tuple(new))[-pool_blocks:])
     if not after.blocks:
         read = implied_input_gain(published, times, forces, sample_time, block_time,
                                   earth_highpass, max_natural_freq, stiffness_frame, pair_ratio)

@@ -604,8 +604,9 @@ class OdometryParams:
                 self.controller_read_block_time >= 0.0):
             raise ValueError('controller_read_block_time must be a finite number >= 0 [s] (0: one '
                              f'pooled read), got {self.controller_read_block_time}')
-        if self.controller_read_pool_blocks < 0 or (self.controller_read_pool_blocks > 0 and
-                                                    self.controller_read_block_time <= 0.0):
+        blocks = self.controller_read_pool_blocks
+        if not isinstance(blocks, int) or isinstance(blocks, bool) or blocks < 0 or \
+                (blocks > 0 and self.controller_read_block_time <= 0.0):
             raise ValueError('controller_read_pool_blocks must be 0 (off) or a count > 0 with '
                              'controller_read_block_time > 0, got '
                              f'{self.controller_read_pool_blocks} (block time '

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 import pytest
@@ -1131,8 +1131,9 @@ def test_controller_read_pair_ratio_is_checked(bad: float) -> None:
         OdometryParams(controller_read_pair_ratio=bad)
 
 
-@pytest.mark.parametrize(('blocks', 'block_time'), [(-1, 300.0), (8, 0.0)])
-def test_controller_read_pool_blocks_is_checked(blocks: int, block_time: float) -> None:
+@pytest.mark.parametrize(('blocks', 'block_time'), [(-1, 300.0), (8, 0.0), (8.5, 300.0),
+                                                   (True, 300.0)])
+def test_controller_read_pool_blocks_is_checked(blocks: Any, block_time: float) -> None:
     with pytest.raises(ValueError, match='controller_read_pool_blocks'):
         OdometryParams(controller_read_pool_blocks=blocks, controller_read_block_time=block_time)
     assert OdometryParams(controller_read_pool_blocks=8).controller_read_pool_blocks == 8

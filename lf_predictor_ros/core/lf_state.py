@@ -724,16 +724,15 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
             pool if pool is not None else ReadPool(end, kept)
     stamps, index, runs = _paired_runs(published, times, sample_time)
     block = max(int(round(block_time / sample_time)), MIN_SAMPLES + 2 * MAX_SHIFT)
-    poses = np.array([p.pose for p in published])
-    twists = np.array([p.twist for p in published])
     new: list[ControllerGains] = []
     for a, b in runs:
         first = a + int(np.searchsorted(stamps[a:b], end, side='right'))
         for start in range(first, b - block + 1, block):
-            rows = slice(start, start + block)
+            rows = published[start:start + block]  # only the new blocks are turned into arrays
             try:
-                new.append(fit_controller_gains(poses[rows], twists[rows],
-                                                forces[index[rows]], sample_time,
+                new.append(fit_controller_gains(np.array([p.pose for p in rows]),
+                                                np.array([p.twist for p in rows]),
+                                                forces[index[start:start + block]], sample_time,
                                                 earth_highpass=earth_highpass,
                                                 stiffness_frame=stiffness_frame))
             except ValueError:  # non-finite values: this block says nothing

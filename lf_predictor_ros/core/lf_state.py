@@ -127,6 +127,11 @@ class ControllerRead:
 
 
 BODY_DOFS = ('surge', 'sway', 'yaw')  # the DOFs a controller read is per
+# A pooled read (``controller_read_pool_blocks``) starts its pool again when this many newest
+# blocks in a row explain no DOF (a PD law explains no command: the controller was switched off,
+# e.g. to joystick, or changed); otherwise older blocks would keep the read, and the memory
+# ``dp_controlled``, for up to the whole pool's time [blocks]
+POOL_RESTART_BLOCKS = 2
 
 # what a vessel-memory job returns: the memory, the calibration, the controller read in force
 Learned = tuple[VesselMemory | None, Covariances | None, ControllerRead | None]
@@ -715,7 +720,10 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
     the read is `_median_read` over the newest ``pool_blocks`` of them. Until the pool holds a
     block the read is `implied_input_gain`'s on the history, so it never comes later than
     without the pool (a first full block of 300 s had left the DDS dropout tests, whose dropout
-    begins at 200 s, without a read). Returns (the read, the pool after it).
+    begins at 200 s, without a read). When the newest `POOL_RESTART_BLOCKS` blocks, a new one
+    among them, explain no DOF, the pool starts again from them: the read is then 'no_fit' and
+    forgotten, as a window's read whose blocks explain nothing (the controller may have been
+    switched off or changed). Returns (the read, the pool after it).
     """
     end = -math.inf if pool is None else pool.end
     kept: tuple[ControllerGains, ...] = () if pool is None else pool.blocks
@@ -738,8 +746,13 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
             except ValueError:  # non-finite values: this block says nothing
                 pass
             end = float(stamps[start + block - 1])
-    after = pool if pool is not None and not new else \
-        ReadPool(end, (kept + tuple(new))[-pool_blocks:])
+    pooled = kept + tuple(new)
+    tail = pooled[-POOL_RESTART_BLOCKS:]
+    restart = bool(new) and len(tail) == POOL_RESTART_BLOCKS and \
+        not any(np.any(b.believed(max_natural_freq)) for b in tail)
+    if restart:
+        pooled = tail
+    after = pool if pool is not None and not new else ReadPool(end, pooled[-pool_blocks:])
     if not after.blocks:
         read = implied_input_gain(published, times, forces, sample_time, block_time,
                                   earth_highpass, max_natural_freq, stiffness_frame, pair_ratio)
@@ -747,7 +760,9 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
                                   'yet'), after
     read = _median_read(list(after.blocks), end, block * len(after.blocks), block_time,
                         max_natural_freq, pair_ratio)
-    return replace(read, note=f'{read.note}; pooled, {len(new)} new'), after
+    restarted = f'; the newest {POOL_RESTART_BLOCKS} blocks explain no DOF, the pool starts ' \
+        'again' if restart else ''
+    return replace(read, note=f'{read.note}; pooled, {len(new)} new{restarted}'), after
 
 
 def _median_read(reads: list[ControllerGains], stamp: float, samples: int,

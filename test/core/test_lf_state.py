@@ -260,6 +260,41 @@ def test_a_pooled_read_reads_every_block_once_and_outvotes_a_wrong_one() -> None
     assert read.outcome == 'no_data' and kept.blocks == pool.blocks and kept.end == pool.end
 
 
+def test_a_pooled_read_starts_again_when_the_newest_blocks_explain_no_dof() -> None:
+    """The controller switched off (noise thrust, as a joystick's) for 300 s, then back.
+
+    One block no PD law explains is outvoted; `POOL_RESTART_BLOCKS` (2) in a row start the pool
+    again from them, and the read is 'no_fit' (forgotten, as a window's read whose blocks explain
+    nothing); once the controller is back its blocks are read again. A block spoilt in one DOF
+    only (a turn's yaw) does not start the pool again.
+    """
+    published, times, forces = _published_pd_loop(1200)
+    truth = 8.0e4 / 3.0e5 ** 2  # 4 Kp / Kd²
+    forces[600:900] = np.random.default_rng(9).standard_normal((300, 1)) * 1.0e5
+    read, pool = pooled_input_gain(published[:600], times[:600], forces[:600], 1.0, 150.0,
+                                   None, 8)
+    assert read.outcome == 'read' and len(pool.blocks) == 4
+    one, after_one = pooled_input_gain(published[:750], times[:750], forces[:750], 1.0, 150.0,
+                                       pool, 8)
+    assert one.outcome == 'read' and one.gain is not None and len(after_one.blocks) == 5
+    assert one.gain[0] == pytest.approx(truth, rel=1e-6) and 'starts again' not in one.note
+    two, after_two = pooled_input_gain(published[:900], times[:900], forces[:900], 1.0, 150.0,
+                                       after_one, 8)
+    assert two.outcome == 'no_fit' and two.gain is None
+    assert after_two.end == 899.0 and len(after_two.blocks) == 2
+    assert after_two.blocks[0] is after_one.blocks[-1]
+    assert 'controller gains not read (0 of 2 blocks of 150 s believed); pooled, 1 new; the ' \
+        'newest 2 blocks explain no DOF, the pool starts again' in two.note
+    back, after_back = pooled_input_gain(published, times, forces, 1.0, 150.0, after_two, 8)
+    assert back.outcome == 'read' and back.gain is not None and len(after_back.blocks) == 4
+    assert back.gain[0] == pytest.approx(truth, rel=1e-6)
+    # 3 DOF, yaw's commands noise in every block, surge and sway read: the pool keeps them all
+    published3, stamps3, commands3 = _published_pd_loop_3dof(600)
+    read, pool = pooled_input_gain(published3, stamps3, commands3, 1.0, 150.0, None, 8)
+    assert read.outcome == 'no_fit' and read.partial_gain is not None
+    assert len(pool.blocks) == 4 and 'starts again' not in read.note
+
+
 def test_the_controller_implied_inertia_reaches_the_memory_unless_one_is_given() -> None:
     """_learn with the controller's commands: G = 4 Kp / Kd², known_gain 'controller'."""
     from lf_predictor_ros.core.lf_state import _learn

@@ -104,7 +104,6 @@ class ControllerRead:
         partial_gain, partial_freq: a block read ('no_fit') that believes some DOFs but not all:
             1/M_ii and 2 Kp / Kd of the believed DOFs, NaN in the others (None otherwise;
             `_learn`'s ``controller_keep_dofs``).
-        pool: the pooled block reads after this read (`pooled_input_gain`; None without).
     """
 
     gain: FloatArray | None
@@ -114,7 +113,6 @@ class ControllerRead:
     natural_freq: FloatArray | None = None
     partial_gain: FloatArray | None = None
     partial_freq: FloatArray | None = None
-    pool: ReadPool | None = None
 
     def __post_init__(self) -> None:
         """Keep read-only copies of the arrays (a read is handed between threads)."""
@@ -133,8 +131,11 @@ BODY_DOFS = ('surge', 'sway', 'yaw')  # the DOFs a controller read is per
 # ``dp_controlled``, for up to the whole pool's time [blocks]
 POOL_RESTART_BLOCKS = 2
 
-# what a vessel-memory job returns: the memory, the calibration, the controller read in force
-Learned = tuple[VesselMemory | None, Covariances | None, ControllerRead | None]
+# what a vessel-memory job returns: the memory, the calibration, the controller read in force,
+# the pooled block reads after it (``controller_read_pool_blocks``; None: not pooled). The pool
+# travels on its own: a read that is not in force ('no_fit') has read its blocks all the same
+Learned = tuple[VesselMemory | None, Covariances | None, ControllerRead | None,
+                ReadPool | None]
 # the damping memory: per DOF the damping rate kept and the excitation it was identified with
 KeptDamping = tuple[FloatArray, FloatArray]
 
@@ -362,11 +363,11 @@ class LfStateEstimator:
             self._memory_error = f'{type(exc).__name__}: {exc}'
 
     def _apply(self, result: Learned) -> None:
-        memory, covariances, controller_read = result
+        memory, covariances, controller_read, pool = result
         self.odometry.apply_learned(memory, covariances)
         self._controller_read = controller_read
-        if controller_read is not None and controller_read.pool is not None:
-            self._read_pool = controller_read.pool
+        if pool is not None:
+            self._read_pool = pool
         if memory is not None and memory.model is not None and memory.damping_score is not None:
             rate = -np.diag(memory.model.damping)
             if self.odometry.params.controller_read_fitted_damping:
@@ -438,12 +439,13 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     ``damping_refuse_bound``, ``controller_fitted_dofs``, ``damping_turn``: `_damping_chosen`'s
     ``refuse_bound``, ``fitted_dofs`` and ``turn``.
     ``pool_blocks`` > 0: the controller is read from the last that many blocks ever read
-    (`pooled_input_gain`, continuing ``read_pool``); the read returned carries the pool after.
+    (`pooled_input_gain`, continuing ``read_pool``), and the pool after it is returned too.
     ``earth_fixed``: without a known or read gain, the fit's environment is one earth-fixed
     force and a constant yaw moment (`lf_dynamics.fit_lf_dynamics`).
     The read returned is the one in force afterwards: this read if it succeeded,
     ``remembered`` if it failed for lack of data, with ``controller_keep_dofs`` the two
-    combined if it failed in some DOFs, else None.
+    combined if it failed in some DOFs, else None; then the pool after the read (None unless
+    ``pool_blocks`` > 0).
     """
     sos = None if wave_peak_freq is None else target_filter(params, wave_peak_freq,
                                                             peak_damping)
@@ -506,12 +508,10 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     if twist_attenuation and wave_peak_freq is not None:
         # `retraining.narrow_reference` filters with the narrow notch, the targets with ``sos``
         reference_filter = sos if reference is None else target_filter(params, wave_peak_freq)
-    if pool is not None and in_force is not None and in_force.pool is not pool:
-        in_force = replace(in_force, pool=pool)  # a remembered read that carries it stays itself
     return memory, calibrate(published, times, values if reference is None else reference,
                              params.ndof, params.sample_time, min_samples, lag_prior,
                              twin_fit, cutoff, pose_edge, twist_likelihood,
-                             reference_filter, heading_speed), in_force
+                             reference_filter, heading_speed), in_force, pool
 
 
 def _kept_per_dof(read: ControllerRead, remembered: ControllerRead) -> ControllerRead:

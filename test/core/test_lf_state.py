@@ -91,7 +91,7 @@ def test_a_given_vessel_inertia_is_the_thrust_gain_of_the_memory() -> None:
     gain = _input_gain((mass, 1.0, 1.0), 1)
     assert gain is not None and gain.tolist() == [1.0 / mass]
     assert _input_gain((0.0, 0.0, 0.0), 3) is None
-    memory, _, _ = _learn(PredictorParams(ndof=1, sample_time=h), np.arange(1200.0),
+    memory, _, _, _ = _learn(PredictorParams(ndof=1, sample_time=h), np.arange(1200.0),
                           np.array(poses), np.array(forces)[:, :1], None, [], 120.0, 60, 1.2,
                           gain)
     assert memory is not None and memory.model is not None
@@ -100,7 +100,7 @@ def test_a_given_vessel_inertia_is_the_thrust_gain_of_the_memory() -> None:
     # dead_reckoning_force_margin reaches the memory (by default 0: no clip; 2: 2 × the window's
     # largest force)
     assert np.all(np.isinf(memory.force_limit))
-    clipped, _, _ = _learn(PredictorParams(ndof=1, sample_time=h), np.arange(1200.0),
+    clipped, _, _, _ = _learn(PredictorParams(ndof=1, sample_time=h), np.arange(1200.0),
                            np.array(poses), np.array(forces)[:, :1], None, [], 120.0, 60, 1.2,
                            gain, force_margin=2.0)
     assert clipped is not None
@@ -295,6 +295,32 @@ def test_a_pooled_read_starts_again_when_the_newest_blocks_explain_no_dof() -> N
     assert len(pool.blocks) == 4 and 'starts again' not in read.note
 
 
+def test_the_estimator_keeps_the_pool_of_a_read_not_in_force_and_a_reset_empties_it() -> None:
+    """The pool comes back from the worker on its own: a 'no_fit' read has read its blocks too.
+
+    A read not in force (None) still hands over its pool, so those blocks are not read again and
+    a pool that started again stays started; the pool carries over to an estimator with new
+    parameters, and ``reset`` empties it.
+    """
+    published, times, forces = _published_pd_loop(300)
+    _, pool = pooled_input_gain(published, times, forces, 1.0, 150.0, None, 8)
+    odometry = OdometryParams(controller_read_pool_blocks=8)
+    est = LfStateEstimator(PredictorParams(ndof=1), odometry, background=False)
+    other = LfStateEstimator(PredictorParams(ndof=1), odometry, background=False)
+    try:
+        est._apply((None, None, None, pool))  # noqa: SLF001 - what a finished job hands over
+        assert est.controller_read is None and est._read_pool is pool  # noqa: SLF001
+        est._apply((None, None, None, None))  # noqa: SLF001 - not pooled: the pool stays
+        assert est._read_pool is pool  # noqa: SLF001
+        other.carry_over(est)
+        assert other._read_pool is pool  # noqa: SLF001
+        est.reset()
+        assert est._read_pool is None  # noqa: SLF001
+    finally:
+        est.close()
+        other.close()
+
+
 def test_the_controller_implied_inertia_reaches_the_memory_unless_one_is_given() -> None:
     """_learn with the controller's commands: G = 4 Kp / Kd², known_gain 'controller'."""
     from lf_predictor_ros.core.lf_state import _learn
@@ -304,38 +330,38 @@ def test_the_controller_implied_inertia_reaches_the_memory_unless_one_is_given()
     poses = np.cumsum(np.cumsum(rng.normal(size=(1200, 1)) * 1e-3, axis=0), axis=0)
     params = PredictorParams(ndof=1, sample_time=1.0)
     args = (params, stamps, poses, commands, None, published, 120.0, 60, 1.2)
-    memory, _, read = _learn(*args, None, (stamps, commands))
+    memory, _, read, no_pool = _learn(*args, None, (stamps, commands))
     assert memory is not None and memory.model is not None
     assert memory.known_gain == 'controller' and memory.dp_controlled
     assert memory.model.input_gain[0, 0] == pytest.approx(8.0e4 / 3.0e5 ** 2, rel=1e-6)
     assert 'controller-implied inertia' in memory.message
     assert read is not None and read.outcome == 'read' and read.stamp == 1199.0
-    assert read.pool is None
-    # pooled (controller_read_pool_blocks): the read carries its pool, which the next continues
-    memory, _, pooled = _learn(*args, None, (stamps, commands), controller_block_time=300.0,
-                               pool_blocks=8)
-    assert pooled is not None and pooled.pool is not None and len(pooled.pool.blocks) == 4
+    assert no_pool is None
+    # pooled (controller_read_pool_blocks): the pool comes back too, and the next continues it
+    memory, _, pooled, pool = _learn(*args, None, (stamps, commands),
+                                     controller_block_time=300.0, pool_blocks=8)
+    assert pooled is not None and pool is not None and len(pool.blocks) == 4
     assert memory is not None and memory.model is not None
     assert memory.model.input_gain[0, 0] == pytest.approx(8.0e4 / 3.0e5 ** 2, rel=1e-6)
-    _, _, again = _learn(*args, None, (stamps, commands), controller_block_time=300.0,
-                         read_pool=pooled.pool, pool_blocks=8)
-    assert again is not None and again.pool is not None and len(again.pool.blocks) == 4
+    _, _, again, same = _learn(*args, None, (stamps, commands), controller_block_time=300.0,
+                               read_pool=pool, pool_blocks=8)
+    assert again is not None and same is pool  # nothing new: the very pool
     assert 'pooled, 0 new' in again.note
     given = np.array([1.0 / 2e6])
-    memory, _, _ = _learn(*args, given, (stamps, commands))
+    memory, _, _, _ = _learn(*args, given, (stamps, commands))
     assert memory is not None and memory.model is not None
     assert memory.known_gain == 'vessel_inertia' and memory.model.input_gain[0, 0] == given[0]
     assert memory.dp_controlled  # the controller was read all the same
-    memory, _, none = _learn(*args, None, None)  # no commands: the gain is fitted (or refused)
+    memory, _, none, _ = _learn(*args, None, None)  # no commands: the gain is fitted (or refused)
     assert memory is None or (memory.known_gain == '' and not memory.dp_controlled)
     assert none is None
     # no commands, but a remembered read: it stands in (a given inertia still takes precedence)
-    memory, _, kept = _learn(*args, None, None, read)
+    memory, _, kept, _ = _learn(*args, None, None, read)
     assert kept is read and memory is not None and memory.model is not None
     assert memory.known_gain == 'controller' and memory.dp_controlled
     assert memory.model.input_gain[0, 0] == pytest.approx(8.0e4 / 3.0e5 ** 2, rel=1e-6)
     assert 'remembered from t=1199.0 s (controller gains: no commands)' in memory.message
-    memory, _, kept = _learn(*args, given, None, read)
+    memory, _, kept, _ = _learn(*args, given, None, read)
     assert kept is read and memory is not None and memory.model is not None
     assert memory.known_gain == 'vessel_inertia' and memory.model.input_gain[0, 0] == given[0]
     assert memory.dp_controlled and 'remembered' in memory.message
@@ -364,7 +390,7 @@ def test_free_fit_earth_fixed_reaches_the_fit_without_a_gain(earth_fixed: bool) 
         forces.append(tau.copy())
         nu = nu + (tau - damping * nu + env_body) / mass
         eta = eta + np.array([c * nu[0] - s * nu[1], s * nu[0] + c * nu[1], nu[2]])
-    memory, _, read = _learn(PredictorParams(ndof=3, sample_time=1.0), np.arange(1200.0),
+    memory, _, read, _ = _learn(PredictorParams(ndof=3, sample_time=1.0), np.arange(1200.0),
                              np.array(poses), np.array(forces), None, [], 120.0, 60, 1.2,
                              earth_fixed=earth_fixed)
     assert read is None and memory is not None and memory.model is not None
@@ -384,26 +410,26 @@ def test_the_damping_memory_keeps_the_rate_of_the_most_excited_window() -> None:
     params = PredictorParams(ndof=1, sample_time=1.0)
     args = (params, stamps, poses, commands, None, published, 120.0, 60, 1.2, None,
             (stamps, commands))
-    own, _, _ = _learn(*args, damping_memory=(True,))
+    own, _, _, _ = _learn(*args, damping_memory=(True,))
     assert own is not None and own.model is not None and own.damping_score is not None
     score = float(np.sum(body_velocity(poses, 1.0) ** 2))
     assert own.damping_score[0] == pytest.approx(score, rel=1e-12)
-    free, _, _ = _learn(*args)
+    free, _, _, _ = _learn(*args)
     assert free is not None and free.model is not None and free.damping_score is None
     assert own.model.damping[0, 0] == pytest.approx(free.model.damping[0, 0], rel=1e-9)
     # a window that moved more before: its rate is kept, with its score
-    kept, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([10 * score])),
+    kept, _, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([10 * score])),
                         damping_memory=(True,))
     assert kept is not None and kept.model is not None and kept.damping_score is not None
     assert kept.model.damping[0, 0] == -0.05 and kept.damping_score[0] == 10 * score
     assert 'damping rates kept 0.05 1/s' in kept.message
     # one that moved less: this window's own rate
-    less, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([0.1 * score])),
+    less, _, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([0.1 * score])),
                         damping_memory=(True,))
     assert less is not None and less.model is not None
     assert less.model.damping[0, 0] == own.model.damping[0, 0]
     # off for this DOF: the kept rates are not looked at
-    off, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([10 * score])),
+    off, _, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([10 * score])),
                        damping_memory=(False,))
     assert off is not None and off.model is not None
     assert off.model.damping[0, 0] == free.model.damping[0, 0]
@@ -571,11 +597,11 @@ def test_the_estimator_keeps_the_damping_across_memories_until_reset(fitted: boo
         memory = VesselMemory(model, 'model', DriftCurve(np.zeros(0), np.zeros((0, 1)),
                                                           np.zeros((0, 1)), 0),
                               {}, '', np.zeros(1), damping_score=np.array([0.3]))
-        est._apply((memory, None, None))  # noqa: SLF001 - what a finished job hands over
+        est._apply((memory, None, None, None))  # noqa: SLF001 - what a finished job hands over
         assert est._kept_damping is not None  # noqa: SLF001
         np.testing.assert_allclose(est._kept_damping[0], [kept], rtol=1e-12)  # noqa: SLF001
         np.testing.assert_array_equal(est._kept_damping[1], [0.3])  # noqa: SLF001
-        est._apply((None, None, None))  # noqa: SLF001 - a memory that could not be learned
+        est._apply((None, None, None, None))  # noqa: SLF001 - a memory that could not be learned
         assert est._kept_damping is not None  # noqa: SLF001
         est.reset()
         assert est._kept_damping is None  # noqa: SLF001
@@ -898,19 +924,19 @@ def test_a_read_spoilt_in_one_dof_keeps_the_remembered_inertia_there() -> None:
     values = np.array([p.pose for p in published])
     args = (params, stamps, values, commands, None, published, 120.0, 60, 1.2, None,
             (stamps, commands), remembered)
-    memory, _, in_force = _learn(*args, controller_block_time=150.0, controller_keep_dofs=True)
+    memory, _, in_force, _ = _learn(*args, controller_block_time=150.0, controller_keep_dofs=True)
     assert in_force is not None and in_force.gain is not None
     np.testing.assert_array_equal(in_force.gain, kept.gain)
     assert memory is not None and memory.dp_controlled
     assert 'yaw remembered from t=100.0 s' in memory.message
     if memory.model is not None:
         np.testing.assert_allclose(np.diag(memory.model.input_gain), kept.gain, rtol=1e-12)
-    memory, _, in_force = _learn(*args, controller_block_time=150.0)
+    memory, _, in_force, _ = _learn(*args, controller_block_time=150.0)
     assert in_force is None and memory is not None and not memory.dp_controlled
     # a read no DOF believes, or no remembered read: nothing to combine
     noise = np.random.default_rng(3).standard_normal(commands.shape) * 1e6
     nothing = implied_input_gain(published, stamps, noise, 1.0, block_time=150.0)
     assert nothing.outcome == 'no_fit' and nothing.partial_gain is None
-    _, _, in_force = _learn(*args[:10], (stamps, commands), None, controller_block_time=150.0,
+    _, _, in_force, _ = _learn(*args[:10], (stamps, commands), None, controller_block_time=150.0,
                             controller_keep_dofs=True)
     assert in_force is None

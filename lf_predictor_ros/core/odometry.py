@@ -387,29 +387,30 @@ class OdometryParams:
         '(core.controller_gains.damping_corrected_inertia). Off: with the fitted or kept '
         'damping rates it over-corrected in the screen (the heading overshot turns by up to '
         '2 rad; docs/BENCHMARKS.md, fifty-third session)', ''))
-    controller_read_fitted_damping: bool = field(default=False, metadata=field_doc(
+    controller_read_fitted_damping: bool = field(default=True, metadata=field_doc(
         'with controller_inertia: the read inertia is the one under which Kd and the damping '
         "force the window's fit found (D = f M_r, which the data fix whatever gain is assumed) "
         'together are critical, M = M_r (1 + f/(2 omega_r))^2, and the damping rates are scaled '
         "by the same factor (the fit's steady gain G/f kept): smooth in f, unlike "
         "controller_read_damping, which takes the fitted rate as the vessel's own "
         '(core.controller_gains.fitted_damping_scale; docs/BENCHMARKS.md, fifty-fifth '
-        'session). Overrides controller_read_damping', ''))
-    controller_read_fitted_damping_dofs: str = field(default='all', metadata=field_doc(
+        'session). Overrides controller_read_damping. On by default, in yaw only, with the '
+        'pooled read since the sixtieth session (rule S)', ''))
+    controller_read_fitted_damping_dofs: str = field(default='yaw', metadata=field_doc(
         "with controller_read_fitted_damping: the DOFs it corrects, 'all' or 'yaw' (surge and "
         'sway then keep the read inertia and their fitted rates): the yaw read is 0.6x for a '
         "PID that takes the vessel's damping off Kd (the simulator's yaw rate 0.086 1/s "
         'against omega_r 0.255 rad/s), while surge and sway are read 1.1-1.3x and their '
         'fitted rates often sit at the bound or vary 10x between windows (docs/BENCHMARKS.md, '
         'fifty-eighth session)', ''))
-    controller_read_pool_blocks: int = field(default=0, metadata=field_doc(
+    controller_read_pool_blocks: int = field(default=8, metadata=field_doc(
         'with controller_inertia and controller_read_block_time > 0: the controller is read '
         'from the newest this many blocks ever read (each block of published estimates read '
         "once, kept across windows) instead of the blocks in one window's history; 0: off. "
         "The controller does not change between windows, but one window's 2-4 blocks, most "
         'with a move or a turn in them, moved the read yaw inertia 0.4-2.5x between two '
         'dropouts of one loop (core.lf_state.pooled_input_gain; docs/BENCHMARKS.md, '
-        'fifty-ninth session)', ''))
+        'fifty-ninth session; 8 by default since the sixtieth, rule S)', ''))
     controller_read_keep_dofs: bool = field(default=True, metadata=field_doc(
         'with controller_inertia: a read whose blocks believe some DOFs but in another none '
         "(a turn spoils yaw's blocks) keeps the last successful read's inertia in that DOF "

@@ -715,7 +715,8 @@ def test_the_last_controller_read_stands_in_for_a_window_without_enough_data() -
         assert memory.known_gain == 'controller' and memory.dp_controlled
         assert memory.model.input_gain[0, 0] == pytest.approx(gain, rel=1e-6)
         assert 'remembered from t=399.0 s (controller gains: longest contiguous run 99 ' \
-            'samples, too few (need 124))' in memory.message
+            'samples, too few (need 124); no full block of 300 samples pooled yet)' \
+            in memory.message
         # commands no PD law explains: the controller may have changed, the read is forgotten
         run(700, 1000, 'noise')
         memory = est.memory

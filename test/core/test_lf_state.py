@@ -92,8 +92,8 @@ def test_a_given_vessel_inertia_is_the_thrust_gain_of_the_memory() -> None:
     assert gain is not None and gain.tolist() == [1.0 / mass]
     assert _input_gain((0.0, 0.0, 0.0), 3) is None
     memory, _, _, _ = _learn(PredictorParams(ndof=1, sample_time=h), np.arange(1200.0),
-                          np.array(poses), np.array(forces)[:, :1], None, [], 120.0, 60, 1.2,
-                          gain)
+                             np.array(poses), np.array(forces)[:, :1], None, [], 120.0, 60, 1.2,
+                             gain)
     assert memory is not None and memory.model is not None
     assert memory.model.input_gain[0, 0] == 1.0 / mass
     assert memory.model.damping[0, 0] == pytest.approx(-damping / mass, rel=0.05)
@@ -101,8 +101,8 @@ def test_a_given_vessel_inertia_is_the_thrust_gain_of_the_memory() -> None:
     # largest force)
     assert np.all(np.isinf(memory.force_limit))
     clipped, _, _, _ = _learn(PredictorParams(ndof=1, sample_time=h), np.arange(1200.0),
-                           np.array(poses), np.array(forces)[:, :1], None, [], 120.0, 60, 1.2,
-                           gain, force_margin=2.0)
+                              np.array(poses), np.array(forces)[:, :1], None, [], 120.0, 60, 1.2,
+                              gain, force_margin=2.0)
     assert clipped is not None
     assert clipped.force_limit[0] == pytest.approx(2.0 * np.max(np.abs(np.array(forces)[:, 0])))
 
@@ -391,8 +391,8 @@ def test_free_fit_earth_fixed_reaches_the_fit_without_a_gain(earth_fixed: bool) 
         nu = nu + (tau - damping * nu + env_body) / mass
         eta = eta + np.array([c * nu[0] - s * nu[1], s * nu[0] + c * nu[1], nu[2]])
     memory, _, read, _ = _learn(PredictorParams(ndof=3, sample_time=1.0), np.arange(1200.0),
-                             np.array(poses), np.array(forces), None, [], 120.0, 60, 1.2,
-                             earth_fixed=earth_fixed)
+                                np.array(poses), np.array(forces), None, [], 120.0, 60, 1.2,
+                                earth_fixed=earth_fixed)
     assert read is None and memory is not None and memory.model is not None
     assert memory.known_gain == ''
     bias = memory.model.bias
@@ -419,18 +419,18 @@ def test_the_damping_memory_keeps_the_rate_of_the_most_excited_window() -> None:
     assert own.model.damping[0, 0] == pytest.approx(free.model.damping[0, 0], rel=1e-9)
     # a window that moved more before: its rate is kept, with its score
     kept, _, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([10 * score])),
-                        damping_memory=(True,))
+                           damping_memory=(True,))
     assert kept is not None and kept.model is not None and kept.damping_score is not None
     assert kept.model.damping[0, 0] == -0.05 and kept.damping_score[0] == 10 * score
     assert 'damping rates kept 0.05 1/s' in kept.message
     # one that moved less: this window's own rate
     less, _, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([0.1 * score])),
-                        damping_memory=(True,))
+                           damping_memory=(True,))
     assert less is not None and less.model is not None
     assert less.model.damping[0, 0] == own.model.damping[0, 0]
     # off for this DOF: the kept rates are not looked at
     off, _, _, _ = _learn(*args, kept_damping=(np.array([0.05]), np.array([10 * score])),
-                       damping_memory=(False,))
+                          damping_memory=(False,))
     assert off is not None and off.model is not None
     assert off.model.damping[0, 0] == free.model.damping[0, 0]
 
@@ -939,5 +939,5 @@ def test_a_read_spoilt_in_one_dof_keeps_the_remembered_inertia_there() -> None:
     nothing = implied_input_gain(published, stamps, noise, 1.0, block_time=150.0)
     assert nothing.outcome == 'no_fit' and nothing.partial_gain is None
     _, _, in_force, _ = _learn(*args[:10], (stamps, commands), None, controller_block_time=150.0,
-                            controller_keep_dofs=True)
+                               controller_keep_dofs=True)
     assert in_force is None

@@ -22,10 +22,14 @@ import argparse
 from collections import defaultdict
 import json
 import math
+from pathlib import Path
+import sys
 from typing import Any
 
 import numpy as np
-from scipy import stats
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from dropout_loop_compare import ratio_cell  # noqa: E402
 
 FAILURE = 0.5  # heading failure of a dropout [rad]
 CATASTROPHE = 1.0  # twice the failure [rad]
@@ -44,16 +48,8 @@ def by_case(cases: list[dict[str, Any]]) -> dict[tuple[str, int], dict[str, Any]
 
 
 def ratio(pairs: list[tuple[float, float]]) -> str:
-    """Geometric mean of cand / base with its 95 % t-interval and the changed runs."""
-    logs = np.array([math.log(c / b) for b, c in pairs
-                     if math.isfinite(b) and math.isfinite(c) and b > 0 and c > 0])
-    if logs.size < 2:
-        return f'n/a ({logs.size} runs)'
-    half = float(stats.t.ppf(0.975, logs.size - 1) * np.std(logs, ddof=1) / math.sqrt(logs.size))
-    mean = float(np.mean(logs))
-    changed = int(np.sum(np.abs(logs) > 1e-9))
-    return (f'{math.exp(mean):.3f} [{math.exp(mean - half):.3f}, {math.exp(mean + half):.3f}] '
-            f'({changed}/{logs.size} changed)')
+    """`dropout_loop_compare.ratio_cell` of (base, candidate) pairs."""
+    return ratio_cell([b for b, _ in pairs], [c for _, c in pairs])
 
 
 def run_mean(case: dict[str, Any], key: str) -> float:

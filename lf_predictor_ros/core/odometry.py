@@ -334,6 +334,13 @@ class OdometryParams:
         'holding std (rao_supply 1077: 5-7.7 std in surge at rest, the low-passed 0.03-0.55), '
         'and the bare gate moved dropouts that begin before a turn by a few per cent the wrong '
         'way (rule N, docs/BENCHMARKS.md, fifty-sixth session); 0: the current twist alone', ''))
+    dead_reckoning_moving_twist_periods: float = field(default=0.0, metadata=field_doc(
+        'with dead_reckoning_moving_twist: the moving DOFs start from the published twist '
+        'averaged (a boxcar) over this many wave periods 2π/ω0 of the newest ω0 estimate, not '
+        'from the current twist: one period has a zero at ω0, so the wave-band velocity the '
+        'twist filter passes (bandwidth 1 rad/s) does not start the dead reckoning; a move '
+        'changes little in one period (docs/BENCHMARKS.md, sixty-first session); 0, or no ω0 '
+        'yet, or a history shorter than the window: the current twist', ''))
     dead_reckoning_excursion_std: float = field(default=2.0, metadata=field_doc(
         "the model's relative error in a manoeuvre: while dead reckoning, the covariance adds "
         "(this × the displacement the memory's model dead-reckons since the dropout began)², "
@@ -546,6 +553,11 @@ class OdometryParams:
             raise ValueError('dead_reckoning_moving_gate_slow must be a finite number >= 0 '
                              '(holding std of the low-passed twist; 0: the current twist '
                              f'alone), got {self.dead_reckoning_moving_gate_slow}')
+        if not (math.isfinite(self.dead_reckoning_moving_twist_periods) and
+                self.dead_reckoning_moving_twist_periods >= 0.0):
+            raise ValueError('dead_reckoning_moving_twist_periods must be a finite number >= 0 '
+                             '(wave periods; 0: the current twist), got '
+                             f'{self.dead_reckoning_moving_twist_periods}')
         if not (math.isfinite(self.dead_reckoning_excursion_std) and
                 self.dead_reckoning_excursion_std >= 0.0):
             raise ValueError('dead_reckoning_excursion_std must be a finite number >= 0 (a '
@@ -712,6 +724,7 @@ class LfOdometry:
         self.ndof = ndof
         self.sample_time = sample_time
         self.params = params or OdometryParams()
+        self._wave_peak_freq: float | None = None  # [rad/s] dead_reckoning_moving_twist_periods
         self.reset()
 
     # ---- public ---------------------------------------------------------------------------
@@ -783,6 +796,23 @@ class LfOdometry:
     def calibrated(self) -> bool:
         """True once the covariances come from a target comparison."""
         return bool(self._pose_cov)
+
+    @property
+    def wave_peak_freq(self) -> float | None:
+        """The newest wave peak frequency ω0 [rad/s] the owner gave (None: none yet)."""
+        return self._wave_peak_freq
+
+    def set_wave_peak_freq(self, wave_peak_freq: float | None) -> None:
+        """The newest ω0 estimate [rad/s] (``dead_reckoning_moving_twist_periods``; None: none).
+
+        Raises:
+            ValueError: not None and not a finite number > 0.
+        """
+        if wave_peak_freq is not None and not (math.isfinite(wave_peak_freq) and
+                                               wave_peak_freq > 0.0):
+            raise ValueError('wave_peak_freq must be None or a finite frequency > 0 [rad/s], '
+                             f'got {wave_peak_freq}')
+        self._wave_peak_freq = None if wave_peak_freq is None else float(wave_peak_freq)
 
     def is_late(self, t: float) -> bool:
         """True if an estimate for t would be older than one already given (``track`` refuses)."""
@@ -1264,7 +1294,9 @@ class LfOdometry:
         """The twist a dead reckoning starts from (a new array).
 
         The low-passed twist; with ``dead_reckoning_moving_twist`` the current one of ``state``
-        in the DOFs that are moving (`_moving_dofs`).
+        in the DOFs that are moving (`_moving_dofs`), or with
+        ``dead_reckoning_moving_twist_periods`` the one averaged over whole wave periods
+        (`_wave_averaged_twist`).
         """
         assert self._slow_twist is not None
         n = self.ndof
@@ -1272,7 +1304,30 @@ class LfOdometry:
             if self.params.dead_reckoning_moving_twist else None
         if moving is None:
             return self._slow_twist.copy()
-        return np.where(moving, state[n:], self._slow_twist)
+        averaged = self._wave_averaged_twist()
+        return np.where(moving, state[n:] if averaged is None else averaged, self._slow_twist)
+
+    def _wave_averaged_twist(self) -> FloatArray | None:
+        """The published twist's mean over ``dead_reckoning_moving_twist_periods`` · 2π/ω0.
+
+        The boxcar over the newest samples stamped within that span of the newest (one period
+        of ω0 has a zero there). None: the option is off, no ω0 is known, or the history since
+        the last reset does not reach back over the whole span.
+        """
+        periods = self.params.dead_reckoning_moving_twist_periods
+        freq = self._wave_peak_freq
+        if periods <= 0.0 or freq is None or not self._history:
+            return None
+        oldest = self._history[-1].stamp - periods * 2.0 * math.pi / freq + \
+            0.5 * self.sample_time
+        total = np.zeros(self.ndof)
+        count = 0
+        for item in reversed(self._history):
+            if item.stamp < oldest:
+                return total / count if count else None
+            total = total + item.twist
+            count += 1
+        return None  # the history does not reach back over the span
 
     def _track_balance(self, twist: FloatArray) -> None:
         """The twist through one low-pass (the motion gate); with the balance, two passes.

@@ -667,6 +667,26 @@ def test_the_untaken_twin_offset_reaches_the_odometry_only_where_it_is_used(
                 np.testing.assert_array_equal(offset, expect)
 
 
+def test_the_odometry_is_given_the_predictors_newest_wave_peak_freq() -> None:
+    """Each update and each coast hands the predictor's ω0 (or None) to the odometry first."""
+    params = PredictorParams(ndof=1, sample_time=1.0, retrain_period=20.0,
+                             training_window=200.0, transient_length=10.0, filter_window=60.0,
+                             append_length=40.0, estimation_window=600.0)
+    fake = _WindowPredictor()
+    est = LfStateEstimator(params, OdometryParams(), background=False,
+                           predictor=fake)  # type: ignore[arg-type]
+    est.update(0.0, np.zeros(3), np.zeros(3))
+    assert est.odometry.wave_peak_freq is None
+    fake.wave_peak_freq = 0.7  # type: ignore[assignment]
+    est.update(1.0, np.zeros(3), np.zeros(3))
+    assert est.odometry.wave_peak_freq == 0.7
+    fake.wave_peak_freq = 0.5  # type: ignore[assignment]
+    out = est.coast(3.0, np.zeros(3))
+    assert out is not None and out.mode == 'dead_reckoning'
+    assert est.odometry.wave_peak_freq == 0.5
+    est.close()
+
+
 def test_the_last_controller_read_stands_in_for_a_window_without_enough_data() -> None:
     """Windows: read → too few contiguous commands (remembered) → noise (forgotten) → too few."""
     # short windows: the estimator keeps the newest 274 commands (its buffer capacity)

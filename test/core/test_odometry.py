@@ -1146,6 +1146,23 @@ def test_dead_reckoning_moving_gate_slow_is_checked(bad: float) -> None:
 
 
 @pytest.mark.parametrize('bad', [-0.1, math.nan, math.inf])
+def test_dead_reckoning_moving_twist_periods_is_checked(bad: float) -> None:
+    with pytest.raises(ValueError, match='dead_reckoning_moving_twist_periods'):
+        OdometryParams(dead_reckoning_moving_twist_periods=bad)
+
+
+@pytest.mark.parametrize('bad', [0.0, -0.5, math.nan, math.inf])
+def test_a_wave_peak_freq_that_is_no_frequency_is_refused(bad: float) -> None:
+    odo = LfOdometry(3, H)
+    odo.set_wave_peak_freq(0.6)
+    with pytest.raises(ValueError, match='wave_peak_freq'):
+        odo.set_wave_peak_freq(bad)
+    assert odo.wave_peak_freq == 0.6
+    odo.set_wave_peak_freq(None)
+    assert odo.wave_peak_freq is None
+
+
+@pytest.mark.parametrize('bad', [-0.1, math.nan, math.inf])
 def test_dead_reckoning_excursion_band_is_checked(bad: float) -> None:
     with pytest.raises(ValueError, match='dead_reckoning_excursion_band'):
         OdometryParams(dead_reckoning_excursion_band=bad)
@@ -1417,6 +1434,50 @@ def test_the_moving_gate_on_the_current_twist_sees_a_move_the_low_pass_lags(gate
     odo._twist_once = np.array([0.25, 0.0, 0.0])  # noqa: SLF001
     moving = odo._moving_dofs(np.ones(3, dtype=bool))  # noqa: SLF001
     assert moving is not None and moving.tolist() == [True, True, False]
+
+
+def _surge_in_waves(periods: float, wave_peak_freq: float | None, seconds: int
+                    ) -> LfOdometry:
+    """Fixes of a 0.5 m/s surge with a 2 m wave motion at ω0 = 2π/20 rad/s, H = 1 s.
+
+    The wave velocity (0.63 m/s amplitude) is below the twist filter's bandwidth (1 rad/s), so
+    the current twist carries most of it.
+    """
+    odo = LfOdometry(3, H, OdometryParams(dead_reckoning_moving_twist_periods=periods,
+                                          prior_pose_std=(1e-3, 1e-3, 1e-4)))
+    odo.set_wave_peak_freq(wave_peak_freq)
+    times = np.arange(float(seconds))
+    north = 0.5 * times + 2.0 * np.sin(2.0 * math.pi / 20.0 * times)
+    _track_surge(odo, times, north, np.zeros(seconds))
+    return odo
+
+
+def test_a_move_starts_from_the_twist_averaged_over_a_wave_period() -> None:
+    """``dead_reckoning_moving_twist_periods``: the wave velocity stays out of the start.
+
+    At t = 199 s the wave velocity is near its crest: the current twist is 0.5 + 0.49 m/s
+    (measured); averaged over one period of ω0 (20 samples) it is the surge speed within
+    0.02 m/s. Sway and yaw, at rest, keep the low-passed twist (0). Without ω0, or with a
+    history shorter than the period, the current twist.
+    """
+    freq = 2.0 * math.pi / 20.0
+    odo = _surge_in_waves(1.0, freq, 200)
+    state = odo._require_state()  # noqa: SLF001 - the start of a dead reckoning
+    moving = odo._moving_dofs(np.ones(3, dtype=bool))  # noqa: SLF001
+    assert moving is not None and moving.tolist() == [True, True, False]
+    current = state[3:]
+    start = odo._start_twist(state)  # noqa: SLF001
+    print(f'current twist {current}, start {start}')
+    assert abs(current[0] - 0.5) > 0.3
+    assert abs(start[0] - 0.5) < 0.02
+    assert abs(start[1]) < 1e-6 and start[2] == 0.0
+    odo.set_wave_peak_freq(None)
+    assert odo._start_twist(state).tolist() == current[:2].tolist() + [start[2]]  # noqa: SLF001
+    short = _surge_in_waves(1.0, 2.0 * math.pi / 300.0, 200)  # a period longer than the run
+    assert short._wave_averaged_twist() is None  # noqa: SLF001
+    off = _surge_in_waves(0.0, freq, 200)
+    assert off._start_twist(off._require_state()).tolist() == \
+        odo._start_twist(state).tolist()  # noqa: SLF001
 
 
 @pytest.mark.parametrize('slow_twist, opens', [([0.05, 0.11, 0.0], True),

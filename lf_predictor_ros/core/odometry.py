@@ -88,6 +88,7 @@ from lf_predictor_ros.core.lf_dynamics import (
     dead_reckon_step,
     heading_basis,
 )
+from lf_predictor_ros.core.span_mean import SpanMean
 
 FloatArray = NDArray[np.float64]
 OdometryMode = Literal['tracking', 'dead_reckoning', 'lost']
@@ -341,6 +342,12 @@ class OdometryParams:
         'twist filter passes (bandwidth 1 rad/s) does not start the dead reckoning; a move '
         'changes little in one period (docs/BENCHMARKS.md, sixty-first session); 0, or no ω0 '
         'yet, or a history shorter than the window: the current twist', ''))
+    dead_reckoning_moving_gate_averaged: float = field(default=0.0, metadata=field_doc(
+        'with dead_reckoning_moving_twist_periods > 0: a DOF also counts as moving (the holding '
+        'balance, the moving twist) when its twist averaged over those wave periods exceeds '
+        'this many holding std (surge and sway as one group): the average lags a move by half '
+        'a period where the low-passed twist lags it by dead_reckoning_force_time, and it has '
+        "none of the current twist's wave-band tails; 0: off", ''))
     dead_reckoning_excursion_std: float = field(default=2.0, metadata=field_doc(
         "the model's relative error in a manoeuvre: while dead reckoning, the covariance adds "
         "(this × the displacement the memory's model dead-reckons since the dropout began)², "
@@ -558,6 +565,16 @@ class OdometryParams:
             raise ValueError('dead_reckoning_moving_twist_periods must be a finite number >= 0 '
                              '(wave periods; 0: the current twist), got '
                              f'{self.dead_reckoning_moving_twist_periods}')
+        if not (math.isfinite(self.dead_reckoning_moving_gate_averaged) and
+                self.dead_reckoning_moving_gate_averaged >= 0.0):
+            raise ValueError('dead_reckoning_moving_gate_averaged must be a finite number >= 0 '
+                             '(holding std; 0: off), got '
+                             f'{self.dead_reckoning_moving_gate_averaged}')
+        if self.dead_reckoning_moving_gate_averaged > 0.0 and \
+                self.dead_reckoning_moving_twist_periods <= 0.0:
+            raise ValueError('dead_reckoning_moving_gate_averaged > 0 needs the averaging span: '
+                             'set dead_reckoning_moving_twist_periods > 0 too (e.g. 1), or the '
+                             'gate to 0')
         if not (math.isfinite(self.dead_reckoning_excursion_std) and
                 self.dead_reckoning_excursion_std >= 0.0):
             raise ValueError('dead_reckoning_excursion_std must be a finite number >= 0 (a '
@@ -739,6 +756,8 @@ class LfOdometry:
         self._lag_peak: tuple[float, FloatArray] | None = None  # (t, held w²), pose_lag_memory
         self._twin_level: FloatArray | None = None  # running level of m² (pose_twin_gain)
         self._history: deque[Published] = deque(maxlen=HISTORY_SAMPLES)
+        # the published twist over dead_reckoning_moving_twist_periods wave periods
+        self._wave_twist = SpanMean(self.sample_time)
         self._x: FloatArray | None = None
         self._p = np.zeros((2 * n, 2 * n))
         self._t: float | None = None
@@ -870,6 +889,7 @@ class LfOdometry:
         if offset is not None and self.params.pose_twin_gain > 0.0 and self.calibrated:
             excess = self._twin_excess(offset)
         self._history.append(Published(t, z.copy(), twist, source, accel, lag, excess))
+        self._wave_twist.add(t, twist, self._wave_span())
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
         self._slow_twist = twist.copy() if self._slow_twist is None else \
             low_pass_step(self._slow_twist, twist, alpha)
@@ -1265,7 +1285,9 @@ class LfOdometry:
         shut 20 s into one; before a calibration the published std), or with
         ``dead_reckoning_moving_gate`` > 0 when the current twist (the last published) exceeds
         that many and, with ``dead_reckoning_moving_gate_slow`` > 0, the low-passed twist that
-        many (the move has begun); surge and sway go together (one earth-fixed force).
+        many (the move has begun), or with ``dead_reckoning_moving_gate_averaged`` > 0 when the
+        twist averaged over whole wave periods exceeds that many; surge and sway go together
+        (one earth-fixed force).
         Holding station the slow twist is mostly the estimate's own error, and balancing against
         it cost 3–10 % in dropouts (docs/BENCHMARKS.md, forty-eighth session); in a setpoint
         move the move's acceleration must not pass for environment.
@@ -1287,6 +1309,10 @@ class LfOdometry:
                 else np.ones(n, dtype=bool)
             moving |= _horizontal_group(np.abs(self._last_output.twist[:n]) > gate * std) & \
                 _horizontal_group(begun)
+        averaged_gate = self.params.dead_reckoning_moving_gate_averaged
+        averaged = self._wave_averaged_twist() if averaged_gate > 0.0 else None
+        if averaged is not None:  # the twist over whole wave periods
+            moving |= _horizontal_group(np.abs(averaged) > averaged_gate * std)
         moving = _horizontal_group(moving & dofs)
         return moving if bool(np.any(moving)) else None
 
@@ -1307,27 +1333,22 @@ class LfOdometry:
         averaged = self._wave_averaged_twist()
         return np.where(moving, state[n:] if averaged is None else averaged, self._slow_twist)
 
+    def _wave_span(self) -> float | None:
+        """``dead_reckoning_moving_twist_periods`` · 2π/ω0 [s] (None: off or no ω0 yet)."""
+        periods = self.params.dead_reckoning_moving_twist_periods
+        freq = self._wave_peak_freq
+        if periods <= 0.0 or freq is None:
+            return None
+        return periods * 2.0 * math.pi / freq
+
     def _wave_averaged_twist(self) -> FloatArray | None:
         """The published twist's mean over ``dead_reckoning_moving_twist_periods`` · 2π/ω0.
 
-        The boxcar over the newest samples stamped within that span of the newest (one period
-        of ω0 has a zero there). None: the option is off, no ω0 is known, or the history since
-        the last reset does not reach back over the whole span.
+        The boxcar over the samples stamped within that span of the newest (`SpanMean`; one
+        period of ω0 has a zero there). None: the option is off, no ω0 is known, or the
+        published twists since the last reset do not reach back over the whole span.
         """
-        periods = self.params.dead_reckoning_moving_twist_periods
-        freq = self._wave_peak_freq
-        if periods <= 0.0 or freq is None or not self._history:
-            return None
-        oldest = self._history[-1].stamp - periods * 2.0 * math.pi / freq + \
-            0.5 * self.sample_time
-        total = np.zeros(self.ndof)
-        count = 0
-        for item in reversed(self._history):
-            if item.stamp < oldest:
-                return total / count if count else None
-            total = total + item.twist
-            count += 1
-        return None  # the history does not reach back over the span
+        return self._wave_twist.mean()
 
     def _track_balance(self, twist: FloatArray) -> None:
         """The twist through one low-pass (the motion gate); with the balance, two passes.

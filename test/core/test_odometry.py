@@ -34,6 +34,7 @@ from lf_predictor_ros.core.odometry import (
     reference_velocity,
     thrust_statistics_step,
 )
+from lf_predictor_ros.core.span_mean import SpanMean
 
 H = 1.0
 
@@ -1471,13 +1472,53 @@ def test_a_move_starts_from_the_twist_averaged_over_a_wave_period() -> None:
     assert abs(current[0] - 0.5) > 0.3
     assert abs(start[0] - 0.5) < 0.02
     assert abs(start[1]) < 1e-6 and start[2] == 0.0
-    odo.set_wave_peak_freq(None)
-    assert odo._start_twist(state).tolist() == current[:2].tolist() + [start[2]]  # noqa: SLF001
-    short = _surge_in_waves(1.0, 2.0 * math.pi / 300.0, 200)  # a period longer than the run
-    assert short._wave_averaged_twist() is None  # noqa: SLF001
-    off = _surge_in_waves(0.0, freq, 200)
-    assert off._start_twist(off._require_state()).tolist() == \
-        odo._start_twist(state).tolist()  # noqa: SLF001
+    for other in (_surge_in_waves(1.0, None, 200),  # no ω0
+                  _surge_in_waves(1.0, 2.0 * math.pi / 300.0, 200),  # a period beyond the run
+                  _surge_in_waves(0.0, freq, 200)):  # off
+        assert other._wave_averaged_twist() is None  # noqa: SLF001
+        other_state = other._require_state()  # noqa: SLF001
+        assert other._start_twist(other_state).tolist() == \
+            current[:2].tolist() + [start[2]]  # noqa: SLF001
+
+
+@pytest.mark.parametrize(('gate', 'averaged', 'opens'), [(0.0, 0.35, False), (3.0, 0.35, True),
+                                                       (3.0, 0.25, False)])
+def test_the_averaged_gate_sees_a_move_the_low_pass_lags(gate: float, averaged: float,
+                                                         opens: bool) -> None:
+    """``dead_reckoning_moving_gate_averaged``: the twist over a wave period opens the gate.
+
+    Holding std 0.1 m/s, 0.1 m/s, 0.01 rad/s; the low-passed twist 0.1 m/s in surge (below 2
+    std). The twist averaged over the wave period, 0.35 m/s in surge (3.5 std) and 0.005 rad/s
+    in yaw, opens surge and sway with a gate of 3 std, not yaw; 0.25 m/s (2.5 std) does not,
+    nor does any average without the gate.
+    """
+    odo = LfOdometry(3, H, OdometryParams(dead_reckoning_moving_twist_periods=1.0,
+                                          dead_reckoning_moving_gate_averaged=gate))
+    for k in range(3):
+        odo.track(float(k), np.zeros(3), np.zeros(3))
+    last = odo._last_output  # noqa: SLF001 - the gate's inputs set by hand
+    assert last is not None
+    odo._last_output = dataclasses.replace(  # noqa: SLF001
+        last, twist=np.array([0.0, 0.0, 0.0]), twist_cov=np.diag([0.01, 0.01, 1e-4]))
+    odo._twist_once = np.array([0.1, 0.0, 0.0])  # noqa: SLF001
+    window = SpanMean(H)
+    for k in range(4):
+        window.add(float(k), np.array([averaged, 0.0, 0.005]), 2.0)
+    odo._wave_twist = window  # noqa: SLF001
+    moving = odo._moving_dofs(np.ones(3, dtype=bool))  # noqa: SLF001
+    if opens:
+        assert moving is not None and moving.tolist() == [True, True, False]
+    else:
+        assert moving is None
+
+
+def test_the_averaged_gate_needs_the_averaging_span() -> None:
+    with pytest.raises(ValueError, match='dead_reckoning_moving_twist_periods > 0'):
+        OdometryParams(dead_reckoning_moving_gate_averaged=2.0)
+    for bad in (-0.1, math.nan, math.inf):
+        with pytest.raises(ValueError, match='dead_reckoning_moving_gate_averaged'):
+            OdometryParams(dead_reckoning_moving_twist_periods=1.0,
+                           dead_reckoning_moving_gate_averaged=bad)
 
 
 @pytest.mark.parametrize('slow_twist, opens', [([0.05, 0.11, 0.0], True),

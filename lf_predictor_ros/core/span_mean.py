@@ -42,7 +42,8 @@ class SpanMean:
     def add(self, stamp: float, value: FloatArray, span: float | None) -> None:
         """A new sample (stamps increasing) and the span [s] it ends; None: off (cleared)."""
         if span is None:
-            self.clear()
+            if self._sum is not None:
+                self.clear()
             return
         if not (math.isfinite(span) and span > 0.0):
             raise ValueError(f'span must be None or a finite time > 0 [s], got {span}')

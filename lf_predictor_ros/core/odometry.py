@@ -335,19 +335,23 @@ class OdometryParams:
         'holding std (rao_supply 1077: 5-7.7 std in surge at rest, the low-passed 0.03-0.55), '
         'and the bare gate moved dropouts that begin before a turn by a few per cent the wrong '
         'way (rule N, docs/BENCHMARKS.md, fifty-sixth session); 0: the current twist alone', ''))
-    dead_reckoning_moving_twist_periods: float = field(default=0.0, metadata=field_doc(
-        'with dead_reckoning_moving_twist: the moving DOFs start from the published twist '
-        'averaged (a boxcar) over this many wave periods 2π/ω0 of the newest ω0 estimate, not '
-        'from the current twist: one period has a zero at ω0, so the wave-band velocity the '
-        'twist filter passes (bandwidth 1 rad/s) does not start the dead reckoning; a move '
-        'changes little in one period (docs/BENCHMARKS.md, sixty-first session); 0, or no ω0 '
-        'yet, or a history shorter than the window: the current twist', ''))
+    dead_reckoning_twist_average_periods: float = field(default=0.0, metadata=field_doc(
+        'the span of the wave-averaged twist: the published twist averaged (a boxcar) over this '
+        'many wave periods 2π/ω0 of the newest ω0 estimate (one period has a zero at ω0, so the '
+        'wave-band velocity the twist filter passes, bandwidth 1 rad/s, is dropped, with a lag '
+        'of half the span); used by dead_reckoning_moving_twist_averaged and '
+        'dead_reckoning_moving_gate_averaged; 0: none', 'wave periods'))
+    dead_reckoning_moving_twist_averaged: bool = field(default=False, metadata=field_doc(
+        'with dead_reckoning_moving_twist and dead_reckoning_twist_average_periods > 0: the '
+        'moving DOFs start from the wave-averaged twist, not the current one (no ω0 yet, or a '
+        'history shorter than the span: the current; docs/BENCHMARKS.md, sixty-first session: '
+        'alone it lost 4 % in the moves row on development seeds)', ''))
     dead_reckoning_moving_gate_averaged: float = field(default=0.0, metadata=field_doc(
-        'with dead_reckoning_moving_twist_periods > 0: a DOF also counts as moving (the holding '
-        'balance, the moving twist) when its twist averaged over those wave periods exceeds '
-        'this many holding std (surge and sway as one group): the average lags a move by half '
-        'a period where the low-passed twist lags it by dead_reckoning_force_time, and it has '
-        "none of the current twist's wave-band tails; 0: off", ''))
+        'with dead_reckoning_twist_average_periods > 0: a DOF also counts as moving (the holding '
+        'balance, the moving twist) when its wave-averaged twist exceeds this many holding std '
+        '(surge and sway as one group): the average lags a move by half its span where the '
+        'low-passed twist lags it by dead_reckoning_force_time, and it has none of the current '
+        "twist's wave-band tails; 0: off", ''))
     dead_reckoning_excursion_std: float = field(default=2.0, metadata=field_doc(
         "the model's relative error in a manoeuvre: while dead reckoning, the covariance adds "
         "(this × the displacement the memory's model dead-reckons since the dropout began)², "
@@ -560,20 +564,24 @@ class OdometryParams:
             raise ValueError('dead_reckoning_moving_gate_slow must be a finite number >= 0 '
                              '(holding std of the low-passed twist; 0: the current twist '
                              f'alone), got {self.dead_reckoning_moving_gate_slow}')
-        if not (math.isfinite(self.dead_reckoning_moving_twist_periods) and
-                self.dead_reckoning_moving_twist_periods >= 0.0):
-            raise ValueError('dead_reckoning_moving_twist_periods must be a finite number >= 0 '
-                             '(wave periods; 0: the current twist), got '
-                             f'{self.dead_reckoning_moving_twist_periods}')
+        if not (math.isfinite(self.dead_reckoning_twist_average_periods) and
+                self.dead_reckoning_twist_average_periods >= 0.0):
+            raise ValueError('dead_reckoning_twist_average_periods must be a finite number >= 0 '
+                             '(wave periods; 0: none), got '
+                             f'{self.dead_reckoning_twist_average_periods}')
+        if self.dead_reckoning_moving_twist_averaged and \
+                self.dead_reckoning_twist_average_periods <= 0.0:
+            raise ValueError('dead_reckoning_moving_twist_averaged needs the averaging span: set '
+                             'dead_reckoning_twist_average_periods > 0 too (e.g. 1), or it false')
         if not (math.isfinite(self.dead_reckoning_moving_gate_averaged) and
                 self.dead_reckoning_moving_gate_averaged >= 0.0):
             raise ValueError('dead_reckoning_moving_gate_averaged must be a finite number >= 0 '
                              '(holding std; 0: off), got '
                              f'{self.dead_reckoning_moving_gate_averaged}')
         if self.dead_reckoning_moving_gate_averaged > 0.0 and \
-                self.dead_reckoning_moving_twist_periods <= 0.0:
+                self.dead_reckoning_twist_average_periods <= 0.0:
             raise ValueError('dead_reckoning_moving_gate_averaged > 0 needs the averaging span: '
-                             'set dead_reckoning_moving_twist_periods > 0 too (e.g. 1), or the '
+                             'set dead_reckoning_twist_average_periods > 0 too (e.g. 1), or the '
                              'gate to 0')
         if not (math.isfinite(self.dead_reckoning_excursion_std) and
                 self.dead_reckoning_excursion_std >= 0.0):
@@ -741,7 +749,7 @@ class LfOdometry:
         self.ndof = ndof
         self.sample_time = sample_time
         self.params = params or OdometryParams()
-        self._wave_peak_freq: float | None = None  # [rad/s] dead_reckoning_moving_twist_periods
+        self._wave_peak_freq: float | None = None  # [rad/s] dead_reckoning_twist_average_periods
         self.reset()
 
     # ---- public ---------------------------------------------------------------------------
@@ -756,7 +764,7 @@ class LfOdometry:
         self._lag_peak: tuple[float, FloatArray] | None = None  # (t, held w²), pose_lag_memory
         self._twin_level: FloatArray | None = None  # running level of m² (pose_twin_gain)
         self._history: deque[Published] = deque(maxlen=HISTORY_SAMPLES)
-        # the published twist over dead_reckoning_moving_twist_periods wave periods
+        # the published twist over dead_reckoning_twist_average_periods wave periods
         self._wave_twist = SpanMean(self.sample_time)
         self._x: FloatArray | None = None
         self._p = np.zeros((2 * n, 2 * n))
@@ -822,7 +830,7 @@ class LfOdometry:
         return self._wave_peak_freq
 
     def set_wave_peak_freq(self, wave_peak_freq: float | None) -> None:
-        """The newest ω0 estimate [rad/s] (``dead_reckoning_moving_twist_periods``; None: none).
+        """The newest ω0 estimate [rad/s] (``dead_reckoning_twist_average_periods``; None: none).
 
         Raises:
             ValueError: not None and not a finite number > 0.
@@ -1321,7 +1329,7 @@ class LfOdometry:
 
         The low-passed twist; with ``dead_reckoning_moving_twist`` the current one of ``state``
         in the DOFs that are moving (`_moving_dofs`), or with
-        ``dead_reckoning_moving_twist_periods`` the one averaged over whole wave periods
+        ``dead_reckoning_moving_twist_averaged`` the one averaged over whole wave periods
         (`_wave_averaged_twist`).
         """
         assert self._slow_twist is not None
@@ -1330,19 +1338,20 @@ class LfOdometry:
             if self.params.dead_reckoning_moving_twist else None
         if moving is None:
             return self._slow_twist.copy()
-        averaged = self._wave_averaged_twist()
+        averaged = self._wave_averaged_twist() \
+            if self.params.dead_reckoning_moving_twist_averaged else None
         return np.where(moving, state[n:] if averaged is None else averaged, self._slow_twist)
 
     def _wave_span(self) -> float | None:
-        """``dead_reckoning_moving_twist_periods`` · 2π/ω0 [s] (None: off or no ω0 yet)."""
-        periods = self.params.dead_reckoning_moving_twist_periods
+        """``dead_reckoning_twist_average_periods`` · 2π/ω0 [s] (None: off or no ω0 yet)."""
+        periods = self.params.dead_reckoning_twist_average_periods
         freq = self._wave_peak_freq
         if periods <= 0.0 or freq is None:
             return None
         return periods * 2.0 * math.pi / freq
 
     def _wave_averaged_twist(self) -> FloatArray | None:
-        """The published twist's mean over ``dead_reckoning_moving_twist_periods`` · 2π/ω0.
+        """The published twist's mean over ``dead_reckoning_twist_average_periods`` · 2π/ω0.
 
         The boxcar over the samples stamped within that span of the newest (`SpanMean`; one
         period of ω0 has a zero there). None: the option is off, no ω0 is known, or the

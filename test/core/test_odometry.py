@@ -1147,9 +1147,11 @@ def test_dead_reckoning_moving_gate_slow_is_checked(bad: float) -> None:
 
 
 @pytest.mark.parametrize('bad', [-0.1, math.nan, math.inf])
-def test_dead_reckoning_moving_twist_periods_is_checked(bad: float) -> None:
-    with pytest.raises(ValueError, match='dead_reckoning_moving_twist_periods'):
-        OdometryParams(dead_reckoning_moving_twist_periods=bad)
+def test_dead_reckoning_twist_average_periods_is_checked(bad: float) -> None:
+    with pytest.raises(ValueError, match='dead_reckoning_twist_average_periods'):
+        OdometryParams(dead_reckoning_twist_average_periods=bad)
+    with pytest.raises(ValueError, match='dead_reckoning_twist_average_periods > 0'):
+        OdometryParams(dead_reckoning_moving_twist_averaged=True)
 
 
 @pytest.mark.parametrize('bad', [0.0, -0.5, math.nan, math.inf])
@@ -1444,7 +1446,8 @@ def _surge_in_waves(periods: float, wave_peak_freq: float | None, seconds: int
     The wave velocity (0.63 m/s amplitude) is below the twist filter's bandwidth (1 rad/s), so
     the current twist carries most of it.
     """
-    odo = LfOdometry(3, H, OdometryParams(dead_reckoning_moving_twist_periods=periods,
+    odo = LfOdometry(3, H, OdometryParams(dead_reckoning_twist_average_periods=periods,
+                                          dead_reckoning_moving_twist_averaged=periods > 0.0,
                                           prior_pose_std=(1e-3, 1e-3, 1e-4)))
     odo.set_wave_peak_freq(wave_peak_freq)
     times = np.arange(float(seconds))
@@ -1454,7 +1457,7 @@ def _surge_in_waves(periods: float, wave_peak_freq: float | None, seconds: int
 
 
 def test_a_move_starts_from_the_twist_averaged_over_a_wave_period() -> None:
-    """``dead_reckoning_moving_twist_periods``: the wave velocity stays out of the start.
+    """``dead_reckoning_moving_twist_averaged``: the wave velocity stays out of the start.
 
     At t = 199 s the wave velocity is near its crest: the current twist is 0.5 + 0.49 m/s
     (measured); averaged over one period of ω0 (20 samples) it is the surge speed within
@@ -1492,7 +1495,7 @@ def test_the_averaged_gate_sees_a_move_the_low_pass_lags(gate: float, averaged: 
     in yaw, opens surge and sway with a gate of 3 std, not yaw; 0.25 m/s (2.5 std) does not,
     nor does any average without the gate.
     """
-    odo = LfOdometry(3, H, OdometryParams(dead_reckoning_moving_twist_periods=1.0,
+    odo = LfOdometry(3, H, OdometryParams(dead_reckoning_twist_average_periods=1.0,
                                           dead_reckoning_moving_gate_averaged=gate))
     for k in range(3):
         odo.track(float(k), np.zeros(3), np.zeros(3))
@@ -1513,11 +1516,11 @@ def test_the_averaged_gate_sees_a_move_the_low_pass_lags(gate: float, averaged: 
 
 
 def test_the_averaged_gate_needs_the_averaging_span() -> None:
-    with pytest.raises(ValueError, match='dead_reckoning_moving_twist_periods > 0'):
+    with pytest.raises(ValueError, match='dead_reckoning_twist_average_periods > 0'):
         OdometryParams(dead_reckoning_moving_gate_averaged=2.0)
     for bad in (-0.1, math.nan, math.inf):
         with pytest.raises(ValueError, match='dead_reckoning_moving_gate_averaged'):
-            OdometryParams(dead_reckoning_moving_twist_periods=1.0,
+            OdometryParams(dead_reckoning_twist_average_periods=1.0,
                            dead_reckoning_moving_gate_averaged=bad)
 
 

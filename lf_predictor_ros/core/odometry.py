@@ -126,6 +126,8 @@ REFERENCE_LOW_PASS_ORDER = 4
 # through one low-pass exceeds this many holding standard deviations of the twist (a two-sided
 # 95 % test of "at rest") [-].
 MOTION_BALANCE_SIGMAS = 2.0
+# ``dead_reckoning_moving_twist_start``: the twist a moving DOF's dead reckoning starts from.
+MOVING_TWIST_STARTS = ('current', 'average', 'extrapolated')
 # ``dead_reckoning_damping_memory``: the DOFs (surge, sway, yaw) whose damping rate the vessel
 # memory keeps across windows, per choice.
 DAMPING_MEMORY_DOFS: dict[str, tuple[bool, bool, bool]] = {
@@ -339,13 +341,16 @@ class OdometryParams:
         'the span of the wave-averaged twist: the published twist averaged (a boxcar) over this '
         'many wave periods 2π/ω0 of the newest ω0 estimate (one period has a zero at ω0, so the '
         'wave-band velocity the twist filter passes, bandwidth 1 rad/s, is dropped, with a lag '
-        'of half the span); used by dead_reckoning_moving_twist_averaged and '
+        'of half the span); used by dead_reckoning_moving_twist_start and '
         'dead_reckoning_moving_gate_averaged; 0: none', 'wave periods'))
-    dead_reckoning_moving_twist_averaged: bool = field(default=False, metadata=field_doc(
-        'with dead_reckoning_moving_twist and dead_reckoning_twist_average_periods > 0: the '
-        'moving DOFs start from the wave-averaged twist, not the current one (no ω0 yet, or a '
-        'history shorter than the span: the current; docs/BENCHMARKS.md, sixty-first session: '
-        'alone it lost 4 % in the moves row on development seeds)', ''))
+    dead_reckoning_moving_twist_start: str = field(default='current', metadata=field_doc(
+        "with dead_reckoning_moving_twist: the twist the moving DOFs start from. 'current': the "
+        "last published; with dead_reckoning_twist_average_periods > 0, 'average': the "
+        'wave-averaged twist (it lags by half its span T: docs/BENCHMARKS.md, sixty-first '
+        'session, alone it lost 4 % in the moves row on development seeds), '
+        "'extrapolated': that average carried over its lag, 2 mean(T) - mean(2T) (both "
+        'boxcars null ω0, and a ramp comes out exact); no ω0 yet, or a history shorter than '
+        'the span: the current', ''))
     dead_reckoning_moving_gate_averaged: float = field(default=0.0, metadata=field_doc(
         'with dead_reckoning_twist_average_periods > 0: a DOF also counts as moving (the holding '
         'balance, the moving twist) when its wave-averaged twist exceeds this many holding std '
@@ -569,10 +574,15 @@ class OdometryParams:
             raise ValueError('dead_reckoning_twist_average_periods must be a finite number >= 0 '
                              '(wave periods; 0: none), got '
                              f'{self.dead_reckoning_twist_average_periods}')
-        if self.dead_reckoning_moving_twist_averaged and \
+        if self.dead_reckoning_moving_twist_start not in MOVING_TWIST_STARTS:
+            raise ValueError('dead_reckoning_moving_twist_start must be one of '
+                             f'{MOVING_TWIST_STARTS}, got '
+                             f'{self.dead_reckoning_moving_twist_start!r}')
+        if self.dead_reckoning_moving_twist_start != 'current' and \
                 self.dead_reckoning_twist_average_periods <= 0.0:
-            raise ValueError('dead_reckoning_moving_twist_averaged needs the averaging span: set '
-                             'dead_reckoning_twist_average_periods > 0 too (e.g. 1), or it false')
+            raise ValueError('dead_reckoning_moving_twist_start other than current needs the '
+                             'averaging span: set dead_reckoning_twist_average_periods > 0 too '
+                             "(e.g. 1), or it 'current'")
         if not (math.isfinite(self.dead_reckoning_moving_gate_averaged) and
                 self.dead_reckoning_moving_gate_averaged >= 0.0):
             raise ValueError('dead_reckoning_moving_gate_averaged must be a finite number >= 0 '
@@ -764,8 +774,10 @@ class LfOdometry:
         self._lag_peak: tuple[float, FloatArray] | None = None  # (t, held w²), pose_lag_memory
         self._twin_level: FloatArray | None = None  # running level of m² (pose_twin_gain)
         self._history: deque[Published] = deque(maxlen=HISTORY_SAMPLES)
-        # the published twist over dead_reckoning_twist_average_periods wave periods
+        # the published twist over dead_reckoning_twist_average_periods wave periods, and
+        # (dead_reckoning_moving_twist_start 'extrapolated') over twice as many
         self._wave_twist = SpanMean(self.sample_time)
+        self._wave_twist_double = SpanMean(self.sample_time)
         self._x: FloatArray | None = None
         self._p = np.zeros((2 * n, 2 * n))
         self._t: float | None = None
@@ -897,7 +909,11 @@ class LfOdometry:
         if offset is not None and self.params.pose_twin_gain > 0.0 and self.calibrated:
             excess = self._twin_excess(offset)
         self._history.append(Published(t, z.copy(), twist, source, accel, lag, excess))
-        self._wave_twist.add(t, twist, self._wave_span())
+        span = self._wave_span()
+        self._wave_twist.add(t, twist, span)
+        self._wave_twist_double.add(
+            t, twist, 2.0 * span if span is not None and
+            self.params.dead_reckoning_moving_twist_start == 'extrapolated' else None)
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
         self._slow_twist = twist.copy() if self._slow_twist is None else \
             low_pass_step(self._slow_twist, twist, alpha)
@@ -1328,9 +1344,8 @@ class LfOdometry:
         """The twist a dead reckoning starts from (a new array).
 
         The low-passed twist; with ``dead_reckoning_moving_twist`` the current one of ``state``
-        in the DOFs that are moving (`_moving_dofs`), or with
-        ``dead_reckoning_moving_twist_averaged`` the one averaged over whole wave periods
-        (`_wave_averaged_twist`).
+        in the DOFs that are moving (`_moving_dofs`), or the wave-averaged one
+        (``dead_reckoning_moving_twist_start``, `_averaged_start`).
         """
         assert self._slow_twist is not None
         n = self.ndof
@@ -1338,9 +1353,24 @@ class LfOdometry:
             if self.params.dead_reckoning_moving_twist else None
         if moving is None:
             return self._slow_twist.copy()
-        averaged = self._wave_averaged_twist() \
-            if self.params.dead_reckoning_moving_twist_averaged else None
+        averaged = self._averaged_start()
         return np.where(moving, state[n:] if averaged is None else averaged, self._slow_twist)
+
+    def _averaged_start(self) -> FloatArray | None:
+        """The wave-averaged start twist of ``dead_reckoning_moving_twist_start`` (None: current).
+
+        'extrapolated': 2 mean(T) − mean(2T), the mean over the last span T carried over its
+        lag of T/2 by the slope between the last two spans ((mean(T) − mean(T before)) / T ·
+        T/2, with mean(T before) = 2 mean(2T) − mean(T)).
+        """
+        choice = self.params.dead_reckoning_moving_twist_start
+        if choice == 'current':
+            return None
+        one = self._wave_twist.mean()
+        if choice == 'average' or one is None:
+            return one
+        two = self._wave_twist_double.mean()
+        return None if two is None else 2.0 * one - two
 
     def _wave_span(self) -> float | None:
         """``dead_reckoning_twist_average_periods`` · 2π/ω0 [s] (None: off or no ω0 yet)."""

@@ -4,7 +4,7 @@ Over one wave period 2π/ω0 the boxcar has a zero of its frequency response at 
 its multiples), so the mean of a velocity over one period keeps the LF part and drops the
 wave-band part at the peak frequency with a lag of half a period. The odometry uses it for the
 twist a dead reckoning starts from and for the motion gate (``OdometryParams``'s
-``dead_reckoning_moving_twist_averaged`` and ``dead_reckoning_moving_gate_averaged``).
+``dead_reckoning_moving_twist_start`` and ``dead_reckoning_moving_gate_averaged``).
 """
 from __future__ import annotations
 

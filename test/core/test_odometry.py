@@ -1151,7 +1151,7 @@ def test_dead_reckoning_twist_average_periods_is_checked(bad: float) -> None:
     with pytest.raises(ValueError, match='dead_reckoning_twist_average_periods'):
         OdometryParams(dead_reckoning_twist_average_periods=bad)
     with pytest.raises(ValueError, match='dead_reckoning_twist_average_periods > 0'):
-        OdometryParams(dead_reckoning_moving_twist_averaged=True)
+        OdometryParams(dead_reckoning_moving_twist_start='average')
 
 
 @pytest.mark.parametrize('bad', [0.0, -0.5, math.nan, math.inf])
@@ -1439,25 +1439,28 @@ def test_the_moving_gate_on_the_current_twist_sees_a_move_the_low_pass_lags(gate
     assert moving is not None and moving.tolist() == [True, True, False]
 
 
-def _surge_in_waves(periods: float, wave_peak_freq: float | None, seconds: int
-                    ) -> LfOdometry:
+def _surge_in_waves(periods: float, wave_peak_freq: float | None, seconds: int,
+                    start: str = 'average', accel: float = 0.0) -> LfOdometry:
     """Fixes of a 0.5 m/s surge with a 2 m wave motion at ω0 = 2π/20 rad/s, H = 1 s.
 
     The wave velocity (0.63 m/s amplitude) is below the twist filter's bandwidth (1 rad/s), so
-    the current twist carries most of it.
+    the current twist carries most of it. ``accel`` [m/s²]: the surge speed is accel · t instead
+    of 0.5 m/s. ``periods`` 0: the start 'current'.
     """
-    odo = LfOdometry(3, H, OdometryParams(dead_reckoning_twist_average_periods=periods,
-                                          dead_reckoning_moving_twist_averaged=periods > 0.0,
-                                          prior_pose_std=(1e-3, 1e-3, 1e-4)))
+    odo = LfOdometry(3, H, OdometryParams(
+        dead_reckoning_twist_average_periods=periods,
+        dead_reckoning_moving_twist_start=start if periods > 0.0 else 'current',
+        prior_pose_std=(1e-3, 1e-3, 1e-4)))
     odo.set_wave_peak_freq(wave_peak_freq)
     times = np.arange(float(seconds))
-    north = 0.5 * times + 2.0 * np.sin(2.0 * math.pi / 20.0 * times)
+    drift = 0.5 * accel * times ** 2 if accel else 0.5 * times
+    north = drift + 2.0 * np.sin(2.0 * math.pi / 20.0 * times)
     _track_surge(odo, times, north, np.zeros(seconds))
     return odo
 
 
 def test_a_move_starts_from_the_twist_averaged_over_a_wave_period() -> None:
-    """``dead_reckoning_moving_twist_averaged``: the wave velocity stays out of the start.
+    """``dead_reckoning_moving_twist_start`` 'average': the wave velocity stays out of the start.
 
     At t = 199 s the wave velocity is near its crest: the current twist is 0.5 + 0.49 m/s
     (measured); averaged over one period of ω0 (20 samples) it is the surge speed within
@@ -1482,6 +1485,27 @@ def test_a_move_starts_from_the_twist_averaged_over_a_wave_period() -> None:
         other_state = other._require_state()  # noqa: SLF001
         assert other._start_twist(other_state).tolist() == \
             current[:2].tolist() + [start[2]]  # noqa: SLF001
+
+
+def test_the_extrapolated_average_starts_an_accelerating_move_without_the_lag() -> None:
+    """'extrapolated': 2 mean(T) − mean(2T) is the speed now on a ramp, with the wave removed.
+
+    Surge speed 0.002 t m/s (0.398 m/s at t = 199 s) and the 2 m wave at ω0 = 2π/20 rad/s:
+    the average over one period (20 samples) lags by 9.5 s (0.379 m/s; measured 0.377); the
+    extrapolated one is within 0.005 m/s of the speed (measured 0.397) while the current twist
+    is 0.49 m/s off.
+    """
+    freq = 2.0 * math.pi / 20.0
+    speed = 0.002 * 199.0
+    average = _surge_in_waves(1.0, freq, 200, 'average', accel=0.002)
+    extrapolated = _surge_in_waves(1.0, freq, 200, 'extrapolated', accel=0.002)
+    state = extrapolated._require_state()  # noqa: SLF001 - the start of a dead reckoning
+    lagged = average._start_twist(average._require_state())[0]  # noqa: SLF001
+    start = extrapolated._start_twist(state)[0]  # noqa: SLF001
+    print(f'current {state[3]:.3f}, average {lagged:.3f}, extrapolated {start:.3f} m/s')
+    assert abs(state[3] - speed) > 0.3
+    assert lagged == pytest.approx(speed - 0.002 * 9.5, abs=0.005)
+    assert start == pytest.approx(speed, abs=0.005)
 
 
 @pytest.mark.parametrize(('gate', 'averaged', 'opens'), [(0.0, 0.35, False), (3.0, 0.35, True),
@@ -1554,7 +1578,8 @@ def test_the_moving_gate_with_a_slow_gate_waits_for_the_move_to_begin(
 
 @pytest.mark.parametrize('name', ['controller_read_fitted_damping_dofs',
                                   'dead_reckoning_damping_memory',
-                                  'controller_read_stiffness_frame'])
+                                  'controller_read_stiffness_frame',
+                                  'dead_reckoning_moving_twist_start'])
 def test_a_choice_outside_its_choices_is_refused(name: str) -> None:
     with pytest.raises(ValueError, match=f"{name} must be one of .*, got 'heading'"):
         OdometryParams(**{name: 'heading'})

@@ -1148,10 +1148,13 @@ def test_dead_reckoning_moving_gate_slow_is_checked(bad: float) -> None:
 
 @pytest.mark.parametrize('bad', [-0.1, math.nan, math.inf])
 def test_dead_reckoning_twist_average_periods_is_checked(bad: float) -> None:
-    with pytest.raises(ValueError, match='dead_reckoning_twist_average_periods'):
-        OdometryParams(dead_reckoning_twist_average_periods=bad)
+    with pytest.raises(ValueError, match='dead_reckoning_twist_average_periods must be'):
+        OdometryParams(dead_reckoning_twist_average_periods=bad,
+                       dead_reckoning_moving_gate_averaged=0.0)
     with pytest.raises(ValueError, match='dead_reckoning_twist_average_periods > 0'):
-        OdometryParams(dead_reckoning_moving_twist_start='average')
+        OdometryParams(dead_reckoning_twist_average_periods=0.0,
+                       dead_reckoning_moving_gate_averaged=0.0,
+                       dead_reckoning_moving_twist_start='average')
 
 
 @pytest.mark.parametrize('bad', [0.0, -0.5, math.nan, math.inf])
@@ -1450,6 +1453,7 @@ def _surge_in_waves(periods: float, wave_peak_freq: float | None, seconds: int,
     odo = LfOdometry(3, H, OdometryParams(
         dead_reckoning_twist_average_periods=periods,
         dead_reckoning_moving_twist_start=start if periods > 0.0 else 'current',
+        dead_reckoning_moving_gate_averaged=0.0,
         prior_pose_std=(1e-3, 1e-3, 1e-4)))
     odo.set_wave_peak_freq(wave_peak_freq)
     times = np.arange(float(seconds))
@@ -1541,7 +1545,8 @@ def test_the_averaged_gate_sees_a_move_the_low_pass_lags(gate: float, averaged: 
 
 def test_the_averaged_gate_needs_the_averaging_span() -> None:
     with pytest.raises(ValueError, match='dead_reckoning_twist_average_periods > 0'):
-        OdometryParams(dead_reckoning_moving_gate_averaged=2.0)
+        OdometryParams(dead_reckoning_twist_average_periods=0.0,
+                       dead_reckoning_moving_gate_averaged=2.0)
     for bad in (-0.1, math.nan, math.inf):
         with pytest.raises(ValueError, match='dead_reckoning_moving_gate_averaged'):
             OdometryParams(dead_reckoning_twist_average_periods=1.0,

@@ -1366,7 +1366,7 @@ class LfOdometry:
         choice = self.params.dead_reckoning_moving_twist_start
         if choice == 'current':
             return None
-        one = self._wave_twist.mean()
+        one = self._wave_averaged_twist()
         if choice == 'average' or one is None:
             return one
         two = self._wave_twist_double.mean()

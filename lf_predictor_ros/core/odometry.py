@@ -337,7 +337,7 @@ class OdometryParams:
         'holding std (rao_supply 1077: 5-7.7 std in surge at rest, the low-passed 0.03-0.55), '
         'and the bare gate moved dropouts that begin before a turn by a few per cent the wrong '
         'way (rule N, docs/BENCHMARKS.md, fifty-sixth session); 0: the current twist alone', ''))
-    dead_reckoning_twist_average_periods: float = field(default=0.0, metadata=field_doc(
+    dead_reckoning_twist_average_periods: float = field(default=1.0, metadata=field_doc(
         'the span of the wave-averaged twist: the published twist averaged (a boxcar) over this '
         'many wave periods 2π/ω0 of the newest ω0 estimate (one period has a zero at ω0, so the '
         'wave-band velocity the twist filter passes, bandwidth 1 rad/s, is dropped, with a lag '
@@ -351,12 +351,13 @@ class OdometryParams:
         "'extrapolated': that average carried over its lag, 2 mean(T) - mean(2T) (both "
         'boxcars null ω0, and a ramp comes out exact); no ω0 yet, or a history shorter than '
         'the span: the current', ''))
-    dead_reckoning_moving_gate_averaged: float = field(default=0.0, metadata=field_doc(
+    dead_reckoning_moving_gate_averaged: float = field(default=2.0, metadata=field_doc(
         'with dead_reckoning_twist_average_periods > 0: a DOF also counts as moving (the holding '
         'balance, the moving twist) when its wave-averaged twist exceeds this many holding std '
         '(surge and sway as one group): the average lags a move by half its span where the '
         'low-passed twist lags it by dead_reckoning_force_time, and it has none of the current '
-        "twist's wave-band tails; 0: off", ''))
+        "twist's wave-band tails (2 with 1 period: rule T, docs/BENCHMARKS.md, sixty-first "
+        'session, the moves row 0.86x on fresh seeds); 0: off', ''))
     dead_reckoning_excursion_std: float = field(default=2.0, metadata=field_doc(
         "the model's relative error in a manoeuvre: while dead reckoning, the covariance adds "
         "(this × the displacement the memory's model dead-reckons since the dropout began)², "

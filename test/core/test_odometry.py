@@ -1413,6 +1413,21 @@ def test_a_memory_without_a_model_keeps_the_one_with_a_model_when_asked(keep: bo
     assert odo.memory is newer
 
 
+def _set_gate_inputs(odo: LfOdometry, twist: list[float], slow_twist: list[float]) -> None:
+    """Three fixes at rest, then the motion gate's inputs set by hand.
+
+    The last published twist ``twist``, its std 0.1 m/s, 0.1 m/s, 0.01 rad/s (the holding std
+    before a calibration), and the low-passed twist ``slow_twist``.
+    """
+    for k in range(3):
+        odo.track(float(k), np.zeros(3), np.zeros(3))
+    last = odo._last_output  # noqa: SLF001 - the gate's inputs set by hand
+    assert last is not None
+    odo._last_output = dataclasses.replace(  # noqa: SLF001
+        last, twist=np.array(twist), twist_cov=np.diag([0.01, 0.01, 1e-4]))
+    odo._twist_once = np.array(slow_twist)  # noqa: SLF001
+
+
 @pytest.mark.parametrize('gate', [0.0, 4.0])
 def test_the_moving_gate_on_the_current_twist_sees_a_move_the_low_pass_lags(gate: float
                                                                            ) -> None:
@@ -1424,13 +1439,7 @@ def test_the_moving_gate_on_the_current_twist_sees_a_move_the_low_pass_lags(gate
     earth-fixed force); yaw, 0.02 rad/s now (2 std), stays at rest either way.
     """
     odo = LfOdometry(3, H, OdometryParams(dead_reckoning_moving_gate=gate))
-    for k in range(3):
-        odo.track(float(k), np.zeros(3), np.zeros(3))
-    last = odo._last_output  # noqa: SLF001 - the gate's inputs set by hand
-    assert last is not None
-    odo._last_output = dataclasses.replace(  # noqa: SLF001
-        last, twist=np.array([0.7, 0.05, 0.02]), twist_cov=np.diag([0.01, 0.01, 1e-4]))
-    odo._twist_once = np.array([0.1, 0.05, 0.0])  # noqa: SLF001
+    _set_gate_inputs(odo, [0.7, 0.05, 0.02], [0.1, 0.05, 0.0])
     moving = odo._moving_dofs(np.ones(3, dtype=bool))  # noqa: SLF001
     if gate == 0.0:
         assert moving is None
@@ -1525,13 +1534,7 @@ def test_the_averaged_gate_sees_a_move_the_low_pass_lags(gate: float, averaged: 
     """
     odo = LfOdometry(3, H, OdometryParams(dead_reckoning_twist_average_periods=1.0,
                                           dead_reckoning_moving_gate_averaged=gate))
-    for k in range(3):
-        odo.track(float(k), np.zeros(3), np.zeros(3))
-    last = odo._last_output  # noqa: SLF001 - the gate's inputs set by hand
-    assert last is not None
-    odo._last_output = dataclasses.replace(  # noqa: SLF001
-        last, twist=np.array([0.0, 0.0, 0.0]), twist_cov=np.diag([0.01, 0.01, 1e-4]))
-    odo._twist_once = np.array([0.1, 0.0, 0.0])  # noqa: SLF001
+    _set_gate_inputs(odo, [0.0, 0.0, 0.0], [0.1, 0.0, 0.0])
     window = SpanMean(H)
     for k in range(4):
         window.add(float(k), np.array([averaged, 0.0, 0.005]), 2.0)
@@ -1567,13 +1570,7 @@ def test_the_moving_gate_with_a_slow_gate_waits_for_the_move_to_begin(
     """
     odo = LfOdometry(3, H, OdometryParams(dead_reckoning_moving_gate=4.0,
                                           dead_reckoning_moving_gate_slow=1.0))
-    for k in range(3):
-        odo.track(float(k), np.zeros(3), np.zeros(3))
-    last = odo._last_output  # noqa: SLF001 - the gate's inputs set by hand
-    assert last is not None
-    odo._last_output = dataclasses.replace(  # noqa: SLF001
-        last, twist=np.array([0.7, 0.0, 0.05]), twist_cov=np.diag([0.01, 0.01, 1e-4]))
-    odo._twist_once = np.array(slow_twist)  # noqa: SLF001
+    _set_gate_inputs(odo, [0.7, 0.0, 0.05], slow_twist)
     moving = odo._moving_dofs(np.ones(3, dtype=bool))  # noqa: SLF001
     if opens:
         assert moving is not None and moving.tolist() == [True, True, False]

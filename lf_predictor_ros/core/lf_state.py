@@ -189,7 +189,7 @@ class LfStateEstimator:
         # the untaken twin offset only where the odometry uses it (pose_twin_gain > 0)
         offset = self.predictor.untaken_twin_offset if self.odometry.params.pose_twin_gain > 0.0 \
             else None
-        self.odometry.set_wave_peak_freq(self.predictor.wave_peak_freq)
+        self._hand_wave_peak_freq()
         odom = self.odometry.track(t + self.sample_time, lf_pose, force, source, offset)
         return lf_pose, odom
 
@@ -215,7 +215,7 @@ class LfStateEstimator:
     def coast(self, t: float, force: FloatArray) -> OdometryEstimate | None:
         """Thrust at t without an accepted pose: dead reckoning (None when lost or never fixed)."""
         self._collect()
-        self.odometry.set_wave_peak_freq(self.predictor.wave_peak_freq)
+        self._hand_wave_peak_freq()
         return self.odometry.coast(t, force)
 
     def restart_segment(self) -> None:
@@ -290,6 +290,12 @@ class LfStateEstimator:
         return self._memory_error
 
     # ---- internals -------------------------------------------------------------------------
+
+    def _hand_wave_peak_freq(self) -> None:
+        """The predictor's newest ω0 to the odometry (one that is no frequency: None)."""
+        freq = self.predictor.wave_peak_freq
+        usable = freq is not None and math.isfinite(freq) and freq > 0.0
+        self.odometry.set_wave_peak_freq(freq if usable else None)
 
     def _restart_buffers(self) -> None:
         self._times: deque[float] = deque(maxlen=self._capacity)

@@ -668,7 +668,10 @@ def test_the_untaken_twin_offset_reaches_the_odometry_only_where_it_is_used(
 
 
 def test_the_odometry_is_given_the_predictors_newest_wave_peak_freq() -> None:
-    """Each update and each coast hands the predictor's ω0 (or None) to the odometry first."""
+    """Each update and each coast hands the predictor's ω0 (or None) to the odometry first.
+
+    An ω0 that is no frequency (inf) is handed as None, not raised in the node's callback.
+    """
     params = PredictorParams(ndof=1, sample_time=1.0, retrain_period=20.0,
                              training_window=200.0, transient_length=10.0, filter_window=60.0,
                              append_length=40.0, estimation_window=600.0)
@@ -684,6 +687,9 @@ def test_the_odometry_is_given_the_predictors_newest_wave_peak_freq() -> None:
     out = est.coast(3.0, np.zeros(3))
     assert out is not None and out.mode == 'dead_reckoning'
     assert est.odometry.wave_peak_freq == 0.5
+    fake.wave_peak_freq = math.inf  # type: ignore[assignment]  # e.g. a corrupt checkpoint's
+    assert est.coast(4.0, np.zeros(3)) is not None
+    assert est.odometry.wave_peak_freq is None
     est.close()
 
 

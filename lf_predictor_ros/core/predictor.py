@@ -708,7 +708,7 @@ class AdaptivePredictor:
             NnarmaxNet.from_state(spec, state)).with_saved_ranges(meta)
         self._model_time = None
         freq = meta.get('wave_peak_freq')
-        if isinstance(freq, (int, float)) and freq > 0:
+        if isinstance(freq, (int, float)) and math.isfinite(freq) and freq > 0:  # else: kept
             self._frequency = float(freq)
             self._tune_wave_filters(float(freq))
         self._last_loss = meta.get('loss')

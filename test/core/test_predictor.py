@@ -25,7 +25,12 @@ import torch
 from lf_predictor_ros.core import predictor as predictor_module
 from lf_predictor_ros.core import retraining
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
-from lf_predictor_ros.core.network import NumpyNnarmax, predict_step
+from lf_predictor_ros.core.network import (
+    NumpyNnarmax,
+    load_checkpoint,
+    predict_step,
+    save_checkpoint,
+)
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
 from lf_predictor_ros.core.regressors import regressor_vector
@@ -712,6 +717,25 @@ def test_checkpoint_written_after_each_accepted_training(tmp_path: Path) -> None
     assert predictor.model is not None and loaded.model is not None
     rows = np.random.default_rng(32).normal(size=(20, predictor.model.spec.n_regressors))
     np.testing.assert_array_equal(loaded.model.forward(rows), predictor.model.forward(rows))
+
+
+def test_a_checkpoint_whose_wave_peak_freq_is_no_frequency_keeps_the_predictors_own(
+        tmp_path: Path) -> None:
+    """A checkpoint's ω0 of inf (JSON 'Infinity') is not taken.
+
+    The network loads; the ω0 and the wave filters stay as they were (an infinite ω0 would reach
+    the notch and the odometry).
+    """
+    source = trained_predictor(FIRST_TRAINING)
+    path = tmp_path / 'trained.pt'
+    source.save(str(path))
+    spec, state, meta = load_checkpoint(str(path))
+    save_checkpoint(str(path), spec, state, {**meta, 'wave_peak_freq': math.inf})
+    loaded = AdaptivePredictor(SMALL, background=False)
+    before = loaded.wave_peak_freq
+    loaded.load(str(path))
+    assert loaded.model is not None
+    assert loaded.wave_peak_freq == before
 
 
 def test_incompatible_checkpoints_raise_clear_errors(tmp_path: Path) -> None:

@@ -351,6 +351,13 @@ class OdometryParams:
         "'extrapolated': that average carried over its lag, 2 mean(T) - mean(2T) (both "
         'boxcars null ω0, and a ramp comes out exact); no ω0 yet, or a history shorter than '
         'the span: the current', ''))
+    dead_reckoning_moving_twist_clamp: float = field(default=0.0, metadata=field_doc(
+        "with dead_reckoning_moving_twist_start 'current' and the averaging span: the current "
+        'twist a moving DOF starts from is kept within this many holding std of the span '
+        'between the wave-averaged twist and its extrapolation over its lag (2 mean(T) - '
+        'mean(2T); the average alone while the history is shorter than 2T): a move starts '
+        'from the current twist, but not from a spike of it (2.4x / 3.6x the true speed at a '
+        'heading failure, docs/BENCHMARKS.md, sixty-first session); 0: off', 'holding std'))
     dead_reckoning_moving_gate_averaged: float = field(default=2.0, metadata=field_doc(
         'with dead_reckoning_twist_average_periods > 0: a DOF also counts as moving (the holding '
         'balance, the moving twist) when its wave-averaged twist exceeds this many holding std '
@@ -584,6 +591,18 @@ class OdometryParams:
             raise ValueError('dead_reckoning_moving_twist_start other than current needs the '
                              'averaging span: set dead_reckoning_twist_average_periods > 0 too '
                              "(e.g. 1), or it 'current'")
+        if not (math.isfinite(self.dead_reckoning_moving_twist_clamp) and
+                self.dead_reckoning_moving_twist_clamp >= 0.0):
+            raise ValueError('dead_reckoning_moving_twist_clamp must be a finite number >= 0 '
+                             '(holding std; 0: off), got '
+                             f'{self.dead_reckoning_moving_twist_clamp}')
+        if self.dead_reckoning_moving_twist_clamp > 0.0 and (
+                self.dead_reckoning_twist_average_periods <= 0.0 or
+                self.dead_reckoning_moving_twist_start != 'current'):
+            raise ValueError('dead_reckoning_moving_twist_clamp > 0 keeps the current start '
+                             'near the wave-averaged twist: set '
+                             'dead_reckoning_twist_average_periods > 0 and '
+                             "dead_reckoning_moving_twist_start 'current' too, or the clamp to 0")
         if not (math.isfinite(self.dead_reckoning_moving_gate_averaged) and
                 self.dead_reckoning_moving_gate_averaged >= 0.0):
             raise ValueError('dead_reckoning_moving_gate_averaged must be a finite number >= 0 '
@@ -776,7 +795,7 @@ class LfOdometry:
         self._twin_level: FloatArray | None = None  # running level of m² (pose_twin_gain)
         self._history: deque[Published] = deque(maxlen=HISTORY_SAMPLES)
         # the published twist over dead_reckoning_twist_average_periods wave periods, and
-        # (dead_reckoning_moving_twist_start 'extrapolated') over twice as many
+        # (the 'extrapolated' start, dead_reckoning_moving_twist_clamp) over twice as many
         self._wave_twist = SpanMean(self.sample_time)
         self._wave_twist_double = SpanMean(self.sample_time)
         self._x: FloatArray | None = None
@@ -913,8 +932,7 @@ class LfOdometry:
         span = self._wave_span()
         self._wave_twist.add(t, twist, span)
         self._wave_twist_double.add(
-            t, twist, 2.0 * span if span is not None and
-            self.params.dead_reckoning_moving_twist_start == 'extrapolated' else None)
+            t, twist, 2.0 * span if span is not None and self._uses_double_span() else None)
         alpha = min(1.0, self.sample_time / self.params.dead_reckoning_velocity_time)
         self._slow_twist = twist.copy() if self._slow_twist is None else \
             low_pass_step(self._slow_twist, twist, alpha)
@@ -1320,12 +1338,7 @@ class LfOdometry:
         if self._twist_once is None or self._last_output is None:
             return None
         n = self.ndof
-        if self._twist_cov:  # the holding part: the published std grows with a move's rate
-            model = self._twist_cov['all']
-            variance = self.params.twist_cov_scale * np.diag(model.covariance(np.zeros(n), 1.0))
-        else:
-            variance = np.diag(self._last_output.twist_cov)[:n]
-        std = np.sqrt(np.maximum(variance, 0.0))
+        std = self._holding_twist_std()
         moving = np.abs(self._twist_once) > MOTION_BALANCE_SIGMAS * std
         gate = self.params.dead_reckoning_moving_gate
         if gate > 0.0:  # the current twist, the last one published
@@ -1341,11 +1354,49 @@ class LfOdometry:
         moving = _horizontal_group(moving & dofs)
         return moving if bool(np.any(moving)) else None
 
+    def _holding_twist_std(self) -> FloatArray:
+        """The twist's holding standard deviation per DOF (the motion gate's unit).
+
+        The calibrated twist covariance without its acceleration part (it grows in a move);
+        before a calibration the last published std.
+        """
+        assert self._last_output is not None
+        n = self.ndof
+        if self._twist_cov:  # the holding part: the published std grows with a move's rate
+            model = self._twist_cov['all']
+            variance = self.params.twist_cov_scale * np.diag(model.covariance(np.zeros(n), 1.0))
+        else:
+            variance = np.diag(self._last_output.twist_cov)[:n]
+        return np.sqrt(np.maximum(variance, 0.0))
+
+    def _uses_double_span(self) -> bool:
+        """Whether the average over twice the span is kept (extrapolated start, the clamp)."""
+        return self.params.dead_reckoning_moving_twist_start == 'extrapolated' or \
+            self.params.dead_reckoning_moving_twist_clamp > 0.0
+
+    def _clamped_current(self, current: FloatArray) -> FloatArray:
+        """``dead_reckoning_moving_twist_clamp``: the current twist kept near the averages.
+
+        Within k holding std of the span between the wave-averaged twist mean(T) and its
+        extrapolation 2 mean(T) − mean(2T) (on a ramp the current twist lies between or on
+        them, so an accelerating move keeps its start); the average alone while mean(2T) is
+        unknown; unchanged while the average is (a new array either way).
+        """
+        clamp = self.params.dead_reckoning_moving_twist_clamp
+        one = self._wave_averaged_twist() if clamp > 0.0 else None
+        if one is None:
+            return current.copy()
+        two = self._wave_twist_double.mean()
+        ahead = one if two is None else 2.0 * one - two
+        margin = clamp * self._holding_twist_std()
+        return np.clip(current, np.minimum(one, ahead) - margin, np.maximum(one, ahead) + margin)
+
     def _start_twist(self, state: FloatArray) -> FloatArray:
         """The twist a dead reckoning starts from (a new array).
 
         The low-passed twist; with ``dead_reckoning_moving_twist`` the current one of ``state``
-        in the DOFs that are moving (`_moving_dofs`), or the wave-averaged one
+        in the DOFs that are moving (`_moving_dofs`; kept near the wave-averaged one with
+        ``dead_reckoning_moving_twist_clamp``, `_clamped_current`), or the wave-averaged one
         (``dead_reckoning_moving_twist_start``, `_averaged_start`).
         """
         assert self._slow_twist is not None
@@ -1355,7 +1406,8 @@ class LfOdometry:
         if moving is None:
             return self._slow_twist.copy()
         averaged = self._averaged_start()
-        return np.where(moving, state[n:] if averaged is None else averaged, self._slow_twist)
+        current = self._clamped_current(state[n:]) if averaged is None else averaged
+        return np.where(moving, current, self._slow_twist)
 
     def _averaged_start(self) -> FloatArray | None:
         """The wave-averaged start twist of ``dead_reckoning_moving_twist_start`` (None: current).

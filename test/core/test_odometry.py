@@ -1452,22 +1452,26 @@ def test_the_moving_gate_on_the_current_twist_sees_a_move_the_low_pass_lags(gate
 
 
 def _surge_in_waves(periods: float, wave_peak_freq: float | None, seconds: int,
-                    start: str = 'average', accel: float = 0.0) -> LfOdometry:
+                    start: str = 'average', accel: float = 0.0, clamp: float = 0.0,
+                    wave: float = 2.0) -> LfOdometry:
     """Fixes of a 0.5 m/s surge with a 2 m wave motion at ω0 = 2π/20 rad/s, H = 1 s.
 
     The wave velocity (0.63 m/s amplitude) is below the twist filter's bandwidth (1 rad/s), so
     the current twist carries most of it. ``accel`` [m/s²]: the surge speed is accel · t instead
-    of 0.5 m/s. ``periods`` 0: the start 'current'.
+    of 0.5 m/s. ``periods`` 0: the start 'current'. ``clamp``:
+    ``dead_reckoning_moving_twist_clamp`` (with the start 'current'); ``wave``: the wave
+    motion's amplitude [m].
     """
     odo = LfOdometry(3, H, OdometryParams(
         dead_reckoning_twist_average_periods=periods,
         dead_reckoning_moving_twist_start=start if periods > 0.0 else 'current',
+        dead_reckoning_moving_twist_clamp=clamp,
         dead_reckoning_moving_gate_averaged=0.0,
         prior_pose_std=(1e-3, 1e-3, 1e-4)))
     odo.set_wave_peak_freq(wave_peak_freq)
     times = np.arange(float(seconds))
     drift = 0.5 * accel * times ** 2 if accel else 0.5 * times
-    north = drift + 2.0 * np.sin(2.0 * math.pi / 20.0 * times)
+    north = drift + wave * np.sin(2.0 * math.pi / 20.0 * times)
     _track_surge(odo, times, north, np.zeros(seconds))
     return odo
 
@@ -1521,6 +1525,49 @@ def test_the_extrapolated_average_starts_an_accelerating_move_without_the_lag() 
     assert start == pytest.approx(speed, abs=0.005)
 
 
+@pytest.mark.parametrize('clamp', [0.0, 2.0, 40.0])
+def test_the_clamp_keeps_a_spike_of_the_current_twist_out_of_the_start(clamp: float) -> None:
+    """``dead_reckoning_moving_twist_clamp``: the current start kept near the averages.
+
+    At t = 199 s of the 0.5 m/s surge in the 2 m wave the current twist is 0.99 m/s (the wave's
+    crest); the average over one period and its extrapolation are 0.5 m/s. The holding std
+    before a calibration is the published one (measured 0.0013 m/s): with k = 2 the start is
+    0.5 + 2 std, with k = 40 it is 0.5 + 40 std (0.55 m/s), without the clamp the current
+    twist. Sway and yaw, at rest, keep the low-passed twist (0).
+    """
+    odo = _surge_in_waves(1.0, 2.0 * math.pi / 20.0, 200, 'current', clamp=clamp)
+    state = odo._require_state()  # noqa: SLF001 - the start of a dead reckoning
+    std = odo._holding_twist_std()[0]  # noqa: SLF001
+    start = odo._start_twist(state)  # noqa: SLF001
+    print(f'current {state[3]:.4f}, std {std:.5f}, start {start[0]:.4f} m/s')
+    assert state[3] == pytest.approx(0.987, abs=0.01)
+    assert 5e-4 < std < 5e-3
+    expected = state[3] if clamp == 0.0 else 0.5 + clamp * std
+    assert start[0] == pytest.approx(expected, abs=1e-3)
+    assert abs(start[1]) < 1e-6 and start[2] == 0.0
+
+
+def test_the_clamp_keeps_an_accelerating_move_s_current_twist() -> None:
+    """Without waves, on a ramp 0.002 t m/s, the current twist lies on the extrapolation.
+
+    The average over one period lags by 9.5 s (0.019 m/s below); the extrapolation is the
+    speed now. The clamp at 2 holding std leaves the current start as it is (0.396 m/s: the
+    twist filter's own lag), where the average alone ± 2 std would have cut it by 0.016 m/s.
+    """
+    odo = _surge_in_waves(1.0, 2.0 * math.pi / 20.0, 200, 'current', accel=0.002, clamp=2.0,
+                          wave=0.0)
+    state = odo._require_state()  # noqa: SLF001 - the start of a dead reckoning
+    std = odo._holding_twist_std()[0]  # noqa: SLF001
+    average = odo._wave_averaged_twist()  # noqa: SLF001
+    assert average is not None
+    start = odo._start_twist(state)[0]  # noqa: SLF001
+    print(f'current {state[3]:.4f}, average {average[0]:.4f}, std {std:.5f}, '
+          f'start {start:.4f} m/s')
+    assert state[3] - (average[0] + 2.0 * std) > 0.01
+    assert start == pytest.approx(state[3], abs=1e-9)
+    assert start == pytest.approx(0.002 * 199.0, abs=0.005)
+
+
 @pytest.mark.parametrize(('gate', 'averaged', 'opens'), [(0.0, 0.35, False), (3.0, 0.35, True),
                                                        (3.0, 0.25, False)])
 def test_the_averaged_gate_sees_a_move_the_low_pass_lags(gate: float, averaged: float,
@@ -1554,6 +1601,21 @@ def test_the_averaged_gate_needs_the_averaging_span() -> None:
         with pytest.raises(ValueError, match='dead_reckoning_moving_gate_averaged'):
             OdometryParams(dead_reckoning_twist_average_periods=1.0,
                            dead_reckoning_moving_gate_averaged=bad)
+
+
+def test_the_clamp_is_checked_and_needs_the_span_and_the_current_start() -> None:
+    for bad in (-0.1, math.nan, math.inf):
+        with pytest.raises(ValueError, match='dead_reckoning_moving_twist_clamp must be'):
+            OdometryParams(dead_reckoning_moving_twist_clamp=bad)
+    with pytest.raises(ValueError, match='dead_reckoning_moving_twist_clamp > 0'):
+        OdometryParams(dead_reckoning_twist_average_periods=0.0,
+                       dead_reckoning_moving_gate_averaged=0.0,
+                       dead_reckoning_moving_twist_clamp=2.0)
+    with pytest.raises(ValueError, match='dead_reckoning_moving_twist_clamp > 0'):
+        OdometryParams(dead_reckoning_moving_twist_start='average',
+                       dead_reckoning_moving_twist_clamp=2.0)
+    params = OdometryParams(dead_reckoning_moving_twist_clamp=2.0)
+    assert params.dead_reckoning_moving_twist_clamp == 2.0
 
 
 @pytest.mark.parametrize('slow_twist, opens', [([0.05, 0.11, 0.0], True),

@@ -128,6 +128,9 @@ REFERENCE_LOW_PASS_ORDER = 4
 MOTION_BALANCE_SIGMAS = 2.0
 # ``dead_reckoning_moving_twist_start``: the twist a moving DOF's dead reckoning starts from.
 MOVING_TWIST_STARTS = ('current', 'average', 'extrapolated')
+# ``dead_reckoning_moving_twist_clamp_dofs``: the DOFs (surge, sway, yaw) the clamp acts on.
+MOVING_TWIST_CLAMP_DOFS: dict[str, tuple[bool, bool, bool]] = {
+    'horizontal': (True, True, False), 'all': (True, True, True)}
 # ``dead_reckoning_damping_memory``: the DOFs (surge, sway, yaw) whose damping rate the vessel
 # memory keeps across windows, per choice.
 DAMPING_MEMORY_DOFS: dict[str, tuple[bool, bool, bool]] = {
@@ -358,6 +361,9 @@ class OdometryParams:
         'mean(2T); the average alone while the history is shorter than 2T): a move starts '
         'from the current twist, but not from a spike of it (2.4x / 3.6x the true speed at a '
         'heading failure, docs/BENCHMARKS.md, sixty-first session); 0: off', 'holding std'))
+    dead_reckoning_moving_twist_clamp_dofs: str = field(default='all', metadata=field_doc(
+        "the DOFs dead_reckoning_moving_twist_clamp acts on: 'all', or 'horizontal' (surge "
+        'and sway; the yaw rate starts from the current one)', ''))
     dead_reckoning_moving_gate_averaged: float = field(default=2.0, metadata=field_doc(
         'with dead_reckoning_twist_average_periods > 0: a DOF also counts as moving (the holding '
         'balance, the moving twist) when its wave-averaged twist exceeds this many holding std '
@@ -661,6 +667,8 @@ class OdometryParams:
             raise ValueError('dead_reckoning_damping_turn must be in [0, pi] rad (0: off), '
                              f'got {self.dead_reckoning_damping_turn}')
         for name, choices in (('controller_read_fitted_damping_dofs', tuple(FITTED_DAMPING_DOFS)),
+                              ('dead_reckoning_moving_twist_clamp_dofs',
+                               tuple(MOVING_TWIST_CLAMP_DOFS)),
                               ('dead_reckoning_damping_memory', tuple(DAMPING_MEMORY_DOFS)),
                               ('controller_read_stiffness_frame', tuple(STIFFNESS_FRAMES))):
             if getattr(self, name) not in choices:
@@ -1380,7 +1388,8 @@ class LfOdometry:
         Within k holding std of the span between the wave-averaged twist mean(T) and its
         extrapolation 2 mean(T) − mean(2T) (on a ramp the current twist lies between or on
         them, so an accelerating move keeps its start); the average alone while mean(2T) is
-        unknown; unchanged while the average is (a new array either way).
+        unknown; unchanged while the average is, and in the DOFs outside
+        ``dead_reckoning_moving_twist_clamp_dofs`` (a new array either way).
         """
         clamp = self.params.dead_reckoning_moving_twist_clamp
         one = self._wave_averaged_twist() if clamp > 0.0 else None
@@ -1389,7 +1398,10 @@ class LfOdometry:
         two = self._wave_twist_double.mean()
         ahead = one if two is None else 2.0 * one - two
         margin = clamp * self._holding_twist_std()
-        return np.clip(current, np.minimum(one, ahead) - margin, np.maximum(one, ahead) + margin)
+        clamped = np.clip(current, np.minimum(one, ahead) - margin,
+                          np.maximum(one, ahead) + margin)
+        dofs = MOVING_TWIST_CLAMP_DOFS[self.params.dead_reckoning_moving_twist_clamp_dofs]
+        return np.where(np.array(dofs[:self.ndof]), clamped, current)
 
     def _start_twist(self, state: FloatArray) -> FloatArray:
         """The twist a dead reckoning starts from (a new array).

@@ -1547,6 +1547,26 @@ def test_the_clamp_keeps_a_spike_of_the_current_twist_out_of_the_start(clamp: fl
     assert abs(start[1]) < 1e-6 and start[2] == 0.0
 
 
+def test_the_clamp_acts_on_its_dofs_only() -> None:
+    """``dead_reckoning_moving_twist_clamp_dofs``: 'horizontal' leaves the yaw rate as it is.
+
+    The surge run in waves (averages 0.5 m/s, 0, 0 rad/s; holding std 0.0013 m/s, 0.0013 m/s,
+    0.00013 rad/s): a current twist of 0.99 m/s, 0.3 m/s, 0.05 rad/s is cut to the averages
+    + 2 std in every DOF with 'all', in surge and sway only with 'horizontal'.
+    """
+    odo = _surge_in_waves(1.0, 2.0 * math.pi / 20.0, 200, 'current', clamp=2.0)
+    std = odo._holding_twist_std()  # noqa: SLF001
+    current = np.array([0.99, 0.3, 0.05])
+    every = odo._clamped_current(current)  # noqa: SLF001
+    np.testing.assert_allclose(every, [0.5, 0.0, 0.0] + 2.0 * std, atol=1e-3)
+    odo.params = dataclasses.replace(odo.params,
+                                     dead_reckoning_moving_twist_clamp_dofs='horizontal')
+    horizontal = odo._clamped_current(current)  # noqa: SLF001
+    np.testing.assert_allclose(horizontal[:2], every[:2], atol=1e-12)
+    assert horizontal[2] == 0.05
+    assert current.tolist() == [0.99, 0.3, 0.05]  # the input is not modified
+
+
 def test_the_clamp_keeps_an_accelerating_move_s_current_twist() -> None:
     """Without waves, on a ramp 0.002 t m/s, the current twist lies on the extrapolation.
 
@@ -1643,7 +1663,8 @@ def test_the_moving_gate_with_a_slow_gate_waits_for_the_move_to_begin(
 @pytest.mark.parametrize('name', ['controller_read_fitted_damping_dofs',
                                   'dead_reckoning_damping_memory',
                                   'controller_read_stiffness_frame',
-                                  'dead_reckoning_moving_twist_start'])
+                                  'dead_reckoning_moving_twist_start',
+                                  'dead_reckoning_moving_twist_clamp_dofs'])
 def test_a_choice_outside_its_choices_is_refused(name: str) -> None:
     with pytest.raises(ValueError, match=f"{name} must be one of .*, got 'heading'"):
         OdometryParams(**{name: 'heading'})

@@ -91,6 +91,10 @@ def one(name: str, seed: int, spread: float, moves: list[float] | None,
             accel = balanced.bias @ heading_basis(float(x[2]), 3)
             starts[float(last.stamp)] = {
                 'twist': np.array(last.twist),
+                'start': self._start_twist(x),  # noqa: SLF001
+                'average': self._wave_averaged_twist(),  # noqa: SLF001
+                'holding_std': self._holding_twist_std(),  # noqa: SLF001
+                'published_std': np.sqrt(np.diag(last.twist_cov)[:3]),
                 'environment': accel / np.diag(balanced.input_gain),
                 'model': None if memory is None else memory.model}
         return balanced
@@ -126,6 +130,11 @@ def one(name: str, seed: int, spread: float, moves: list[float] | None,
             print(f'   lf_odom: environment {np.round(info["environment"] / 1e3, 1)} kN, true '
                   f'{np.round(env_l / 1e3, 1)} | twist {np.round(info["twist"], 3)}, true '
                   f'{np.round(nu_l, 3)}')
+            average = info['average']
+            print(f'     start twist {np.round(info["start"], 4)}, wave-averaged '
+                  f'{None if average is None else np.round(average, 4)}, holding std '
+                  f'{np.round(info["holding_std"], 4)}, published std '
+                  f'{np.round(info["published_std"], 4)}')
             model = info['model']
             if model is not None:
                 print(f'     model T {np.round(-1.0 / np.diag(model.damping), 1)} s, gain / true '

@@ -355,12 +355,13 @@ class OdometryParams:
         'boxcars null ω0, and a ramp comes out exact); no ω0 yet, or a history shorter than '
         'the span: the current', ''))
     dead_reckoning_moving_twist_clamp: float = field(default=0.0, metadata=field_doc(
-        "with dead_reckoning_moving_twist_start 'current' and the averaging span: the current "
-        'twist a moving DOF starts from is kept within this many holding std of the span '
-        'between the wave-averaged twist and its extrapolation over its lag (2 mean(T) - '
-        'mean(2T); the average alone while the history is shorter than 2T): a move starts '
-        'from the current twist, but not from a spike of it (2.4x / 3.6x the true speed at a '
-        'heading failure, docs/BENCHMARKS.md, sixty-first session); 0: off', 'holding std'))
+        'with the averaging span: the current twist a moving DOF starts from (the start '
+        "'current'; the others have nothing to clamp) is kept within this many holding std of "
+        'the span between the wave-averaged twist and its extrapolation over its lag (2 '
+        'mean(T) - mean(2T); the average alone while the history is shorter than 2T): a move '
+        'starts from the current twist, but not from a spike of it (2.4x / 3.6x the true speed '
+        'at a heading failure, docs/BENCHMARKS.md, sixty-first session); 0: off',
+        'holding std'))
     dead_reckoning_moving_twist_clamp_dofs: str = field(default='all', metadata=field_doc(
         "the DOFs dead_reckoning_moving_twist_clamp acts on: 'all', or 'horizontal' (surge "
         'and sway; the yaw rate starts from the current one)', ''))
@@ -602,13 +603,12 @@ class OdometryParams:
             raise ValueError('dead_reckoning_moving_twist_clamp must be a finite number >= 0 '
                              '(holding std; 0: off), got '
                              f'{self.dead_reckoning_moving_twist_clamp}')
-        if self.dead_reckoning_moving_twist_clamp > 0.0 and (
-                self.dead_reckoning_twist_average_periods <= 0.0 or
-                self.dead_reckoning_moving_twist_start != 'current'):
+        if self.dead_reckoning_moving_twist_clamp > 0.0 and \
+                self.dead_reckoning_twist_average_periods <= 0.0:
             raise ValueError('dead_reckoning_moving_twist_clamp > 0 keeps the current start '
                              'near the wave-averaged twist: set '
-                             'dead_reckoning_twist_average_periods > 0 and '
-                             "dead_reckoning_moving_twist_start 'current' too, or the clamp to 0")
+                             'dead_reckoning_twist_average_periods > 0 too (e.g. 1), or the '
+                             'clamp to 0')
         if not (math.isfinite(self.dead_reckoning_moving_gate_averaged) and
                 self.dead_reckoning_moving_gate_averaged >= 0.0):
             raise ValueError('dead_reckoning_moving_gate_averaged must be a finite number >= 0 '
@@ -1379,8 +1379,9 @@ class LfOdometry:
 
     def _uses_double_span(self) -> bool:
         """Whether the average over twice the span is kept (extrapolated start, the clamp)."""
-        return self.params.dead_reckoning_moving_twist_start == 'extrapolated' or \
-            self.params.dead_reckoning_moving_twist_clamp > 0.0
+        start = self.params.dead_reckoning_moving_twist_start
+        return start == 'extrapolated' or \
+            (start == 'current' and self.params.dead_reckoning_moving_twist_clamp > 0.0)
 
     def _clamped_current(self, current: FloatArray) -> FloatArray:
         """``dead_reckoning_moving_twist_clamp``: the current twist kept near the averages.

@@ -1567,6 +1567,23 @@ def test_the_clamp_acts_on_its_dofs_only() -> None:
     assert current.tolist() == [0.99, 0.3, 0.05]  # the input is not modified
 
 
+@pytest.mark.parametrize(('start', 'clamp', 'kept'), [('current', 2.0, True),
+                                                   ('current', 0.0, False),
+                                                   ('average', 2.0, False),
+                                                   ('extrapolated', 0.0, True)])
+def test_the_double_span_average_is_kept_only_where_it_is_read(start: str, clamp: float,
+                                                               kept: bool) -> None:
+    """mean(2T) is kept for the extrapolated start and for the clamp of the current start.
+
+    With an averaged start the clamp has nothing to clamp (no error), and mean(2T) is not kept.
+    """
+    odo = _surge_in_waves(1.0, 2.0 * math.pi / 20.0, 200, start, clamp=clamp)
+    double = odo._wave_twist_double.mean()  # noqa: SLF001
+    assert (double is not None) == kept
+    if kept:
+        assert double[0] == pytest.approx(0.5, abs=0.01)
+
+
 def test_the_clamp_keeps_an_accelerating_move_s_current_twist() -> None:
     """Without waves, on a ramp 0.002 t m/s, the current twist lies on the extrapolation.
 

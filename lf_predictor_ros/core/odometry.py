@@ -593,32 +593,27 @@ class OdometryParams:
             raise ValueError('dead_reckoning_moving_twist_start must be one of '
                              f'{MOVING_TWIST_STARTS}, got '
                              f'{self.dead_reckoning_moving_twist_start!r}')
-        if self.dead_reckoning_moving_twist_start != 'current' and \
-                self.dead_reckoning_twist_average_periods <= 0.0:
-            raise ValueError('dead_reckoning_moving_twist_start other than current needs the '
-                             'averaging span: set dead_reckoning_twist_average_periods > 0 too '
-                             "(e.g. 1), or it 'current'")
         if not (math.isfinite(self.dead_reckoning_moving_twist_clamp) and
                 self.dead_reckoning_moving_twist_clamp >= 0.0):
             raise ValueError('dead_reckoning_moving_twist_clamp must be a finite number >= 0 '
                              '(holding std; 0: off), got '
                              f'{self.dead_reckoning_moving_twist_clamp}')
-        if self.dead_reckoning_moving_twist_clamp > 0.0 and \
-                self.dead_reckoning_twist_average_periods <= 0.0:
-            raise ValueError('dead_reckoning_moving_twist_clamp > 0 keeps the current start '
-                             'near the wave-averaged twist: set '
-                             'dead_reckoning_twist_average_periods > 0 too (e.g. 1), or the '
-                             'clamp to 0')
         if not (math.isfinite(self.dead_reckoning_moving_gate_averaged) and
                 self.dead_reckoning_moving_gate_averaged >= 0.0):
             raise ValueError('dead_reckoning_moving_gate_averaged must be a finite number >= 0 '
                              '(holding std; 0: off), got '
                              f'{self.dead_reckoning_moving_gate_averaged}')
-        if self.dead_reckoning_moving_gate_averaged > 0.0 and \
-                self.dead_reckoning_twist_average_periods <= 0.0:
-            raise ValueError('dead_reckoning_moving_gate_averaged > 0 needs the averaging span: '
-                             'set dead_reckoning_twist_average_periods > 0 too (e.g. 1), or the '
-                             'gate to 0')
+        for what, used in (
+                ("dead_reckoning_moving_twist_start other than 'current'",
+                 self.dead_reckoning_moving_twist_start != 'current'),
+                ('dead_reckoning_moving_twist_clamp > 0',
+                 self.dead_reckoning_moving_twist_clamp > 0.0),
+                ('dead_reckoning_moving_gate_averaged > 0',
+                 self.dead_reckoning_moving_gate_averaged > 0.0)):
+            if used and self.dead_reckoning_twist_average_periods <= 0.0:
+                raise ValueError(f'{what} needs the averaging span: set '
+                                 'dead_reckoning_twist_average_periods > 0 too (e.g. 1), or '
+                                 'turn it off')
         if not (math.isfinite(self.dead_reckoning_excursion_std) and
                 self.dead_reckoning_excursion_std >= 0.0):
             raise ValueError('dead_reckoning_excursion_std must be a finite number >= 0 (a '

@@ -8,7 +8,9 @@ Runs only lf_odom's dropout loop of `odometry_bench` (the dropouts of ``--moves`
 (body frame): the current twist (the last published), the start twist the odometry chose, the
 wave-averaged twist mean(T) and mean(2T) (`SpanMean`, kept whatever the start option: the
 averaging windows are filled for the log), the holding and the published twist std, the
-moving DOFs, and the true LF body velocity; plus lf_odom's heading error 60 s in. The list is
+moving DOFs, and the true LF body velocity; the environment force the dead reckoning starts
+from (G⁻¹ B β(ψ) of the balanced model, as `dropout_start_probe.py`) and, on the supply vessel,
+the truth's (M ν̇ + D ν − τ over the 30 s before); plus lf_odom's heading error 59 s in. The list is
 written as JSON for offline comparison of start rules (the start's yaw-rate error times the
 yaw time constant is most of a dropout's heading error). Development seeds only; the
 sixty-second session's section of docs/BENCHMARKS.md.
@@ -24,15 +26,17 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import dropout_start_probe as probe  # noqa: E402
 import move_dropout_probe as mdp  # noqa: E402
 
 from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
 from lf_predictor_ros.benchmark.estimators import predictor_params  # noqa: E402
-from lf_predictor_ros.core.lf_dynamics import body_velocity  # noqa: E402
+from lf_predictor_ros.core.lf_dynamics import LfDynamics, body_velocity, heading_basis  # noqa: E402,E501
 from lf_predictor_ros.core.odometry import LfOdometry, OdometryEstimate, OdometryParams  # noqa: E402,E501
 from sim_ros.simulation import load_scenario  # noqa: E402
 
 FloatArray = np.ndarray
+SUPPLY_SCENARIOS = ('rao_supply', 'rao_swell')  # the vessel of `probe.true_environment`
 
 
 def _listed(value: FloatArray | None) -> list[float] | None:
@@ -48,6 +52,16 @@ def one(name: str, seed: int, spread: float, moves: list[float] | None,
     starts: list[dict[str, Any]] = []
     original_start = LfOdometry._start_twist
     original_double = LfOdometry._uses_double_span
+    original_balanced = LfOdometry._balanced_model
+    environments: dict[float, list[float]] = {}
+
+    def balanced(self: LfOdometry) -> LfDynamics | None:
+        model = original_balanced(self)
+        x, last = self._x, self._last_output  # noqa: SLF001
+        if model is not None and x is not None and last is not None and self.ndof == 3:
+            accel = model.bias @ heading_basis(float(x[2]), 3)
+            environments[float(last.stamp)] = _listed(accel / np.diag(model.input_gain)) or []
+        return model
 
     def traced(self: LfOdometry, state: FloatArray) -> FloatArray:
         chosen = original_start(self, state)
@@ -67,6 +81,7 @@ def one(name: str, seed: int, spread: float, moves: list[float] | None,
 
     LfOdometry._start_twist = traced  # type: ignore[method-assign]
     LfOdometry._uses_double_span = lambda self: True  # type: ignore[method-assign]
+    LfOdometry._balanced_model = balanced  # type: ignore[method-assign]
     log: list[OdometryEstimate] = []
     try:
         run = ob._odometry_loop(scenario, seed, mdp.DURATION, params, odometry,  # noqa: SLF001
@@ -74,6 +89,7 @@ def one(name: str, seed: int, spread: float, moves: list[float] | None,
     finally:
         LfOdometry._start_twist = original_start  # type: ignore[method-assign]
         LfOdometry._uses_double_span = original_double  # type: ignore[method-assign]
+        LfOdometry._balanced_model = original_balanced  # type: ignore[method-assign]
     record = run.record
     h = float(record.t[1] - record.t[0])
     nu = body_velocity(record.truth_lf_pose, h)
@@ -89,8 +105,11 @@ def one(name: str, seed: int, spread: float, moves: list[float] | None,
             j = int(np.argmin(np.abs(record.t - end)))
             heading_error = float(np.angle(np.exp(1j * (late.pose[2] -
                                                         record.truth_lf_pose[j, 2]))))
+        true_env = _listed(probe.true_environment(record, entry['stamp'])[0]) \
+            if name in SUPPLY_SCENARIOS else None
         out.append({'scenario': name, 'seed': seed, **entry, 'true': _listed(nu[k]),
-                    'heading_error_59': heading_error})
+                    'environment': environments.get(entry['stamp']),
+                    'true_environment': true_env, 'heading_error_59': heading_error})
     return out
 
 

@@ -63,6 +63,15 @@ def true_environment(record: SimRecord, t0: float, span: float = 30.0
     return env[keep].mean(axis=0), nu[keep][-1]
 
 
+def start_environment(model: LfDynamics, heading: float) -> FloatArray:
+    """The environment a dead reckoning balances, as a body force: G⁻¹ B β(ψ) [N, N, N·m].
+
+    A DOF whose ``dead_reckoning_force_time`` is 0 (yaw by default) keeps the window's fit.
+    """
+    accel = model.bias @ heading_basis(heading, 3)
+    return np.asarray(accel / np.diag(model.input_gain), dtype=np.float64)
+
+
 def nearest(log: dict[float, Any], t: float, before: bool = False) -> Any:
     """The entry of ``log`` nearest to ``t`` (at or before it with ``before``), within 1 s."""
     keys = [k for k in log if k <= t] if before else list(log)
@@ -85,17 +94,14 @@ def one(name: str, seed: int, spread: float, moves: list[float] | None,
         balanced = original(self)
         x, last = self._x, self._last_output  # noqa: SLF001
         if last is not None and x is not None and balanced is not None:
-            # the environment the dead reckoning balances, as a body force: G⁻¹ B β(ψ) (a DOF
-            # whose dead_reckoning_force_time is 0, yaw by default, keeps the window's fit)
             memory = self.memory
-            accel = balanced.bias @ heading_basis(float(x[2]), 3)
             starts[float(last.stamp)] = {
                 'twist': np.array(last.twist),
                 'start': self._start_twist(x),  # noqa: SLF001
                 'average': self._wave_averaged_twist(),  # noqa: SLF001
                 'holding_std': self._holding_twist_std(),  # noqa: SLF001
                 'published_std': np.sqrt(np.diag(last.twist_cov)[:3]),
-                'environment': accel / np.diag(balanced.input_gain),
+                'environment': start_environment(balanced, float(x[2])),
                 'model': None if memory is None else memory.model}
         return balanced
 

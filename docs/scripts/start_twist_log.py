@@ -31,7 +31,7 @@ import move_dropout_probe as mdp  # noqa: E402
 
 from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
 from lf_predictor_ros.benchmark.estimators import predictor_params  # noqa: E402
-from lf_predictor_ros.core.lf_dynamics import LfDynamics, body_velocity, heading_basis  # noqa: E402,E501
+from lf_predictor_ros.core.lf_dynamics import LfDynamics, body_velocity  # noqa: E402
 from lf_predictor_ros.core.odometry import LfOdometry, OdometryEstimate, OdometryParams  # noqa: E402,E501
 from sim_ros.simulation import load_scenario  # noqa: E402
 
@@ -59,8 +59,8 @@ def one(name: str, seed: int, spread: float, moves: list[float] | None,
         model = original_balanced(self)
         x, last = self._x, self._last_output  # noqa: SLF001
         if model is not None and x is not None and last is not None and self.ndof == 3:
-            accel = model.bias @ heading_basis(float(x[2]), 3)
-            environments[float(last.stamp)] = _listed(accel / np.diag(model.input_gain)) or []
+            environment = probe.start_environment(model, float(x[2]))
+            environments[float(last.stamp)] = _listed(environment) or []
         return model
 
     def traced(self: LfOdometry, state: FloatArray) -> FloatArray:

@@ -9,7 +9,8 @@ Runs only lf_odom's dropout loop of `odometry_bench` (the dropouts of ``--moves`
 wave-averaged twist mean(T) and mean(2T) (`SpanMean`, kept whatever the start option: the
 averaging windows are filled for the log), the holding and the published twist std, the
 moving DOFs, and the true LF body velocity; the environment force the dead reckoning starts
-from (G⁻¹ B β(ψ) of the balanced model, as `dropout_start_probe.py`) and, on the supply vessel,
+from (G⁻¹ B β(ψ) of the balanced model, as `dropout_start_probe.py`) and that model's thrust
+gains and damping rates (diagonals of G and F) and, on the supply vessel,
 the truth's (M ν̇ + D ν − τ over the 30 s before); plus lf_odom's heading error 59 s in. The list is
 written as JSON for offline comparison of start rules (the start's yaw-rate error times the
 yaw time constant is most of a dropout's heading error). Development seeds only; the
@@ -54,6 +55,7 @@ def one(name: str, seed: int, spread: float, moves: list[float] | None,
     original_double = LfOdometry._uses_double_span
     original_balanced = LfOdometry._balanced_model
     environments: dict[float, list[float]] = {}
+    models: dict[float, dict[str, list[float] | None]] = {}
 
     def balanced(self: LfOdometry) -> LfDynamics | None:
         model = original_balanced(self)
@@ -61,6 +63,8 @@ def one(name: str, seed: int, spread: float, moves: list[float] | None,
         if model is not None and x is not None and last is not None and self.ndof == 3:
             environment = probe.start_environment(model, float(x[2]))
             environments[float(last.stamp)] = _listed(environment) or []
+            models[float(last.stamp)] = {'input_gain': _listed(np.diag(model.input_gain)),
+                                         'damping': _listed(np.diag(model.damping))}
         return model
 
     def traced(self: LfOdometry, state: FloatArray) -> FloatArray:
@@ -109,6 +113,7 @@ def one(name: str, seed: int, spread: float, moves: list[float] | None,
             if name in SUPPLY_SCENARIOS else None
         out.append({'scenario': name, 'seed': seed, **entry, 'true': _listed(nu[k]),
                     'environment': environments.get(entry['stamp']),
+                    'model': models.get(entry['stamp']),
                     'true_environment': true_env, 'heading_error_59': heading_error})
     return out
 

@@ -144,23 +144,6 @@ def design_wave_filter(
     return sos
 
 
-def design_lowpass(cutoff: float, sample_time: float) -> FloatArray:
-    """A 2nd-order Butterworth low-pass at ``cutoff`` [rad/s] for ``sample_time`` [s], as SOS.
-
-    Discretized as scipy's ``butter`` does (bilinear, pre-warped at the cutoff); unity DC gain.
-    Raises ValueError unless 0 < cutoff < π / sample_time (the Nyquist frequency).
-    """
-    if not (np.isfinite(sample_time) and sample_time > 0.0):
-        raise ValueError(f'sample_time must be a positive number of seconds, got {sample_time}')
-    nyquist = np.pi / sample_time
-    if not (np.isfinite(cutoff) and 0.0 < cutoff < nyquist):
-        raise ValueError(f'the low-pass cutoff must be in (0, {nyquist:.4g}) rad/s (the Nyquist '
-                         f'frequency), got {cutoff}')
-    sos: FloatArray = np.asarray(signal.butter(2, cutoff / nyquist, output='sos'),
-                                 dtype=np.float64)
-    return sos
-
-
 def frequency_response(
     sos: FloatArray, omega: ArrayLike, sample_time: float
 ) -> NDArray[np.complex128]:

@@ -151,8 +151,7 @@ class LfDynamics:
 def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
                     ridge: float = RIDGE, input_gain: ArrayLike | None = None,
                     damping_rate: ArrayLike | None = None,
-                    earth_fixed: bool = False,
-                    prefilter: FloatArray | None = None) -> LfDynamics:
+                    earth_fixed: bool = False) -> LfDynamics:
     """Least-squares fit of ν̇ = F ν + G τ + B β(ψ) on an LF pose series and its body forces.
 
     F and G are diagonal: each DOF is fitted on its own velocity and force (+ the environment
@@ -178,13 +177,6 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
             earth-fixed force, a constant yaw moment; `_fit_earth_fixed`) instead of a free
             [1, cos ψ, sin ψ] per DOF, which a window at one heading cannot identify: fitted
             there, it extrapolates to absurd forces at another heading.
-        prefilter: an SOS low-pass (`equation_lowpass`) applied zero-phase to both sides of
-            the equation, to ν̇, ν, τ and β(ψ) alike, before the least squares (a state-variable
-            filter: the model is linear in them, so it holds between the filtered signals);
-            None: none. ν is differentiated from the targets, and the wave motion the targets'
-            filter leaves in them is an error in that regressor, which biases the damping rate
-            towards 0 (errors in variables) where the LF velocity is small, as in station
-            keeping. The residual std is that of the unfiltered equation.
 
     Raises:
         ValueError: bad shapes, too few samples, non-finite data, or a fit that is not a damped
@@ -202,9 +194,9 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
     nu = body_velocity(eta, sample_time)
     nu_dot = np.gradient(nu, sample_time, axis=0)
     basis = heading_basis(eta[:, 2] if n == 3 else np.zeros(eta.shape[0]), n)
-    columns = 2 * n + basis.shape[1]
-    if eta.shape[0] < 5 * columns:
-        raise ValueError(f'{eta.shape[0]} samples are too few to fit {columns} '
+    phi = np.hstack([nu, tau, basis])
+    if phi.shape[0] < 5 * phi.shape[1]:
+        raise ValueError(f'{phi.shape[0]} samples are too few to fit {phi.shape[1]} '
                          'coefficients per DOF: use a longer window')
     known = None if input_gain is None else np.asarray(input_gain, dtype=np.float64)
     if known is not None and (known.shape != (n,) or not np.all(np.isfinite(known)) or
@@ -215,18 +207,12 @@ def fit_lf_dynamics(targets: ArrayLike, forces: ArrayLike, sample_time: float,
                              not np.all(np.isfinite(rate)) or np.any(rate <= 0.0)):
         raise ValueError(f'damping_rate must be {n} positive finite numbers D_ii/M_ii [1/s] '
                          f'and needs input_gain, got {rate}')
-    f_nu, f_dot, f_tau, f_basis = (nu, nu_dot, tau, basis) if prefilter is None else \
-        (zero_phase(x, prefilter) for x in (nu, nu_dot, tau, basis))
     if known is not None:
-        coef, residual_std = _fit_known_gain(f_nu, f_dot, f_tau, f_basis, known, ridge, rate)
+        coef, residual_std = _fit_known_gain(nu, nu_dot, tau, eta, known, ridge, rate)
     elif earth_fixed and n == 3:
-        coef, residual_std = _fit_earth_fixed(f_nu, f_dot, f_tau, f_basis, ridge)
+        coef, residual_std = _fit_earth_fixed(nu, nu_dot, tau, eta, ridge)
     else:
-        coef, residual_std = _fit_diagonal(np.hstack([f_nu, f_tau, f_basis]), f_nu, f_dot,
-                                           ridge)
-    if prefilter is not None:  # the unfiltered equation's residual
-        residual_std = np.std(nu_dot - nu @ coef[:, :n].T - tau @ coef[:, n:2 * n].T -
-                              basis @ coef[:, 2 * n:].T, axis=0)
+        coef, residual_std = _fit_diagonal(phi, nu, nu_dot, ridge)
     model = LfDynamics(damping=coef[:, :n], input_gain=coef[:, n:2 * n], bias=coef[:, 2 * n:],
                        residual_std=residual_std)
     if model.growth_rate() > MAX_GROWTH_RATE:
@@ -264,7 +250,7 @@ def _fit_diagonal(phi: FloatArray, nu: FloatArray, nu_dot: FloatArray,
     return coef, residual_std
 
 
-def _fit_earth_fixed(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, basis: FloatArray,
+def _fit_earth_fixed(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, eta: FloatArray,
                      ridge: float) -> tuple[FloatArray, FloatArray]:
     """3 DOF, no known gain: F and G with a constant environment, then the earth-fixed one.
 
@@ -286,16 +272,15 @@ def _fit_earth_fixed(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, basis:
         coef[:, :2 * n] = first[:, :2 * n]
         coef[:, 2 * n] = first[:, 2 * n]
         return coef, np.std(nu_dot - constant @ first.T, axis=0)
-    return _fit_known_gain(nu, nu_dot, tau, basis, gain, ridge, -np.diag(first[:, :n]))
+    return _fit_known_gain(nu, nu_dot, tau, eta, gain, ridge, -np.diag(first[:, :n]))
 
 
-def _fit_known_gain(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, basis: FloatArray,
+def _fit_known_gain(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, eta: FloatArray,
                     gain: FloatArray, ridge: float, rate: FloatArray | None = None
                     ) -> tuple[FloatArray, FloatArray]:
     """Damping and environment with a known diagonal thrust gain G (coefficient rows as `phi`).
 
     With known damping rates ``rate`` (f_i, F = −diag(f)) only the environment is fitted.
-    ``basis``: β(ψ) per sample, (m, 1) or (m, 3) (`heading_basis`, possibly prefiltered).
 
     Surge and sway share one earth-fixed environment force b = [b_N, b_E] (Fossen 2011 eq. 7.8,
     R(ψ)ᵀ b): u̇ − G_u τ_u = f_u u + G_u (b_N cos ψ + b_E sin ψ), v̇ − G_v τ_v = f_v v +
@@ -317,7 +302,7 @@ def _fit_known_gain(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, basis: 
         coef[0, 0], coef[0, 1], coef[0, 2] = min(float(own[0, 0]), -MIN_DAMPING_RATE), gain[0], \
             own[0, 1]
         return coef, std
-    c, s = basis[:, 1], basis[:, 2]
+    c, s = np.cos(eta[:, 2]), np.sin(eta[:, 2])
     zero = np.zeros_like(c)
     phi = np.vstack([np.column_stack([nu[:, 0], zero, gain[0] * c, gain[0] * s]),
                      np.column_stack([zero, nu[:, 1], -gain[1] * s, gain[1] * c])])
@@ -339,6 +324,7 @@ def _fit_known_gain(nu: FloatArray, nu_dot: FloatArray, tau: FloatArray, basis: 
     coef[0, 7:9] = gain[0] * b_north, gain[0] * b_east  # u̇: cos ψ, sin ψ
     coef[1, 7:9] = gain[1] * b_east, -gain[1] * b_north  # v̇: cos ψ, sin ψ
     coef[2, 6] = n_env
+    basis = heading_basis(eta[:, 2], 3)
     fitted = nu @ np.diag(np.diag(coef[:, :3])) + tau * gain + basis @ coef[:, 6:].T
     return coef, np.std(nu_dot - fitted, axis=0)
 
@@ -532,8 +518,7 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
                         targets_filter: FloatArray | None = None,
                         force_margin: float = FORCE_MARGIN,
                         damping_rate: ArrayLike | None = None,
-                        earth_fixed: bool = False,
-                        prefilter: FloatArray | None = None) -> VesselMemory:
+                        earth_fixed: bool = False) -> VesselMemory:
     """Fit the LF dynamics on the older part of a window; pick the dead reckoner on the newest.
 
     The fit uses the oldest 1 − ``VALIDATION_FRACTION`` of the window; each dead reckoner is
@@ -550,8 +535,6 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     ``force_limit`` is this multiple of the window's largest force per DOF; 0: no limit.
     ``damping_rate``: known damping rates with ``input_gain`` (`fit_lf_dynamics`).
     ``earth_fixed``: without ``input_gain``, the environment's form (`fit_lf_dynamics`).
-    ``prefilter``: the low-pass both sides of the fitted equation go through
-    (`fit_lf_dynamics`); the drift tests run on the unfiltered data.
     """
     check_force_margin(force_margin, 'force_margin')
     eta_t = as_series(targets, 'targets')
@@ -562,7 +545,7 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     try:
         model = fit_lf_dynamics(eta_t[:split], tau[:split], sample_time,
                                 input_gain=input_gain, damping_rate=damping_rate,
-                                earth_fixed=earth_fixed, prefilter=prefilter)
+                                earth_fixed=earth_fixed)
     except ValueError as exc:
         message = f'LF dynamics not fitted: {exc}'
     curves = {name: drift_test(model, name, eta_t[split:], tau[split:], sample_time,
@@ -584,8 +567,7 @@ def learn_vessel_memory(targets: ArrayLike, forces: ArrayLike, sample_time: floa
     if model is not None:
         try:
             model = fit_lf_dynamics(eta_t, tau, sample_time, input_gain=input_gain,
-                                    damping_rate=damping_rate, earth_fixed=earth_fixed,
-                                    prefilter=prefilter)
+                                    damping_rate=damping_rate, earth_fixed=earth_fixed)
         except ValueError as exc:
             model, message = None, f'LF dynamics not refitted: {exc}'
             chosen = 'hold' if chosen == 'model' else chosen

@@ -44,7 +44,6 @@ from lf_predictor_ros.core.controller_gains import (
     median_natural_freq,
 )
 from lf_predictor_ros.core.estimator import EstimatorStatus
-from lf_predictor_ros.core.filters import design_lowpass
 from lf_predictor_ros.core.lf_dynamics import (
     FORCE_MARGIN,
     MIN_DAMPING_RATE,
@@ -353,8 +352,7 @@ class LfStateEstimator:
                 FITTED_DAMPING_DOFS[odometry.params.controller_read_fitted_damping_dofs][
                     :self.ndof],
                 odometry.params.dead_reckoning_damping_turn, self._read_pool,
-                odometry.params.controller_read_pool_blocks,
-                odometry.params.dead_reckoning_damping_prefilter)
+                odometry.params.controller_read_pool_blocks)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -408,7 +406,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            damping_refuse_bound: bool = False,
            controller_fitted_dofs: tuple[bool, ...] = (),
            damping_turn: float = 0.0, read_pool: ReadPool | None = None,
-           pool_blocks: int = 0, damping_prefilter: float = 0.0) -> Learned:
+           pool_blocks: int = 0) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -452,9 +450,6 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     (`pooled_input_gain`, continuing ``read_pool``), and the pool after it is returned too.
     ``earth_fixed``: without a known or read gain, the fit's environment is one earth-fixed
     force and a constant yaw moment (`lf_dynamics.fit_lf_dynamics`).
-    ``damping_prefilter`` > 0 [× ω0]: every fit of the memory (the damping memory's and the
-    memory's own) low-passes both sides of its equation below this × ``wave_peak_freq``
-    (`lf_dynamics.fit_lf_dynamics`'s ``prefilter``; no ω0 yet: none).
     The read returned is the one in force afterwards: this read if it succeeded,
     ``remembered`` if it failed for lack of data, with ``controller_keep_dofs`` the two
     combined if it failed in some DOFs, else None; then the pool after the read (None unless
@@ -462,8 +457,6 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     """
     sos = None if wave_peak_freq is None else target_filter(params, wave_peak_freq,
                                                             peak_damping)
-    prefilter = None if wave_peak_freq is None or damping_prefilter <= 0.0 else \
-        design_lowpass(damping_prefilter * wave_peak_freq, params.sample_time)
     source = 'vessel_inertia' if input_gain is not None else ''
     read: ControllerRead | None = None
     pool: ReadPool | None = None
@@ -503,13 +496,12 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                                                    input_gain, read_freq, kept_damping,
                                                    damping_memory, controller_fitted_damping,
                                                    damping_refuse_bound,
-                                                   controller_fitted_dofs, damping_turn,
-                                                   prefilter)
+                                                   controller_fitted_dofs, damping_turn)
         note = '; '.join(part for part in (note, *parts) if part)
     try:
         memory: VesselMemory | None = learn_vessel_memory(values, forces, params.sample_time,
                                                           horizon, gain, sos, force_margin,
-                                                          rate, earth_fixed, prefilter)
+                                                          rate, earth_fixed)
     except ValueError:
         memory = None
     if memory is not None and score is not None:
@@ -553,7 +545,7 @@ def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
                     natural_freq: FloatArray | None, kept: KeptDamping | None,
                     damping_memory: tuple[bool, ...], fitted_damping: bool = False,
                     refuse_bound: bool = False, fitted_dofs: tuple[bool, ...] = (),
-                    turn: float = 0.0, prefilter: FloatArray | None = None
+                    turn: float = 0.0
                     ) -> tuple[FloatArray, FloatArray | None, FloatArray | None, list[str]]:
     """The thrust gain and damping rates the window's memory is learned with, before it is.
 
@@ -590,7 +582,7 @@ def _damping_chosen(values: FloatArray, forces: FloatArray, sample_time: float,
     memorized = bool(np.any(dofs))
     try:
         model = fit_lf_dynamics(values, paired_forces(forces, sos), sample_time,
-                                input_gain=input_gain, prefilter=prefilter)
+                                input_gain=input_gain)
     except ValueError:
         return input_gain, None, None, []
     rate = -np.diag(model.damping)

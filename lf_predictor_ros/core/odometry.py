@@ -501,16 +501,6 @@ class OdometryParams:
         'energy decides alone. 0.3 rad (taken, not tuned: between the settling after a turn '
         'and the smallest setpoint turn) is the default since the fifty-eighth session (rule '
         'Q; docs/BENCHMARKS.md)', 'rad'))
-    dead_reckoning_damping_prefilter: float = field(default=0.0, metadata=field_doc(
-        "with a known or read thrust gain: every fit of the vessel memory low-passes both "
-        'sides of its equation (velocity, acceleration, thrust, environment basis) below this '
-        'x wave_peak_freq before the least squares (lf_dynamics.fit_lf_dynamics prefilter); '
-        "0: off. The targets' velocity carries the wave motion their filter leaves (a "
-        'broad-band sea passes below the notch), an error in the regressor that biases the '
-        'damping towards 0 where the vessel hardly moves: the yaw steady gain G/f the loops '
-        'of rao_supply kept from station keeping was 1.0-2.8x the truth, and the heading '
-        'through a turn hidden by a dropout was worse the larger it was (docs/BENCHMARKS.md, '
-        'sixty-third session); in (0, 1]', '× ω0'))
     controller_read_earth_frame: bool = field(default=True, metadata=field_doc(
         'with controller_inertia, 3 DOF: high-pass the estimates and the commands in the earth '
         'frame before turning them into the body frame (a turn away from the setpoint origin '
@@ -671,11 +661,6 @@ class OdometryParams:
                 0.0 <= self.dead_reckoning_damping_turn <= math.pi):
             raise ValueError('dead_reckoning_damping_turn must be in [0, pi] rad (0: off), '
                              f'got {self.dead_reckoning_damping_turn}')
-        if not (math.isfinite(self.dead_reckoning_damping_prefilter) and
-                0.0 <= self.dead_reckoning_damping_prefilter <= 1.0):
-            raise ValueError('dead_reckoning_damping_prefilter must be in [0, 1] x '
-                             'wave_peak_freq (0: off), got '
-                             f'{self.dead_reckoning_damping_prefilter}')
         for name, choices in (('controller_read_fitted_damping_dofs', tuple(FITTED_DAMPING_DOFS)),
                               ('dead_reckoning_moving_twist_clamp_dofs',
                                tuple(MOVING_TWIST_CLAMP_DOFS)),

@@ -9,7 +9,6 @@ from scipy import signal
 from lf_predictor_ros.core.filters import (
     CausalFilter,
     continuous_wave_filter,
-    design_lowpass,
     design_wave_filter,
     frequency_response,
     low_pass_step,
@@ -217,25 +216,3 @@ def test_low_pass_step_moves_each_entry_by_its_weight_and_keeps_the_state() -> N
     np.testing.assert_array_equal(state, [1.0, -2.0, 0.5])  # the input is not modified
     with pytest.raises(ValueError):
         low_pass_step(state, [1.0, 2.0], 0.5)  # entries must match
-
-
-@pytest.mark.parametrize('cutoff', [0.05, 0.15, 1.0])
-def test_design_lowpass_has_unit_dc_gain_and_half_power_at_its_cutoff(cutoff: float) -> None:
-    """A 2nd-order Butterworth: |H(0)| = 1, |H(ω_c)| = 1/√2, |H(10 ω_c)| ≈ 1/100 (−40 dB/dec).
-
-    At 10 rad/s (a third of the Nyquist frequency at 0.1 s) the bilinear map attenuates more:
-    0.0084.
-    """
-    sos = design_lowpass(cutoff, 0.1)
-    gain = np.abs(frequency_response(sos, [0.0, cutoff, 10.0 * cutoff], 0.1))
-    assert gain[0] == pytest.approx(1.0, abs=1e-9)
-    assert gain[1] == pytest.approx(1.0 / np.sqrt(2.0), rel=1e-6)
-    assert gain[2] == pytest.approx(0.01, rel=0.2)
-
-
-@pytest.mark.parametrize('cutoff, sample_time', [(0.0, 0.1), (-1.0, 0.1), (40.0, 0.1),
-                                                 (float('nan'), 0.1), (0.1, 0.0)])
-def test_design_lowpass_refuses_a_cutoff_outside_the_band(cutoff: float,
-                                                          sample_time: float) -> None:
-    with pytest.raises(ValueError, match='must be'):
-        design_lowpass(cutoff, sample_time)

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from lf_predictor_ros.core import lf_dynamics
-from lf_predictor_ros.core.filters import design_lowpass
 from lf_predictor_ros.core.lf_dynamics import (
     FORCE_MARGIN,
     DriftCurve,
@@ -371,56 +370,3 @@ def test_a_known_damping_rate_is_kept_and_only_the_environment_fitted() -> None:
     memory = learn_vessel_memory(poses, tau, h, 120.0, gain, damping_rate=[0.02, 0.03, 0.1])
     assert memory.model is not None
     np.testing.assert_array_equal(np.diag(memory.model.damping), [-0.02, -0.03, -0.1])
-
-
-def _slow_run_with_waves(seed: int) -> tuple[np.ndarray, np.ndarray, float, float]:
-    """1 DOF, ν̇ = f ν + g τ + b at h 0.1 s, slow thrust; targets with wave motion left in them.
-
-    Returns (targets + waves (m, 1), thrust (m, 1), f [1/s], g [1/kg]). The LF velocity is
-    about as large as the wave velocity left in the targets (0.02 m/s): station keeping.
-    """
-    h, m, rate, gain = 0.1, 12000, 1.0 / 11.5, 1e-6
-    rng = np.random.default_rng(seed)
-    weight = h * 0.05  # first-order low-pass of white noise, corner 0.05 rad/s
-    tau = np.zeros(m)
-    for k in range(1, m):
-        tau[k] = tau[k - 1] + weight * (rng.normal() - tau[k - 1])
-    tau *= 2e3 / np.std(tau)
-    nu, eta = np.zeros(m), np.zeros(m)
-    for k in range(m - 1):
-        nu[k + 1] = nu[k] + h * (-rate * nu[k] + gain * tau[k + 1] + 2e-4)
-        eta[k + 1] = eta[k] + h * nu[k + 1]
-    t = np.arange(m) * h
-    waves = sum(a * np.sin(w * t + p) for a, w, p in ((0.05, 0.35, 0.3), (0.04, 0.42, 1.0),
-                                                      (0.03, 0.5, 2.0)))
-    return (eta + waves)[:, None], tau[:, None], -rate, gain
-
-
-@pytest.mark.parametrize('seed', [0, 1, 2])
-def test_a_prefilter_takes_the_wave_motion_out_of_the_damping_fit(seed: int) -> None:
-    """Errors in variables: wave motion left in the targets halves the fitted damping rate.
-
-    Low-passed on both sides below the waves (0.15 rad/s, the waves at 0.35–0.5 rad/s), the
-    equation still holds and the rate comes back within 2 % (seeds 0–3 gave 0.39–0.50× without,
-    0.994–1.000× with); the residual std stays that of the unfiltered equation.
-    """
-    targets, tau, damping, gain = _slow_run_with_waves(seed)
-    plain = fit_lf_dynamics(targets, tau, 0.1, input_gain=[gain])
-    filtered = fit_lf_dynamics(targets, tau, 0.1, input_gain=[gain],
-                               prefilter=design_lowpass(0.15, 0.1))
-    assert plain.damping[0, 0] / damping < 0.6
-    assert filtered.damping[0, 0] / damping == pytest.approx(1.0, abs=0.02)
-    assert filtered.bias[0, 0] == pytest.approx(2e-4, rel=0.1)
-    assert filtered.residual_std[0] == pytest.approx(plain.residual_std[0], rel=0.05)
-    memory = learn_vessel_memory(targets, tau, 0.1, 60.0, [gain],
-                                 prefilter=design_lowpass(0.15, 0.1))
-    assert memory.model is not None
-    assert memory.model.damping[0, 0] / damping == pytest.approx(1.0, abs=0.02)
-
-
-def test_the_damping_prefilter_parameter_is_validated() -> None:
-    assert OdometryParams(dead_reckoning_damping_prefilter=0.25).dead_reckoning_damping_prefilter \
-        == 0.25
-    for bad in (-0.1, 1.5, float('nan')):
-        with pytest.raises(ValueError, match='dead_reckoning_damping_prefilter must be in'):
-            OdometryParams(dead_reckoning_damping_prefilter=bad)

@@ -85,21 +85,23 @@ class ControllerGains:
     shift: int
     stiffness_frame: str = 'body'
 
-    def believed(self, max_natural_freq: float = math.inf) -> NDArray[np.bool_]:
-        """Per DOF: a PD law that explains the thrust, with positive gains.
+    def believed(self, max_natural_freq: float = math.inf,
+                 min_r_squared: float = MIN_R_SQUARED) -> NDArray[np.bool_]:
+        """Per DOF: a PD law that explains the thrust (R² ≥ ``min_r_squared``), positive gains.
 
         And whose natural frequency 2 Kp / Kd is below ``max_natural_freq`` [rad/s] (inf: no
         bound; `implied_input_gain` passes ``MAX_NATURAL_FREQ_RATIO`` × ω0).
         """
-        return (self.r_squared >= MIN_R_SQUARED) & (self.stiffness > 0.0) & \
+        return (self.r_squared >= min_r_squared) & (self.stiffness > 0.0) & \
             (self.damping > 0.0) & (self.natural_freq() < max_natural_freq)
 
-    def implied_inertia(self, max_natural_freq: float = math.inf) -> FloatArray | None:
+    def implied_inertia(self, max_natural_freq: float = math.inf,
+                        min_r_squared: float = MIN_R_SQUARED) -> FloatArray | None:
         """M_i = Kd_i² / (4 Kp_i) per DOF (module docstring), or None unless every DOF is believed.
 
-        [kg, kg, kg·m²]. ``max_natural_freq``: as `believed`.
+        [kg, kg, kg·m²]. ``max_natural_freq``, ``min_r_squared``: as `believed`.
         """
-        if not np.all(self.believed(max_natural_freq)):
+        if not np.all(self.believed(max_natural_freq, min_r_squared)):
             return None
         return self.inertia_per_dof()
 
@@ -136,7 +138,8 @@ def block_bounds(length: int, block: int, minimum: int) -> list[tuple[int, int]]
 
 
 def median_implied_inertia(blocks: Sequence[ControllerGains],
-                           max_natural_freq: float = math.inf, pair_ratio: float = math.inf
+                           max_natural_freq: float = math.inf, pair_ratio: float = math.inf,
+                           min_r_squared: float = MIN_R_SQUARED
                            ) -> tuple[FloatArray | None, NDArray[np.int64]]:
     """Per DOF the median of Kd² / (4 Kp) over the blocks where that DOF is believed.
 
@@ -144,52 +147,58 @@ def median_implied_inertia(blocks: Sequence[ControllerGains],
     setpoint move or a turn corrupts the read of the block it falls in (its R² drops to
     0.4–0.7 and the inertia is off by 0.02–20×), and pooled over the whole history it had
     corrupted every later read. Returns (the inertia, or None unless every DOF is believed in
-    at least one block; the count of believed blocks per DOF). ``max_natural_freq``: as
-    `ControllerGains.believed`. ``pair_ratio``: a DOF that exactly two blocks believe, with
-    inertias more than this factor apart, is believed by neither (`_believed_blocks`).
+    at least one block; the count of believed blocks per DOF). ``max_natural_freq``,
+    ``min_r_squared``: as `ControllerGains.believed`. ``pair_ratio``: a DOF that exactly two
+    blocks believe, with inertias more than this factor apart, is believed by neither
+    (`_believed_blocks`).
     """
     return _median_believed(blocks, ControllerGains.inertia_per_dof, max_natural_freq,
-                            pair_ratio)
+                            pair_ratio, min_r_squared)
 
 
 def median_natural_freq(blocks: Sequence[ControllerGains],
                         max_natural_freq: float = math.inf,
-                        pair_ratio: float = math.inf) -> FloatArray | None:
+                        pair_ratio: float = math.inf,
+                        min_r_squared: float = MIN_R_SQUARED) -> FloatArray | None:
     """Per DOF the median of 2 Kp / Kd over the believed blocks (`median_implied_inertia`'s).
 
     None unless every DOF is believed in at least one block [rad/s].
     """
     return _median_believed(blocks, ControllerGains.natural_freq, max_natural_freq,
-                            pair_ratio)[0]
+                            pair_ratio, min_r_squared)[0]
 
 
 def believed_medians(blocks: Sequence[ControllerGains], max_natural_freq: float = math.inf,
-                     pair_ratio: float = math.inf) -> tuple[FloatArray, FloatArray]:
+                     pair_ratio: float = math.inf,
+                     min_r_squared: float = MIN_R_SQUARED) -> tuple[FloatArray, FloatArray]:
     """Per DOF the medians of the inertia and of 2 Kp / Kd over the blocks believing it.
 
     NaN in a DOF no block believes (`median_implied_inertia` gives None then): what a read
     still says about the DOFs that are believed. Returns (inertia, natural frequency).
     """
     return (_per_dof_medians(blocks, ControllerGains.inertia_per_dof, max_natural_freq,
-                             pair_ratio)[0],
+                             pair_ratio, min_r_squared)[0],
             _per_dof_medians(blocks, ControllerGains.natural_freq, max_natural_freq,
-                             pair_ratio)[0])
+                             pair_ratio, min_r_squared)[0])
 
 
 def _median_believed(blocks: Sequence[ControllerGains],
                      quantity: Callable[[ControllerGains], FloatArray],
-                     max_natural_freq: float, pair_ratio: float = math.inf
+                     max_natural_freq: float, pair_ratio: float = math.inf,
+                     min_r_squared: float = MIN_R_SQUARED
                      ) -> tuple[FloatArray | None, NDArray[np.int64]]:
     """Per DOF the median of ``quantity`` over the blocks that believe that DOF; the counts.
 
     (None, counts) unless every DOF is believed in at least one block.
     """
-    median, counts = _per_dof_medians(blocks, quantity, max_natural_freq, pair_ratio)
+    median, counts = _per_dof_medians(blocks, quantity, max_natural_freq, pair_ratio,
+                                      min_r_squared)
     return (median if counts.size and np.all(counts > 0) else None), counts
 
 
 def _believed_blocks(blocks: Sequence[ControllerGains], max_natural_freq: float,
-                     pair_ratio: float) -> NDArray[np.bool_]:
+                     pair_ratio: float, min_r_squared: float = MIN_R_SQUARED
+                     ) -> NDArray[np.bool_]:
     """Per block and DOF: believed (`ControllerGains.believed`), and not a disagreeing pair.
 
     The median of two blocks is their mean: when a turn or a move spoils one of them and it
@@ -199,7 +208,7 @@ def _believed_blocks(blocks: Sequence[ControllerGains], max_natural_freq: float,
     two blocks believe, with inertias more than ``pair_ratio`` apart, is then believed by
     neither (inf: never); with three or more the median outvotes one spoilt block.
     """
-    believed = np.array([b.believed(max_natural_freq) for b in blocks])
+    believed = np.array([b.believed(max_natural_freq, min_r_squared) for b in blocks])
     if math.isinf(pair_ratio):
         return believed
     inertia = np.array([b.inertia_per_dof() for b in blocks])
@@ -212,12 +221,13 @@ def _believed_blocks(blocks: Sequence[ControllerGains], max_natural_freq: float,
 
 def _per_dof_medians(blocks: Sequence[ControllerGains],
                      quantity: Callable[[ControllerGains], FloatArray],
-                     max_natural_freq: float, pair_ratio: float = math.inf
+                     max_natural_freq: float, pair_ratio: float = math.inf,
+                     min_r_squared: float = MIN_R_SQUARED
                      ) -> tuple[FloatArray, NDArray[np.int64]]:
     """Per DOF the median of ``quantity`` over the blocks believing it (NaN: none); counts."""
     if not blocks:
         return np.zeros(0), np.zeros(0, dtype=np.int64)
-    believed = _believed_blocks(blocks, max_natural_freq, pair_ratio)
+    believed = _believed_blocks(blocks, max_natural_freq, pair_ratio, min_r_squared)
     counts = believed.sum(axis=0).astype(np.int64)
     values = np.array([quantity(b) for b in blocks])
     median = np.array([float(np.median(values[believed[:, i], i])) if counts[i] else math.nan

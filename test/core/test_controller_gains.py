@@ -152,6 +152,26 @@ def test_unrelated_thrust_gives_no_inertia() -> None:
     assert gains.implied_inertia() is None
 
 
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_a_controller_acting_on_another_estimate_explains_less_and_a_bound_refuses_it(
+        seed: int) -> None:
+    """A PID on the true LF pose, read on an estimate 0.8 × another LF track off it.
+
+    It explains 0.60-0.76 of the thrust (the PID on the estimate itself > 0.95, above): believed
+    with the old bound 0.5, not with ``min_r_squared`` 0.9 (`controller_read_min_r_squared`).
+    """
+    eta = _lf_track(1 + seed)
+    estimate = eta + 0.8 * _lf_track(20 + seed)
+    gains = fit_controller_gains(estimate, body_velocity(estimate, H),
+                                 _pid_thrust(eta, body_velocity(eta, H), 1.0), H)
+    assert np.all((gains.r_squared > MIN_R_SQUARED) & (gains.r_squared < 0.8))
+    assert gains.believed().all()
+    assert not gains.believed(min_r_squared=0.9).any()
+    assert gains.implied_inertia(min_r_squared=0.9) is None
+    inertia, counts = median_implied_inertia([gains, gains, gains], min_r_squared=0.9)
+    assert inertia is None and counts.tolist() == [0, 0, 0]
+
+
 def test_negative_gain_is_not_believed() -> None:
     gains = ControllerGains(np.array([1.0, -1.0, 1.0]), np.ones(3), np.ones(3), 0)
     assert gains.believed().tolist() == [True, False, True]

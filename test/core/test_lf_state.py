@@ -260,6 +260,31 @@ def test_a_pooled_read_reads_every_block_once_and_outvotes_a_wrong_one() -> None
     assert read.outcome == 'no_data' and kept.blocks == pool.blocks and kept.end == pool.end
 
 
+def test_a_read_needs_the_r_squared_it_is_given() -> None:
+    """``min_r_squared``: commands the PD law explains only in part are read at 0.5, not 0.9.
+
+    The PD thrust plus white noise of 0.6 its size (R² 0.70-0.75 per block, in the band of a
+    controller acting on another estimate, docs/BENCHMARKS.md, sixty-third session).
+    """
+    published, times, forces = _published_pd_loop(1200)
+    noisy = forces + np.random.default_rng(3).standard_normal(forces.shape) * \
+        0.6 * float(np.std(forces))
+    read, pool = pooled_input_gain(published, times, noisy, 1.0, 300.0, None, 8)
+    r_squared = np.array([float(b.r_squared[0]) for b in pool.blocks])
+    assert len(pool.blocks) == 4 and np.all((r_squared > 0.5) & (r_squared < 0.9))
+    assert read.outcome == 'read'
+    strict, _ = pooled_input_gain(published, times, noisy, 1.0, 300.0, None, 8,
+                                  min_r_squared=0.9)
+    assert strict.outcome == 'no_fit' and strict.gain is None
+    single = implied_input_gain(published, times, noisy, 1.0, 300.0, min_r_squared=0.9)
+    assert single.outcome == 'no_fit'
+    assert pooled_input_gain(published, times, forces, 1.0, 300.0, None, 8,
+                             min_r_squared=0.9)[0].outcome == 'read'
+    for bad in (0.0, 1.0, float('nan')):
+        with pytest.raises(ValueError, match='controller_read_min_r_squared must be in'):
+            OdometryParams(controller_read_min_r_squared=bad)
+
+
 def test_a_pooled_read_starts_again_when_the_newest_blocks_explain_no_dof() -> None:
     """The controller switched off (noise thrust, as a joystick's) for 300 s, then back.
 

@@ -139,7 +139,7 @@ def block_bounds(length: int, block: int, minimum: int) -> list[tuple[int, int]]
 
 def median_implied_inertia(blocks: Sequence[ControllerGains],
                            max_natural_freq: float = math.inf, pair_ratio: float = math.inf,
-                           min_r_squared: float = MIN_R_SQUARED
+                           lone_r_squared: float = 0.0
                            ) -> tuple[FloatArray | None, NDArray[np.int64]]:
     """Per DOF the median of Kd² / (4 Kp) over the blocks where that DOF is believed.
 
@@ -147,57 +147,57 @@ def median_implied_inertia(blocks: Sequence[ControllerGains],
     setpoint move or a turn corrupts the read of the block it falls in (its R² drops to
     0.4–0.7 and the inertia is off by 0.02–20×), and pooled over the whole history it had
     corrupted every later read. Returns (the inertia, or None unless every DOF is believed in
-    at least one block; the count of believed blocks per DOF). ``max_natural_freq``,
-    ``min_r_squared``: as `ControllerGains.believed`. ``pair_ratio``: a DOF that exactly two
-    blocks believe, with inertias more than this factor apart, is believed by neither
-    (`_believed_blocks`).
+    at least one block; the count of believed blocks per DOF). ``max_natural_freq``: as
+    `ControllerGains.believed`. ``pair_ratio``: a DOF that exactly two blocks believe, with
+    inertias more than this factor apart, is believed by neither; ``lone_r_squared``: a DOF
+    that one block alone believes needs this R² (`_believed_blocks`).
     """
     return _median_believed(blocks, ControllerGains.inertia_per_dof, max_natural_freq,
-                            pair_ratio, min_r_squared)
+                            pair_ratio, lone_r_squared)
 
 
 def median_natural_freq(blocks: Sequence[ControllerGains],
                         max_natural_freq: float = math.inf,
                         pair_ratio: float = math.inf,
-                        min_r_squared: float = MIN_R_SQUARED) -> FloatArray | None:
+                        lone_r_squared: float = 0.0) -> FloatArray | None:
     """Per DOF the median of 2 Kp / Kd over the believed blocks (`median_implied_inertia`'s).
 
     None unless every DOF is believed in at least one block [rad/s].
     """
     return _median_believed(blocks, ControllerGains.natural_freq, max_natural_freq,
-                            pair_ratio, min_r_squared)[0]
+                            pair_ratio, lone_r_squared)[0]
 
 
 def believed_medians(blocks: Sequence[ControllerGains], max_natural_freq: float = math.inf,
                      pair_ratio: float = math.inf,
-                     min_r_squared: float = MIN_R_SQUARED) -> tuple[FloatArray, FloatArray]:
+                     lone_r_squared: float = 0.0) -> tuple[FloatArray, FloatArray]:
     """Per DOF the medians of the inertia and of 2 Kp / Kd over the blocks believing it.
 
     NaN in a DOF no block believes (`median_implied_inertia` gives None then): what a read
     still says about the DOFs that are believed. Returns (inertia, natural frequency).
     """
     return (_per_dof_medians(blocks, ControllerGains.inertia_per_dof, max_natural_freq,
-                             pair_ratio, min_r_squared)[0],
+                             pair_ratio, lone_r_squared)[0],
             _per_dof_medians(blocks, ControllerGains.natural_freq, max_natural_freq,
-                             pair_ratio, min_r_squared)[0])
+                             pair_ratio, lone_r_squared)[0])
 
 
 def _median_believed(blocks: Sequence[ControllerGains],
                      quantity: Callable[[ControllerGains], FloatArray],
                      max_natural_freq: float, pair_ratio: float = math.inf,
-                     min_r_squared: float = MIN_R_SQUARED
+                     lone_r_squared: float = 0.0
                      ) -> tuple[FloatArray | None, NDArray[np.int64]]:
     """Per DOF the median of ``quantity`` over the blocks that believe that DOF; the counts.
 
     (None, counts) unless every DOF is believed in at least one block.
     """
     median, counts = _per_dof_medians(blocks, quantity, max_natural_freq, pair_ratio,
-                                      min_r_squared)
+                                      lone_r_squared)
     return (median if counts.size and np.all(counts > 0) else None), counts
 
 
 def _believed_blocks(blocks: Sequence[ControllerGains], max_natural_freq: float,
-                     pair_ratio: float, min_r_squared: float = MIN_R_SQUARED
+                     pair_ratio: float, lone_r_squared: float = 0.0
                      ) -> NDArray[np.bool_]:
     """Per block and DOF: believed (`ControllerGains.believed`), and not a disagreeing pair.
 
@@ -206,9 +206,18 @@ def _believed_blocks(blocks: Sequence[ControllerGains], max_natural_freq: float,
     inertia 2.4e10 from two blocks against 2.6e9 from the block before the turn, the truth
     4.3e9; the dead-reckoned heading 1.3 rad off), no majority says which. A DOF that exactly
     two blocks believe, with inertias more than ``pair_ratio`` apart, is then believed by
-    neither (inf: never); with three or more the median outvotes one spoilt block.
+    neither (inf: never); with three or more the median outvotes one spoilt block. Nothing
+    outvotes a block that alone believes a DOF: it then needs an R² of at least
+    ``lone_r_squared`` (≤ ``MIN_R_SQUARED``: no more than any block). A controller acting on
+    another estimate explains 0.47–0.74 of the commands (onedof_feedback, a PID on the true
+    LF pose), one acting on these estimates 0.996 in median (docs/BENCHMARKS.md, sixty-third
+    session).
     """
-    believed = np.array([b.believed(max_natural_freq, min_r_squared) for b in blocks])
+    believed = np.array([b.believed(max_natural_freq) for b in blocks])
+    if lone_r_squared > MIN_R_SQUARED and believed.size:
+        r_squared = np.array([b.r_squared for b in blocks])
+        lone = believed.sum(axis=0) == 1
+        believed[:, lone] &= r_squared[:, lone] >= lone_r_squared
     if math.isinf(pair_ratio):
         return believed
     inertia = np.array([b.inertia_per_dof() for b in blocks])
@@ -222,12 +231,12 @@ def _believed_blocks(blocks: Sequence[ControllerGains], max_natural_freq: float,
 def _per_dof_medians(blocks: Sequence[ControllerGains],
                      quantity: Callable[[ControllerGains], FloatArray],
                      max_natural_freq: float, pair_ratio: float = math.inf,
-                     min_r_squared: float = MIN_R_SQUARED
+                     lone_r_squared: float = 0.0
                      ) -> tuple[FloatArray, NDArray[np.int64]]:
     """Per DOF the median of ``quantity`` over the blocks believing it (NaN: none); counts."""
     if not blocks:
         return np.zeros(0), np.zeros(0, dtype=np.int64)
-    believed = _believed_blocks(blocks, max_natural_freq, pair_ratio, min_r_squared)
+    believed = _believed_blocks(blocks, max_natural_freq, pair_ratio, lone_r_squared)
     counts = believed.sum(axis=0).astype(np.int64)
     values = np.array([quantity(b) for b in blocks])
     median = np.array([float(np.median(values[believed[:, i], i])) if counts[i] else math.nan

@@ -354,7 +354,7 @@ class LfStateEstimator:
                     :self.ndof],
                 odometry.params.dead_reckoning_damping_turn, self._read_pool,
                 odometry.params.controller_read_pool_blocks,
-                odometry.params.controller_read_min_r_squared)
+                odometry.params.controller_read_lone_r_squared)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -409,7 +409,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            controller_fitted_dofs: tuple[bool, ...] = (),
            damping_turn: float = 0.0, read_pool: ReadPool | None = None,
            pool_blocks: int = 0,
-           controller_min_r_squared: float = MIN_R_SQUARED) -> Learned:
+           controller_lone_r_squared: float = 0.0) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -449,8 +449,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     ``controller_pair_ratio``: `implied_input_gain`'s ``pair_ratio``.
     ``damping_refuse_bound``, ``controller_fitted_dofs``, ``damping_turn``: `_damping_chosen`'s
     ``refuse_bound``, ``fitted_dofs`` and ``turn``.
-    ``controller_min_r_squared``: the R² a block's PD law needs to be believed
-    (`ControllerGains.believed`).
+    ``controller_lone_r_squared``: the R² a DOF needs that one block alone believes (or a read
+    without blocks) (`implied_input_gain`'s ``lone_r_squared``).
     ``pool_blocks`` > 0: the controller is read from the last that many blocks ever read
     (`pooled_input_gain`, continuing ``read_pool``), and the pool after it is returned too.
     ``earth_fixed``: without a known or read gain, the fit's environment is one earth-fixed
@@ -472,12 +472,12 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                                            controller_block_time, read_pool, pool_blocks,
                                            controller_earth_frame, bound,
                                            controller_stiffness_frame, controller_pair_ratio,
-                                           controller_min_r_squared)
+                                           controller_lone_r_squared)
         else:
             read = implied_input_gain(published, *commands, params.sample_time,
                                       controller_block_time, controller_earth_frame, bound,
                                       controller_stiffness_frame, controller_pair_ratio,
-                                      controller_min_r_squared)
+                                      controller_lone_r_squared)
     elif remembered is not None:
         read = ControllerRead(None, 'controller gains: no commands', 'no_data')
     in_force: ControllerRead | None = read if read is not None and read.outcome == 'read' \
@@ -632,7 +632,7 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
                        max_natural_freq: float = math.inf,
                        stiffness_frame: str = 'body',
                        pair_ratio: float = math.inf,
-                       min_r_squared: float = MIN_R_SQUARED) -> ControllerRead:
+                       lone_r_squared: float = 0.0) -> ControllerRead:
     """1/M_ii implied by the DP controller acting on the published estimates.
 
     ``times``, ``forces``: the controller's commands and their stamps (a controller stamps its
@@ -656,8 +656,9 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     above it is not believed (`ControllerGains.believed`; the learning job passes
     ``MAX_NATURAL_FREQ_RATIO`` × ω0; inf: no bound). ``pair_ratio``: with blocks, a DOF two
     blocks believe with inertias more than this factor apart is not believed
-    (`controller_gains.median_implied_inertia`; inf: never). ``min_r_squared``: the R² a
-    DOF's PD law needs to be believed (`ControllerGains.believed`).
+    (`controller_gains.median_implied_inertia`; inf: never). ``lone_r_squared``: the R² a DOF
+    needs that one block alone believes, or the one read without blocks (nothing outvotes it;
+    `controller_gains.median_implied_inertia`; 0: no more than any block).
     """
     if not published or times.shape[0] == 0:
         return ControllerRead(None, 'controller gains: no data', 'no_data')
@@ -683,14 +684,14 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
                                           earth_highpass=earth_highpass,
                                           stiffness_frame=stiffness_frame) for a, b in blocks]
             return _median_read(reads, float(stamps[rows[-1]]), rows.size, block_time,
-                                max_natural_freq, pair_ratio, min_r_squared)
+                                max_natural_freq, pair_ratio, lone_r_squared)
         gains = fit_controller_gains(poses, twists, paired, sample_time,
                                      run_starts=np.cumsum(lengths)[:-1].tolist(),
                                      earth_highpass=earth_highpass,
                                      stiffness_frame=stiffness_frame)
     except ValueError as exc:  # non-finite values: nothing learned about the controller
         return ControllerRead(None, f'controller gains: {exc}', 'no_data')
-    inertia = gains.implied_inertia(max_natural_freq, min_r_squared)
+    inertia = gains.implied_inertia(max_natural_freq, max(MIN_R_SQUARED, lone_r_squared))
     r2 = ', '.join(f'{v:.2f}' for v in gains.r_squared)
     if inertia is None:
         return ControllerRead(None, f'controller gains not read (R² {r2})', 'no_fit')
@@ -726,7 +727,7 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
                       pool_blocks: int, earth_highpass: bool = False,
                       max_natural_freq: float = math.inf, stiffness_frame: str = 'body',
                       pair_ratio: float = math.inf,
-                      min_r_squared: float = MIN_R_SQUARED) -> tuple[ControllerRead, ReadPool]:
+                      lone_r_squared: float = 0.0) -> tuple[ControllerRead, ReadPool]:
     """`implied_input_gain` from the last ``pool_blocks`` blocks ever read, each read once.
 
     The controller of a DP vessel does not change from one window to the next, but its read
@@ -741,7 +742,7 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
     begins at 200 s, without a read). When the newest `POOL_RESTART_BLOCKS` blocks, a new one
     among them, explain no DOF, the pool starts again from them: the read is then 'no_fit' and
     forgotten, as a window's read whose blocks explain nothing (the controller may have been
-    switched off or changed). ``min_r_squared``: as `implied_input_gain`. Returns (the read,
+    switched off or changed). ``lone_r_squared``: as `implied_input_gain`. Returns (the read,
     the pool after it).
     """
     end = -math.inf if pool is None else pool.end
@@ -768,18 +769,18 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
     pooled = kept + tuple(new)
     tail = pooled[-POOL_RESTART_BLOCKS:]
     restart = bool(new) and len(tail) == POOL_RESTART_BLOCKS and \
-        not any(np.any(b.believed(max_natural_freq, min_r_squared)) for b in tail)
+        not any(np.any(b.believed(max_natural_freq)) for b in tail)
     if restart:
         pooled = tail
     after = pool if pool is not None and not new else ReadPool(end, pooled[-pool_blocks:])
     if not after.blocks:
         read = implied_input_gain(published, times, forces, sample_time, block_time,
                                   earth_highpass, max_natural_freq, stiffness_frame, pair_ratio,
-                                  min_r_squared)
+                                  lone_r_squared)
         return replace(read, note=f'{read.note}; no full block of {block} samples pooled '
                                   'yet'), after
     read = _median_read(list(after.blocks), end, block * len(after.blocks), block_time,
-                        max_natural_freq, pair_ratio, min_r_squared)
+                        max_natural_freq, pair_ratio, lone_r_squared)
     restarted = f'; the newest {POOL_RESTART_BLOCKS} blocks explain no DOF, the pool starts ' \
         'again' if restart else ''
     return replace(read, note=f'{read.note}; pooled, {len(new)} new{restarted}'), after
@@ -788,17 +789,17 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
 def _median_read(reads: list[ControllerGains], stamp: float, samples: int,
                  block_time: float, max_natural_freq: float = math.inf,
                  pair_ratio: float = math.inf,
-                 min_r_squared: float = MIN_R_SQUARED) -> ControllerRead:
+                 lone_r_squared: float = 0.0) -> ControllerRead:
     """The read of `implied_input_gain` from one `ControllerGains` per block."""
     inertia, counts = median_implied_inertia(reads, max_natural_freq, pair_ratio,
-                                             min_r_squared)
+                                             lone_r_squared)
     believed = ', '.join(f'{c}' for c in counts)
     earth = sum(read.stiffness_frame == 'earth' for read in reads)
     what = f'{believed} of {len(reads)} blocks of {block_time:.0f} s believed' + \
         (f', {earth} with the stiffness in the earth frame' if earth else '')
     if inertia is None:
         partial_inertia, partial_freq = believed_medians(reads, max_natural_freq, pair_ratio,
-                                                         min_r_squared)
+                                                         lone_r_squared)
         partial = bool(np.any(np.isfinite(partial_inertia)))
         return ControllerRead(None, f'controller gains not read ({what})', 'no_fit', stamp,
                               partial_gain=1.0 / partial_inertia if partial else None,
@@ -807,7 +808,7 @@ def _median_read(reads: list[ControllerGains], stamp: float, samples: int,
                                           f"{', '.join(f'{v:.3g}' for v in inertia)} "
                                           f'(median; {what}; {samples} samples)'), 'read', stamp,
                           median_natural_freq(reads, max_natural_freq, pair_ratio,
-                                              min_r_squared))
+                                              lone_r_squared))
 
 
 def _input_gain(inertia: tuple[float, ...], ndof: int) -> FloatArray | None:

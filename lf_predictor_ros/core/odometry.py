@@ -449,15 +449,16 @@ class OdometryParams:
         'with a move or a turn in them, moved the read yaw inertia 0.4-2.5x between two '
         'dropouts of one loop (core.lf_state.pooled_input_gain; docs/BENCHMARKS.md, '
         'fifty-ninth session; 8 by default since the sixtieth, rule S)', ''))
-    controller_read_min_r_squared: float = field(default=0.5, metadata=field_doc(
-        "with controller_inertia: a block's PD law is believed only if it explains at least "
-        'this fraction of the high-passed command variance (R^2; core.controller_gains). A '
-        'controller acting on these estimates explains 0.99 in median (rao_supply, rao_swell: '
-        'blocks below 0.9 read 0.2-0.5x the inertia, spoilt by a move or a turn); one acting '
-        'on another estimate (onedof_feedback, PID on the true LF pose) explained 0.47-0.74, '
-        'and one such block, believed, read 64.6 kg against about 1471 and the dead '
-        'reckoning ran 303 m off in 120 s (docs/BENCHMARKS.md, sixty-third session); in '
-        '(0, 1)', '-'))
+    controller_read_lone_r_squared: float = field(default=0.0, metadata=field_doc(
+        'with controller_inertia: a DOF that one block alone believes (nothing outvotes it; '
+        'or a read without blocks) needs a PD law that explains at least this fraction of the '
+        'high-passed commands (R^2; core.controller_gains); 0: the 0.5 every block needs. A '
+        'controller acting on these estimates explains 0.996 in median (rao_supply, '
+        'rao_swell), one acting on another estimate 0.47-0.74 (onedof_feedback, a PID on the '
+        'true LF pose): one such block, alone and believed, read 64.6 kg against about 1471 '
+        'and the dead reckoning ran 303 m off in 120 s. 0.9 demanded of every block instead '
+        'made the heading through hidden turns worse (rao_supply 1.16x: the median lost the '
+        'low blocks; docs/BENCHMARKS.md, sixty-third session); in [0, 1)', '-'))
     controller_read_keep_dofs: bool = field(default=True, metadata=field_doc(
         'with controller_inertia: a read whose blocks believe some DOFs but in another none '
         "(a turn spoils yaw's blocks) keeps the last successful read's inertia in that DOF "
@@ -666,10 +667,10 @@ class OdometryParams:
             raise ValueError('vessel_inertia must be 3 finite numbers, all 0 (learn) or all > 0 '
                              f'[kg, kg, kg·m²], got {self.vessel_inertia}')
         object.__setattr__(self, 'vessel_inertia', inertia)
-        if not (math.isfinite(self.controller_read_min_r_squared) and
-                0.0 < self.controller_read_min_r_squared < 1.0):
-            raise ValueError('controller_read_min_r_squared must be in (0, 1), got '
-                             f'{self.controller_read_min_r_squared}')
+        if not (math.isfinite(self.controller_read_lone_r_squared) and
+                0.0 <= self.controller_read_lone_r_squared < 1.0):
+            raise ValueError('controller_read_lone_r_squared must be in [0, 1) (0: off), got '
+                             f'{self.controller_read_lone_r_squared}')
         if not (math.isfinite(self.dead_reckoning_damping_turn) and
                 0.0 <= self.dead_reckoning_damping_turn <= math.pi):
             raise ValueError('dead_reckoning_damping_turn must be in [0, pi] rad (0: off), '

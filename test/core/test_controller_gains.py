@@ -157,8 +157,9 @@ def test_a_controller_acting_on_another_estimate_explains_less_and_a_bound_refus
         seed: int) -> None:
     """A PID on the true LF pose, read on an estimate 0.8 × another LF track off it.
 
-    It explains 0.60-0.76 of the thrust (the PID on the estimate itself > 0.95, above): believed
-    with the old bound 0.5, not with ``min_r_squared`` 0.9 (`controller_read_min_r_squared`).
+    It explains 0.60-0.76 of the thrust (the PID on the estimate itself > 0.95, above): every
+    block believes it (R² ≥ 0.5), but alone it is not believed with ``lone_r_squared`` 0.9
+    (`controller_read_lone_r_squared`); among three blocks the lone bound does not apply.
     """
     eta = _lf_track(1 + seed)
     estimate = eta + 0.8 * _lf_track(20 + seed)
@@ -168,8 +169,23 @@ def test_a_controller_acting_on_another_estimate_explains_less_and_a_bound_refus
     assert gains.believed().all()
     assert not gains.believed(min_r_squared=0.9).any()
     assert gains.implied_inertia(min_r_squared=0.9) is None
-    inertia, counts = median_implied_inertia([gains, gains, gains], min_r_squared=0.9)
+    inertia, counts = median_implied_inertia([gains], lone_r_squared=0.9)
     assert inertia is None and counts.tolist() == [0, 0, 0]
+    assert median_implied_inertia([gains])[0] is not None
+    inertia, counts = median_implied_inertia([gains, gains, gains], lone_r_squared=0.9)
+    assert inertia is not None and counts.tolist() == [3, 3, 3]
+
+
+def test_a_dof_one_block_alone_believes_needs_the_lone_r_squared() -> None:
+    """Per DOF: surge's lone block (R² 0.7) is refused at 0.9, sway's (0.95) kept; yaw has 2."""
+    def block(r2: list[float]) -> ControllerGains:
+        return ControllerGains(np.ones(3), np.full(3, 2.0), np.array(r2), 0)  # M 1 each
+
+    blocks = [block([0.7, 0.95, 0.6]), block([0.1, 0.2, 0.6])]
+    _, counts = median_implied_inertia(blocks)
+    assert counts.tolist() == [1, 1, 2]
+    inertia, counts = median_implied_inertia(blocks, lone_r_squared=0.9)
+    assert inertia is None and counts.tolist() == [0, 1, 2]
 
 
 def test_negative_gain_is_not_believed() -> None:

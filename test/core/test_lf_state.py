@@ -260,11 +260,13 @@ def test_a_pooled_read_reads_every_block_once_and_outvotes_a_wrong_one() -> None
     assert read.outcome == 'no_data' and kept.blocks == pool.blocks and kept.end == pool.end
 
 
-def test_a_read_needs_the_r_squared_it_is_given() -> None:
-    """``min_r_squared``: commands the PD law explains only in part are read at 0.5, not 0.9.
+def test_a_lone_block_needs_the_lone_r_squared() -> None:
+    """``lone_r_squared``: commands a PD law explains only in part, read from one block alone.
 
     The PD thrust plus white noise of 0.6 its size (R² 0.70-0.75 per block, in the band of a
-    controller acting on another estimate, docs/BENCHMARKS.md, sixty-third session).
+    controller acting on another estimate, docs/BENCHMARKS.md, sixty-third session): one
+    block alone is read without the bound and refused with 0.9; four such blocks are read
+    either way (the median of several outvotes a spoilt one); the noise-free law is read.
     """
     published, times, forces = _published_pd_loop(1200)
     noisy = forces + np.random.default_rng(3).standard_normal(forces.shape) * \
@@ -273,16 +275,21 @@ def test_a_read_needs_the_r_squared_it_is_given() -> None:
     r_squared = np.array([float(b.r_squared[0]) for b in pool.blocks])
     assert len(pool.blocks) == 4 and np.all((r_squared > 0.5) & (r_squared < 0.9))
     assert read.outcome == 'read'
-    strict, _ = pooled_input_gain(published, times, noisy, 1.0, 300.0, None, 8,
-                                  min_r_squared=0.9)
-    assert strict.outcome == 'no_fit' and strict.gain is None
-    single = implied_input_gain(published, times, noisy, 1.0, 300.0, min_r_squared=0.9)
-    assert single.outcome == 'no_fit'
-    assert pooled_input_gain(published, times, forces, 1.0, 300.0, None, 8,
-                             min_r_squared=0.9)[0].outcome == 'read'
-    for bad in (0.0, 1.0, float('nan')):
-        with pytest.raises(ValueError, match='controller_read_min_r_squared must be in'):
-            OdometryParams(controller_read_min_r_squared=bad)
+    assert pooled_input_gain(published, times, noisy, 1.0, 300.0, None, 8,
+                             lone_r_squared=0.9)[0].outcome == 'read'
+    first, _ = pooled_input_gain(published[:300], times[:300], noisy[:300], 1.0, 300.0, None, 8)
+    assert first.outcome == 'read'
+    lone, _ = pooled_input_gain(published[:300], times[:300], noisy[:300], 1.0, 300.0, None, 8,
+                                lone_r_squared=0.9)
+    assert lone.outcome == 'no_fit' and lone.gain is None
+    assert implied_input_gain(published, times, noisy, 1.0, lone_r_squared=0.9).outcome == \
+        'no_fit'  # one read without blocks is a lone read
+    assert implied_input_gain(published, times, noisy, 1.0).outcome == 'read'
+    assert pooled_input_gain(published[:300], times[:300], forces[:300], 1.0, 300.0, None, 8,
+                             lone_r_squared=0.9)[0].outcome == 'read'
+    for bad in (-0.1, 1.0, float('nan')):
+        with pytest.raises(ValueError, match='controller_read_lone_r_squared must be in'):
+            OdometryParams(controller_read_lone_r_squared=bad)
 
 
 def test_a_pooled_read_starts_again_when_the_newest_blocks_explain_no_dof() -> None:

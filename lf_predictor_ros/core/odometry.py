@@ -449,7 +449,7 @@ class OdometryParams:
         'with a move or a turn in them, moved the read yaw inertia 0.4-2.5x between two '
         'dropouts of one loop (core.lf_state.pooled_input_gain; docs/BENCHMARKS.md, '
         'fifty-ninth session; 8 by default since the sixtieth, rule S)', ''))
-    controller_read_lone_r_squared: float = field(default=0.0, metadata=field_doc(
+    controller_read_lone_r_squared: float = field(default=0.9, metadata=field_doc(
         'with controller_inertia: a DOF that one block alone believes (nothing outvotes it; '
         'or a read without blocks) needs a PD law that explains at least this fraction of the '
         'high-passed commands (R^2; core.controller_gains); 0: the 0.5 every block needs. A '
@@ -458,7 +458,9 @@ class OdometryParams:
         'true LF pose): one such block, alone and believed, read 64.6 kg against about 1471 '
         'and the dead reckoning ran 303 m off in 120 s. 0.9 demanded of every block instead '
         'made the heading through hidden turns worse (rao_supply 1.16x: the median lost the '
-        'low blocks; docs/BENCHMARKS.md, sixty-third session); in [0, 1)', '-'))
+        'low blocks; docs/BENCHMARKS.md, sixty-third session). 0.9 (between the two, not '
+        'tuned) is the default since the sixty-third session (rule V: the development '
+        'divergence gone, every fresh run unchanged); in [0, 1)', '-'))
     controller_read_keep_dofs: bool = field(default=True, metadata=field_doc(
         'with controller_inertia: a read whose blocks believe some DOFs but in another none '
         "(a turn spoils yaw's blocks) keeps the last successful read's inertia in that DOF "

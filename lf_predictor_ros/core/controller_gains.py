@@ -215,9 +215,9 @@ def _believed_blocks(blocks: Sequence[ControllerGains], max_natural_freq: float,
     """
     believed = np.array([b.believed(max_natural_freq) for b in blocks])
     if lone_r_squared > MIN_R_SQUARED and believed.size:
-        r_squared = np.array([b.r_squared for b in blocks])
+        strict = np.array([b.believed(max_natural_freq, lone_r_squared) for b in blocks])
         lone = believed.sum(axis=0) == 1
-        believed[:, lone] &= r_squared[:, lone] >= lone_r_squared
+        believed[:, lone] = strict[:, lone]
     if math.isinf(pair_ratio):
         return believed
     inertia = np.array([b.inertia_per_dof() for b in blocks])

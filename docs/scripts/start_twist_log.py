@@ -11,10 +11,10 @@ averaging windows are filled for the log), the holding and the published twist s
 moving DOFs, and the true LF body velocity; the environment force the dead reckoning starts
 from (G⁻¹ B β(ψ) of the balanced model, as `dropout_start_probe.py`) and that model's thrust
 gains and damping rates (diagonals of G and F) and, on the supply vessel,
-the truth's (M ν̇ + D ν − τ over the 30 s before); plus lf_odom's heading error 59 s in. The list is
-written as JSON for offline comparison of start rules (the start's yaw-rate error times the
-yaw time constant is most of a dropout's heading error). Development seeds only; the
-sixty-second session's section of docs/BENCHMARKS.md.
+the truth's (M ν̇ + D ν − τ over the 30 s before); plus lf_odom's heading error 59 s in and
+the heading std it published then. The list is written as JSON for offline comparison of start
+rules (the start's yaw-rate error times the yaw time constant is most of a dropout's heading
+error). Development seeds only; the sixty-second session's section of docs/BENCHMARKS.md.
 """
 from __future__ import annotations
 
@@ -104,17 +104,19 @@ def one(name: str, seed: int, spread: float, moves: list[float] | None,
         k = int(np.argmin(np.abs(record.t - entry['stamp'])))
         end = entry['stamp'] + 59.0
         late = next((o for o in log if abs(o.stamp - end) < 0.6), None)
-        heading_error = None
+        heading_error = heading_std = None
         if late is not None:
+            heading_std = float(np.sqrt(late.pose_cov[2, 2]))
             j = int(np.argmin(np.abs(record.t - end)))
             heading_error = float(np.angle(np.exp(1j * (late.pose[2] -
                                                         record.truth_lf_pose[j, 2]))))
         true_env = _listed(probe.true_environment(record, entry['stamp'])[0]) \
-            if name in SUPPLY_SCENARIOS else None
+            if scenario.name in SUPPLY_SCENARIOS else None
         out.append({'scenario': name, 'seed': seed, **entry, 'true': _listed(nu[k]),
                     'environment': environments.get(entry['stamp']),
                     'model': models.get(entry['stamp']),
-                    'true_environment': true_env, 'heading_error_59': heading_error})
+                    'true_environment': true_env, 'heading_error_59': heading_error,
+                    'heading_std_59': heading_std})
     return out
 
 

@@ -58,7 +58,10 @@ unwrapped, central differences).
    Trust in the loop (lf_odom only): the fraction of the dead-reckoned estimates of each dropout
    whose 95 % covariance ellipse (eᵀ P⁻¹ e ≤ χ²₀.₉₅(n), e against the loop's true LF pose at the
    estimate's stamp) contains the truth, and at the end of the dropout the published horizontal
-   standard deviation √(P_NN + P_EE) next to the horizontal error.
+   standard deviation √(P_NN + P_EE) next to the horizontal error. With
+   ``--dropout-loop-velocity difference`` lf_odom's loops (with and without dropouts) take the
+   D term from the PID's own finite difference of lf_odom's pose instead of its twist: a DP
+   stack that takes only the position (`dp_controller`'s default ``velocity_source``).
 
 The dropouts of items 3 and 5 come at the same times in every seed unless ``--dropout-spread``
 delays each seed's by its own draw (``dropout_shift_for_seed``; the JSON's ``dropout_shift``).
@@ -136,6 +139,11 @@ LOOP_FD = 'adaptive'  # the predictor loop with the PID's finite-difference D te
 LOOP_ODOM = 'adaptive_odom_d'  # the same with the D term from the odometry twist
 LOOP_OBSERVER = 'observer'  # the tuned passive observer (PID finite-difference D term)
 DROPOUT_LOOP_LENGTH = 60.0  # [s] dropouts of item 5 (within the 120 s timeout)
+# Where item 5's PID takes its D term (``--dropout-loop-velocity``), as `dp_controller`'s
+# ``velocity_source``: 'odometry', lf_odom's twist; 'difference', its own filtered finite
+# difference of the pose it is given (lf_odom's, dead-reckoned in a dropout, as the node's
+# lf_pose is): a DP stack that takes only the position
+DROPOUT_LOOP_VELOCITIES = ('odometry', 'difference')
 AFTER_DROPOUT = 120.0  # [s] scored after each dropout of item 5
 # The seed's own random stream for the dropouts' delay (``--dropout-spread``), apart from the
 # sea's, the noise's and the scenario schedule's draws.
@@ -445,7 +453,8 @@ def _in_dropout(t: float, dropouts: Sequence[tuple[float, float]]) -> bool:
 def _odometry_loop(scenario: Scenario, seed: int, duration: float, params: PredictorParams,
                    odometry: OdometryParams,
                    dropouts: Sequence[tuple[float, float]] = (),
-                   log: list[OdometryEstimate] | None = None) -> ClosedLoopRun:
+                   log: list[OdometryEstimate] | None = None,
+                   velocity_source: str = 'odometry') -> ClosedLoopRun:
     """The predictor loop with the D term from the odometry twist (items 4 and 5).
 
     Without dropouts the PID takes the predictor's LF pose (= lf_odom's pose while tracking
@@ -453,8 +462,12 @@ def _odometry_loop(scenario: Scenario, seed: int, duration: float, params: Predi
     with ``velocity_source: odometry``: dead-reckoned in a dropout (``coast``), blended after
     it; NaN when 'lost' (the PID holds its last estimate). The PID's commands reach the
     estimator as ``thrust_command`` does the node (``LfStateEstimator.command``). ``log``: every
-    dead-reckoned estimate is appended to it.
+    dead-reckoned estimate is appended to it. ``velocity_source`` 'difference': the PID takes
+    its D term from its own finite difference of the pose instead (`DROPOUT_LOOP_VELOCITIES`).
     """
+    if velocity_source not in DROPOUT_LOOP_VELOCITIES:
+        raise ValueError(f'velocity_source must be one of {DROPOUT_LOOP_VELOCITIES}, got '
+                         f'{velocity_source!r}')
     est = LfStateEstimator(params, odometry, background=False)
     latest: list[FloatArray | None] = [None]
     dropped = [False]
@@ -478,8 +491,9 @@ def _odometry_loop(scenario: Scenario, seed: int, duration: float, params: Predi
         return np.asarray(lf_pose, dtype=np.float64)
 
     try:
+        velocity = (lambda: latest[0]) if velocity_source == 'odometry' else None
         return run_loop(scenario, seed, duration, params.sample_time, step,
-                        velocity=lambda: latest[0], command=est.command)
+                        velocity=velocity, command=est.command)
     finally:
         est.close()
 
@@ -565,22 +579,30 @@ def dropout_coverage(log: Sequence[OdometryEstimate], run: ClosedLoopRun, ndof: 
 def _dropout_loops(scenario: Scenario, seed: int, duration: float, params: PredictorParams,
                    odometry: OdometryParams, setup: Any, ideal: SimRecord,
                    odom_run: ClosedLoopRun, shift: float = 0.0,
-                   move_delay: tuple[float, float] | None = None) -> dict[str, Any]:
+                   move_delay: tuple[float, float] | None = None,
+                   velocity_source: str = 'odometry') -> dict[str, Any]:
     """Item 5 of the module docstring (``odom_run``: item 4's loop without dropouts).
 
     ``move_delay``: the dropouts start in the setpoint moves (`move_dropouts`) instead of at the
-    spread schedule's times.
+    spread schedule's times. ``velocity_source`` (`DROPOUT_LOOP_VELOCITIES`): where lf_odom's
+    loop takes its D term; with 'difference' its loop without dropouts is run the same way
+    (``odom_run`` is not used).
     """
     if move_delay is None:
         dropouts = default_dropouts(params, duration, length=DROPOUT_LOOP_LENGTH, shift=shift)
     else:
         dropouts = move_dropouts(scenario, params, seed, duration, move_delay)
     log: list[OdometryEstimate] = []
-    odom_with = _odometry_loop(scenario, seed, duration, params, odometry, dropouts, log)
+    odom_with = _odometry_loop(scenario, seed, duration, params, odometry, dropouts, log,
+                               velocity_source)
+    if velocity_source != 'odometry':
+        odom_run = _odometry_loop(scenario, seed, duration, params, odometry, (), None,
+                                  velocity_source)
     runs = {'lf_odom': (odom_with, odom_run),
             'observer': (_observer_loop(scenario, seed, duration, setup, dropouts),
                          _observer_loop(scenario, seed, duration, setup, ()))}
-    out: dict[str, Any] = {'dropouts': [list(d) for d in dropouts]}
+    out: dict[str, Any] = {'dropouts': [list(d) for d in dropouts],
+                           'velocity_source': velocity_source}
     for name, (with_dropouts, without) in runs.items():
         out[name] = {'with_dropouts': dropout_deviation(
                          with_dropouts, _loop_reference(scenario, with_dropouts.record, ideal),
@@ -596,7 +618,8 @@ def _dropout_loops(scenario: Scenario, seed: int, duration: float, params: Predi
 def _loop_runs(scenario_name: str, seed: int, duration: float, params: PredictorParams,
                odometry: OdometryParams, setup: Any, warmup: float,
                dropout_loops: bool = False, dropout_shift: float = 0.0,
-               move_delay: tuple[float, float] | None = None) -> dict[str, Any]:
+               move_delay: tuple[float, float] | None = None,
+               dropout_velocity: str = 'odometry') -> dict[str, Any]:
     """Items 4 and (``dropout_loops``) 5 of the module docstring."""
     scenario = load_scenario(scenario_name)
     h = params.sample_time
@@ -617,7 +640,8 @@ def _loop_runs(scenario_name: str, seed: int, duration: float, params: Predictor
         out[name]['stability_reason'] = verdict.get('reason')
     if dropout_loops:
         out['dropout_loops'] = _dropout_loops(scenario, seed, duration, params, odometry, setup,
-                                              ideal, odom_run, dropout_shift, move_delay)
+                                              ideal, odom_run, dropout_shift, move_delay,
+                                              dropout_velocity)
     return out
 
 
@@ -629,7 +653,8 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
                       tracking: bool = True, dropout_loops: bool = False,
                       dropout_spread: float = 0.0,
                       dropout_moves: tuple[float, float] | None = None,
-                      dead_reckoning_commands: bool = False) -> dict[str, Any]:
+                      dead_reckoning_commands: bool = False,
+                      dropout_velocity: str = 'odometry') -> dict[str, Any]:
     """Every measurement of the module docstring on one (scenario, seed); JSON-ready.
 
     ``dropout_spread`` [s]: the default dropouts of items 3 and 5 are delayed by the seed's
@@ -637,7 +662,8 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
     0: at the same times in every seed. ``dropout_moves`` (low, high) [s]: item 5's dropouts
     start that long after each setpoint change instead (`move_dropouts`; item 3 unchanged).
     ``dead_reckoning_commands``: item 3 also feeds the thrust as the controller's commands
-    (`_dropout_run`'s ``commands``).
+    (`_dropout_run`'s ``commands``). ``dropout_velocity``: where item 5's lf_odom loop takes its
+    D term (`DROPOUT_LOOP_VELOCITIES`).
     """
     begin_time = time.monotonic()
     scenario = load_scenario(scenario_name)
@@ -683,7 +709,7 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
     if loops and scenario.controller.enabled:
         out['closed_loop'] = _loop_runs(scenario_name, seed, total, params, odometry, setup,
                                         float(data['t'][begin]), dropout_loops, shift,
-                                        dropout_moves)
+                                        dropout_moves, dropout_velocity)
     out['seconds'] = round(time.monotonic() - begin_time, 1)
     return out
 
@@ -708,6 +734,7 @@ class OdometrySpec:
     dropout_spread: float = 0.0
     dropout_moves: tuple[float, float] | None = None
     dead_reckoning_commands: bool = False
+    dropout_velocity: str = 'odometry'
 
     @property
     def key(self) -> str:
@@ -721,7 +748,7 @@ class OdometrySpec:
                      self.dead_reckoning, self.tracking,
                      tuple(sorted(self.params_overrides.items())), self.dropout_loops,
                      tuple(sorted(self.odometry_overrides.items())), self.dropout_spread,
-                     self.dropout_moves, self.dead_reckoning_commands))
+                     self.dropout_moves, self.dead_reckoning_commands, self.dropout_velocity))
 
 
 def run_spec(spec: OdometrySpec) -> dict[str, Any]:
@@ -745,7 +772,8 @@ def run_spec(spec: OdometrySpec) -> dict[str, Any]:
                              tracking=spec.tracking, dropout_loops=spec.dropout_loops,
                              dropout_spread=spec.dropout_spread,
                              dropout_moves=spec.dropout_moves,
-                             dead_reckoning_commands=spec.dead_reckoning_commands)
+                             dead_reckoning_commands=spec.dead_reckoning_commands,
+                             dropout_velocity=spec.dropout_velocity)
 
 
 def run_specs(specs: Sequence[OdometrySpec], scheduler: str | None = None,
@@ -1087,6 +1115,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                      'controller read may then mark the memory dp_controlled)')
     run.add_argument('--dropout-loops', action='store_true',
                      help='also the closed loops through pose dropouts (item 5; with the loops)')
+    run.add_argument('--dropout-loop-velocity', choices=DROPOUT_LOOP_VELOCITIES,
+                     default='odometry',
+                     help="where item 5's lf_odom loop takes its D term: lf_odom's twist "
+                     "(default) or the PID's own finite difference of the pose, as "
+                     "dp_controller's velocity_source")
     run.add_argument('--dropout-spread', type=float, default=0.0, metavar='SECONDS',
                      help="delay each seed's dropouts (items 3 and 5) by its own U(0, SECONDS) "
                      'draw, so the seeds sample their phase against the setpoint schedule '
@@ -1143,7 +1176,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                               params_overrides=params, dropout_loops=args.dropout_loops,
                               odometry_overrides=overrides, dropout_spread=args.dropout_spread,
                               dropout_moves=moves,
-                              dead_reckoning_commands=args.dead_reckoning_commands)
+                              dead_reckoning_commands=args.dead_reckoning_commands,
+                              dropout_velocity=args.dropout_loop_velocity)
                  for bandwidth in args.twist_bandwidth for lag in args.pose_lag_scale
                  for s in args.scenarios for seed in args.seeds]
         results = run_specs(specs, args.scheduler, args.workers)

@@ -294,6 +294,28 @@ def test_dropout_mean_table_compares_per_run_means_with_the_observer() -> None:
     assert row[8] == '1/4 |'  # 2.0 < 5.0 only
 
 
+def test_dropout_loop_velocity_chooses_the_pids_d_term(monkeypatch: pytest.MonkeyPatch) -> None:
+    """'odometry': the PID reads lf_odom's twist; 'difference': its own finite difference."""
+    given: list[Any] = []
+
+    def run_loop(*args: Any, **kwargs: Any) -> str:
+        given.append(kwargs['velocity'])
+        return 'run'
+
+    monkeypatch.setattr(odometry_bench, 'run_loop', run_loop)
+    scenario = load_scenario('onedof_feedback')
+    params = PredictorParams()
+    for source in odometry_bench.DROPOUT_LOOP_VELOCITIES:
+        assert odometry_bench._odometry_loop(  # noqa: SLF001
+            scenario, 1, 60.0, params, OdometryParams(), velocity_source=source) == 'run'
+    assert callable(given[0]) and given[0]() is None  # no estimate yet: no twist
+    assert given[1] is None
+    with pytest.raises(ValueError, match='velocity_source'):
+        odometry_bench._odometry_loop(scenario, 1, 60.0, params, OdometryParams(),  # noqa: SLF001
+                                      velocity_source='twist')
+    assert len(given) == 2
+
+
 def test_odometry_overrides_are_validated() -> None:
     assert _odometry_overrides(['dead_reckoner=hold', 'prior_pose_std=[1, 1, 0.1]']) == {
         'dead_reckoner': 'hold', 'prior_pose_std': (1, 1, 0.1)}
@@ -348,6 +370,15 @@ def test_param_reaches_every_case_and_a_bad_one_stops_before_a_run(
         odometry_bench.main(['run', '--scenarios', 'supply_closed_loop', '--seeds', '3',
                              '--dropout-moves', '20', '60', '-o', str(out)])
     assert len(seen) == 4 + len(odometry_bench.DEFAULT_SCENARIOS)
+    for velocity in ([], ['--dropout-loop-velocity', 'difference']):
+        assert odometry_bench.main(['run', '--scenarios', 'rao_supply', '--seeds', '3',
+                                    '--dropout-loops', *velocity, '-o', str(out)]) == 0
+    assert [spec.dropout_velocity for spec in seen[-2:]] == ['odometry', 'difference']
+    assert seen[-1].key != seen[-2].key
+    with pytest.raises(SystemExit):
+        odometry_bench.main(['run', '--scenarios', 'rao_supply', '--seeds', '3',
+                             '--dropout-loop-velocity', 'twist', '-o', str(out)])
+    assert len(seen) == 6 + len(odometry_bench.DEFAULT_SCENARIOS)
 
 
 def test_true_twist_is_the_body_velocity_across_the_heading_wrap() -> None:

@@ -26,12 +26,14 @@ east m, heading rad] with the heading unwrapped, ν and τ in ``base_link_fsd``.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+import itertools
 import math
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import uniform_filter1d
+from scipy.signal import lfilter
 
 from lf_predictor_ros.core.lf_dynamics import as_series, body_to_earth, earth_to_body
 
@@ -64,6 +66,10 @@ MAX_NATURAL_FREQ_RATIO = 1.0
 # into the body frame afterwards, τ = −R(ψ)ᵀ Kp (η − η_d) − Kd ν (the MSS DP PID, anchors §5,
 # and `sim_ros.control.pid`); 'auto', whichever explains the thrust better.
 STIFFNESS_FRAMES = ('body', 'earth', 'auto')
+# The velocities the controller's D term may act on (`fit_controller_gains`): 'twist', the
+# published twist (a controller on lf_odom's twist); 'difference', the published poses' own
+# filtered finite difference (a controller that differentiates lf_pose, `difference_velocity`).
+VELOCITY_SOURCES = ('twist', 'difference')
 
 
 @dataclass(frozen=True)
@@ -77,6 +83,7 @@ class ControllerGains:
         r_squared: fraction of the high-passed thrust variance the PD law explains [-].
         shift: samples the thrust lags the estimates by (negative: leads).
         stiffness_frame: 'body' or 'earth' (`STIFFNESS_FRAMES`): the frame Kp acts in.
+        velocity_source: 'twist' or 'difference' (`VELOCITY_SOURCES`): the velocity Kd acts on.
     """
 
     stiffness: FloatArray
@@ -84,6 +91,7 @@ class ControllerGains:
     r_squared: FloatArray
     shift: int
     stiffness_frame: str = 'body'
+    velocity_source: str = 'twist'
 
     def believed(self, max_natural_freq: float = math.inf,
                  min_r_squared: float = MIN_R_SQUARED) -> NDArray[np.bool_]:
@@ -304,11 +312,34 @@ def damping_corrected_inertia(inertia: ArrayLike, natural_freq: ArrayLike,
     return result
 
 
+def difference_velocity(poses: ArrayLike, sample_time: float, filter_time: float) -> FloatArray:
+    """The body velocity a DP PID differentiates from the poses it is given.
+
+    ν_k = R(ψ_k)ᵀ v_k with v_k = v_{k−1} + α ((η_k − η_{k−1}) / h − v_{k−1}), v_0 = 0: the
+    finite difference through the first-order low-pass 1/(T_v s + 1), exactly discretized (α =
+    1 − e^{−h/T_v}), as `sim_ros.control.pid.pid_step` (MSS ``PIDnonlinearMIMO.m``) computes
+    the D term's velocity when it is given no measured one. ``poses`` (m, n), n = 1 or 3
+    (heading unwrapped, so no step wraps), ``sample_time`` h and ``filter_time`` T_v [s], both
+    > 0. Returns (m, n) [m/s, m/s, rad/s]; 1 DOF: v itself.
+    """
+    eta = as_series(poses, 'poses')
+    if not (math.isfinite(sample_time) and sample_time > 0.0 and math.isfinite(filter_time)
+            and filter_time > 0.0):
+        raise ValueError(f'sample_time and filter_time must be finite and > 0 [s], got '
+                         f'{sample_time} and {filter_time}')
+    steps = np.zeros_like(eta)
+    steps[1:] = np.diff(eta, axis=0) / sample_time
+    alpha = 1.0 - math.exp(-sample_time / filter_time)
+    velocity = np.asarray(lfilter([alpha], [1.0, alpha - 1.0], steps, axis=0), dtype=np.float64)
+    return earth_to_body(eta, velocity, eta.shape[1])
+
+
 def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
                          sample_time: float, highpass_time: float = HIGHPASS_TIME,
                          max_shift: int = MAX_SHIFT, run_starts: Sequence[int] = (),
                          earth_highpass: bool = False,
-                         stiffness_frame: str = 'body') -> ControllerGains:
+                         stiffness_frame: str = 'body',
+                         difference_twists: ArrayLike | None = None) -> ControllerGains:
     """Least squares of the high-passed thrust on −(body-frame pose), −ν and −∫pose, per DOF.
 
     The series may be several contiguous runs one after the other (``run_starts``): each run is
@@ -340,6 +371,15 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
             Kp_E = M_22 ω_n², and Kd_u² / (4 Kp) reads M_11² / M_22 (0.6 M_11 on the supply
             vessel), sway M_22² / M_11 (1.67 M_22) (docs/BENCHMARKS.md, fifty-fifth session).
             'auto': both, the one whose R² summed over the DOFs is larger. 1 DOF: 'body'.
+        difference_twists: a second body velocity the D term may act on, shape (m, n): the
+            poses' own finite difference low-passed (`difference_velocity`, computed over the
+            whole stretch the poses come from, so that its filter is warm), for a controller
+            that differentiates the pose it is given instead of taking the twist; the fit with
+            the larger R² summed over the DOFs is kept (``velocity_source`` says which). The
+            simulator's PID differentiating the predictor's pose (T_v 1 s; rao_supply 1219,
+            four 300 s blocks) explained ≥ 0.997 of its thrust in 9 of 12 block DOFs on its own
+            difference, in none on the twist (at most 0.97; docs/BENCHMARKS.md, sixty-fourth
+            session). None: the twist only.
 
     Raises:
         ValueError: bad shapes, non-finite values, bad run starts, a run shorter than
@@ -359,6 +399,11 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
     if stiffness_frame not in STIFFNESS_FRAMES:
         raise ValueError(f'stiffness_frame must be one of {STIFFNESS_FRAMES}, got '
                          f'{stiffness_frame!r}')
+    diff = None if difference_twists is None else as_series(difference_twists,
+                                                              'difference_twists')
+    if diff is not None and diff.shape != eta.shape:
+        raise ValueError(f'difference_twists must have the shape of poses {eta.shape}, got '
+                         f'{diff.shape}')
     frames = ('body',) if n != 3 else ('body', 'earth') if stiffness_frame == 'auto' else \
         (stiffness_frame,)
     m = eta.shape[0]
@@ -371,7 +416,8 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
                          f'{need} is too few to read controller gains: use longer runs')
     window = max(3, int(round(highpass_time / sample_time)))
     # per run: high-passed position, integral, velocity, thrust (body frame); with an earth
-    # stiffness also the earth-frame high-passed position and integral and the heading
+    # stiffness also the earth-frame high-passed position and integral and the heading; with
+    # a difference time last the high-passed difference velocity
     runs: list[tuple[FloatArray, ...]] = []
     for first, end in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
         pose = eta[first:end]
@@ -386,7 +432,12 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
         if 'earth' in frames:
             run = (*run, _highpass(pose, window),
                    _highpass(np.cumsum(pose, axis=0) * sample_time, window), pose[:, 2:])
+        if diff is not None:
+            part = diff[first:end]
+            run = (*run, earth_to_body(pose, _highpass(body_to_earth(pose, part), window), 3)
+                   if earth_highpass and n == 3 else _highpass(part, window))
         runs.append(run)
+    velocities = {'twist': 2} if diff is None else {'twist': 2, 'difference': -1}
     best: ControllerGains | None = None
     for shift in range(-max_shift, max_shift + 1):
         # thrust[k + shift] was computed from the estimate at k, both in the same run
@@ -397,13 +448,14 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
             parts.append(tuple(column[lo + shift:hi + shift] if j == 3 else column[lo:hi]
                                for j, column in enumerate(run)))
         columns = [np.concatenate(column) for column in zip(*parts, strict=True)]
-        position, integral, velocity, thrust = columns[:4]
-        for frame in frames:
+        position, integral, _, thrust = columns[:4]
+        for (source, column), frame in itertools.product(velocities.items(), frames):
+            velocity = columns[column]
             gains = _fit_pid(position, integral, velocity, thrust, shift) if frame == 'body' \
                 else _fit_pid_earth(position, integral, velocity, thrust, columns[4], columns[5],
                                     columns[6], shift)
             if best is None or float(np.sum(gains.r_squared)) > float(np.sum(best.r_squared)):
-                best = gains
+                best = replace(gains, velocity_source=source)
     assert best is not None
     return best
 

@@ -39,6 +39,7 @@ from lf_predictor_ros.core.controller_gains import (
     believed_medians,
     block_bounds,
     damping_corrected_inertia,
+    difference_velocity,
     fit_controller_gains,
     fitted_damping_scale,
     median_implied_inertia,
@@ -131,6 +132,10 @@ BODY_DOFS = ('surge', 'sway', 'yaw')  # the DOFs a controller read is per
 # e.g. to joystick, or changed); otherwise older blocks would keep the read, and the memory
 # ``dp_controlled``, for up to the whole pool's time [blocks]
 POOL_RESTART_BLOCKS = 2
+# With ``controller_read_difference_time`` a pooled block's difference velocity is filtered
+# from this many time constants before the block where its run began earlier, so that the
+# filter is warm (e^−10 of its start left) as the controller's was [-]
+DIFFERENCE_WARM_UP = 10.0
 
 # what a vessel-memory job returns: the memory, the calibration, the controller read in force,
 # the pooled block reads after it (``controller_read_pool_blocks``; None: not pooled). The pool
@@ -354,7 +359,8 @@ class LfStateEstimator:
                     :self.ndof],
                 odometry.params.dead_reckoning_damping_turn, self._read_pool,
                 odometry.params.controller_read_pool_blocks,
-                odometry.params.controller_read_lone_r_squared)
+                odometry.params.controller_read_lone_r_squared,
+                odometry.params.controller_read_difference_time)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -409,7 +415,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            controller_fitted_dofs: tuple[bool, ...] = (),
            damping_turn: float = 0.0, read_pool: ReadPool | None = None,
            pool_blocks: int = 0,
-           controller_lone_r_squared: float = 0.0) -> Learned:
+           controller_lone_r_squared: float = 0.0,
+           controller_difference_time: float = 0.0) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -450,7 +457,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     ``damping_refuse_bound``, ``controller_fitted_dofs``, ``damping_turn``: `_damping_chosen`'s
     ``refuse_bound``, ``fitted_dofs`` and ``turn``.
     ``controller_lone_r_squared``: the R² a DOF needs that one block alone believes (or a read
-    without blocks) (`implied_input_gain`'s ``lone_r_squared``).
+    without blocks) (`implied_input_gain`'s ``lone_r_squared``); ``controller_difference_time``:
+    its ``difference_time`` (the D term may act on the poses' own difference).
     ``pool_blocks`` > 0: the controller is read from the last that many blocks ever read
     (`pooled_input_gain`, continuing ``read_pool``), and the pool after it is returned too.
     ``earth_fixed``: without a known or read gain, the fit's environment is one earth-fixed
@@ -472,12 +480,12 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                                            controller_block_time, read_pool, pool_blocks,
                                            controller_earth_frame, bound,
                                            controller_stiffness_frame, controller_pair_ratio,
-                                           controller_lone_r_squared)
+                                           controller_lone_r_squared, controller_difference_time)
         else:
             read = implied_input_gain(published, *commands, params.sample_time,
                                       controller_block_time, controller_earth_frame, bound,
                                       controller_stiffness_frame, controller_pair_ratio,
-                                      controller_lone_r_squared)
+                                      controller_lone_r_squared, controller_difference_time)
     elif remembered is not None:
         read = ControllerRead(None, 'controller gains: no commands', 'no_data')
     in_force: ControllerRead | None = read if read is not None and read.outcome == 'read' \
@@ -632,7 +640,8 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
                        max_natural_freq: float = math.inf,
                        stiffness_frame: str = 'body',
                        pair_ratio: float = math.inf,
-                       lone_r_squared: float = 0.0) -> ControllerRead:
+                       lone_r_squared: float = 0.0,
+                       difference_time: float = 0.0) -> ControllerRead:
     """1/M_ii implied by the DP controller acting on the published estimates.
 
     ``times``, ``forces``: the controller's commands and their stamps (a controller stamps its
@@ -659,6 +668,9 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     (`controller_gains.median_implied_inertia`; inf: never). ``lone_r_squared``: the R² a DOF
     needs that one block alone believes, or the one read without blocks (nothing outvotes it;
     `controller_gains.median_implied_inertia`; 0: no more than any block).
+    ``difference_time`` > 0 [s]: the D term may also act on the poses' own finite difference
+    low-passed over that time, a controller that differentiates the pose
+    (`fit_controller_gains`; 0: the published twist only).
     """
     if not published or times.shape[0] == 0:
         return ControllerRead(None, 'controller gains: no data', 'no_data')
@@ -674,21 +686,28 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     twists = np.array([published[k].twist for k in rows])
     paired = forces[index[rows]]
     lengths = [b - a for a, b in runs]
+    offsets = np.r_[0, np.cumsum(lengths)].tolist()
+    diffs = None if difference_time <= 0.0 else np.concatenate([  # warm over each whole run
+        difference_velocity(poses[a:b], sample_time, difference_time)
+        for a, b in zip(offsets[:-1], offsets[1:], strict=True)])
     try:
         if block_time > 0.0:
             block = int(round(block_time / sample_time))
-            offsets = np.r_[0, np.cumsum(lengths)].tolist()
             blocks = [(offsets[j] + a, offsets[j] + b) for j, length in enumerate(lengths)
                       for a, b in block_bounds(length, block, need)]
             reads = [fit_controller_gains(poses[a:b], twists[a:b], paired[a:b], sample_time,
                                           earth_highpass=earth_highpass,
-                                          stiffness_frame=stiffness_frame) for a, b in blocks]
+                                          stiffness_frame=stiffness_frame,
+                                          difference_twists=None if diffs is None
+                                          else diffs[a:b])
+                     for a, b in blocks]
             return _median_read(reads, float(stamps[rows[-1]]), rows.size, block_time,
                                 max_natural_freq, pair_ratio, lone_r_squared)
         gains = fit_controller_gains(poses, twists, paired, sample_time,
                                      run_starts=np.cumsum(lengths)[:-1].tolist(),
                                      earth_highpass=earth_highpass,
-                                     stiffness_frame=stiffness_frame)
+                                     stiffness_frame=stiffness_frame,
+                                     difference_twists=diffs)
     except ValueError as exc:  # non-finite values: nothing learned about the controller
         return ControllerRead(None, f'controller gains: {exc}', 'no_data')
     inertia = gains.implied_inertia(max_natural_freq, max(MIN_R_SQUARED, lone_r_squared))
@@ -727,7 +746,8 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
                       pool_blocks: int, earth_highpass: bool = False,
                       max_natural_freq: float = math.inf, stiffness_frame: str = 'body',
                       pair_ratio: float = math.inf,
-                      lone_r_squared: float = 0.0) -> tuple[ControllerRead, ReadPool]:
+                      lone_r_squared: float = 0.0,
+                      difference_time: float = 0.0) -> tuple[ControllerRead, ReadPool]:
     """`implied_input_gain` from the last ``pool_blocks`` blocks ever read, each read once.
 
     The controller of a DP vessel does not change from one window to the next, but its read
@@ -742,8 +762,8 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
     begins at 200 s, without a read). When the newest `POOL_RESTART_BLOCKS` blocks, a new one
     among them, explain no DOF, the pool starts again from them: the read is then 'no_fit' and
     forgotten, as a window's read whose blocks explain nothing (the controller may have been
-    switched off or changed). ``lone_r_squared``: as `implied_input_gain`. Returns (the read,
-    the pool after it).
+    switched off or changed). ``lone_r_squared``, ``difference_time``: as
+    `implied_input_gain`. Returns (the read, the pool after it).
     """
     end = -math.inf if pool is None else pool.end
     kept: tuple[ControllerGains, ...] = () if pool is None else pool.blocks
@@ -756,13 +776,21 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
     for a, b in runs:
         first = a + int(np.searchsorted(stamps[a:b], end, side='right'))
         for start in range(first, b - block + 1, block):
-            rows = published[start:start + block]  # only the new blocks are turned into arrays
+            # only the new blocks are turned into arrays, with a lead that warms the
+            # difference's filter up where the run began earlier
+            lead = 0 if difference_time <= 0.0 else \
+                min(start - a, math.ceil(DIFFERENCE_WARM_UP * difference_time / sample_time))
+            rows = published[start - lead:start + block]
+            poses = np.array([p.pose for p in rows])
             try:
-                new.append(fit_controller_gains(np.array([p.pose for p in rows]),
-                                                np.array([p.twist for p in rows]),
+                diff = None if difference_time <= 0.0 else \
+                    difference_velocity(poses, sample_time, difference_time)[lead:]
+                new.append(fit_controller_gains(poses[lead:], np.array([p.twist for p in
+                                                                         rows[lead:]]),
                                                 forces[index[start:start + block]], sample_time,
                                                 earth_highpass=earth_highpass,
-                                                stiffness_frame=stiffness_frame))
+                                                stiffness_frame=stiffness_frame,
+                                                difference_twists=diff))
             except ValueError:  # non-finite values: this block says nothing
                 pass
             end = float(stamps[start + block - 1])
@@ -776,7 +804,7 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
     if not after.blocks:
         read = implied_input_gain(published, times, forces, sample_time, block_time,
                                   earth_highpass, max_natural_freq, stiffness_frame, pair_ratio,
-                                  lone_r_squared)
+                                  lone_r_squared, difference_time)
         return replace(read, note=f'{read.note}; no full block of {block} samples pooled '
                                   'yet'), after
     read = _median_read(list(after.blocks), end, block * len(after.blocks), block_time,

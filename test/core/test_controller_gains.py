@@ -13,6 +13,7 @@ from lf_predictor_ros.core.controller_gains import (
     believed_medians,
     block_bounds,
     damping_corrected_inertia,
+    difference_velocity,
     fit_controller_gains,
     fitted_damping_scale,
     median_implied_inertia,
@@ -36,13 +37,15 @@ def _lf_track(seed: int, m: int = 1500, heading: float = 0.0) -> np.ndarray:
     return np.array([0.0, 0.0, heading]) + smooth * np.array([0.5, 0.5, 0.01])
 
 
-def _pid_thrust(eta: np.ndarray, nu: np.ndarray, zeta: float, lag: int = 0) -> np.ndarray:
+def _pid_thrust(eta: np.ndarray, nu: np.ndarray | None, zeta: float, lag: int = 0
+                ) -> np.ndarray:
+    """The MSS PID's thrust on ``eta``, its D term on ``nu`` (None: its own difference)."""
     gains = gains_from_bandwidth(MASS, BANDWIDTH, zeta)
     state = PidState()
     tau = np.zeros_like(eta)
     for k in range(eta.shape[0]):
         tau[k], state = pid_step(state, gains, eta[k], np.array([0.0, 0.0, eta[0, 2]]), H,
-                                 velocity_body=nu[k])
+                                 velocity_body=None if nu is None else nu[k])
     # the thrust at k computed from the estimate at k − lag
     return np.concatenate([np.repeat(tau[:1], lag, axis=0), tau[:tau.shape[0] - lag]])
 
@@ -355,6 +358,66 @@ def test_bad_input_is_refused_with_a_message(bad: str) -> None:
         h = 0.0
     with pytest.raises(ValueError, match='must|too few'):
         fit_controller_gains(eta, nu, tau, h)
+
+
+def test_difference_velocity_of_a_ramp_is_the_first_order_response() -> None:
+    """η = V t: v_k = V (1 − (1 − α)^k), α = 1 − e^{−h/T_v}; ν = R(ψ)ᵀ v."""
+    h, filter_time, heading = 0.5, 2.0, 0.7
+    rate = np.array([0.3, -0.2, 0.0])  # m/s, m/s, rad/s
+    k = np.arange(40)
+    eta = np.array([1.0, 2.0, heading]) + k[:, None] * h * rate
+    alpha = 1.0 - math.exp(-h / filter_time)
+    earth = rate * (1.0 - (1.0 - alpha) ** k)[:, None]
+    c, s = math.cos(heading), math.sin(heading)
+    body = np.column_stack([c * earth[:, 0] + s * earth[:, 1], -s * earth[:, 0] + c * earth[:, 1],
+                            earth[:, 2]])
+    np.testing.assert_allclose(difference_velocity(eta, h, filter_time), body, atol=1e-12)
+    np.testing.assert_allclose(difference_velocity(eta[:, :1], h, filter_time), earth[:, :1],
+                               atol=1e-12)
+    for bad in ((0.0, 1.0), (h, 0.0), (h, math.nan)):
+        with pytest.raises(ValueError, match='must be finite and > 0'):
+            difference_velocity(eta, *bad)
+
+
+def test_difference_velocity_is_the_simulators_pid_velocity() -> None:
+    eta = _lf_track(9, m=200, heading=1.0)
+    gains = gains_from_bandwidth(MASS, BANDWIDTH)
+    state = PidState()
+    velocity = np.zeros_like(eta)
+    for k in range(eta.shape[0]):
+        _, state = pid_step(state, gains, eta[k], np.zeros(3), H)
+        velocity[k] = earth_to_body(eta[k:k + 1], state.velocity_earth[None, :], 3)[0]
+    np.testing.assert_allclose(difference_velocity(eta, H, gains.velocity_filter_time),
+                               velocity, atol=1e-12)
+
+
+def test_a_pid_that_differentiates_the_pose_is_read_on_the_difference() -> None:
+    """The PID's D term on its own difference of a pose with wave leftovers, not the twist."""
+    eta = _lf_track(10)
+    leftover = np.random.default_rng(10).standard_normal(eta.shape) * np.array([0.05, 0.05,
+                                                                                   0.001])
+    pose = eta + leftover  # what the controller is given
+    twist = body_velocity(eta, H)  # a smooth twist published with it
+    tau = _pid_thrust(pose, None, 1.0)
+    on_twist = fit_controller_gains(pose, twist, tau, H)
+    difference = difference_velocity(pose, H, 1.0)
+    either = fit_controller_gains(pose, twist, tau, H, difference_twists=difference)
+    assert on_twist.velocity_source == 'twist'
+    assert np.all(on_twist.r_squared < 0.9)
+    assert either.velocity_source == 'difference'
+    assert np.all(either.r_squared > 0.99)
+    design = gains_from_bandwidth(MASS, BANDWIDTH, 1.0)
+    np.testing.assert_allclose(either.damping, design.kd, rtol=0.02)
+    inertia = either.implied_inertia()
+    assert inertia is not None
+    np.testing.assert_allclose(inertia, MASS, rtol=0.05)
+    # a PID on the published twist is still read on the twist
+    on_published = fit_controller_gains(pose, twist, _pid_thrust(pose, twist, 1.0), H,
+                                        difference_twists=difference)
+    assert on_published.velocity_source == 'twist'
+    assert np.all(on_published.r_squared > 0.99)
+    with pytest.raises(ValueError, match='difference_twists must'):
+        fit_controller_gains(pose, twist, tau, H, difference_twists=difference[:, :2])
 
 
 def test_inputs_are_not_modified() -> None:

@@ -27,12 +27,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-import itertools
 import math
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import uniform_filter1d
+from scipy.optimize import minimize_scalar
 from scipy.signal import lfilter
 
 from lf_predictor_ros.core.lf_dynamics import as_series, body_to_earth, earth_to_body
@@ -66,10 +66,15 @@ MAX_NATURAL_FREQ_RATIO = 1.0
 # into the body frame afterwards, τ = −R(ψ)ᵀ Kp (η − η_d) − Kd ν (the MSS DP PID, anchors §5,
 # and `sim_ros.control.pid`); 'auto', whichever explains the thrust better.
 STIFFNESS_FRAMES = ('body', 'earth', 'auto')
-# The velocities the controller's D term may act on (`fit_controller_gains`): 'twist', the
-# published twist (a controller on lf_odom's twist); 'difference', the published poses' own
-# filtered finite difference (a controller that differentiates lf_pose, `difference_velocity`).
-VELOCITY_SOURCES = ('twist', 'difference')
+# The filter time constants T_v a DP controller's own velocity difference may have, the grid
+# `read_controller_gains` tries (``controller_read_difference``): 1 s is `dp_controller`'s and
+# the MSS PID's; the search reaches T_v / 2 below the first and 2 T_v above the last [s]
+DIFFERENCE_TIMES = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
+# `read_controller_gains` refines a winning difference filter's time constant by a bounded
+# search in log T_v between its grid neighbours (at a grid end: this factor beyond it), to this
+# tolerance in log T_v [-]
+DIFFERENCE_SEARCH_FACTOR = 2.0
+DIFFERENCE_SEARCH_TOLERANCE = 0.01
 
 
 @dataclass(frozen=True)
@@ -83,7 +88,8 @@ class ControllerGains:
         r_squared: fraction of the high-passed thrust variance the PD law explains [-].
         shift: samples the thrust lags the estimates by (negative: leads).
         stiffness_frame: 'body' or 'earth' (`STIFFNESS_FRAMES`): the frame Kp acts in.
-        velocity_source: 'twist' or 'difference' (`VELOCITY_SOURCES`): the velocity Kd acts on.
+        difference_time: 0: Kd acts on the published twist; > 0: on the poses' own finite
+            difference low-passed over this time constant T_v [s] (`read_controller_gains`).
     """
 
     stiffness: FloatArray
@@ -91,7 +97,7 @@ class ControllerGains:
     r_squared: FloatArray
     shift: int
     stiffness_frame: str = 'body'
-    velocity_source: str = 'twist'
+    difference_time: float = 0.0
 
     def believed(self, max_natural_freq: float = math.inf,
                  min_r_squared: float = MIN_R_SQUARED) -> NDArray[np.bool_]:
@@ -338,8 +344,7 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
                          sample_time: float, highpass_time: float = HIGHPASS_TIME,
                          max_shift: int = MAX_SHIFT, run_starts: Sequence[int] = (),
                          earth_highpass: bool = False,
-                         stiffness_frame: str = 'body',
-                         difference_twists: ArrayLike | None = None) -> ControllerGains:
+                         stiffness_frame: str = 'body') -> ControllerGains:
     """Least squares of the high-passed thrust on −(body-frame pose), −ν and −∫pose, per DOF.
 
     The series may be several contiguous runs one after the other (``run_starts``): each run is
@@ -371,15 +376,6 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
             Kp_E = M_22 ω_n², and Kd_u² / (4 Kp) reads M_11² / M_22 (0.6 M_11 on the supply
             vessel), sway M_22² / M_11 (1.67 M_22) (docs/BENCHMARKS.md, fifty-fifth session).
             'auto': both, the one whose R² summed over the DOFs is larger. 1 DOF: 'body'.
-        difference_twists: a second body velocity the D term may act on, shape (m, n): the
-            poses' own finite difference low-passed (`difference_velocity`, computed over the
-            whole stretch the poses come from, so that its filter is warm), for a controller
-            that differentiates the pose it is given instead of taking the twist; the fit with
-            the larger R² summed over the DOFs is kept (``velocity_source`` says which). The
-            simulator's PID differentiating the predictor's pose (T_v 1 s; rao_supply 1219,
-            four 300 s blocks) explained ≥ 0.997 of its thrust in 9 of 12 block DOFs on its own
-            difference, in none on the twist (at most 0.97; docs/BENCHMARKS.md, sixty-fourth
-            session). None: the twist only.
 
     Raises:
         ValueError: bad shapes, non-finite values, bad run starts, a run shorter than
@@ -399,11 +395,6 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
     if stiffness_frame not in STIFFNESS_FRAMES:
         raise ValueError(f'stiffness_frame must be one of {STIFFNESS_FRAMES}, got '
                          f'{stiffness_frame!r}')
-    diff = None if difference_twists is None else as_series(difference_twists,
-                                                              'difference_twists')
-    if diff is not None and diff.shape != eta.shape:
-        raise ValueError(f'difference_twists must have the shape of poses {eta.shape}, got '
-                         f'{diff.shape}')
     frames = ('body',) if n != 3 else ('body', 'earth') if stiffness_frame == 'auto' else \
         (stiffness_frame,)
     m = eta.shape[0]
@@ -416,8 +407,7 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
                          f'{need} is too few to read controller gains: use longer runs')
     window = max(3, int(round(highpass_time / sample_time)))
     # per run: high-passed position, integral, velocity, thrust (body frame); with an earth
-    # stiffness also the earth-frame high-passed position and integral and the heading; with
-    # a difference time last the high-passed difference velocity
+    # stiffness also the earth-frame high-passed position and integral and the heading
     runs: list[tuple[FloatArray, ...]] = []
     for first, end in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
         pose = eta[first:end]
@@ -432,12 +422,7 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
         if 'earth' in frames:
             run = (*run, _highpass(pose, window),
                    _highpass(np.cumsum(pose, axis=0) * sample_time, window), pose[:, 2:])
-        if diff is not None:
-            part = diff[first:end]
-            run = (*run, earth_to_body(pose, _highpass(body_to_earth(pose, part), window), 3)
-                   if earth_highpass and n == 3 else _highpass(part, window))
         runs.append(run)
-    velocities = {'twist': 2} if diff is None else {'twist': 2, 'difference': -1}
     best: ControllerGains | None = None
     for shift in range(-max_shift, max_shift + 1):
         # thrust[k + shift] was computed from the estimate at k, both in the same run
@@ -448,16 +433,90 @@ def fit_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
             parts.append(tuple(column[lo + shift:hi + shift] if j == 3 else column[lo:hi]
                                for j, column in enumerate(run)))
         columns = [np.concatenate(column) for column in zip(*parts, strict=True)]
-        position, integral, _, thrust = columns[:4]
-        for (source, column), frame in itertools.product(velocities.items(), frames):
-            velocity = columns[column]
+        position, integral, velocity, thrust = columns[:4]
+        for frame in frames:
             gains = _fit_pid(position, integral, velocity, thrust, shift) if frame == 'body' \
                 else _fit_pid_earth(position, integral, velocity, thrust, columns[4], columns[5],
                                     columns[6], shift)
             if best is None or float(np.sum(gains.r_squared)) > float(np.sum(best.r_squared)):
-                best = replace(gains, velocity_source=source)
+                best = gains
     assert best is not None
     return best
+
+
+def read_controller_gains(poses: ArrayLike, twists: ArrayLike, forces: ArrayLike,
+                          sample_time: float, *, difference_times: Sequence[float] = (),
+                          lead: int = 0, run_starts: Sequence[int] = (),
+                          earth_highpass: bool = False,
+                          stiffness_frame: str = 'body') -> ControllerGains:
+    """`fit_controller_gains` with the D term on the twist, or on the poses' own difference.
+
+    A DP controller may take its D term from the published twist (lf_odom) or differentiate the
+    pose it is given (`difference_velocity`, a filter time T_v of its own: `dp_controller`'s
+    default, 1 s). The second explains the commands on the twist only in part (at most 0.97
+    per block and DOF, rao_supply) and reads the inertia wrong (0.13–0.34× on a synthetic MSS
+    PID with T_v 0.5–5 s), and on the difference with another T_v than its own wrong too
+    (0.03–3.3×; docs/BENCHMARKS.md, sixty-fourth session). So each T_v of the increasing grid
+    ``difference_times`` [s] is fitted as the velocity (``twists`` replaced), then the best
+    one's T_v refined by a bounded search in log T_v between its grid neighbours (beyond a grid
+    end: ``DIFFERENCE_SEARCH_FACTOR``), and the fit with the largest R² summed over the DOFs,
+    the twist's or a difference's, is returned (``difference_time`` says which). Empty grid:
+    `fit_controller_gains` on the twist alone.
+
+    Args:
+        poses: the estimates the controller was given, (lead + m, n).
+        twists: their published body velocities, (m, n): the stretch read.
+        forces: the commands, (m, n), the stretch read.
+        sample_time: h [s].
+        difference_times: the grid of T_v [s] tried (empty: the twist only).
+        lead: the first ``lead`` rows of ``poses`` only warm the difference's filter up (the
+            stretch before the one read, in the same run: the controller's filter was warm).
+        run_starts: as `fit_controller_gains` (rows of the stretch read); the difference
+            restarts at each.
+        earth_highpass: as `fit_controller_gains`.
+        stiffness_frame: as `fit_controller_gains`.
+
+    Raises:
+        ValueError: as `fit_controller_gains`; a grid that is not increasing, finite and > 0,
+            or a bad ``lead``.
+    """
+    eta = as_series(poses, 'poses')
+    grid = [float(t) for t in difference_times]
+    if not all(math.isfinite(t) and t > 0.0 for t in grid) or np.any(np.diff(grid) <= 0.0):
+        raise ValueError(f'difference_times must be finite, > 0 and increasing [s], got '
+                         f'{list(difference_times)}')
+    if not 0 <= lead < eta.shape[0]:
+        raise ValueError(f'lead must be in [0, {eta.shape[0]}) rows, got {lead}')
+    stretch = eta[lead:]
+
+    def fit(velocity: ArrayLike, filter_time: float) -> ControllerGains:
+        gains = fit_controller_gains(stretch, velocity, forces, sample_time,
+                                     run_starts=run_starts, earth_highpass=earth_highpass,
+                                     stiffness_frame=stiffness_frame)
+        return replace(gains, difference_time=filter_time)
+
+    def difference(filter_time: float) -> FloatArray:
+        bounds = [0, *[int(k) for k in run_starts], stretch.shape[0]]
+        parts = [difference_velocity(eta[:lead + bounds[1]], sample_time, filter_time)[lead:]]
+        parts += [difference_velocity(stretch[a:b], sample_time, filter_time)
+                  for a, b in zip(bounds[1:-1], bounds[2:], strict=True)]
+        return np.concatenate(parts)
+
+    def score(gains: ControllerGains) -> float:
+        return float(np.sum(gains.r_squared))
+
+    best = fit(twists, 0.0)
+    if not grid:
+        return best
+    fits = [fit(difference(t), t) for t in grid]
+    k = int(np.argmax([score(g) for g in fits]))
+    low = grid[k - 1] if k > 0 else grid[0] / DIFFERENCE_SEARCH_FACTOR
+    high = grid[k + 1] if k + 1 < len(grid) else grid[-1] * DIFFERENCE_SEARCH_FACTOR
+    found = minimize_scalar(lambda x: -score(fit(difference(math.exp(x)), math.exp(x))),
+                            bounds=(math.log(low), math.log(high)), method='bounded',
+                            options={'xatol': DIFFERENCE_SEARCH_TOLERANCE})
+    refined = fit(difference(math.exp(found.x)), math.exp(found.x))
+    return max((best, fits[k], refined), key=score)
 
 
 def _fit_pid(position: FloatArray, integral: FloatArray, velocity: FloatArray,

@@ -22,6 +22,7 @@ some DOFs keeps the remembered gain only in the DOFs no block believes (a turn s
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 import math
@@ -31,6 +32,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lf_predictor_ros.core.controller_gains import (
+    DIFFERENCE_SEARCH_FACTOR,
+    DIFFERENCE_TIMES,
     MAX_NATURAL_FREQ_RATIO,
     MAX_SHIFT,
     MIN_R_SQUARED,
@@ -39,11 +42,10 @@ from lf_predictor_ros.core.controller_gains import (
     believed_medians,
     block_bounds,
     damping_corrected_inertia,
-    difference_velocity,
-    fit_controller_gains,
     fitted_damping_scale,
     median_implied_inertia,
     median_natural_freq,
+    read_controller_gains,
 )
 from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.lf_dynamics import (
@@ -132,9 +134,9 @@ BODY_DOFS = ('surge', 'sway', 'yaw')  # the DOFs a controller read is per
 # e.g. to joystick, or changed); otherwise older blocks would keep the read, and the memory
 # ``dp_controlled``, for up to the whole pool's time [blocks]
 POOL_RESTART_BLOCKS = 2
-# With ``controller_read_difference_time`` a pooled block's difference velocity is filtered
-# from this many time constants before the block where its run began earlier, so that the
-# filter is warm (e^−10 of its start left) as the controller's was [-]
+# With ``controller_read_difference`` a block's difference velocity is filtered from this many
+# of the longest time constants searched before the block where its run began earlier, so that
+# the filter is warm (e^−10 of its start left) as the controller's was [-]
 DIFFERENCE_WARM_UP = 10.0
 
 # what a vessel-memory job returns: the memory, the calibration, the controller read in force,
@@ -360,7 +362,7 @@ class LfStateEstimator:
                 odometry.params.dead_reckoning_damping_turn, self._read_pool,
                 odometry.params.controller_read_pool_blocks,
                 odometry.params.controller_read_lone_r_squared,
-                odometry.params.controller_read_difference_time)
+                odometry.params.controller_read_difference)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -416,7 +418,7 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            damping_turn: float = 0.0, read_pool: ReadPool | None = None,
            pool_blocks: int = 0,
            controller_lone_r_squared: float = 0.0,
-           controller_difference_time: float = 0.0) -> Learned:
+           controller_difference: bool = False) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -457,8 +459,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     ``damping_refuse_bound``, ``controller_fitted_dofs``, ``damping_turn``: `_damping_chosen`'s
     ``refuse_bound``, ``fitted_dofs`` and ``turn``.
     ``controller_lone_r_squared``: the R² a DOF needs that one block alone believes (or a read
-    without blocks) (`implied_input_gain`'s ``lone_r_squared``); ``controller_difference_time``:
-    its ``difference_time`` (the D term may act on the poses' own difference).
+    without blocks) (`implied_input_gain`'s ``lone_r_squared``); ``controller_difference``:
+    its ``difference`` (the D term may act on the poses' own filtered difference).
     ``pool_blocks`` > 0: the controller is read from the last that many blocks ever read
     (`pooled_input_gain`, continuing ``read_pool``), and the pool after it is returned too.
     ``earth_fixed``: without a known or read gain, the fit's environment is one earth-fixed
@@ -480,12 +482,12 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                                            controller_block_time, read_pool, pool_blocks,
                                            controller_earth_frame, bound,
                                            controller_stiffness_frame, controller_pair_ratio,
-                                           controller_lone_r_squared, controller_difference_time)
+                                           controller_lone_r_squared, controller_difference)
         else:
             read = implied_input_gain(published, *commands, params.sample_time,
                                       controller_block_time, controller_earth_frame, bound,
                                       controller_stiffness_frame, controller_pair_ratio,
-                                      controller_lone_r_squared, controller_difference_time)
+                                      controller_lone_r_squared, controller_difference)
     elif remembered is not None:
         read = ControllerRead(None, 'controller gains: no commands', 'no_data')
     in_force: ControllerRead | None = read if read is not None and read.outcome == 'read' \
@@ -641,7 +643,7 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
                        stiffness_frame: str = 'body',
                        pair_ratio: float = math.inf,
                        lone_r_squared: float = 0.0,
-                       difference_time: float = 0.0) -> ControllerRead:
+                       difference: bool = False) -> ControllerRead:
     """1/M_ii implied by the DP controller acting on the published estimates.
 
     ``times``, ``forces``: the controller's commands and their stamps (a controller stamps its
@@ -668,9 +670,10 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     (`controller_gains.median_implied_inertia`; inf: never). ``lone_r_squared``: the R² a DOF
     needs that one block alone believes, or the one read without blocks (nothing outvotes it;
     `controller_gains.median_implied_inertia`; 0: no more than any block).
-    ``difference_time`` > 0 [s]: the D term may also act on the poses' own finite difference
-    low-passed over that time, a controller that differentiates the pose
-    (`fit_controller_gains`; 0: the published twist only).
+    ``difference``: the D term may also act on the poses' own finite difference through a
+    low-pass whose time constant the read finds, a controller that differentiates the pose
+    (`controller_gains.read_controller_gains` over `DIFFERENCE_TIMES`; False: the published
+    twist only).
     """
     if not published or times.shape[0] == 0:
         return ControllerRead(None, 'controller gains: no data', 'no_data')
@@ -687,27 +690,23 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     paired = forces[index[rows]]
     lengths = [b - a for a, b in runs]
     offsets = np.r_[0, np.cumsum(lengths)].tolist()
-    diffs = None if difference_time <= 0.0 else np.concatenate([  # warm over each whole run
-        difference_velocity(poses[a:b], sample_time, difference_time)
-        for a, b in zip(offsets[:-1], offsets[1:], strict=True)])
+    grid = DIFFERENCE_TIMES if difference else ()
     try:
         if block_time > 0.0:
             block = int(round(block_time / sample_time))
-            blocks = [(offsets[j] + a, offsets[j] + b) for j, length in enumerate(lengths)
+            blocks = [(offsets[j] + a, offsets[j] + b, _warm_lead(a, grid, sample_time))
+                      for j, length in enumerate(lengths)
                       for a, b in block_bounds(length, block, need)]
-            reads = [fit_controller_gains(poses[a:b], twists[a:b], paired[a:b], sample_time,
-                                          earth_highpass=earth_highpass,
-                                          stiffness_frame=stiffness_frame,
-                                          difference_twists=None if diffs is None
-                                          else diffs[a:b])
-                     for a, b in blocks]
+            reads = [read_controller_gains(poses[a - lead:b], twists[a:b], paired[a:b],
+                                           sample_time, difference_times=grid, lead=lead,
+                                           earth_highpass=earth_highpass,
+                                           stiffness_frame=stiffness_frame)
+                     for a, b, lead in blocks]
             return _median_read(reads, float(stamps[rows[-1]]), rows.size, block_time,
                                 max_natural_freq, pair_ratio, lone_r_squared)
-        gains = fit_controller_gains(poses, twists, paired, sample_time,
-                                     run_starts=np.cumsum(lengths)[:-1].tolist(),
-                                     earth_highpass=earth_highpass,
-                                     stiffness_frame=stiffness_frame,
-                                     difference_twists=diffs)
+        gains = read_controller_gains(poses, twists, paired, sample_time, difference_times=grid,
+                                      run_starts=offsets[1:-1], earth_highpass=earth_highpass,
+                                      stiffness_frame=stiffness_frame)
     except ValueError as exc:  # non-finite values: nothing learned about the controller
         return ControllerRead(None, f'controller gains: {exc}', 'no_data')
     inertia = gains.implied_inertia(max_natural_freq, max(MIN_R_SQUARED, lone_r_squared))
@@ -715,7 +714,9 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     if inertia is None:
         return ControllerRead(None, f'controller gains not read (R² {r2})', 'no_fit')
     used = f'{rows.size} samples' + (f' in {len(runs)} runs' if len(runs) > 1 else '') + \
-        ('; stiffness in the earth frame' if gains.stiffness_frame == 'earth' else '')
+        ('; stiffness in the earth frame' if gains.stiffness_frame == 'earth' else '') + \
+        (f"; Kd on the pose's own difference, T_v {gains.difference_time:.2g} s"
+         if gains.difference_time > 0.0 else '')
     return ControllerRead(1.0 / inertia, (f"controller-implied inertia "
                                           f"{', '.join(f'{v:.3g}' for v in inertia)} "
                                           f'(R² {r2}; {used})'), 'read', float(stamps[rows[-1]]),
@@ -741,13 +742,25 @@ def _paired_runs(published: list[Published], times: FloatArray, sample_time: flo
     return stamps, index, runs
 
 
+def _warm_lead(before: int, grid: Sequence[float], sample_time: float) -> int:
+    """Rows before a block that warm its difference filters up: at most ``before`` (0: none).
+
+    ``DIFFERENCE_WARM_UP`` of the longest time constant the search over ``grid`` reaches
+    (`controller_gains.read_controller_gains`); an empty grid needs none.
+    """
+    if not grid:
+        return 0
+    longest = max(grid) * DIFFERENCE_SEARCH_FACTOR
+    return min(before, int(math.ceil(DIFFERENCE_WARM_UP * longest / sample_time)))
+
+
 def pooled_input_gain(published: list[Published], times: FloatArray, forces: FloatArray,
                       sample_time: float, block_time: float, pool: ReadPool | None,
                       pool_blocks: int, earth_highpass: bool = False,
                       max_natural_freq: float = math.inf, stiffness_frame: str = 'body',
                       pair_ratio: float = math.inf,
                       lone_r_squared: float = 0.0,
-                      difference_time: float = 0.0) -> tuple[ControllerRead, ReadPool]:
+                      difference: bool = False) -> tuple[ControllerRead, ReadPool]:
     """`implied_input_gain` from the last ``pool_blocks`` blocks ever read, each read once.
 
     The controller of a DP vessel does not change from one window to the next, but its read
@@ -762,7 +775,7 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
     begins at 200 s, without a read). When the newest `POOL_RESTART_BLOCKS` blocks, a new one
     among them, explain no DOF, the pool starts again from them: the read is then 'no_fit' and
     forgotten, as a window's read whose blocks explain nothing (the controller may have been
-    switched off or changed). ``lone_r_squared``, ``difference_time``: as
+    switched off or changed). ``lone_r_squared``, ``difference``: as
     `implied_input_gain`. Returns (the read, the pool after it).
     """
     end = -math.inf if pool is None else pool.end
@@ -772,25 +785,20 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
             pool if pool is not None else ReadPool(end, kept)
     stamps, index, runs = _paired_runs(published, times, sample_time)
     block = max(int(round(block_time / sample_time)), MIN_SAMPLES + 2 * MAX_SHIFT)
+    grid = DIFFERENCE_TIMES if difference else ()
     new: list[ControllerGains] = []
     for a, b in runs:
         first = a + int(np.searchsorted(stamps[a:b], end, side='right'))
         for start in range(first, b - block + 1, block):
             # only the new blocks are turned into arrays, with a lead that warms the
             # difference's filter up where the run began earlier
-            lead = 0 if difference_time <= 0.0 else \
-                min(start - a, math.ceil(DIFFERENCE_WARM_UP * difference_time / sample_time))
+            lead = _warm_lead(start - a, grid, sample_time)
             rows = published[start - lead:start + block]
-            poses = np.array([p.pose for p in rows])
             try:
-                diff = None if difference_time <= 0.0 else \
-                    difference_velocity(poses, sample_time, difference_time)[lead:]
-                new.append(fit_controller_gains(poses[lead:], np.array([p.twist for p in
-                                                                         rows[lead:]]),
-                                                forces[index[start:start + block]], sample_time,
-                                                earth_highpass=earth_highpass,
-                                                stiffness_frame=stiffness_frame,
-                                                difference_twists=diff))
+                new.append(read_controller_gains(
+                    np.array([p.pose for p in rows]), np.array([p.twist for p in rows[lead:]]),
+                    forces[index[start:start + block]], sample_time, difference_times=grid,
+                    lead=lead, earth_highpass=earth_highpass, stiffness_frame=stiffness_frame))
             except ValueError:  # non-finite values: this block says nothing
                 pass
             end = float(stamps[start + block - 1])
@@ -804,7 +812,7 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
     if not after.blocks:
         read = implied_input_gain(published, times, forces, sample_time, block_time,
                                   earth_highpass, max_natural_freq, stiffness_frame, pair_ratio,
-                                  lone_r_squared, difference_time)
+                                  lone_r_squared, difference)
         return replace(read, note=f'{read.note}; no full block of {block} samples pooled '
                                   'yet'), after
     read = _median_read(list(after.blocks), end, block * len(after.blocks), block_time,
@@ -823,8 +831,11 @@ def _median_read(reads: list[ControllerGains], stamp: float, samples: int,
                                              lone_r_squared)
     believed = ', '.join(f'{c}' for c in counts)
     earth = sum(read.stiffness_frame == 'earth' for read in reads)
+    filters = [read.difference_time for read in reads if read.difference_time > 0.0]
     what = f'{believed} of {len(reads)} blocks of {block_time:.0f} s believed' + \
-        (f', {earth} with the stiffness in the earth frame' if earth else '')
+        (f', {earth} with the stiffness in the earth frame' if earth else '') + \
+        (f", {len(filters)} with Kd on the pose's own difference (T_v median "
+         f'{float(np.median(filters)):.2g} s)' if filters else '')
     if inertia is None:
         partial_inertia, partial_freq = believed_medians(reads, max_natural_freq, pair_ratio,
                                                          lone_r_squared)

@@ -461,16 +461,17 @@ class OdometryParams:
         'low blocks; docs/BENCHMARKS.md, sixty-third session). 0.9 (between the two, not '
         'tuned) is the default since the sixty-third session (rule V: the development '
         'divergence gone, every fresh run unchanged); in [0, 1)', '-'))
-    controller_read_difference_time: float = field(default=0.0, metadata=field_doc(
-        "with controller_inertia: > 0, the controller's D term may also act on the published "
-        "poses' own finite difference low-passed over this time constant (a DP controller "
-        "that differentiates lf_pose itself, as dp_controller's default velocity_source "
-        "'difference' with its velocity_filter_time 1 s), and each block keeps whichever "
-        'velocity, the twist or the difference, explains the commands better '
-        '(core.controller_gains.fit_controller_gains); 0: the published twist only. Read on '
-        "the twist, such a controller explained at most 0.97 of its commands and a move's "
-        'dropout diverged with the pose held (rao_supply; docs/BENCHMARKS.md, sixty-fourth '
-        'session)', 's'))
+    controller_read_difference: bool = field(default=False, metadata=field_doc(
+        "with controller_inertia: the controller's D term may also act on the published poses' "
+        'own finite difference through a first-order low-pass of a time constant T_v the read '
+        'finds (a grid of 0.25-8 s, refined; a DP controller that differentiates lf_pose '
+        "itself, as dp_controller's default velocity_source 'difference', T_v 1 s), and each "
+        'block keeps the twist or the difference, whichever explains the commands better '
+        '(core.controller_gains.read_controller_gains); false: the published twist only. '
+        "Read on the twist, such a controller explained at most 0.97 of its commands and a "
+        "move's dropout diverged with the pose held (rao_supply); read on the difference with "
+        'a T_v not its own, the inertia was 0.03-3.3x (docs/BENCHMARKS.md, sixty-fourth '
+        'session)', ''))
     controller_read_keep_dofs: bool = field(default=True, metadata=field_doc(
         'with controller_inertia: a read whose blocks believe some DOFs but in another none '
         "(a turn spoils yaw's blocks) keeps the last successful read's inertia in that DOF "
@@ -683,11 +684,6 @@ class OdometryParams:
                 0.0 <= self.controller_read_lone_r_squared < 1.0):
             raise ValueError('controller_read_lone_r_squared must be in [0, 1) (0: off), got '
                              f'{self.controller_read_lone_r_squared}')
-        if not (math.isfinite(self.controller_read_difference_time) and
-                self.controller_read_difference_time >= 0.0):
-            raise ValueError('controller_read_difference_time must be a finite number >= 0 s '
-                             "(0: the twist only; 1: dp_controller's velocity_filter_time), "
-                             f'got {self.controller_read_difference_time}')
         if not (math.isfinite(self.dead_reckoning_damping_turn) and
                 0.0 <= self.dead_reckoning_damping_turn <= math.pi):
             raise ValueError('dead_reckoning_damping_turn must be in [0, pi] rad (0: off), '

@@ -8,6 +8,7 @@ import pytest
 from scipy.signal import lfilter
 
 from lf_predictor_ros.core.controller_gains import (
+    DIFFERENCE_TIMES,
     MIN_R_SQUARED,
     ControllerGains,
     believed_medians,
@@ -18,6 +19,7 @@ from lf_predictor_ros.core.controller_gains import (
     fitted_damping_scale,
     median_implied_inertia,
     median_natural_freq,
+    read_controller_gains,
 )
 from lf_predictor_ros.core.lf_dynamics import body_velocity, earth_to_body
 from sim_ros.control.pid import PidState, gains_from_bandwidth, pid_step
@@ -391,33 +393,63 @@ def test_difference_velocity_is_the_simulators_pid_velocity() -> None:
                                velocity, atol=1e-12)
 
 
-def test_a_pid_that_differentiates_the_pose_is_read_on_the_difference() -> None:
-    """The PID's D term on its own difference of a pose with wave leftovers, not the twist."""
+@pytest.mark.parametrize('filter_time', [1.0, 3.0, 0.4])
+def test_a_pid_that_differentiates_the_pose_is_read_on_its_own_difference(filter_time: float
+                                                                          ) -> None:
+    """The PID's D term on its own difference of a pose with wave leftovers, T_v found.
+
+    On the twist the PD law explains little and reads the inertia wrong; on the difference
+    with the grid and the search over T_v (1 s on the grid, 3 s and 0.4 s between its points)
+    it explains everything and reads T_v and the inertia.
+    """
     eta = _lf_track(10)
     leftover = np.random.default_rng(10).standard_normal(eta.shape) * np.array([0.05, 0.05,
                                                                                    0.001])
     pose = eta + leftover  # what the controller is given
     twist = body_velocity(eta, H)  # a smooth twist published with it
-    tau = _pid_thrust(pose, None, 1.0)
-    on_twist = fit_controller_gains(pose, twist, tau, H)
-    difference = difference_velocity(pose, H, 1.0)
-    either = fit_controller_gains(pose, twist, tau, H, difference_twists=difference)
-    assert on_twist.velocity_source == 'twist'
-    assert np.all(on_twist.r_squared < 0.9)
-    assert either.velocity_source == 'difference'
-    assert np.all(either.r_squared > 0.99)
-    design = gains_from_bandwidth(MASS, BANDWIDTH, 1.0)
-    np.testing.assert_allclose(either.damping, design.kd, rtol=0.02)
+    design = gains_from_bandwidth(MASS, BANDWIDTH, 1.0, velocity_filter_time=filter_time)
+    state = PidState()
+    tau = np.zeros_like(pose)
+    for k in range(pose.shape[0]):
+        tau[k], state = pid_step(state, design, pose[k], np.array([0.0, 0.0, pose[0, 2]]), H)
+    on_twist = read_controller_gains(pose, twist, tau, H)
+    assert on_twist.difference_time == 0.0 and np.all(on_twist.r_squared < 0.9)
+    either = read_controller_gains(pose, twist, tau, H, difference_times=DIFFERENCE_TIMES)
+    assert either.difference_time == pytest.approx(filter_time, rel=0.02)
+    assert np.all(either.r_squared > 0.999)
+    np.testing.assert_allclose(either.damping, design.kd, rtol=0.03)
     inertia = either.implied_inertia()
     assert inertia is not None
     np.testing.assert_allclose(inertia, MASS, rtol=0.05)
-    # a PID on the published twist is still read on the twist
-    on_published = fit_controller_gains(pose, twist, _pid_thrust(pose, twist, 1.0), H,
-                                        difference_twists=difference)
-    assert on_published.velocity_source == 'twist'
-    assert np.all(on_published.r_squared > 0.99)
-    with pytest.raises(ValueError, match='difference_twists must'):
-        fit_controller_gains(pose, twist, tau, H, difference_twists=difference[:, :2])
+    # a PID on the published twist is still read on the twist, to the bit
+    on_published = _pid_thrust(pose, twist, 1.0)
+    kept = read_controller_gains(pose, twist, on_published, H, difference_times=DIFFERENCE_TIMES)
+    plain = fit_controller_gains(pose, twist, on_published, H)
+    assert kept.difference_time == 0.0 and kept.shift == plain.shift
+    for name in ('stiffness', 'damping', 'r_squared'):
+        np.testing.assert_array_equal(getattr(kept, name), getattr(plain, name))
+
+
+def test_the_difference_filter_is_warmed_up_on_the_lead() -> None:
+    """``lead`` rows before the stretch read only warm the difference's filter.
+
+    A read from the middle of a run then matches the controller, whose filter was running.
+    """
+    eta = _lf_track(11) + np.random.default_rng(11).standard_normal((1500, 3)) * \
+        np.array([0.05, 0.05, 0.001])
+    twist = body_velocity(eta, H)
+    tau = _pid_thrust(eta, None, 1.0)
+    cold = read_controller_gains(eta[600:], twist[600:], tau[600:], H, difference_times=(1.0,))
+    warm = read_controller_gains(eta[400:], twist[600:], tau[600:], H, difference_times=(1.0,),
+                                 lead=200)
+    assert warm.r_squared.min() > 0.9999 > cold.r_squared.min()
+    inertia = warm.implied_inertia()
+    assert inertia is not None
+    np.testing.assert_allclose(inertia, MASS, rtol=0.03)
+    for bad in ({'difference_times': (2.0, 1.0)}, {'difference_times': (0.0,)},
+                {'lead': -1}, {'lead': 1500}):
+        with pytest.raises(ValueError, match='difference_times|lead'):
+            read_controller_gains(eta, twist, tau, H, **bad)  # type: ignore[arg-type]
 
 
 def test_inputs_are_not_modified() -> None:

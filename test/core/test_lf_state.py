@@ -293,35 +293,38 @@ def test_a_lone_block_needs_the_lone_r_squared() -> None:
             OdometryParams(controller_read_lone_r_squared=bad)
 
 
-def test_a_controller_that_differentiates_the_pose_is_read_with_a_difference_time() -> None:
-    """``difference_time``: the PD law's D term on the pose's own filtered difference.
+def test_a_controller_that_differentiates_the_pose_is_read_with_difference() -> None:
+    """``difference``: the PD law's D term on the pose's own filtered difference.
 
     The published pose carries wave leftovers (white, 0.3 m) that the published twist does not;
-    a PD controller differentiating that pose (T_v 1 s, as dp_controller's default) puts the
+    a PD controller differentiating that pose (T_v 2 s, dp_controller's default is 1 s) puts the
     leftovers' difference into its commands, which the twist cannot explain: no read, or a
-    wrong one where a block's R² passes 0.5. With the difference time the read is exact
-    (Kd² / (4 Kp) of the law), pooled or not.
+    wrong one where R² passes 0.5. With ``difference`` the read finds T_v and is
+    exact (Kd² / (4 Kp) of the law), pooled or not.
     """
     smooth, times, _ = _published_pd_loop(600)
     leftover = np.random.default_rng(12).standard_normal(len(smooth)) * 0.3
     published = [replace(p, pose=p.pose + w) for p, w in zip(smooth, leftover, strict=True)]
     poses = np.array([p.pose for p in published])
-    commands = -2.0e4 * poses - 3.0e5 * difference_velocity(poses, 1.0, 1.0)
+    commands = -2.0e4 * poses - 3.0e5 * difference_velocity(poses, 1.0, 2.0)
     truth = 8.0e4 / 3.0e5 ** 2  # 4 Kp / Kd²
-    assert implied_input_gain(published, times, commands, 1.0).outcome == 'no_fit'
-    read = implied_input_gain(published, times, commands, 1.0, difference_time=1.0)
+    for wrong in (implied_input_gain(published, times, commands, 1.0),
+                  pooled_input_gain(published, times, commands, 1.0, 300.0, None, 8)[0]):
+        assert wrong.gain is None or not 0.5 < wrong.gain[0] / truth < 2.0
+    read = implied_input_gain(published, times, commands, 1.0, difference=True)
     assert read.outcome == 'read' and read.gain is not None
-    np.testing.assert_allclose(read.gain, [truth], rtol=1e-6)
-    wrong, _ = pooled_input_gain(published, times, commands, 1.0, 300.0, None, 8)
-    assert wrong.gain is None or not 0.5 < wrong.gain[0] / truth < 2.0  # R² 0.49, 0.51
+    np.testing.assert_allclose(read.gain, [truth], rtol=1e-3)
+    assert "Kd on the pose's own difference, T_v 2 s" in read.note
     pooled, pool = pooled_input_gain(published, times, commands, 1.0, 300.0, None, 8,
-                                     difference_time=1.0)
+                                     difference=True)
     assert pooled.outcome == 'read' and pooled.gain is not None
-    np.testing.assert_allclose(pooled.gain, [truth], rtol=1e-4)  # the warm-up leaves e^−10
-    assert [b.velocity_source for b in pool.blocks] == ['difference', 'difference']
-    for bad in (-1.0, float('nan'), float('inf')):
-        with pytest.raises(ValueError, match='controller_read_difference_time must be'):
-            OdometryParams(controller_read_difference_time=bad)
+    np.testing.assert_allclose(pooled.gain, [truth], rtol=1e-3)
+    np.testing.assert_allclose([b.difference_time for b in pool.blocks], [2.0, 2.0], rtol=1e-2)
+    assert "2 with Kd on the pose's own difference (T_v median 2 s)" in pooled.note
+    blocks = implied_input_gain(published, times, commands, 1.0, block_time=300.0,
+                                difference=True)
+    assert blocks.gain is not None
+    np.testing.assert_allclose(blocks.gain, [truth], rtol=1e-3)
 
 
 def test_a_pooled_read_starts_again_when_the_newest_blocks_explain_no_dof() -> None:

@@ -1054,11 +1054,15 @@ def dropout_mean_table(cases: Sequence[dict[str, Any]]) -> str:
 def report(cases: Sequence[dict[str, Any]]) -> str:
     """Every table."""
     seconds = sum(c.get('seconds', 0.0) for c in cases)
+    sources = sorted({c.get('closed_loop', {}).get('dropout_loops', {}).get('velocity_source',
+                                                                           'odometry')
+                      for c in cases if c.get('closed_loop', {}).get('dropout_loops')})
     return '\n\n'.join([
         f'{len(cases)} runs, seeds {sorted({c["seed"] for c in cases})}, pose_cov_scale '
         f'{cases[0]["pose_cov_scale"]:.4g}, pose_lag_scale {cases[0].get("pose_lag_scale", "–")}, '
         f'twist_cov_scale {cases[0]["twist_cov_scale"]:.4g}, '
-        f'{seconds / 60:.1f} worker-min',
+        + (f"dropout loops' D term from {' and '.join(sources)}, " if sources else '')
+        + f'{seconds / 60:.1f} worker-min',
         '**Covariance consistency (NEES)**', nees_table(cases), '**Twist accuracy**',
         twist_table(cases), '**Dead-reckoning drift**', drift_table(cases),
         '**Closed loop, D term**', loop_table(cases),

@@ -114,14 +114,14 @@ from lf_predictor_ros.benchmark.suite import (
     schedule_shift_for_seed,
     scored_start,
 )
+from lf_predictor_ros.core.controller_gains import difference_velocity
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_dynamics import body_velocity
 from lf_predictor_ros.core.lf_state import LfStateEstimator
 from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.retraining import first_training_samples
-from sim_ros.control.pid import PidGains, PidState, pid_step
-from sim_ros.physics.kinematics import earth_to_body
+from sim_ros.control.pid import VELOCITY_FILTER_TIME, VELOCITY_SOURCES
 from sim_ros.simulation import ClosedLoopRun, Scenario, SimRecord, load_scenario, simulate
 
 FloatArray = NDArray[np.float64]
@@ -139,11 +139,6 @@ LOOP_FD = 'adaptive'  # the predictor loop with the PID's finite-difference D te
 LOOP_ODOM = 'adaptive_odom_d'  # the same with the D term from the odometry twist
 LOOP_OBSERVER = 'observer'  # the tuned passive observer (PID finite-difference D term)
 DROPOUT_LOOP_LENGTH = 60.0  # [s] dropouts of item 5 (within the 120 s timeout)
-# Where item 5's PID takes its D term (``--dropout-loop-velocity``), as `dp_controller`'s
-# ``velocity_source``: 'odometry', lf_odom's twist; 'difference', its own filtered finite
-# difference of the pose it is given (lf_odom's, dead-reckoned in a dropout, as the node's
-# lf_pose is): a DP stack that takes only the position
-DROPOUT_LOOP_VELOCITIES = ('odometry', 'difference')
 AFTER_DROPOUT = 120.0  # [s] scored after each dropout of item 5
 # The seed's own random stream for the dropouts' delay (``--dropout-spread``), apart from the
 # sea's, the noise's and the scenario schedule's draws.
@@ -218,16 +213,13 @@ def consistency(error: FloatArray, cov: FloatArray) -> dict[str, Any]:
 def pid_velocity(poses: FloatArray, sample_time: float, ndof: int) -> FloatArray:
     """The PID's velocity from a pose series (module docstring, `pid_step`) → body (m, ndof).
 
-    `pid_step` itself is run over the poses (its gains do not touch the velocity filter) and
-    its filtered finite difference turned into the body frame, as its D term uses it.
+    `controller_gains.difference_velocity` at the PID's ``VELOCITY_FILTER_TIME`` (tested equal
+    to `pid_step`'s filtered finite difference) on the finite poses (m, 3) with the heading
+    unwrapped, as `pid_step` wraps each step.
     """
-    gains = PidGains(np.zeros(3), np.zeros(3), np.zeros(3))
-    state = PidState()
-    out = np.zeros((poses.shape[0], ndof))
-    for k in range(poses.shape[0]):
-        _, state = pid_step(state, gains, poses[k], poses[k], sample_time)
-        out[k] = earth_to_body(float(poses[k, 2]), state.velocity_earth)[:ndof]
-    return out
+    unwrapped = np.array(poses, dtype=np.float64)
+    unwrapped[:, 2] = np.unwrap(unwrapped[:, 2])
+    return difference_velocity(unwrapped, sample_time, VELOCITY_FILTER_TIME)[:, :ndof]
 
 
 def default_dropouts(params: PredictorParams, duration: float,
@@ -462,11 +454,13 @@ def _odometry_loop(scenario: Scenario, seed: int, duration: float, params: Predi
     with ``velocity_source: odometry``: dead-reckoned in a dropout (``coast``), blended after
     it; NaN when 'lost' (the PID holds its last estimate). The PID's commands reach the
     estimator as ``thrust_command`` does the node (``LfStateEstimator.command``). ``log``: every
-    dead-reckoned estimate is appended to it. ``velocity_source`` 'difference': the PID takes
-    its D term from its own finite difference of the pose instead (`DROPOUT_LOOP_VELOCITIES`).
+    dead-reckoned estimate is appended to it. ``velocity_source`` (`pid.VELOCITY_SOURCES`, as
+    `dp_controller`'s): 'difference', the PID takes its D term from its own filtered finite
+    difference of the pose it is given (lf_odom's, dead-reckoned in a dropout, as the node's
+    lf_pose is), a DP stack that takes only the position.
     """
-    if velocity_source not in DROPOUT_LOOP_VELOCITIES:
-        raise ValueError(f'velocity_source must be one of {DROPOUT_LOOP_VELOCITIES}, got '
+    if velocity_source not in VELOCITY_SOURCES:
+        raise ValueError(f'velocity_source must be one of {VELOCITY_SOURCES}, got '
                          f'{velocity_source!r}')
     est = LfStateEstimator(params, odometry, background=False)
     latest: list[FloatArray | None] = [None]
@@ -584,7 +578,7 @@ def _dropout_loops(scenario: Scenario, seed: int, duration: float, params: Predi
     """Item 5 of the module docstring (``odom_run``: item 4's loop without dropouts).
 
     ``move_delay``: the dropouts start in the setpoint moves (`move_dropouts`) instead of at the
-    spread schedule's times. ``velocity_source`` (`DROPOUT_LOOP_VELOCITIES`): where lf_odom's
+    spread schedule's times. ``velocity_source`` (`pid.VELOCITY_SOURCES`): where lf_odom's
     loop takes its D term; with 'difference' its loop without dropouts is run the same way
     (``odom_run`` is not used).
     """
@@ -663,7 +657,7 @@ def run_odometry_case(scenario_name: str, seed: int, duration: float | None = DE
     start that long after each setpoint change instead (`move_dropouts`; item 3 unchanged).
     ``dead_reckoning_commands``: item 3 also feeds the thrust as the controller's commands
     (`_dropout_run`'s ``commands``). ``dropout_velocity``: where item 5's lf_odom loop takes its
-    D term (`DROPOUT_LOOP_VELOCITIES`).
+    D term (`pid.VELOCITY_SOURCES`).
     """
     begin_time = time.monotonic()
     scenario = load_scenario(scenario_name)
@@ -1119,7 +1113,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                      'controller read may then mark the memory dp_controlled)')
     run.add_argument('--dropout-loops', action='store_true',
                      help='also the closed loops through pose dropouts (item 5; with the loops)')
-    run.add_argument('--dropout-loop-velocity', choices=DROPOUT_LOOP_VELOCITIES,
+    run.add_argument('--dropout-loop-velocity', choices=VELOCITY_SOURCES,
                      default='odometry',
                      help="where item 5's lf_odom loop takes its D term: lf_odom's twist "
                      "(default) or the PID's own finite difference of the pose, as "

@@ -29,6 +29,9 @@ from sim_ros.physics.kinematics import FloatArray, earth_to_body, wrap_angle
 
 SETPOINT_FILTER_TIME = 10.0  # s, T_f (MSS PIDnonlinearMIMO.m)
 VELOCITY_FILTER_TIME = 1.0  # s, T_v of the finite-difference velocity estimate
+# Where the D term's velocity comes from: 'difference', the filtered finite difference of the
+# poses (`pid_step` without ``velocity_body``); 'odometry', an estimator's twist (with it)
+VELOCITY_SOURCES = ('difference', 'odometry')
 
 
 def _vec3(values: float | Sequence[float] | FloatArray, name: str) -> FloatArray:

@@ -80,13 +80,18 @@ from lf_predictor_ros.nodes.params import LiveParameters, declare_and_load
 from lf_predictor_ros.nodes.params import param_meta as _meta
 from lf_predictor_ros.nodes.qos import publisher_qos, sensor_qos
 from lf_predictor_ros.nodes.runner import spin_node
-from sim_ros.control.pid import PidGains, PidState, gains_from_bandwidth, pid_step
+from sim_ros.control.pid import (
+    VELOCITY_SOURCES,
+    PidGains,
+    PidState,
+    gains_from_bandwidth,
+    pid_step,
+)
 from sim_ros.physics.vessels import SUPPLY_M
 from sim_ros.simulation import ControllerConfig, Simulator, load_scenario
 
 NODE_NAME = 'dp_controller'
 NS_PER_S = 1e9  # [ns/s]
-VELOCITY_SOURCES = ('difference', 'odometry')
 SCHEDULE_ROW = 4  # [t s, north m, east m, yaw rad]
 
 

@@ -305,7 +305,7 @@ def test_dropout_loop_velocity_chooses_the_pids_d_term(monkeypatch: pytest.Monke
     monkeypatch.setattr(odometry_bench, 'run_loop', run_loop)
     scenario = load_scenario('onedof_feedback')
     params = PredictorParams()
-    for source in odometry_bench.DROPOUT_LOOP_VELOCITIES:
+    for source in ('odometry', 'difference'):  # pid.VELOCITY_SOURCES
         assert odometry_bench._odometry_loop(  # noqa: SLF001
             scenario, 1, 60.0, params, OdometryParams(), velocity_source=source) == 'run'
     assert callable(given[0]) and given[0]() is None  # no estimate yet: no twist

@@ -5,10 +5,11 @@
 Builds the `predictor` node in-process (shipped defaults, ndof 3), feeds it simulated
 supply-vessel pose + thrust messages by calling its subscription callbacks at `--speed` × real
 time, and times every pose callback (wall clock, `time.perf_counter`). Callbacks are split into
-"idle" and "while training" (the core's worker thread busy). Prints p50 / p99 / max, the number
-of trainings, and the CPU time of the process and its children (the ω0 fit's) per simulated
-hour, and the garbage collector's full collections and its longest run (a collection in any
-thread stalls the callback: the GIL).
+"idle" and "while training" (the core's worker thread busy); ``learning_p99_ms`` is the p99
+of the callbacks that ran while the vessel memory's job ran on its own thread (either kind).
+Prints p50 / p99 / max, the number of trainings, and the CPU time of the process and its
+children (the ω0 fit's) per simulated hour, and the garbage collector's full collections and its
+longest run (a collection in any thread stalls the callback: the GIL).
 
 With input faster than the sample time h (1 s), most callbacks only store the pose; the one that
 completes a grid sample runs the whole step (checks, predictor, odometry, publishing). At 100 Hz
@@ -16,6 +17,16 @@ that is one callback in a hundred, so the p99 sits at the fast end of the steps 
 the machine's noise. ``step_p50_ms`` / ``step_p90_ms`` (idle and busy) are the percentiles of
 the step callbacks alone (those after which the node has processed one more sample): the
 statistic to compare two versions of the step with.
+
+``--commands pid`` also closes a DP controller on the node's output, as a DP stack does: a
+helper node in the same process hears ``lf_pose`` over DDS (between callbacks, not timed), runs
+``sim_ros``'s PID on it (the scenario's gains, the D term on the filtered pose difference:
+``dp_controller``'s default) and hands each command to the node's ``thrust_command`` callback,
+stamped with the estimate's stamp. The vessel memory then reads the controller's gains in its
+learning thread (``controller_inertia``, ``core.controller_gains``), which the default feed
+(``--commands none``: no ``thrust_command``) never runs. The commands do not move the simulated
+vessel (the poses are simulated beforehand); the read only needs them to be a PD law of the
+published estimates. ``controller_read`` reports the last read's outcome.
 
 The default feed (20×) sends the callbacks 0.5 ms apart, which keeps the caches warm; at real
 time (``--speed 1``) the step took 1.28–1.31 ms (median) against 1.0–1.15 ms at 20× on the
@@ -33,16 +44,30 @@ import resource
 import sys
 import time
 
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 import numpy as np
+from numpy.typing import NDArray
 import rclpy
 from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.utilities import try_shutdown
 
-from lf_predictor_ros.nodes.conversions import pose_to_msg, wrench_to_msg
+from lf_predictor_ros.nodes.conversions import (
+    msg_to_pose,
+    pose_to_msg,
+    stamp_to_sec,
+    wrench_to_msg,
+)
 from lf_predictor_ros.nodes.predictor_node import PredictorNode
+from lf_predictor_ros.nodes.qos import publisher_qos
 from lf_predictor_ros.nodes.runner import freeze_startup_heap
-from sim_ros.simulation import load_scenario, simulate
+from sim_ros.control.pid import PidGains, PidState, pid_step
+from sim_ros.simulation import Simulator, controller_gains, load_scenario, simulate
+
+COMMAND_FEEDS = ('none', 'pid')  # --commands
+FloatArray = NDArray[np.float64]
 
 
 def _cpu_seconds() -> float:
@@ -110,13 +135,64 @@ class CollectionTimer:
                 'gc_max_ms': max(self.seconds, default=0.0) * 1e3}
 
 
+class PidOnEstimates:
+    """``--commands pid``: `sim_ros`'s PID on the node's ``lf_pose``, heard over DDS.
+
+    A DP controller as `dp_controller` runs it with its default (``velocity_source:
+    difference``): one PID step per estimate, dt the stamp difference, the command stamped with
+    the estimate's stamp.
+    """
+
+    def __init__(self, context: Context, gains: PidGains, setpoint: FloatArray,
+                 tau_max: FloatArray) -> None:
+        """Subscribe to ``lf_pose`` in `context` (the predictor node's)."""
+        self._node = Node('latency_dp_controller', context=context)
+        self._heard: list[PoseStamped] = []
+        self._node.create_subscription(PoseStamped, 'lf_pose', self._heard.append,
+                                       publisher_qos())
+        self._executor = SingleThreadedExecutor(context=context)
+        self._executor.add_node(self._node)
+        self._gains, self._setpoint, self._tau_max = gains, setpoint, tau_max
+        self._state = PidState()
+        self._last_stamp: float | None = None
+        self.commands = 0
+
+    def answer(self, timeout: float) -> list[WrenchStamped]:
+        """Spin until an estimate is heard (at most `timeout` [s]); its PID commands."""
+        deadline = time.monotonic() + timeout
+        while not self._heard and time.monotonic() < deadline:
+            self._executor.spin_once(timeout_sec=max(deadline - time.monotonic(), 0.0))
+        self._executor.spin_once(timeout_sec=0.0)  # any other estimate already delivered
+        answers = []
+        for msg in self._heard:
+            stamp = stamp_to_sec(msg.header.stamp)
+            if self._last_stamp is not None and stamp <= self._last_stamp:
+                continue  # a re-sent estimate: the controller answers each stamp once
+            dt = 1.0 if self._last_stamp is None else stamp - self._last_stamp
+            self._last_stamp = stamp
+            tau, self._state = pid_step(self._state, self._gains, msg_to_pose(msg),
+                                        self._setpoint, dt, self._tau_max)
+            answers.append(wrench_to_msg(tau, msg.header.stamp))
+        self._heard.clear()
+        self.commands += len(answers)
+        return answers
+
+    def close(self) -> None:
+        """Destroy the helper node."""
+        self._executor.shutdown()
+        self._node.destroy_node()
+
+
 def measure(rate_hz: float, minutes: float, speed: float,
-            freeze: bool = True) -> dict[str, float]:
+            freeze: bool = True, commands: str = 'none') -> dict[str, float | str]:
     """Run one input rate; return latency percentiles [ms] and CPU use.
 
     ``freeze``: freeze the heap after building the node, as the node executables do
-    (`nodes.runner.freeze_startup_heap`); False measures the node without it.
+    (`nodes.runner.freeze_startup_heap`); False measures the node without it. ``commands``
+    (`COMMAND_FEEDS`): 'pid' closes `PidOnEstimates` on the node's output (module docstring).
     """
+    if commands not in COMMAND_FEEDS:
+        raise ValueError(f'commands must be one of {COMMAND_FEEDS}, got {commands!r}')
     scenario = load_scenario('supply_closed_loop')
     record = simulate(scenario, seed=11, duration=minutes * 60.0)
     times = np.arange(record.t[0], record.t[-1], 1.0 / rate_hz)  # resample to the input rate
@@ -126,6 +202,14 @@ def measure(rate_hz: float, minutes: float, speed: float,
     context = Context()
     rclpy.init(context=context)
     node = PredictorNode(context=context, parameter_overrides=[Parameter('ndof', value=3)])
+    controller = None
+    if commands == 'pid':
+        simulator = Simulator(scenario, 11)
+        controller = PidOnEstimates(
+            context, controller_gains(scenario, simulator.true_model()),
+            np.asarray(scenario.controller.setpoint, dtype=np.float64),
+            np.asarray(scenario.controller.tau_max or simulator.actuator_limit(),
+                       dtype=np.float64))
     if freeze:
         freeze_startup_heap()
     collections = CollectionTimer()
@@ -134,10 +218,12 @@ def measure(rate_hz: float, minutes: float, speed: float,
     busy: list[float] = []
     idle_steps: list[float] = []
     busy_steps: list[float] = []
+    learning: list[float] = []  # callbacks while the vessel memory's job ran (either kind)
     cpu0, wall0 = _cpu_seconds(), time.monotonic()
+    waited = 0.0  # wall time spent hearing estimates (--commands pid): not the node's
     try:
         for k in range(len(times)):
-            target = wall0 + (times[k] - times[0]) / speed
+            target = wall0 + waited + (times[k] - times[0]) / speed
             pause = target - time.monotonic()
             if pause > 0:
                 time.sleep(pause)
@@ -147,21 +233,35 @@ def measure(rate_hz: float, minutes: float, speed: float,
             predictor = node.predictor
             training = predictor is not None and not predictor.wait_for_training(0.0)
             samples = node.samples
+            state = node.state
+            memory_learning = state is not None and state.memory_learning
             start = time.perf_counter()
             node.on_pose(msg)
             elapsed = time.perf_counter() - start
             (busy if training else idle).append(elapsed)
+            if memory_learning:
+                learning.append(elapsed)
             if node.samples > samples:  # this callback completed a sample: the whole step
                 (busy_steps if training else idle_steps).append(elapsed)
+                if controller is not None:
+                    heard = time.monotonic()
+                    answers = controller.answer(timeout=0.05)
+                    waited += time.monotonic() - heard
+                    for answer in answers:
+                        node.on_command(answer)
         predictor = node.predictor
         counters = predictor.counters if predictor is not None else {}
+        state = node.state
+        read = state.controller_read if state is not None else None
     finally:
         collections.stop()
+        if controller is not None:
+            controller.close()
         node.destroy_node()
         try_shutdown(context=context)
         if freeze:
             gc.unfreeze()  # the next rate starts from the same heap
-    cpu, wall = _cpu_seconds() - cpu0, time.monotonic() - wall0
+    cpu, wall = _cpu_seconds() - cpu0, time.monotonic() - wall0 - waited
     simulated_hours = (times[-1] - times[0]) / 3600.0
 
     def pct(values: list[float], q: float) -> float:
@@ -173,8 +273,11 @@ def measure(rate_hz: float, minutes: float, speed: float,
             'busy_step_p50_ms': pct(busy_steps, 50), 'busy_step_p90_ms': pct(busy_steps, 90),
             'steps_while_training': len(busy_steps),
             'callbacks_while_training': len(busy), 'trainings': counters.get('trainings', 0),
+            'learning_p99_ms': pct(learning, 99), 'callbacks_while_learning': len(learning),
             'cpu_s_per_sim_hour': cpu / simulated_hours, 'cpu_share': cpu / wall,
-            **collections.summary()}
+            **collections.summary(), 'commands': commands,
+            'commands_sent': controller.commands if controller is not None else 0,
+            'controller_read': read.outcome if read is not None else 'none'}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -186,9 +289,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--rates', type=float, nargs='*', default=[10.0, 100.0])
     parser.add_argument('--no-gc-freeze', dest='freeze', action='store_false',
                         help='do not freeze the heap after building the node (as before 2026-12)')
+    parser.add_argument('--commands', choices=COMMAND_FEEDS, default='none',
+                        help="'pid': a DP controller answers each lf_pose on thrust_command, so "
+                             'the vessel memory reads its gains (module docstring)')
     args = parser.parse_args(argv)
     for rate in args.rates:
-        result = measure(rate, args.minutes, args.speed, args.freeze)
+        result = measure(rate, args.minutes, args.speed, args.freeze, args.commands)
         print(' '.join(f'{k}={v:.4g}' if isinstance(v, float) else f'{k}={v}'
                        for k, v in result.items()), flush=True)
     return 0

@@ -293,6 +293,12 @@ class LfStateEstimator:
         return self._controller_read
 
     @property
+    def memory_learning(self) -> bool:
+        """A vessel-memory job (fit, checks, the controller read) is running on its thread."""
+        job = self._job
+        return job is not None and not job.done()
+
+    @property
     def memory_error(self) -> str | None:
         """Why the last vessel-memory job failed (None if it did not)."""
         return self._memory_error

@@ -1034,3 +1034,18 @@ def test_a_read_spoilt_in_one_dof_keeps_the_remembered_inertia_there() -> None:
     _, _, in_force, _ = _learn(*args[:10], (stamps, commands), None, controller_block_time=150.0,
                                controller_keep_dofs=True)
     assert in_force is None
+
+
+def test_memory_learning_is_true_only_while_a_memory_job_runs() -> None:
+    from concurrent.futures import Future
+
+    est = LfStateEstimator(PredictorParams(ndof=1), background=False)
+    try:
+        assert not est.memory_learning  # no job yet
+        job: Future[object] = Future()
+        est._job = job  # type: ignore[assignment]  # what _maybe_learn submits
+        assert est.memory_learning
+        job.set_result(None)
+        assert not est.memory_learning  # done, not yet collected
+    finally:
+        est.close()

@@ -4,7 +4,11 @@
 
 Topics: `/thrust` (WrenchStamped), `/truth/lf_pose`, `/truth/pose` and `/measured_pose`
 (PoseStamped), one message each per simulator sample, log time = stamp. For replay benchmarks and
-tests, and to try `replay` without a vessel.
+tests, and to try `replay` without a vessel. With ``--thrust-command`` (a scenario with a DP
+controller) also `/thrust_command` (WrenchStamped), as a DP stack's log has it: at every
+controller instant t (each multiple of the predictor's sample time h) the command held during
+the period ending at t, stamped t (the commands `odometry_bench`'s loops hand to the vessel
+memory; `replay` feeds them to the controller read).
 
 A scenario with a DP controller is recorded with its loop closed on ``--loop-estimator``
 (default `observer`: the passive observer with the scenario's tuned gains, fed once per h, as the
@@ -21,6 +25,9 @@ from collections.abc import Sequence
 from pathlib import Path
 import sys
 
+import numpy as np
+from numpy.typing import NDArray
+
 from lf_predictor_ros.bag.mcap_writer import BagWriter, qos_profile_dict, qos_profiles_yaml
 from lf_predictor_ros.bag.provenance import recording_custom_data
 from lf_predictor_ros.bag.ros_codec import serialize
@@ -35,6 +42,7 @@ WRENCH = 'geometry_msgs/msg/WrenchStamped'
 SENSOR_QOS = qos_profiles_yaml([qos_profile_dict(reliability='best_effort', depth=5)])
 TRUTH_LOOP = 'truth'  # --loop-estimator: the scenario's PID on the true LF pose (leaks)
 LOOP_CHOICES = (*CAUSAL, TRUTH_LOOP)
+FloatArray = NDArray[np.float64]
 DEFAULT_LOOP = 'observer'
 
 
@@ -61,13 +69,26 @@ def simulate_recording(scenario: Scenario, seed: int, duration: float | None,
     return recording.full_rate, recording.provenance
 
 
+def command_rows(times: FloatArray, command_period: float) -> NDArray[np.intp]:
+    """Indices of the samples at a controller instant: t > 0 a multiple of the period [s]."""
+    if not (command_period > 0.0):
+        raise ValueError(f'command_period must be > 0 s, got {command_period}')
+    cycles = np.asarray(times, dtype=np.float64) / command_period
+    return np.flatnonzero((np.abs(cycles - np.round(cycles)) < 1e-6) & (cycles > 0.5))
+
+
 def write_record(path: Path, record: SimRecord, *, duration: float | None = None,
                  truth: bool = True, total_truth: bool = False,
-                 provenance: Provenance | None = None) -> Path:
+                 provenance: Provenance | None = None,
+                 command_period: float | None = None) -> Path:
     """Thrust, truth and measured pose of each sample (in that order, log time = stamp).
 
     ``provenance`` goes into the bag's rosbag2 custom data (`bag.provenance`).
+    ``command_period`` [s] (None: no command topic): `/thrust_command` at the samples
+    `command_rows` picks, after the sample's other messages (module docstring).
     """
+    commands = set() if command_period is None else \
+        set(command_rows(record.t, command_period).tolist())
     custom = (None if provenance is None else
               recording_custom_data(provenance.scenario, provenance.seed, provenance.loop,
                                     provenance.estimator))
@@ -76,6 +97,7 @@ def write_record(path: Path, record: SimRecord, *, duration: float | None = None
         thrust_ch = writer.add_topic('/thrust', WRENCH)
         truth_ch = writer.add_topic('/truth/lf_pose', POSE) if truth else -1
         total_ch = writer.add_topic('/truth/pose', POSE) if total_truth else -1
+        command_ch = writer.add_topic('/thrust_command', WRENCH) if commands else -1
         for k, t in enumerate(record.t):
             if duration is not None and t > duration:
                 break
@@ -86,6 +108,9 @@ def write_record(path: Path, record: SimRecord, *, duration: float | None = None
             if total_truth:
                 writer.write(total_ch, ns, serialize(pose_to_msg(record.truth_pose[k], t)))
             writer.write(pose_ch, ns, serialize(pose_to_msg(record.measured_pose[k], t)))
+            if k in commands:
+                writer.write(command_ch, ns,
+                             serialize(wrench_to_msg(record.thrust_command[k], t)))
     return path
 
 
@@ -100,15 +125,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--loop-estimator', choices=LOOP_CHOICES, default=DEFAULT_LOOP,
                         help='estimator the DP loop is closed on (default observer); truth: '
                         'the PID on the true LF pose, whose thrust leaks it (cost only)')
+    parser.add_argument('--thrust-command', action='store_true',
+                        help="also write the DP controller's commands on /thrust_command "
+                        '(module docstring; a scenario with a DP controller only)')
     args = parser.parse_args(argv)
     scenario = load_scenario(args.scenario)
     seed = scenario.seed if args.seed is None else args.seed
+    if args.thrust_command and not scenario.controller.enabled:
+        parser.exit(2, f'sim_bag: error: {args.scenario} has no DP controller, so no '
+                    'thrust_command: drop --thrust-command\n')
     try:
         record, provenance = simulate_recording(scenario, seed, args.duration,
                                                 args.loop_estimator)
     except ValueError as err:
         parser.exit(2, f'sim_bag: error: {err}\n')
-    write_record(Path(args.output), record, truth=True, total_truth=True, provenance=provenance)
+    command_period = provenance.sample_time if args.thrust_command else None
+    write_record(Path(args.output), record, truth=True, total_truth=True, provenance=provenance,
+                 command_period=command_period)
     print(f'wrote {len(record.t)} samples ({provenance.label()}) to {args.output}')
     return 0
 

@@ -68,3 +68,37 @@ def test_command_line_writes_the_run_and_its_provenance(tmp_path: Path,
     assert custom[RECORDING_LOOP_KEY] == 'estimator'
     assert custom[RECORDING_ESTIMATOR_KEY] == 'observer'
     assert np.array_equal(np.array(thrust)[:, [0, 1, 5]], record.thrust)
+
+
+def test_thrust_command_is_written_once_per_controller_instant(tmp_path: Path) -> None:
+    path = tmp_path / 'sim.mcap'
+    assert sim_bag.main(['supply_closed_loop', '--duration', '20', '--seed', str(SEED),
+                         '--thrust-command', '-o', str(path)]) == 0
+    record, _ = sim_bag.simulate_recording(load_scenario('supply_closed_loop'), SEED, 20.0)
+    with BagReader(path) as reader:
+        rows = [(m.log_time_ns, stamped_fields(m.data, WRENCH))
+                for m in reader.messages(['/thrust_command'])]
+    stamps = [fields.sec + fields.nanosec * 1e-9 for _, fields in rows]
+    assert stamps == pytest.approx(np.arange(1.0, 20.5, 1.0), abs=1e-9)  # h = 1 s, t = 1 … 20
+    assert [log for log, _ in rows] == [round(t * 1e9) for t in np.arange(1.0, 20.5, 1.0)]
+    k = np.round(np.array(stamps) / 0.1).astype(int) - 1  # the sample at each stamp
+    np.testing.assert_array_equal(np.array(record.t)[k], stamps)
+    commands = np.array([fields.values for _, fields in rows])[:, [0, 1, 5]]
+    np.testing.assert_array_equal(commands, record.thrust_command[k])
+    assert np.all(np.abs(commands[:, 0]) > 0.0)  # the PID's commands, not zeros
+
+
+def test_command_rows_are_the_multiples_of_the_period() -> None:
+    times = np.arange(1, 31) * 0.1  # 0.1 … 3.0 s
+    np.testing.assert_array_equal(sim_bag.command_rows(times, 1.0), [9, 19, 29])
+    np.testing.assert_array_equal(sim_bag.command_rows(times, 0.5), [4, 9, 14, 19, 24, 29])
+    with pytest.raises(ValueError, match='command_period must be > 0'):
+        sim_bag.command_rows(times, 0.0)
+
+
+def test_thrust_command_without_a_controller_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        sim_bag.main(['threedof_open_loop', '--duration', '20', '--thrust-command',
+                      '-o', str(tmp_path / 'x.mcap')])
+    assert exit_info.value.code == 2
+    assert not (tmp_path / 'x.mcap').exists()

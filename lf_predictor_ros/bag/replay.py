@@ -21,8 +21,13 @@ pose is not replayed into the predictor, and a fault found after the fact restar
 segment. Dropouts are judged on the pose stamps (a stamp gap longer than `dropout_timeout`).
 The DP controller's commands (WrenchStamped, default `/thrust_command`, optional) go to
 `OdomDriver.command`, as in the node: the dead reckoner's inertia from the controller's gains
-(`controller_inertia`; commands computed from another estimator's poses than the replayed one
-explain less of the regression and are then not used).
+(`controller_inertia`). The read assumes the controller acted on the replayed estimates. The
+commands of a loop closed on another estimator explain less of the regression, but not always
+too little: on a 2 h log of the supply vessel's loop on the observer the read believed them
+from about 30 min on, at 5-34x the true inertia, and a dead reckoning then drifted 30-70 m in
+120 s where holding the last pose drifts under 1 m (docs/BENCHMARKS.md, sixty-fifth session).
+A replay that fed commands ends with a warning saying so and what was read; `--command-topic
+''` leaves them out.
 
 OUTPUT gets every input message (same bytes, log and publish times; same channel types, schema
 text, QoS metadata and type hash) plus, with the log time of the pose message that produced them:
@@ -99,7 +104,7 @@ from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.evaluation import DEFAULT_WAVE_BAND, Metrics, format_table, score
 from lf_predictor_ros.core.heading import wrap_angle
-from lf_predictor_ros.core.lf_state import LfStateEstimator
+from lf_predictor_ros.core.lf_state import ControllerRead, LfStateEstimator
 from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
@@ -483,11 +488,28 @@ class ReplayResult:
     evaluation_start: float | None = None  # [s]
     recording: dict[str, str] = field(default_factory=dict)  # the input's rosbag2 custom data
     leaks_truth: bool = False  # the input says its DP loop ran on the true LF pose
+    commands: int = 0  # messages on the command topic handed to the controller read
 
     @property
     def realtime_factor(self) -> float:
         """Bag seconds replayed per wall second."""
         return self.bag_duration / self.wall_time if self.wall_time > 0.0 else math.inf
+
+
+def command_warning(topic: str, read: ControllerRead | None) -> str:
+    """The caveat of a replay that fed a bag's DP controller commands to the controller read.
+
+    The read assumes the controller acted on this predictor's estimates. A log of a DP loop
+    closed on another estimator is a foreign controller's, which the read can believe after
+    some 30 minutes with an inertia several times off, and a dead reckoning on it then drifts
+    tens of metres in 120 s (docs/BENCHMARKS.md, sixty-fifth session).
+    """
+    outcome = 'no read in force at the end' if read is None else \
+        f'the read in force at the end: {read.note}'
+    return (f'{topic!r} was fed to the controller read ({outcome}). The read assumes the DP '
+            "controller acted on this replay's estimates; if the recorded loop ran on another "
+            'estimator, the read can believe a wrong inertia and the dead reckoning drift far: '
+            "replay again with --command-topic '' to leave the commands out")
 
 
 def _stamp_seconds(fields: StampedFields, log_time_ns: int) -> float:
@@ -636,6 +658,7 @@ class _Replayer:
         except ValueError:
             force = np.full(3, np.nan)  # counted by the driver (commands_invalid)
         self.odom.command(_stamp_seconds(message, log_time_ns), force)
+        self.result.commands += 1
 
     def _truth(self, data: bytes, log_time_ns: int) -> None:
         message = self._decode(data, POSE_TYPE, self.options.truth_topic)
@@ -792,6 +815,9 @@ def replay(options: ReplayOptions, config: ReplayConfig,
     result.aligner_counters = replayer.aligner.counters.as_dict()
     result.final_wave_peak_freq = replayer.predictor.wave_peak_freq
     result.final_state = replayer.predictor.status().state
+    if result.commands:
+        result.warnings.append(command_warning(options.command_topic,
+                                               replayer.odom.state.controller_read))
     if result.estimates == 0:
         output.unlink(missing_ok=True)
         raise BagError(f'bag {options.input!r} ends without any usable pose on '

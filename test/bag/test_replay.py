@@ -642,3 +642,15 @@ def test_thrust_commands_reach_the_odometry_and_bad_ones_are_counted(
     assert last['odom_commands_out_of_order'] == '1'  # the second 6.0 s command
     copied = [m for c, m in BagReader(output).records() if c.topic == '/thrust_command']
     assert len(copied) == 4  # the input is copied unchanged, the bad one too
+    # the caveat of a read on recorded commands, and how to leave them out
+    assert "replay: warning: '/thrust_command' was fed to the controller read" in stderr
+    assert "--command-topic ''" in stderr
+    left_out = work / 'without_commands_out.mcap'
+    code, _, stderr = run_replay(extended, '-o', left_out, '--params-file', params_file,
+                                 '--command-topic', '')
+    assert code == 0, stderr
+    assert 'controller read' not in stderr
+    last = read_diagnostics(left_out)[-1][2]
+    assert last['odom_commands_invalid'] == '0'  # the NaN command never reached the driver
+    assert len([m for c, m in BagReader(left_out).records()
+                if c.topic == '/thrust_command']) == 4  # still copied

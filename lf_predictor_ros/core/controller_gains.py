@@ -61,6 +61,9 @@ MIN_SAMPLES = 120
 # on onedof_feedback, an inertia 10⁴× too small and a dead reckoning kilometres off
 # (docs/BENCHMARKS.md, fifty-second session) [-].
 MAX_NATURAL_FREQ_RATIO = 1.0
+# `identity_gated` judges a controller from at least this many blocks (a median of fewer is
+# not a majority)
+IDENTITY_MIN_BLOCKS = 3
 # The frames the stiffness Kp may act in (`fit_controller_gains`): 'body', Kp on the body-frame
 # error R(ψ)ᵀ(η − η_d) (Fossen 2011 §12.2.6); 'earth', Kp on the earth-frame error, turned
 # into the body frame afterwards, τ = −R(ψ)ᵀ Kp (η − η_d) − Kd ν (the MSS DP PID, anchors §5,
@@ -149,6 +152,37 @@ def block_bounds(length: int, block: int, minimum: int) -> list[tuple[int, int]]
     if full >= 1 and length - full * size >= minimum:
         edges.append(full * size)
     return list(zip(edges, edges[1:] + [length], strict=True))
+
+
+def identity_gated(blocks: Sequence[ControllerGains], median_r_squared: float
+                   ) -> tuple[list[ControllerGains], NDArray[np.bool_]]:
+    """The blocks with R² 0 in every DOF unless some DOF's median R² reaches ``median_r_squared``.
+
+    Whether the controller acts on these estimates at all, asked of the blocks together (a
+    controller identity gate): the PD law of a controller acting on the published estimates
+    explains nearly all of the high-passed commands in most blocks, in the DOFs a move or a
+    turn does not spoil (surge and sway of rao_supply's moves: a median over any eight
+    consecutive blocks of at least 0.96; yaw there down to 0.46), while one acting on another
+    estimator's poses explains less in every DOF: 0.47–0.74 on onedof_feedback (a PID on the
+    true LF pose, sixty-third session), medians of at most 0.87 on a 2 h log of the supply
+    vessel's loop on the observer, whose blocks the read believed at 5–34× the true inertia
+    (docs/BENCHMARKS.md, sixty-fifth session). So the gate asks the best DOF: when no DOF's
+    median R² over the blocks reaches it, no DOF is read. A per-block bound would drop the
+    spoilt blocks of a true read (their values keep the median honest, sixty-third session);
+    the median keeps them. Fewer than `IDENTITY_MIN_BLOCKS` blocks are not judged: the median
+    of one or two is no majority (one spoilt block decides it; in rao_supply's moves two
+    consecutive blocks of a controller acting on these estimates had a best median of 0.82,
+    while single foreign blocks reached 0.90). NaN R² count as 0. Returns (the blocks, gated
+    or not; per DOF whether it was gated: all or none). ``median_r_squared`` ≤ 0: unchanged.
+    """
+    if median_r_squared <= 0.0 or len(blocks) < IDENTITY_MIN_BLOCKS:
+        size = blocks[0].r_squared.shape[0] if blocks else 0
+        return list(blocks), np.zeros(size, dtype=bool)
+    r_squared = np.nan_to_num(np.array([b.r_squared for b in blocks], dtype=np.float64))
+    if np.max(np.median(r_squared, axis=0)) >= median_r_squared:
+        return list(blocks), np.zeros(r_squared.shape[1], dtype=bool)
+    gated = np.ones(r_squared.shape[1], dtype=bool)
+    return [replace(b, r_squared=np.zeros_like(b.r_squared)) for b in blocks], gated
 
 
 def median_implied_inertia(blocks: Sequence[ControllerGains],

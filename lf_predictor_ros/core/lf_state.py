@@ -43,6 +43,7 @@ from lf_predictor_ros.core.controller_gains import (
     block_bounds,
     damping_corrected_inertia,
     fitted_damping_scale,
+    identity_gated,
     median_implied_inertia,
     median_natural_freq,
     read_controller_gains,
@@ -368,7 +369,8 @@ class LfStateEstimator:
                 odometry.params.dead_reckoning_damping_turn, self._read_pool,
                 odometry.params.controller_read_pool_blocks,
                 odometry.params.controller_read_lone_r_squared,
-                odometry.params.controller_read_difference)
+                odometry.params.controller_read_difference,
+                odometry.params.controller_read_median_r_squared)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -424,7 +426,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            damping_turn: float = 0.0, read_pool: ReadPool | None = None,
            pool_blocks: int = 0,
            controller_lone_r_squared: float = 0.0,
-           controller_difference: bool = False) -> Learned:
+           controller_difference: bool = False,
+           controller_median_r_squared: float = 0.0) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -466,7 +469,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     ``refuse_bound``, ``fitted_dofs`` and ``turn``.
     ``controller_lone_r_squared``: the R² a DOF needs that one block alone believes (or a read
     without blocks) (`implied_input_gain`'s ``lone_r_squared``); ``controller_difference``:
-    its ``difference`` (the D term may act on the poses' own filtered difference).
+    its ``difference`` (the D term may act on the poses' own filtered difference);
+    ``controller_median_r_squared``: its ``median_r_squared`` (the controller identity gate).
     ``pool_blocks`` > 0: the controller is read from the last that many blocks ever read
     (`pooled_input_gain`, continuing ``read_pool``), and the pool after it is returned too.
     ``earth_fixed``: without a known or read gain, the fit's environment is one earth-fixed
@@ -488,12 +492,14 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                                            controller_block_time, read_pool, pool_blocks,
                                            controller_earth_frame, bound,
                                            controller_stiffness_frame, controller_pair_ratio,
-                                           controller_lone_r_squared, controller_difference)
+                                           controller_lone_r_squared, controller_difference,
+                                           controller_median_r_squared)
         else:
             read = implied_input_gain(published, *commands, params.sample_time,
                                       controller_block_time, controller_earth_frame, bound,
                                       controller_stiffness_frame, controller_pair_ratio,
-                                      controller_lone_r_squared, controller_difference)
+                                      controller_lone_r_squared, controller_difference,
+                                      controller_median_r_squared)
     elif remembered is not None:
         read = ControllerRead(None, 'controller gains: no commands', 'no_data')
     in_force: ControllerRead | None = read if read is not None and read.outcome == 'read' \
@@ -649,7 +655,8 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
                        stiffness_frame: str = 'body',
                        pair_ratio: float = math.inf,
                        lone_r_squared: float = 0.0,
-                       difference: bool = False) -> ControllerRead:
+                       difference: bool = False,
+                       median_r_squared: float = 0.0) -> ControllerRead:
     """1/M_ii implied by the DP controller acting on the published estimates.
 
     ``times``, ``forces``: the controller's commands and their stamps (a controller stamps its
@@ -679,7 +686,10 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     ``difference``: the D term may also act on the poses' own finite difference through a
     low-pass whose time constant the read finds, a controller that differentiates the pose
     (`controller_gains.read_controller_gains` over `DIFFERENCE_TIMES`; False: the published
-    twist only).
+    twist only). ``median_r_squared``: with at least `controller_gains.IDENTITY_MIN_BLOCKS`
+    blocks, unless some DOF's median R² over them reaches it, no DOF is believed (the
+    controller identity gate, `controller_gains.identity_gated`; 0: off; a read without
+    blocks is not judged).
     """
     if not published or times.shape[0] == 0:
         return ControllerRead(None, 'controller gains: no data', 'no_data')
@@ -709,7 +719,8 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
                                            stiffness_frame=stiffness_frame)
                      for a, b, lead in blocks]
             return _median_read(reads, float(stamps[rows[-1]]), rows.size, block_time,
-                                max_natural_freq, pair_ratio, lone_r_squared)
+                                max_natural_freq, pair_ratio, lone_r_squared,
+                                median_r_squared)
         gains = read_controller_gains(poses, twists, paired, sample_time, difference_times=grid,
                                       run_starts=offsets[1:-1], earth_highpass=earth_highpass,
                                       stiffness_frame=stiffness_frame)
@@ -766,7 +777,8 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
                       max_natural_freq: float = math.inf, stiffness_frame: str = 'body',
                       pair_ratio: float = math.inf,
                       lone_r_squared: float = 0.0,
-                      difference: bool = False) -> tuple[ControllerRead, ReadPool]:
+                      difference: bool = False,
+                      median_r_squared: float = 0.0) -> tuple[ControllerRead, ReadPool]:
     """`implied_input_gain` from the last ``pool_blocks`` blocks ever read, each read once.
 
     The controller of a DP vessel does not change from one window to the next, but its read
@@ -781,8 +793,8 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
     begins at 200 s, without a read). When the newest `POOL_RESTART_BLOCKS` blocks, a new one
     among them, explain no DOF, the pool starts again from them: the read is then 'no_fit' and
     forgotten, as a window's read whose blocks explain nothing (the controller may have been
-    switched off or changed). ``lone_r_squared``, ``difference``: as
-    `implied_input_gain`. Returns (the read, the pool after it).
+    switched off or changed). ``lone_r_squared``, ``difference``, ``median_r_squared`` (over
+    the pooled blocks): as `implied_input_gain`. Returns (the read, the pool after it).
     """
     end = -math.inf if pool is None else pool.end
     kept: tuple[ControllerGains, ...] = () if pool is None else pool.blocks
@@ -818,11 +830,11 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
     if not after.blocks:
         read = implied_input_gain(published, times, forces, sample_time, block_time,
                                   earth_highpass, max_natural_freq, stiffness_frame, pair_ratio,
-                                  lone_r_squared, difference)
+                                  lone_r_squared, difference, median_r_squared)
         return replace(read, note=f'{read.note}; no full block of {block} samples pooled '
                                   'yet'), after
     read = _median_read(list(after.blocks), end, block * len(after.blocks), block_time,
-                        max_natural_freq, pair_ratio, lone_r_squared)
+                        max_natural_freq, pair_ratio, lone_r_squared, median_r_squared)
     restarted = f'; the newest {POOL_RESTART_BLOCKS} blocks explain no DOF, the pool starts ' \
         'again' if restart else ''
     return replace(read, note=f'{read.note}; pooled, {len(new)} new{restarted}'), after
@@ -831,8 +843,15 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
 def _median_read(reads: list[ControllerGains], stamp: float, samples: int,
                  block_time: float, max_natural_freq: float = math.inf,
                  pair_ratio: float = math.inf,
-                 lone_r_squared: float = 0.0) -> ControllerRead:
-    """The read of `implied_input_gain` from one `ControllerGains` per block."""
+                 lone_r_squared: float = 0.0,
+                 median_r_squared: float = 0.0) -> ControllerRead:
+    """The read of `implied_input_gain` from one `ControllerGains` per block.
+
+    ``median_r_squared``: the controller identity gate first (`controller_gains.identity_gated`).
+    """
+    median_r2 = np.median(np.nan_to_num(np.array([r.r_squared for r in reads])), axis=0) \
+        if reads else np.zeros(0)
+    reads, gated = identity_gated(reads, median_r_squared)
     inertia, counts = median_implied_inertia(reads, max_natural_freq, pair_ratio,
                                              lone_r_squared)
     believed = ', '.join(f'{c}' for c in counts)
@@ -841,7 +860,10 @@ def _median_read(reads: list[ControllerGains], stamp: float, samples: int,
     what = f'{believed} of {len(reads)} blocks of {block_time:.0f} s believed' + \
         (f', {earth} with the stiffness in the earth frame' if earth else '') + \
         (f", {len(filters)} with Kd on the pose's own difference (T_v median "
-         f'{float(np.median(filters)):.2g} s)' if filters else '')
+         f'{float(np.median(filters)):.2g} s)' if filters else '') + \
+        (f"; median R² {', '.join(f'{v:.2f}' for v in median_r2)}, none reaches "
+         f"{median_r_squared:g}: a controller on another estimator's poses?"
+         if np.any(gated) else '')
     if inertia is None:
         partial_inertia, partial_freq = believed_medians(reads, max_natural_freq, pair_ratio,
                                                          lone_r_squared)

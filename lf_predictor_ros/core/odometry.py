@@ -461,6 +461,15 @@ class OdometryParams:
         'low blocks; docs/BENCHMARKS.md, sixty-third session). 0.9 (between the two, not '
         'tuned) is the default since the sixty-third session (rule V: the development '
         'divergence gone, every fresh run unchanged); in [0, 1)', '-'))
+    controller_read_median_r_squared: float = field(default=0.0, metadata=field_doc(
+        'with controller_inertia: a controller identity gate. When the read has at least 3 '
+        "blocks (the pool, or the window's) and no DOF's median R^2 over them reaches this, no "
+        'DOF is read: the controller does not act on these estimates (core.controller_gains.'
+        'identity_gated). A controller acting on them: best medians of 0.93 or more '
+        "(rao_supply's and rao_swell's moves); one on another estimator's poses: at most 0.88, "
+        'and on a 2 h supply-vessel log of a loop on the observer the read believed it at '
+        '5-34x the true inertia, a dead reckoning then 30-130 m off in 120 s '
+        '(docs/BENCHMARKS.md, sixty-fifth session). 0: off; in [0, 1)', '-'))
     controller_read_difference: bool = field(default=True, metadata=field_doc(
         "with controller_inertia: the controller's D term may also act on the published poses' "
         'own finite difference through a first-order low-pass of a time constant T_v the read '
@@ -683,6 +692,10 @@ class OdometryParams:
             raise ValueError('vessel_inertia must be 3 finite numbers, all 0 (learn) or all > 0 '
                              f'[kg, kg, kg·m²], got {self.vessel_inertia}')
         object.__setattr__(self, 'vessel_inertia', inertia)
+        if not (math.isfinite(self.controller_read_median_r_squared) and
+                0.0 <= self.controller_read_median_r_squared < 1.0):
+            raise ValueError('controller_read_median_r_squared must be in [0, 1) (0: off), got '
+                             f'{self.controller_read_median_r_squared}')
         if not (math.isfinite(self.controller_read_lone_r_squared) and
                 0.0 <= self.controller_read_lone_r_squared < 1.0):
             raise ValueError('controller_read_lone_r_squared must be in [0, 1) (0: off), got '

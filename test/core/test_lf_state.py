@@ -1049,3 +1049,50 @@ def test_memory_learning_is_true_only_while_a_memory_job_runs() -> None:
         assert not est.memory_learning  # done, not yet collected
     finally:
         est.close()
+
+
+def test_the_identity_gate_refuses_a_controller_acting_on_another_estimate() -> None:
+    """``median_r_squared``: commands of a PD law on another estimate are not read.
+
+    The other estimate is these estimates plus a fast AR(1) difference (3 s, std about 0.1 of
+    the motion's): its PD law explains a median 0.84 of the commands on these estimates, each
+    block passes the 0.5 a block needs, and the read believes an inertia 8 % off. The gate at
+    0.95 refuses it and says why; the controller acting on these estimates (R² 1) is read as
+    exactly with the gate as without, by blocks and pooled.
+    """
+    published, times, forces = _published_pd_loop(600)
+    x = np.array([p.pose[0] for p in published])
+    rng = np.random.default_rng(3)
+    b = math.exp(-1.0 / 3.0)
+    other = x.copy()
+    offset = 0.0
+    for k in range(1, x.size):
+        offset = b * offset + (1.0 - b) * rng.standard_normal() * 0.25
+        other[k] += offset
+    foreign = (-2.0e4 * other - 3.0e5 * np.gradient(other))[:, None]
+    truth = 8.0e4 / 3.0e5 ** 2  # 4 Kp / Kd²
+    believed = implied_input_gain(published, times, foreign, 1.0, block_time=150.0)
+    assert believed.outcome == 'read' and believed.gain is not None
+    assert abs(believed.gain[0] / truth - 1.0) > 0.05  # read, and wrong
+    gated = implied_input_gain(published, times, foreign, 1.0, block_time=150.0,
+                               median_r_squared=0.95)
+    assert gated.outcome == 'no_fit' and gated.gain is None
+    assert 'median R² 0.84, none reaches 0.95' in gated.note
+    read, pool = pooled_input_gain(published, times, foreign, 1.0, 150.0, None, 8,
+                                   median_r_squared=0.95)
+    assert read.outcome == 'no_fit' and len(pool.blocks) == 4  # the blocks are kept, ungated
+    for median in (0.0, 0.95):
+        own = implied_input_gain(published, times, forces, 1.0, block_time=150.0,
+                                 median_r_squared=median)
+        assert own.gain is not None and own.gain[0] == pytest.approx(truth, rel=1e-6)
+        own, _ = pooled_input_gain(published, times, forces, 1.0, 150.0, None, 8,
+                                   median_r_squared=median)
+        assert own.gain is not None and own.gain[0] == pytest.approx(truth, rel=1e-6)
+        assert 'median R²' not in own.note
+    single = implied_input_gain(published, times, foreign, 1.0, median_r_squared=0.95)
+    # a read without blocks, or of two blocks, is not judged (no majority)
+    assert single.gain is not None and 'none reaches' not in single.note
+    two = implied_input_gain(published[:300], times[:300], foreign[:300], 1.0,
+                             block_time=150.0, median_r_squared=0.95)
+    assert '2 blocks' in two.note or 'of 2 blocks' in two.note
+    assert 'none reaches' not in two.note

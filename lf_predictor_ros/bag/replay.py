@@ -24,8 +24,9 @@ The DP controller's commands (WrenchStamped, default `/thrust_command`, optional
 (`controller_inertia`). The read assumes the controller acted on the replayed estimates. The
 commands of a loop closed on another estimator explain less of the regression, but not always
 too little: on a 2 h log of the supply vessel's loop on the observer the read believed them
-from about 30 min on, at 5-34x the true inertia, and a dead reckoning then drifted 30-70 m in
-120 s where holding the last pose drifts under 1 m (docs/BENCHMARKS.md, sixty-fifth session).
+from about 30 min on, at 5-34x the true inertia, and in the benchmark's stand-in for such
+logs a dead reckoning on such a read drifted 30-130 m in 120 s where holding the last pose
+drifts under 1 m (docs/BENCHMARKS.md, sixty-fifth session).
 A replay that fed commands ends with a warning saying so and what was read; `--command-topic
 ''` leaves them out.
 

@@ -468,8 +468,9 @@ class OdometryParams:
         'identity_gated). A controller acting on them: best medians of 0.93 or more '
         "(rao_supply's and rao_swell's moves); one on another estimator's poses: at most 0.88, "
         'and on a 2 h supply-vessel log of a loop on the observer the read believed it at '
-        '5-34x the true inertia, a dead reckoning then 30-130 m off in 120 s '
-        '(docs/BENCHMARKS.md, sixty-fifth session). 0: off; in [0, 1)', '-'))
+        "5-34x the true inertia; in the benchmark's stand-in for such logs a dead reckoning "
+        'on such a read ran 30-130 m off in 120 s (docs/BENCHMARKS.md, sixty-fifth session). '
+        '0: off; in [0, 1)', '-'))
     controller_read_difference: bool = field(default=True, metadata=field_doc(
         "with controller_inertia: the controller's D term may also act on the published poses' "
         'own finite difference through a first-order low-pass of a time constant T_v the read '

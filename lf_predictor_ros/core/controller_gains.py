@@ -178,11 +178,20 @@ def identity_gated(blocks: Sequence[ControllerGains], median_r_squared: float
     if median_r_squared <= 0.0 or len(blocks) < IDENTITY_MIN_BLOCKS:
         size = blocks[0].r_squared.shape[0] if blocks else 0
         return list(blocks), np.zeros(size, dtype=bool)
-    r_squared = np.nan_to_num(np.array([b.r_squared for b in blocks], dtype=np.float64))
-    if np.max(np.median(r_squared, axis=0)) >= median_r_squared:
-        return list(blocks), np.zeros(r_squared.shape[1], dtype=bool)
-    gated = np.ones(r_squared.shape[1], dtype=bool)
+    medians = median_r_squared_per_dof(blocks)
+    if np.max(medians) >= median_r_squared:
+        return list(blocks), np.zeros(medians.shape[0], dtype=bool)
+    gated = np.ones(medians.shape[0], dtype=bool)
     return [replace(b, r_squared=np.zeros_like(b.r_squared)) for b in blocks], gated
+
+
+def median_r_squared_per_dof(blocks: Sequence[ControllerGains]) -> FloatArray:
+    """Per DOF the median R² over the blocks, NaN counted as 0 (no blocks: empty)."""
+    if not blocks:
+        return np.zeros(0)
+    r_squared = np.nan_to_num(np.array([b.r_squared for b in blocks], dtype=np.float64))
+    result: FloatArray = np.median(r_squared, axis=0)
+    return result
 
 
 def median_implied_inertia(blocks: Sequence[ControllerGains],

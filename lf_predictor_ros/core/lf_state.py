@@ -46,6 +46,7 @@ from lf_predictor_ros.core.controller_gains import (
     identity_gated,
     median_implied_inertia,
     median_natural_freq,
+    median_r_squared_per_dof,
     read_controller_gains,
 )
 from lf_predictor_ros.core.estimator import EstimatorStatus
@@ -849,8 +850,7 @@ def _median_read(reads: list[ControllerGains], stamp: float, samples: int,
 
     ``median_r_squared``: the controller identity gate first (`controller_gains.identity_gated`).
     """
-    median_r2 = np.median(np.nan_to_num(np.array([r.r_squared for r in reads])), axis=0) \
-        if reads else np.zeros(0)
+    median_r2 = median_r_squared_per_dof(reads)
     reads, gated = identity_gated(reads, median_r_squared)
     inertia, counts = median_implied_inertia(reads, max_natural_freq, pair_ratio,
                                              lone_r_squared)

@@ -164,10 +164,12 @@ def identity_gated(blocks: Sequence[ControllerGains], median_r_squared: float
     turn does not spoil (surge and sway of rao_supply's moves: a median over any eight
     consecutive blocks of at least 0.96; yaw there down to 0.46), while one acting on another
     estimator's poses explains less in every DOF: 0.47–0.74 on onedof_feedback (a PID on the
-    true LF pose, sixty-third session), medians of at most 0.87 on a 2 h log of the supply
-    vessel's loop on the observer, whose blocks the read believed at 5–34× the true inertia
-    (docs/BENCHMARKS.md, sixty-fifth session). So the gate asks the best DOF: when no DOF's
-    median R² over the blocks reaches it, no DOF is read. A per-block bound would drop the
+    true LF pose, sixty-third session), and on a 2 h log of the supply vessel's loop on the
+    observer, whose blocks the read believed at 5–34× the true inertia, a best median over
+    three or more blocks of at most 0.88, against 0.93 or more for controllers acting on
+    these estimates (docs/BENCHMARKS.md, sixty-fifth session; `OdometryParams.
+    controller_read_median_r_squared`, 0.91 by rule Y). So the gate asks the best DOF: when
+    no DOF's median R² over the blocks reaches it, no DOF is read. A per-block bound would drop the
     spoilt blocks of a true read (their values keep the median honest, sixty-third session);
     the median keeps them. Fewer than `IDENTITY_MIN_BLOCKS` blocks are not judged: the median
     of one or two is no majority (one spoilt block decides it; in rao_supply's moves two

@@ -18,11 +18,11 @@ the machine's noise. ``step_p50_ms`` / ``step_p90_ms`` (idle and busy) are the p
 the step callbacks alone (those after which the node has processed one more sample): the
 statistic to compare two versions of the step with.
 
-``--commands pid`` also closes a DP controller on the node's output, as a DP stack does: a
-helper node in the same process hears ``lf_pose`` over DDS (between callbacks, not timed), runs
-``sim_ros``'s PID on it (the scenario's gains, the D term on the filtered pose difference:
-``dp_controller``'s default) and hands each command to the node's ``thrust_command`` callback,
-stamped with the estimate's stamp. The vessel memory then reads the controller's gains in its
+``--commands pid`` also closes a DP controller on the node's output, as a DP stack does: the
+`dp_controller` node in the same process (its defaults: the scenario's gains, the D term on the
+filtered pose difference) answers ``lf_pose`` over DDS (spun between callbacks, not timed), and
+each of its commands, stamped with the estimate's stamp, goes to the node's ``thrust_command``
+callback. The vessel memory then reads the controller's gains in its
 learning thread (``controller_inertia``, ``core.controller_gains``), which the default feed
 (``--commands none``: no ``thrust_command``) never runs. The commands do not move the simulated
 vessel (the poses are simulated beforehand); the read only needs them to be a PD law of the
@@ -44,9 +44,8 @@ import resource
 import sys
 import time
 
-from geometry_msgs.msg import PoseStamped, WrenchStamped
+from geometry_msgs.msg import WrenchStamped
 import numpy as np
-from numpy.typing import NDArray
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -55,19 +54,17 @@ from rclpy.parameter import Parameter
 from rclpy.utilities import try_shutdown
 
 from lf_predictor_ros.nodes.conversions import (
-    msg_to_pose,
     pose_to_msg,
     stamp_to_sec,
     wrench_to_msg,
 )
 from lf_predictor_ros.nodes.predictor_node import PredictorNode
-from lf_predictor_ros.nodes.qos import publisher_qos
+from lf_predictor_ros.nodes.qos import command_qos
 from lf_predictor_ros.nodes.runner import freeze_startup_heap
-from sim_ros.control.pid import PidGains, PidState, pid_step
-from sim_ros.simulation import Simulator, controller_gains, load_scenario, simulate
+from sim_ros.nodes.dp_controller_node import DpControllerNode
+from sim_ros.simulation import load_scenario, simulate
 
 COMMAND_FEEDS = ('none', 'pid')  # --commands
-FloatArray = NDArray[np.float64]
 
 
 def _cpu_seconds() -> float:
@@ -135,52 +132,53 @@ class CollectionTimer:
                 'gc_max_ms': max(self.seconds, default=0.0) * 1e3}
 
 
-class PidOnEstimates:
-    """``--commands pid``: `sim_ros`'s PID on the node's ``lf_pose``, heard over DDS.
+class DpControllerFeed:
+    """``--commands pid``: the `dp_controller` node answering the node's ``lf_pose``.
 
-    A DP controller as `dp_controller` runs it with its default (``velocity_source:
-    difference``): one PID step per estimate, dt the stamp difference, the command stamped with
-    the estimate's stamp.
+    The product's controller with its defaults (scenario supply_closed_loop, the D term on the
+    filtered pose difference), in `context`, and a probe on its ``thrust_command``, both spun
+    by `answer` between the pose callbacks.
     """
 
-    def __init__(self, context: Context, gains: PidGains, setpoint: FloatArray,
-                 tau_max: FloatArray) -> None:
-        """Subscribe to ``lf_pose`` in `context` (the predictor node's)."""
-        self._node = Node('latency_dp_controller', context=context)
-        self._heard: list[PoseStamped] = []
-        self._node.create_subscription(PoseStamped, 'lf_pose', self._heard.append,
-                                       publisher_qos())
+    def __init__(self, context: Context) -> None:
+        """Build the controller and the probe in `context` (the predictor node's)."""
+        self.controller = DpControllerNode(context=context)
+        self._probe = Node('latency_command_probe', context=context)
+        self._heard: list[WrenchStamped] = []
+        self._probe.create_subscription(WrenchStamped, 'thrust_command', self._heard.append,
+                                        command_qos())
         self._executor = SingleThreadedExecutor(context=context)
-        self._executor.add_node(self._node)
-        self._gains, self._setpoint, self._tau_max = gains, setpoint, tau_max
-        self._state = PidState()
+        self._executor.add_node(self.controller)
+        self._executor.add_node(self._probe)
         self._last_stamp: float | None = None
         self.commands = 0
 
     def answer(self, timeout: float) -> list[WrenchStamped]:
-        """Spin until an estimate is heard (at most `timeout` [s]); its PID commands."""
+        """Spin until a command is heard (at most `timeout` [s]); the commands with new stamps.
+
+        The controller answers a re-offered estimate again with the same stamp (a lockstep
+        simulator's first sample); the predictor would count the repeat out of order, so it is
+        passed on once.
+        """
         deadline = time.monotonic() + timeout
         while not self._heard and time.monotonic() < deadline:
             self._executor.spin_once(timeout_sec=max(deadline - time.monotonic(), 0.0))
-        self._executor.spin_once(timeout_sec=0.0)  # any other estimate already delivered
+        self._executor.spin_once(timeout_sec=0.0)  # any other command already delivered
         answers = []
         for msg in self._heard:
             stamp = stamp_to_sec(msg.header.stamp)
-            if self._last_stamp is not None and stamp <= self._last_stamp:
-                continue  # a re-sent estimate: the controller answers each stamp once
-            dt = 1.0 if self._last_stamp is None else stamp - self._last_stamp
-            self._last_stamp = stamp
-            tau, self._state = pid_step(self._state, self._gains, msg_to_pose(msg),
-                                        self._setpoint, dt, self._tau_max)
-            answers.append(wrench_to_msg(tau, msg.header.stamp))
+            if self._last_stamp is None or stamp > self._last_stamp:
+                self._last_stamp = stamp
+                answers.append(msg)
         self._heard.clear()
         self.commands += len(answers)
         return answers
 
     def close(self) -> None:
-        """Destroy the helper node."""
+        """Destroy the controller and the probe."""
         self._executor.shutdown()
-        self._node.destroy_node()
+        self._probe.destroy_node()
+        self.controller.destroy_node()
 
 
 def measure(rate_hz: float, minutes: float, speed: float,
@@ -189,7 +187,7 @@ def measure(rate_hz: float, minutes: float, speed: float,
 
     ``freeze``: freeze the heap after building the node, as the node executables do
     (`nodes.runner.freeze_startup_heap`); False measures the node without it. ``commands``
-    (`COMMAND_FEEDS`): 'pid' closes `PidOnEstimates` on the node's output (module docstring).
+    (`COMMAND_FEEDS`): 'pid' closes `DpControllerFeed` on the node's output (module docstring).
     """
     if commands not in COMMAND_FEEDS:
         raise ValueError(f'commands must be one of {COMMAND_FEEDS}, got {commands!r}')
@@ -202,14 +200,7 @@ def measure(rate_hz: float, minutes: float, speed: float,
     context = Context()
     rclpy.init(context=context)
     node = PredictorNode(context=context, parameter_overrides=[Parameter('ndof', value=3)])
-    controller = None
-    if commands == 'pid':
-        simulator = Simulator(scenario, 11)
-        controller = PidOnEstimates(
-            context, controller_gains(scenario, simulator.true_model()),
-            np.asarray(scenario.controller.setpoint, dtype=np.float64),
-            np.asarray(scenario.controller.tau_max or simulator.actuator_limit(),
-                       dtype=np.float64))
+    controller = DpControllerFeed(context) if commands == 'pid' else None
     if freeze:
         freeze_startup_heap()
     collections = CollectionTimer()

@@ -59,39 +59,41 @@ def test_the_collection_timer_counts_full_collections_while_it_records() -> None
 
 
 def test_the_pid_feed_answers_each_estimate_once_with_the_pid_command(ros_context: Any) -> None:
+    """`DpControllerFeed`: dp_controller's command for each new estimate, its stamp, once."""
     from geometry_msgs.msg import PoseStamped
     from rclpy.node import Node
 
-    from lf_predictor_ros.benchmark.latency import PidOnEstimates
+    from lf_predictor_ros.benchmark.latency import DpControllerFeed
     from lf_predictor_ros.nodes.conversions import msg_to_force, pose_to_msg, stamp_to_sec
     from lf_predictor_ros.nodes.qos import publisher_qos
-    from sim_ros.control.pid import PidState, gains_from_bandwidth, pid_step
+    from sim_ros.control.pid import PidState, pid_step
 
-    gains = gains_from_bandwidth([6e6, 8e6, 4e9], [0.1, 0.1, 0.15])
-    setpoint, tau_max = np.array([0.5, 0.0, 0.0]), np.array([1e6, 1e6, 1e8])
-    controller = PidOnEstimates(ros_context, gains, setpoint, tau_max)
+    feed = DpControllerFeed(ros_context)
+    config = feed.controller.config
+    gains, tau_max = config.gains(), np.array(config.tau_max)
     node = Node('test_lf_pose', context=ros_context)
     publisher = node.create_publisher(PoseStamped, 'lf_pose', publisher_qos())
     poses = [np.array([1.0, -2.0, 0.1]), np.array([1.2, -2.1, 0.12])]
-    first, state = pid_step(PidState(), gains, poses[0], setpoint, 1.0, tau_max)
+    setpoint = np.array(config.setpoint)
+    first, state = pid_step(PidState(), gains, poses[0], setpoint, config.nominal_dt, tau_max)
     second, _ = pid_step(state, gains, poses[1], setpoint, 2.0, tau_max)  # dt: the stamps'
     try:
         end = time.monotonic() + 20.0
         while publisher.get_subscription_count() == 0:
-            assert time.monotonic() < end, 'the PID feed never matched lf_pose'
+            assert time.monotonic() < end, 'the controller never matched lf_pose'
             time.sleep(0.01)
         publisher.publish(pose_to_msg(poses[0], 10.0))
-        answers = controller.answer(timeout=20.0)
+        answers = feed.answer(timeout=20.0)
         assert len(answers) == 1 and stamp_to_sec(answers[0].header.stamp) == 10.0
         np.testing.assert_allclose(msg_to_force(answers[0]), first, rtol=1e-12)
         publisher.publish(pose_to_msg(poses[0], 10.0))  # the same estimate again
-        assert controller.answer(timeout=0.5) == []
+        assert feed.answer(timeout=0.5) == []
         publisher.publish(pose_to_msg(poses[1], 12.0))
-        answers = controller.answer(timeout=20.0)
+        answers = feed.answer(timeout=20.0)
         assert len(answers) == 1 and stamp_to_sec(answers[0].header.stamp) == 12.0
         np.testing.assert_allclose(msg_to_force(answers[0]), second, rtol=1e-12)
-        assert controller.commands == 2
-        assert np.abs(second[0]) > 1e3  # the setpoint offset commands a real force
+        assert feed.commands == 2
+        assert np.all(np.abs(second[:2]) > 1e3)  # the offset from the setpoint: a real force
     finally:
-        controller.close()
+        feed.close()
         node.destroy_node()

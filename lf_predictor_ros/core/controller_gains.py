@@ -155,7 +155,7 @@ def block_bounds(length: int, block: int, minimum: int) -> list[tuple[int, int]]
 
 
 def identity_gated(blocks: Sequence[ControllerGains], median_r_squared: float
-                   ) -> tuple[list[ControllerGains], NDArray[np.bool_]]:
+                   ) -> tuple[list[ControllerGains], bool]:
     """The blocks with R² 0 in every DOF unless some DOF's median R² reaches ``median_r_squared``.
 
     Whether the controller acts on these estimates at all, asked of the blocks together (a
@@ -175,16 +175,12 @@ def identity_gated(blocks: Sequence[ControllerGains], median_r_squared: float
     of one or two is no majority (one spoilt block decides it; in rao_supply's moves two
     consecutive blocks of a controller acting on these estimates had a best median of 0.82,
     while single foreign blocks reached 0.90). NaN R² count as 0. Returns (the blocks, gated
-    or not; per DOF whether it was gated: all or none). ``median_r_squared`` ≤ 0: unchanged.
+    or not; whether they were gated). ``median_r_squared`` ≤ 0: unchanged.
     """
-    if median_r_squared <= 0.0 or len(blocks) < IDENTITY_MIN_BLOCKS:
-        size = blocks[0].r_squared.shape[0] if blocks else 0
-        return list(blocks), np.zeros(size, dtype=bool)
-    medians = median_r_squared_per_dof(blocks)
-    if np.max(medians) >= median_r_squared:
-        return list(blocks), np.zeros(medians.shape[0], dtype=bool)
-    gated = np.ones(medians.shape[0], dtype=bool)
-    return [replace(b, r_squared=np.zeros_like(b.r_squared)) for b in blocks], gated
+    if median_r_squared <= 0.0 or len(blocks) < IDENTITY_MIN_BLOCKS or \
+            np.max(median_r_squared_per_dof(blocks)) >= median_r_squared:
+        return list(blocks), False
+    return [replace(b, r_squared=np.zeros_like(b.r_squared)) for b in blocks], True
 
 
 def median_r_squared_per_dof(blocks: Sequence[ControllerGains]) -> FloatArray:

@@ -863,7 +863,7 @@ def _median_read(reads: list[ControllerGains], stamp: float, samples: int,
          f'{float(np.median(filters)):.2g} s)' if filters else '') + \
         (f"; median R² {', '.join(f'{v:.2f}' for v in median_r2)}, none reaches "
          f"{median_r_squared:g}: a controller on another estimator's poses?"
-         if np.any(gated) else '')
+         if gated else '')
     if inertia is None:
         partial_inertia, partial_freq = believed_medians(reads, max_natural_freq, pair_ratio,
                                                          lone_r_squared)

@@ -1,81 +1,109 @@
-"""The ω0 spectrum fit in a child process (issue 13, cost: the node's callbacks while training).
+"""The node's background jobs in a child process (issue 13, cost: the callbacks while training).
 
-scipy's Nelder-Mead (`frequency._fit_peak`), run on the predictor's worker thread, keeps the
-node's pose callbacks from taking the GIL for up to 132 ms; the longest callbacks while training
-(37–112 ms) overlapped it (docs/BENCHMARKS.md, twenty-eighth session). In a child process the fit
-holds no lock of the node's, and the worker thread waits for its result with the GIL released.
+The ω0 spectrum fit, the retraining and the vessel memory's job run on worker threads of the
+node's process, and every Python step of theirs holds the GIL against the pose callbacks. A
+thread waiting for the GIL takes it back only after Python's switch interval (5 ms) if the
+holder does not release it sooner, so a callback that meets a running job can take milliseconds
+instead of a tenth of one. scipy's Nelder-Mead (`frequency._fit_peak`) kept the callbacks from
+the GIL for up to 132 ms (docs/BENCHMARKS.md, twenty-eighth session), and with the fit here the
+retraining and the vessel memory's job still stretched 1–2 % of the callbacks that met them to
+1.5–7 ms (sixty-sixth session). In a child process a job holds no lock of the node's, and the
+worker thread waits for its result with the GIL released.
 
-`FitProcess` is a `frequency.SpectrumFit`: called with `frequency.spectrum_estimate`'s
-arguments, it returns that function's result, computed in one long-lived child process (a
-`ProcessPoolExecutor` of one worker, started by `FitProcess.start` or the first call). The
-child comes from the 'forkserver' start method: a fork of a small server process that has
-imported numpy, scipy and `core.frequency` only, never a fork of the node, whose rclpy and torch
-threads a fork would copy in an unknown state ('spawn' where forkserver does not exist). Its
-numbers are those of the calling thread: the same function, library and CPU
-(`test/core/test_fit_process.py`).
+`FitProcess.run` computes any module-level function of picklable arguments in one long-lived
+child process (a `ProcessPoolExecutor` of one worker, started by `FitProcess.start` or the first
+call); called with `frequency.spectrum_estimate`'s arguments a `FitProcess` is a
+`frequency.SpectrumFit`. The child comes from the 'forkserver' start method: a fork of a small
+server process that has imported numpy, scipy, torch and the jobs' modules only (`PRELOAD`),
+never a fork of the node, whose rclpy and torch threads a fork would copy in an unknown state
+('spawn' where forkserver does not exist). Its numbers are those of the calling thread: the same
+functions, libraries and CPU (`test/core/test_fit_process.py`). Jobs run one at a time, in the
+order asked.
 
-An error of the estimate itself (a ValueError for too little data) is raised to the caller as
-it is. When the child cannot be started or dies, the estimate is computed on the calling thread
-instead (the same numbers; counted in ``failures``) and the next call starts a new child.
+An error of the job itself (a ValueError for too little data) is raised to the caller as it is.
+When the child cannot be started or dies, the job is computed on the calling thread instead (the
+same numbers; counted in ``failures``) and the next call starts a new child.
 
-The predictor uses it for its background jobs only (`frequency.spectrum_fit_by`); inline
-predictors (replay, benchmarks) compute on their own thread as before.
+The predictor and the vessel memory use it for their background jobs only (`predictor`,
+`lf_state`); inline ones (replay, benchmarks) compute on their own thread as before.
 """
 from __future__ import annotations
 
 from collections.abc import Callable
-from concurrent.futures import CancelledError, ProcessPoolExecutor
+from concurrent.futures import CancelledError, Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 import multiprocessing
 import os
 import signal
 import threading
 import time
-from typing import TypeVar
+from typing import TypeVar, cast
 
 from lf_predictor_ros.core.frequency import FrequencyEstimate, _FloatArray, spectrum_estimate
 
-# what the forkserver imports once, before it forks the child
-PRELOAD = ['lf_predictor_ros.core.frequency']
+# what the forkserver imports once, before it forks the child: the jobs' modules (torch with
+# them), so that no job waits for an import
+PRELOAD = ['lf_predictor_ros.core.frequency', 'lf_predictor_ros.core.retraining',
+           'lf_predictor_ros.core.lf_state']
 PARENT_CHECK_PERIOD = 1.0  # [s] how often the child checks that the node still exists
+STOP_CHECK_PERIOD = 0.05  # [s] how often `FitProcess.run` looks at its ``stop`` while waiting
 _T = TypeVar('_T')
+_NO_CHILD = object()  # `FitProcess._ask`'s answer when there is no child
+
+
+class JobAbandonedError(Exception):
+    """`FitProcess.run` stopped waiting: its ``stop`` was set (the child finishes the job)."""
 
 
 class FitProcess:
-    """`frequency.spectrum_estimate` in one long-lived child process (module docstring)."""
+    """Background jobs in one long-lived child process (module docstring)."""
 
     def __init__(self) -> None:
         """No process runs until `start` or the first call."""
         self._lock = threading.Lock()
         self._executor: ProcessPoolExecutor | None = None
-        self.failures = 0  # fits computed on the caller's thread: no child, or it died
+        self.failures = 0  # jobs computed on the caller's thread: no child, or it died
         self.starts = 0  # children started
 
     def __call__(self, data: _FloatArray, sample_time: float, highpass_cutoff: float,
                  wave_band: tuple[float, float], min_peak_ratio: float,
                  previous: float | FrequencyEstimate | None) -> FrequencyEstimate:
         """`spectrum_estimate` of these arguments, computed in the child."""
-        args = (data, sample_time, highpass_cutoff, wave_band, min_peak_ratio, previous)
-        answer = self._ask(spectrum_estimate, *args)
-        if answer is None:  # no child (cannot start, killed, closed meanwhile): computed here
+        return self.run(spectrum_estimate, data, sample_time, highpass_cutoff, wave_band,
+                        min_peak_ratio, previous)
+
+    def run(self, function: Callable[..., _T], *args: object,
+            stop: threading.Event | None = None,
+            fallback: Callable[[], _T] | None = None) -> _T:
+        """``function(*args)`` computed in the child (a module-level function, picklable args).
+
+        Without a child (it cannot start, was killed, or closed meanwhile) ``fallback()`` is
+        computed on this thread instead (None: ``function(*args)``), counted in ``failures``.
+        Raises what ``function`` raised, and `JobAbandonedError` once ``stop`` is set while waiting
+        (looked at every `STOP_CHECK_PERIOD`; the child finishes the job, its result is lost).
+        """
+        answer = self._ask(function, *args, stop=stop)
+        if answer is _NO_CHILD:
             with self._lock:
                 self.failures += 1
-            return spectrum_estimate(*args)
-        return answer
+            return fallback() if fallback is not None else function(*args)
+        return cast(_T, answer)
 
     def start(self) -> bool:
         """Start the child now and wait until it answers (not at the first fit).
 
-        The first start of a process's forkserver imports numpy and scipy in a fresh
-        interpreter (1–2 s): at the first fit, a lockstep run would wait that long for its first
-        ω0 (the demo lost its first two trainings). False if no child can be started.
+        The first start of a process's forkserver imports `PRELOAD` (numpy, scipy, torch) in a
+        fresh interpreter (seconds): at the first job, a lockstep run would wait that long for
+        its first ω0 (the demo lost its first two trainings). False if no child can be started.
         """
-        return self._ask(_ready) is not None
+        return self._ask(_ready) is not _NO_CHILD
 
-    def _ask(self, function: Callable[..., _T], *args: object) -> _T | None:
-        """``function(*args)`` in the child; None when the child is not there.
+    def _ask(self, function: Callable[..., _T], *args: object,
+             stop: threading.Event | None = None) -> object:
+        """``function(*args)`` in the child; `_NO_CHILD` when the child is not there.
 
-        An exception of ``function`` itself is raised here as it is.
+        An exception of ``function`` itself is raised here as it is; `JobAbandonedError` once
+        ``stop`` is set while waiting.
         """
         try:
             future = self._running().submit(function, *args)
@@ -83,11 +111,11 @@ class FitProcess:
             future = None  # an AssertionError), or a broken or closed pool
         if future is not None:
             try:
-                return future.result()
+                return _result(future, stop)
             except (BrokenProcessPool, CancelledError):  # the child died, or close() meanwhile
                 pass
         self._discard()
-        return None
+        return _NO_CHILD
 
     @property
     def running(self) -> bool:
@@ -112,6 +140,20 @@ class FitProcess:
             executor, self._executor = self._executor, None
         if executor is not None:
             executor.shutdown(wait=False, cancel_futures=True)
+
+
+def _result(future: Future[_T], stop: threading.Event | None) -> _T:
+    """The future's result; `JobAbandonedError` once ``stop`` is set before it is there."""
+    if stop is None:
+        return future.result()
+    while True:
+        try:
+            return future.result(timeout=STOP_CHECK_PERIOD)
+        except TimeoutError:
+            if future.done():  # the job itself raised a TimeoutError
+                raise
+            if stop.is_set():
+                raise JobAbandonedError('stopped while the child computes the job') from None
 
 
 def _ready() -> bool:

@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lf_predictor_ros.core.filters import zero_phase
+from lf_predictor_ros.core.readonly import ReadOnlyArrays
 
 FloatArray = NDArray[np.float64]
 DeadReckoner = Literal['model', 'constant_velocity', 'hold']
@@ -101,7 +102,7 @@ def body_velocity(targets: ArrayLike, sample_time: float) -> FloatArray:
 
 
 @dataclass(frozen=True)
-class LfDynamics:
+class LfDynamics(ReadOnlyArrays):
     """ν̇ = F ν + G τ + B β(ψ), one row per DOF (see the module docstring).
 
     Attributes:

@@ -60,6 +60,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 import torch
 
+from lf_predictor_ros.core.readonly import ReadOnlyArrays
 from lf_predictor_ros.core.regressors import (
     RAMP_ORDERS,
     as_series,
@@ -916,7 +917,7 @@ def _frozen(array: torch.Tensor) -> FloatArray:
 
 
 @dataclass(frozen=True, eq=False)
-class NumpyNnarmax:
+class NumpyNnarmax(ReadOnlyArrays):
     """Immutable numpy copy of an ``NnarmaxNet`` for the real-time predict path.
 
     Computes exactly ``NnarmaxNet.forward`` (float64) without torch. Arrays are read-only; a new

@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 import math
 import threading
 import time
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,6 +46,7 @@ from lf_predictor_ros.core.network import (
     without_force_inputs,
 )
 from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.readonly import read_only
 from lf_predictor_ros.core.regressors import build_regressors
 from lf_predictor_ros.core.targets import TargetWindow, training_mask
 from lf_predictor_ros.core.training import (
@@ -118,6 +120,12 @@ class RetrainResult:
     # ``thrust_hold``: the window showed no excitation and the candidate kept the thrust
     # weights of the network in service (`thrust_held`)
     thrust_held: bool = False
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Unpickled (from `core.fit_process`'s child): ``narrow_reference`` read-only again."""
+        for name, value in state.items():
+            object.__setattr__(self, name, value)
+        read_only(self.narrow_reference)
 
 
 # Dead-reckoning horizon of the thrust test of ``thrust_validation`` [s] (the dead-reckoning

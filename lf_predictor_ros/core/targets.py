@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lf_predictor_ros.core.readonly import ReadOnlyArrays
+
 _FloatArray = NDArray[np.float64]
 
 
@@ -85,7 +87,7 @@ def training_mask(n_samples: int, transient_len: int) -> NDArray[np.bool_]:
 
 
 @dataclass(frozen=True, eq=False)
-class TargetWindow:
+class TargetWindow(ReadOnlyArrays):
     """Target series with the sample index of every target (index = t / sample_time).
 
     Attributes:

@@ -1,7 +1,8 @@
-"""The ω0 spectrum fit in a child process (core/fit_process.py)."""
+"""The background jobs in a child process (core/fit_process.py): the ω0 fit and any job."""
 from __future__ import annotations
 
 import math
+import operator
 import os
 from pathlib import Path
 import signal
@@ -83,6 +84,39 @@ def test_a_killed_child_is_replaced_and_the_call_answered_here(fit: FitProcess) 
     assert fit.failures == 1 and not fit.running
     assert fit(*args) == expected  # a new child
     assert fit.starts == 2 and fit.failures == 1
+
+
+def test_any_job_runs_in_the_child_and_its_errors_come_back_as_they_are(fit: FitProcess) -> None:
+    # module-level functions only: the child imports them (this test module it could not)
+    assert fit.run(math.fsum, [0.1] * 10) == math.fsum([0.1] * 10)
+    assert fit.run(os.getpid) != os.getpid()  # computed elsewhere
+    with pytest.raises(ZeroDivisionError):
+        fit.run(operator.truediv, 1.0, 0.0)
+    stop = threading.Event()
+    with pytest.raises(TimeoutError, match='the job'):  # not taken for a wait's timeout
+        fit.run(exec, "raise TimeoutError('the job')", stop=stop)
+    assert fit.starts == 1 and fit.failures == 0
+
+
+def test_a_set_stop_abandons_the_wait_not_the_child(fit: FitProcess) -> None:
+    stop = threading.Event()
+    threading.Timer(0.2, stop.set).start()
+    start = time.monotonic()
+    with pytest.raises(fit_process.JobAbandonedError):
+        fit.run(time.sleep, 30.0, stop=stop)
+    assert time.monotonic() - start < 0.2 + 10 * fit_process.STOP_CHECK_PERIOD + 5.0
+    assert fit.running and fit.failures == 0  # the child sleeps on; the next job waits for it
+
+
+def test_without_a_child_the_fallback_is_computed_here(
+        fit: FitProcess, monkeypatch: pytest.MonkeyPatch) -> None:
+    def no_process() -> None:  # multiprocessing's refusal inside a daemonic process
+        raise AssertionError('daemonic processes are not allowed to have children')
+
+    monkeypatch.setattr(fit_process, '_context', no_process)
+    assert fit.run(math.fsum, [1.0, 2.0], fallback=lambda: 42.0) == 42.0
+    assert fit.run(math.fsum, [1.0, 2.0]) == 3.0  # no fallback: the job itself, here
+    assert fit.failures == 2 and fit.starts == 0
 
 
 def test_the_setting_is_per_thread_and_restored() -> None:

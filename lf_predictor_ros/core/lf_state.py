@@ -5,9 +5,9 @@ LF pose (issue 14): every ``update`` feeds the ``AdaptivePredictor`` (thesis Alg
 its LF pose to ``LfOdometry`` (velocity, covariances, dead reckoning). Whenever a retraining has
 produced new zero-phase targets, the vessel memory is learned from them and the applied thrust
 (``core.lf_dynamics.learn_vessel_memory``) and the covariances are recalibrated against them.
-With ``background`` the vessel memory and the calibration run on a worker thread (the update
-path only hands over copies and picks up a finished result, it never waits), as the network's
-training does.
+With ``background`` the vessel memory and the calibration run in the child process of
+`core.fit_process`, handed over by a worker thread (the update path only hands over copies and
+picks up a finished result, it never waits), as the network's training does.
 
 ``coast(t, force)`` is the dead-reckoning step for a time with thrust but no accepted pose.
 ``command(t, force)`` logs the DP controller's command (``thrust_command``): without a given
@@ -26,7 +26,7 @@ from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 import math
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,6 +50,7 @@ from lf_predictor_ros.core.controller_gains import (
     read_controller_gains,
 )
 from lf_predictor_ros.core.estimator import EstimatorStatus
+from lf_predictor_ros.core.fit_process import FitProcess, shared_fit_process
 from lf_predictor_ros.core.lf_dynamics import (
     FORCE_MARGIN,
     MIN_DAMPING_RATE,
@@ -72,6 +73,8 @@ from lf_predictor_ros.core.odometry import (
 )
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
+from lf_predictor_ros.core.published_columns import PublishedColumns
+from lf_predictor_ros.core.readonly import ReadOnlyArrays
 from lf_predictor_ros.core.retraining import target_filter
 from lf_predictor_ros.core.targets import TargetWindow
 
@@ -94,7 +97,7 @@ class ReadPool:
 
 
 @dataclass(frozen=True)
-class ControllerRead:
+class ControllerRead(ReadOnlyArrays):
     """One attempt to read the DP controller's implied thrust gain (`implied_input_gain`).
 
     Attributes:
@@ -343,41 +346,44 @@ class LfStateEstimator:
         reading = odometry.params.controller_inertia
         commands = (np.array(self._command_times), np.array(self._commands)) if \
             reading and self._commands else None
-        args = (self.params, times, values, np.array(self._forces)[rows],
-                self.predictor.wave_peak_freq, odometry.published(),
-                odometry.params.dead_reckoning_timeout, odometry.params.min_calibration_samples,
-                odometry.params.pose_lag_prior,
-                _input_gain(odometry.params.vessel_inertia, self.ndof), commands,
-                self._controller_read if reading else None, self.predictor.targets_peak_damping,
-                reference, odometry.params.pose_twin_fit,
-                odometry.params.twist_reference_cutoff, odometry.params.pose_reference_cutoff,
-                odometry.params.twist_likelihood_fit, odometry.params.twist_attenuation,
-                odometry.params.pose_heading_speed_lag,
-                odometry.params.controller_read_block_time,
-                odometry.params.controller_read_earth_frame,
-                odometry.params.dead_reckoning_force_margin,
-                odometry.params.controller_read_damping,
-                self._kept_damping,
-                DAMPING_MEMORY_DOFS[odometry.params.dead_reckoning_damping_memory][:self.ndof],
-                odometry.params.controller_read_stiffness_frame,
-                odometry.params.controller_read_fitted_damping,
-                odometry.params.controller_read_keep_dofs,
-                odometry.params.free_fit_earth_fixed,
-                odometry.params.controller_read_pair_ratio or math.inf,
-                odometry.params.dead_reckoning_damping_refuse_bound,
-                FITTED_DAMPING_DOFS[odometry.params.controller_read_fitted_damping_dofs][
-                    :self.ndof],
-                odometry.params.dead_reckoning_damping_turn, self._read_pool,
-                odometry.params.controller_read_pool_blocks,
-                odometry.params.controller_read_lone_r_squared,
-                odometry.params.controller_read_difference,
-                odometry.params.controller_read_median_r_squared)
+        head: tuple[Any, ...] = (self.params, times, values, np.array(self._forces)[rows],
+                                 self.predictor.wave_peak_freq)
+        tail: tuple[Any, ...] = (
+            odometry.params.dead_reckoning_timeout, odometry.params.min_calibration_samples,
+            odometry.params.pose_lag_prior,
+            _input_gain(odometry.params.vessel_inertia, self.ndof), commands,
+            self._controller_read if reading else None, self.predictor.targets_peak_damping,
+            reference, odometry.params.pose_twin_fit,
+            odometry.params.twist_reference_cutoff, odometry.params.pose_reference_cutoff,
+            odometry.params.twist_likelihood_fit, odometry.params.twist_attenuation,
+            odometry.params.pose_heading_speed_lag,
+            odometry.params.controller_read_block_time,
+            odometry.params.controller_read_earth_frame,
+            odometry.params.dead_reckoning_force_margin,
+            odometry.params.controller_read_damping,
+            self._kept_damping,
+            DAMPING_MEMORY_DOFS[odometry.params.dead_reckoning_damping_memory][:self.ndof],
+            odometry.params.controller_read_stiffness_frame,
+            odometry.params.controller_read_fitted_damping,
+            odometry.params.controller_read_keep_dofs,
+            odometry.params.free_fit_earth_fixed,
+            odometry.params.controller_read_pair_ratio or math.inf,
+            odometry.params.dead_reckoning_damping_refuse_bound,
+            FITTED_DAMPING_DOFS[odometry.params.controller_read_fitted_damping_dofs][
+                :self.ndof],
+            odometry.params.dead_reckoning_damping_turn, self._read_pool,
+            odometry.params.controller_read_pool_blocks,
+            odometry.params.controller_read_lone_r_squared,
+            odometry.params.controller_read_difference,
+            odometry.params.controller_read_median_r_squared)
+        published = odometry.published()
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
-            self._job = self._executor.submit(_learn, *args)
+            self._job = self._executor.submit(_learn_in_child, shared_fit_process(), head,
+                                              published, tail)
         else:
-            self._apply(_learn(*args))
+            self._apply(_learn(*(*head, published, *tail)))
 
     def _collect(self) -> None:
         job = self._job
@@ -403,6 +409,28 @@ class LfStateEstimator:
                 rate = rate / np.diag(memory.model.input_gain)
             self._kept_damping = (rate, memory.damping_score)
         self._memory_error = None
+
+
+def _learn_in_child(process: FitProcess, head: tuple[Any, ...], published: list[Published],
+                    tail: tuple[Any, ...]) -> Learned:
+    """`_learn` (``*head, published, *tail``) in the child process (`core.fit_process`).
+
+    The history goes as `PublishedColumns` (as objects its pickling would hold this thread's
+    GIL for about 20 ms); without a child the job is computed on this thread.
+    """
+    try:
+        history: PublishedColumns | list[Published] = PublishedColumns.of(published)
+    except ValueError:
+        history = published
+    return process.run(_learn_packed, head, history, tail,
+                       fallback=lambda: _learn(*(*head, published, *tail)))
+
+
+def _learn_packed(head: tuple[Any, ...], history: PublishedColumns | list[Published],
+                  tail: tuple[Any, ...]) -> Learned:
+    """In the child: `_learn` with the history unpacked."""
+    published = history.records() if isinstance(history, PublishedColumns) else history
+    return _learn(*(*head, published, *tail))
 
 
 def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, forces: FloatArray,

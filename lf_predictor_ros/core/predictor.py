@@ -85,7 +85,7 @@ import torch
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.estimator import EstimatorState, EstimatorStatus
 from lf_predictor_ros.core.filters import low_pass_step
-from lf_predictor_ros.core.fit_process import FitProcess, shared_fit_process
+from lf_predictor_ros.core.fit_process import FitProcess, JobAbandonedError, shared_fit_process
 from lf_predictor_ros.core.frequency import FrequencyEstimate, spectrum_fit_by
 from lf_predictor_ros.core.heading import ContinuousHeading, wrap_angle, wrap_pose
 from lf_predictor_ros.core.job_worker import JobWorker
@@ -266,7 +266,8 @@ class AdaptivePredictor:
         self._outcomes: queue.SimpleQueue[_JobOutcome] = queue.SimpleQueue()
         self._stop = threading.Event()
         self._worker = JobWorker(worker_name)  # trainings and ω0 jobs, one at a time
-        # the worker's ω0 spectrum fits run in a child process (core.fit_process); inline: here
+        # the worker's retrainings and ω0 spectrum fits run in a child process
+        # (core.fit_process); inline: here
         self._fit_process: FitProcess | None = shared_fit_process() if background else None
         self._generation = 0
         self._model: NumpyNnarmax | None = None
@@ -623,9 +624,10 @@ class AdaptivePredictor:
 
     @property
     def omega_fits_here(self) -> int:
-        """ω0 fits this process ran on a worker thread: no fit child process (0 inline).
+        """Background jobs this process computed on a worker thread: no child (0 inline).
 
-        Process-wide (one `core.fit_process` child serves every predictor of the process).
+        ω0 fits, retrainings and vessel-memory jobs; process-wide (one `core.fit_process` child
+        serves every predictor and vessel memory of the process).
         """
         return 0 if self._fit_process is None else self._fit_process.failures
 
@@ -1111,11 +1113,21 @@ class AdaptivePredictor:
              frequency: FrequencyEstimate | float | None, stop: threading.Event,
              before_restart: tuple[float, TargetWindow] | None = None) -> None:
         """Worker body: never raises; the outcome goes through the queue."""
+        def here() -> RetrainResult:
+            with spectrum_fit_by(self._fit_process):
+                return run_retraining(self.params, snapshot, incumbent, targets, frequency,
+                                      stop, before_restart)
+
         try:
-            with self._training_lock, spectrum_fit_by(self._fit_process):
-                # one training at a time per lock (the gate's twin)
-                result = run_retraining(self.params, snapshot, incumbent, targets, frequency,
-                                        stop, before_restart)
+            with self._training_lock:  # one training at a time per lock (the gate's twin)
+                if self._fit_process is None:
+                    result = here()
+                else:  # in the child (core.fit_process), where it holds no GIL of the node's
+                    result = self._fit_process.run(run_retraining, self.params, snapshot,
+                                                   incumbent, targets, frequency, None,
+                                                   before_restart, stop=stop, fallback=here)
+        except JobAbandonedError:
+            return  # stopped (closed, or its result discarded): nobody takes an outcome
         except Exception as exc:  # noqa: BLE001 - any failure must keep the node alive
             self._outcomes.put(_JobOutcome(generation, None, exc))
             return

@@ -1096,3 +1096,55 @@ def test_the_identity_gate_refuses_a_controller_acting_on_another_estimate() -> 
                              block_time=150.0, median_r_squared=0.95)
     assert '2 blocks' in two.note or 'of 2 blocks' in two.note
     assert 'none reaches' not in two.note
+
+
+def same(a: object, b: object) -> bool:
+    """Equal to the last bit, through dataclasses, tuples, lists and arrays (NaN equals NaN)."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and \
+            a.shape == b.shape and bool(np.array_equal(a, b, equal_nan=a.dtype.kind == 'f'))
+    if isinstance(a, (tuple, list)):
+        return isinstance(b, type(a)) and len(a) == len(b) and all(
+            same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if hasattr(a, '__dict__'):  # dataclasses and other records
+        return type(a) is type(b) and same(vars(a), vars(b))
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a):
+        return math.isnan(b)
+    return a == b
+
+
+def test_the_memory_job_in_the_child_gives_the_numbers_of_this_thread(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """`_learn_in_child` (the background path) returns what `_learn` returns here."""
+    from lf_predictor_ros.core import lf_state
+    from lf_predictor_ros.core.fit_process import FitProcess
+
+    calls: list[tuple[object, ...]] = []
+    real = lf_state._learn
+
+    def recording(*args: object) -> object:
+        calls.append(args)
+        return real(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(lf_state, '_learn', recording)
+    record = simulate(load_scenario('supply_closed_loop'), 4, 1400.0)
+    est = LfStateEstimator(PredictorParams(ndof=3), background=False)
+    for k in range(record.t.shape[0]):
+        est.update(float(record.t[k]), record.measured_pose[k], record.thrust[k])
+    est.close()
+    monkeypatch.setattr(lf_state, '_learn', real)
+    assert calls, 'a memory job after the first training'
+    args = calls[-1]
+    head, published, tail = args[:5], args[5], args[6:]
+    assert isinstance(published, list) and len(published) > 1000
+    expected = real(*args)  # type: ignore[arg-type]
+    process = FitProcess()
+    try:
+        got = lf_state._learn_in_child(process, head, published, tail)
+        assert process.starts == 1 and process.failures == 0  # computed in the child
+    finally:
+        process.close()
+    assert same(got, expected)
+    assert got[0] is not None  # a vessel memory was learned

@@ -377,6 +377,9 @@ def test_the_twin_never_trains_beside_the_holding_network(
         return result
 
     monkeypatch.setattr('lf_predictor_ros.core.predictor.run_retraining', timed)
+    # a stand-in defined here cannot run in the child process (it would import this module):
+    # the jobs run on the worker threads, as without a child; the lock is taken the same way
+    monkeypatch.setattr('lf_predictor_ros.core.predictor.shared_fit_process', lambda: None)
     t, pose, force = moving_run(300, 3)
     gated = AdaptivePredictor(SMALL.replace(motion_gate=True), background=True)
     try:
@@ -443,6 +446,8 @@ def test_wait_for_training_keeps_one_timeout_for_both_networks(
         return run_retraining(*args, **kwargs)  # type: ignore[arg-type]
 
     monkeypatch.setattr('lf_predictor_ros.core.predictor.run_retraining', slow)
+    # the stand-in runs on the worker threads (the child process could not import it)
+    monkeypatch.setattr('lf_predictor_ros.core.predictor.shared_fit_process', lambda: None)
     t, pose, force = moving_run(300, 3)
     gated = AdaptivePredictor(SMALL.replace(motion_gate=True), background=True)
     try:

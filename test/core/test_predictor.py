@@ -362,58 +362,55 @@ def test_background_training_never_blocks_update_and_swaps_atomically(
         predictor.close()
 
 
-def test_update_never_waits_for_a_held_training(monkeypatch: pytest.MonkeyPatch) -> None:
-    """A training held inside the worker (with the training lock taken) stalls no update.
+def test_update_never_waits_for_a_held_training() -> None:
+    """A training held in the worker (the training lock taken elsewhere) stalls no update.
 
-    The training waits for the test's release; if `update` waited for the worker, for its lock
-    or for the outcome, the first update after the start would wait out ``HOLD_TIMEOUT`` and the
-    training would have finished before the checks below: no wall-clock bound is needed.
+    The training runs in the child process (`core.fit_process`), where the test cannot reach
+    it; the worker takes the training lock first, and the test holds that lock. If `update`
+    waited for the worker, for its lock or for the outcome, the first update after the start
+    would never return: no wall-clock bound is needed.
     """
-    started, release, finished = threading.Event(), threading.Event(), threading.Event()
-    original = predictor_module.run_retraining
-
-    def held(*args: Any, **kwargs: Any) -> retraining.RetrainResult:
-        started.set()
-        release.wait(timeout=HOLD_TIMEOUT)
-        try:
-            return original(*args, **kwargs)
-        finally:
-            finished.set()
-
-    monkeypatch.setattr(predictor_module, 'run_retraining', held)
     n = FIRST_TRAINING + 3 * DELTA
     t, pose, force = synthetic_onedof(n, seed=23)
     predictor = AdaptivePredictor(SMALL.replace(motion_gate=False), background=True)
+    lock = predictor._training_lock
+    lock.acquire()
     try:
         feed_to_first_training(predictor, t, pose, force)
-        assert started.wait(HOLD_TIMEOUT), 'the first training starts at sample 120'
+        assert not predictor.wait_for_training(0.0), 'the first training starts at sample 120'
         outputs = []
         for i in range(FIRST_TRAINING, n):  # three retrain periods while the training is held
             outputs.append(predictor.update(float(t[i]), pose[i], force[i]))
-            assert not finished.is_set(), f'update {i} waited for the held training'
+            assert not predictor.wait_for_training(0.0), f'the training ended at update {i}'
         assert predictor.counters['overruns'] == 1  # the retraining due at 140 found it busy
         assert predictor.model is None and predictor.status().state == 'warming_up'
         assert np.all(np.isfinite(np.array(outputs)))  # served by the cascade meanwhile
-        release.set()
+        lock.release()
         assert predictor.wait_for_training(HOLD_TIMEOUT)
         predictor.update(float(t[-1]) + 1.0, pose[-1], force[-1])  # collects the outcome
         assert predictor.counters['trainings'] == 1 and predictor.model is not None
     finally:
-        release.set()
+        if lock.locked():
+            lock.release()
         predictor.close()
 
 
-def test_background_omega_fits_run_in_the_child_with_the_inline_numbers(
+def test_background_jobs_run_in_the_child_with_the_inline_numbers(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """The worker's ω0 spectrum fits go to `core.fit_process`; the estimate is the inline one."""
+    """The worker's ω0 fits and retrainings go to `core.fit_process`, with the inline numbers."""
     from lf_predictor_ros.core import fit_process, frequency
 
     calls: list[int] = []
+    jobs: list[str] = []
 
     class Counted(fit_process.FitProcess):
         def __call__(self, *args: Any) -> frequency.FrequencyEstimate:
             calls.append(1)
             return super().__call__(*args)
+
+        def run(self, function: Any, *args: Any, **kwargs: Any) -> Any:
+            jobs.append(function.__name__)
+            return super().run(function, *args, **kwargs)
 
     counted = Counted()
     monkeypatch.setattr(predictor_module, 'shared_fit_process', lambda: counted)
@@ -429,8 +426,13 @@ def test_background_omega_fits_run_in_the_child_with_the_inline_numbers(
             assert background.wait_for_training(60.0)
         assert background.counters['trainings'] == inline.counters['trainings'] == 1
         assert calls and counted.starts == 1 and counted.failures == 0
+        assert jobs.count('run_retraining') == 1  # the training too
         assert background.omega_fits_here == inline.omega_fits_here == 0
         assert background.wave_peak_freq == inline.wave_peak_freq
+        model, expected = background.model, inline.model
+        assert model is not None and expected is not None
+        assert np.array_equal(model.output_weight, expected.output_weight)
+        assert not model.output_weight.flags.writeable  # read-only through the pickling
         assert background.wave_peak_freq == pytest.approx(WAVE_PEAK_FREQ, rel=0.1)
     finally:
         background.close()
@@ -611,6 +613,9 @@ def test_worker_exception_before_any_network_reports_error(
         monkeypatch: pytest.MonkeyPatch) -> None:
     t, pose, force = synthetic_onedof(200, seed=24)
     monkeypatch.setattr(predictor_module, 'run_retraining', crash)
+    # the child process would import this module to run the stand-in: the jobs run on the
+    # worker thread, as without a child (process-wide `omega_fits_here` stays untouched)
+    monkeypatch.setattr(predictor_module, 'shared_fit_process', lambda: None)
     predictor = AdaptivePredictor(SMALL, background=True)
     try:
         feed(predictor, t, pose, force, 0, FIRST_TRAINING)

@@ -2,7 +2,7 @@
 
 `LfOdometry.published` is a list of `Published` records (one per estimate, 1000–1700 in a
 window). Pickled as objects they cost the sending thread about 20 ms of the GIL (2-core machine,
-docs/BENCHMARKS.md, sixty-sixth session); as a few arrays, about 2–3 ms to build and nothing
+docs/BENCHMARKS.md, sixty-sixth session); as a few arrays, about 1.5 ms to build and nothing
 worth counting to pickle. `PublishedColumns.of` packs a history, `PublishedColumns.records`
 gives the same records back, value for value (`test/core/test_published_columns.py`).
 """
@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from operator import attrgetter
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,20 +47,21 @@ class PublishedColumns:
             ValueError: an array field's rows differ in shape or are not float64 (then send
                 the records as they are).
         """
-        columns = {name: _stacked([getattr(p, name) for p in history], name)
+        columns = {name: _stacked(list(map(attrgetter(name), history)), name)
                    for name in _ARRAY_FIELDS}
-        sources = tuple(sorted({p.source for p in history}))
+        names = list(map(attrgetter('source'), history))
+        sources = tuple(sorted(set(names)))
         index = {name: i for i, name in enumerate(sources)}
-        codes = np.array([index[p.source] for p in history], dtype=np.intp)
-        has_excess = np.array([p.twin_excess is not None for p in history], dtype=bool)
-        present = [p.twin_excess for p in history if p.twin_excess is not None]
-        width = _stacked(present, 'twin_excess').shape[1] if present else 0
-        excess = np.full((len(history), width), np.nan)
-        if present:
-            excess[has_excess] = _stacked(present, 'twin_excess')
-        return cls(np.array([p.stamp for p in history], dtype=np.float64), sources=sources,
-                   source_codes=codes, twin_excess=excess, has_twin_excess=has_excess,
-                   **columns)
+        codes = np.array([index[name] for name in names], dtype=np.intp)
+        excesses = list(map(attrgetter('twin_excess'), history))
+        has_excess = np.array([e is not None for e in excesses], dtype=bool)
+        present = [e for e in excesses if e is not None]
+        stacked = _stacked(present, 'twin_excess')
+        excess = np.full((len(history), stacked.shape[1]), np.nan)
+        excess[has_excess] = stacked
+        stamps = np.fromiter(map(attrgetter('stamp'), history), np.float64, len(history))
+        return cls(stamps, sources=sources, source_codes=codes, twin_excess=excess,
+                   has_twin_excess=has_excess, **columns)
 
     def records(self) -> list[Published]:
         """The records again (each array a copy of its row)."""
@@ -70,13 +72,16 @@ class PublishedColumns:
                 for i in range(self.stamp.shape[0])]
 
 
-def _stacked(rows: Sequence[FloatArray], name: str) -> FloatArray:
+def _stacked(rows: list[FloatArray], name: str) -> FloatArray:
     """Rows of one shape, float64, as one (m, k) array (m = 0: shape (0, 0))."""
     if not rows:
         return np.zeros((0, 0))
-    shape = np.shape(rows[0])
-    if len(shape) != 1 or any(not isinstance(r, np.ndarray) or r.dtype != np.float64 or
-                              r.shape != shape for r in rows):
+    try:
+        kinds = set(map(attrgetter('dtype'), rows))
+        stacked = np.array(rows)
+    except (AttributeError, ValueError):  # not arrays, or of different shapes
+        stacked = None
+    if stacked is None or kinds != {np.dtype(np.float64)} or stacked.ndim != 2:
         raise ValueError(f'published {name} rows are not float64 vectors of one shape: '
                          'send the records as they are')
-    return np.array(rows, dtype=np.float64)
+    return stacked

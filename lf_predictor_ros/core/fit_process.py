@@ -5,10 +5,10 @@ node's process, and every Python step of theirs holds the GIL against the pose c
 thread waiting for the GIL takes it back only after Python's switch interval (5 ms) if the
 holder does not release it sooner, so a callback that meets a running job can take milliseconds
 instead of a tenth of one. scipy's Nelder-Mead (`frequency._fit_peak`) kept the callbacks from
-the GIL for up to 132 ms (docs/BENCHMARKS.md, twenty-eighth session), and with the fit here the
-retraining and the vessel memory's job still stretched 1–2 % of the callbacks that met them to
-1.5–7 ms (sixty-sixth session). In a child process a job holds no lock of the node's, and the
-worker thread waits for its result with the GIL released.
+the GIL for up to 132 ms (docs/BENCHMARKS.md, twenty-eighth session); with the fit here, the
+retraining and the vessel memory's job still stretched callbacks that only store a pose to
+1.4–7.5 ms (45 of 9500 while training in one run; sixty-sixth session). In a child process a job
+holds no lock of the node's, and the worker thread waits for its result with the GIL released.
 
 `FitProcess.run` computes any module-level function of picklable arguments in one long-lived
 child process (a `ProcessPoolExecutor` of one worker, started by `FitProcess.start` or the first

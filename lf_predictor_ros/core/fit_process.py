@@ -38,6 +38,7 @@ import signal
 import threading
 import time
 from typing import TypeVar, cast
+import weakref
 
 from lf_predictor_ros.core.frequency import FrequencyEstimate, _FloatArray, spectrum_estimate
 
@@ -47,12 +48,13 @@ PRELOAD = ['lf_predictor_ros.core.frequency', 'lf_predictor_ros.core.retraining'
            'lf_predictor_ros.core.lf_state']
 PARENT_CHECK_PERIOD = 1.0  # [s] how often the child checks that the node still exists
 STOP_CHECK_PERIOD = 0.05  # [s] how often `FitProcess.run` looks at its ``stop`` while waiting
+ABANDONED_RETRIES = 2  # times a job cut off by another's abandonment is asked of a new child
 _T = TypeVar('_T')
 _NO_CHILD = object()  # `FitProcess._ask`'s answer when there is no child
 
 
 class JobAbandonedError(Exception):
-    """`FitProcess.run` stopped waiting: its ``stop`` was set (the child finishes the job)."""
+    """`FitProcess.run` stopped waiting: its ``stop`` was set (the child was ended)."""
 
 
 class FitProcess:
@@ -63,6 +65,8 @@ class FitProcess:
         self._lock = threading.Lock()
         self._executor: ProcessPoolExecutor | None = None
         self.failures = 0  # jobs computed on the caller's thread: no child, or it died
+        # children ended because their job was abandoned (`_end_abandoned`): not broken
+        self._ended: weakref.WeakSet[ProcessPoolExecutor] = weakref.WeakSet()
         self.starts = 0  # children started
 
     def __call__(self, data: _FloatArray, sample_time: float, highpass_cutoff: float,
@@ -80,7 +84,7 @@ class FitProcess:
         Without a child (it cannot start, was killed, or closed meanwhile) ``fallback()`` is
         computed on this thread instead (None: ``function(*args)``), counted in ``failures``.
         Raises what ``function`` raised, and `JobAbandonedError` once ``stop`` is set while waiting
-        (looked at every `STOP_CHECK_PERIOD`; the child finishes the job, its result is lost).
+        (looked at every `STOP_CHECK_PERIOD`; the child computing it is ended, `_ask`).
         """
         answer = self._ask(function, *args, stop=stop)
         if answer is _NO_CHILD:
@@ -103,18 +107,28 @@ class FitProcess:
         """``function(*args)`` in the child; `_NO_CHILD` when the child is not there.
 
         An exception of ``function`` itself is raised here as it is; `JobAbandonedError` once
-        ``stop`` is set while waiting.
+        ``stop`` is set while waiting, and the child is then ended (`_end_abandoned`): a long
+        training it went on with would hold up every job after it. A job of another thread
+        that this ending cut off is asked again of a new child.
         """
-        try:
-            future = self._running().submit(function, *args)
-        except Exception:  # noqa: BLE001 - no child: cannot start (e.g. in a daemonic process,
-            future = None  # an AssertionError), or a broken or closed pool
-        if future is not None:
+        for _ in range(ABANDONED_RETRIES + 1):
+            executor: ProcessPoolExecutor | None = None
             try:
-                return _result(future, stop)
-            except (BrokenProcessPool, CancelledError):  # the child died, or close() meanwhile
-                pass
-        self._discard()
+                executor = self._running()
+                future = executor.submit(function, *args)
+            except Exception:  # noqa: BLE001 - no child: cannot start (e.g. in a daemonic
+                future = None  # process, an AssertionError), or a broken or closed pool
+            if future is not None:
+                try:
+                    return _result(future, stop)
+                except JobAbandonedError:
+                    self._end_abandoned(executor)
+                    raise
+                except (BrokenProcessPool, CancelledError):  # the child died, or closed
+                    if executor in self._ended:
+                        continue  # ended by an abandoned job, not broken: a new child
+            self._discard()
+            return _NO_CHILD
         return _NO_CHILD
 
     @property
@@ -140,6 +154,18 @@ class FitProcess:
             executor, self._executor = self._executor, None
         if executor is not None:
             executor.shutdown(wait=False, cancel_futures=True)
+
+    def _end_abandoned(self, executor: ProcessPoolExecutor | None) -> None:
+        """End the child computing an abandoned job (the next job starts a new one)."""
+        if executor is None:
+            return
+        with self._lock:
+            self._ended.add(executor)
+            if self._executor is executor:
+                self._executor = None
+        for process in list((getattr(executor, '_processes', None) or {}).values()):
+            process.terminate()  # ProcessPoolExecutor has no public way before Python 3.14
+        executor.shutdown(wait=False, cancel_futures=True)
 
 
 def _result(future: Future[_T], stop: threading.Event | None) -> _T:

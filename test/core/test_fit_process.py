@@ -98,14 +98,38 @@ def test_any_job_runs_in_the_child_and_its_errors_come_back_as_they_are(fit: Fit
     assert fit.starts == 1 and fit.failures == 0
 
 
-def test_a_set_stop_abandons_the_wait_not_the_child(fit: FitProcess) -> None:
+def test_a_set_stop_abandons_the_job_and_ends_its_child(fit: FitProcess) -> None:
     stop = threading.Event()
     threading.Timer(0.2, stop.set).start()
     start = time.monotonic()
     with pytest.raises(fit_process.JobAbandonedError):
         fit.run(time.sleep, 30.0, stop=stop)
     assert time.monotonic() - start < 0.2 + 10 * fit_process.STOP_CHECK_PERIOD + 5.0
-    assert fit.running and fit.failures == 0  # the child sleeps on; the next job waits for it
+    assert not fit.running  # the child sleeping on would hold up every job after it
+    start = time.monotonic()
+    assert fit.run(math.fsum, [1.0, 2.0]) == 3.0  # a new child, at once
+    assert time.monotonic() - start < 10.0
+    assert fit.starts == 2 and fit.failures == 0
+
+
+def test_a_job_queued_behind_an_abandoned_one_is_asked_of_the_new_child(fit: FitProcess) -> None:
+    stop = threading.Event()
+    answers: list[object] = []
+    raised: list[object] = []
+    abandoned = threading.Thread(target=lambda: raised.append(pytest.raises(
+        fit_process.JobAbandonedError, fit.run, time.sleep, 30.0, stop=stop)))
+    abandoned.start()
+    time.sleep(0.5)  # the sleep is running in the child
+    queued = threading.Thread(target=lambda: answers.append(fit.run(os.getpid)))
+    queued.start()
+    time.sleep(0.3)  # queued behind it
+    stop.set()
+    abandoned.join(10.0)
+    queued.join(10.0)
+    assert not abandoned.is_alive() and not queued.is_alive()
+    assert len(raised) == 1 and len(answers) == 1
+    assert isinstance(answers[0], int) and answers[0] != os.getpid()  # computed in a child
+    assert fit.starts == 2 and fit.failures == 0  # not counted as computed here
 
 
 def test_without_a_child_the_fallback_is_computed_here(

@@ -375,6 +375,7 @@ def test_update_never_waits_for_a_held_training() -> None:
     predictor = AdaptivePredictor(SMALL.replace(motion_gate=False), background=True)
     lock = predictor._training_lock
     lock.acquire()
+    held = True
     try:
         feed_to_first_training(predictor, t, pose, force)
         assert not predictor.wait_for_training(0.0), 'the first training starts at sample 120'
@@ -386,11 +387,12 @@ def test_update_never_waits_for_a_held_training() -> None:
         assert predictor.model is None and predictor.status().state == 'warming_up'
         assert np.all(np.isfinite(np.array(outputs)))  # served by the cascade meanwhile
         lock.release()
+        held = False
         assert predictor.wait_for_training(HOLD_TIMEOUT)
         predictor.update(float(t[-1]) + 1.0, pose[-1], force[-1])  # collects the outcome
         assert predictor.counters['trainings'] == 1 and predictor.model is not None
     finally:
-        if lock.locked():
+        if held:  # only the test's own hold (a lock has no owner: never the worker's)
             lock.release()
         predictor.close()
 

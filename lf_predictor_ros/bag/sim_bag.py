@@ -25,14 +25,11 @@ from collections.abc import Sequence
 from pathlib import Path
 import sys
 
-import numpy as np
-from numpy.typing import NDArray
-
 from lf_predictor_ros.bag.mcap_writer import BagWriter, qos_profile_dict, qos_profiles_yaml
 from lf_predictor_ros.bag.provenance import recording_custom_data
 from lf_predictor_ros.bag.ros_codec import serialize
 from lf_predictor_ros.benchmark.estimators import CAUSAL, make_estimator, predictor_params
-from lf_predictor_ros.benchmark.recordings import Provenance, record
+from lf_predictor_ros.benchmark.recordings import Provenance, grid_rows, grid_stride, record
 from lf_predictor_ros.benchmark.suite import make_setup
 from lf_predictor_ros.nodes.conversions import pose_to_msg, wrench_to_msg
 from sim_ros.simulation import Scenario, SimRecord, load_scenario
@@ -42,7 +39,6 @@ WRENCH = 'geometry_msgs/msg/WrenchStamped'
 SENSOR_QOS = qos_profiles_yaml([qos_profile_dict(reliability='best_effort', depth=5)])
 TRUTH_LOOP = 'truth'  # --loop-estimator: the scenario's PID on the true LF pose (leaks)
 LOOP_CHOICES = (*CAUSAL, TRUTH_LOOP)
-FloatArray = NDArray[np.float64]
 DEFAULT_LOOP = 'observer'
 
 
@@ -69,26 +65,19 @@ def simulate_recording(scenario: Scenario, seed: int, duration: float | None,
     return recording.full_rate, recording.provenance
 
 
-def command_rows(times: FloatArray, command_period: float) -> NDArray[np.intp]:
-    """Indices of the samples at a controller instant: t > 0 a multiple of the period [s]."""
-    if not (command_period > 0.0):
-        raise ValueError(f'command_period must be > 0 s, got {command_period}')
-    cycles = np.asarray(times, dtype=np.float64) / command_period
-    return np.flatnonzero((np.abs(cycles - np.round(cycles)) < 1e-6) & (cycles > 0.5))
-
-
 def write_record(path: Path, record: SimRecord, *, duration: float | None = None,
                  truth: bool = True, total_truth: bool = False,
                  provenance: Provenance | None = None,
-                 command_period: float | None = None) -> Path:
+                 command_stride: int | None = None) -> Path:
     """Thrust, truth and measured pose of each sample (in that order, log time = stamp).
 
     ``provenance`` goes into the bag's rosbag2 custom data (`bag.provenance`).
-    ``command_period`` [s] (None: no command topic): `/thrust_command` at the samples
-    `command_rows` picks, after the sample's other messages (module docstring).
+    ``command_stride`` (None: no command topic): `/thrust_command` at the grid instants of
+    that many sensor samples (`recordings.grid_rows`), after the sample's other messages
+    (module docstring).
     """
-    commands = set() if command_period is None else \
-        set(command_rows(record.t, command_period).tolist())
+    commands = set() if command_stride is None else \
+        set(range(len(record.t))[grid_rows(command_stride)])
     custom = (None if provenance is None else
               recording_custom_data(provenance.scenario, provenance.seed, provenance.loop,
                                     provenance.estimator))
@@ -139,9 +128,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                                                 args.loop_estimator)
     except ValueError as err:
         parser.exit(2, f'sim_bag: error: {err}\n')
-    command_period = provenance.sample_time if args.thrust_command else None
+    command_stride = grid_stride(scenario, provenance.sample_time) if args.thrust_command \
+        else None
     write_record(Path(args.output), record, truth=True, total_truth=True, provenance=provenance,
-                 command_period=command_period)
+                 command_stride=command_stride)
     print(f'wrote {len(record.t)} samples ({provenance.label()}) to {args.output}')
     return 0
 

@@ -121,11 +121,16 @@ class Recording:
         return {'t': self.t, 'y': self.y, 'u': self.u, 'truth': self.truth, 'omega': self.omega}
 
 
-def decimate(record: SimRecord, stride: int) -> dict[str, FloatArray]:
-    """A simulator record on the grid h = stride · sensor period (module docstring)."""
+def grid_rows(stride: int) -> slice:
+    """The sensor samples at the grid instants: the last of every ``stride`` (t = h, 2h, …)."""
     if stride < 1:
         raise ValueError(f'stride must be >= 1 sensor samples, got {stride}')
-    sl = slice(stride - 1, None, stride)
+    return slice(stride - 1, None, stride)
+
+
+def decimate(record: SimRecord, stride: int) -> dict[str, FloatArray]:
+    """A simulator record on the grid h = stride · sensor period (module docstring)."""
+    sl = grid_rows(stride)
     return {'t': record.t[sl], 'y': block_mean_poses(record.measured_pose, stride),
             'u': record.thrust[sl], 'truth': record.truth_lf_pose[sl],
             'omega': record.wave_peak_freq[sl], 'wave': wave_motion(record)[sl]}

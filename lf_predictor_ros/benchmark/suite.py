@@ -68,6 +68,7 @@ from lf_predictor_ros.benchmark.recordings import (
     LeakReport,
     Recording,
     check_scorable,
+    grid_rows,
     grid_stride,
     leak_check,
     record,
@@ -413,7 +414,7 @@ def run_closed_loops(scenario: Scenario, seed: int, duration: float | None,
         if name in names:
             results[name] = metrics
             omega, psd = _thrust_spectrum(rec.thrust[keep], scenario.sample_time, ndof)
-            sl = slice(stride - 1, None, stride)
+            sl = grid_rows(stride)
             series[name] = LoopSeries(
                 rec.t[sl], stability.pose_offset(rec.truth_lf_pose[sl], setpoint[sl], ndof),
                 omega, psd)

@@ -10,6 +10,7 @@ from lf_predictor_ros.bag import sim_bag
 from lf_predictor_ros.bag.mcap_reader import BagReader
 from lf_predictor_ros.bag.provenance import RECORDING_ESTIMATOR_KEY, RECORDING_LOOP_KEY
 from lf_predictor_ros.bag.ros_codec import stamped_fields
+from lf_predictor_ros.benchmark.recordings import grid_rows
 from sim_ros.simulation import load_scenario, simulate
 
 DURATION = 60.0  # [s] 600 sensor samples of the supply vessel
@@ -88,12 +89,13 @@ def test_thrust_command_is_written_once_per_controller_instant(tmp_path: Path) -
     assert np.all(np.abs(commands[:, 0]) > 0.0)  # the PID's commands, not zeros
 
 
-def test_command_rows_are_the_multiples_of_the_period() -> None:
-    times = np.arange(1, 31) * 0.1  # 0.1 … 3.0 s
-    np.testing.assert_array_equal(sim_bag.command_rows(times, 1.0), [9, 19, 29])
-    np.testing.assert_array_equal(sim_bag.command_rows(times, 0.5), [4, 9, 14, 19, 24, 29])
-    with pytest.raises(ValueError, match='command_period must be > 0'):
-        sim_bag.command_rows(times, 0.0)
+def test_command_rows_are_the_grid_instants() -> None:
+    """The commands go at the predictor's grid instants, the samples `decimate` keeps."""
+    rows = np.arange(30)  # sensor samples at 0.1 … 3.0 s
+    np.testing.assert_array_equal(rows[grid_rows(10)], [9, 19, 29])  # h = 1 s
+    np.testing.assert_array_equal(rows[grid_rows(5)], [4, 9, 14, 19, 24, 29])  # h = 0.5 s
+    with pytest.raises(ValueError, match='stride must be >= 1'):
+        grid_rows(0)
 
 
 def test_thrust_command_without_a_controller_is_refused(tmp_path: Path) -> None:

@@ -241,7 +241,8 @@ class AdaptivePredictor:
     def __init__(self, params: PredictorParams, *, background: bool = True,
                  checkpoint_path: str | None = None, max_trainings: int | None = None,
                  training_lock: threading.Lock | None = None,
-                 worker_name: str = 'lf-predictor-training') -> None:
+                 worker_name: str = 'lf-predictor-training',
+                 cascade_output: bool = True) -> None:
         """Create an untrained predictor.
 
         ``background``: train on a worker thread (True, for nodes) or inline at the retraining
@@ -252,6 +253,10 @@ class AdaptivePredictor:
         ``training_lock``: held by a worker while it trains, so predictors sharing it train one
         after the other (the motion gate's twin shares its holding network's). ``worker_name``:
         the name of the worker thread (`core.job_worker`) that runs the trainings and ω0 jobs.
+        ``cascade_output`` False: the caller never reads the output while the network does not
+        serve (the motion gate's twin, `_gated`); with ``nfb`` 0 and no output smoothing the
+        cascade fallback is then neither run nor retuned (its output could reach nothing) and
+        the measured position stands in for it.
         """
         self.params = params
         self.max_trainings = max_trainings
@@ -301,6 +306,8 @@ class AdaptivePredictor:
         self._thrust_held = 0  # accepted trainings that kept the thrust weights (thrust_hold)
         self._smoothing = params.switch_blend_time > 0.0 or any(
             rate > 0.0 for rate in params.max_output_rate[:params.ndof])
+        # the cascade's output can reach the output or the regressors (see cascade_output)
+        self._run_cascade = cascade_output or params.nfb > 0 or self._smoothing
         # Motion gate (issue 13): a ramp-invariant twin on the same data, blended in by
         # core.motion_gate when the vessel moves faster than it usually does.
         self._moving: AdaptivePredictor | None = None
@@ -313,7 +320,7 @@ class AdaptivePredictor:
                 background=background,
                 checkpoint_path=twin_checkpoint_path(checkpoint_path) if checkpoint_path else None,
                 max_trainings=max_trainings, training_lock=self._training_lock,
-                worker_name='lf-predictor-twin-training')
+                worker_name='lf-predictor-twin-training', cascade_output=False)
             self._gate = MotionGate(params.ndof, params.sample_time,
                                     time_constant=params.motion_gate_time,
                                     window=params.training_window,
@@ -367,9 +374,11 @@ class AdaptivePredictor:
         self._u.append(u)
         self._y.append(y)
         self._k += 1
-        lf_now = self._fallback.update(t, pose_arr, force_arr)
+        # the cascade fallback's estimate in position coordinates (the measurement without it)
+        fallback = self._position(self._fallback.update(t, pose_arr, force_arr),
+                                  update_heading=False) if self._run_cascade else y
         if self._fb_next != self._k:  # no network prediction exists for this sample
-            self._fb.append(self._position(lf_now, update_heading=False))
+            self._fb.append(fallback)
         prediction = self._predict()
         if self._roughness is not None and self._roughness.update(y, prediction):
             prediction = self._retire_rough_network()
@@ -379,10 +388,10 @@ class AdaptivePredictor:
             self._message = 'network prediction implausible: cascade fallback'
             prediction = None
             self._fb.clear()
-            self._fb.append(self._position(lf_now, update_heading=False))
+            self._fb.append(fallback)
         if prediction is None:
             self._used_network = False
-            estimate = self._position(lf_now, update_heading=False)
+            estimate = fallback
             self._fb_next = -1
         else:
             self._used_network = True
@@ -391,7 +400,7 @@ class AdaptivePredictor:
             self._fb_next = self._k + 1
         if self._smoothing:  # output only: the buffers above are not touched
             estimate = self._bumpless(t, estimate, model if prediction is not None else None,
-                                      self._position(lf_now, update_heading=False))
+                                      fallback)
         self._maybe_retrain(t)
         return self._notched(t, self._gated(t, self._output(estimate, pose_arr), pose_arr,
                                             force_arr))
@@ -744,7 +753,8 @@ class AdaptivePredictor:
 
     def _tune_wave_filters(self, wave_peak_freq: float) -> None:
         """Retune the cascade fallback and the output notch to ω0 [rad/s] (outputs continuous)."""
-        self._fallback.set_wave_peak_freq(wave_peak_freq)
+        if self._run_cascade:
+            self._fallback.set_wave_peak_freq(wave_peak_freq)
         for notch in (self._output_notch, self._gate_yaw_notch):
             if notch is not None:
                 notch.set_wave_peak_freq(wave_peak_freq)

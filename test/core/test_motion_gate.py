@@ -362,6 +362,23 @@ def test_smoothed_gate_blends_the_low_passed_offset_of_the_two_networks(
     assert smaller > 100  # the low-pass changed the output (not the unsmoothed gate again)
 
 
+@pytest.mark.parametrize(('change', 'runs'), [
+    ({}, False), ({'switch_blend_time': 5.0}, True), ({'max_output_rate': (1.0, 1.0, 0.1)}, True)])
+def test_the_twin_runs_its_cascade_only_where_its_output_can_reach_something(
+        change: dict[str, Any], runs: bool) -> None:
+    # The gate reads the twin only while its network serves (nfb 0 and no smoothing: nothing
+    # else reads its cascade), so its cascade is neither run nor retuned; the blend test above
+    # shows the gated output unchanged against a twin run alone, cascade and all.
+    predictor = AdaptivePredictor(SMALL.replace(motion_gate=True, **change), background=False)
+    t, pose, force = moving_run(600, 2)
+    for k in range(300):
+        predictor.update(t[k], pose[k], force[k])
+    twin = predictor._moving
+    assert twin is not None and twin.counters['trainings'] > 0
+    assert twin._fallback._filter.initialized is runs
+    assert predictor._fallback._filter.initialized  # the holding side's cascade always runs
+
+
 def test_the_twin_never_trains_beside_the_holding_network(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """In background mode the two trainings share one lock: they run one after the other."""

@@ -235,16 +235,12 @@ def low_pass_step(state: ArrayLike, value: ArrayLike,
     return np.array([a + w * (b - a) for a, w, b in zip(old, weights, new, strict=True)],
                     dtype=np.float64)
 
-def _sos_step_floats(coefficients: list[list[float]], state: FloatArray,
-                     u: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """`_sos_step` of one sample in plain floats: the same operations in the same order."""
-    x, new_state = _sos_step_lists(coefficients, state.tolist(), u.tolist())
-    return np.array(x, dtype=np.float64), np.array(new_state, dtype=np.float64)
-
-
 def _sos_step_lists(coefficients: list[list[float]], state: list[list[list[float]]],
                     x: list[float]) -> tuple[list[float], list[list[list[float]]]]:
-    """The float step of `_sos_step_floats` on nested lists (state: section, 2, channel)."""
+    """`_sos_step` of one sample in plain floats on nested lists (state: section, 2, channel).
+
+    The same operations in the same order, without numpy's per-call cost.
+    """
     new_state = []
     for (b0, b1, b2, _, a1, a2), (first, second) in zip(coefficients, state, strict=True):
         out = [b0 * xi + si for xi, si in zip(x, first, strict=True)]
@@ -294,9 +290,11 @@ class CausalFilter:
         self._sos = _check_sos(sos)
         self._coefficients: list[list[float]] = self._sos.tolist()  # per-sample step
         self._n_channels = n_channels
-        self._state: FloatArray | None = None
-        self._inputs: list[FloatArray] = []
-        self._outputs: list[FloatArray] = []
+        # the DF2T section states as nested lists (section, 2, channel): `_sos_step_lists`
+        self._state: list[list[list[float]]] | None = None
+        # the newest inputs and outputs (lists of n_channels floats), for `retune`
+        self._inputs: list[list[float]] = []
+        self._outputs: list[list[float]] = []
 
     @property
     def sos(self) -> FloatArray:
@@ -324,12 +322,22 @@ class CausalFilter:
         u = np.array(x, dtype=np.float64).reshape(-1)
         if u.shape != (self._n_channels,):
             raise ValueError(f'sample must have shape ({self._n_channels},), got {u.shape}')
+        return np.array(self.filter_values(u.tolist()), dtype=np.float64)
+
+    def filter_values(self, values: list[float]) -> list[float]:
+        """`filter` of one sample given as n_channels floats; the output as a new list.
+
+        The same numbers as `filter`, without its arrays (the predict path's cascade).
+        """
+        if len(values) != self._n_channels:
+            raise ValueError(f'sample must have shape ({self._n_channels},), got '
+                             f'({len(values)},)')
         if self._state is None:
             zi = signal.sosfilt_zi(self._sos)  # steady state for a unit step input
-            self._state = zi[:, :, None] * u[None, None, :]
-        out, self._state = _sos_step_floats(self._coefficients, self._state, u)
-        self._remember(u, out)
-        return np.array(out, dtype=np.float64)
+            self._state = (zi[:, :, None] * np.array(values, dtype=np.float64)).tolist()
+        out, self._state = _sos_step_lists(self._coefficients, self._state, values)
+        self._remember(list(values), out)
+        return list(out)
 
     def filter_rows(self, rows: list[list[float]]) -> list[list[float]]:
         """`filter` of every row (n_channels floats) in order; the outputs as lists.
@@ -342,7 +350,7 @@ class CausalFilter:
         if len(rows) == 1:
             return outputs
         assert self._state is not None  # set by the first filter() call
-        state = self._state.tolist()
+        state = self._state
         coefficients = self._coefficients
         for row in rows[1:]:
             if len(row) != self._n_channels:
@@ -350,14 +358,14 @@ class CausalFilter:
                                  f'({len(row)},)')
             out, state = _sos_step_lists(coefficients, state, row)
             outputs.append(out)
-        self._state = np.array(state, dtype=np.float64)
+        self._state = state
         order = 2 * self._sos.shape[0]
         for row, out in list(zip(rows[1:], outputs[1:], strict=True))[-order:]:
-            self._remember(np.array(row, dtype=np.float64), np.array(out, dtype=np.float64))
+            self._remember([float(v) for v in row], list(out))
         return outputs
 
-    def _remember(self, u: FloatArray, y: FloatArray) -> None:
-        """Keep the newest input and output rows (``filter``'s own arrays: no copies needed)."""
+    def _remember(self, u: list[float], y: list[float]) -> None:
+        """Keep the newest input and output rows (lists no caller holds: no copies needed)."""
         order = 2 * self._sos.shape[0]
         self._inputs.append(u)
         self._outputs.append(y)
@@ -381,11 +389,12 @@ class CausalFilter:
         order = 2 * new_sos.shape[0]
         if len(self._inputs) < order:
             zi = signal.sosfilt_zi(new_sos)
-            self._state = zi[:, :, None] * self._outputs[-1][None, None, :]
+            last = np.array(self._outputs[-1], dtype=np.float64)
+            self._state = (zi[:, :, None] * last).tolist()
             self._inputs = self._inputs[-1:]
             self._outputs = self._outputs[-1:]
             return
-        self._state = self._fit_state(new_sos, order)
+        self._state = self._fit_state(new_sos, order).tolist()
 
     def _fit_state(self, sos: FloatArray, order: int) -> FloatArray:
         """State matching the stored I/O history for `sos` (least squares, observability)."""

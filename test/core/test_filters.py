@@ -1,6 +1,8 @@
 """Tests for the notch + low-pass wave filter: design, zero-phase and streaming application."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 import pytest
@@ -166,6 +168,24 @@ def test_causal_filter_equals_sosfilt_with_steady_state_init() -> None:
     filt = CausalFilter(sos, 3)
     out = np.array([filt.filter(sample) for sample in y])
     np.testing.assert_allclose(out, expected, rtol=0.0, atol=1e-12)
+
+
+def test_filter_values_gives_filters_numbers_bit_for_bit_through_a_retune() -> None:
+    rng = np.random.default_rng(8)
+    y = np.cumsum(rng.normal(size=(300, 3)), axis=0) + 5.0
+    arrays, floats = (CausalFilter(design_wave_filter(0.7, 0.2), 3) for _ in range(2))
+    for k, sample in enumerate(y):
+        if k == 150:  # the state fitted to the I/O history the floats path remembered
+            arrays.retune(design_wave_filter(0.9, 0.2))
+            floats.retune(design_wave_filter(0.9, 0.2))
+        values = sample.tolist()
+        out = floats.filter_values(values)
+        assert arrays.filter(sample).tolist() == out  # bit for bit
+        assert values == sample.tolist()  # the input list is not changed
+        out[0] = math.nan  # the caller's list: the filter's state keeps no reference to it
+    assert math.isfinite(floats.filter_values([1.0, 2.0, 3.0])[0])
+    with pytest.raises(ValueError, match='shape'):
+        floats.filter_values([1.0, 2.0])
 
 
 def test_causal_filter_starts_without_jump_and_resets() -> None:

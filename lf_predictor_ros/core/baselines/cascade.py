@@ -86,10 +86,10 @@ class CascadeFilter:
     def update(self, t: float, pose: FloatArray, force: FloatArray) -> FloatArray:
         """Filter one measured pose (3,) at time t [s]; return the LF pose estimate (3,)."""
         measured = np.asarray(pose, dtype=np.float64)
-        if measured.shape != (3,) or not all(map(math.isfinite, measured.tolist())):
+        values = measured.tolist()
+        if measured.shape != (3,) or not all(map(math.isfinite, values)):
             raise ValueError(f'pose must be 3 finite numbers [north, east, yaw], got {pose}')
-        channels = np.array(self._channels(measured.tolist()), dtype=np.float64)
-        return np.array(self._estimate(self._filter.filter(channels).tolist()),
+        return np.array(self._estimate(self._filter.filter_values(self._channels(values))),
                         dtype=np.float64)
 
     def update_series(self, poses: FloatArray) -> FloatArray:

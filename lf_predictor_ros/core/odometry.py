@@ -889,6 +889,8 @@ class LfOdometry:
         self._q_cache: tuple[float, OdometryParams, dict[str, ErrorModel],
                              VesselMemory | None, FloatArray] | None = None
         self._beta_cache: tuple[OdometryParams, FloatArray] | None = None
+        # (the twist calibration, twist_cov_scale, its holding std): see _holding_twist_std
+        self._holding_std_cache: tuple[dict[str, ErrorModel], float, FloatArray] | None = None
 
     @property
     def mode(self) -> OdometryMode:
@@ -1383,25 +1385,31 @@ class LfOdometry:
         Holding station the slow twist is mostly the estimate's own error, and balancing against
         it cost 3–10 % in dropouts (docs/BENCHMARKS.md, forty-eighth session); in a setpoint
         move the move's acceleration must not pass for environment.
+        (Plain floats and bools: it runs at every sample, and holding station builds no array.)
         """
         if self._twist_once is None or self._last_output is None:
             return None
         n = self.ndof
-        std = self._holding_twist_std()
-        moving = np.abs(self._twist_once) > MOTION_BALANCE_SIGMAS * std
+        std = self._holding_twist_std().tolist()
+        once = self._twist_once.tolist()
+        moving = [abs(v) > MOTION_BALANCE_SIGMAS * s for v, s in zip(once, std, strict=True)]
         gate = self.params.dead_reckoning_moving_gate
         if gate > 0.0:  # the current twist, the last one published
             slow_gate = self.params.dead_reckoning_moving_gate_slow
-            begun = np.abs(self._twist_once) > slow_gate * std if slow_gate > 0.0 \
-                else np.ones(n, dtype=bool)
-            moving |= _horizontal_group(np.abs(self._last_output.twist[:n]) > gate * std) & \
-                _horizontal_group(begun)
+            begun = [abs(v) > slow_gate * s for v, s in zip(once, std, strict=True)] \
+                if slow_gate > 0.0 else [True] * n
+            fast = _grouped([abs(v) > gate * s for v, s in zip(
+                self._last_output.twist[:n].tolist(), std, strict=True)])
+            moving = [m or (f and b) for m, f, b in zip(moving, fast, _grouped(begun),
+                                                        strict=True)]
         averaged_gate = self.params.dead_reckoning_moving_gate_averaged
         averaged = self._wave_averaged_twist() if averaged_gate > 0.0 else None
         if averaged is not None:  # the twist over whole wave periods
-            moving |= _horizontal_group(np.abs(averaged) > averaged_gate * std)
-        moving = _horizontal_group(moving & dofs)
-        return moving if bool(np.any(moving)) else None
+            wide = _grouped([abs(v) > averaged_gate * s
+                             for v, s in zip(averaged.tolist(), std, strict=True)])
+            moving = [m or w for m, w in zip(moving, wide, strict=True)]
+        moving = _grouped([m and bool(d) for m, d in zip(moving, dofs.tolist(), strict=True)])
+        return np.array(moving, dtype=bool) if any(moving) else None
 
     def _holding_twist_std(self) -> FloatArray:
         """The twist's holding standard deviation per DOF (the motion gate's unit).
@@ -1411,12 +1419,19 @@ class LfOdometry:
         """
         assert self._last_output is not None
         n = self.ndof
-        if self._twist_cov:  # the holding part: the published std grows with a move's rate
-            model = self._twist_cov['all']
-            variance = self.params.twist_cov_scale * np.diag(model.covariance(np.zeros(n), 1.0))
-        else:
+        if not self._twist_cov:
             variance = np.diag(self._last_output.twist_cov)[:n]
-        return np.sqrt(np.maximum(variance, 0.0))
+            return np.sqrt(np.maximum(variance, 0.0))
+        # the holding part (the published std grows with a move's rate): one number per
+        # calibration and scale, computed once (read-only)
+        scale, cached = self.params.twist_cov_scale, self._holding_std_cache
+        if cached is not None and cached[0] is self._twist_cov and cached[1] == scale:
+            return cached[2]
+        model = self._twist_cov['all']
+        std = np.sqrt(np.maximum(scale * np.diag(model.covariance(np.zeros(n), 1.0)), 0.0))
+        std.setflags(write=False)
+        self._holding_std_cache = (self._twist_cov, scale, std)
+        return std
 
     def _uses_double_span(self) -> bool:
         """Whether the average over twice the span is kept (extrapolated start, the clamp)."""
@@ -2184,15 +2199,15 @@ def _kinematic_transition(heading: float, h: float, ndof: int) -> tuple[FloatArr
     return a, np.zeros(2 * ndof)
 
 
-def _horizontal_group(dofs: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """Per DOF flags with surge and sway joined (3 DOF: either one sets both; a new array).
+def _grouped(flags: list[bool]) -> list[bool]:
+    """Per DOF flags with surge and sway joined (3 DOF: either one sets both; a new list).
 
     Surge and sway share one earth-fixed environment force, so they move or rest together.
     """
-    grouped = dofs.copy()
-    if grouped.shape[0] == 3:
-        grouped[:2] = bool(grouped[0] or grouped[1])
-    return grouped
+    if len(flags) == 3:
+        both = flags[0] or flags[1]
+        return [both, both, flags[2]]
+    return list(flags)
 
 
 def _rotation_block(heading: float, ndof: int) -> FloatArray:

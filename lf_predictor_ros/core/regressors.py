@@ -191,6 +191,12 @@ def rotate_blocks(values: ArrayLike, cos: ArrayLike, sin: ArrayLike) -> FloatArr
     c = np.asarray(cos, dtype=np.float64)[..., np.newaxis]
     s = np.asarray(sin, dtype=np.float64)[..., np.newaxis]
     north, east = blocks[..., 0], blocks[..., 1]
-    rotated = np.stack((c * north - s * east, s * north + c * east, blocks[..., 2]), axis=-1)
-    result: FloatArray = rotated.reshape(array.shape)
+    # written into a copy (the third channels stay): c·north − s·east and s·north + c·east,
+    # each product rounded, then the sum, as the expressions compute them (no temporaries)
+    result: FloatArray = array.copy()
+    rotated = result.reshape(blocks.shape)
+    np.multiply(c, north, out=rotated[..., 0])
+    rotated[..., 0] -= s * east
+    np.multiply(s, north, out=rotated[..., 1])
+    rotated[..., 1] += c * east
     return result

@@ -167,7 +167,9 @@ def test_rotate_blocks_numbers_and_torch_twin() -> None:
     np.testing.assert_allclose(earth, [0.0, 1.0, 7.0], atol=1e-15)
     rng = np.random.default_rng(4)
     rows, angles = rng.normal(size=(5, 9)), rng.uniform(-4.0, 4.0, size=5)
+    kept = rows.copy()
     turned = rotate_blocks(rows, np.cos(angles), np.sin(angles))
+    np.testing.assert_array_equal(rows, kept)  # a new array: the input is not changed
     twin = rotate_blocks_torch(torch.from_numpy(rows), torch.from_numpy(np.cos(angles)),
                                torch.from_numpy(np.sin(angles))).numpy()
     np.testing.assert_array_equal(twin, turned)

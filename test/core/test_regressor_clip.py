@@ -52,6 +52,21 @@ def test_the_range_is_taken_in_the_network_frame() -> None:
         low[0] = 0.0
 
 
+def test_the_clips_are_np_clip_value_for_value_nan_included() -> None:
+    # the predict path clips with np.minimum(np.maximum(·)) (cheaper): np.clip's numbers
+    net = NumpyNnarmax.from_module(NnarmaxNet(SPEC_3DOF, seed=2))
+    rng = np.random.default_rng(6)
+    clipped = net.with_range(rng.normal(size=(30, SPEC_3DOF.nu * 3 + SPEC_3DOF.ny * 3)))
+    assert clipped.regressor_range is not None and clipped.output_range is not None
+    rows = 4.0 * rng.normal(size=(40, clipped.regressor_range[0].size))  # far outside, too
+    rows[3, 1] = np.nan
+    plain = replace(clipped, regressor_range=None, output_range=None)
+    expected = np.clip(plain._forward_absolute(np.clip(rows, *clipped.regressor_range)),
+                       *clipped.output_range)
+    np.testing.assert_array_equal(clipped._forward_absolute(rows), expected)  # NaN row too
+    assert np.isnan(expected[3]).all() and np.isfinite(np.delete(expected, 3, axis=0)).all()
+
+
 def test_rows_of_the_window_are_predicted_exactly_as_without_the_clip() -> None:
     plain = _linear_net([2.0, 0.0, 1.0])
     rows = _window_rows()

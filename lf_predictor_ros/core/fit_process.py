@@ -26,19 +26,32 @@ same numbers; counted in ``failures``) and the next call starts a new child.
 
 The predictor and the vessel memory use it for their background jobs only (`predictor`,
 `lf_state`); inline ones (replay, benchmarks) compute on their own thread as before.
+
+A job and its result cross as bytes of a plain pickle in which torch tensors travel as numpy
+arrays (`_packed`). The executor's own pickler (multiprocessing's) would move every tensor of a
+state_dict into a shared-memory file and pass its descriptor through a helper thread and a
+socket: a round trip of a linear network's state_dict took 20–46 ms of threads in the node that
+take the GIL in turns with the callbacks, against 0.6 ms as arrays (docs/BENCHMARKS.md,
+sixty-seventh session). A job the child cannot unpickle (a function it cannot import) is
+computed on the calling thread, and the child stays.
 """
 from __future__ import annotations
 
 from collections.abc import Callable
 from concurrent.futures import CancelledError, Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+import io
 import multiprocessing
 import os
+import pickle
 import signal
+import sys
 import threading
 import time
-from typing import TypeVar, cast
+from typing import Any, TypeVar, cast
 import weakref
+
+import numpy as np
 
 from lf_predictor_ros.core.frequency import FrequencyEstimate, _FloatArray, spectrum_estimate
 
@@ -55,6 +68,10 @@ _NO_CHILD = object()  # `FitProcess._ask`'s answer when there is no child
 
 class JobAbandonedError(Exception):
     """`FitProcess.run` stopped waiting: its ``stop`` was set (the child was ended)."""
+
+
+class JobNotLoadableError(Exception):
+    """The child could not unpickle a job (e.g. a function it cannot import)."""
 
 
 class FitProcess:
@@ -111,16 +128,22 @@ class FitProcess:
         training it went on with would hold up every job after it. A job of another thread
         that this ending cut off is asked again of a new child.
         """
+        try:
+            job = _packed((function, args))
+        except Exception:  # noqa: BLE001 - cannot be pickled: computed here, the child stays
+            return _NO_CHILD
         for _ in range(ABANDONED_RETRIES + 1):
             executor: ProcessPoolExecutor | None = None
             try:
                 executor = self._running()
-                future = executor.submit(function, *args)
+                future = executor.submit(_call_packed, job)
             except Exception:  # noqa: BLE001 - no child: cannot start (e.g. in a daemonic
                 future = None  # process, an AssertionError), or a broken or closed pool
             if future is not None:
                 try:
-                    return _result(future, stop)
+                    return _unpacked(_result(future, stop))
+                except JobNotLoadableError:
+                    return _NO_CHILD  # computed here; the child is fine
                 except JobAbandonedError:
                     self._end_abandoned(executor)
                     raise
@@ -185,6 +208,52 @@ def _result(future: Future[_T], stop: threading.Event | None) -> _T:
 def _ready() -> bool:
     """The child's answer to `FitProcess.start`."""
     return True
+
+
+class _ArrayPickler(pickle.Pickler):
+    """A plain pickler that writes a CPU torch tensor as its numpy array (`_packed`)."""
+
+    def reducer_override(self, obj: Any) -> Any:
+        torch = sys.modules.get('torch')  # no tensor exists before torch is imported
+        if torch is None or type(obj) is not torch.Tensor or obj.requires_grad or \
+                obj.device.type != 'cpu' or obj.layout != torch.strided:
+            return NotImplemented
+        try:
+            array = obj.numpy()  # the tensor's own memory: written by value below
+        except (TypeError, RuntimeError):  # a dtype numpy has not (bfloat16): pickled as usual
+            return NotImplemented
+        return _tensor_from_array, (array,)
+
+
+def _tensor_from_array(array: np.ndarray) -> Any:
+    """The tensor `_ArrayPickler` wrote (same dtype, shape and numbers)."""
+    import torch
+    return torch.from_numpy(array)
+
+
+def _packed(value: object) -> bytes:
+    """``value`` as plain pickle bytes, its tensors as numpy arrays (module docstring)."""
+    buffer = io.BytesIO()
+    _ArrayPickler(buffer, protocol=pickle.HIGHEST_PROTOCOL).dump(value)
+    return buffer.getvalue()
+
+
+def _unpacked(data: object) -> object:
+    """The value `_packed` wrote (`_call_packed`'s answer)."""
+    return pickle.loads(cast(bytes, data))
+
+
+def _call_packed(job: bytes) -> bytes:
+    """In the child: the packed ``(function, args)`` computed, its result packed.
+
+    `JobNotLoadableError` when the job cannot be unpickled here; the function's own errors
+    are raised as they are.
+    """
+    try:
+        function, args = pickle.loads(job)
+    except Exception as error:  # noqa: BLE001 - e.g. a function of a module not importable here
+        raise JobNotLoadableError(f'{type(error).__name__}: {error}') from None
+    return _packed(function(*args))
 
 
 def _child_setup(parent: int) -> None:

@@ -10,9 +10,11 @@ import subprocess
 import sys
 import threading
 import time
+import types
 
 import numpy as np
 import pytest
+import torch
 
 from lf_predictor_ros.core import fit_process, frequency
 from lf_predictor_ros.core.fit_process import PARENT_CHECK_PERIOD, FitProcess, shared_fit_process
@@ -96,6 +98,41 @@ def test_any_job_runs_in_the_child_and_its_errors_come_back_as_they_are(fit: Fit
     with pytest.raises(TimeoutError, match='the job'):  # not taken for a wait's timeout
         fit.run(exec, "raise TimeoutError('the job')", stop=stop)
     assert fit.starts == 1 and fit.failures == 0
+
+
+def test_a_job_the_child_cannot_load_is_computed_here_and_the_child_stays(
+        fit: FitProcess, monkeypatch: pytest.MonkeyPatch) -> None:
+    module = types.ModuleType('lf_parent_only_jobs')  # importable in this process only
+    exec('def plus_one(value):\n    return value + 1\n', module.__dict__)  # noqa: S102
+    monkeypatch.setitem(sys.modules, module.__name__, module)
+    assert fit.run(module.plus_one, 1) == 2
+    assert fit.failures == 1 and fit.starts == 1 and fit.running
+    assert fit.run(os.getpid) != os.getpid()  # the same child answers the next job
+    assert fit.starts == 1 and fit.failures == 1
+
+
+def test_tensors_cross_as_arrays_not_through_shared_memory(fit: FitProcess) -> None:
+    # multiprocessing's own pickler moves each tensor into a shared-memory file whose
+    # descriptor a helper thread hands over (a state_dict's round trip 20–46 ms of GIL turns)
+    generator = torch.Generator().manual_seed(1)
+    state = {'weight': torch.randn(3, 108, dtype=torch.float64, generator=generator),
+             'count': torch.arange(4), 'flag': torch.tensor([True, False]),
+             'turned': torch.arange(6.0).reshape(2, 3).t()}  # not contiguous
+    back = fit.run(dict, state)
+    assert back.keys() == state.keys()
+    for key, value in state.items():
+        assert back[key].dtype == value.dtype and torch.equal(back[key], value)  # every bit
+        assert not back[key].is_shared()
+    assert fit.run(torch.Tensor.is_shared, state['weight']) is False  # as the child got it
+    assert fit.starts == 1 and fit.failures == 0
+
+
+def test_tensors_numpy_cannot_hold_are_pickled_as_usual() -> None:
+    tensors = {'half': torch.tensor([1.5, -2.25], dtype=torch.bfloat16),
+               'grad': torch.ones(3, dtype=torch.float64, requires_grad=True)}
+    back = fit_process._unpacked(fit_process._packed(tensors))
+    assert back['half'].dtype == torch.bfloat16 and torch.equal(back['half'], tensors['half'])
+    assert back['grad'].requires_grad and torch.equal(back['grad'], tensors['grad'])
 
 
 def test_a_set_stop_abandons_the_job_and_ends_its_child(fit: FitProcess) -> None:

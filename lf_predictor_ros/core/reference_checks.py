@@ -205,7 +205,7 @@ class ReferenceChecker:
         self._same_count = 0
         self._last_raw: tuple[tuple[int, ...], list[float]] | None = None  # shape, values
         self._frozen = False
-        self._block: list[tuple[float, FloatArray]] = []
+        self._block = _PoseBlock(self.ndof)  # the current wave-motion block
         self._motion_history: deque[FloatArray] = deque(maxlen=MOTION_MEMORY)
         self._no_motion = False
         self._drift_mean: FloatArray | None = None
@@ -240,14 +240,14 @@ class ReferenceChecker:
         if self._last_t is not None and t <= self._last_t:
             if t == self._last_t:
                 return ACCEPT  # a repeated stamp: nothing new to test (the aligner drops it)
-            self._block = []  # time went backwards: the local tests restart from this pose
+            self._block.clear()  # time went backwards: the local tests restart from this pose
             self._fit.clear()
             self._pending = []
         gap = self._last_t is not None and t - self._last_t > self.settings.dropout_timeout
         if gap:
             if not self._dropout_counted:  # a gap in the stamps the clock watch did not see
                 self.counters['dropout'] += 1
-            self._block = []
+            self._block.clear()
             self._fit.clear()
             self._pending = []
         self._dropout_counted = False
@@ -429,19 +429,19 @@ class ReferenceChecker:
         for sample in self._pending[-FIT_SAMPLES:]:
             self._fit.append(sample)
         self._pending = []
-        self._block = []
+        self._block.clear()
         return Verdict(True, restart=True, fault='step')
 
     def _check_motion(self, t: float, y: FloatArray, wave_peak_freq: float | None) -> bool:
         """Add to the current block; at its end judge it. True when no motion is detected now."""
-        self._block.append((t, y))
+        self._block.append(t, y)
         period = 2.0 * math.pi / wave_peak_freq if wave_peak_freq and wave_peak_freq > 0 \
             else DEFAULT_WAVE_PERIOD
-        if t - self._block[0][0] < self.settings.motion_wave_periods * period or \
-                len(self._block) < MIN_BLOCK_SAMPLES:
+        if t - self._block.start < self.settings.motion_wave_periods * period or \
+                self._block.size < MIN_BLOCK_SAMPLES:
             return False
-        motion = _detrended_rms(self._block, self.ndof)
-        self._block = []
+        motion = _detrended_rms(*self._block.arrays(), self.ndof)
+        self._block.clear()
         was = self._no_motion
         if len(self._motion_history) >= MIN_MOTION_BLOCKS:
             reference = np.median(np.array(self._motion_history), axis=0)
@@ -541,10 +541,48 @@ class ReferenceChecker:
         return out
 
 
-def _detrended_rms(block: list[tuple[float, FloatArray]], ndof: int) -> FloatArray:
-    """Per-DOF RMS of a block after removing its least-squares line (heading unwrapped)."""
-    times = np.array([t for t, _ in block])
-    values = np.array([v for _, v in block])
+class _PoseBlock:
+    """The poses of a wave-motion block as growing arrays (stamps (n,), poses (n, ndof)).
+
+    A block spans several wave periods of every measured pose (thousands at 100 Hz); built as
+    a list of (t, pose) it cost 5–8 ms in the one callback that judged it (docs/BENCHMARKS.md,
+    sixty-seventh session).
+    """
+
+    def __init__(self, ndof: int) -> None:
+        self._times = np.empty(256)
+        self._values = np.empty((256, ndof))
+        self.size = 0
+
+    @property
+    def start(self) -> float:
+        """The first pose's stamp [s] (the block is not empty)."""
+        return float(self._times[0])
+
+    def append(self, t: float, y: FloatArray) -> None:
+        """Add one pose (ndof values) stamped t; the arrays double when full."""
+        if self.size == self._times.shape[0]:
+            self._times = np.concatenate((self._times, np.empty_like(self._times)))
+            self._values = np.concatenate((self._values, np.empty_like(self._values)))
+        self._times[self.size] = t
+        self._values[self.size] = y
+        self.size += 1
+
+    def arrays(self) -> tuple[FloatArray, FloatArray]:
+        """Copies of the stamps (n,) and poses (n, ndof) held, oldest first."""
+        return self._times[:self.size].copy(), self._values[:self.size].copy()
+
+    def clear(self) -> None:
+        """Forget the poses (the arrays are kept for the next block)."""
+        self.size = 0
+
+
+def _detrended_rms(times: FloatArray, values: FloatArray, ndof: int) -> FloatArray:
+    """Per-DOF RMS of a block after removing its least-squares line (heading unwrapped).
+
+    ``times`` (n,) and ``values`` (n, ndof), the caller's own copies (the heading column of
+    ``values`` is unwrapped in place).
+    """
     if ndof == 3:
         values[:, 2] = values[0, 2] + np.unwrap(values[:, 2] - values[0, 2])
     design = np.column_stack([np.ones_like(times), times - times.mean()])

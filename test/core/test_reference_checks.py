@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 import pytest
 
+from lf_predictor_ros.core import reference_checks
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 from lf_predictor_ros.core.reference_checks import (
     ReferenceChecker,
@@ -98,6 +99,34 @@ def test_no_wave_motion_is_flagged_where_waves_were_seen_before() -> None:
     assert checker.counters['no_wave_motion'] == 1 and 'no_wave_motion' in checker.faults
     assert checker.status()[0] == 'ERROR'
     assert all(k > 6000 for k in flagged)
+
+
+def test_a_block_of_thousands_of_poses_gives_the_detrended_rms_of_its_waves() -> None:
+    # 100 Hz over 60 s (grown from 256 rows): a line plus a sinusoid of amplitude a and 8 whole
+    # periods (ωT = 16π) per DOF, the heading wrapping past ±π on its way. About the best line
+    # the RMS is a·√(1/2 − 12/(ωT)²): the line takes up the sinusoid's correlation with t,
+    # ∫(t − T/2) sin ωt dt = −T/ω, of variance T²/12
+    block = reference_checks._PoseBlock(3)
+    t = 1000.0 + np.arange(6000) * 0.01
+    amplitude = np.array([0.4, 0.25, 0.02])
+    line = np.column_stack([2.0 + 0.05 * t, -1.0 - 0.02 * t, 3.12 + 0.001 * (t - t[0])])
+    omega = 16.0 * math.pi / 60.0  # [rad/s]
+    poses = line + amplitude * np.sin(omega * (t - t[0]))[:, None]
+    poses[:, 2] = np.angle(np.exp(1j * poses[:, 2]))  # wrapped, as measured
+    assert poses[:, 2].min() < -3.0 < 3.0 < poses[:, 2].max()  # it crosses ±π
+    for k in range(t.size):
+        block.append(float(t[k]), poses[k])
+    assert block.size == 6000 and block.start == 1000.0
+    times, values = block.arrays()
+    np.testing.assert_array_equal(times, t)
+    np.testing.assert_array_equal(values, poses)
+    rms = reference_checks._detrended_rms(times, values, 3)
+    expected = amplitude * math.sqrt(0.5 - 12.0 / (16.0 * math.pi) ** 2)
+    np.testing.assert_allclose(rms, expected, rtol=1e-3)
+    np.testing.assert_array_equal(block.arrays()[1], poses)  # its copy was unwrapped, not this
+    block.clear()
+    block.append(5.0, np.zeros(3))
+    assert block.size == 1 and block.start == 5.0
 
 
 def test_outlier_is_rejected_and_a_persistent_step_becomes_the_new_level() -> None:

@@ -545,8 +545,8 @@ class _PoseBlock:
     """The poses of a wave-motion block as growing arrays (stamps (n,), poses (n, ndof)).
 
     A block spans several wave periods of every measured pose (thousands at 100 Hz); built as
-    a list of (t, pose) it cost 5–8 ms in the one callback that judged it (docs/BENCHMARKS.md,
-    sixty-seventh session).
+    a list of (t, pose) it cost 3.7–8.4 ms in the one callback that judged it
+    (docs/BENCHMARKS.md, sixty-seventh session).
     """
 
     def __init__(self, ndof: int) -> None:

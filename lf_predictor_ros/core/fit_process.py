@@ -211,7 +211,11 @@ def _ready() -> bool:
 
 
 class _ArrayPickler(pickle.Pickler):
-    """A plain pickler that writes a CPU torch tensor as its numpy array (`_packed`)."""
+    """A plain pickler that writes a CPU torch tensor as its numpy array (`_packed`).
+
+    Each tensor arrives with its own memory: tensors that were views of one storage (none in
+    a state_dict of this package's networks) are no longer shared.
+    """
 
     def reducer_override(self, obj: Any) -> Any:
         torch = sys.modules.get('torch')  # no tensor exists before torch is imported

@@ -192,7 +192,7 @@ def rotate_blocks(values: ArrayLike, cos: ArrayLike, sin: ArrayLike) -> FloatArr
     s = np.asarray(sin, dtype=np.float64)[..., np.newaxis]
     north, east = blocks[..., 0], blocks[..., 1]
     # written into a copy (the third channels stay): c·north − s·east and s·north + c·east,
-    # each product rounded, then the sum, as the expressions compute them (no temporaries)
+    # each product rounded, then the sum, as the expressions compute them (no np.stack)
     result: FloatArray = array.copy()
     rotated = result.reshape(blocks.shape)
     np.multiply(c, north, out=rotated[..., 0])

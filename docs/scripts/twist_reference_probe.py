@@ -41,10 +41,10 @@ from lf_predictor_ros.benchmark.odometry_bench import true_twist  # noqa: E402
 from lf_predictor_ros.core.heading import wrap_angle  # noqa: E402
 from lf_predictor_ros.core.lf_dynamics import body_velocity  # noqa: E402
 from lf_predictor_ros.core.odometry import (  # noqa: E402
-    Published,
     low_passed,
     reference_velocity,
 )
+from lf_predictor_ros.core.published_columns import Published  # noqa: E402
 
 FloatArray = NDArray[np.float64]
 SCORED_FROM = 481.0  # [s] the benchmark's first scored sample at h = 1 s

@@ -64,16 +64,14 @@ from lf_predictor_ros.core.odometry import (
     DAMPING_MEMORY_DOFS,
     FITTED_DAMPING_DOFS,
     Covariances,
-    EstimateSource,
     LfOdometry,
     OdometryEstimate,
     OdometryParams,
-    Published,
     calibrate,
 )
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
-from lf_predictor_ros.core.published_columns import PublishedColumns
+from lf_predictor_ros.core.published_columns import EstimateSource, Published, PublishedColumns
 from lf_predictor_ros.core.readonly import ReadOnlyArrays
 from lf_predictor_ros.core.retraining import target_filter
 from lf_predictor_ros.core.targets import TargetWindow
@@ -376,14 +374,13 @@ class LfStateEstimator:
             odometry.params.controller_read_lone_r_squared,
             odometry.params.controller_read_difference,
             odometry.params.controller_read_median_r_squared)
-        published = odometry.published()
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
             self._job = self._executor.submit(_learn_in_child, shared_fit_process(), head,
-                                              published, tail)
+                                              odometry.published_columns(), tail)
         else:
-            self._apply(_learn(*(*head, published, *tail)))
+            self._apply(_learn(*(*head, odometry.published(), *tail)))
 
     def _collect(self) -> None:
         job = self._job
@@ -411,26 +408,22 @@ class LfStateEstimator:
         self._memory_error = None
 
 
-def _learn_in_child(process: FitProcess, head: tuple[Any, ...], published: list[Published],
+def _learn_in_child(process: FitProcess, head: tuple[Any, ...], published: PublishedColumns,
                     tail: tuple[Any, ...]) -> Learned:
-    """`_learn` (``*head, published, *tail``) in the child process (`core.fit_process`).
+    """`_learn` (``*head, published.records(), *tail``) in the child process (`core.fit_process`).
 
-    The history goes as `PublishedColumns` (as objects its pickling would hold this thread's
-    GIL for about 20 ms, as columns 1.5 ms); without a child the job is computed on this thread.
+    The history goes as the odometry's columns (a snapshot of its `PublishedLog`: nothing to
+    pack on this thread, whose GIL the node's callbacks wait for); without a child the job is
+    computed on this thread.
     """
-    try:
-        history: PublishedColumns | list[Published] = PublishedColumns.of(published)
-    except ValueError:
-        history = published
-    return process.run(_learn_packed, head, history, tail,
-                       fallback=lambda: _learn(*(*head, published, *tail)))
+    return process.run(_learn_packed, head, published, tail,
+                       fallback=lambda: _learn_packed(head, published, tail))
 
 
-def _learn_packed(head: tuple[Any, ...], history: PublishedColumns | list[Published],
+def _learn_packed(head: tuple[Any, ...], history: PublishedColumns,
                   tail: tuple[Any, ...]) -> Learned:
-    """In the child: `_learn` with the history unpacked."""
-    published = history.records() if isinstance(history, PublishedColumns) else history
-    return _learn(*(*head, published, *tail))
+    """`_learn` with the history given as columns."""
+    return _learn(*(*head, history.records(), *tail))
 
 
 def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, forces: FloatArray,

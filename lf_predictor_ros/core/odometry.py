@@ -88,11 +88,16 @@ from lf_predictor_ros.core.lf_dynamics import (
     dead_reckon_step,
     heading_basis,
 )
+from lf_predictor_ros.core.published_columns import (
+    EstimateSource,
+    Published,
+    PublishedColumns,
+    PublishedLog,
+)
 from lf_predictor_ros.core.span_mean import SpanMean
 
 FloatArray = NDArray[np.float64]
 OdometryMode = Literal['tracking', 'dead_reckoning', 'lost']
-EstimateSource = Literal['network', 'fallback']
 # (pose error model, twist error model) per source ('network', 'fallback', 'all')
 Covariances = tuple[dict[str, 'ErrorModel'], dict[str, 'ErrorModel']]
 SOURCES: tuple[EstimateSource, ...] = ('network', 'fallback')
@@ -800,21 +805,6 @@ class ErrorModel:
         return cov
 
 
-@dataclass(frozen=True)
-class Published:
-    """One published estimate as the calibration sees it (pose unwrapped, ndof entries)."""
-
-    stamp: float
-    pose: FloatArray  # unwrapped, ndof entries
-    twist: FloatArray
-    source: EstimateSource
-    accel: FloatArray  # the twist's low-passed change per second (twist error model regressor)
-    lag: FloatArray  # the pose error model's regressor w (`LfOdometry._lag_regressor`)
-    # the untaken twin offset's excess max(0, m² − 2 L) (`LfOdometry._twin_excess`; None: no
-    # offset given or not calibrated yet)
-    twin_excess: FloatArray | None = None
-
-
 class LfOdometry:
     """LF velocity, calibrated covariances and dead reckoning (see the module docstring)."""
 
@@ -842,7 +832,7 @@ class LfOdometry:
         self._accel: tuple[float, FloatArray, FloatArray] | None = None  # (t, twist, accel)
         self._lag_peak: tuple[float, FloatArray] | None = None  # (t, held w²), pose_lag_memory
         self._twin_level: FloatArray | None = None  # running level of m² (pose_twin_gain)
-        self._history: deque[Published] = deque(maxlen=HISTORY_SAMPLES)
+        self._history = PublishedLog(HISTORY_SAMPLES)
         # the published twist over dead_reckoning_twist_average_periods wave periods, and
         # (the 'extrapolated' start, dead_reckoning_moving_twist_clamp) over twice as many
         self._wave_twist = SpanMean(self.sample_time)
@@ -1077,7 +1067,11 @@ class LfOdometry:
 
     def published(self) -> list[Published]:
         """A copy of the published history the covariances are calibrated on (oldest first)."""
-        return list(self._history)
+        return self._history.columns().records()
+
+    def published_columns(self) -> PublishedColumns:
+        """The published history as columns: a snapshot, taken without a copy (`PublishedLog`)."""
+        return self._history.columns()
 
     def apply_learned(self, memory: VesselMemory | None, covariances: Covariances | None) -> None:
         """Put a vessel memory and a calibration in use (None: keep the previous one).

@@ -18,10 +18,10 @@ from lf_predictor_ros.core.lf_state import (
 from lf_predictor_ros.core.odometry import (
     LfOdometry,
     OdometryParams,
-    Published,
     normalized_error_squared,
 )
 from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.published_columns import Published, PublishedLog
 from lf_predictor_ros.core.targets import TargetWindow
 from sim_ros.simulation import load_scenario, simulate
 
@@ -1140,9 +1140,12 @@ def test_the_memory_job_in_the_child_gives_the_numbers_of_this_thread(
     head, published, tail = args[:5], args[5], args[6:]
     assert isinstance(published, list) and len(published) > 1000
     expected = real(*args)  # type: ignore[arg-type]
+    log = PublishedLog(len(published))  # the history as the odometry hands it to the job
+    for item in published:
+        log.append(item)
     process = FitProcess()
     try:
-        got = lf_state._learn_in_child(process, head, published, tail)
+        got = lf_state._learn_in_child(process, head, log.columns(), tail)
         assert process.starts == 1 and process.failures == 0  # computed in the child
     finally:
         process.close()

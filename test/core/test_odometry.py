@@ -20,7 +20,6 @@ from lf_predictor_ros.core.odometry import (
     LfOdometry,
     OdometryEstimate,
     OdometryParams,
-    Published,
     attenuated_variance,
     band_excess,
     calibrate,
@@ -34,6 +33,7 @@ from lf_predictor_ros.core.odometry import (
     reference_velocity,
     thrust_statistics_step,
 )
+from lf_predictor_ros.core.published_columns import Published
 from lf_predictor_ros.core.span_mean import SpanMean
 
 H = 1.0
@@ -233,7 +233,8 @@ def test_calibration_fits_the_heading_speed_gain_on_every_source() -> None:
         assert math.isclose(fitted[0][source].hold[2, 2], 1e-4, rel_tol=1e-6)
         assert plain[0][source].speed_gain == 0.0
     odo = LfOdometry(3, H, OdometryParams(pose_heading_speed_lag=True))
-    odo._history.extend(history)
+    for record in history:
+        odo._history.append(record)
     odo.learn(times, targets, None)
     assert odo._pose_cov is not None
     assert math.isclose(odo._pose_cov['all'].speed_gain, 0.01, rel_tol=1e-6)

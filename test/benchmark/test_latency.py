@@ -13,9 +13,22 @@ from typing import Any
 import numpy as np
 import pytest
 
-from lf_predictor_ros.benchmark.latency import CollectionTimer, _descendants_cpu_seconds
+from lf_predictor_ros.benchmark.latency import (
+    CollectionTimer,
+    _descendants_cpu_seconds,
+    slow_counts,
+)
 
 BURN = 0.6  # [s] CPU time the grandchild spends
+
+
+
+def test_slow_counts_split_the_steps_from_the_other_callbacks() -> None:
+    steps = [0.0009, 0.0011, 0.0030]  # [s] one under the 1 ms bound, two over
+    callbacks = [0.0001, 0.0010, 0.0015, 0.0002, *steps]  # 1 ms itself is not over
+    assert slow_counts(callbacks, steps) == (2, 1)
+    assert slow_counts(callbacks, steps, limit=0.0005) == (3, 2)
+    assert slow_counts([], []) == (0, 0)
 
 
 @pytest.mark.skipif(not Path('/proc/self/stat').exists(), reason='reads Linux /proc')

@@ -832,7 +832,10 @@ class LfOdometry:
         self._accel: tuple[float, FloatArray, FloatArray] | None = None  # (t, twist, accel)
         self._lag_peak: tuple[float, FloatArray] | None = None  # (t, held w²), pose_lag_memory
         self._twin_level: FloatArray | None = None  # running level of m² (pose_twin_gain)
-        self._history = PublishedLog(HISTORY_SAMPLES)
+        # the published history twice: the records for a calibration on this thread (no copy
+        # to make), the same as columns for a job in the child (no packing on this thread)
+        self._history: deque[Published] = deque(maxlen=HISTORY_SAMPLES)
+        self._history_columns = PublishedLog(HISTORY_SAMPLES)
         # the published twist over dead_reckoning_twist_average_periods wave periods, and
         # (the 'extrapolated' start, dead_reckoning_moving_twist_clamp) over twice as many
         self._wave_twist = SpanMean(self.sample_time)
@@ -969,7 +972,9 @@ class LfOdometry:
         excess = None
         if offset is not None and self.params.pose_twin_gain > 0.0 and self.calibrated:
             excess = self._twin_excess(offset)
-        self._history.append(Published(t, z.copy(), twist, source, accel, lag, excess))
+        record = Published(t, z.copy(), twist, source, accel, lag, excess)
+        self._history.append(record)
+        self._history_columns.append(record)
         span = self._wave_span()
         self._wave_twist.add(t, twist, span)
         self._wave_twist_double.add(
@@ -1067,11 +1072,11 @@ class LfOdometry:
 
     def published(self) -> list[Published]:
         """A copy of the published history the covariances are calibrated on (oldest first)."""
-        return self._history.columns().records()
+        return list(self._history)
 
     def published_columns(self) -> PublishedColumns:
         """The published history as columns: a snapshot, taken without a copy (`PublishedLog`)."""
-        return self._history.columns()
+        return self._history_columns.columns()
 
     def apply_learned(self, memory: VesselMemory | None, covariances: Covariances | None) -> None:
         """Put a vessel memory and a calibration in use (None: keep the previous one).

@@ -98,6 +98,30 @@ def test_covariance_is_calibrated_from_target_comparison() -> None:
     assert out.pose_cov[1, 1] == pytest.approx(0.0, abs=1e-12)
 
 
+def test_the_published_columns_hold_the_published_records() -> None:
+    """`published_columns` (the memory job's history) gives `published`'s records to the bit."""
+    odo = LfOdometry(3, H, OdometryParams(pose_twin_gain=1.0, pose_lag_prior=0.0))
+    rng = np.random.default_rng(5)
+    times = np.arange(200.0)
+    poses = np.column_stack([0.01 * times, -0.02 * times, 0.001 * times]) + \
+        rng.normal(0.0, 0.1, (200, 3))
+    for k in range(200):
+        odo.track(times[k], poses[k], rng.normal(0.0, 1e4, 3),
+                  'network' if k % 3 else 'fallback', twin_offset=rng.normal(0.0, 0.1, 3))
+        if k == 120:  # calibrated from here on: the twin excess is kept with each record
+            odo.learn(times[:100], poses[:100], None)
+    records, columns = odo.published(), odo.published_columns()
+    assert len(records) == len(columns) == 200
+    assert sum(r.twin_excess is not None for r in records) == 79
+    back = columns.records()
+    for a, b in zip(back, records, strict=True):
+        assert (a.stamp, a.source) == (b.stamp, b.source)
+        for name in ('pose', 'twist', 'accel', 'lag'):
+            assert np.array_equal(getattr(a, name), getattr(b, name))
+        assert (a.twin_excess is None) == (b.twin_excess is None)
+        assert a.twin_excess is None or np.array_equal(a.twin_excess, b.twin_excess)
+
+
 def test_learn_uses_every_calibration_setting() -> None:
     """`LfOdometry.learn` equals `calibrate` with the odometry's own settings.
 
@@ -233,8 +257,7 @@ def test_calibration_fits_the_heading_speed_gain_on_every_source() -> None:
         assert math.isclose(fitted[0][source].hold[2, 2], 1e-4, rel_tol=1e-6)
         assert plain[0][source].speed_gain == 0.0
     odo = LfOdometry(3, H, OdometryParams(pose_heading_speed_lag=True))
-    for record in history:
-        odo._history.append(record)
+    odo._history.extend(history)
     odo.learn(times, targets, None)
     assert odo._pose_cov is not None
     assert math.isclose(odo._pose_cov['all'].speed_gain, 0.01, rel_tol=1e-6)

@@ -32,6 +32,10 @@ learning thread (``controller_inertia``, ``core.controller_gains``), which the d
 vessel (the poses are simulated beforehand); the read only needs them to be a PD law of the
 published estimates. ``controller_read`` reports the last read's outcome.
 
+The math libraries run on one thread after the node is built, as in the node executables
+(`core.math_threads`; before the sixty-eighth session the bench relied on ``OMP_NUM_THREADS=1``
+in its command line, which a plain ``ros2 run`` does not set).
+
 The default feed (20×) sends the callbacks 0.5 ms apart, which keeps the caches warm; at real
 time (``--speed 1``) the step took 1.28–1.31 ms (median) against 1.0–1.15 ms at 20× on the
 2-core machine of docs/BENCHMARKS.md's twenty-ninth session, and a training overlaps hardly any
@@ -57,6 +61,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.utilities import try_shutdown
 
+from lf_predictor_ros.core.math_threads import use_one_math_thread
 from lf_predictor_ros.nodes.conversions import (
     pose_to_msg,
     stamp_to_sec,
@@ -213,6 +218,7 @@ def measure(rate_hz: float, minutes: float, speed: float,
     rclpy.init(context=context)
     node = PredictorNode(context=context, parameter_overrides=[Parameter('ndof', value=3)])
     controller = DpControllerFeed(context) if commands == 'pid' else None
+    use_one_math_thread()  # as the node executables (`nodes.runner`), for good
     if freeze:
         freeze_startup_heap()
     collections = CollectionTimer()

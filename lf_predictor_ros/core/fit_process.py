@@ -54,6 +54,7 @@ import weakref
 import numpy as np
 
 from lf_predictor_ros.core.frequency import FrequencyEstimate, _FloatArray, spectrum_estimate
+from lf_predictor_ros.core.math_threads import use_one_math_thread
 
 # what the forkserver imports once, before it forks the child: the jobs' modules (torch with
 # them), so that no job waits for an import
@@ -267,9 +268,11 @@ def _child_setup(parent: int) -> None:
     shuts the child down; the child itself would only print a KeyboardInterrupt traceback.
     A parent killed outright (SIGKILL, a crash) cannot shut it down, and a pool worker waits for
     work forever (it holds its own queue's write end), keeping the forkserver alive with it: a
-    daemon thread checks every `PARENT_CHECK_PERIOD` that the parent still exists.
+    daemon thread checks every `PARENT_CHECK_PERIOD` that the parent still exists. The math
+    libraries run on one thread (`math_threads.use_one_math_thread`).
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    use_one_math_thread()  # the other core is the node's (`core.math_threads`)
     threading.Thread(target=_end_with, args=(parent,), name='fit-parent-watch',
                      daemon=True).start()
 

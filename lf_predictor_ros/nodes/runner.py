@@ -14,7 +14,9 @@ Once the node is built, the heap is frozen (`freeze_startup_heap`): the objects 
 and the node itself (343 000 in the predictor node, with torch and rclpy) leave the garbage
 collector's generations, so a full collection no longer walks them. Such a collection holds the
 GIL, and with it every callback, for 0.1–0.26 s (measured: docs/BENCHMARKS.md, forty-eighth
-session).
+session). The math libraries' thread pools are then limited to one thread
+(`core.math_threads`): the node and its child process share the cores with each other and the
+DP stack.
 """
 from __future__ import annotations
 
@@ -28,6 +30,8 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.task import Future
 from rclpy.utilities import ok, try_shutdown
+
+from lf_predictor_ros.core.math_threads import use_one_math_thread
 
 FLUSH_TIMEOUT = 2.0  # [s] longest wait for the subscribers' acknowledgements at a normal end
 
@@ -47,6 +51,7 @@ def spin_node(make_node: Callable[[], Node], *,
     except (KeyboardInterrupt, ExternalShutdownException):
         try_shutdown()
         return 0
+    use_one_math_thread()
     freeze_startup_heap()
     spin_until_shutdown(node, until)
     return 0

@@ -85,7 +85,6 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from numpy.typing import NDArray
-import torch
 import yaml
 
 from lf_predictor_ros.bag.mcap_reader import BagError, BagReader
@@ -106,6 +105,7 @@ from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.evaluation import DEFAULT_WAVE_BAND, Metrics, format_table, score
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_state import ControllerRead, LfStateEstimator
+from lf_predictor_ros.core.math_threads import use_one_math_thread
 from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
@@ -985,7 +985,7 @@ def _write_json(path: str, document: Mapping[str, Any]) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `replay` executable; returns the exit code."""
     options = parse_args(argv)
-    torch.set_num_threads(1)  # deterministic and polite on shared cores
+    use_one_math_thread()  # BLAS and torch: deterministic, polite on shared cores, the node's
     try:
         config = load_config(options.params_file, options.seed)
         result = replay(options, config)

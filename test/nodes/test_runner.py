@@ -81,9 +81,13 @@ def test_freeze_startup_heap_takes_every_live_object_out_of_the_collections() ->
 
 def test_spin_node_freezes_the_heap_after_building_the_node_and_before_spinning(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """The node's own objects are frozen too; a rejected configuration freezes nothing."""
+    """The node's own objects are frozen too; a rejected configuration freezes nothing.
+
+    The math libraries are put on one thread there too (`core.math_threads`).
+    """
     calls: list[str] = []
     monkeypatch.setattr(runner, 'freeze_startup_heap', lambda: calls.append('freeze'))
+    monkeypatch.setattr(runner, 'use_one_math_thread', lambda: calls.append('threads'))
     monkeypatch.setattr(runner, 'spin_until_shutdown', lambda node, until: calls.append('spin'))
 
     def make() -> Any:
@@ -91,7 +95,7 @@ def test_spin_node_freezes_the_heap_after_building_the_node_and_before_spinning(
         return object()
 
     assert runner.spin_node(make, config_errors=(ValueError,), logger_name='freeze_test') == 0
-    assert calls == ['make', 'freeze', 'spin']
+    assert calls == ['make', 'threads', 'freeze', 'spin']
 
     def invalid() -> Any:
         raise ValueError('bad parameter')

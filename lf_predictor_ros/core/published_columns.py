@@ -6,23 +6,23 @@ calibration and the vessel memory learn from that history in a child process
 GIL for about 20 ms (2-core machine, docs/BENCHMARKS.md, sixty-sixth session); packed into
 arrays when the job starts, it still held the GIL for 1.5–3 ms in a few large array calls, and
 the node's pose callbacks waited that long (sixty-eighth session). `PublishedLog` therefore
-writes each record into columns as it is published and hands out `PublishedColumns` snapshots
-without a copy; `PublishedColumns.records` gives the records back, value for value
-(`test/core/test_published_columns.py`).
+writes each record into columns as it is published (`row_buffer.RowBuffer`) and hands out
+`PublishedColumns` snapshots without a copy; `PublishedColumns.records` gives the records
+back, value for value (`test/core/test_published_columns.py`).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Literal, TypeVar, cast
+from typing import Literal, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
+from lf_predictor_ros.core.row_buffer import RowBuffer
+
 FloatArray = NDArray[np.float64]
 EstimateSource = Literal['network', 'fallback']
 _VECTOR_FIELDS = ('pose', 'twist', 'accel', 'lag')
-MIN_ROWS = 64  # rows of a log's first buffers [-]
-ArrayT = TypeVar('ArrayT', bound=NDArray[Any])
 
 
 @dataclass(frozen=True)
@@ -74,12 +74,10 @@ class PublishedColumns:
 class PublishedLog:
     """The newest ``capacity`` published records as columns, oldest first.
 
-    Every column is a buffer of up to 2 × ``capacity`` rows. `append` writes the row after the
-    newest and never writes a row again; when the buffers are full, the kept rows (at most
-    ``capacity``) move to new buffers. A `columns` snapshot is therefore made of views, taken
-    without a copy, that later appends leave as they are: another thread may read or pickle
-    it while the node goes on publishing. The first record fixes each vector's length (the twin
-    excess has the pose's).
+    Each column is a `RowBuffer`: a row once written is never written again, so a `columns`
+    snapshot is made of views, taken without a copy, that later appends leave as they are:
+    another thread may read or pickle it while the node goes on publishing. The first record
+    fixes each vector's length (the twin excess has the pose's).
     """
 
     def __init__(self, capacity: int) -> None:
@@ -87,17 +85,15 @@ class PublishedLog:
         if not (isinstance(capacity, int) and capacity >= 1):
             raise ValueError(f'the published history needs a capacity >= 1, got {capacity!r}')
         self.capacity = capacity
-        self._stamp: FloatArray = np.empty(0)
-        self._vectors: dict[str, FloatArray] = {}
-        self._excess: FloatArray = np.empty((0, 0))
-        self._has_excess: NDArray[np.bool_] = np.empty(0, dtype=bool)
-        self._codes: NDArray[np.intp] = np.empty(0, dtype=np.intp)
+        self._stamp = RowBuffer(capacity=capacity)
+        self._vectors: dict[str, RowBuffer] = {}  # made at the first record (its lengths)
+        self._excess = RowBuffer((0,), capacity=capacity)
+        self._has_excess = RowBuffer(dtype=bool, capacity=capacity)
+        self._codes = RowBuffer(dtype=np.intp, capacity=capacity)
         self._sources: dict[str, int] = {}
-        self._start = 0
-        self._end = 0
 
     def __len__(self) -> int:
-        return self._end - self._start
+        return len(self._stamp)
 
     def append(self, record: Published) -> None:
         """Add ``record`` as the newest (its vectors copied); beyond ``capacity`` drop the oldest.
@@ -106,51 +102,33 @@ class PublishedLog:
             ValueError: a vector is not a real 1-D array of the length the first record set
                 (the log is left as it was).
         """
-        if self._end == self._stamp.shape[0]:
-            self._move(record)
-        row = self._end  # not in any snapshot yet: a failed append leaves it to the next
-        for name, column in self._vectors.items():
-            column[row] = _checked(getattr(record, name), column, name)
+        if not self._vectors:
+            widths = {name: _width(getattr(record, name), name) for name in _VECTOR_FIELDS}
+            self._vectors = {name: RowBuffer((width,), capacity=self.capacity)
+                             for name, width in widths.items()}
+            self._excess = RowBuffer((widths['pose'],), capacity=self.capacity)
+        rows = [_checked(getattr(record, name), column.row_shape, name)
+                for name, column in self._vectors.items()]  # all checked before any is written
         excess = record.twin_excess
-        if excess is None:
-            self._excess[row] = np.nan
-        else:
-            self._excess[row] = _checked(excess, self._excess, 'twin_excess')
-        self._has_excess[row] = excess is not None
-        self._stamp[row] = record.stamp
-        self._codes[row] = self._sources.setdefault(record.source, len(self._sources))
-        self._end = row + 1
-        if self._end - self._start > self.capacity:
-            self._start += 1
+        excess_row = np.nan if excess is None else \
+            _checked(excess, self._excess.row_shape, 'twin_excess')
+        for column, row in zip(self._vectors.values(), rows, strict=True):
+            column.append(row)
+        self._excess.append(excess_row)
+        self._has_excess.append(excess is not None)
+        self._stamp.append(record.stamp)
+        self._codes.append(self._sources.setdefault(record.source, len(self._sources)))
 
     def columns(self) -> PublishedColumns:
         """The kept records as read-only views (a snapshot: later appends do not change it)."""
-        span = slice(self._start, self._end)
         empty = np.empty((0, 0))
-        vectors = {name: _view(self._vectors[name], span) if self._vectors else empty
+        vectors = {name: self._vectors[name].view() if self._vectors else empty
                    for name in _VECTOR_FIELDS}
         return PublishedColumns(
-            _view(self._stamp, span), sources=tuple(self._sources),
-            source_codes=_view(self._codes, span),
-            twin_excess=_view(self._excess, span) if self._vectors else empty,
-            has_twin_excess=_view(self._has_excess, span), **vectors)
-
-    def _move(self, record: Published) -> None:
-        """New buffers holding the kept rows at their start (the first record sets the widths)."""
-        kept = self._end - self._start
-        rows = min(2 * self.capacity, max(MIN_ROWS, 2 * kept))
-        if not self._vectors:
-            widths = {name: _width(getattr(record, name), name) for name in _VECTOR_FIELDS}
-            self._vectors = {name: np.empty((0, width)) for name, width in widths.items()}
-            self._excess = np.empty((0, widths['pose']))
-        span = slice(self._start, self._end)
-        self._stamp = _moved(self._stamp, span, rows)
-        self._vectors = {name: _moved(column, span, rows)
-                         for name, column in self._vectors.items()}
-        self._excess = _moved(self._excess, span, rows)
-        self._has_excess = _moved(self._has_excess, span, rows)
-        self._codes = _moved(self._codes, span, rows)
-        self._start, self._end = 0, kept
+            self._stamp.view(), sources=tuple(self._sources),
+            source_codes=self._codes.view(),
+            twin_excess=self._excess.view() if self._vectors else empty,
+            has_twin_excess=self._has_excess.view(), **vectors)
 
 
 def _width(value: object, name: str) -> int:
@@ -161,25 +139,10 @@ def _width(value: object, name: str) -> int:
     return int(shape[0])
 
 
-def _checked(value: object, column: FloatArray, name: str) -> FloatArray:
-    """``value`` if it fits a row of ``column`` (a real 1-D array of its width)."""
-    if getattr(value, 'shape', None) != column.shape[1:] or \
+def _checked(value: object, row_shape: tuple[int, ...], name: str) -> FloatArray:
+    """``value`` if it fits a row of ``row_shape`` (a real 1-D array of that length)."""
+    if getattr(value, 'shape', None) != row_shape or \
             getattr(value, 'dtype', np.dtype(object)).kind not in 'biuf':
-        raise ValueError(f'published {name} must be a real array of shape {column.shape[1:]} '
+        raise ValueError(f'published {name} must be a real array of shape {row_shape} '
                          f'(set by the first record), got {value!r}')
     return cast(FloatArray, value)
-
-
-def _moved(array: ArrayT, span: slice, rows: int) -> ArrayT:
-    """A new buffer of ``rows`` rows whose first rows are ``array[span]``."""
-    moved = np.empty((rows, *array.shape[1:]), dtype=array.dtype)
-    kept = array[span]
-    moved[:kept.shape[0]] = kept
-    return cast(ArrayT, moved)
-
-
-def _view(array: ArrayT, span: slice) -> ArrayT:
-    """A read-only view of ``array[span]``."""
-    view = array[span]
-    view.flags.writeable = False
-    return cast(ArrayT, view)

@@ -58,6 +58,7 @@ from numpy.typing import NDArray
 from lf_predictor_ros.core.field_meta import field_doc
 from lf_predictor_ros.core.filters import low_pass_step
 from lf_predictor_ros.core.heading import wrap_angle
+from lf_predictor_ros.core.row_buffer import RowBuffer
 
 FloatArray = NDArray[np.float64]
 Level = Literal['OK', 'WARN', 'ERROR']
@@ -550,31 +551,32 @@ class _PoseBlock:
     """
 
     def __init__(self, ndof: int) -> None:
-        self._times = np.empty(256)
-        self._values = np.empty((256, ndof))
-        self.size = 0
+        self._times = RowBuffer()
+        self._values = RowBuffer((ndof,))
+
+    @property
+    def size(self) -> int:
+        """Poses held."""
+        return len(self._times)
 
     @property
     def start(self) -> float:
         """The first pose's stamp [s] (the block is not empty)."""
-        return float(self._times[0])
+        return float(self._times.view()[0])
 
     def append(self, t: float, y: FloatArray) -> None:
-        """Add one pose (ndof values) stamped t; the arrays double when full."""
-        if self.size == self._times.shape[0]:
-            self._times = np.concatenate((self._times, np.empty_like(self._times)))
-            self._values = np.concatenate((self._values, np.empty_like(self._values)))
-        self._times[self.size] = t
-        self._values[self.size] = y
-        self.size += 1
+        """Add one pose (ndof values) stamped t."""
+        self._times.append(t)
+        self._values.append(y)
 
     def arrays(self) -> tuple[FloatArray, FloatArray]:
         """Copies of the stamps (n,) and poses (n, ndof) held, oldest first."""
-        return self._times[:self.size].copy(), self._values[:self.size].copy()
+        return self._times.view().copy(), self._values.view().copy()
 
     def clear(self) -> None:
-        """Forget the poses (the arrays are kept for the next block)."""
-        self.size = 0
+        """Forget the poses."""
+        self._times.clear()
+        self._values.clear()
 
 
 def _detrended_rms(times: FloatArray, values: FloatArray, ndof: int) -> FloatArray:

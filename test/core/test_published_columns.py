@@ -6,7 +6,8 @@ import pickle
 import numpy as np
 import pytest
 
-from lf_predictor_ros.core.published_columns import MIN_ROWS, Published, PublishedLog
+from lf_predictor_ros.core.published_columns import Published, PublishedLog
+from lf_predictor_ros.core.row_buffer import MIN_ROWS
 
 
 def history(count: int, seed: int) -> list[Published]:

@@ -102,7 +102,7 @@ def test_no_wave_motion_is_flagged_where_waves_were_seen_before() -> None:
 
 
 def test_a_block_of_thousands_of_poses_gives_the_detrended_rms_of_its_waves() -> None:
-    # 100 Hz over 60 s (grown from 256 rows): a line plus a sinusoid of amplitude a and 8 whole
+    # 100 Hz over 60 s (arrays grown): a line plus a sinusoid of amplitude a and 8 whole
     # periods (ωT = 16π) per DOF, the heading wrapping past ±π on its way. About the best line
     # the RMS is a·√(1/2 − 12/(ωT)²): the line takes up the sinusoid's correlation with t,
     # ∫(t − T/2) sin ωt dt = −T/ω, of variance T²/12

@@ -25,9 +25,9 @@ from typing import Any, TextIO
 from threadpoolctl import threadpool_limits
 
 from lf_predictor_ros.benchmark.suite import CaseResult, run_case
+from lf_predictor_ros.core.math_threads import BLAS_THREAD_VARIABLES
 
 IN_PROCESS = 'none'
-BLAS_THREAD_VARIABLES = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS')
 
 
 @dataclass(frozen=True)

@@ -118,6 +118,7 @@ from lf_predictor_ros.core.controller_gains import difference_velocity
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_dynamics import body_velocity
 from lf_predictor_ros.core.lf_state import LfStateEstimator
+from lf_predictor_ros.core.math_threads import BLAS_THREAD_VARIABLES
 from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.retraining import first_training_samples
@@ -1144,7 +1145,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     rep.add_argument('files', nargs='+')
     args = parser.parse_args(argv)
     if args.command == 'run':
-        for name in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
+        for name in BLAS_THREAD_VARIABLES:
             os.environ.setdefault(name, '1')
         loop_seeds = set(args.seeds if args.loop_seeds is None else args.loop_seeds)
         if not (math.isfinite(args.dropout_spread) and args.dropout_spread >= 0.0):

@@ -20,6 +20,9 @@ import sys
 
 from threadpoolctl import threadpool_info, threadpool_limits
 
+# environment variables that size the BLAS / OpenMP pools when a library loads
+BLAS_THREAD_VARIABLES = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS')
+
 
 def use_one_math_thread() -> None:
     """Put the BLAS / OpenMP pools (numpy, scipy) and torch's intra-op pool on one thread.

@@ -7,14 +7,12 @@ import sys
 import pytest
 
 from lf_predictor_ros.core.fit_process import FitProcess
-from lf_predictor_ros.core.math_threads import math_threads
-
-THREAD_VARIABLES = ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS')
+from lf_predictor_ros.core.math_threads import BLAS_THREAD_VARIABLES, math_threads
 
 
 def run_fresh(code: str, monkeypatch: pytest.MonkeyPatch) -> str:
     """``code`` in a new interpreter whose environment does not limit any thread pool."""
-    for name in THREAD_VARIABLES:
+    for name in BLAS_THREAD_VARIABLES:
         monkeypatch.delenv(name, raising=False)
     done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                           timeout=120, check=True)
@@ -40,7 +38,7 @@ def test_a_process_without_torch_does_not_load_it(monkeypatch: pytest.MonkeyPatc
 
 
 def test_the_child_computes_on_one_thread(monkeypatch: pytest.MonkeyPatch) -> None:
-    for name in THREAD_VARIABLES:  # the child inherits the environment when it starts
+    for name in BLAS_THREAD_VARIABLES:  # the child inherits the environment when it starts
         monkeypatch.delenv(name, raising=False)
     fit = FitProcess()
     try:

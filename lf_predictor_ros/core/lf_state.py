@@ -21,7 +21,6 @@ some DOFs keeps the remembered gain only in the DOFs no block believes (a turn s
 """
 from __future__ import annotations
 
-from collections import deque
 from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
@@ -74,6 +73,7 @@ from lf_predictor_ros.core.predictor import AdaptivePredictor
 from lf_predictor_ros.core.published_columns import EstimateSource, Published, PublishedColumns
 from lf_predictor_ros.core.readonly import ReadOnlyArrays
 from lf_predictor_ros.core.retraining import target_filter
+from lf_predictor_ros.core.row_buffer import RowBuffer
 from lf_predictor_ros.core.targets import TargetWindow
 
 FloatArray = NDArray[np.float64]
@@ -176,9 +176,10 @@ class LfStateEstimator:
         self._kept_damping: KeptDamping | None = None
         # the controller's block reads kept across windows (``controller_read_pool_blocks``)
         self._read_pool: ReadPool | None = None
-        # the controller's commands, kept across segments (matched to the published estimates)
-        self._command_times: deque[float] = deque(maxlen=self._capacity)
-        self._commands: deque[FloatArray] = deque(maxlen=self._capacity)
+        # the controller's commands, kept across segments (matched to the published estimates);
+        # rows in arrays, so a memory job takes them without building arrays in the callback
+        self._command_times = RowBuffer(capacity=self._capacity)
+        self._commands = RowBuffer((self.ndof,), capacity=self._capacity)
         self._restart_buffers()
 
     def update(self, t: float, pose: FloatArray, force: FloatArray) -> tuple[
@@ -190,7 +191,7 @@ class LfStateEstimator:
         """
         lf_pose = self.predictor.update(t, pose, force)
         self._times.append(t)
-        self._forces.append(np.array(force[:self.ndof], dtype=np.float64))
+        self._forces.append(force[:self.ndof])
         self._count += 1
         self._collect()
         self._maybe_learn()
@@ -217,7 +218,7 @@ class LfStateEstimator:
         if not math.isfinite(t) or tau.shape[0] < self.ndof or not np.all(np.isfinite(tau)):
             raise ValueError(f'a thrust command needs a finite stamp and {self.ndof} finite '
                              f'force entries [N, N, N·m], got t={t}, force={force!r}')
-        if self._command_times and t <= self._command_times[-1]:
+        if len(self._command_times) and t <= self._command_times.view()[-1]:
             return False
         self._command_times.append(float(t))
         self._commands.append(tau[:self.ndof])
@@ -255,8 +256,10 @@ class LfStateEstimator:
         self._controller_read = previous.controller_read
         self._kept_damping = previous._kept_damping
         self._read_pool = previous._read_pool
-        self._command_times.extend(previous._command_times)
-        self._commands.extend(previous._commands)
+        for t, tau in zip(previous._command_times.view(), previous._commands.view(),
+                          strict=True):
+            self._command_times.append(t)
+            self._commands.append(tau)
 
     def reset(self) -> None:
         """Forget everything (predictor, odometry, memory, the remembered controller read)."""
@@ -315,8 +318,8 @@ class LfStateEstimator:
         self.odometry.set_wave_peak_freq(freq if usable else None)
 
     def _restart_buffers(self) -> None:
-        self._times: deque[float] = deque(maxlen=self._capacity)
-        self._forces: deque[FloatArray] = deque(maxlen=self._capacity)
+        self._times = RowBuffer(capacity=self._capacity)
+        self._forces = RowBuffer((self.ndof,), capacity=self._capacity)
         self._count = 0  # samples in this segment (= predictor's index + 1)
         self._seen_targets: TargetWindow | None = None
         self._job = None
@@ -331,7 +334,7 @@ class LfStateEstimator:
         keep = (idx >= 0) & (idx < len(self._times))
         if np.count_nonzero(keep) < 3:
             return
-        times = np.array(self._times)[idx[keep]]
+        times = self._times.view()[idx[keep]]
         values = np.array(targets.values, dtype=np.float64).reshape(len(targets), -1)[keep]
         odometry = self.odometry
         narrow = self.predictor.narrow_reference if odometry.params.narrow_reference else None
@@ -342,9 +345,9 @@ class LfStateEstimator:
         times, values, rows = times[:usable], values[:usable], idx[keep][:usable]  # contiguous
         reference = reference[:usable]
         reading = odometry.params.controller_inertia
-        commands = (np.array(self._command_times), np.array(self._commands)) if \
-            reading and self._commands else None
-        head: tuple[Any, ...] = (self.params, times, values, np.array(self._forces)[rows],
+        commands = (np.array(self._command_times.view()), np.array(self._commands.view())) if \
+            reading and len(self._commands) else None
+        head: tuple[Any, ...] = (self.params, times, values, self._forces.view()[rows],
                                  self.predictor.wave_peak_freq)
         tail: tuple[Any, ...] = (
             odometry.params.dead_reckoning_timeout, odometry.params.min_calibration_samples,

@@ -861,6 +861,28 @@ def test_commands_are_checked_and_kept_in_order() -> None:
         est.close()
 
 
+def test_carry_over_continues_the_command_log_and_its_capacity() -> None:
+    params = PredictorParams(ndof=3)
+    est = LfStateEstimator(params, background=False)
+    other = LfStateEstimator(params.replace(max_epochs=3), background=False)
+    try:
+        capacity = est._capacity
+        for k in range(capacity + 5):  # five more than kept: the oldest five are dropped
+            assert est.command(float(k), np.array([k, -k, 0.5 * k], dtype=np.float64))
+        other.carry_over(est)
+        times, commands = other._command_times.view(), other._commands.view()
+        np.testing.assert_array_equal(times, np.arange(5.0, capacity + 5.0))
+        np.testing.assert_array_equal(commands[:, 1], -times)
+        np.testing.assert_array_equal(commands[:, 2], 0.5 * times)
+        assert not other.command(float(capacity + 4), np.zeros(3))  # not newer than the log
+        assert other.command(float(capacity + 5), np.zeros(3))
+        assert len(other._commands) == capacity
+        np.testing.assert_array_equal(est._command_times.view(), times)  # the source unchanged
+    finally:
+        est.close()
+        other.close()
+
+
 def test_the_vessel_memory_filters_the_thrust_like_the_targets_in_a_broadband_sea(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """`_learn` designs the targets' filter with the sea's peak damping (notch_zeta_broadband)."""

@@ -266,6 +266,39 @@ def _state_space(sos: FloatArray) -> _StateSpace:
     return _StateSpace(a=a, b=nxt.reshape(-1), c=c, d=float(out[0]))
 
 
+@dataclass(frozen=True)
+class RetunePlan:
+    """New coefficients and what `CausalFilter.retune` needs of them alone (issue 13, cost).
+
+    The observability matrix and the Markov parameters of the new cascade depend on its
+    coefficients only, not on the filter's history: made beforehand (`plan_retune`, e.g. in the
+    job that found the new ω0, in another process), they are not computed on the predict path.
+    The state fitted from them is the same to the bit as from the coefficients alone.
+    """
+
+    sos: FloatArray
+    state_space: _StateSpace
+    observability: FloatArray  # (order, n_states): rows C A^k, k < order
+    markov: tuple[FloatArray, ...]  # C A^i B for i < order - 1
+
+
+def plan_retune(sos: ArrayLike) -> RetunePlan:
+    """`RetunePlan` of ``sos`` (normalized sections, shape (n_sections, 6))."""
+    checked = _check_sos(np.asarray(sos, dtype=np.float64))
+    ss = _state_space(checked)
+    order = 2 * checked.shape[0]
+    n_states = ss.a.shape[0]
+    obs = np.zeros((order, n_states))
+    power = np.eye(n_states)
+    for k in range(order):
+        obs[k] = ss.c @ power
+        power = ss.a @ power
+    markov = tuple(ss.c @ np.linalg.matrix_power(ss.a, i) @ ss.b for i in range(order - 1))
+    for array in (checked, obs, ss.a, ss.b, ss.c, *markov):
+        array.setflags(write=False)
+    return RetunePlan(sos=checked, state_space=ss, observability=obs, markov=markov)
+
+
 def _check_sos(sos: FloatArray) -> FloatArray:
     arr = np.array(sos, dtype=np.float64)
     if arr.ndim != 2 or arr.shape[1] != 6 or arr.shape[0] < 1:
@@ -373,15 +406,16 @@ class CausalFilter:
             del self._inputs[0]
             del self._outputs[0]
 
-    def retune(self, sos: FloatArray) -> None:
+    def retune(self, sos: FloatArray | RetunePlan) -> None:
         """Switch to new coefficients while keeping the output continuous.
 
         The new state is the one for which the new filter, fed the last N inputs, would have
         produced the last N outputs of the old filter (N = filter order): the new recursion
         continues the actual output history instead of restarting. Before N samples exist, the
-        new filter starts in steady state at the last output.
+        new filter starts in steady state at the last output. A `RetunePlan` (`plan_retune`)
+        gives the same state with less work here.
         """
-        new_sos = _check_sos(sos)
+        plan, new_sos = (sos, sos.sos) if isinstance(sos, RetunePlan) else (None, _check_sos(sos))
         self._sos = new_sos
         self._coefficients = new_sos.tolist()
         if self._state is None:
@@ -394,27 +428,21 @@ class CausalFilter:
             self._inputs = self._inputs[-1:]
             self._outputs = self._outputs[-1:]
             return
-        self._state = self._fit_state(new_sos, order).tolist()
+        self._state = self._fit_state(plan or plan_retune(new_sos), order).tolist()
 
-    def _fit_state(self, sos: FloatArray, order: int) -> FloatArray:
-        """State matching the stored I/O history for `sos` (least squares, observability)."""
-        ss = _state_space(sos)
+    def _fit_state(self, plan: RetunePlan, order: int) -> FloatArray:
+        """State matching the stored I/O history for the plan's filter (least squares)."""
+        ss, obs = plan.state_space, plan.observability
         u_hist = np.array(self._inputs[-order:])  # (N, channels), oldest first
         y_hist = np.array(self._outputs[-order:])
-        n_states = ss.a.shape[0]
-        obs = np.zeros((order, n_states))
-        power = np.eye(n_states)
-        for k in range(order):
-            obs[k] = ss.c @ power
-            power = ss.a @ power
         # y_k = C A^k z0 + D u_k + Σ_{j<k} C A^(k-1-j) B u_j
         forced = np.zeros_like(y_hist)
         for k in range(order):
             forced[k] = ss.d * u_hist[k]
             for j in range(k):
-                forced[k] += (ss.c @ np.linalg.matrix_power(ss.a, k - 1 - j) @ ss.b) * u_hist[j]
+                forced[k] += plan.markov[k - 1 - j] * u_hist[j]
         z0, *_ = np.linalg.lstsq(obs, y_hist - forced, rcond=None)  # (n_states, channels)
         z = z0
         for k in range(order):
             z = ss.a @ z + np.outer(ss.b, u_hist[k])
-        return np.asarray(z.reshape(sos.shape[0], 2, -1), dtype=np.float64)
+        return np.asarray(z.reshape(plan.sos.shape[0], 2, -1), dtype=np.float64)

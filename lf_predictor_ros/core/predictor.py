@@ -82,7 +82,7 @@ import numpy as np
 from numpy.typing import NDArray
 import torch
 
-from lf_predictor_ros.core.baselines.cascade import CascadeFilter
+from lf_predictor_ros.core.baselines.cascade import CascadeFilter, CascadePlan, plan_cascade
 from lf_predictor_ros.core.estimator import EstimatorState, EstimatorStatus
 from lf_predictor_ros.core.filters import low_pass_step
 from lf_predictor_ros.core.fit_process import FitProcess, JobAbandonedError, shared_fit_process
@@ -227,12 +227,42 @@ class _JobOutcome:
 
     def __init__(self, generation: int, result: RetrainResult | None,
                  error: BaseException | None, saved_error: str | None = None,
-                 frequency: FrequencyEstimate | None = None) -> None:
+                 frequency: FrequencyEstimate | None = None,
+                 fallback_plan: CascadePlan | None = None) -> None:
         self.generation = generation
         self.result = result
         self.error = error
         self.saved_error = saved_error
         self.frequency = frequency  # set by a frequency-only job (before the first training)
+        self.fallback_plan = fallback_plan  # the cascade fallback at the result's ω0
+
+
+def fallback_design(params: PredictorParams) -> dict[str, Any]:
+    """`CascadeFilter`'s design arguments of the predictor's cascade fallback."""
+    return {'notch_zeta': params.fallback_notch_zeta, 'notch_depth': params.notch_depth,
+            'lowpass_offset': params.lowpass_offset}
+
+
+def retrain_and_plan(params: PredictorParams, snapshot: Snapshot,
+                     incumbent: dict[str, torch.Tensor] | None, targets: TargetWindow | None,
+                     frequency: FrequencyEstimate | float | None,
+                     stop: threading.Event | None,
+                     before_restart: tuple[float, TargetWindow] | None,
+                     plan_fallback: bool) -> tuple[RetrainResult, CascadePlan | None]:
+    """`run_retraining`, and with ``plan_fallback`` the cascade fallback planned at its ω0.
+
+    In the job (the child process), so that applying the result on the predict path does not
+    design the fallback's filter (`plan_cascade`; docs/BENCHMARKS.md, sixty-ninth session).
+    """
+    result = run_retraining(params, snapshot, incumbent, targets, frequency, stop,
+                            before_restart)
+    plan = plan_fallback_at(params, result.frequency.wave_peak_freq) if plan_fallback else None
+    return result, plan
+
+
+def plan_fallback_at(params: PredictorParams, wave_peak_freq: float) -> CascadePlan:
+    """The cascade fallback's `CascadePlan` at ω0 [rad/s] (`retrain_and_plan`)."""
+    return plan_cascade(wave_peak_freq, params.sample_time, **fallback_design(params))
 
 
 class AdaptivePredictor:
@@ -288,9 +318,7 @@ class AdaptivePredictor:
         self._message = 'collecting data'
         self._last_error: str | None = None
         self._fallback = CascadeFilter(params.ndof, params.sample_time, self._fallback_freq(),
-                                       notch_zeta=params.fallback_notch_zeta,
-                                       notch_depth=params.notch_depth,
-                                       lowpass_offset=params.lowpass_offset)
+                                       **fallback_design(params))
         self._output_notch: CascadeFilter | None = None  # output_notch_zeta > 0
         if params.output_notch_zeta > 0.0:
             self._output_notch = self._wave_notch(params.ndof, params.output_notch_zeta)
@@ -751,10 +779,14 @@ class AdaptivePredictor:
         if self._roughness is not None:  # second differences never span a segment restart
             self._roughness.reset()
 
-    def _tune_wave_filters(self, wave_peak_freq: float) -> None:
-        """Retune the cascade fallback and the output notch to ω0 [rad/s] (outputs continuous)."""
+    def _tune_wave_filters(self, wave_peak_freq: float,
+                           fallback_plan: CascadePlan | None = None) -> None:
+        """Retune the cascade fallback and the output notch to ω0 [rad/s] (outputs continuous).
+
+        ``fallback_plan``: the fallback planned at that ω0 by the job (`retrain_and_plan`).
+        """
         if self._run_cascade:
-            self._fallback.set_wave_peak_freq(wave_peak_freq)
+            self._fallback.set_wave_peak_freq(wave_peak_freq, fallback_plan)
         for notch in (self._output_notch, self._gate_yaw_notch):
             if notch is not None:
                 notch.set_wave_peak_freq(wave_peak_freq)
@@ -1123,19 +1155,21 @@ class AdaptivePredictor:
              frequency: FrequencyEstimate | float | None, stop: threading.Event,
              before_restart: tuple[float, TargetWindow] | None = None) -> None:
         """Worker body: never raises; the outcome goes through the queue."""
-        def here() -> RetrainResult:
+        plan_fallback = self._run_cascade
+
+        def here() -> tuple[RetrainResult, CascadePlan | None]:
             with spectrum_fit_by(self._fit_process):
-                return run_retraining(self.params, snapshot, incumbent, targets, frequency,
-                                      stop, before_restart)
+                return retrain_and_plan(self.params, snapshot, incumbent, targets, frequency,
+                                        stop, before_restart, plan_fallback)
 
         try:
             with self._training_lock:  # one training at a time per lock (the gate's twin)
                 if self._fit_process is None:
-                    result = here()
+                    result, plan = here()
                 else:  # in the child (core.fit_process), where it holds no GIL of the node's
-                    result = self._fit_process.run(run_retraining, self.params, snapshot,
-                                                   incumbent, targets, frequency, None,
-                                                   before_restart, stop=stop, fallback=here)
+                    result, plan = self._fit_process.run(
+                        retrain_and_plan, self.params, snapshot, incumbent, targets, frequency,
+                        None, before_restart, plan_fallback, stop=stop, fallback=here)
         except JobAbandonedError:
             return  # stopped (closed, or its result discarded): nobody takes an outcome
         except Exception as exc:  # noqa: BLE001 - any failure must keep the node alive
@@ -1148,7 +1182,8 @@ class AdaptivePredictor:
                                 result.state_dict, self._meta(result))
             except (OSError, ValueError) as exc:
                 saved_error = f'checkpoint not saved: {exc}'
-        self._outcomes.put(_JobOutcome(generation, result, None, saved_error))
+        self._outcomes.put(_JobOutcome(generation, result, None, saved_error,
+                                       fallback_plan=plan))
 
     def _collect_outcomes(self, t: float) -> None:
         if self._outcomes.empty():  # the usual case, without raising queue.Empty
@@ -1182,7 +1217,7 @@ class AdaptivePredictor:
             self._targets_damping = result.targets_peak_damping
             self._narrow_reference = result.narrow_reference
         self._frequency = result.frequency
-        self._tune_wave_filters(result.frequency.wave_peak_freq)
+        self._tune_wave_filters(result.frequency.wave_peak_freq, outcome.fallback_plan)
         if result.restarted:
             # the network before is the old sea's: a retirement falls back to the cascade, tuned
             # to the new ω0, not to a network trained on waves that are gone

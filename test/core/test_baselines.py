@@ -16,6 +16,7 @@ from lf_predictor_ros.core.baselines import (
     bias_gains,
     smooth_poses,
 )
+from lf_predictor_ros.core.baselines.cascade import plan_cascade
 from lf_predictor_ros.core.baselines.observer import system_matrices
 from lf_predictor_ros.core.estimator import EstimatorStatus, LfEstimator
 from lf_predictor_ros.core.evaluation import run_estimator, score
@@ -135,6 +136,28 @@ def test_cascade_retune_and_reset() -> None:
     assert cascade.update(0.0, np.array([-1.0, 0.0, 0.0]), np.zeros(3))[0] == pytest.approx(-1.0)
     with pytest.raises(ValueError, match='ndof'):
         CascadeFilter(2, 0.1, 0.8)
+
+
+def test_a_cascade_plan_retunes_as_the_design_does_and_only_its_own_filter() -> None:
+    rng = np.random.default_rng(4)
+    poses = np.cumsum(rng.normal(scale=0.1, size=(80, 3)), axis=0)
+    design = {'notch_zeta': 0.1, 'notch_depth': 0.05, 'lowpass_offset': 0.2}
+    plain, planned = (CascadeFilter(3, 1.0, 0.8, **design) for _ in range(2))
+    plan = plan_cascade(0.6, 1.0, **design)
+    wrong_plans = (plan_cascade(0.61, 1.0, **design), plan_cascade(0.6, 0.5, **design),
+                   plan_cascade(0.6, 1.0, **{**design, 'notch_zeta': 0.2}),
+                   plan_cascade(0.6, 1.0, **design, lowpass_order=1))
+    for k, pose in enumerate(poses):
+        if k == 40:
+            plain.set_wave_peak_freq(0.6)
+            planned.set_wave_peak_freq(0.6, plan)
+        if k == 60:  # plans for another ω0, sample time or design: refused, nothing changed
+            for wrong in wrong_plans:
+                with pytest.raises(ValueError, match='cannot retune this filter'):
+                    planned.set_wave_peak_freq(0.6, wrong)
+        assert planned.update(0.0, pose, np.zeros(3)).tolist() == \
+            plain.update(0.0, pose, np.zeros(3)).tolist()  # bit for bit
+    assert planned.wave_peak_freq == 0.6
 
 
 @pytest.mark.parametrize('ndof', [1, 3])

@@ -14,6 +14,7 @@ from lf_predictor_ros.core.filters import (
     design_wave_filter,
     frequency_response,
     low_pass_step,
+    plan_retune,
     settling_samples,
     zero_phase,
 )
@@ -186,6 +187,24 @@ def test_filter_values_gives_filters_numbers_bit_for_bit_through_a_retune() -> N
     assert math.isfinite(floats.filter_values([1.0, 2.0, 3.0])[0])
     with pytest.raises(ValueError, match='shape'):
         floats.filter_values([1.0, 2.0])
+
+
+def test_a_retune_plan_gives_the_retune_of_the_coefficients_bit_for_bit() -> None:
+    rng = np.random.default_rng(9)
+    y = np.cumsum(rng.normal(size=(200, 3)), axis=0) + 5.0
+    plain, planned = (CausalFilter(design_wave_filter(0.7, 1.0), 3) for _ in range(2))
+    new = design_wave_filter(0.55, 1.0, notch_zeta=0.1)
+    plan = plan_retune(new)
+    for k, sample in enumerate(y):
+        if k in (2, 120):  # before the I/O history is long enough (steady state) and after
+            plain.retune(new)
+            planned.retune(plan)
+        assert planned.filter(sample).tolist() == plain.filter(sample).tolist()
+    np.testing.assert_array_equal(planned.sos, new)
+    assert len(plan.markov) == 2 * new.shape[0] - 1
+    assert not plan.observability.flags.writeable and not plan.sos.flags.writeable
+    with pytest.raises(ValueError, match='normalized'):
+        plan_retune(2.0 * new)
 
 
 def test_causal_filter_starts_without_jump_and_resets() -> None:

@@ -19,6 +19,8 @@ import torch
 from lf_predictor_ros.core import fit_process, frequency
 from lf_predictor_ros.core.fit_process import PARENT_CHECK_PERIOD, FitProcess, shared_fit_process
 from lf_predictor_ros.core.frequency import FrequencyEstimate, spectrum_estimate, spectrum_fit_by
+from lf_predictor_ros.core.params import PredictorParams
+from lf_predictor_ros.core.predictor import plan_fallback_at
 
 WAVE_BAND = (0.25, 1.4)  # rad/s
 HIGHPASS_CUTOFF = 0.2  # rad/s
@@ -98,6 +100,24 @@ def test_any_job_runs_in_the_child_and_its_errors_come_back_as_they_are(fit: Fit
     with pytest.raises(TimeoutError, match='the job'):  # not taken for a wait's timeout
         fit.run(exec, "raise TimeoutError('the job')", stop=stop)
     assert fit.starts == 1 and fit.failures == 0
+
+
+def test_the_fallback_planned_in_the_child_is_this_thread_s_to_the_bit(fit: FitProcess) -> None:
+    """The predictor's job plans its cascade fallback in the child (`retrain_and_plan`)."""
+    params = PredictorParams()
+    here = plan_fallback_at(params, 0.6283)
+    there = fit.run(plan_fallback_at, params, 0.6283)
+    assert fit.starts == 1 and fit.failures == 0  # computed in the child
+    assert (there.wave_peak_freq, there.sample_time, there.design) == \
+        (here.wave_peak_freq, here.sample_time, here.design)
+    for mine, theirs in ((here.retune.sos, there.retune.sos),
+                         (here.retune.observability, there.retune.observability),
+                         (here.retune.state_space.a, there.retune.state_space.a),
+                         (here.retune.state_space.b, there.retune.state_space.b),
+                         (here.retune.state_space.c, there.retune.state_space.c),
+                         *zip(here.retune.markov, there.retune.markov, strict=True)):
+        np.testing.assert_array_equal(theirs, mine)
+    assert there.retune.state_space.d == here.retune.state_space.d
 
 
 def test_a_job_the_child_cannot_load_is_computed_here_and_the_child_stays(

@@ -428,7 +428,7 @@ def test_background_jobs_run_in_the_child_with_the_inline_numbers(
             assert background.wait_for_training(60.0)
         assert background.counters['trainings'] == inline.counters['trainings'] == 1
         assert calls and counted.starts == 1 and counted.failures == 0
-        assert jobs.count('run_retraining') == 1  # the training too
+        assert jobs.count('retrain_and_plan') == 1  # the training too
         assert background.omega_fits_here == inline.omega_fits_here == 0
         assert background.wave_peak_freq == inline.wave_peak_freq
         model, expected = background.model, inline.model

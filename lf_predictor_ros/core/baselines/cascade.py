@@ -7,6 +7,7 @@ beat. Heading is unwrapped before filtering so a crossing of ±π is not seen as
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 import math
 from typing import Any
 
@@ -20,12 +21,49 @@ from lf_predictor_ros.core.filters import (
     DEFAULT_NOTCH_DEPTH,
     DEFAULT_NOTCH_ZETA,
     CausalFilter,
+    RetunePlan,
     design_wave_filter,
+    plan_retune,
 )
 from lf_predictor_ros.core.heading import wrap_angle
 
 FloatArray = NDArray[np.float64]
 _YAW = 2  # index of heading in a pose
+
+
+@dataclass(frozen=True)
+class CascadePlan:
+    """A cascade's coefficients at one ω0, designed ahead of its retuning (`plan_cascade`).
+
+    For a job in another thread or process that finds a new ω0: the design (scipy's pole and
+    zero placement, about 0.5 ms) and the coefficients' part of the retuning are done there, not
+    on the predict path (issue 13, cost). What it was designed for travels with it, so a plan
+    for another filter is refused (`CascadeFilter.set_wave_peak_freq`).
+    """
+
+    wave_peak_freq: float  # [rad/s]
+    sample_time: float  # [s]
+    design: tuple[tuple[str, Any], ...]  # design_wave_filter's keyword arguments, sorted
+    retune: RetunePlan
+
+
+def plan_cascade(wave_peak_freq: float, sample_time: float, *,
+                 notch_zeta: float = DEFAULT_NOTCH_ZETA,
+                 notch_depth: float = DEFAULT_NOTCH_DEPTH,
+                 lowpass_offset: float | None = DEFAULT_LOWPASS_OFFSET,
+                 lowpass_order: int = DEFAULT_LOWPASS_ORDER) -> CascadePlan:
+    """`CascadePlan` of ``CascadeFilter(…, sample_time, …)`` with these design arguments at ω0."""
+    freq, step = float(wave_peak_freq), float(sample_time)
+    design = _design_arguments(notch_zeta, notch_depth, lowpass_offset, lowpass_order)
+    sos = design_wave_filter(freq, step, **design)
+    return CascadePlan(freq, step, tuple(sorted(design.items())), plan_retune(sos))
+
+
+def _design_arguments(notch_zeta: float, notch_depth: float, lowpass_offset: float | None,
+                      lowpass_order: int) -> dict[str, Any]:
+    """`design_wave_filter`'s keyword arguments of a cascade (`CascadeFilter`, `plan_cascade`)."""
+    return {'notch_zeta': notch_zeta, 'notch_depth': notch_depth,
+            'lowpass_offset': lowpass_offset, 'lowpass_order': lowpass_order}
 
 
 class CascadeFilter:
@@ -51,12 +89,7 @@ class CascadeFilter:
         """
         self.ndof = check_ndof(ndof)
         self.sample_time = float(sample_time)
-        self._design: dict[str, Any] = {
-            'notch_zeta': notch_zeta,
-            'notch_depth': notch_depth,
-            'lowpass_offset': lowpass_offset,
-            'lowpass_order': lowpass_order,
-        }
+        self._design = _design_arguments(notch_zeta, notch_depth, lowpass_offset, lowpass_order)
         self._wave_peak_freq = float(wave_peak_freq)
         sos = design_wave_filter(self._wave_peak_freq, self.sample_time, **self._design)
         self._filter = CausalFilter(sos, self.ndof)
@@ -68,11 +101,24 @@ class CascadeFilter:
         """Current notch frequency ω0 [rad/s]."""
         return self._wave_peak_freq
 
-    def set_wave_peak_freq(self, wave_peak_freq: float) -> None:
-        """Retune the notch to a new ω0 [rad/s], keeping the output continuous."""
-        sos = design_wave_filter(float(wave_peak_freq), self.sample_time, **self._design)
-        self._filter.retune(sos)
-        self._wave_peak_freq = float(wave_peak_freq)
+    def set_wave_peak_freq(self, wave_peak_freq: float, plan: CascadePlan | None = None) -> None:
+        """Retune the notch to a new ω0 [rad/s], keeping the output continuous.
+
+        ``plan``: this filter's design at that ω0 made beforehand (`plan_cascade`), the same
+        numbers with less work here. ValueError if it was made for another ω0 or filter.
+        """
+        freq = float(wave_peak_freq)
+        if plan is None:
+            self._filter.retune(design_wave_filter(freq, self.sample_time, **self._design))
+        else:
+            wanted = (freq, self.sample_time, tuple(sorted(self._design.items())))
+            if (plan.wave_peak_freq, plan.sample_time, plan.design) != wanted:
+                raise ValueError(f'a cascade plan for ω0 {plan.wave_peak_freq} rad/s, h '
+                                 f'{plan.sample_time} s, {dict(plan.design)} cannot retune this '
+                                 f'filter to ω0 {freq} rad/s (h {self.sample_time} s, '
+                                 f'{self._design}): plan it with plan_cascade for this filter')
+            self._filter.retune(plan.retune)
+        self._wave_peak_freq = freq
 
     def _continuous_yaw(self, yaw: float) -> float:
         """Heading unwrapped against the previous sample (steps below π per sample)."""

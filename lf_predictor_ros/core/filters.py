@@ -428,7 +428,9 @@ class CausalFilter:
             self._inputs = self._inputs[-1:]
             self._outputs = self._outputs[-1:]
             return
-        self._state = self._fit_state(plan or plan_retune(new_sos), order).tolist()
+        if plan is None:
+            plan = plan_retune(new_sos)
+        self._state = self._fit_state(plan, order).tolist()
 
     def _fit_state(self, plan: RetunePlan, order: int) -> FloatArray:
         """State matching the stored I/O history for the plan's filter (least squares)."""

@@ -29,7 +29,7 @@ What is counted:
   counts every pose and sequence gap. If the probe gets everything and the node misses canaries,
   the node's executor is too slow (its keep_last 5 reader queue overflows); if the probe misses
   them too, DDS / the machine drops them; a growing ``max_lag_s`` points at the publisher;
-- node memory: VmRSS of the node's PID every simulated minute (``/proc/PID/status``): first
+- node memory: the resident set of the node's PID every simulated minute (`rss_bytes`): first
   sample after the first training, last sample, growth %; node CPU seconds (utime + stime of
   ``/proc/PID/stat``) per simulated hour.
 
@@ -75,7 +75,7 @@ PREDICTOR_ARGS = ('--ros-args', '-p', 'ndof:=3')  # shipped defaults otherwise
 STARTUP_TIMEOUT = 60.0  # [s wall] node start (torch import) and DDS matching on a loaded machine
 SETTLE_TIMEOUT = 15.0  # [s wall] after the last pose, for the node's backlog and diagnostics
 MATCH_SETTLE = 0.5  # [s wall] after discovery, for the reader side of the match
-MEMORY_PERIOD = 60.0  # [s simulated] VmRSS / CPU sampling period
+MEMORY_PERIOD = 60.0  # [s simulated] resident set / CPU sampling period
 CLOCK_TICKS = os.sysconf('SC_CLK_TCK')  # [ticks/s] unit of utime / stime in /proc/PID/stat
 PROBE_STARTUP = 0.2  # [s wall] poll period while waiting for the probe's subscription
 MAX_GAPS_LISTED = 20  # probe: gaps reported individually (index, length)
@@ -192,12 +192,27 @@ def missing_in_sequence(stamps_ns: Sequence[int], period_ns: int) -> int:
 
 
 def rss_bytes(pid: int) -> int:
-    """Resident set size of a process [bytes] (``VmRSS`` of ``/proc/PID/status``)."""
-    with open(f'/proc/{pid}/status', encoding='ascii') as status:
-        for line in status:
-            if line.startswith('VmRSS:'):
-                return int(line.split()[1]) * 1024  # the file gives kB
-    raise ValueError(f'/proc/{pid}/status has no VmRSS line; is {pid} a zombie?')
+    """Resident set size of a process [bytes]: ``Rss`` of ``/proc/PID/smaps_rollup``.
+
+    Exact (the kernel walks the mappings); ``VmRSS`` of ``/proc/PID/status`` is kept from
+    per-CPU counters that may lag (proc(5)), and is read only where ``smaps_rollup`` is
+    missing (Linux before 4.14).
+    """
+    try:
+        return _proc_kb(f'/proc/{pid}/smaps_rollup', 'Rss:') * 1024
+    except FileNotFoundError:
+        if not os.path.exists(f'/proc/{pid}'):
+            raise
+        return _proc_kb(f'/proc/{pid}/status', 'VmRSS:') * 1024
+
+
+def _proc_kb(path: str, key: str) -> int:
+    """The kB value of the first line of ``path`` that starts with ``key``."""
+    with open(path, encoding='ascii') as lines:
+        for line in lines:
+            if line.startswith(key):
+                return int(line.split()[1])  # the files give kB
+    raise ValueError(f'{path} has no {key} line; is the process a zombie?')
 
 
 def cpu_seconds(pid: int) -> float:
@@ -292,7 +307,7 @@ def _probe_result(log_path: Path) -> dict[str, Any]:
 
 @dataclass
 class _MemoryLog:
-    """VmRSS samples of the node and whether the first training was seen before each."""
+    """Resident-set samples of the node and whether the first training was seen before each."""
 
     pid: int
     samples_mb: list[float] = field(default_factory=list)

@@ -9,10 +9,13 @@ import math
 import mmap
 import os
 import resource
+import subprocess
+import sys
 from typing import Any
 
 import pytest
 
+from lf_predictor_ros.benchmark import dds_soak
 from lf_predictor_ros.benchmark.dds_soak import (
     SoakConfig,
     SoakResult,
@@ -93,6 +96,25 @@ def test_proc_readers_agree_with_the_kernel_for_this_process() -> None:
     finally:
         block.close()
     assert grown == pytest.approx(BLOCK_BYTES, rel=0.1)
+
+
+def test_rss_falls_back_to_vmrss_without_smaps_rollup_and_a_gone_process_raises(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    exact = rss_bytes(os.getpid())
+    real = dds_soak._proc_kb
+
+    def without_rollup(path: str, key: str) -> int:
+        if path.endswith('smaps_rollup'):
+            raise FileNotFoundError(path)  # a kernel before 4.14
+        return real(path, key)
+
+    monkeypatch.setattr(dds_soak, '_proc_kb', without_rollup)
+    assert rss_bytes(os.getpid()) == pytest.approx(exact, rel=0.1)  # VmRSS: close, not exact
+    monkeypatch.undo()
+    gone = subprocess.Popen([sys.executable, '-c', 'pass'])
+    gone.wait()
+    with pytest.raises(FileNotFoundError):
+        rss_bytes(gone.pid)
 
 
 @pytest.mark.dds

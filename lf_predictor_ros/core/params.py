@@ -150,14 +150,20 @@ class PredictorParams:
         default=5.0, metadata=_doc(
             "with motion_gate and motion_gate_yaw: the gate's heading gain comes from the "
             "applied yaw moment instead of the twin's velocity: 1 while |N| (low-passed over "
-            '2 s) exceeds this many times its level (low-passed over 600 s; no gain in the '
-            'first 600 s), held motion_gate_yaw_hold, then faded to 0 over 10 s (a turn is '
-            'known from the moment before the heading shows it; core/yaw_moment_trigger.py); '
+            '2 s) exceeds this many times its level (low-passed over 600 s; no gain during '
+            'motion_gate_yaw_warmup), held motion_gate_yaw_hold, then faded to 0 over 10 s (a '
+            'turn is known from the moment before the heading shows it; '
+            'core/yaw_moment_trigger.py); '
             '0 = off (the velocity gain, as north and east)', ''))
     motion_gate_yaw_hold: float = field(
         default=30.0, metadata=_doc(
             'with motion_gate_yaw_moment_ratio: time the heading gain stays 1 after the yaw '
             'moment was last above its ratio', 's'))
+    motion_gate_yaw_warmup: float = field(
+        default=600.0, metadata=_doc(
+            "with motion_gate_yaw_moment_ratio: no heading gain until the yaw moment's level "
+            'has seen this much time (the level is the running mean of |N| for its first '
+            "600 s); a turn inside the warm-up gets the holding network's lagging heading", 's'))
     motion_gate_yaw_notch: float = field(
         default=0.0, metadata=_doc(
             'with motion_gate and motion_gate_yaw: width ζ of a causal notch at the estimated '
@@ -516,7 +522,8 @@ class PredictorParams:
                      'wave_augmentation', 'switch_blend_time', 'motion_gate_smoothing',
                      'output_notch_zeta', 'notch_lower_edge', 'notch_zeta_broadband',
                      'motion_gate_yaw_notch', 'motion_gate_yaw_moment_ratio',
-                     'motion_gate_yaw_hold', 'motion_gate_fade_in'):
+                     'motion_gate_yaw_hold', 'motion_gate_yaw_warmup',
+                     'motion_gate_fade_in'):
             if getattr(self, name) < 0.0:
                 raise ValueError(f'positivity rule: {name} must be ≥ 0, got '
                                  f'{getattr(self, name)!r}')

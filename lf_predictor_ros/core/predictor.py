@@ -376,7 +376,8 @@ class AdaptivePredictor:
                 params.motion_gate_yaw_moment_ratio > 0.0:
             self._yaw_trigger = YawMomentTrigger(params.sample_time,
                                                  params.motion_gate_yaw_moment_ratio,
-                                                 params.motion_gate_yaw_hold)
+                                                 params.motion_gate_yaw_hold,
+                                                 params.motion_gate_yaw_warmup)
         if params.motion_gate and params.motion_gate_yaw and params.ndof == 3 and \
                 params.motion_gate_yaw_notch > 0.0:
             self._gate_yaw_notch = self._wave_notch(1, params.motion_gate_yaw_notch)

@@ -11,12 +11,13 @@ trigger gives the gate's heading gain from the moment instead (issue 13):
     g_k = 1 − (τ − hold)/T_f    for τ s since then, down to 0,
 
 LP_T a first-order low-pass of time constant T (weight min(1, h/T) per sample h). No gain
-before T_L has passed: the level is not yet a measure of station keeping. Only the moment's size
+before ``warmup`` s have passed (T_L by default): the level is not yet a measure of station
+keeping. Only the moment's size
 against its own level is used; nothing about the vessel is assumed. The constants are those of
 the probe that passed the adoption test on development seeds
 (`docs/scripts/yaw_moment_gate_probe.py` up to commit fd2c469; docs/BENCHMARKS.md, forty-fourth
 and forty-fifth sessions); ρ and ``hold`` are `PredictorParams` fields
-(``motion_gate_yaw_moment_ratio``, ``motion_gate_yaw_hold``).
+(``motion_gate_yaw_moment_ratio``, ``motion_gate_yaw_hold``, ``motion_gate_yaw_warmup``).
 """
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ import math
 
 # T_m: time constant of the low-pass on |yaw moment| [s].
 MOMENT_TIME = 2.0
-# T_L: time constant of the level's low-pass, and the warm-up before any gain [s].
+# T_L: time constant of the level's low-pass, and the default warm-up before any gain [s].
 LEVEL_TIME = 600.0
 # T_f: after the hold, the gain falls linearly from 1 to 0 over this time [s].
 FADE_TIME = 10.0
@@ -35,17 +36,24 @@ LEVEL_FLOOR = 1.0
 class YawMomentTrigger:
     """The heading gain g of the module docstring, updated once per predictor sample."""
 
-    def __init__(self, sample_time: float, ratio: float, hold: float) -> None:
-        """Create for samples ``sample_time`` [s] apart; ``ratio`` ρ [-] > 0, ``hold`` [s] ≥ 0."""
+    def __init__(self, sample_time: float, ratio: float, hold: float,
+                 warmup: float = LEVEL_TIME) -> None:
+        """Create for samples ``sample_time`` [s] apart; ``ratio`` ρ [-] > 0, ``hold`` [s] ≥ 0.
+
+        ``warmup`` [s] ≥ 0: no gain until the level has seen this much time of moments.
+        """
         for name, value in (('sample_time', sample_time), ('ratio', ratio)):
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'YawMomentTrigger {name} must be finite and > 0, got '
                                  f'{value!r}')
-        if not (math.isfinite(hold) and hold >= 0.0):
-            raise ValueError(f'YawMomentTrigger hold must be finite and ≥ 0, got {hold!r}')
+        for name, value in (('hold', hold), ('warmup', warmup)):
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f'YawMomentTrigger {name} must be finite and ≥ 0, got '
+                                 f'{value!r}')
         self.sample_time = sample_time
         self.ratio = ratio
         self.hold = hold
+        self.warmup = warmup
         self.reset()
 
     def reset(self) -> None:
@@ -57,8 +65,8 @@ class YawMomentTrigger:
 
     @property
     def warm(self) -> bool:
-        """Whether the level has seen LEVEL_TIME of moments (no gain before)."""
-        return self._samples * self.sample_time >= LEVEL_TIME
+        """Whether the level has seen ``warmup`` s of moments (no gain before)."""
+        return self._samples * self.sample_time >= self.warmup
 
     def update(self, moment: float) -> float:
         """Add the yaw moment N [N·m] applied at this sample; return the heading gain in [0, 1].

@@ -769,7 +769,8 @@ def test_the_yaw_moment_sets_the_heading_gain_and_nothing_else(
     """motion_gate_yaw_moment_ratio ρ: yaw gain = `YawMomentTrigger` on the applied N.
 
     ``moving_run`` with a yaw moment 20 N·m above its noise (σ 1 N·m) while the vessel turns;
-    the level's warm-up shortened to 200 s so that a 600 s run holds it. Against the velocity
+    the level's time and the warm-up shortened to 200 s so that a 600 s run holds them. Against
+    the velocity
     gain (ρ 0) on the same data: the same networks, the same north/east gains and outputs; the
     heading gain the trigger's where the twin is on its network (else 0), and the heading
     holding + g·offset, so that out + untaken is the same for both (holding + offset).
@@ -778,9 +779,10 @@ def test_the_yaw_moment_sets_the_heading_gain_and_nothing_else(
     t, pose, force = moving_run(600, 2)
     turning = (t >= 450.0) & (t < 550.0)  # the ramp of moving_run(600, …): 0.75·n, 100 s
     force[turning, 2] += 20.0  # [N·m]
-    moment = _run_on(GATED_BY_MOMENT, t, pose, force)
-    velocity = _run_on(GATED_BY_MOMENT.replace(motion_gate_yaw_moment_ratio=0.0), t, pose, force)
-    reference = YawMomentTrigger(1.0, 5.0, 30.0)
+    gated = GATED_BY_MOMENT.replace(motion_gate_yaw_warmup=200.0)
+    moment = _run_on(gated, t, pose, force)
+    velocity = _run_on(gated.replace(motion_gate_yaw_moment_ratio=0.0), t, pose, force)
+    reference = YawMomentTrigger(1.0, 5.0, 30.0, 200.0)
     expected = np.array([reference.update(float(n)) for n in force[:, 2]])
     assert moment.twin_using_network is not None
     on = moment.twin_using_network
@@ -807,5 +809,9 @@ def test_the_yaw_moment_trigger_is_built_only_where_it_acts() -> None:
         assert AdaptivePredictor(params, background=False)._yaw_trigger is None
     with pytest.raises(ValueError, match='motion_gate_yaw_hold must be ≥ 0'):
         GATED_BY_MOMENT.replace(motion_gate_yaw_hold=-1.0)
+    with pytest.raises(ValueError, match='motion_gate_yaw_warmup must be ≥ 0'):
+        GATED_BY_MOMENT.replace(motion_gate_yaw_warmup=-1.0)
+    assert AdaptivePredictor(GATED_BY_MOMENT.replace(motion_gate_yaw_warmup=120.0),
+                             background=False)._yaw_trigger.warmup == 120.0
     with pytest.raises(ValueError, match='motion_gate_yaw_moment_ratio must be ≥ 0'):
         GATED_BY_MOMENT.replace(motion_gate_yaw_moment_ratio=-5.0)

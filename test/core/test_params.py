@@ -124,7 +124,8 @@ def test_defaults_and_sample_counts() -> None:
     assert (defaults.motion_gate, defaults.ramp_order, defaults.motion_gate_smoothing,
             defaults.motion_gate_dead_zone, defaults.motion_gate_yaw) == (True, 2, 5.0, 0.6, True)
     assert (defaults.motion_gate_yaw_moment_ratio, defaults.motion_gate_yaw_hold,
-            defaults.guard_floor) == (5.0, 30.0, (0.5, 0.5, 0.1))
+            defaults.motion_gate_yaw_warmup, defaults.guard_floor) == (5.0, 30.0, 600.0,
+                                                                      (0.5, 0.5, 0.1))
     assert (defaults.ramp_invariant, defaults.motion_gate_ny,
             defaults.motion_gate_validation) == (False, 0, False)
     assert (defaults.notch_zeta, defaults.notch_zeta_broadband, defaults.notch_lower_edge,

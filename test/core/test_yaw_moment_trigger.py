@@ -1,6 +1,6 @@
 """The heading gain from the yaw moment (``core.yaw_moment_trigger``; issue 13).
 
-Against values worked out by hand: no gain in the level's warm-up or at a steady moment, the
+Against values worked out by hand: no gain in the warm-up (a parameter) or at a steady moment, the
 gain 1 from the first sample of a turn's moment, held ``hold`` s after the last sample above the
 ratio and then faded linearly over FADE_TIME; the level's floor; bad input.
 """
@@ -60,6 +60,31 @@ def test_a_turn_opens_the_gain_at_once_holds_it_and_fades_it_linearly() -> None:
     assert after[39:] == [0.0] * 21
 
 
+def test_the_warm_up_is_a_parameter_and_the_level_a_running_mean_in_it() -> None:
+    """``warmup`` 120 s at h = 1 s: the 120th sample is the first that can open the gain.
+
+    A turn moment as the 120th sample: level (119·1e6 + 1e7) / 120 = 1.075e6 (the running mean),
+    m = 0.5·1e6 + 0.5·1e7 = 5.5e6 > 5 × 1.075e6 (open); as the 119th: not yet warm (0).
+    """
+    early = YawMomentTrigger(1.0, 5.0, 30.0, warmup=120.0)
+    assert [early.update(STATION) for _ in range(118)] == [0.0] * 118
+    assert early.update(TURN) == 0.0 and not early.warm
+    trigger = YawMomentTrigger(1.0, 5.0, 30.0, warmup=120.0)
+    assert [trigger.update(STATION) for _ in range(119)] == [0.0] * 119 and not trigger.warm
+    assert trigger.update(TURN) == 1.0 and trigger.warm
+    assert trigger._level == pytest.approx((119 * STATION + TURN) / 120, rel=1e-12)
+    default = YawMomentTrigger(1.0, 5.0, 30.0)  # the warm-up is LEVEL_TIME unless given
+    assert default.warmup == LEVEL_TIME
+    assert [default.update(STATION) for _ in range(119)] + [default.update(TURN)] == [0.0] * 120
+    # warm-up 0: warm from the first sample, which is its own level (no gain); the 100th
+    # sample, a turn: level 1e6 + 9e6/100 = 1.09e6, 5 × 1.09e6 < m = 5.5e6 (open)
+    at_once = YawMomentTrigger(1.0, 5.0, 30.0, warmup=0.0)
+    assert at_once.update(TURN) == 0.0 and at_once.warm
+    at_once.reset()
+    assert [at_once.update(STATION) for _ in range(99)] + [at_once.update(TURN)] == \
+        [0.0] * 99 + [1.0]
+
+
 def test_hold_and_ratio_are_the_parameters() -> None:
     short = YawMomentTrigger(1.0, 5.0, 5.0)
     _warm(short)
@@ -95,7 +120,9 @@ def test_a_non_finite_moment_is_skipped_and_reset_forgets() -> None:
     ((1.0, math.nan, 30.0), 'ratio must be finite and > 0'),
     ((1.0, 5.0, -1.0), 'hold must be finite and ≥ 0'),
     ((1.0, 5.0, math.inf), 'hold must be finite and ≥ 0'),
+    ((1.0, 5.0, 30.0, -1.0), 'warmup must be finite and ≥ 0'),
+    ((1.0, 5.0, 30.0, math.nan), 'warmup must be finite and ≥ 0'),
 ])
-def test_bad_settings_are_refused(args: tuple[float, float, float], message: str) -> None:
+def test_bad_settings_are_refused(args: tuple[float, ...], message: str) -> None:
     with pytest.raises(ValueError, match=message):
         YawMomentTrigger(*args)

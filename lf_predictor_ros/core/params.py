@@ -55,7 +55,8 @@ _STR_FIELDS = ('trainer', 'training_mode', 'regressor_frame', 'sea_change_confir
 _BOOL_FIELDS = ('linear_init', 'thrust_validation', 'thrust_ridge_validation', 'thrust_hold',
                 'north_east_decoupled',
                 'ramp_invariant', 'motion_gate',
-                'motion_gate_validation', 'motion_gate_yaw', 'notch_broadband_holding_only',
+                'motion_gate_validation', 'motion_gate_yaw', 'motion_gate_yaw_network_level',
+                'notch_broadband_holding_only',
                 'sea_change_revert', 'frequency_yaw')
 _TUPLE_FIELDS = ('wave_band', 'max_output_rate', 'lf_augmentation', 'guard_floor')
 
@@ -164,6 +165,13 @@ class PredictorParams:
             "with motion_gate_yaw_moment_ratio: no heading gain until the yaw moment's level "
             'has seen this much time (the level is the running mean of |N| for its first '
             "600 s); a turn inside the warm-up gets the holding network's lagging heading", 's'))
+    motion_gate_yaw_network_level: bool = field(
+        default=False, metadata=_doc(
+            "with motion_gate_yaw_moment_ratio: the trigger's level and warm-up count only the "
+            "yaw moments applied while the gate's twin serves from its network (as the gate's "
+            "usual velocity does): a DP loop on the cascade fallback's estimates (before the "
+            'first training) applies larger moments, which would keep the level above any turn '
+            "for many minutes; false: every moment from the start"))
     motion_gate_yaw_notch: float = field(
         default=0.0, metadata=_doc(
             'with motion_gate and motion_gate_yaw: width ζ of a causal notch at the estimated '

@@ -997,14 +997,22 @@ class AdaptivePredictor:
         twin is on its fallback the gate restarts (its history of the network's motion stays),
         so it opens only after ``GATE_MIN_FILL`` of a window of the network's own outputs.
         With ``motion_gate_yaw_moment_ratio`` the heading's gain is the yaw moment's
-        (``core.yaw_moment_trigger``, fed every sample's moment) instead of the velocity's.
+        (``core.yaw_moment_trigger``, fed every sample's moment, or with
+        ``motion_gate_yaw_network_level`` only those applied while the twin uses its network:
+        the moments a DP loop applies on the cascade fallback's estimates are another filter's
+        loop's, as the gate's usual velocity) instead of the velocity's.
         """
         if self._moving is None or self._gate is None:
             return out
         moving = self._moving.update(t, pose, force)
-        # motion_gate_yaw_moment_ratio: the heading gain of this sample, from the yaw moment
-        yaw_gain = None if self._yaw_trigger is None else self._yaw_trigger.update(
-            float(force[2]))
+        # motion_gate_yaw_moment_ratio: the heading gain of this sample, from the yaw moment;
+        # with motion_gate_yaw_network_level only the moments applied while the twin serves
+        # from its network are evidence (NaN: skipped, the hold goes on)
+        yaw_gain = None
+        if self._yaw_trigger is not None:
+            yaw_gain = self._yaw_trigger.update(
+                float(force[2]) if self._moving.using_network
+                or not self.params.motion_gate_yaw_network_level else math.nan)
         offset = moving_offset(out, moving, self.ndof)
         if not self._moving.using_network or not _all_finite(offset):
             # The gate measures the twin's network alone: the usual velocity of the cascade

@@ -801,6 +801,43 @@ def test_the_yaw_moment_sets_the_heading_gain_and_nothing_else(
     assert np.max(np.abs(moment.out[:, 2] - velocity.out[:, 2])) > 1e-3  # and that shows
 
 
+def test_with_the_network_level_the_fallbacks_moments_are_no_evidence(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """motion_gate_yaw_network_level: the trigger is fed the moments of twin-on-network samples.
+
+    ``moving_run`` with a yaw moment of 100 N·m (σ 1) while the twin serves from its fallback,
+    the warm-up 50 s and the level's time 200 s: with every moment as evidence the level is
+    still above 20 N·m when the turn's 20 N·m more comes and the gain stays shut; with the
+    network's moments only the turn opens it, and the gains are those of a trigger fed NaN
+    wherever the twin was not on its network.
+    """
+    monkeypatch.setattr(yaw_moment_trigger, 'LEVEL_TIME', 200.0)
+    t, pose, force = moving_run(600, 2)
+    gated = GATED_BY_MOMENT.replace(motion_gate_yaw_warmup=50.0)
+    probe = _run_on(gated, t, pose, force)
+    assert probe.twin_using_network is not None
+    first = int(np.argmax(probe.twin_using_network))
+    assert 0 < first < 400 and probe.twin_using_network[first:].all()
+    force[:first, 2] += 100.0  # [N·m] the fallback's loop
+    turning = (t >= 450.0) & (t < 550.0)
+    force[turning, 2] += 20.0
+    every = _run_on(gated, t, pose, force)
+    network = _run_on(gated.replace(motion_gate_yaw_network_level=True), t, pose, force)
+    assert every.twin_using_network is not None and network.twin_using_network is not None
+    assert np.array_equal(every.twin_using_network, probe.twin_using_network)
+    assert np.array_equal(network.twin_using_network, probe.twin_using_network)
+    on = probe.twin_using_network
+    reference = YawMomentTrigger(1.0, 5.0, 30.0, 50.0)
+    expected = np.array([reference.update(float(n) if o else math.nan)
+                         for n, o in zip(force[:, 2], on, strict=True)])
+    assert np.array_equal(network.gain[:, 2], np.where(on, expected, 0.0))
+    assert np.all(every.gain[:, 2] == 0.0)
+    assert np.all(network.gain[turning, 2][:20] == 1.0)
+    assert np.all(network.gain[t < 450.0, 2] == 0.0)
+    assert np.array_equal(network.gain[:, :2], every.gain[:, :2])
+    assert np.array_equal(network.out[:, :2], every.out[:, :2])
+
+
 def test_the_yaw_moment_trigger_is_built_only_where_it_acts() -> None:
     assert AdaptivePredictor(GATED_BY_MOMENT, background=False)._yaw_trigger is not None
     for params in (GATED_BY_MOMENT.replace(motion_gate_yaw=False),

@@ -161,10 +161,11 @@ class PredictorParams:
             'with motion_gate_yaw_moment_ratio: time the heading gain stays 1 after the yaw '
             'moment was last above its ratio', 's'))
     motion_gate_yaw_warmup: float = field(
-        default=600.0, metadata=_doc(
+        default=300.0, metadata=_doc(
             "with motion_gate_yaw_moment_ratio: no heading gain until the yaw moment's level "
             'has seen this much time (the level is the running mean of |N| for its first '
-            "600 s); a turn inside the warm-up gets the holding network's lagging heading", 's'))
+            "600 s); a turn inside the warm-up gets the holding network's lagging heading; "
+            "300 s: the motion gate's own warm-up (GATE_MIN_FILL of its window)", 's'))
     motion_gate_yaw_network_level: bool = field(
         default=False, metadata=_doc(
             "with motion_gate_yaw_moment_ratio: the trigger's level and warm-up count only the "

@@ -118,13 +118,13 @@ def test_defaults_and_sample_counts() -> None:
     assert params.wave_peak_prior is None
     assert PredictorParams(initial_wave_peak_freq=0.6).wave_peak_prior == 0.6
     # the shipped motion gate (parabola twin, T 5 s, dead zone 0.6, the heading gated while the
-    # yaw moment is 5× its level, held 30 s), the guard's heading floor 0.1 rad and the
-    # broadband targets' notch for station keeping (ζ 1.3, lower edge 0.23 rad/s)
+    # yaw moment is 5× its level, held 30 s, after a 300 s warm-up), the guard's heading floor
+    # 0.1 rad and the broadband targets' notch for station keeping (ζ 1.3, lower edge 0.23 rad/s)
     defaults = PredictorParams()
     assert (defaults.motion_gate, defaults.ramp_order, defaults.motion_gate_smoothing,
             defaults.motion_gate_dead_zone, defaults.motion_gate_yaw) == (True, 2, 5.0, 0.6, True)
     assert (defaults.motion_gate_yaw_moment_ratio, defaults.motion_gate_yaw_hold,
-            defaults.motion_gate_yaw_warmup, defaults.guard_floor) == (5.0, 30.0, 600.0,
+            defaults.motion_gate_yaw_warmup, defaults.guard_floor) == (5.0, 30.0, 300.0,
                                                                       (0.5, 0.5, 0.1))
     assert (defaults.ramp_invariant, defaults.motion_gate_ny,
             defaults.motion_gate_validation) == (False, 0, False)

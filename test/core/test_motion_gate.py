@@ -770,10 +770,9 @@ def test_the_yaw_moment_sets_the_heading_gain_and_nothing_else(
 
     ``moving_run`` with a yaw moment 20 N·m above its noise (σ 1 N·m) while the vessel turns;
     the level's time and the warm-up shortened to 200 s so that a 600 s run holds them. Against
-    the velocity
-    gain (ρ 0) on the same data: the same networks, the same north/east gains and outputs; the
-    heading gain the trigger's where the twin is on its network (else 0), and the heading
-    holding + g·offset, so that out + untaken is the same for both (holding + offset).
+    the velocity gain (ρ 0) on the same data: the same networks, the same north/east gains and
+    outputs; the heading gain the trigger's where the twin is on its network (else 0), and the
+    heading holding + g·offset, so that out + untaken is the same for both (holding + offset).
     """
     monkeypatch.setattr(yaw_moment_trigger, 'LEVEL_TIME', 200.0)
     t, pose, force = moving_run(600, 2)

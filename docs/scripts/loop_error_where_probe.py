@@ -9,7 +9,9 @@ loop and the shipped predictor's loop (`suite.run_closed_loops`, scored from the
 first scored sample). Prints, per loop, the horizontal position error RMS [m] (true LF pose
 against the ideal loop's LF track) while holding station and in the ``--after`` seconds after
 each setpoint event, and the share of the loop's mean squared error made after the events
-(docs/BENCHMARKS.md, twenty-second session).
+(docs/BENCHMARKS.md, twenty-second session). ``--per-event`` adds a line per event inside the
+run: each loop's RMS in the ``--after`` seconds after it and that window's share of the loop's
+squared error (seventieth session: the first manoeuvre, while the motion gate is still shut).
 """
 from __future__ import annotations
 
@@ -45,12 +47,27 @@ def split_error(t: np.ndarray, offset: np.ndarray, events: Sequence[float], afte
     return hold, moved, float(squared[near].sum() / squared.sum())
 
 
+def event_errors(t: np.ndarray, offset: np.ndarray, events: Sequence[float], after: float,
+                 ) -> list[tuple[float, float, float]]:
+    """Per event inside ``t``: (event time, N/E offset RMS after it [m], its share of the MSE)."""
+    squared = offset[:, 0] ** 2 + offset[:, 1] ** 2
+    total = float(squared.sum())
+    out = []
+    for event in events:
+        near = (t >= event) & (t < event + after)
+        if np.any(near):
+            out.append((event, float(np.sqrt(squared[near].mean())),
+                        float(squared[near].sum()) / total))
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('scenario')
     parser.add_argument('seeds', nargs='+', type=int)
     parser.add_argument('--after', type=float, default=240.0, help='s after each event')
     parser.add_argument('--schedule-spread', type=float, default=SCHEDULE_SPREAD)
+    parser.add_argument('--per-event', action='store_true', help='a line per event')
     args = parser.parse_args(argv)
     if set(args.seeds) - set(TUNING_SEEDS) - set(DEVELOPMENT_SEEDS):
         parser.error('only tuning and development seeds (held-out seeds: `benchmark`)')
@@ -75,6 +92,16 @@ def main(argv: Sequence[str] | None = None) -> int:
                          f'after events {share:.2f}')
         print(f'{args.scenario} {seed} events {[round(e) for e in events]} ' + ' | '.join(parts),
               flush=True)
+        if args.per_event:
+            per_loop = {}
+            for name in LOOPS:
+                keep = series[name].t >= start
+                per_loop[name] = event_errors(series[name].t[keep], series[name].offset[keep],
+                                              events, args.after)
+            for rows in zip(*per_loop.values(), strict=True):
+                print(f'  event at {rows[0][0]:6.0f} s: ' + ' | '.join(
+                    f'{name} {rms:.3f} m ({share:.2f} of its MSE)'
+                    for name, (_, rms, share) in zip(LOOPS, rows, strict=True)), flush=True)
     return 0
 
 

@@ -228,13 +228,15 @@ class _JobOutcome:
     def __init__(self, generation: int, result: RetrainResult | None,
                  error: BaseException | None, saved_error: str | None = None,
                  frequency: FrequencyEstimate | None = None,
-                 fallback_plan: CascadePlan | None = None) -> None:
+                 fallback_plan: CascadePlan | None = None,
+                 gate_notch_plan: CascadePlan | None = None) -> None:
         self.generation = generation
         self.result = result
         self.error = error
         self.saved_error = saved_error
         self.frequency = frequency  # set by a frequency-only job (before the first training)
         self.fallback_plan = fallback_plan  # the cascade fallback at the result's ω0
+        self.gate_notch_plan = gate_notch_plan  # the gate's heading notch at that ω0
 
 
 def fallback_design(params: PredictorParams) -> dict[str, Any]:
@@ -243,21 +245,33 @@ def fallback_design(params: PredictorParams) -> dict[str, Any]:
             'lowpass_offset': params.lowpass_offset}
 
 
+def notch_design(params: PredictorParams, notch_zeta: float) -> dict[str, Any]:
+    """`CascadeFilter`'s design arguments of a notch at ω0 alone (width ``notch_zeta``)."""
+    return {'notch_zeta': notch_zeta, 'notch_depth': params.notch_depth, 'lowpass_offset': None}
+
+
 def retrain_and_plan(params: PredictorParams, snapshot: Snapshot,
                      incumbent: dict[str, torch.Tensor] | None, targets: TargetWindow | None,
                      frequency: FrequencyEstimate | float | None,
                      stop: threading.Event | None,
                      before_restart: tuple[float, TargetWindow] | None,
-                     plan_fallback: bool) -> tuple[RetrainResult, CascadePlan | None]:
-    """`run_retraining`, and with ``plan_fallback`` the cascade fallback planned at its ω0.
+                     plan_fallback: bool, plan_gate_notch: bool = False,
+                     ) -> tuple[RetrainResult, CascadePlan | None, CascadePlan | None]:
+    """`run_retraining`, and the filters retuned to its ω0 planned at it.
 
-    In the job (the child process), so that applying the result on the predict path does not
-    design the fallback's filter (`plan_cascade`; docs/BENCHMARKS.md, sixty-ninth session).
+    ``plan_fallback``: the cascade fallback; ``plan_gate_notch``: the motion gate's heading
+    notch (``motion_gate_yaw_notch``). In the job (the child process), so that applying the
+    result on the predict path does not design a filter (`plan_cascade`; docs/BENCHMARKS.md,
+    sixty-ninth and seventieth sessions).
     """
     result = run_retraining(params, snapshot, incumbent, targets, frequency, stop,
                             before_restart)
-    plan = plan_fallback_at(params, result.frequency.wave_peak_freq) if plan_fallback else None
-    return result, plan
+    freq = result.frequency.wave_peak_freq
+    plan = plan_fallback_at(params, freq) if plan_fallback else None
+    notch = plan_cascade(freq, params.sample_time,
+                         **notch_design(params, params.motion_gate_yaw_notch)) \
+        if plan_gate_notch else None
+    return result, plan, notch
 
 
 def plan_fallback_at(params: PredictorParams, wave_peak_freq: float) -> CascadePlan:
@@ -781,22 +795,24 @@ class AdaptivePredictor:
             self._roughness.reset()
 
     def _tune_wave_filters(self, wave_peak_freq: float,
-                           fallback_plan: CascadePlan | None = None) -> None:
-        """Retune the cascade fallback and the output notch to ω0 [rad/s] (outputs continuous).
+                           fallback_plan: CascadePlan | None = None,
+                           gate_notch_plan: CascadePlan | None = None) -> None:
+        """Retune the cascade fallback and the notches to ω0 [rad/s] (outputs continuous).
 
-        ``fallback_plan``: the fallback planned at that ω0 by the job (`retrain_and_plan`).
+        ``fallback_plan`` / ``gate_notch_plan``: the fallback / the gate's heading notch planned
+        at that ω0 by the job (`retrain_and_plan`).
         """
         if self._run_cascade:
             self._fallback.set_wave_peak_freq(wave_peak_freq, fallback_plan)
-        for notch in (self._output_notch, self._gate_yaw_notch):
-            if notch is not None:
-                notch.set_wave_peak_freq(wave_peak_freq)
+        if self._output_notch is not None:
+            self._output_notch.set_wave_peak_freq(wave_peak_freq)
+        if self._gate_yaw_notch is not None:
+            self._gate_yaw_notch.set_wave_peak_freq(wave_peak_freq, gate_notch_plan)
 
     def _wave_notch(self, channels: int, notch_zeta: float) -> CascadeFilter:
         """A causal notch at ω0 (width ``notch_zeta``, depth notch_depth, no low-pass)."""
         return CascadeFilter(channels, self.params.sample_time, self._fallback_freq(),
-                             notch_zeta=notch_zeta, notch_depth=self.params.notch_depth,
-                             lowpass_offset=None)
+                             **notch_design(self.params, notch_zeta))
 
     def _notched(self, t: float, out: FloatArray) -> FloatArray:
         """The published pose through the output notch (``output_notch_zeta``; off: ``out``).
@@ -1165,20 +1181,22 @@ class AdaptivePredictor:
              before_restart: tuple[float, TargetWindow] | None = None) -> None:
         """Worker body: never raises; the outcome goes through the queue."""
         plan_fallback = self._run_cascade
+        plan_notch = self._gate_yaw_notch is not None
 
-        def here() -> tuple[RetrainResult, CascadePlan | None]:
+        def here() -> tuple[RetrainResult, CascadePlan | None, CascadePlan | None]:
             with spectrum_fit_by(self._fit_process):
                 return retrain_and_plan(self.params, snapshot, incumbent, targets, frequency,
-                                        stop, before_restart, plan_fallback)
+                                        stop, before_restart, plan_fallback, plan_notch)
 
         try:
             with self._training_lock:  # one training at a time per lock (the gate's twin)
                 if self._fit_process is None:
-                    result, plan = here()
+                    result, plan, notch_plan = here()
                 else:  # in the child (core.fit_process), where it holds no GIL of the node's
-                    result, plan = self._fit_process.run(
+                    result, plan, notch_plan = self._fit_process.run(
                         retrain_and_plan, self.params, snapshot, incumbent, targets, frequency,
-                        None, before_restart, plan_fallback, stop=stop, fallback=here)
+                        None, before_restart, plan_fallback, plan_notch, stop=stop,
+                        fallback=here)
         except JobAbandonedError:
             return  # stopped (closed, or its result discarded): nobody takes an outcome
         except Exception as exc:  # noqa: BLE001 - any failure must keep the node alive
@@ -1192,7 +1210,7 @@ class AdaptivePredictor:
             except (OSError, ValueError) as exc:
                 saved_error = f'checkpoint not saved: {exc}'
         self._outcomes.put(_JobOutcome(generation, result, None, saved_error,
-                                       fallback_plan=plan))
+                                       fallback_plan=plan, gate_notch_plan=notch_plan))
 
     def _collect_outcomes(self, t: float) -> None:
         if self._outcomes.empty():  # the usual case, without raising queue.Empty
@@ -1226,7 +1244,8 @@ class AdaptivePredictor:
             self._targets_damping = result.targets_peak_damping
             self._narrow_reference = result.narrow_reference
         self._frequency = result.frequency
-        self._tune_wave_filters(result.frequency.wave_peak_freq, outcome.fallback_plan)
+        self._tune_wave_filters(result.frequency.wave_peak_freq, outcome.fallback_plan,
+                                outcome.gate_notch_plan)
         if result.restarted:
             # the network before is the old sea's: a retirement falls back to the cascade, tuned
             # to the new ω0, not to a network trained on waves that are gone

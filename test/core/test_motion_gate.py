@@ -837,6 +837,46 @@ def test_with_the_network_level_the_fallbacks_moments_are_no_evidence(
     assert np.array_equal(network.out[:, :2], every.out[:, :2])
 
 
+def test_the_gates_heading_notch_is_planned_by_the_job_with_the_same_numbers(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """motion_gate_yaw_notch: the job plans the notch at its ω0; applying it designs nothing.
+
+    The same run with the job's plans and with the notch's plan dropped (the notch then
+    designs itself in `_tune_wave_filters`, as before the seventieth session): the same outputs
+    and gains to the bit; with the plan every retune of the notch that applies a training is
+    planned (the ω0 jobs before the first training still design theirs).
+    """
+    from lf_predictor_ros.core import predictor as predictor_module
+    from lf_predictor_ros.core.baselines.cascade import CascadeFilter
+
+    t, pose, force = moving_run(600, 2)
+    force[(t >= 450.0) & (t < 550.0), 2] += 20.0
+    notched = GATED_BY_MOMENT.replace(motion_gate_yaw_notch=0.2, motion_gate_yaw_warmup=50.0)
+    retunes: list[bool] = []  # per retune of the gate's notch: planned?
+    retune = CascadeFilter.set_wave_peak_freq
+
+    def logged(self: CascadeFilter, wave_peak_freq: float, plan: Any = None) -> None:
+        if self._design['lowpass_offset'] is None and self._design['notch_zeta'] == 0.2:
+            retunes.append(plan is not None)
+        retune(self, wave_peak_freq, plan)
+
+    monkeypatch.setattr(CascadeFilter, 'set_wave_peak_freq', logged)
+    planned = _run_on(notched, t, pose, force)
+    with_plan = list(retunes)
+    retunes.clear()
+    plan = predictor_module.retrain_and_plan
+    monkeypatch.setattr(predictor_module, 'retrain_and_plan',
+                        lambda *args: plan(*args)[:2] + (None,))
+    plain = _run_on(notched, t, pose, force)
+    trainings = planned.counters['trainings']
+    assert trainings > 1 and plain.counters['trainings'] == trainings
+    assert len(retunes) == len(with_plan) and not any(retunes)
+    assert sum(with_plan) >= trainings  # every applied training (accepted or not) is planned
+    assert np.array_equal(planned.out, plain.out)
+    assert np.array_equal(planned.gain, plain.gain)
+    assert np.any(planned.gain[:, 2] == 1.0)  # the notched heading offset reached the output
+
+
 def test_the_yaw_moment_trigger_is_built_only_where_it_acts() -> None:
     assert AdaptivePredictor(GATED_BY_MOMENT, background=False)._yaw_trigger is not None
     for params in (GATED_BY_MOMENT.replace(motion_gate_yaw=False),

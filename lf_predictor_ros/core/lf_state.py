@@ -345,7 +345,8 @@ class LfStateEstimator:
         times, values, rows = times[:usable], values[:usable], idx[keep][:usable]  # contiguous
         reference = reference[:usable]
         reading = odometry.params.controller_inertia
-        commands = (np.array(self._command_times.view()), np.array(self._commands.view())) if \
+        # read-only snapshots (`RowBuffer.view`): later commands do not change them
+        commands = (self._command_times.view(), self._commands.view()) if \
             reading and len(self._commands) else None
         head: tuple[Any, ...] = (self.params, times, values, self._forces.view()[rows],
                                  self.predictor.wave_peak_freq)

@@ -69,7 +69,7 @@ from __future__ import annotations
 
 import atexit
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 import math
 from pathlib import Path
 import queue
@@ -229,14 +229,14 @@ class _JobOutcome:
                  error: BaseException | None, saved_error: str | None = None,
                  frequency: FrequencyEstimate | None = None,
                  fallback_plan: CascadePlan | None = None,
-                 gate_notch_plan: CascadePlan | None = None) -> None:
+                 notch_plans: Mapping[float, CascadePlan] | None = None) -> None:
         self.generation = generation
         self.result = result
         self.error = error
         self.saved_error = saved_error
         self.frequency = frequency  # set by a frequency-only job (before the first training)
         self.fallback_plan = fallback_plan  # the cascade fallback at the result's ω0
-        self.gate_notch_plan = gate_notch_plan  # the gate's heading notch at that ω0
+        self.notch_plans = notch_plans  # the notches at that ω0, by width ζ
 
 
 def fallback_design(params: PredictorParams) -> dict[str, Any]:
@@ -255,23 +255,22 @@ def retrain_and_plan(params: PredictorParams, snapshot: Snapshot,
                      frequency: FrequencyEstimate | float | None,
                      stop: threading.Event | None,
                      before_restart: tuple[float, TargetWindow] | None,
-                     plan_fallback: bool, plan_gate_notch: bool = False,
-                     ) -> tuple[RetrainResult, CascadePlan | None, CascadePlan | None]:
+                     plan_fallback: bool, notch_zetas: tuple[float, ...] = (),
+                     ) -> tuple[RetrainResult, CascadePlan | None, dict[float, CascadePlan]]:
     """`run_retraining`, and the filters retuned to its ω0 planned at it.
 
-    ``plan_fallback``: the cascade fallback; ``plan_gate_notch``: the motion gate's heading
-    notch (``motion_gate_yaw_notch``). In the job (the child process), so that applying the
-    result on the predict path does not design a filter (`plan_cascade`; docs/BENCHMARKS.md,
-    sixty-ninth and seventieth sessions).
+    ``plan_fallback``: the cascade fallback; ``notch_zetas``: the widths of the notches the
+    predictor retunes (``output_notch_zeta``, ``motion_gate_yaw_notch``), planned by width. In
+    the job (the child process), so that applying the result on the predict path does not
+    design a filter (`plan_cascade`; docs/BENCHMARKS.md, sixty-ninth and seventieth sessions).
     """
     result = run_retraining(params, snapshot, incumbent, targets, frequency, stop,
                             before_restart)
     freq = result.frequency.wave_peak_freq
     plan = plan_fallback_at(params, freq) if plan_fallback else None
-    notch = plan_cascade(freq, params.sample_time,
-                         **notch_design(params, params.motion_gate_yaw_notch)) \
-        if plan_gate_notch else None
-    return result, plan, notch
+    notches = {zeta: plan_cascade(freq, params.sample_time, **notch_design(params, zeta))
+               for zeta in notch_zetas}
+    return result, plan, notches
 
 
 def plan_fallback_at(params: PredictorParams, wave_peak_freq: float) -> CascadePlan:
@@ -796,18 +795,23 @@ class AdaptivePredictor:
 
     def _tune_wave_filters(self, wave_peak_freq: float,
                            fallback_plan: CascadePlan | None = None,
-                           gate_notch_plan: CascadePlan | None = None) -> None:
+                           notch_plans: Mapping[float, CascadePlan] | None = None) -> None:
         """Retune the cascade fallback and the notches to ω0 [rad/s] (outputs continuous).
 
-        ``fallback_plan`` / ``gate_notch_plan``: the fallback / the gate's heading notch planned
-        at that ω0 by the job (`retrain_and_plan`).
+        ``fallback_plan`` / ``notch_plans``: the fallback / the notches (by width) planned at
+        that ω0 by the job (`retrain_and_plan`); a filter without a plan designs itself.
         """
         if self._run_cascade:
             self._fallback.set_wave_peak_freq(wave_peak_freq, fallback_plan)
-        if self._output_notch is not None:
-            self._output_notch.set_wave_peak_freq(wave_peak_freq)
-        if self._gate_yaw_notch is not None:
-            self._gate_yaw_notch.set_wave_peak_freq(wave_peak_freq, gate_notch_plan)
+        plans = notch_plans or {}
+        for notch, zeta in self._notches():
+            notch.set_wave_peak_freq(wave_peak_freq, plans.get(zeta))
+
+    def _notches(self) -> list[tuple[CascadeFilter, float]]:
+        """The notches retuned with ω0 and their widths ζ (`_wave_notch`)."""
+        return [(notch, zeta) for notch, zeta in (
+            (self._output_notch, self.params.output_notch_zeta),
+            (self._gate_yaw_notch, self.params.motion_gate_yaw_notch)) if notch is not None]
 
     def _wave_notch(self, channels: int, notch_zeta: float) -> CascadeFilter:
         """A causal notch at ω0 (width ``notch_zeta``, depth notch_depth, no low-pass)."""
@@ -1181,21 +1185,21 @@ class AdaptivePredictor:
              before_restart: tuple[float, TargetWindow] | None = None) -> None:
         """Worker body: never raises; the outcome goes through the queue."""
         plan_fallback = self._run_cascade
-        plan_notch = self._gate_yaw_notch is not None
+        notch_zetas = tuple(zeta for _, zeta in self._notches())
 
-        def here() -> tuple[RetrainResult, CascadePlan | None, CascadePlan | None]:
+        def here() -> tuple[RetrainResult, CascadePlan | None, dict[float, CascadePlan]]:
             with spectrum_fit_by(self._fit_process):
                 return retrain_and_plan(self.params, snapshot, incumbent, targets, frequency,
-                                        stop, before_restart, plan_fallback, plan_notch)
+                                        stop, before_restart, plan_fallback, notch_zetas)
 
         try:
             with self._training_lock:  # one training at a time per lock (the gate's twin)
                 if self._fit_process is None:
-                    result, plan, notch_plan = here()
+                    result, plan, notch_plans = here()
                 else:  # in the child (core.fit_process), where it holds no GIL of the node's
-                    result, plan, notch_plan = self._fit_process.run(
+                    result, plan, notch_plans = self._fit_process.run(
                         retrain_and_plan, self.params, snapshot, incumbent, targets, frequency,
-                        None, before_restart, plan_fallback, plan_notch, stop=stop,
+                        None, before_restart, plan_fallback, notch_zetas, stop=stop,
                         fallback=here)
         except JobAbandonedError:
             return  # stopped (closed, or its result discarded): nobody takes an outcome
@@ -1210,7 +1214,7 @@ class AdaptivePredictor:
             except (OSError, ValueError) as exc:
                 saved_error = f'checkpoint not saved: {exc}'
         self._outcomes.put(_JobOutcome(generation, result, None, saved_error,
-                                       fallback_plan=plan, gate_notch_plan=notch_plan))
+                                       fallback_plan=plan, notch_plans=notch_plans))
 
     def _collect_outcomes(self, t: float) -> None:
         if self._outcomes.empty():  # the usual case, without raising queue.Empty
@@ -1245,7 +1249,7 @@ class AdaptivePredictor:
             self._narrow_reference = result.narrow_reference
         self._frequency = result.frequency
         self._tune_wave_filters(result.frequency.wave_peak_freq, outcome.fallback_plan,
-                                outcome.gate_notch_plan)
+                                outcome.notch_plans)
         if result.restarted:
             # the network before is the old sea's: a retirement falls back to the cascade, tuned
             # to the new ω0, not to a network trained on waves that are gone

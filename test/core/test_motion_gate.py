@@ -839,31 +839,37 @@ def test_with_the_network_level_the_fallbacks_moments_are_no_evidence(
 
 def test_the_gates_heading_notch_is_planned_by_the_job_with_the_same_numbers(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """motion_gate_yaw_notch: the job plans the notch at its ω0; applying it designs nothing.
+    """The job plans the notches at its ω0; applying it designs none of them.
 
-    The same run with the job's plans and with the notch's plan dropped (the notch then
-    designs itself in `_tune_wave_filters`, as before the seventieth session): the same outputs
-    and gains to the bit; with the plan every retune of the notch that applies a training is
-    planned (the ω0 jobs before the first training still design theirs).
+    ``motion_gate_yaw_notch`` 0.2 and ``output_notch_zeta`` 0.3. The same run with the job's
+    plans and with the notches' plans dropped (each notch then designs itself in
+    `_tune_wave_filters`, as before the seventieth session): the same outputs and gains to the
+    bit; with the plans every retune of a notch that applies a training is planned (the ω0 jobs
+    before the first training still design theirs).
     """
     from lf_predictor_ros.core import predictor as predictor_module
     from lf_predictor_ros.core.baselines.cascade import CascadeFilter
 
     t, pose, force = moving_run(600, 2)
     force[(t >= 450.0) & (t < 550.0), 2] += 20.0
-    notched = GATED_BY_MOMENT.replace(motion_gate_yaw_notch=0.2, motion_gate_yaw_warmup=50.0)
+    notched = GATED_BY_MOMENT.replace(motion_gate_yaw_notch=0.2, motion_gate_yaw_warmup=50.0,
+                                      output_notch_zeta=0.3)
     retunes: list[bool] = []  # per retune of the gate's notch: planned?
+    output_retunes: list[bool] = []  # the same of the output notch
     retune = CascadeFilter.set_wave_peak_freq
 
     def logged(self: CascadeFilter, wave_peak_freq: float, plan: Any = None) -> None:
         if self._design['lowpass_offset'] is None and self._design['notch_zeta'] == 0.2:
             retunes.append(plan is not None)
+        if self._design['lowpass_offset'] is None and self._design['notch_zeta'] == 0.3:
+            output_retunes.append(plan is not None)
         retune(self, wave_peak_freq, plan)
 
     monkeypatch.setattr(CascadeFilter, 'set_wave_peak_freq', logged)
     planned = _run_on(notched, t, pose, force)
-    with_plan = list(retunes)
+    with_plan, output_with_plan = list(retunes), list(output_retunes)
     retunes.clear()
+    output_retunes.clear()
     plan = predictor_module.retrain_and_plan
     monkeypatch.setattr(predictor_module, 'retrain_and_plan',
                         lambda *args: plan(*args)[:2] + (None,))
@@ -872,6 +878,9 @@ def test_the_gates_heading_notch_is_planned_by_the_job_with_the_same_numbers(
     assert trainings > 1 and plain.counters['trainings'] == trainings
     assert len(retunes) == len(with_plan) and not any(retunes)
     assert sum(with_plan) >= trainings  # every applied training (accepted or not) is planned
+    # the output notch (the twin's too): as many retunes, planned where a training applies
+    assert len(output_retunes) == len(output_with_plan) and not any(output_retunes)
+    assert sum(output_with_plan) >= trainings
     assert np.array_equal(planned.out, plain.out)
     assert np.array_equal(planned.gain, plain.gain)
     assert np.any(planned.gain[:, 2] == 1.0)  # the notched heading offset reached the output

@@ -266,11 +266,33 @@ def retrain_and_plan(params: PredictorParams, snapshot: Snapshot,
     """
     result = run_retraining(params, snapshot, incumbent, targets, frequency, stop,
                             before_restart)
-    freq = result.frequency.wave_peak_freq
-    plan = plan_fallback_at(params, freq) if plan_fallback else None
-    notches = {zeta: plan_cascade(freq, params.sample_time, **notch_design(params, zeta))
-               for zeta in notch_zetas}
-    return result, plan, notches
+    return (result, *plan_wave_filters(params, result.frequency.wave_peak_freq, plan_fallback,
+                                       notch_zetas))
+
+
+def estimate_and_plan(params: PredictorParams, y: FloatArray,
+                      previous: FrequencyEstimate | float | None, plan_fallback: bool,
+                      notch_zetas: tuple[float, ...] = (),
+                      ) -> tuple[FrequencyEstimate, CascadePlan | None, dict[float, CascadePlan]]:
+    """`estimate_frequency` (the ω0 jobs before the first training), and the filters planned.
+
+    As `retrain_and_plan`: in the job (the child process), so that applying the estimate on the
+    predict path retunes the cascade fallback and the notches without designing them
+    (docs/BENCHMARKS.md, seventy-first session). Raises what `estimate_frequency` raises.
+    """
+    estimate = estimate_frequency(params, y, previous)
+    return (estimate, *plan_wave_filters(params, estimate.wave_peak_freq, plan_fallback,
+                                         notch_zetas))
+
+
+def plan_wave_filters(params: PredictorParams, wave_peak_freq: float, plan_fallback: bool,
+                      notch_zetas: tuple[float, ...],
+                      ) -> tuple[CascadePlan | None, dict[float, CascadePlan]]:
+    """The plans of the filters retuned to ω0 [rad/s]: the fallback's (if asked), the notches'."""
+    plan = plan_fallback_at(params, wave_peak_freq) if plan_fallback else None
+    notches = {zeta: plan_cascade(wave_peak_freq, params.sample_time,
+                                  **notch_design(params, zeta)) for zeta in notch_zetas}
+    return plan, notches
 
 
 def plan_fallback_at(params: PredictorParams, wave_peak_freq: float) -> CascadePlan:
@@ -1172,12 +1194,25 @@ class AdaptivePredictor:
 
     def _frequency_job(self, generation: int, y: FloatArray,
                        previous: FrequencyEstimate | float | None) -> None:
-        try:
+        """Worker body of an ω0 job (`estimate_and_plan`, in the child as `_job`)."""
+        plan_fallback = self._run_cascade
+        notch_zetas = tuple(zeta for _, zeta in self._notches())
+
+        def here() -> tuple[FrequencyEstimate, CascadePlan | None, dict[float, CascadePlan]]:
             with spectrum_fit_by(self._fit_process):
-                estimate = estimate_frequency(self.params, y, previous)
+                return estimate_and_plan(self.params, y, previous, plan_fallback, notch_zetas)
+
+        try:
+            if self._fit_process is None:
+                estimate, plan, notch_plans = here()
+            else:
+                estimate, plan, notch_plans = self._fit_process.run(
+                    estimate_and_plan, self.params, y, previous, plan_fallback, notch_zetas,
+                    fallback=here)
         except (ValueError, FloatingPointError):
             return  # too little data for the spectrum yet: try again after Δ
-        self._outcomes.put(_JobOutcome(generation, None, None, frequency=estimate))
+        self._outcomes.put(_JobOutcome(generation, None, None, frequency=estimate,
+                                       fallback_plan=plan, notch_plans=notch_plans))
 
     def _job(self, generation: int, snapshot: Snapshot,
              incumbent: dict[str, torch.Tensor] | None, targets: TargetWindow | None,
@@ -1231,7 +1266,8 @@ class AdaptivePredictor:
         if outcome.frequency is not None:
             if outcome.frequency.confident or self._frequency is None:
                 self._frequency = outcome.frequency
-                self._tune_wave_filters(outcome.frequency.wave_peak_freq)
+                self._tune_wave_filters(outcome.frequency.wave_peak_freq,
+                                        outcome.fallback_plan, outcome.notch_plans)
                 self._message = (f'collecting data; ω0 ≈ {outcome.frequency.wave_peak_freq:.3f} '
                                  'rad/s, cascade fallback tuned to it')
             return

@@ -873,6 +873,9 @@ def test_the_gates_heading_notch_is_planned_by_the_job_with_the_same_numbers(
     plan = predictor_module.retrain_and_plan
     monkeypatch.setattr(predictor_module, 'retrain_and_plan',
                         lambda *args: plan(*args)[:2] + (None,))
+    early = predictor_module.estimate_and_plan  # the ω0 jobs before the first training
+    monkeypatch.setattr(predictor_module, 'estimate_and_plan',
+                        lambda *args: early(*args)[:2] + ({},))
     plain = _run_on(notched, t, pose, force)
     trainings = planned.counters['trainings']
     assert trainings > 1 and plain.counters['trainings'] == trainings

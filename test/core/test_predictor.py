@@ -197,6 +197,44 @@ def test_output_is_the_cascade_fallback_before_the_first_training(prior: float,
     assert 'cascade fallback tuned' in predictor.status().message
 
 
+def test_early_omega_jobs_plan_the_filters_they_retune(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Before the first training an ω0 job plans the fallback and the notches it retunes.
+
+    `predictor.estimate_and_plan`, as `retrain_and_plan` for a training: applying its estimate
+    on the predict path designs no filter, and the outputs are those of unplanned retunes.
+    """
+    t, pose, force, _ = onedof_record(5, 400.0)
+    params = SMALL.replace(output_notch_zeta=0.3)
+    retunes: list[tuple[float, bool]] = []  # (notch width ζ, planned?) per retune
+    retune = CascadeFilter.set_wave_peak_freq
+
+    def logged(self: CascadeFilter, wave_peak_freq: float, plan: Any = None) -> None:
+        retunes.append((self._design['notch_zeta'], plan is not None))
+        retune(self, wave_peak_freq, plan)
+
+    def run() -> NDArray[np.float64]:
+        predictor = AdaptivePredictor(params, background=False)
+        out = [predictor.update(float(t[i]), pose[i], force[i]) for i in range(FIRST_TRAINING - 1)]
+        assert predictor.status().trainings == 0
+        assert 'cascade fallback tuned' in predictor.status().message
+        return np.array(out)
+
+    monkeypatch.setattr(CascadeFilter, 'set_wave_peak_freq', logged)
+    planned = run()
+    with_plan = list(retunes)
+    retunes.clear()
+    plan = predictor_module.estimate_and_plan
+    monkeypatch.setattr(predictor_module, 'estimate_and_plan',
+                        lambda *args: (plan(*args)[0], None, {}))
+    plain = run()
+    widths = {zeta for zeta, _ in with_plan}
+    assert widths == {params.fallback_notch_zeta, 0.3}  # the fallback and the output notch
+    assert len(with_plan) >= 2 and all(planned for _, planned in with_plan)
+    assert [zeta for zeta, _ in retunes] == [zeta for zeta, _ in with_plan]
+    assert not any(planned for _, planned in retunes)
+    assert np.array_equal(planned, plain)
+
+
 @functools.cache
 def inline_run(n: int) -> tuple[FloatArray, tuple[int, ...], tuple[str, ...],
                                 AdaptivePredictor]:
@@ -427,8 +465,11 @@ def test_background_jobs_run_in_the_child_with_the_inline_numbers(
             background.update(float(t[i]), pose[i], force[i])
             assert background.wait_for_training(60.0)
         assert background.counters['trainings'] == inline.counters['trainings'] == 1
-        assert calls and counted.starts == 1 and counted.failures == 0
-        assert jobs.count('retrain_and_plan') == 1  # the training too
+        # every ω0 fit ran inside a job in the child: the early ones (`estimate_and_plan`)
+        # and the training's (`retrain_and_plan`); none through a fit asked from here
+        assert not calls and counted.starts == 1 and counted.failures == 0
+        assert jobs.count('estimate_and_plan') >= 1
+        assert jobs.count('retrain_and_plan') == 1
         assert background.omega_fits_here == inline.omega_fits_here == 0
         assert background.wave_peak_freq == inline.wave_peak_freq
         model, expected = background.model, inline.model

@@ -280,6 +280,7 @@ class RetunePlan:
     state_space: _StateSpace
     observability: FloatArray  # (order, n_states): rows C A^k, k < order
     markov: tuple[FloatArray, ...]  # C A^i B for i < order - 1
+    steady_state: FloatArray  # sosfilt_zi(sos): the state after a unit step, per section
 
 
 def plan_retune(sos: ArrayLike) -> RetunePlan:
@@ -294,9 +295,11 @@ def plan_retune(sos: ArrayLike) -> RetunePlan:
         obs[k] = ss.c @ power
         power = ss.a @ power
     markov = tuple(ss.c @ np.linalg.matrix_power(ss.a, i) @ ss.b for i in range(order - 1))
-    for array in (checked, obs, ss.a, ss.b, ss.c, *markov):
+    steady = signal.sosfilt_zi(checked)
+    for array in (checked, obs, ss.a, ss.b, ss.c, steady, *markov):
         array.setflags(write=False)
-    return RetunePlan(sos=checked, state_space=ss, observability=obs, markov=markov)
+    return RetunePlan(sos=checked, state_space=ss, observability=obs, markov=markov,
+                      steady_state=steady)
 
 
 def _check_sos(sos: FloatArray) -> FloatArray:
@@ -328,6 +331,7 @@ class CausalFilter:
         # the newest inputs and outputs (lists of n_channels floats), for `retune`
         self._inputs: list[list[float]] = []
         self._outputs: list[list[float]] = []
+        self._zi: FloatArray | None = None  # sosfilt_zi of the coefficients, once needed
 
     @property
     def sos(self) -> FloatArray:
@@ -350,6 +354,16 @@ class CausalFilter:
         self._inputs = []
         self._outputs = []
 
+    def _steady_state(self) -> FloatArray:
+        """``sosfilt_zi`` of the coefficients, computed once per set of them.
+
+        A restart (`reset`, a new data segment) then designs nothing on the predict path, nor
+        does the first sample after a planned `retune` (`RetunePlan.steady_state`).
+        """
+        if self._zi is None:
+            self._zi = signal.sosfilt_zi(self._sos)
+        return self._zi
+
     def filter(self, x: FloatArray) -> FloatArray:
         """Filter one sample x (n_channels,) and return the output (n_channels,)."""
         u = np.array(x, dtype=np.float64).reshape(-1)
@@ -366,7 +380,7 @@ class CausalFilter:
             raise ValueError(f'sample must have shape ({self._n_channels},), got '
                              f'({len(values)},)')
         if self._state is None:
-            zi = signal.sosfilt_zi(self._sos)  # steady state for a unit step input
+            zi = self._steady_state()  # steady state for a unit step input
             self._state = (zi[:, :, None] * np.array(values, dtype=np.float64)).tolist()
         out, self._state = _sos_step_lists(self._coefficients, self._state, values)
         self._remember(list(values), out)
@@ -418,11 +432,12 @@ class CausalFilter:
         plan, new_sos = (sos, sos.sos) if isinstance(sos, RetunePlan) else (None, _check_sos(sos))
         self._sos = new_sos
         self._coefficients = new_sos.tolist()
+        self._zi = plan.steady_state if plan is not None else None
         if self._state is None:
             return
         order = 2 * new_sos.shape[0]
         if len(self._inputs) < order:
-            zi = signal.sosfilt_zi(new_sos)
+            zi = self._steady_state()
             last = np.array(self._outputs[-1], dtype=np.float64)
             self._state = (zi[:, :, None] * last).tolist()
             self._inputs = self._inputs[-1:]

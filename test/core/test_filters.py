@@ -207,6 +207,40 @@ def test_a_retune_plan_gives_the_retune_of_the_coefficients_bit_for_bit() -> Non
         plan_retune(2.0 * new)
 
 
+def test_a_restart_and_a_planned_retune_compute_no_steady_state(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``sosfilt_zi`` once per set of coefficients, never at a restart or after a plan."""
+    calls: list[int] = []
+    zi = signal.sosfilt_zi
+
+    def counted(sos: NDArray[np.float64]) -> NDArray[np.float64]:
+        calls.append(1)
+        return zi(sos)
+
+    new = design_wave_filter(0.55, 1.0, notch_zeta=0.1)
+    plan = plan_retune(new)
+    monkeypatch.setattr(signal, 'sosfilt_zi', counted)
+    filt = CausalFilter(design_wave_filter(0.7, 1.0), 2)
+    sample = np.array([3.0, -1.0])
+    first = filt.filter(sample)
+    assert len(calls) == 1
+    filt.reset()
+    assert filt.filter(sample).tolist() == first.tolist()  # the same start, not computed again
+    assert len(calls) == 1
+    filt.retune(plan)  # too short a history: starts in the plan's steady state
+    filt.reset()
+    after_restart = filt.filter(sample)
+    assert len(calls) == 1
+    fresh = CausalFilter(new, 2)
+    assert after_restart.tolist() == fresh.filter(sample).tolist()  # equal to a new filter
+    assert len(calls) == 2  # the new filter's own
+    filt.retune(new)  # unplanned: computed once more at the next start
+    filt.reset()
+    filt.filter(sample)
+    assert len(calls) == 3
+    assert not plan.steady_state.flags.writeable
+
+
 def test_causal_filter_starts_without_jump_and_resets() -> None:
     filt = CausalFilter(design_wave_filter(0.5, 0.1), 2)
     outs = np.array([filt.filter(np.array([12.5, -3.0])) for _ in range(50)])

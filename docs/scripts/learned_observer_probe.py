@@ -24,7 +24,11 @@ share of the raw loop's (`suite.run_closed_loops`, scored from the benchmark's f
 sample) for ``adaptive`` (shipped defaults), ``obs_truth`` (true model, gains tuned against the
 truth on the ``--tune`` seeds), ``obs_targets`` (true model, gains against the targets) and
 ``obs_learned`` (the 30 % wrong model, gains against the targets). The ω0 each observer uses is
-the true one (as the benchmark's observer). Development seeds only.
+the true one (as the benchmark's observer). ``--wrong-model-truth-gains`` adds ``obs_wrong_tg``:
+the 30 % wrong model with ``obs_truth``'s gains (added after the first results, to tell the
+model's part from the gains'); ``--benchmark-mistuned`` adds the benchmark's own
+``observer_mistuned`` loop (`config/baselines` gains, M ×1.3, D ×0.7 and ω0 ×1.2). Development
+seeds only.
 
 Question and decision (written before any run, seventy-first session): (a) if ``obs_targets``
 has an open-loop RMSE ≤ 1.15× ``obs_truth``'s in every DOF (mean over the seeds) on rao_supply,
@@ -109,6 +113,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('scenario')
     parser.add_argument('--tune', nargs='+', type=int, required=True)
     parser.add_argument('--seeds', nargs='+', type=int, required=True)
+    parser.add_argument('--wrong-model-truth-gains', action='store_true',
+                        help="also the wrong model with obs_truth's gains (obs_wrong_tg)")
+    parser.add_argument('--benchmark-mistuned', action='store_true',
+                        help="also the benchmark's observer_mistuned loop")
     args = parser.parse_args(argv)
     if set(args.tune + args.seeds) - set(DEVELOPMENT_SEEDS) or set(args.tune) & set(args.seeds):
         parser.error('development seeds only, the tuning and scoring seeds apart')
@@ -119,6 +127,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     gains['obs_targets'] = (true_model, tune(target_case))
     learned_case, _ = tuning_case(args.scenario, args.tune, 'targets', wrong(true_model))
     gains['obs_learned'] = (wrong(true_model), tune(learned_case))
+    if args.wrong_model_truth_gains:
+        gains['obs_wrong_tg'] = (wrong(true_model), gains['obs_truth'][1])
     for name, (_, point) in gains.items():
         print(f'{args.scenario} gains {name}: {point}', flush=True)
     for seed in args.seeds:
@@ -129,9 +139,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         start = float(d['t'][start_index])
         ideal = simulate(scenario, seed=seed, duration=DURATION, controller=True,
                          feedback='truth_lf')
-        loops, _ = run_closed_loops(scenario, seed, DURATION, setup, ('adaptive', 'raw'), ideal,
-                                    start)
-        rows = {'adaptive': loops['adaptive']}
+        names = ('adaptive', 'raw') + (('observer_mistuned',) if args.benchmark_mistuned else ())
+        loops, _ = run_closed_loops(scenario, seed, DURATION, setup, names, ideal, start)
+        rows = {name: loops[name] for name in names if name != 'raw'}
         one = bt.TuningCase(scenario, setup.ndof, setup.sample_time, 1, start_index, DURATION,
                             setup.model, [dict(d)])
         for name, (model, point) in gains.items():

@@ -53,7 +53,7 @@ def windows(scenario_name: str, seed: int) -> tuple[int, float, FloatArray, Floa
                                                     list[Window]]:
     """(ndof, h, times, truth, every calibration window) of one run."""
     captured: list[Window] = []
-    name = 'calibrate'  # lf_state's own import of odometry.calibrate, wrapped for this run
+    name = 'calibrate'  # lf_state's own import of error_models.calibrate, wrapped for this run
     original = getattr(lf_state, name)
 
     def keep(history: Sequence[Published], times: Any, targets: Any, *args: Any,

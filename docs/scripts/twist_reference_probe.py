@@ -8,14 +8,14 @@ SCENARIO:SEED, `LfStateEstimator` with the shipped defaults runs inline on the f
 (`twin_gain_calibration.windows`: 1500 s, the benchmark's schedule spread) and every calibration
 window is kept. For the last three windows, every other one, on the published twists of the
 window from 481 s on and at least 30 samples from its ends: the RMS twist error against the
-reference velocity (the window's reference differentiated, as `odometry.calibrate` does) and
+reference velocity (the window's reference differentiated, as `error_models.calibrate` does) and
 against the true LF velocity, their ratio of mean squares (truth / reference), the reference
 velocity's own content above 0.5 ω0 (zero-phase Butterworth high-pass of order 4, ω0 the
 recording's median true wave peak frequency) and the ratio against the reference with that
 content removed (`truth/lp`). With ``--pose`` the same for the published pose against the
-window's targets, low-passed by `odometry.low_passed` (the ninth rule's reference). With
+window's targets, low-passed by `error_models.low_passed` (the ninth rule's reference). With
 ``--shared``, on the last window only: the twist error e (against the truth) and the low-passed
-reference's error d (`odometry.reference_velocity`, against the truth), their RMS and
+reference's error d (`error_models.reference_velocity`, against the truth), their RMS and
 correlation on the calm half of the samples (|a| below its median per DOF, a the twist error
 model's regressor), and in the band 0.1 rad/s – 0.5 ω0 (zero-phase Butterworth band-pass of
 order 2) the RMS of e, of the true velocity, of the reference and of d, with the correlations
@@ -38,12 +38,9 @@ from method_probe import run_cases  # noqa: E402 - the sibling script
 import twin_gain_calibration  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.benchmark.odometry_bench import true_twist  # noqa: E402
+from lf_predictor_ros.core.error_models import low_passed, reference_velocity  # noqa: E402
 from lf_predictor_ros.core.heading import wrap_angle  # noqa: E402
 from lf_predictor_ros.core.lf_dynamics import body_velocity  # noqa: E402
-from lf_predictor_ros.core.odometry import (  # noqa: E402
-    low_passed,
-    reference_velocity,
-)
 from lf_predictor_ros.core.published_columns import Published  # noqa: E402
 
 FloatArray = NDArray[np.float64]

@@ -48,6 +48,7 @@ from lf_predictor_ros.core.controller_gains import (
     median_r_squared_per_dof,
     read_controller_gains,
 )
+from lf_predictor_ros.core.error_models import Covariances, calibrate
 from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.fit_process import FitProcess, shared_fit_process
 from lf_predictor_ros.core.lf_dynamics import (
@@ -62,11 +63,9 @@ from lf_predictor_ros.core.lf_dynamics import (
 from lf_predictor_ros.core.odometry import (
     DAMPING_MEMORY_DOFS,
     FITTED_DAMPING_DOFS,
-    Covariances,
     LfOdometry,
     OdometryEstimate,
     OdometryParams,
-    calibrate,
 )
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
@@ -468,8 +467,9 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     or a remembered read marks the memory ``dp_controlled``, and the memory's message carries
     its note ('… remembered from t=… s' for a remembered one).
     The memory is None if it cannot be learned; the covariances compare the published estimates
-    with ``reference`` (same instants; None: the targets ``values``; `odometry.calibrate`, which
-    fits the untaken twin offset's coefficients with ``twin_fit``, and with ``twist_cutoff`` > 0
+    with ``reference`` (same instants; None: the targets ``values``;
+    `error_models.calibrate`, which fits the untaken twin offset's coefficients with
+    ``twin_fit``, and with ``twist_cutoff`` > 0
     [× ω0] compares the twist with the reference velocity low-passed below ``twist_cutoff`` ·
     ``wave_peak_freq``; no ω0 yet: the velocity as it is; ``pose_cutoff`` [× ω0]: the pose
     against the reference low-passed below ``pose_cutoff`` · ``wave_peak_freq``;

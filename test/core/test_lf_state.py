@@ -9,17 +9,14 @@ import pytest
 import torch
 
 from lf_predictor_ros.core.controller_gains import difference_velocity
+from lf_predictor_ros.core.error_models import normalized_error_squared
 from lf_predictor_ros.core.lf_dynamics import DriftCurve, LfDynamics, VesselMemory, body_velocity
 from lf_predictor_ros.core.lf_state import (
     LfStateEstimator,
     implied_input_gain,
     pooled_input_gain,
 )
-from lf_predictor_ros.core.odometry import (
-    LfOdometry,
-    OdometryParams,
-    normalized_error_squared,
-)
+from lf_predictor_ros.core.odometry import LfOdometry, OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.published_columns import Published, PublishedLog
 from lf_predictor_ros.core.targets import TargetWindow
@@ -917,8 +914,9 @@ def test_wide_notch_targets_are_replaced_by_the_narrow_reference_for_calibration
         monkeypatch: pytest.MonkeyPatch, narrow: bool) -> None:
     """OdometryParams.narrow_reference: the covariances are fitted against narrow-notch targets."""
     from lf_predictor_ros.core import lf_state, retraining
+    from lf_predictor_ros.core.error_models import calibrate
     from lf_predictor_ros.core.frequency import FrequencyEstimate
-    from lf_predictor_ros.core.odometry import OdometryParams, calibrate
+    from lf_predictor_ros.core.odometry import OdometryParams
 
     broadband = FrequencyEstimate(0.8, True, 50.0, (0.8,), 0.1)  # λ 0.1: the wide notch applies
     monkeypatch.setattr(retraining, 'sea_state_estimate', lambda *args: broadband)

@@ -24,7 +24,7 @@ from lf_predictor_ros.benchmark.estimators import predictor_params
 from lf_predictor_ros.benchmark.suite import make_recording, make_setup
 from lf_predictor_ros.core.alignment import AlignerSettings, InputAligner
 from lf_predictor_ros.core.lf_state import LfStateEstimator
-from lf_predictor_ros.core.odometry import OdometryParams
+from lf_predictor_ros.core.odometry_params import OdometryParams
 from lf_predictor_ros.core.reference_checks import ReferenceChecker, ReferenceCheckSettings
 from sim_ros.simulation import load_scenario, simulate
 

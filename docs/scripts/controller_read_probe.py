@@ -34,7 +34,7 @@ import method_probe as mp  # noqa: E402 - the sibling script
 from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
 from lf_predictor_ros.benchmark.suite import make_setup, predictor_params  # noqa: E402
 from lf_predictor_ros.core import lf_state  # noqa: E402
-from lf_predictor_ros.core.odometry import OdometryParams  # noqa: E402
+from lf_predictor_ros.core.odometry_params import OdometryParams  # noqa: E402
 from sim_ros.simulation import controller_gains, load_scenario  # noqa: E402
 
 WAYS = ('pooled', 'blocks')

@@ -41,11 +41,8 @@ from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
 from lf_predictor_ros.benchmark.estimators import predictor_params  # noqa: E402
 from lf_predictor_ros.benchmark.suite import _loop_reference  # noqa: E402
 from lf_predictor_ros.core import odometry as odometry_module  # noqa: E402
-from lf_predictor_ros.core.odometry import (  # noqa: E402
-    LfOdometry,
-    OdometryEstimate,
-    OdometryParams,
-)
+from lf_predictor_ros.core.odometry import LfOdometry, OdometryEstimate  # noqa: E402
+from lf_predictor_ros.core.odometry_params import OdometryParams  # noqa: E402
 from sim_ros.simulation import load_scenario, simulate  # noqa: E402
 
 DURATION = 3600.0  # [s] the odometry bench's loop length

@@ -45,7 +45,8 @@ from lf_predictor_ros.core.lf_dynamics import (  # noqa: E402
     heading_basis,
     paired_forces,
 )
-from lf_predictor_ros.core.odometry import LfOdometry, OdometryEstimate, OdometryParams  # noqa: E402,E501
+from lf_predictor_ros.core.odometry import LfOdometry, OdometryEstimate  # noqa: E402
+from lf_predictor_ros.core.odometry_params import OdometryParams  # noqa: E402
 from sim_ros.physics.vessels import SUPPLY_D, SUPPLY_M  # noqa: E402
 from sim_ros.simulation import SimRecord, load_scenario  # noqa: E402
 

@@ -34,7 +34,7 @@ from lf_predictor_ros.benchmark.estimators import param_overrides, predictor_par
 from lf_predictor_ros.benchmark.suite import scored_start  # noqa: E402
 from lf_predictor_ros.core.heading import unwrap_heading, wrap_angle  # noqa: E402
 from lf_predictor_ros.core.lf_state import LfStateEstimator  # noqa: E402
-from lf_predictor_ros.core.odometry import OdometryParams  # noqa: E402
+from lf_predictor_ros.core.odometry_params import OdometryParams  # noqa: E402
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -50,7 +50,7 @@ from lf_predictor_ros.core.baselines.observer import PassiveObserver
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_dynamics import VesselMemory
 from lf_predictor_ros.core.lf_state import LfStateEstimator
-from lf_predictor_ros.core.odometry import OdometryParams
+from lf_predictor_ros.core.odometry_params import OdometryParams
 from sim_ros.simulation import load_scenario, simulate
 
 FloatArray = np.ndarray

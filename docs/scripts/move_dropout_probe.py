@@ -28,11 +28,8 @@ import method_probe as mp  # noqa: E402
 from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
 from lf_predictor_ros.benchmark.estimators import predictor_params  # noqa: E402
 from lf_predictor_ros.core.lf_dynamics import LfDynamics  # noqa: E402
-from lf_predictor_ros.core.odometry import (  # noqa: E402
-    LfOdometry,
-    OdometryEstimate,
-    OdometryParams,
-)
+from lf_predictor_ros.core.odometry import LfOdometry, OdometryEstimate  # noqa: E402
+from lf_predictor_ros.core.odometry_params import OdometryParams  # noqa: E402
 from lf_predictor_ros.core.params import PredictorParams  # noqa: E402
 from sim_ros.simulation import Scenario, load_scenario  # noqa: E402
 

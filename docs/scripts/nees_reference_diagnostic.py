@@ -28,7 +28,7 @@ from lf_predictor_ros.benchmark.seen_truth import recording_seen_truth
 from lf_predictor_ros.benchmark.suite import make_recording, make_setup, scored_start
 from lf_predictor_ros.core.filters import zero_phase
 from lf_predictor_ros.core.lf_state import LfStateEstimator
-from lf_predictor_ros.core.odometry import OdometryParams
+from lf_predictor_ros.core.odometry_params import OdometryParams
 from lf_predictor_ros.core.retraining import target_filter
 from sim_ros.simulation import load_scenario
 

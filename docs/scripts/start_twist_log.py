@@ -33,7 +33,8 @@ import move_dropout_probe as mdp  # noqa: E402
 from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
 from lf_predictor_ros.benchmark.estimators import predictor_params  # noqa: E402
 from lf_predictor_ros.core.lf_dynamics import LfDynamics, body_velocity  # noqa: E402
-from lf_predictor_ros.core.odometry import LfOdometry, OdometryEstimate, OdometryParams  # noqa: E402,E501
+from lf_predictor_ros.core.odometry import LfOdometry, OdometryEstimate  # noqa: E402
+from lf_predictor_ros.core.odometry_params import OdometryParams  # noqa: E402
 from sim_ros.simulation import load_scenario  # noqa: E402
 
 FloatArray = np.ndarray

@@ -34,7 +34,7 @@ from lf_predictor_ros.benchmark.benchmark import SCHEDULE_SPREAD  # noqa: E402
 from lf_predictor_ros.benchmark.estimators import predictor_params  # noqa: E402
 from lf_predictor_ros.core import lf_state  # noqa: E402
 from lf_predictor_ros.core.heading import wrap_angle  # noqa: E402
-from lf_predictor_ros.core.odometry import OdometryParams  # noqa: E402
+from lf_predictor_ros.core.odometry_params import OdometryParams  # noqa: E402
 from lf_predictor_ros.core.published_columns import Published  # noqa: E402
 
 FloatArray = NDArray[np.float64]

@@ -40,7 +40,8 @@ from lf_predictor_ros.benchmark.benchmark import SCHEDULE_SPREAD  # noqa: E402
 from lf_predictor_ros.benchmark.estimators import predictor_params  # noqa: E402
 from lf_predictor_ros.core.heading import wrap_angle  # noqa: E402
 from lf_predictor_ros.core.lf_state import LfStateEstimator  # noqa: E402
-from lf_predictor_ros.core.odometry import TWIN_LEVEL_TIME, OdometryParams  # noqa: E402
+from lf_predictor_ros.core.odometry import TWIN_LEVEL_TIME  # noqa: E402
+from lf_predictor_ros.core.odometry_params import OdometryParams  # noqa: E402
 
 FloatArray = NDArray[np.float64]
 DURATION = 1500.0  # [s] as the odometry benchmark's development runs

@@ -30,7 +30,7 @@ from method_probe import fair_case  # noqa: E402 - the sibling script
 from lf_predictor_ros.core.filters import design_wave_filter  # noqa: E402
 from lf_predictor_ros.core.lf_dynamics import body_velocity  # noqa: E402
 from lf_predictor_ros.core.lf_state import LfStateEstimator  # noqa: E402
-from lf_predictor_ros.core.odometry import OdometryParams  # noqa: E402
+from lf_predictor_ros.core.odometry_params import OdometryParams  # noqa: E402
 
 BANDS = ((0.0, 0.2), (0.2, 0.35), (0.35, 1.4), (1.4, np.pi))  # [rad/s]
 SCORED_FROM = 481  # [samples] the benchmark's first scored sample at h = 1 s

@@ -45,7 +45,8 @@ from lf_predictor_ros.benchmark.suite import (  # noqa: E402
     scored_start,
 )
 from lf_predictor_ros.core.lf_state import LfStateEstimator  # noqa: E402
-from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams  # noqa: E402
+from lf_predictor_ros.core.odometry import OdometryEstimate  # noqa: E402
+from lf_predictor_ros.core.odometry_params import OdometryParams  # noqa: E402
 from sim_ros.simulation import load_scenario  # noqa: E402
 
 FloatArray = NDArray[np.float64]

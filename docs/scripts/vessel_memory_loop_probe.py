@@ -25,7 +25,7 @@ from lf_predictor_ros.benchmark import odometry_bench as ob  # noqa: E402
 from lf_predictor_ros.benchmark.suite import make_setup, predictor_params  # noqa: E402
 from lf_predictor_ros.core.lf_dynamics import VesselMemory  # noqa: E402
 from lf_predictor_ros.core.lf_state import LfStateEstimator  # noqa: E402
-from lf_predictor_ros.core.odometry import OdometryParams  # noqa: E402
+from lf_predictor_ros.core.odometry_params import OdometryParams  # noqa: E402
 from sim_ros.simulation import load_scenario  # noqa: E402
 
 DURATION = 1800.0  # [s] simulated per loop

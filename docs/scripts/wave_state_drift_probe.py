@@ -37,7 +37,7 @@ from lf_predictor_ros.benchmark.suite import (
     scored_start,
 )
 from lf_predictor_ros.core.heading import wrap_angle
-from lf_predictor_ros.core.odometry import OdometryParams
+from lf_predictor_ros.core.odometry_params import OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from sim_ros.simulation import load_scenario
 

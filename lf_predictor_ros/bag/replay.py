@@ -106,7 +106,8 @@ from lf_predictor_ros.core.evaluation import DEFAULT_WAVE_BAND, Metrics, format_
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_state import ControllerRead, LfStateEstimator
 from lf_predictor_ros.core.math_threads import use_one_math_thread
-from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
+from lf_predictor_ros.core.odometry import OdometryEstimate
+from lf_predictor_ros.core.odometry_params import OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor
 from lf_predictor_ros.core.reference_checks import ReferenceChecker, ReferenceCheckSettings

@@ -119,7 +119,8 @@ from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_dynamics import body_velocity
 from lf_predictor_ros.core.lf_state import LfStateEstimator
 from lf_predictor_ros.core.math_threads import BLAS_THREAD_VARIABLES
-from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
+from lf_predictor_ros.core.odometry import OdometryEstimate
+from lf_predictor_ros.core.odometry_params import OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.retraining import first_training_samples
 from sim_ros.control.pid import VELOCITY_FILTER_TIME, VELOCITY_SOURCES

@@ -60,11 +60,10 @@ from lf_predictor_ros.core.lf_dynamics import (
     learn_vessel_memory,
     paired_forces,
 )
-from lf_predictor_ros.core.odometry import (
+from lf_predictor_ros.core.odometry import LfOdometry, OdometryEstimate
+from lf_predictor_ros.core.odometry_params import (
     DAMPING_MEMORY_DOFS,
     FITTED_DAMPING_DOFS,
-    LfOdometry,
-    OdometryEstimate,
     OdometryParams,
 )
 from lf_predictor_ros.core.params import PredictorParams

@@ -25,8 +25,9 @@ After ``dead_reckoning_timeout`` without an accepted fix nothing is published (s
 ERROR) rather than a guess. The first samples after the dropout go through ``update``: the
 odometry gates them for plausibility and blends from the dead-reckoned pose
 (``reacquire_blend_time``), so ``lf_pose`` does not step. Every ``OdometryParams`` field is a
-node parameter (``core/odometry.py``, ``config/predictor.yaml``: the dead-reckoning timeout and
-start velocity, the covariance scales and priors, the twist bandwidth, the reacquisition gate).
+node parameter (``core/odometry_params.py``, ``config/predictor.yaml``: the dead-reckoning
+timeout and start velocity, the covariance scales and priors, the twist bandwidth, the
+reacquisition gate).
 ``thrust_command`` (WrenchStamped, command QoS; optional) → ``OdomDriver.command``: the DP
 controller's commands, from which the vessel memory reads the controller's gains and the inertia
 they imply for dead reckoning (``controller_inertia``, ``core.controller_gains``).
@@ -137,7 +138,8 @@ from std_srvs.srv import Trigger
 from lf_predictor_ros.bag.ros_codec import estimate_cdr, float64_cdr
 from lf_predictor_ros.core.alignment import AlignedSample, AlignerSettings, InputAligner
 from lf_predictor_ros.core.estimator import EstimatorStatus
-from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
+from lf_predictor_ros.core.odometry import OdometryEstimate
+from lf_predictor_ros.core.odometry_params import OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.reference_checks import ReferenceChecker, ReferenceCheckSettings
 from lf_predictor_ros.nodes.conversions import (

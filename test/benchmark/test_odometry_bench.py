@@ -31,7 +31,8 @@ from lf_predictor_ros.benchmark.odometry_bench import (
     true_twist,
 )
 from lf_predictor_ros.benchmark.suite import schedule_shift_for_seed
-from lf_predictor_ros.core.odometry import OdometryEstimate, OdometryParams
+from lf_predictor_ros.core.odometry import OdometryEstimate
+from lf_predictor_ros.core.odometry_params import OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from sim_ros.simulation import ClosedLoopRun, SimRecord, load_scenario
 

@@ -19,7 +19,7 @@ from lf_predictor_ros.core.error_models import (
     reference_velocity,
 )
 from lf_predictor_ros.core.filters import design_wave_filter, frequency_response
-from lf_predictor_ros.core.odometry import OdometryParams
+from lf_predictor_ros.core.odometry_params import OdometryParams
 from lf_predictor_ros.core.published_columns import Published
 
 H = 1.0  # [s] sample time

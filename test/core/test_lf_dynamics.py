@@ -20,7 +20,7 @@ from lf_predictor_ros.core.lf_dynamics import (
     learn_vessel_memory,
     paired_forces,
 )
-from lf_predictor_ros.core.odometry import OdometryParams
+from lf_predictor_ros.core.odometry_params import OdometryParams
 
 H = 1.0  # s
 MASS = np.array([5e6, 6e6, 4e9])  # kg, kg, kg·m²

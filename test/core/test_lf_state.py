@@ -16,7 +16,8 @@ from lf_predictor_ros.core.lf_state import (
     implied_input_gain,
     pooled_input_gain,
 )
-from lf_predictor_ros.core.odometry import LfOdometry, OdometryParams
+from lf_predictor_ros.core.odometry import LfOdometry
+from lf_predictor_ros.core.odometry_params import OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.published_columns import Published, PublishedLog
 from lf_predictor_ros.core.targets import TargetWindow
@@ -525,7 +526,7 @@ def test_the_damping_memory_of_the_yaw_alone_keeps_surge_and_sway_as_fitted() ->
     """'yaw': only the heading's damping rate comes from the kept window (3 DOF, known G)."""
     from lf_predictor_ros.core.lf_dynamics import learn_vessel_memory
     from lf_predictor_ros.core.lf_state import _damping_chosen
-    from lf_predictor_ros.core.odometry import DAMPING_MEMORY_DOFS
+    from lf_predictor_ros.core.odometry_params import DAMPING_MEMORY_DOFS
 
     model, poses, tau = _open_loop_vessel(5)
     gain = np.diag(model.input_gain)
@@ -548,7 +549,7 @@ def test_the_damping_memory_of_the_yaw_alone_keeps_surge_and_sway_as_fitted() ->
 def test_the_damping_memory_keeps_the_yaw_rate_of_a_turn() -> None:
     """dead_reckoning_damping_turn: without a turn a window scores 0 in yaw and never replaces."""
     from lf_predictor_ros.core.lf_state import _damping_chosen
-    from lf_predictor_ros.core.odometry import DAMPING_MEMORY_DOFS
+    from lf_predictor_ros.core.odometry_params import DAMPING_MEMORY_DOFS
 
     model, poses, tau = _open_loop_vessel(5)
     gain, yaw = np.diag(model.input_gain), DAMPING_MEMORY_DOFS['yaw']
@@ -586,7 +587,7 @@ def test_the_damping_memory_can_refuse_a_rate_at_the_bound() -> None:
     """
     from lf_predictor_ros.core.lf_dynamics import MIN_DAMPING_RATE, fit_lf_dynamics
     from lf_predictor_ros.core.lf_state import _damping_chosen
-    from lf_predictor_ros.core.odometry import DAMPING_MEMORY_DOFS
+    from lf_predictor_ros.core.odometry_params import DAMPING_MEMORY_DOFS
 
     model, poses, tau = _open_loop_vessel(5, yaw=0.002, yaw_moment=5e5)
     gain = np.diag(model.input_gain)
@@ -615,7 +616,7 @@ def test_the_fitted_damping_scales_gain_and_rates_and_keeps_the_damping_force() 
     from lf_predictor_ros.core.controller_gains import fitted_damping_scale
     from lf_predictor_ros.core.lf_dynamics import fit_lf_dynamics
     from lf_predictor_ros.core.lf_state import _damping_chosen
-    from lf_predictor_ros.core.odometry import DAMPING_MEMORY_DOFS, FITTED_DAMPING_DOFS
+    from lf_predictor_ros.core.odometry_params import DAMPING_MEMORY_DOFS, FITTED_DAMPING_DOFS
 
     model, poses, tau = _open_loop_vessel(6)
     read_gain = 1.6 * np.diag(model.input_gain)  # a read 1.6× too strong
@@ -916,7 +917,7 @@ def test_wide_notch_targets_are_replaced_by_the_narrow_reference_for_calibration
     from lf_predictor_ros.core import lf_state, retraining
     from lf_predictor_ros.core.error_models import calibrate
     from lf_predictor_ros.core.frequency import FrequencyEstimate
-    from lf_predictor_ros.core.odometry import OdometryParams
+    from lf_predictor_ros.core.odometry_params import OdometryParams
 
     broadband = FrequencyEstimate(0.8, True, 50.0, (0.8,), 0.1)  # λ 0.1: the wide notch applies
     monkeypatch.setattr(retraining, 'sea_state_estimate', lambda *args: broadband)

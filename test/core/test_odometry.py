@@ -21,11 +21,11 @@ from lf_predictor_ros.core.odometry import (
     UNESTIMATED_VARIANCE,
     LfOdometry,
     OdometryEstimate,
-    OdometryParams,
     band_excess,
     excursion_covariance,
     thrust_statistics_step,
 )
+from lf_predictor_ros.core.odometry_params import OdometryParams
 from lf_predictor_ros.core.published_columns import Published
 from lf_predictor_ros.core.span_mean import SpanMean
 

@@ -28,7 +28,7 @@ import yaml
 
 from lf_predictor_ros.bag.ros_codec import deserialize
 from lf_predictor_ros.core.frequency import welch_resolution
-from lf_predictor_ros.core.odometry import OdometryParams
+from lf_predictor_ros.core.odometry_params import OdometryParams
 from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.predictor import AdaptivePredictor, twin_checkpoint_path
 from lf_predictor_ros.core.reference_checks import ReferenceCheckSettings

@@ -30,6 +30,30 @@ DAMPING_MEMORY_DOFS: dict[str, tuple[bool, bool, bool]] = {
 FITTED_DAMPING_DOFS: dict[str, tuple[bool, bool, bool]] = {
     'yaw': (False, False, True), 'all': (True, True, True)}
 
+# The settings that must be finite numbers >= 0, with what their message adds after ">= 0" (the
+# unit and what 0 means), in the order they are checked.
+NON_NEGATIVE: tuple[tuple[str, str], ...] = (
+    ('pose_lag_scale', ''),
+    ('pose_lag_memory', ' s (0: no memory)'),
+    ('pose_lag_prior', ' s'),
+    ('pose_twin_gain', ' (0: off)'),
+    ('pose_reference_cutoff', ' (× ω0; 0: the targets as they are)'),
+    ('twist_reference_cutoff', ' (× ω0; 0: the reference velocity as it is)'),
+    ('dead_reckoning_moving_gate', ' (holding std; 0: off)'),
+    ('dead_reckoning_moving_gate_slow',
+     ' (holding std of the low-passed twist; 0: the current twist alone)'),
+    ('dead_reckoning_twist_average_periods', ' (wave periods; 0: none)'),
+    ('dead_reckoning_moving_twist_clamp', ' (holding std; 0: off)'),
+    ('dead_reckoning_moving_gate_averaged', ' (holding std; 0: off)'),
+    ('dead_reckoning_excursion_std', ' (a fraction of the dead-reckoned displacement; 0: off)'),
+    ('dead_reckoning_excursion_band', ' (thrust stds; 0: the whole thrust)'),
+    ('reacquire_time', ' s'),
+    ('reacquire_blend_time', ' s'),
+    ('twist_bandwidth', " rad/s (0: process noise from the targets' LF acceleration)"),
+    ('dead_reckoning_holding_lead', ' s'),
+    ('controller_read_block_time', ' [s] (0: one pooled read)'),
+)
+
 
 @dataclass(frozen=True)
 class OdometryParams:
@@ -464,59 +488,19 @@ class OdometryParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'{name} must be a positive finite number, got {value}')
-        if not (math.isfinite(self.pose_lag_scale) and self.pose_lag_scale >= 0.0):
-            raise ValueError(f'pose_lag_scale must be a finite number >= 0, got '
-                             f'{self.pose_lag_scale}')
-        if not (math.isfinite(self.pose_lag_memory) and self.pose_lag_memory >= 0.0):
-            raise ValueError(f'pose_lag_memory must be a finite number >= 0 s (0: no memory), '
-                             f'got {self.pose_lag_memory}')
-        if not (math.isfinite(self.pose_lag_prior) and self.pose_lag_prior >= 0.0):
-            raise ValueError(f'pose_lag_prior must be a finite number >= 0 s, got '
-                             f'{self.pose_lag_prior}')
-        if not (math.isfinite(self.pose_twin_gain) and self.pose_twin_gain >= 0.0):
-            raise ValueError(f'pose_twin_gain must be a finite number >= 0 (0: off), got '
-                             f'{self.pose_twin_gain}')
-        if not (math.isfinite(self.pose_reference_cutoff) and
-                self.pose_reference_cutoff >= 0.0):
-            raise ValueError('pose_reference_cutoff must be a finite number >= 0 (× ω0; 0: the '
-                             f'targets as they are), got {self.pose_reference_cutoff}')
-        if not (math.isfinite(self.twist_reference_cutoff) and
-                self.twist_reference_cutoff >= 0.0):
-            raise ValueError('twist_reference_cutoff must be a finite number >= 0 (× ω0; 0: the '
-                             f'reference velocity as it is), got {self.twist_reference_cutoff}')
+        for name, hint in NON_NEGATIVE:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f'{name} must be a finite number >= 0{hint}, got {value}')
         check_force_margin(self.dead_reckoning_force_margin, 'dead_reckoning_force_margin')
-        if not (math.isfinite(self.dead_reckoning_moving_gate) and
-                self.dead_reckoning_moving_gate >= 0.0):
-            raise ValueError('dead_reckoning_moving_gate must be a finite number >= 0 (holding '
-                             f'std; 0: off), got {self.dead_reckoning_moving_gate}')
         if not (math.isfinite(self.controller_read_pair_ratio) and
                 (self.controller_read_pair_ratio == 0.0 or self.controller_read_pair_ratio > 1.0)):
             raise ValueError('controller_read_pair_ratio must be 0 (off) or a finite factor > 1, '
                              f'got {self.controller_read_pair_ratio}')
-        if not (math.isfinite(self.dead_reckoning_moving_gate_slow) and
-                self.dead_reckoning_moving_gate_slow >= 0.0):
-            raise ValueError('dead_reckoning_moving_gate_slow must be a finite number >= 0 '
-                             '(holding std of the low-passed twist; 0: the current twist '
-                             f'alone), got {self.dead_reckoning_moving_gate_slow}')
-        if not (math.isfinite(self.dead_reckoning_twist_average_periods) and
-                self.dead_reckoning_twist_average_periods >= 0.0):
-            raise ValueError('dead_reckoning_twist_average_periods must be a finite number >= 0 '
-                             '(wave periods; 0: none), got '
-                             f'{self.dead_reckoning_twist_average_periods}')
         if self.dead_reckoning_moving_twist_start not in MOVING_TWIST_STARTS:
             raise ValueError('dead_reckoning_moving_twist_start must be one of '
                              f'{MOVING_TWIST_STARTS}, got '
                              f'{self.dead_reckoning_moving_twist_start!r}')
-        if not (math.isfinite(self.dead_reckoning_moving_twist_clamp) and
-                self.dead_reckoning_moving_twist_clamp >= 0.0):
-            raise ValueError('dead_reckoning_moving_twist_clamp must be a finite number >= 0 '
-                             '(holding std; 0: off), got '
-                             f'{self.dead_reckoning_moving_twist_clamp}')
-        if not (math.isfinite(self.dead_reckoning_moving_gate_averaged) and
-                self.dead_reckoning_moving_gate_averaged >= 0.0):
-            raise ValueError('dead_reckoning_moving_gate_averaged must be a finite number >= 0 '
-                             '(holding std; 0: off), got '
-                             f'{self.dead_reckoning_moving_gate_averaged}')
         for what, used in (
                 ("dead_reckoning_moving_twist_start other than 'current'",
                  self.dead_reckoning_moving_twist_start != 'current'),
@@ -528,16 +512,6 @@ class OdometryParams:
                 raise ValueError(f'{what} needs the averaging span: set '
                                  'dead_reckoning_twist_average_periods > 0 too (e.g. 1), or '
                                  'turn it off')
-        if not (math.isfinite(self.dead_reckoning_excursion_std) and
-                self.dead_reckoning_excursion_std >= 0.0):
-            raise ValueError('dead_reckoning_excursion_std must be a finite number >= 0 (a '
-                             'fraction of the dead-reckoned displacement; 0: off), got '
-                             f'{self.dead_reckoning_excursion_std}')
-        if not (math.isfinite(self.dead_reckoning_excursion_band) and
-                self.dead_reckoning_excursion_band >= 0.0):
-            raise ValueError('dead_reckoning_excursion_band must be a finite number >= 0 '
-                             '(thrust stds; 0: the whole thrust), got '
-                             f'{self.dead_reckoning_excursion_band}')
         if not (math.isfinite(self.dead_reckoning_velocity_time) and
                 self.dead_reckoning_velocity_time > 0.0):
             raise ValueError('dead_reckoning_velocity_time must be a positive number of seconds, '
@@ -548,11 +522,6 @@ class OdometryParams:
         if not (self.dead_reckoning_holding_max_age >= 0.0):  # inf allowed, NaN not
             raise ValueError('dead_reckoning_holding_max_age must be >= 0 s (inf: any age), '
                              f'got {self.dead_reckoning_holding_max_age}')
-        for name in ('reacquire_time', 'reacquire_blend_time', 'twist_bandwidth',
-                     'dead_reckoning_holding_lead'):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0.0):
-                raise ValueError(f'{name} must be a finite number >= 0 s, got {value}')
         force_time = tuple(self.dead_reckoning_force_time)
         if len(force_time) != 3 or not all(math.isfinite(v) and v >= 0.0 for v in force_time):
             raise ValueError('dead_reckoning_force_time must be 3 finite numbers >= 0 s (surge, '
@@ -593,10 +562,6 @@ class OdometryParams:
         if self.dead_reckoner not in ('auto', *DEAD_RECKONERS):
             raise ValueError(f"dead_reckoner must be 'auto' or one of {DEAD_RECKONERS}, got "
                              f'{self.dead_reckoner!r}')
-        if not (math.isfinite(self.controller_read_block_time) and
-                self.controller_read_block_time >= 0.0):
-            raise ValueError('controller_read_block_time must be a finite number >= 0 [s] (0: one '
-                             f'pooled read), got {self.controller_read_block_time}')
         blocks = self.controller_read_pool_blocks
         if not isinstance(blocks, int) or isinstance(blocks, bool) or blocks < 0 or \
                 (blocks > 0 and self.controller_read_block_time <= 0.0):

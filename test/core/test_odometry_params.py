@@ -2,11 +2,12 @@
 from __future__ import annotations
 
 import math
+import re
 from typing import Any
 
 import pytest
 
-from lf_predictor_ros.core.odometry_params import OdometryParams
+from lf_predictor_ros.core.odometry_params import NON_NEGATIVE, OdometryParams
 
 
 @pytest.mark.parametrize('bad', [0.5, -1.0, math.nan, math.inf])
@@ -106,3 +107,13 @@ def test_the_clamp_is_checked_and_needs_the_span() -> None:
 def test_a_choice_outside_its_choices_is_refused(name: str) -> None:
     with pytest.raises(ValueError, match=f"{name} must be one of .*, got 'heading'"):
         OdometryParams(**{name: 'heading'})
+
+
+@pytest.mark.parametrize(('name', 'hint'), NON_NEGATIVE)
+@pytest.mark.parametrize('bad', [-1.0, math.nan, math.inf, -math.inf])
+def test_a_setting_that_must_be_non_negative_is_refused_with_its_unit(name: str, hint: str,
+                                                                       bad: float) -> None:
+    with pytest.raises(ValueError,
+                       match=re.escape(f'{name} must be a finite number >= 0{hint}, got {bad}')):
+        OdometryParams(**{name: bad})
+    assert getattr(OdometryParams(**{name: 2.0}), name) == 2.0

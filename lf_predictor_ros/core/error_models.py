@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import signal
 
 from lf_predictor_ros.core.filters import frequency_response, zero_phase
+from lf_predictor_ros.core.finite import all_finite
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_dynamics import body_velocity
 from lf_predictor_ros.core.published_columns import EstimateSource, Published
@@ -414,11 +415,6 @@ def normalized_error_squared(error: ArrayLike, covariance: ArrayLike) -> FloatAr
                          f'{p.shape}')
     return np.asarray(np.einsum('ij,ij->i', e, np.linalg.solve(p, e[..., None])[..., 0]),
                       dtype=np.float64)
-
-
-def all_finite(*arrays: FloatArray) -> bool:
-    """All entries finite (math.isfinite on the entries of these few-element arrays)."""
-    return all(all(map(math.isfinite, np.asarray(a).ravel().tolist())) for a in arrays)
 
 
 def _second_moment(errors: FloatArray) -> FloatArray:

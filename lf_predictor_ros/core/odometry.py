@@ -72,14 +72,9 @@ from typing import Literal, cast
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lf_predictor_ros.core.error_models import (
-    SOURCES,
-    Covariances,
-    ErrorModel,
-    all_finite,
-    calibrate,
-)
+from lf_predictor_ros.core.error_models import SOURCES, Covariances, ErrorModel, calibrate
 from lf_predictor_ros.core.filters import low_pass_step
+from lf_predictor_ros.core.finite import all_finite
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_dynamics import (
     DeadReckoner,

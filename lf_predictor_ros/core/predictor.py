@@ -85,6 +85,7 @@ import torch
 from lf_predictor_ros.core.baselines.cascade import CascadeFilter, CascadePlan, plan_cascade
 from lf_predictor_ros.core.estimator import EstimatorState, EstimatorStatus
 from lf_predictor_ros.core.filters import low_pass_step
+from lf_predictor_ros.core.finite import all_finite
 from lf_predictor_ros.core.fit_process import FitProcess, JobAbandonedError, shared_fit_process
 from lf_predictor_ros.core.frequency import FrequencyEstimate, spectrum_fit_by
 from lf_predictor_ros.core.heading import ContinuousHeading, wrap_angle, wrap_pose
@@ -887,7 +888,7 @@ class AdaptivePredictor:
         prediction = self._predict_with(model)
         if prediction is None:
             return None
-        if not _all_finite(prediction):
+        if not all_finite(prediction):
             self._message = 'network output not finite: cascade fallback'
             return None
         return np.asarray(prediction, dtype=np.float64)
@@ -1056,7 +1057,7 @@ class AdaptivePredictor:
                 float(force[2]) if self._moving.using_network
                 or not self.params.motion_gate_yaw_network_level else math.nan)
         offset = moving_offset(out, moving, self.ndof)
-        if not self._moving.using_network or not _all_finite(offset):
+        if not self._moving.using_network or not all_finite(offset):
             # The gate measures the twin's network alone: the usual velocity of the cascade
             # fallback is another filter's, and the step where the source switches is no motion.
             self._gate.restart()
@@ -1341,14 +1342,9 @@ def _newest(rows: deque[FloatArray], count: int) -> FloatArray:
     return np.array([rows[i] for i in range(-n, 0)])
 
 
-def _all_finite(values: FloatArray) -> bool:
-    """np.all(np.isfinite(values)) of a few entries, without numpy's per-call overhead."""
-    return all(map(math.isfinite, np.asarray(values, dtype=np.float64).ravel().tolist()))
-
-
 def _checked(value: FloatArray, name: str) -> FloatArray:
     arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != (3,) or not _all_finite(arr):
+    if arr.shape != (3,) or not all_finite(arr):
         raise ValueError(f'{name} must be 3 finite numbers [north, east, yaw] / [X, Y, N], got '
                          f'{value!r}')
     return arr

@@ -27,12 +27,11 @@ from lf_predictor_ros.core.filters import frequency_response, zero_phase
 from lf_predictor_ros.core.finite import all_finite
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.lf_dynamics import body_velocity
-from lf_predictor_ros.core.published_columns import EstimateSource, Published
+from lf_predictor_ros.core.published_columns import SOURCES, Published
 
 FloatArray = NDArray[np.float64]
 # (pose error model, twist error model) per source ('network', 'fallback', 'all')
 Covariances = tuple[dict[str, 'ErrorModel'], dict[str, 'ErrorModel']]
-SOURCES: tuple[EstimateSource, ...] = ('network', 'fallback')
 # The holding variance σ²_hold of the pose error model is at least this fraction of the mean
 # squared error of the window [-] (a lag fit must not claim that a still vessel is exact; on the
 # tuning seeds 0.05–0.5 change the calibrated NEES by < 10 %).

@@ -72,7 +72,7 @@ from typing import Literal, cast
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lf_predictor_ros.core.error_models import SOURCES, Covariances, ErrorModel, calibrate
+from lf_predictor_ros.core.error_models import Covariances, ErrorModel, calibrate
 from lf_predictor_ros.core.filters import low_pass_step
 from lf_predictor_ros.core.finite import all_finite
 from lf_predictor_ros.core.heading import wrap_angle
@@ -89,6 +89,7 @@ from lf_predictor_ros.core.odometry_params import (
     OdometryParams,
 )
 from lf_predictor_ros.core.published_columns import (
+    SOURCES,
     EstimateSource,
     Published,
     PublishedColumns,

@@ -22,6 +22,7 @@ from lf_predictor_ros.core.row_buffer import RowBuffer
 
 FloatArray = NDArray[np.float64]
 EstimateSource = Literal['network', 'fallback']
+SOURCES: tuple[EstimateSource, ...] = ('network', 'fallback')  # every EstimateSource
 _VECTOR_FIELDS = ('pose', 'twist', 'accel', 'lag')
 
 

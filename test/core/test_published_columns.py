@@ -2,11 +2,17 @@
 from __future__ import annotations
 
 import pickle
+from typing import get_args
 
 import numpy as np
 import pytest
 
-from lf_predictor_ros.core.published_columns import Published, PublishedLog
+from lf_predictor_ros.core.published_columns import (
+    SOURCES,
+    EstimateSource,
+    Published,
+    PublishedLog,
+)
 from lf_predictor_ros.core.row_buffer import MIN_ROWS
 
 
@@ -124,3 +130,7 @@ def test_the_first_record_must_carry_vectors() -> None:
 def test_invalid_capacity(capacity: object) -> None:
     with pytest.raises(ValueError, match='capacity >= 1'):
         PublishedLog(capacity)  # type: ignore[arg-type]
+
+
+def test_sources_are_every_estimate_source() -> None:
+    assert SOURCES == get_args(EstimateSource) == ('network', 'fallback')

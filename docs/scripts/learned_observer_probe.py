@@ -11,9 +11,9 @@ two questions that decide whether a *learned* observer is worth building:
 
 1. **Gains without the truth.** The passive observer's gains chosen by the same coordinate
    descent (`baseline_tuning.coordinate_search` over `OBSERVER_GRID` from `RECORDING_OBSERVER`)
-   against the predictor's zero-phase targets (`smooth_poses` at the shipped target settings,
-   ``notch_zeta`` / ``notch_depth`` / ``lowpass_offset``, at the true ω0) instead of the true LF
-   pose, on the ``--tune`` seeds' fair recordings.
+   against the predictor's zero-phase targets (the benchmark's ``smoother_targets`` row: the
+   shipped target settings at the true ω0) instead of the true LF pose, on the ``--tune``
+   seeds' fair recordings.
 2. **A wrong model.** The same with the model 30 % wrong (M ×1.3, D ×0.7; about what the
    vessel memory learns late in a run, forty-sixth session), ω0 the true one (the predictor
    estimates ω0 itself).
@@ -54,10 +54,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from method_probe import DEVELOPMENT_SEEDS, fair_case  # noqa: E402 - the sibling script
 
 from lf_predictor_ros.benchmark import baseline_tuning as bt  # noqa: E402
+from lf_predictor_ros.benchmark.baseline_tuning import smoother_settings  # noqa: E402
 from lf_predictor_ros.benchmark.benchmark import SCHEDULE_SPREAD  # noqa: E402
+from lf_predictor_ros.benchmark.estimators import EstimatorSetup  # noqa: E402
 from lf_predictor_ros.benchmark.suite import run_closed_loops, scored_start  # noqa: E402
 from lf_predictor_ros.core.baselines.smoother import smooth_poses  # noqa: E402
-from lf_predictor_ros.core.params import PredictorParams  # noqa: E402
 from sim_ros.physics.vessels import LinearModel  # noqa: E402
 from sim_ros.simulation import simulate  # noqa: E402
 
@@ -66,12 +67,15 @@ WRONG_MASS = 1.3  # the learned model's error assumed: M ×1.3, D ×0.7 (observe
 WRONG_DAMPING = 0.7
 
 
-def targets_of(data: dict[str, Any], ndof: int, sample_time: float) -> np.ndarray:
-    """The predictor's zero-phase targets of a whole recording (shipped settings, true ω0)."""
-    params = PredictorParams()
-    return smooth_poses(data['y'], sample_time, float(np.median(data['omega'])), ndof,
-                        notch_zeta=params.notch_zeta, notch_depth=params.notch_depth,
-                        lowpass_offset=params.lowpass_offset)
+def targets_of(data: dict[str, Any], setup: EstimatorSetup) -> np.ndarray:
+    """The predictor's zero-phase targets of a whole recording (true ω0).
+
+    The benchmark's ``smoother_targets`` row (`suite.run_open_loop`): the predictor's own target
+    settings at the scenario's ω0.
+    """
+    settings = smoother_settings(setup.baselines, 'smoother_targets', setup.params)
+    return smooth_poses(data['y'], setup.sample_time, setup.wave_peak_freq, setup.ndof,
+                        **settings)
 
 
 def tuning_case(scenario_name: str, seeds: Sequence[int], reference: str,
@@ -83,7 +87,7 @@ def tuning_case(scenario_name: str, seeds: Sequence[int], reference: str,
                                                      SCHEDULE_SPREAD)
         d = dict(recording.data())
         if reference == 'targets':
-            d['truth'] = targets_of(d, setup.ndof, setup.sample_time)
+            d['truth'] = targets_of(d, setup)
         data.append(d)
         if case is None:
             case = bt.TuningCase(scenario, setup.ndof, setup.sample_time, 1, 0, DURATION,

@@ -3,13 +3,14 @@
     OMP_NUM_THREADS=1 python docs/scripts/estimate_at_t_probe.py rao_swell 1 2 3
 
 The predictor publishes the LF pose predicted for the next sample (thesis: ŷLF(t + 1)); the
-baselines estimate the pose at t. This probe patches `core.training._prepare_window` so that row
-t's training target is yT(t) (the target series and its mask shifted one sample later; nothing
-else changes: the same windows, targets, regressors and defaults) and prints, per seed, the
-open-loop RMSE of that predictor against the truth at t and at t + h, and its DP loop next to
-the observer, oracle_kf and raw loops (`method_probe.loops`, variant 'now'; the loops use every
-output at once, as for the shipped predictor). Tuning and development seeds only. Compare with the
-default rows of `method_probe.py --closed-loop` on the same seeds.
+baselines estimate the pose at t. This probe patches `prepare_window` in `core.training` (the name
+it imported from `core.training_window`) so that row t's training target is yT(t) (the target
+series and its mask shifted one sample later; nothing else changes: the same windows, targets,
+regressors and defaults) and prints, per seed, the open-loop RMSE of that predictor against the
+truth at t and at t + h, and its DP loop next to the observer, oracle_kf and raw loops
+(`method_probe.loops`, variant 'now'; the loops use every output at once, as for the shipped
+predictor). Tuning and development seeds only. Compare with the default rows of `method_probe.py
+--closed-loop` on the same seeds.
 """
 from __future__ import annotations
 
@@ -26,17 +27,18 @@ from lf_predictor_ros.benchmark.suite import scored_start
 from lf_predictor_ros.core import training
 from lf_predictor_ros.core.heading import wrap_angle
 from lf_predictor_ros.core.predictor import AdaptivePredictor
+from lf_predictor_ros.core.training_window import prepare_window
 
 sys.path.insert(0, str(Path(__file__).parent))
 import method_probe  # noqa: E402  (the sibling script)
 
 DURATION = 1800.0  # [s] as method_probe's default
-_ORIGINAL = training._prepare_window
+_ORIGINAL = prepare_window
 
 
 def _targets_at_t(spec: Any, u: ArrayLike, y: ArrayLike, targets: ArrayLike,
                   mask: ArrayLike | None) -> Any:
-    """`_prepare_window` with the targets one sample later: row t is trained on yT(t)."""
+    """`prepare_window` with the targets one sample later: row t is trained on yT(t)."""
     series = np.asarray(targets, dtype=np.float64)
     series = np.concatenate([series[:1], series[:-1]])
     shifted = None if mask is None else np.concatenate(
@@ -71,7 +73,7 @@ def main(argv: list[str]) -> int:
     if set(seeds) - set(TUNING_SEEDS) - set(method_probe.DEVELOPMENT_SEEDS):
         print('tuning and development seeds only (held-out seeds: `benchmark`)')
         return 2
-    training._prepare_window = _targets_at_t
+    setattr(training, 'prepare_window', _targets_at_t)  # noqa: B010 - the name training uses
     torch.set_num_threads(1)
     for seed in seeds:
         run(argv[0], seed)

@@ -49,13 +49,8 @@ from lf_predictor_ros.core.params import PredictorParams
 from lf_predictor_ros.core.readonly import read_only
 from lf_predictor_ros.core.regressors import build_regressors
 from lf_predictor_ros.core.targets import TargetWindow, training_mask
-from lf_predictor_ros.core.training import (
-    TrainSettings,
-    evaluate_loss,
-    loss_frame_errors,
-    loss_scale,
-    train,
-)
+from lf_predictor_ros.core.training import TrainSettings, evaluate_loss, train
+from lf_predictor_ros.core.training_window import loss_frame_errors, loss_scale
 
 FloatArray = NDArray[np.float64]
 

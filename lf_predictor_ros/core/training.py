@@ -5,7 +5,9 @@ In the spirit of karpathy/minGPT's trainer, this module knows nothing about laye
 ``forward`` maps raw regressor rows (``regressors.build_regressors`` layout) to the next LF
 position, a ``free_run(x_static, fb_init)`` for the parallel mode and, when
 ``TrainSettings.standardize`` is on, a ``set_standardization(u, y)`` method (``NnarmaxNet`` has
-all three).
+all three). The window and the objective's data residuals on it are `training_window`; the
+Levenberg–Marquardt Jacobian and normal equations are `lm_jacobian`; this module holds the
+settings, the least-squares solve of the linear network and the optimizers' loops.
 
 Objective (thesis eq. 2.6 and 2.8 with a = 1, b = ``weight_decay``, plus our derivative term):
 
@@ -13,15 +15,16 @@ Objective (thesis eq. 2.6 and 2.8 with a = 1, b = ``weight_decay``, plus our der
     MSE   = mean over kept samples and channels of ((ŷLF(t+1) − yT(t+1)) / s)²
     MSE_Δ = mean over kept consecutive pairs of ((Δŷ − ΔyT) / s_Δ)²,  Δx(t+1) = x(t+1) − x(t)
 
-s is the per-channel scale of what the network predicts (``loss_scale``: the std of the kept
-targets, or for a relative network the RMS of yT(t+1) − y(t)) and s_Δ the RMS of the targets' first
-differences, so the loss is dimensionless, treats metres and radians alike and is comparable
-between candidate networks on the same window. For a body-frame network (``spec.body_frame``) the
-errors, steps and differences are taken in the body frame of the row's newest heading ψ(t) (north
-and east rotated by R(ψ(t))ᵀ) before scaling, so s is per surge/sway and the loss is rotation
-invariant like the network. The derivative term answers the thesis's closed-loop
-failure (§5.4.2: the prediction's derivative had the wrong sign, so a PID's D-term steered with the
-waves). Samples with ``mask`` False (the last ε, thesis Algorithm 4.1 line 38) contribute no error.
+s is the per-channel scale of what the network predicts (``training_window.loss_scale``: the std of
+the kept targets, or for a relative network the RMS of yT(t+1) − y(t)) and s_Δ the RMS of the
+targets' first differences, so the loss is dimensionless, treats metres and radians alike and is
+comparable between candidate networks on the same window. For a body-frame network
+(``spec.body_frame``) the errors, steps and differences are taken in the body frame of the row's
+newest heading ψ(t) (north and east rotated by R(ψ(t))ᵀ) before scaling, so s is per surge/sway and
+the loss is rotation invariant like the network. The derivative term answers the thesis's
+closed-loop failure (§5.4.2: the prediction's derivative had the wrong sign, so a PID's D-term
+steered with the waves). Samples with ``mask`` False (the last ε, thesis Algorithm 4.1 line 38)
+contribute no error.
 
 Modes (thesis §2.3; Narendra & Parthasarathy 1990):
 - ``series_parallel``: the feedback regressors are the targets yT: a feed-forward problem.
@@ -36,7 +39,7 @@ Algorithms:
   ε = [√(1/N)·e; √(d/N_Δ)·e_Δ; √b·w] so that ‖ε‖² = J(w); μ adapts as in MATLAB ``trainlm``
   (× ``lm_mu_dec`` after a successful step, × ``lm_mu_inc`` until a step succeeds). The Jacobian
   comes from per-row reverse-mode Jacobians (``vmap(jacrev)``) and, in parallel mode, the
-  dynamic-backpropagation recursion through the feedback (see ``_prediction_jacobian``).
+  dynamic-backpropagation recursion through the feedback (``lm_jacobian.prediction_jacobian``).
 - ``lbfgs``: ``torch.optim.LBFGS`` with strong-Wolfe line search, one iteration per epoch.
 - ``adam``: full-batch Adam, one step per epoch.
 
@@ -66,26 +69,28 @@ from dataclasses import dataclass
 import math
 import threading
 import time
-from typing import Literal, NamedTuple, cast
+from typing import Literal, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 import torch
-from torch.func import functional_call, jacrev, vmap
 
-from lf_predictor_ros.core.network import (
-    LINEAR_RIDGE,
-    NnarmaxNet,
-    NnarmaxSpec,
-    _relative_frame_torch,
-    rotate_blocks_torch,
-    solve_ridge,
+from lf_predictor_ros.core.lm_jacobian import (
+    FlatParameters,
+    LmScratch,
+    damped_step,
+    lm_normal_equations,
+    one_layer_prediction,
+    window_prediction,
 )
-from lf_predictor_ros.core.regressors import (
-    as_series,
-    build_regressors,
-    n_static_regressors,
-    rotate_blocks,
+from lf_predictor_ros.core.network import LINEAR_RIDGE, NnarmaxNet, NnarmaxSpec, solve_ridge
+from lf_predictor_ros.core.regressors import as_series, build_regressors, n_static_regressors
+from lf_predictor_ros.core.training_window import (
+    TrainingWindow,
+    WindowPredictor,
+    data_residuals,
+    prepare_window,
+    window_mse,
 )
 
 FloatArray = NDArray[np.float64]
@@ -95,7 +100,6 @@ Mode = Literal['series_parallel', 'parallel']
 
 _ALGORITHMS = ('lm', 'lbfgs', 'adam')
 _MODES = ('series_parallel', 'parallel')
-_SCALE_FLOOR = 1e-12  # [-] relative floor below which a target channel is not normalized
 
 
 @dataclass(frozen=True)
@@ -221,178 +225,6 @@ class TrainResult:
     initial_objective: float = math.nan
 
 
-@dataclass(frozen=True)
-class _Window:
-    """Training window as tensors, prepared once per run."""
-
-    x_series: torch.Tensor  # (rows, n_reg) regressors with the targets as feedback
-    fb_init: torch.Tensor  # (nfb, n_out) targets at first−nfb+1 … first (oldest first)
-    target: torch.Tensor  # (rows − 1, n_out) yT(t + 1) for row t
-    keep: torch.Tensor  # (rows − 1,) bool: target counts
-    keep_pair: torch.Tensor  # (rows − 2,) bool: both targets of a difference count
-    scale: torch.Tensor  # (n_out,) loss normalization (``loss_scale``)
-    diff_scale: torch.Tensor  # (n_out,) RMS of kept target differences
-    first: int
-    # body-frame networks: (cos ψ(t), sin ψ(t)) of each target row's newest heading, (rows − 1,)
-    body: tuple[torch.Tensor, torch.Tensor] | None = None
-
-
-class _WindowPredictor(torch.nn.Module):
-    """Runs a regressor network over a window, series-parallel (batch) or parallel (unrolled)."""
-
-    def __init__(self, net: NnarmaxNet, n_static: int, nfb: int) -> None:
-        """Wrap ``net``; the feedback block is the last ``nfb`` lag blocks of a regressor row."""
-        super().__init__()
-        self.net = net
-        self.n_static = n_static
-        self.nfb = nfb
-
-    def forward(
-        self, x_series: torch.Tensor, fb_init: torch.Tensor, parallel: bool
-    ) -> torch.Tensor:
-        """Predictions ŷLF(t + 1) for every row t of the window, shape (rows, n_out)."""
-        if not parallel or self.nfb == 0:
-            prediction: torch.Tensor = self.net(x_series)
-            return prediction
-        free_run: torch.Tensor = self.net.free_run(
-            x_series[:, : self.n_static], fb_init, differentiable=torch.is_grad_enabled()
-        )
-        return free_run
-
-
-def _channel_scale(values: FloatArray) -> FloatArray:
-    """Per-channel normalization: the given spread, or 1 for a (near-)constant channel."""
-    return np.where(values > _SCALE_FLOOR, values, 1.0)
-
-
-def _y_series(spec: NnarmaxSpec, y: ArrayLike, n: int) -> FloatArray:
-    """The measured positions as an (n, n_outputs) series (validated length)."""
-    series = as_series(y, spec.n_outputs, 'y')
-    if series.shape[0] != n:
-        raise ValueError(f'y has {series.shape[0]} samples, the targets {n}: align them first')
-    return series
-
-
-def loss_frame_errors(spec: NnarmaxSpec, y_now: ArrayLike, errors: ArrayLike) -> FloatArray:
-    """Errors (rows, n_out) in the frame of the loss.
-
-    Unchanged, or for a body-frame network rotated into the body frame of each row's newest
-    heading ψ(t) = ``y_now[:, 2]``.
-    """
-    values = np.asarray(errors, dtype=np.float64)
-    if not spec.body_frame:
-        return values
-    heading = as_series(y_now, spec.n_outputs, 'y')[:, 2]
-    return rotate_blocks(values, np.cos(heading), -np.sin(heading))
-
-
-def _in_loss_frame(values: torch.Tensor, body: tuple[torch.Tensor, torch.Tensor] | None,
-                   ) -> torch.Tensor:
-    """``loss_frame_errors`` on tensors: the body rotation of a window's rows (or none)."""
-    if body is None:
-        return values
-    return rotate_blocks_torch(values, body[0], -body[1])
-
-
-def loss_scale(spec: NnarmaxSpec, y_now: ArrayLike, target_next: ArrayLike,
-               keep: ArrayLike) -> FloatArray:
-    """Per-channel normalization of the training loss, shape (n_outputs,).
-
-    Absolute networks: the std of the kept targets yT(t + 1) (thesis: normalized MSE). Relative
-    networks (``spec.relative``) predict ŷLF(t + 1) − y(t), so the loss is normalized by the RMS
-    of yT(t + 1) − y(t), the size of what they actually predict. The absolute spread would mostly
-    measure how far the vessel drifted in the window (tens of metres), make a 0.2 m error look
-    like 1e-4 and let the weight penalty (eq. 2.8) dominate the fit.
-    ``y_now`` (rows, n_out) is y(t) and ``target_next`` (rows, n_out) yT(t + 1) for the same rows.
-    Body-frame networks: the steps in the body frame of ψ(t) (``loss_frame_errors``).
-    """
-    kept = np.asarray(keep, dtype=bool)
-    target = as_series(target_next, spec.n_outputs, 'targets')[kept]
-    if not spec.relative:
-        return _channel_scale(target.std(axis=0))
-    now = as_series(y_now, spec.n_outputs, 'y')[kept]
-    step = loss_frame_errors(spec, now, target - now)
-    return _channel_scale(np.sqrt(np.mean(step ** 2, axis=0)))
-
-
-def _prepare_window(
-    spec: NnarmaxSpec, u: ArrayLike, y: ArrayLike, targets: ArrayLike, mask: ArrayLike | None
-) -> _Window:
-    """Validate the arrays and build the regressors, targets and masks of one window."""
-    target_series = as_series(targets, spec.n_outputs, 'targets')
-    x_series, first = build_regressors(u, y, target_series, spec)
-    n = target_series.shape[0]
-    keep_all = np.ones(n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-    if keep_all.shape != (n,):
-        raise ValueError(f'mask must have shape ({n},) like the targets, got {keep_all.shape}')
-    if n - first < 3:
-        raise ValueError(
-            f'window too short: {n} samples leave fewer than 3 regressor rows after the first '
-            f'{first}; collect more data before training'
-        )
-    if not (np.all(np.isfinite(x_series)) and np.all(np.isfinite(target_series))):
-        raise ValueError('u, y and targets must be finite: drop or fill invalid samples first')
-    target = target_series[first + 1 :]
-    keep = keep_all[first + 1 :]
-    keep_pair = keep[1:] & keep[:-1]
-    if keep.sum() < 2:
-        raise ValueError('mask keeps fewer than 2 training targets: the window is all transient')
-    y_now = _y_series(spec, y, n)[first : n - 1]
-    scale = loss_scale(spec, y_now, target, keep)
-    diffs = loss_frame_errors(spec, y_now[1:], np.diff(target, axis=0))[keep_pair]
-    diff_rms = np.sqrt(np.mean(diffs**2, axis=0)) if diffs.size else np.ones(spec.n_outputs)
-    body = None
-    if spec.body_frame:
-        body = (torch.from_numpy(np.cos(y_now[:, 2])), torch.from_numpy(np.sin(y_now[:, 2])))
-    return _Window(
-        x_series=torch.from_numpy(x_series),
-        fb_init=torch.from_numpy(target_series[first - spec.nfb + 1 : first + 1].copy()),
-        target=torch.from_numpy(target.copy()),
-        keep=torch.from_numpy(keep.copy()),
-        keep_pair=torch.from_numpy(keep_pair.copy()),
-        scale=torch.from_numpy(scale),
-        diff_scale=torch.from_numpy(_channel_scale(diff_rms)),
-        first=first,
-        body=body,
-    )
-
-
-def _mse_residuals(prediction: torch.Tensor, window: _Window) -> torch.Tensor:
-    """Normalized errors of the kept samples, scaled so that their squared sum is the MSE."""
-    difference = _in_loss_frame(prediction[:-1] - window.target, window.body)
-    error = (difference / window.scale)[window.keep]
-    return error.reshape(-1) / math.sqrt(error.numel())
-
-
-def _derivative_residuals(
-    prediction: torch.Tensor, window: _Window, derivative_weight: float
-) -> torch.Tensor:
-    """Errors of the first differences, scaled so their squared sum is d · MSE_Δ."""
-    fitted = prediction[:-1]
-    error = ((fitted[1:] - fitted[:-1]) - (window.target[1:] - window.target[:-1]))
-    if window.body is not None:  # in the frame of the later row, like ``diff_scale``
-        error = _in_loss_frame(error, (window.body[0][1:], window.body[1][1:]))
-    error = (error / window.diff_scale)[window.keep_pair]
-    if error.numel() == 0:
-        return error.reshape(-1)
-    return error.reshape(-1) * math.sqrt(derivative_weight / error.numel())
-
-
-def _data_residuals(
-    prediction: torch.Tensor, window: _Window, derivative_weight: float
-) -> torch.Tensor:
-    """Residual vector of the data terms (MSE and, if weighted, derivative)."""
-    parts = [_mse_residuals(prediction, window)]
-    if derivative_weight > 0.0:
-        parts.append(_derivative_residuals(prediction, window, derivative_weight))
-    return torch.cat(parts)
-
-
-def _mse(prediction: torch.Tensor, window: _Window) -> float:
-    """The MSE part of the objective (the reported loss)."""
-    return float(torch.sum(_mse_residuals(prediction.detach(), window) ** 2))
-
-
 @dataclass
 class _Run:
     """Mutable bookkeeping of one training run (local to ``train``)."""
@@ -485,7 +317,7 @@ def _train(
 ) -> TrainResult:
     """Body of ``train`` (runs with one torch thread)."""
     spec = net.spec
-    window = _prepare_window(spec, u, y, targets, mask)
+    window = prepare_window(spec, u, y, targets, mask)
     model = copy.deepcopy(net)
     if settings.standardize:
         model.set_standardization(u, y, preserve_function=True)
@@ -508,13 +340,13 @@ def _train(
                                 force_prior=settings.force_prior,
                                 hold_forces=settings.hold_forces,
                                 north_east_decoupled=settings.north_east_decoupled)
-    runner = _WindowPredictor(model, n_static_regressors(spec), spec.nfb)
+    runner = WindowPredictor(model, n_static_regressors(spec), spec.nfb)
     parallel = settings.mode == 'parallel'
     with torch.no_grad():
         initial_objective, prediction = _objective(runner, window, parallel, settings)
-        initial_loss = _mse(prediction, window)
+        initial_loss = window_mse(prediction, window)
     run = _Run(settings, stop_event, start, [])
-    optimizers: dict[str, Callable[[_WindowPredictor, _Window, bool, _Run], str]] = {
+    optimizers: dict[str, Callable[[WindowPredictor, TrainingWindow, bool, _Run], str]] = {
         'lm': _levenberg_marquardt,
         'lbfgs': _lbfgs,
         'adam': _adam,
@@ -525,7 +357,7 @@ def _train(
         reason = run.stop_reason() or optimizers[settings.algorithm](runner, window, parallel, run)
         with torch.no_grad():
             objective, prediction = _objective(runner, window, parallel, settings)
-            loss = _mse(prediction, window)
+            loss = window_mse(prediction, window)
     state = {name: value.detach().clone() for name, value in model.state_dict().items()}
     return TrainResult(
         state_dict=state,
@@ -579,11 +411,11 @@ def validated_force_ridges(design: torch.Tensor, wanted: torch.Tensor, n_force: 
 
 
 def _objective(
-    runner: _WindowPredictor, window: _Window, parallel: bool, settings: TrainSettings
+    runner: WindowPredictor, window: TrainingWindow, parallel: bool, settings: TrainSettings
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """(J(w), prediction) with autograd through the runner's parameters."""
     prediction = runner(window.x_series, window.fb_init, parallel)
-    residuals = _data_residuals(prediction, window, settings.derivative_weight)
+    residuals = data_residuals(prediction, window, settings.derivative_weight)
     objective = torch.sum(residuals**2)
     if settings.weight_decay > 0.0:
         weights = torch.nn.utils.parameters_to_vector(runner.parameters())
@@ -605,545 +437,24 @@ def decay_vector(net: torch.nn.Module, weight_decay: float) -> torch.Tensor:
     return torch.cat(parts) if parts else torch.zeros(0, dtype=torch.float64)
 
 
-@dataclass(frozen=True)
-class _FlatParameters:
-    """Names and shapes of a module's parameters, to move between a flat vector and a dict."""
-
-    names: tuple[str, ...]
-    shapes: tuple[torch.Size, ...]
-    sizes: tuple[int, ...]
-
-    @classmethod
-    def of(cls, module: torch.nn.Module) -> _FlatParameters:
-        """Layout of ``module.parameters()`` (the order of ``parameters_to_vector``)."""
-        named = list(module.named_parameters())
-        return cls(
-            names=tuple(name for name, _ in named),
-            shapes=tuple(param.shape for _, param in named),
-            sizes=tuple(param.numel() for _, param in named),
-        )
-
-    def unflatten(self, flat: torch.Tensor, prefix: str = '') -> dict[str, torch.Tensor]:
-        """Parameter dict for ``functional_call`` from a flat weight vector."""
-        parts = flat.split(list(self.sizes))
-        return {
-            prefix + name: part.view(shape)
-            for name, part, shape in zip(self.names, parts, self.shapes, strict=True)
-        }
-
-
-def _window_prediction(
-    runner: _WindowPredictor, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
-    parallel: bool,
-) -> torch.Tensor:
-    """Predictions over the window with the weights ``flat`` (the runner is not modified)."""
-    buffers = {'net.' + name: value for name, value in runner.net.named_buffers()}
-    params = layout.unflatten(flat, prefix='net.')
-    prediction: torch.Tensor = functional_call(
-        runner, {**params, **buffers}, (window.x_series, window.fb_init, parallel)
-    )
-    return prediction
-
-
-def _prediction_jacobian(
-    runner: _WindowPredictor, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
-    parallel: bool,
-) -> torch.Tensor:
-    """dŷLF(t + 1)/dw for every row, shape (rows, n_out, n_weights).
-
-    Each row's output depends on its own regressor only, so the per-row Jacobians come from a
-    reverse-mode Jacobian of one row, vectorized over the rows (``vmap(jacrev)``): n_out backward
-    passes of a tiny network instead of n_weights forward passes over the window. In parallel
-    mode the feedback regressors are earlier outputs, and the total derivative follows the
-    dynamic-backpropagation recursion (Narendra & Parthasarathy 1991, IEEE TNN 2(2)):
-
-        S_r = ∂f/∂w|_r + Σ_k ∂f/∂fb_k|_r · S_{r−k−1},   S_r = dŷ_r/dw,
-
-    where fb_k is feedback lag k and rows before the first see targets (S = 0).
-    """
-    net = runner.net
-    buffers = dict(net.named_buffers())
-
-    def one_row(weights: torch.Tensor, x_row: torch.Tensor) -> torch.Tensor:
-        params = layout.unflatten(weights)
-        out: torch.Tensor = functional_call(net, {**params, **buffers}, (x_row[None, :],))
-        return out[0]
-
-    if not parallel or runner.nfb == 0:
-        written_out = _one_layer_jacobian(net, layout, flat, window.x_series)
-        if written_out is not None:
-            return written_out
-        jac_w: torch.Tensor = vmap(jacrev(one_row), in_dims=(None, 0))(flat, window.x_series)
-        return jac_w
-    nfb, n_out = runner.nfb, window.target.shape[1]
-    with torch.no_grad():
-        prediction = _window_prediction(runner, layout, flat, window, parallel=True)
-    history = torch.cat((window.fb_init, prediction))  # feedback values, oldest first
-    rows = prediction.shape[0]
-    lag_index = (nfb - 1 + torch.arange(rows))[:, None] - torch.arange(nfb)[None, :]
-    x_parallel = torch.cat(
-        (window.x_series[:, : runner.n_static], history[lag_index].reshape(rows, nfb * n_out)),
-        dim=1,
-    )
-    jac_w, jac_x = vmap(jacrev(one_row, argnums=(0, 1)), in_dims=(None, 0))(flat, x_parallel)
-    direct = jac_w.numpy()
-    feedback_gain = jac_x[:, :, runner.n_static :].reshape(rows, n_out, nfb, n_out).numpy()
-    total = np.empty_like(direct)
-    for row in range(rows):
-        sensitivity = direct[row].copy()
-        for lag in range(min(nfb, row)):
-            sensitivity += feedback_gain[row, :, lag, :] @ total[row - lag - 1]
-        total[row] = sensitivity
-    return torch.from_numpy(total)
-
-
-_ONE_LAYER_NAMES = ('hidden.0.weight', 'hidden.0.bias', 'output.weight', 'output.bias',
-                    'bypass.weight')
-
-
-class _OneLayerParts(NamedTuple):
-    """The forward values the written-out Jacobian of a one-tanh-layer network is made of."""
-
-    x_s: torch.Tensor  # (rows, n_in) standardized regressors
-    tanh: torch.Tensor  # (rows, hidden) tanh layer output
-    g_pre: torch.Tensor  # (rows, n_out, hidden) tanh_backward(y_std_i · W2_i, tanh)
-    y_std: torch.Tensor  # (n_out,)
-
-
-@dataclass
-class _LmScratch:
-    """One training's reusable LM Jacobian arrays (what they hold is valid until the next use).
-
-    ``columns``: the residual Jacobian array (its zero blocks stay zero, every other entry is
-    written again); ``x_s``: the standardized regressors, which depend on the window and the
-    network's standardization only, not on the weights.
-    """
-
-    columns: torch.Tensor | None = None
-    x_s: torch.Tensor | None = None
-    # the window forward's own (batched) standardized regressors and relative base
-    forward_x_s: torch.Tensor | None = None
-    forward_base: torch.Tensor | None = None
-    # the factors of the residual Jacobian's columns (``_one_layer_factors``)
-    factors: torch.Tensor | None = None
-
-
-def _one_layer_parts(
-    net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, x: torch.Tensor,
-    scratch: _LmScratch | None = None,
-) -> _OneLayerParts | None:
-    """Forward values for ``_one_layer_jacobian``; None unless earth frame, 1 layer, bypass."""
-    spec = net.spec
-    if spec.body_frame or spec.hidden_layers != 1 or layout.names != _ONE_LAYER_NAMES:
-        return None
-    params = layout.unflatten(flat)
-    w1, b1, w2 = params['hidden.0.weight'], params['hidden.0.bias'], params['output.weight']
-    rows = x.shape[0]
-    n_out, hidden = w2.shape
-    with torch.no_grad():
-        x_s = scratch.x_s if scratch is not None and scratch.x_s is not None else \
-            _standardized_rows(net, x)
-        if scratch is not None:
-            scratch.x_s = x_s
-        tanh = torch.tanh(torch.nn.functional.linear(x_s, w1, b1))
-        y_std = net.y_std
-        g_pre = torch.ops.aten.tanh_backward(
-            (y_std[:, None] * w2)[None].expand(rows, n_out, hidden), tanh[:, None, :])
-    return _OneLayerParts(x_s, tanh, g_pre, y_std)
-
-
-def _one_layer_jacobian(
-    net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, x: torch.Tensor
-) -> torch.Tensor | None:
-    """``vmap(jacrev(one_row))`` of an earth-frame network with one tanh layer and a bypass.
-
-    Written out, the backward pass of the basis vector e_i through ŷ = y_mean + y_std ·
-    (W2 tanh(W1 x_s + b1) + b2 + Wb x_s) gives single products only: y_std_i · x_s (Wb row i),
-    y_std_i · tanh (W2 row i), y_std_i (b2), g = tanh_backward(y_std_i · W2_i, tanh) (b1) and
-    g · x_s (W1); every other entry is 0. Computed as such over the whole window, each entry is
-    bit for bit the autograd one (zeros +0, as its accumulating products give them): checked on
-    every Jacobian of a 1800 s replay and by a test. The standardized regressors of a
-    ramp-invariant network come from ``vmap`` over the rows as in ``jacrev`` (its line fit
-    rounds differently over a batch). Returns None for any other network (the caller's vmap).
-    """
-    parts = _one_layer_parts(net, layout, flat, x)
-    if parts is None:
-        return None
-    rows = x.shape[0]
-    n_out = parts.y_std.shape[0]
-    jac = torch.zeros(rows, n_out, flat.numel(), dtype=torch.float64)
-    _fill_one_layer(jac.permute(2, 0, 1), parts)
-    return jac
-
-
-def _fill_one_layer(out: torch.Tensor, parts: _OneLayerParts,
-                    residual: _ResidualMap | None = None) -> None:
-    """Write the Jacobian into zeroed ``out`` (n_weights, rows, n_out), weights in flat order.
-
-    Only the non-zero blocks are written. With ``residual`` each block is then mapped to the
-    residual Jacobian's (``_ResidualMap``): a zero entry maps to +0 exactly, so the zero blocks
-    need no work.
-    """
-    x_s, tanh, g_pre, y_std = parts
-    n_in = x_s.shape[1]
-    n_out, hidden = g_pre.shape[1:]
-    with torch.no_grad():
-        w1_end = hidden * n_in
-        w1 = out[:w1_end].unflatten(0, (hidden, n_in))
-        torch.mul(g_pre.permute(2, 0, 1)[:, None], x_s.T[None, :, :, None], out=w1)
-        w1 += 0.0  # −0 products to +0, as autograd's accumulating products
-        if residual is not None:
-            residual.apply(out[:w1_end])
-        b1 = out[w1_end:w1_end + hidden]
-        b1.copy_(g_pre.permute(2, 0, 1))
-        b1 += 0.0
-        if residual is not None:
-            residual.apply(b1)
-        w2 = out[w1_end + hidden:w1_end + hidden + n_out * hidden].unflatten(0, (n_out, hidden))
-        b2 = out[w1_end + hidden + n_out * hidden:w1_end + hidden + n_out * (hidden + 1)]
-        wb = out[w1_end + hidden + n_out * (hidden + 1):].unflatten(0, (n_out, n_in))
-        for i in range(n_out):
-            torch.mul(tanh.T, y_std[i], out=w2[i, :, :, i])
-            w2[i, :, :, i] += 0.0
-            b2[i, :, i] = y_std[i]
-            torch.mul(x_s.T, y_std[i], out=wb[i, :, :, i])
-            wb[i, :, :, i] += 0.0
-            if residual is not None:
-                residual.apply(w2[i, :, :, i], i)
-                residual.apply(b2[i, :, i], i)
-                residual.apply(wb[i, :, :, i], i)
-
-
-def _one_layer_kept(
-    net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
-    derivative_weight: float, scratch: _LmScratch | None,
-) -> tuple[_OneLayerParts, _ResidualMap] | None:
-    """The kept rows' forward values and the MSE residual map, or None (see the callers)."""
-    if derivative_weight > 0.0 or window.body is not None:
-        return None
-    parts = _one_layer_parts(net, layout, flat, window.x_series, scratch)
-    if parts is None:
-        return None
-    rows, n_out = window.x_series.shape[0], parts.y_std.shape[0]
-    offset = _data_residuals(torch.zeros(rows, n_out, dtype=torch.float64), window, 0.0)
-    kept = window.keep.nonzero()[:, 0]
-    n_keep = kept.numel()
-    residual = _ResidualMap(window.target[kept], window.scale, math.sqrt(n_keep * n_out),
-                            offset.view(n_keep, n_out))
-    return (_OneLayerParts(parts.x_s[kept], parts.tanh[kept], parts.g_pre[kept], parts.y_std),
-            residual)
-
-
-def _one_layer_residual_jacobian(
-    net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
-    derivative_weight: float, scratch: _LmScratch | None = None,
-) -> torch.Tensor | None:
-    """``_residual_jacobian(_prediction_jacobian(...))`` of a one-layer earth-frame network.
-
-    Only the MSE residuals (derivative_weight 0): the kept rows' written-out Jacobian is built
-    in the residual Jacobian's own layout (n_weights, n_residuals), and the residual map's
-    element-wise steps run on it in place, so neither the whole window's Jacobian nor a
-    transposing copy is made. The same numbers: see ``_one_layer_jacobian`` and
-    ``_residual_columns``. None when it does not apply. With ``scratch`` (one per training)
-    its arrays are reused: the returned Jacobian is then valid until the next call.
-    """
-    found = _one_layer_kept(net, layout, flat, window, derivative_weight, scratch)
-    if found is None:
-        return None
-    parts, residual = found
-    n_keep, n_out = residual.offset.shape
-    columns = _zeroed(scratch, (flat.numel(), n_keep, n_out))
-    _fill_one_layer(columns, parts, residual)
-    return columns.view(flat.numel(), -1).T
-
-
-def _one_layer_factors(parts: _OneLayerParts, out: torch.Tensor | None = None) -> torch.Tensor:
-    """The columns every output's residual Jacobian is a scaling of, transposed: (n_c, n_keep).
-
-    With d = 1 − tanh², output i's prediction Jacobian in row r is y_std_i · W2_ij · d_rj · x_rk
-    (W1), y_std_i · W2_ij · d_rj (b1), y_std_i · tanh_rj (W2 row i), y_std_i (b2_i) and
-    y_std_i · x_rk (bypass row i), zero elsewhere; the residual map scales output i by
-    c_i = 1/(scale_i · √(n_keep · n_out)). So output i's non-zero columns are the shared
-    factors B = [d_j x_k, d_j] scaled per hidden unit by a_ij = c_i y_std_i W2_ij and the own
-    factors O = [tanh, 1, x] scaled by e_i = c_i y_std_i. Rows: B in flat (W1, b1) order, then O
-    in (W2 row, b2, bypass row) order. ``out``: an array to write into.
-    """
-    x_s, tanh, _, _ = parts
-    n_keep, n_in = x_s.shape
-    hidden = tanh.shape[1]
-    w1_end = hidden * n_in
-    shared = w1_end + hidden
-    shape = (shared + hidden + 1 + n_in, n_keep)
-    if out is None or out.shape != shape:
-        out = torch.empty(shape, dtype=torch.float64)
-    with torch.no_grad():
-        slope = 1.0 - tanh.T * tanh.T  # (hidden, n_keep)
-        torch.mul(slope[:, None, :], x_s.T[None], out=out[:w1_end].unflatten(0, (hidden, n_in)))
-        out[w1_end:shared] = slope
-        out[shared:shared + hidden] = tanh.T
-        out[shared + hidden] = 1.0
-        out[shared + hidden + 1:] = x_s.T
-    return out
-
-
-def _one_layer_normal_equations(
-    net: NnarmaxNet, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
-    derivative_weight: float, residuals: torch.Tensor, scratch: _LmScratch | None = None,
-) -> tuple[torch.Tensor, torch.Tensor] | None:
-    """(Jᵀ J, Jᵀ r) of ``_one_layer_residual_jacobian``'s J by factors; None where it is None.
-
-    Output i's rows of J are [B diag(â_i), e_i O] in its non-zero columns
-    (``_one_layer_factors``; â_i is a_i repeated over each hidden unit's columns), so with
-    G = [B O]ᵀ [B O] (one symmetric product, BLAS syrk through numpy) and P = [B O]ᵀ R
-    (R: the residuals, one column per output):
-
-        shared × shared  G_BB ∘ Σ_i â_i â_iᵀ      shared × own_i  diag(â_i) G_BO e_i
-        own_i × own_i    e_i² G_OO                 own_i × own_j   0 (i ≠ j)
-        Jᵀ r: shared Σ_i â_i ∘ P_B,i,  own_i e_i P_O,i.
-
-    The same matrix in exact arithmetic, about n_out × 2 × (n_weights/n_c)² fewer multiply-adds
-    than the dense ``J.T @ J``; it differs in the last bits (and in the rounding of the residual
-    map's subtract-and-divide, which this skips). Exactly symmetric.
-    """
-    found = _one_layer_kept(net, layout, flat, window, derivative_weight, scratch)
-    if found is None:
-        return None
-    parts, residual = found
-    factors = _one_layer_factors(parts, scratch.factors if scratch is not None else None)
-    if scratch is not None:
-        scratch.factors = factors
-    n_c, n_keep = factors.shape
-    n_in = parts.x_s.shape[1]
-    n_out, hidden = parts.g_pre.shape[1:]
-    shared = hidden * (n_in + 1)
-    block = factors.numpy()
-    gram = block @ block.T  # numpy: syrk for a matrix times its own transpose
-    per_output = np.ascontiguousarray(residuals.view(n_keep, n_out).numpy())
-    projected = block @ per_output  # (n_c, n_out)
-    w2 = layout.unflatten(flat)['output.weight'].detach().numpy()  # (n_out, hidden)
-    own_scale = (parts.y_std / (residual.scale * residual.root)).numpy()  # e_i
-    unit_scale = own_scale[:, None] * w2  # a_ij
-    # â_i: W1 columns (j, k) then b1 columns j
-    shared_scale = np.concatenate((np.repeat(unit_scale, n_in, axis=1), unit_scale), axis=1)
-    n_weights = flat.numel()
-    matrix = np.zeros((n_weights, n_weights))
-    gradient = np.zeros(n_weights)
-    # Σ_i â_i â_iᵀ by outer products: exactly symmetric, as G
-    outer = sum(np.multiply.outer(scale_i, scale_i) for scale_i in shared_scale)
-    matrix[:shared, :shared] = gram[:shared, :shared] * outer
-    gradient[:shared] = np.sum(shared_scale.T * projected[:shared], axis=1)
-    for i in range(n_out):
-        own = np.concatenate((
-            np.arange(shared + i * hidden, shared + (i + 1) * hidden),
-            [shared + n_out * hidden + i],
-            np.arange(shared + n_out * (hidden + 1) + i * n_in,
-                      shared + n_out * (hidden + 1) + (i + 1) * n_in)))
-        cross = gram[:shared, shared:] * (shared_scale[i][:, None] * own_scale[i])
-        matrix[:shared, own] = cross
-        matrix[own, :shared] = cross.T
-        matrix[np.ix_(own, own)] = gram[shared:, shared:] * own_scale[i] ** 2
-        gradient[own] = own_scale[i] * projected[shared:, i]
-    return torch.from_numpy(matrix), torch.from_numpy(gradient)
-
-
-def _damped_step(matrix: torch.Tensor, mu: float, gradient: torch.Tensor) -> torch.Tensor:
-    """(matrix + μ I)⁻¹ gradient by Cholesky; LU (``linalg.solve``) if it is not positive definite.
-
-    For μ > 0 the damped Gauss–Newton matrix Jᵀ J + diag(b) + μ I is symmetric positive
-    definite, so the Cholesky factor exists unless rounding breaks it (then LU as before).
-    """
-    damped = matrix.clone()
-    damped.diagonal().add_(mu)
-    factor, info = torch.linalg.cholesky_ex(damped)
-    if int(info) != 0:
-        lu_step: torch.Tensor = torch.linalg.solve(damped, gradient)
-        return lu_step
-    step: torch.Tensor = torch.cholesky_solve(gradient[:, None], factor)[:, 0]
-    return step
-
-
-def _zeroed(scratch: _LmScratch | None, shape: tuple[int, int, int]) -> torch.Tensor:
-    """A zero array of ``shape`` the first time; then the scratch one as it was left."""
-    if scratch is not None and scratch.columns is not None and scratch.columns.shape == shape:
-        return scratch.columns
-    columns = torch.zeros(shape, dtype=torch.float64)
-    if scratch is not None:
-        scratch.columns = columns
-    return columns
-
-
-@dataclass(frozen=True)
-class _ResidualMap:
-    """The MSE residual map's element-wise steps ((v − target)/scale)/√n − offset, in place."""
-
-    target: torch.Tensor  # (n_keep, n_out) kept targets
-    scale: torch.Tensor  # (n_out,)
-    root: float  # √(n_keep · n_out)
-    offset: torch.Tensor  # (n_keep, n_out) the map of 0
-
-    def apply(self, values: torch.Tensor, channel: int | None = None) -> None:
-        """``values`` (..., n_keep, n_out), or (..., n_keep) of output ``channel``."""
-        if channel is None:
-            target, scale, offset = self.target, self.scale, self.offset
-        else:
-            target, scale = self.target[:, channel], self.scale[channel]
-            offset = self.offset[:, channel]
-        values -= target
-        values /= scale
-        values /= self.root
-        values -= offset
-
-
-def _standardized_rows(net: NnarmaxNet, x: torch.Tensor) -> torch.Tensor:
-    """The standardized (relative) regressors x_s the network's first layers see, (rows, n)."""
-    spec = net.spec
-    x_mean, x_std = net.regressor_standardization()
-
-    def one(rows: torch.Tensor) -> torch.Tensor:
-        if spec.relative:
-            rows = rows - _relative_frame_torch(spec, rows)[1]
-        return (rows - x_mean) / x_std
-
-    if spec.ramp_invariant:
-        per_row: torch.Tensor = vmap(lambda row: one(row[None, :])[0])(x)
-        return per_row
-    return one(x)
-
-
-def _residual_jacobian(
-    jac_prediction: torch.Tensor, window: _Window, derivative_weight: float
-) -> torch.Tensor:
-    """Jacobian of the data residuals from that of the predictions (the map is affine).
-
-    Column j is residuals(dŷ/dw_j) − residuals(0). Earth-frame windows compute all columns at
-    once (``_residual_columns``), element for element as the per-column map; the result is laid
-    out as ``vmap(..., out_dims=1)`` lays it out (transpose of a contiguous (n_weights,
-    n_residuals)), so J^T J sees the same operands.
-    """
-    offset = _data_residuals(torch.zeros(jac_prediction.shape[:2], dtype=torch.float64), window,
-                             derivative_weight)
-    if window.body is None:
-        columns = _residual_columns(jac_prediction, window, derivative_weight)
-        columns -= offset[:, None]
-        return columns.T.contiguous().T
-
-    def linear_part(prediction: torch.Tensor) -> torch.Tensor:
-        return _data_residuals(prediction, window, derivative_weight) - offset
-
-    jacobian: torch.Tensor = vmap(linear_part, in_dims=2, out_dims=1)(jac_prediction)
-    return jacobian
-
-
-def _residual_columns(
-    jac_prediction: torch.Tensor, window: _Window, derivative_weight: float
-) -> torch.Tensor:
-    """``_data_residuals`` of every column jac_prediction[:, :, j] (earth frame), (n_res, n_w).
-
-    The same element-wise operations in the same order as ``_mse_residuals`` and
-    ``_derivative_residuals`` (kept rows picked first, which does not change them), in place
-    on the (rows, n_out, n_weights) array's layout: few new 15 MB buffers per LM epoch.
-    """
-    n_weights = jac_prediction.shape[2]
-    fitted = jac_prediction[:-1]
-    error = fitted[window.keep]
-    error -= window.target[window.keep][:, :, None]
-    error /= window.scale[:, None]
-    mse = error.reshape(-1, n_weights)
-    mse /= math.sqrt(error.shape[0] * error.shape[1])
-    if not derivative_weight > 0.0:
-        return mse
-    step = fitted[1:] - fitted[:-1]
-    step -= (window.target[1:] - window.target[:-1])[:, :, None]
-    step /= window.diff_scale[:, None]
-    kept = step[window.keep_pair]
-    count = kept.shape[0] * kept.shape[1]
-    derivative = kept.reshape(-1, n_weights)
-    if count > 0:
-        derivative *= math.sqrt(derivative_weight / count)
-    return torch.cat((mse, derivative))
-
-
-def _one_layer_prediction(
-    runner: _WindowPredictor, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
-    parallel: bool, scratch: _LmScratch,
-) -> torch.Tensor | None:
-    """``_window_prediction`` (no grad) of a one-layer earth-frame network, x_s kept in scratch.
-
-    ``NnarmaxNet.forward``'s operations in its order on the weights ``flat``; the standardized
-    regressors and the relative base (weight-free) are computed once per training. None when
-    it does not apply.
-    """
-    net = runner.net
-    spec = net.spec
-    if (parallel and runner.nfb > 0) or spec.body_frame or spec.hidden_layers != 1 or \
-            layout.names != _ONE_LAYER_NAMES:
-        return None
-    if scratch.forward_x_s is None:
-        x = window.x_series
-        if spec.relative:
-            _, shift, scratch.forward_base = _relative_frame_torch(spec, x)
-            x = x - shift
-        x_mean, x_std = net.regressor_standardization()
-        scratch.forward_x_s = (x - x_mean) / x_std
-    x_s = scratch.forward_x_s
-    params = layout.unflatten(flat)
-    linear = torch.nn.functional.linear
-    hidden = torch.tanh(linear(x_s, params['hidden.0.weight'], params['hidden.0.bias']))
-    out = linear(hidden, params['output.weight'], params['output.bias'])
-    out = out + linear(x_s, params['bypass.weight'])
-    prediction = net.y_mean + net.y_std * out
-    return prediction if scratch.forward_base is None else scratch.forward_base + prediction
-
-
-def _lm_jacobian(
-    runner: _WindowPredictor, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
-    parallel: bool, derivative_weight: float, scratch: _LmScratch | None = None,
-) -> torch.Tensor:
-    """Jacobian of the data residuals w.r.t. the weights, (n_residuals, n_weights).
-
-    ``scratch``: see ``_one_layer_residual_jacobian`` (valid until the next call then).
-    """
-    if not parallel or runner.nfb == 0:
-        direct = _one_layer_residual_jacobian(runner.net, layout, flat, window,
-                                              derivative_weight, scratch)
-        if direct is not None:
-            return direct
-    return _residual_jacobian(_prediction_jacobian(runner, layout, flat, window, parallel),
-                              window, derivative_weight)
-
-
-def _lm_normal_equations(
-    runner: _WindowPredictor, layout: _FlatParameters, flat: torch.Tensor, window: _Window,
-    parallel: bool, derivative_weight: float, residuals: torch.Tensor, scratch: _LmScratch,
-) -> tuple[torch.Tensor, torch.Tensor, bool]:
-    """(Jᵀ J, Jᵀ r, by_factors): by factors for the default network, else from the dense J."""
-    if not parallel or runner.nfb == 0:
-        normal = _one_layer_normal_equations(runner.net, layout, flat, window,
-                                             derivative_weight, residuals, scratch)
-        if normal is not None:
-            return normal[0], normal[1], True
-    jacobian = _lm_jacobian(runner, layout, flat, window, parallel, derivative_weight, scratch)
-    return jacobian.T @ jacobian, jacobian.T @ residuals, False
-
-
 def _levenberg_marquardt(
-    runner: _WindowPredictor, window: _Window, parallel: bool, run: _Run
+    runner: WindowPredictor, window: TrainingWindow, parallel: bool, run: _Run
 ) -> str:
     """Levenberg–Marquardt (thesis eq. 2.7) with trainlm-style μ adaptation."""
     settings = run.settings
-    layout = _FlatParameters.of(runner.net)
+    layout = FlatParameters.of(runner.net)
     decay = decay_vector(runner.net, settings.weight_decay)
 
     def residual_fn(flat: torch.Tensor) -> torch.Tensor:
-        prediction = _one_layer_prediction(runner, layout, flat, window, parallel, scratch)
+        prediction = one_layer_prediction(runner, layout, flat, window, parallel, scratch)
         if prediction is None:
-            prediction = _window_prediction(runner, layout, flat, window, parallel)
-        return _data_residuals(prediction, window, settings.derivative_weight)
+            prediction = window_prediction(runner, layout, flat, window, parallel)
+        return data_residuals(prediction, window, settings.derivative_weight)
 
     def objective_of(flat: torch.Tensor, residuals: torch.Tensor) -> float:
         return float(torch.sum(residuals**2) + torch.sum(decay * flat**2))
 
-    scratch = _LmScratch()  # one epoch's Jacobian is dead at the next's
+    scratch = LmScratch()  # one epoch's Jacobian is dead at the next's
     with torch.no_grad():
         weights = torch.nn.utils.parameters_to_vector(runner.net.parameters()).detach().clone()
         residuals = residual_fn(weights)
@@ -1156,7 +467,7 @@ def _levenberg_marquardt(
         if stop is not None:
             reason = stop
             break
-        jtj, jtr, by_factors = _lm_normal_equations(runner, layout, weights, window, parallel,
+        jtj, jtr, by_factors = lm_normal_equations(runner, layout, weights, window, parallel,
                                                     settings.derivative_weight, residuals,
                                                     scratch)
         gradient = jtr + decay * weights  # ½ ∇J
@@ -1167,7 +478,7 @@ def _levenberg_marquardt(
         accepted = False
         while not accepted:
             if by_factors:
-                step = _damped_step(gauss_newton, mu, gradient)
+                step = damped_step(gauss_newton, mu, gradient)
             else:
                 step = torch.linalg.solve(gauss_newton + mu * identity, gradient)
             candidate = weights - step
@@ -1198,15 +509,15 @@ def _levenberg_marquardt(
     return reason
 
 
-def _mse_residuals_from(residuals: torch.Tensor, window: _Window) -> torch.Tensor:
+def _mse_residuals_from(residuals: torch.Tensor, window: TrainingWindow) -> torch.Tensor:
     """The MSE block at the head of a data-residual vector."""
     n_mse = int(window.keep.sum()) * window.target.shape[1]
     return residuals[:n_mse]
 
 
 def _gradient_descent(
-    runner: _WindowPredictor,
-    window: _Window,
+    runner: WindowPredictor,
+    window: TrainingWindow,
     parallel: bool,
     run: _Run,
     optimizer: torch.optim.Optimizer,
@@ -1228,7 +539,7 @@ def _gradient_descent(
     def evaluate() -> tuple[float, float]:
         with torch.no_grad():
             objective, prediction = _objective(runner, window, parallel, settings)
-        return float(objective), _mse(prediction, window)
+        return float(objective), window_mse(prediction, window)
 
     best_objective, _ = evaluate()
     best_state = copy.deepcopy(runner.state_dict())
@@ -1263,7 +574,7 @@ def _gradient_norm(module: torch.nn.Module) -> float:
     return float(torch.linalg.vector_norm(torch.cat(grads))) if grads else math.inf
 
 
-def _lbfgs(runner: _WindowPredictor, window: _Window, parallel: bool, run: _Run) -> str:
+def _lbfgs(runner: WindowPredictor, window: TrainingWindow, parallel: bool, run: _Run) -> str:
     """L-BFGS with strong-Wolfe line search, one iteration per epoch."""
     optimizer = torch.optim.LBFGS(
         runner.parameters(), lr=1.0, max_iter=1, max_eval=_LBFGS_MAX_EVAL, history_size=20,
@@ -1272,7 +583,7 @@ def _lbfgs(runner: _WindowPredictor, window: _Window, parallel: bool, run: _Run)
     return _gradient_descent(runner, window, parallel, run, optimizer)
 
 
-def _adam(runner: _WindowPredictor, window: _Window, parallel: bool, run: _Run) -> str:
+def _adam(runner: WindowPredictor, window: TrainingWindow, parallel: bool, run: _Run) -> str:
     """Full-batch Adam, one step per epoch."""
     optimizer = torch.optim.Adam(runner.parameters(), lr=run.settings.lr)
     return _gradient_descent(runner, window, parallel, run, optimizer)
@@ -1304,7 +615,7 @@ def predict_window(
     target_series = as_series(targets, spec.n_outputs, 'targets')
     x_series, first = build_regressors(u, y, target_series, spec)
     fb_init = target_series[first - spec.nfb + 1 : first + 1].copy()
-    runner = _WindowPredictor(net, n_static_regressors(spec), spec.nfb)
+    runner = WindowPredictor(net, n_static_regressors(spec), spec.nfb)
     with torch.inference_mode():
         prediction = runner(
             torch.from_numpy(x_series), torch.from_numpy(fb_init), mode == 'parallel'
@@ -1328,11 +639,11 @@ def evaluate_loss(
     if mode not in _MODES:
         raise ValueError(f'mode must be one of {_MODES}, got {mode!r}')
     net = _as_net(net_or_state, spec)
-    window = _prepare_window(spec, u, y, targets, mask)
-    runner = _WindowPredictor(net, n_static_regressors(spec), spec.nfb)
+    window = prepare_window(spec, u, y, targets, mask)
+    runner = WindowPredictor(net, n_static_regressors(spec), spec.nfb)
     with torch.inference_mode():
         prediction = runner(window.x_series, window.fb_init, mode == 'parallel')
-    return _mse(prediction, window)
+    return window_mse(prediction, window)
 
 
 def warm_up() -> None:

@@ -45,7 +45,8 @@ from lf_predictor_ros.core.retraining import (
     target_filter,
     train_settings,
 )
-from lf_predictor_ros.core.training import loss_frame_errors, loss_scale, predict_window, train
+from lf_predictor_ros.core.training import predict_window, train
+from lf_predictor_ros.core.training_window import loss_frame_errors, loss_scale
 
 pytestmark = pytest.mark.filterwarnings(
     'ignore:`torch.jit.script` is deprecated:DeprecationWarning'

@@ -31,7 +31,8 @@ from lf_predictor_ros.core.retraining import (
     training_window,
 )
 from lf_predictor_ros.core.targets import TargetWindow
-from lf_predictor_ros.core.training import TrainResult, loss_scale
+from lf_predictor_ros.core.training import TrainResult
+from lf_predictor_ros.core.training_window import loss_scale
 from sim_ros.simulation import load_scenario, simulate
 
 # torch loads its forward-AD decompositions once per process via the deprecated torch.jit.script

@@ -1,6 +1,7 @@
 """Tests of the model-agnostic trainer: LM / L-BFGS / Adam, series-parallel and parallel modes."""
 from __future__ import annotations
 
+from collections.abc import Callable
 import functools
 from pathlib import Path
 import subprocess
@@ -19,13 +20,16 @@ from lf_predictor_ros.core.training import (
     TrainSettings,
     evaluate_loss,
     flushing_subnormals,
-    loss_scale,
     predict_window,
     subnormals_flushed,
     train,
     validated_force_ridges,
     warm_up,
 )
+
+# the core conftest's ``one_layer_case`` fixture: seed → (spec, net, u, y, x, mask)
+OneLayerCase = Callable[[int], tuple[NnarmaxSpec, NnarmaxNet, np.ndarray, np.ndarray,
+                                     np.ndarray, np.ndarray]]
 
 # torch loads its forward-AD decompositions once per process via the deprecated torch.jit.script
 pytestmark = pytest.mark.filterwarnings(
@@ -328,127 +332,6 @@ def test_adam_never_returns_worse_weights_than_the_warm_start() -> None:
     assert result.loss == pytest.approx(result.initial_loss, rel=1e-12)
 
 
-@pytest.mark.parametrize('mode', ['series_parallel', 'parallel'])
-def test_lm_jacobian_equals_forward_mode_autodiff(mode: str) -> None:
-    # The LM Jacobian is assembled from per-row Jacobians (+ the feedback recursion in parallel
-    # mode); it must equal brute-force forward-mode AD through the whole (unrolled) window.
-    from lf_predictor_ros.core import training
-
-    spec = NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=2, nfb=3, hidden_units=4,
-                       hidden_layers=2)
-    rng = np.random.default_rng(15)
-    n = 80
-    u = rng.normal(size=(n, 3))
-    x = np.cumsum(rng.normal(scale=0.05, size=(n, 3)), axis=0)
-    y = x + rng.normal(scale=0.02, size=(n, 3))
-    mask = np.arange(n) < n - 10
-    net = NnarmaxNet(spec, seed=16)
-    net.set_standardization(u, y)
-    with torch.no_grad():
-        for param in net.parameters():
-            param.add_(0.05 * torch.randn(param.shape, dtype=param.dtype,
-                                          generator=torch.Generator().manual_seed(17)))
-    window = training._prepare_window(spec, u, y, x, mask)
-    runner = training._WindowPredictor(net, 2 * 3 + 2 * 3, spec.nfb)
-    layout = training._FlatParameters.of(net)
-    flat = torch.nn.utils.parameters_to_vector(net.parameters()).detach()
-    parallel = mode == 'parallel'
-
-    def residuals(weights: torch.Tensor) -> torch.Tensor:
-        prediction = training._window_prediction(runner, layout, weights, window, parallel)
-        return training._data_residuals(prediction, window, 0.5)
-
-    expected = torch.func.jacfwd(residuals)(flat)
-    jac_prediction = training._prediction_jacobian(runner, layout, flat, window, parallel)
-    actual = training._residual_jacobian(jac_prediction, window, 0.5)
-    # kept targets: indices first + 1 = 3 … 69 → 67 samples, 66 differences, 3 channels each
-    assert actual.shape == expected.shape == ((67 + 66) * 3, flat.numel())
-    scale = float(expected.abs().max())
-    np.testing.assert_allclose(actual.numpy(), expected.numpy(), rtol=0, atol=1e-10 * scale)
-
-
-@pytest.mark.parametrize('derivative_weight', [0.0, 0.5])
-def test_stacked_residual_jacobian_is_bitwise_the_per_column_map(derivative_weight: float
-                                                                 ) -> None:
-    # The earth-frame fast path of _residual_jacobian must give the vmap'ed per-column map's
-    # bits and memory layout: the LM step (J^T J, solve) and so every replay output depend on it.
-    from lf_predictor_ros.core import training
-
-    spec = NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=2, ny=2, nfb=0, hidden_units=4)
-    rng = np.random.default_rng(21)
-    n = 90
-    u = rng.normal(size=(n, 3))
-    x = np.cumsum(rng.normal(scale=0.05, size=(n, 3)), axis=0)
-    y = x + rng.normal(scale=0.02, size=(n, 3))
-    mask = (np.arange(n) < n - 10) & (np.arange(n) % 7 != 3)
-    window = training._prepare_window(spec, u, y, x, mask)
-    assert window.body is None
-    jac_prediction = torch.from_numpy(rng.normal(size=(window.target.shape[0] + 1, 3, 40)))
-    offset = training._data_residuals(torch.zeros(jac_prediction.shape[:2], dtype=torch.float64),
-                                      window, derivative_weight)
-
-    def linear_part(prediction: torch.Tensor) -> torch.Tensor:
-        return training._data_residuals(prediction, window, derivative_weight) - offset
-
-    expected = torch.func.vmap(linear_part, in_dims=2, out_dims=1)(jac_prediction)
-    actual = training._residual_jacobian(jac_prediction, window, derivative_weight)
-    assert torch.equal(actual, expected)
-    assert actual.stride() == expected.stride()
-
-
-@pytest.mark.parametrize('ramp_invariant', [False, True])
-def test_one_layer_jacobian_is_bitwise_vmap_jacrev(ramp_invariant: bool) -> None:
-    # The written-out Jacobian of the default network shape (one tanh layer + bypass) must give
-    # vmap(jacrev)'s bits, zero signs included: the LM step and every replay output depend on it.
-    from lf_predictor_ros.core import training
-
-    spec = NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=3, ny=4, nfb=0, hidden_units=2,
-                       relative=True, ramp_invariant=ramp_invariant)
-    rng = np.random.default_rng(23)
-    n = 120
-    u = rng.normal(size=(n, 3))
-    x = np.cumsum(rng.normal(scale=0.05, size=(n, 3)), axis=0)
-    y = x + rng.normal(scale=0.02, size=(n, 3))
-    net = NnarmaxNet(spec, seed=24)
-    net.set_standardization(u, y)
-    window = training._prepare_window(spec, u, y, x, np.arange(n) % 9 != 4)
-    layout = training._FlatParameters.of(net)
-    flat = torch.nn.utils.parameters_to_vector(net.parameters()).detach()
-    buffers = dict(net.named_buffers())
-
-    def one_row(weights: torch.Tensor, x_row: torch.Tensor) -> torch.Tensor:
-        return torch.func.functional_call(net, {**layout.unflatten(weights), **buffers},
-                                          (x_row[None, :],))[0]
-
-    generator = torch.Generator().manual_seed(25)
-    scratch = training._LmScratch()  # reused across the two weights, as in the LM epochs
-    for weights in (flat, flat + 0.3 * torch.randn(flat.shape, generator=generator,
-                                                   dtype=torch.float64)):
-        expected = torch.func.vmap(torch.func.jacrev(one_row), in_dims=(None, 0))(
-            weights, window.x_series)
-        actual = training._one_layer_jacobian(net, layout, weights, window.x_series)
-        assert actual is not None
-        assert torch.equal(actual.view(torch.int64), expected.view(torch.int64))
-        # the LM's residual Jacobian built straight from it (MSE only): same bits and layout
-        runner = training._WindowPredictor(net, training.n_static_regressors(spec), spec.nfb)
-        reference = training._residual_jacobian(expected, window, 0.0)
-        direct = training._lm_jacobian(runner, layout, weights, window, False, 0.0)
-        assert direct.stride() == reference.stride()
-        assert torch.equal(direct.view(torch.int64), reference.view(torch.int64))
-        reused = training._lm_jacobian(runner, layout, weights, window, False, 0.0, scratch)
-        assert torch.equal(reused.view(torch.int64), reference.view(torch.int64))
-        with torch.no_grad():  # the LM's candidate forward pass, x_s kept in scratch
-            forward = training._window_prediction(runner, layout, weights, window, False)
-            kept = training._one_layer_prediction(runner, layout, weights, window, False,
-                                                  scratch)
-        assert kept is not None
-        assert torch.equal(kept.view(torch.int64), forward.view(torch.int64))
-    two_layers = NnarmaxNet(NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=3, ny=4, nfb=0,
-                                        hidden_units=2, hidden_layers=2), seed=1)
-    assert training._one_layer_jacobian(two_layers, training._FlatParameters.of(two_layers),
-                                        flat, window.x_series) is None
-
-
 def test_warm_up_does_the_slow_lazy_imports_up_front() -> None:
     # In a fresh interpreter: torch._dynamo is not loaded by importing the trainer, warm_up()
     # loads it, and the first real training afterwards pays no multi-second import.
@@ -477,21 +360,6 @@ def test_warm_up_does_the_slow_lazy_imports_up_front() -> None:
     assert first_training < 0.5
 
 
-def test_loss_scale_is_the_size_of_what_the_network_predicts() -> None:
-    """Absolute: std of yT(t+1); relative: RMS of yT(t+1) − y(t) (not the window's drift)."""
-    y_now = np.arange(100.0)[:, None]  # a vessel drifting 1 m per sample
-    target = y_now + 1.0 + 0.5 * np.cos(np.arange(100.0))[:, None]
-    keep = np.ones(100, dtype=bool)
-    absolute = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=1, ny=2, nfb=0, hidden_units=2)
-    relative = NnarmaxSpec(n_outputs=1, n_inputs_u=1, nu=1, ny=2, nfb=0, hidden_units=2,
-                           relative=True)
-    assert loss_scale(absolute, y_now, target, keep)[0] == pytest.approx(target.std())
-    step = target - y_now
-    assert loss_scale(relative, y_now, target, keep)[0] == pytest.approx(
-        np.sqrt(np.mean(step ** 2)))
-    assert loss_scale(relative, y_now, target, keep)[0] < 0.05 * target.std()
-
-
 def test_linear_init_fits_a_linear_system_before_the_first_epoch() -> None:
     """y(t+1) = 1.6 y(t) − 0.6 y(t−1) + 0.2 u(t): zero epochs of LM, loss ~ 0 with linear_init."""
     u, y = linear_system(seed=8)
@@ -502,137 +370,6 @@ def test_linear_init_fits_a_linear_system_before_the_first_epoch() -> None:
                    TrainSettings(max_epochs=0, linear_init=True))
     assert plain.loss > 0.1  # persistence ŷ(t+1) = y(t) is far off
     assert linear.loss < 1e-9  # measured 1.05e-12 (the 1e-6 ridge leaves a trace)
-
-
-def one_layer_case(seed: int) -> tuple[NnarmaxSpec, NnarmaxNet, np.ndarray, np.ndarray,
-                                       np.ndarray, np.ndarray]:
-    """A default-shaped (one tanh layer + bypass, earth frame, relative) 3-output net and data."""
-    spec = NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=3, ny=4, nfb=0, hidden_units=2,
-                       relative=True)
-    rng = np.random.default_rng(seed)
-    n = 150
-    u = rng.normal(size=(n, 3))
-    # steps driven by the previous input (learnable) + a little noise, far from the origin
-    steps = 0.05 * np.tanh(np.roll(u, 1, axis=0)) + rng.normal(scale=0.005, size=(n, 3))
-    x = np.cumsum(steps, axis=0) + np.array([40.0, -25.0, 1.0])
-    y = x + rng.normal(scale=0.002, size=(n, 3))
-    net = NnarmaxNet(spec, seed=seed + 1)
-    net.set_standardization(u, y)
-    return spec, net, u, y, x, np.arange(n) % 9 != 4
-
-
-def test_blockwise_normal_equations_equal_the_dense_products() -> None:
-    # The LM's fast path builds Jᵀ J and Jᵀ r from the factors of the Jacobian's columns; they
-    # must be the dense products of the residual Jacobian (up to rounding), exactly symmetric,
-    # with exact zeros between two outputs' own columns.
-    from lf_predictor_ros.core import training
-
-    spec, net, u, y, x, mask = one_layer_case(31)
-    window = training._prepare_window(spec, u, y, x, mask)
-    layout = training._FlatParameters.of(net)
-    flat = torch.nn.utils.parameters_to_vector(net.parameters()).detach()
-    generator = torch.Generator().manual_seed(32)
-    scratch = training._LmScratch()  # reused across the weights, as in the LM epochs
-    for weights in (flat, flat + 0.3 * torch.randn(flat.shape, generator=generator,
-                                                   dtype=torch.float64)):
-        jacobian = training._one_layer_residual_jacobian(net, layout, weights, window, 0.0)
-        assert jacobian is not None
-        dense = jacobian.clone()
-        residuals = torch.randn(dense.shape[0], generator=generator, dtype=torch.float64)
-        found = training._one_layer_normal_equations(net, layout, weights, window, 0.0,
-                                                     residuals, scratch)
-        assert found is not None
-        matrix, gradient = found
-        expected = dense.T @ dense
-        assert torch.equal(matrix, matrix.T)
-        np.testing.assert_allclose(matrix.numpy(), expected.numpy(), rtol=1e-12,
-                                   atol=1e-12 * float(expected.abs().max()))
-        expected_gradient = dense.T @ residuals
-        np.testing.assert_allclose(gradient.numpy(), expected_gradient.numpy(), rtol=1e-12,
-                                   atol=1e-12 * float(expected_gradient.abs().max()))
-        # W2 row 0 against W2 row 1: disjoint outputs' own columns
-        n_in = window.x_series.shape[1]
-        shared = 2 * (n_in + 1)  # W1 (2 × n_in), b1
-        assert torch.all(matrix[shared:shared + 2, shared + 2:shared + 4] == 0.0)
-        assert torch.all(expected[shared:shared + 2, shared + 2:shared + 4] == 0.0)
-        # output i's rows of J: its non-zero columns are the factors times e_i or â_i
-        factors = scratch.factors
-        assert factors is not None
-        by_output = dense.view(-1, 3, flat.numel())
-        w2 = layout.unflatten(weights)['output.weight']
-        for i in range(3):
-            e_i = net.y_std[i] / (window.scale[i] * np.sqrt(by_output.shape[0] * 3))
-            a_i = e_i * w2[i]
-            # W2 row i (3 × 2), b2_i, bypass row i (3 × n_in)
-            own = list(range(shared + 2 * i, shared + 2 * i + 2)) + [shared + 6 + i] + list(
-                range(shared + 9 + i * n_in, shared + 9 + (i + 1) * n_in))
-            scale = torch.cat((a_i.repeat_interleave(n_in), a_i, e_i.repeat(len(own))))
-            expected_rows = by_output[:, i, list(range(shared)) + own]
-            actual_rows = (factors * scale[:, None]).T
-            np.testing.assert_allclose(actual_rows.numpy(), expected_rows.numpy(), rtol=0,
-                                       atol=1e-13 * float(expected_rows.abs().max()))
-            others = [c for c in range(flat.numel()) if c >= shared and c not in own]
-            assert torch.all(by_output[:, i, others] == 0.0)
-    two_layers = NnarmaxNet(NnarmaxSpec(n_outputs=3, n_inputs_u=3, nu=3, ny=4, nfb=0,
-                                        hidden_units=2, hidden_layers=2), seed=1)
-    assert training._one_layer_normal_equations(
-        two_layers, training._FlatParameters.of(two_layers), flat, window, 0.0,
-        torch.zeros(1, dtype=torch.float64)) is None
-    assert training._one_layer_normal_equations(net, layout, flat, window, 0.5,
-                                                torch.zeros(1, dtype=torch.float64)) is None
-
-
-def test_cholesky_step_equals_the_lu_step() -> None:
-    from lf_predictor_ros.core import training
-
-    spec, net, u, y, x, mask = one_layer_case(33)
-    window = training._prepare_window(spec, u, y, x, mask)
-    layout = training._FlatParameters.of(net)
-    flat = torch.nn.utils.parameters_to_vector(net.parameters()).detach()
-    dense = training._one_layer_residual_jacobian(net, layout, flat, window, 0.0)
-    assert dense is not None
-    matrix = dense.T @ dense
-    matrix = 0.5 * (matrix + matrix.T)
-    gradient = torch.from_numpy(np.random.default_rng(34).normal(size=flat.numel()))
-    identity = torch.eye(flat.numel(), dtype=torch.float64)
-    for mu in (1e-3, 1e-1, 1e3):
-        lu = torch.linalg.solve(matrix + mu * identity, gradient)
-        cholesky = training._damped_step(matrix, mu, gradient)
-        np.testing.assert_allclose(cholesky.numpy(), lu.numpy(), rtol=0,
-                                   atol=1e-9 * float(lu.abs().max()))
-    # not positive definite: the LU fallback, the same bits as linalg.solve
-    indefinite = matrix - 10.0 * identity
-    step = training._damped_step(indefinite, 1e-3, gradient)
-    assert torch.equal(step, torch.linalg.solve(indefinite + 1e-3 * identity, gradient))
-    assert torch.all(torch.isfinite(step))
-
-
-def test_lm_fast_path_trains_to_the_dense_paths_loss(monkeypatch: pytest.MonkeyPatch) -> None:
-    # Blockwise normal equations + Cholesky against the dense J^T J + LU of before: the same
-    # LM (eq. 2.7, trainlm μ), so after 30 epochs the same losses up to rounding: relative
-    # 1e-9 asserted (2e-14 seen).
-    from lf_predictor_ros.core import training
-
-    spec, net, u, y, x, mask = one_layer_case(35)
-    settings = TrainSettings(max_epochs=30, max_seconds=60.0, min_grad=0.0)
-    calls = []
-    fast_path = training._one_layer_normal_equations
-
-    def counted(*args: object, **kwargs: object) -> object:
-        found = fast_path(*args, **kwargs)  # type: ignore[arg-type]
-        calls.append(found is not None)
-        return found
-
-    monkeypatch.setattr(training, '_one_layer_normal_equations', counted)
-    fast = train(net, u, y, x, mask, settings)
-    assert calls and all(calls)
-    monkeypatch.setattr(training, '_one_layer_normal_equations', lambda *args: None)
-    dense = train(net, u, y, x, mask, settings)
-    print(f'fast {fast.loss!r} ({fast.epochs} epochs), dense {dense.loss!r} ({dense.epochs})')
-    assert fast.loss < 0.5 * fast.initial_loss
-    assert fast.epochs == dense.epochs
-    assert fast.loss == pytest.approx(dense.loss, rel=1e-9)
-    np.testing.assert_allclose(fast.loss_history, dense.loss_history, rtol=1e-9)
 
 
 SMALLEST_NORMAL = float(np.finfo(np.float64).tiny)  # 2.2e-308
@@ -663,7 +400,8 @@ def test_subnormals_flushed_sets_the_mode_inside_and_restores_it() -> None:
         torch.set_flush_denormal(False)
 
 
-def test_training_turns_subnormal_weights_into_the_zeros_they_act_as() -> None:
+def test_training_turns_subnormal_weights_into_the_zeros_they_act_as(
+        one_layer_case: OneLayerCase) -> None:
     # Weight decay carried from training to training shrinks unused hidden units until their
     # weights are subnormal; the trainer flushes them (training.py docstring). With FTZ/DAZ a
     # subnormal weight is a zero in every product, so training from it gives the bits of training

@@ -60,6 +60,7 @@ from lf_predictor_ros.core.lf_dynamics import (
     learn_vessel_memory,
     paired_forces,
 )
+from lf_predictor_ros.core.manoeuvre import manoeuvring
 from lf_predictor_ros.core.odometry import LfOdometry, OdometryEstimate
 from lf_predictor_ros.core.odometry_params import (
     DAMPING_MEMORY_DOFS,
@@ -375,7 +376,8 @@ class LfStateEstimator:
             odometry.params.controller_read_pool_blocks,
             odometry.params.controller_read_lone_r_squared,
             odometry.params.controller_read_difference,
-            odometry.params.controller_read_median_r_squared)
+            odometry.params.controller_read_median_r_squared,
+            odometry.params.controller_read_holding_only)
         if self.background:
             if self._executor is None:
                 self._executor = ThreadPoolExecutor(1, thread_name_prefix='lf-vessel-memory')
@@ -451,7 +453,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
            pool_blocks: int = 0,
            controller_lone_r_squared: float = 0.0,
            controller_difference: bool = False,
-           controller_median_r_squared: float = 0.0) -> Learned:
+           controller_median_r_squared: float = 0.0,
+           controller_holding_only: bool = False) -> Learned:
     """Worker job: the vessel memory of one target window, the covariances, the controller read.
 
     ``forces``: the thrust at the targets' instants; the targets' zero-phase filter (at
@@ -495,7 +498,8 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
     ``controller_lone_r_squared``: the R² a DOF needs that one block alone believes (or a read
     without blocks) (`implied_input_gain`'s ``lone_r_squared``); ``controller_difference``:
     its ``difference`` (the D term may act on the poses' own filtered difference);
-    ``controller_median_r_squared``: its ``median_r_squared`` (the controller identity gate).
+    ``controller_median_r_squared``: its ``median_r_squared`` (the controller identity gate);
+    ``controller_holding_only``: its ``holding_only`` (blocks of station keeping only).
     ``pool_blocks`` > 0: the controller is read from the last that many blocks ever read
     (`pooled_input_gain`, continuing ``read_pool``), and the pool after it is returned too.
     ``earth_fixed``: without a known or read gain, the fit's environment is one earth-fixed
@@ -518,13 +522,15 @@ def _learn(params: PredictorParams, times: FloatArray, values: FloatArray, force
                                            controller_earth_frame, bound,
                                            controller_stiffness_frame, controller_pair_ratio,
                                            controller_lone_r_squared, controller_difference,
-                                           controller_median_r_squared)
+                                           controller_median_r_squared,
+                                           holding_only=controller_holding_only)
         else:
             read = implied_input_gain(published, *commands, params.sample_time,
                                       controller_block_time, controller_earth_frame, bound,
                                       controller_stiffness_frame, controller_pair_ratio,
                                       controller_lone_r_squared, controller_difference,
-                                      controller_median_r_squared)
+                                      controller_median_r_squared,
+                                      holding_only=controller_holding_only)
     elif remembered is not None:
         read = ControllerRead(None, 'controller gains: no commands', 'no_data')
     in_force: ControllerRead | None = read if read is not None and read.outcome == 'read' \
@@ -681,7 +687,8 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
                        pair_ratio: float = math.inf,
                        lone_r_squared: float = 0.0,
                        difference: bool = False,
-                       median_r_squared: float = 0.0) -> ControllerRead:
+                       median_r_squared: float = 0.0,
+                       *, holding_only: bool = False) -> ControllerRead:
     """1/M_ii implied by the DP controller acting on the published estimates.
 
     ``times``, ``forces``: the controller's commands and their stamps (a controller stamps its
@@ -714,7 +721,8 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
     twist only). ``median_r_squared``: with at least `controller_gains.IDENTITY_MIN_BLOCKS`
     blocks, unless some DOF's median R² over them reaches it, no DOF is believed (the
     controller identity gate, `controller_gains.identity_gated`; 0: off; a read without
-    blocks is not judged).
+    blocks is not judged). ``holding_only``: with ``block_time`` > 0, a block whose estimates
+    manoeuvred (`block_manoeuvred`) is not read; none left: 'no_data'.
     """
     if not published or times.shape[0] == 0:
         return ControllerRead(None, 'controller gains: no data', 'no_data')
@@ -738,6 +746,13 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
             blocks = [(offsets[j] + a, offsets[j] + b, _warm_lead(a, grid, sample_time))
                       for j, length in enumerate(lengths)
                       for a, b in block_bounds(length, block, need)]
+            if holding_only:
+                moved = len(blocks)
+                blocks = [(a, b, lead) for a, b, lead in blocks
+                          if not block_manoeuvred(poses[a:b], sample_time)]
+                if not blocks:
+                    return ControllerRead(None, f'controller gains: all {moved} blocks '
+                                               'manoeuvred (holding only)', 'no_data')
             reads = [read_controller_gains(poses[a - lead:b], twists[a:b], paired[a:b],
                                            sample_time, difference_times=grid, lead=lead,
                                            earth_highpass=earth_highpass,
@@ -763,6 +778,22 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
                                           f"{', '.join(f'{v:.3g}' for v in inertia)} "
                                           f'(R² {r2}; {used})'), 'read', float(stamps[rows[-1]]),
                           gains.natural_freq())
+
+
+def block_manoeuvred(poses: FloatArray, sample_time: float) -> bool:
+    """Did the estimates of one read block manoeuvre (`manoeuvre.manoeuvring`)?
+
+    ``poses`` (m, ndof), the heading wrapped (unwrapped here). A DP controller acts on the
+    error from its filtered setpoint η_d, which the read does not know: holding station, η_d is
+    constant and the high-pass removes it; through a setpoint move or a turn its transient is
+    left in the thrust and the PD fit reads it as stiffness and damping (rao_swell, blocks with
+    a move: inertia 0.19–0.89× the controller's, station keeping 0.91–1.03×; docs/
+    BENCHMARKS.md, seventy-second session).
+    """
+    values = np.array(poses, dtype=np.float64)
+    if values.shape[1] == 3:
+        values[:, 2] = np.unwrap(values[:, 2])
+    return manoeuvring(values, sample_time)
 
 
 def _paired_runs(published: list[Published], times: FloatArray, sample_time: float
@@ -803,7 +834,8 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
                       pair_ratio: float = math.inf,
                       lone_r_squared: float = 0.0,
                       difference: bool = False,
-                      median_r_squared: float = 0.0) -> tuple[ControllerRead, ReadPool]:
+                      median_r_squared: float = 0.0,
+                      *, holding_only: bool = False) -> tuple[ControllerRead, ReadPool]:
     """`implied_input_gain` from the last ``pool_blocks`` blocks ever read, each read once.
 
     The controller of a DP vessel does not change from one window to the next, but its read
@@ -819,7 +851,8 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
     among them, explain no DOF, the pool starts again from them: the read is then 'no_fit' and
     forgotten, as a window's read whose blocks explain nothing (the controller may have been
     switched off or changed). ``lone_r_squared``, ``difference``, ``median_r_squared`` (over
-    the pooled blocks): as `implied_input_gain`. Returns (the read, the pool after it).
+    the pooled blocks), ``holding_only`` (a new block that manoeuvred is passed over, not
+    pooled): as `implied_input_gain`. Returns (the read, the pool after it).
     """
     end = -math.inf if pool is None else pool.end
     kept: tuple[ControllerGains, ...] = () if pool is None else pool.blocks
@@ -837,6 +870,10 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
             # difference's filter up where the run began earlier
             lead = _warm_lead(start - a, grid, sample_time)
             rows = published[start - lead:start + block]
+            end = float(stamps[start + block - 1])
+            if holding_only and block_manoeuvred(np.array([p.pose for p in rows[lead:]]),
+                                                 sample_time):
+                continue
             try:
                 new.append(read_controller_gains(
                     np.array([p.pose for p in rows]), np.array([p.twist for p in rows[lead:]]),
@@ -844,7 +881,6 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
                     lead=lead, earth_highpass=earth_highpass, stiffness_frame=stiffness_frame))
             except ValueError:  # non-finite values: this block says nothing
                 pass
-            end = float(stamps[start + block - 1])
     pooled = kept + tuple(new)
     tail = pooled[-POOL_RESTART_BLOCKS:]
     restart = bool(new) and len(tail) == POOL_RESTART_BLOCKS and \
@@ -855,7 +891,8 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
     if not after.blocks:
         read = implied_input_gain(published, times, forces, sample_time, block_time,
                                   earth_highpass, max_natural_freq, stiffness_frame, pair_ratio,
-                                  lone_r_squared, difference, median_r_squared)
+                                  lone_r_squared, difference, median_r_squared,
+                                  holding_only=holding_only)
         return replace(read, note=f'{read.note}; no full block of {block} samples pooled '
                                   'yet'), after
     read = _median_read(list(after.blocks), end, block * len(after.blocks), block_time,

@@ -394,6 +394,13 @@ class OdometryParams:
         'controller has not changed); false: forgotten, the thrust gain is then fitted, and a '
         'fitted yaw environment extrapolated to -91 MN m after a turn (rao_supply 1008; '
         'docs/BENCHMARKS.md, fifty-sixth session; the default since then, rule M)', ''))
+    controller_read_holding_only: bool = field(default=False, metadata=field_doc(
+        'with controller_inertia and controller_read_block_time: a block whose published '
+        'estimates manoeuvred (a setpoint move or a turn, core.manoeuvre) is not read. The '
+        "controller acts on the error from its filtered setpoint, which the read does not know; "
+        'holding station that setpoint is constant and the high-pass removes it, in a move or a '
+        "turn its transient is read as stiffness and damping (blocks with a move: inertia "
+        "0.19-0.89x the controller's; docs/BENCHMARKS.md, seventy-second session)", ''))
     controller_read_pair_ratio: float = field(default=3.0, metadata=field_doc(
         'with controller_inertia and controller_read_block_time: a DOF that exactly two '
         'blocks believe, with implied inertias more than this factor apart, is not read from '

@@ -13,6 +13,7 @@ from lf_predictor_ros.core.error_models import normalized_error_squared
 from lf_predictor_ros.core.lf_dynamics import DriftCurve, LfDynamics, VesselMemory, body_velocity
 from lf_predictor_ros.core.lf_state import (
     LfStateEstimator,
+    block_manoeuvred,
     implied_input_gain,
     pooled_input_gain,
 )
@@ -202,6 +203,79 @@ def test_a_block_read_outvotes_a_spoilt_stretch_of_commands() -> None:
     read = implied_input_gain(published, times, noise, 1.0, block_time=150.0)
     assert read.gain is None and read.outcome == 'no_fit'
     assert 'controller gains not read (0 of 4 blocks of 150 s believed)' in read.note
+
+
+def _published_pd_loop_with_moves(m: int, moves: tuple[float, ...]
+                                  ) -> tuple[list[Published], np.ndarray, np.ndarray]:
+    """`_published_pd_loop` with 15 m setpoint moves at ``moves`` [s] (1 DOF, h = 1 s).
+
+    The vessel follows each move smoothly over about a minute; the controller acts on the error
+    from its setpoint through the first-order reference filter (T_f 10 s, `sim_ros.control.
+    pid`), which the read does not know: Kp 2e4, Kd 3e5 as in `_published_pd_loop`.
+    """
+    published, times, _ = _published_pd_loop(m)
+    t = times - times[0]
+    shift = np.zeros(m)
+    setpoint = np.zeros(m)
+    for start in moves:
+        after = np.clip(t - start, 0.0, None)
+        shift += 15.0 * (1.0 - (1.0 + after / 15.0) * np.exp(-after / 15.0))  # ζ = 1 follow
+        setpoint += 15.0 * (1.0 - np.exp(-after / 10.0)) * (t >= start)
+    x = np.array([p.pose[0] for p in published]) + shift
+    v = np.array([p.twist[0] for p in published]) + np.gradient(shift)
+    moved = [Published(p.stamp, np.array([xi]), np.array([vi]), 'network', np.zeros(1),
+                       np.array([vi])) for p, xi, vi in zip(published, x, v, strict=True)]
+    return moved, times, (-2.0e4 * (x - setpoint) - 3.0e5 * v)[:, None]
+
+
+def test_holding_only_reads_the_controller_from_the_blocks_without_a_move() -> None:
+    """``holding_only``: blocks whose estimates manoeuvred are not read (lf_state docstring).
+
+    Two of four 150 s blocks hold a 15 m setpoint move: the setpoint's transient is in the
+    thrust and not in the regressors, so those blocks read another PD law, and the median of
+    the four is off (3.6× the inertia); from the two holding blocks the read is exact.
+    """
+    published, times, forces = _published_pd_loop_with_moves(600, (200.0, 330.0))
+    truth = 8.0e4 / 3.0e5 ** 2  # 4 Kp / Kd²
+    assert [block_manoeuvred(np.array([p.pose for p in published[a:a + 150]]), 1.0)
+            for a in (0, 150, 300, 450)] == [False, True, True, False]
+    mixed = implied_input_gain(published, times, forces, 1.0, block_time=150.0)
+    assert mixed.gain is not None and mixed.gain[0] < 0.5 * truth  # measured 0.28×
+    read = implied_input_gain(published, times, forces, 1.0, block_time=150.0,
+                              holding_only=True)
+    assert read.outcome == 'read' and read.gain is not None
+    np.testing.assert_allclose(read.gain, [truth], rtol=1e-6)
+    assert '(median; 2 of 2 blocks of 150 s believed' in read.note
+    # pooled: the moved blocks are passed over for good (the pool's end moves past them)
+    read, pool = pooled_input_gain(published, times, forces, 1.0, 150.0, None, 8,
+                                   holding_only=True)
+    assert len(pool.blocks) == 2 and pool.end == 599.0
+    assert read.gain is not None and read.gain[0] == pytest.approx(truth, rel=1e-6)
+    _, mixed_pool = pooled_input_gain(published, times, forces, 1.0, 150.0, None, 8)
+    assert len(mixed_pool.blocks) == 4
+    # every block moved: nothing read, for lack of data (a remembered read stands in)
+    moving, moving_times, moving_forces = _published_pd_loop_with_moves(
+        600, (20.0, 170.0, 320.0, 470.0))
+    none = implied_input_gain(moving, moving_times, moving_forces, 1.0, block_time=150.0,
+                              holding_only=True)
+    assert none.gain is None and none.outcome == 'no_data'
+    assert 'all 4 blocks manoeuvred (holding only)' in none.note
+    read, empty = pooled_input_gain(moving, moving_times, moving_forces, 1.0, 150.0, None, 8,
+                                    holding_only=True)
+    assert read.outcome == 'no_data' and empty.blocks == () and empty.end == 599.0
+
+
+def test_block_manoeuvred_sees_a_turn_not_a_heading_across_pi() -> None:
+    rng = np.random.default_rng(12)
+    holding = np.column_stack([rng.normal(scale=0.3, size=(300, 2)),
+                               np.pi + rng.normal(scale=0.01, size=300)])
+    holding[:, 2] = (holding[:, 2] + np.pi) % (2.0 * np.pi) - np.pi  # wrapped: jumps ±2π
+    assert np.ptp(holding[:, 2]) > 6.0
+    assert not block_manoeuvred(holding, 1.0)
+    turning = holding.copy()
+    turning[150:, 2] = (turning[150:, 2] + 0.785 + np.pi) % (2.0 * np.pi) - np.pi  # 45°
+    assert block_manoeuvred(turning, 1.0)
+    assert not block_manoeuvred(holding[:, :1], 1.0)  # 1 DOF: surge only
 
 
 def test_a_pooled_read_reads_every_block_once_and_outvotes_a_wrong_one() -> None:

@@ -786,9 +786,9 @@ def block_manoeuvred(poses: FloatArray, sample_time: float) -> bool:
     ``poses`` (m, ndof), the heading wrapped (unwrapped here). A DP controller acts on the
     error from its filtered setpoint η_d, which the read does not know: holding station, η_d is
     constant and the high-pass removes it; through a setpoint move or a turn its transient is
-    left in the thrust and the PD fit reads it as stiffness and damping (rao_swell, blocks with
-    a move: inertia 0.19–0.89× the controller's, station keeping 0.91–1.03×; docs/
-    BENCHMARKS.md, seventy-second session).
+    left in the thrust and the PD fit reads it as stiffness and damping (rao_supply and
+    rao_swell, ten loops: blocks with a move read the surge inertia 0.17–0.90× the controller's,
+    blocks holding station 0.90–1.08×; docs/BENCHMARKS.md, seventy-second session).
     """
     values = np.array(poses, dtype=np.float64)
     if values.shape[1] == 3:
@@ -863,6 +863,7 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
     block = max(int(round(block_time / sample_time)), MIN_SAMPLES + 2 * MAX_SHIFT)
     grid = DIFFERENCE_TIMES if difference else ()
     new: list[ControllerGains] = []
+    passed_over = False  # a new block that manoeuvred (holding_only): the pool's end moves
     for a, b in runs:
         first = a + int(np.searchsorted(stamps[a:b], end, side='right'))
         for start in range(first, b - block + 1, block):
@@ -873,6 +874,7 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
             end = float(stamps[start + block - 1])
             if holding_only and block_manoeuvred(np.array([p.pose for p in rows[lead:]]),
                                                  sample_time):
+                passed_over = True
                 continue
             try:
                 new.append(read_controller_gains(
@@ -887,7 +889,8 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
         not any(np.any(b.believed(max_natural_freq)) for b in tail)
     if restart:
         pooled = tail
-    after = pool if pool is not None and not new else ReadPool(end, pooled[-pool_blocks:])
+    after = pool if pool is not None and not new and not passed_over else \
+        ReadPool(end, pooled[-pool_blocks:])
     if not after.blocks:
         read = implied_input_gain(published, times, forces, sample_time, block_time,
                                   earth_highpass, max_natural_freq, stiffness_frame, pair_ratio,

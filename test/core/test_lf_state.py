@@ -253,6 +253,14 @@ def test_holding_only_reads_the_controller_from_the_blocks_without_a_move() -> N
     assert read.gain is not None and read.gain[0] == pytest.approx(truth, rel=1e-6)
     _, mixed_pool = pooled_input_gain(published, times, forces, 1.0, 150.0, None, 8)
     assert len(mixed_pool.blocks) == 4
+    # a later read whose only new block moved: the pool keeps its blocks, its end moves on
+    _, first = pooled_input_gain(published[:300], times[:300], forces[:300], 1.0, 150.0, None,
+                                 8, holding_only=True)
+    assert len(first.blocks) == 1 and first.end == 299.0
+    read, later = pooled_input_gain(published[:450], times[:450], forces[:450], 1.0, 150.0,
+                                    first, 8, holding_only=True)
+    assert later.blocks == first.blocks and later.end == 449.0
+    assert read.gain is not None and read.gain[0] == pytest.approx(truth, rel=1e-6)
     # every block moved: nothing read, for lack of data (a remembered read stands in)
     moving, moving_times, moving_forces = _published_pd_loop_with_moves(
         600, (20.0, 170.0, 320.0, 470.0))

@@ -8,7 +8,9 @@ BENCHMARKS.md, eleventh session: the wide notch helps the supply vessel's loops 
 rao_supply's, whose windows hold its setpoint moves and turns). The same test makes
 ``PredictorParams.sea_change_confirm: manoeuvres`` (the default since the twentieth session) ask
 for a confirmed change of sea state when a move or a turn is in the short window; ``turning``,
-its heading part, does so for ``turns`` (fifteenth session).
+its heading part, does so for ``turns`` (fifteenth session). With
+``OdometryParams.controller_read_holding_only`` the controller read passes over its blocks that
+manoeuvred (`lf_state.block_manoeuvred`; seventy-second session).
 
 The test needs no model: the positions are averaged over consecutive blocks of
 ``MANOEUVRE_BLOCK`` seconds (wave periods of 5–20 s average out), and the window shows a

@@ -399,8 +399,10 @@ class OdometryParams:
         'estimates manoeuvred (a setpoint move or a turn, core.manoeuvre) is not read. The '
         "controller acts on the error from its filtered setpoint, which the read does not know; "
         'holding station that setpoint is constant and the high-pass removes it, in a move or a '
-        "turn its transient is read as stiffness and damping (blocks with a move: inertia "
-        "0.19-0.89x the controller's; docs/BENCHMARKS.md, seventy-second session)", ''))
+        "turn its transient is read as stiffness and damping (blocks with a move: surge inertia "
+        "0.17-0.90x the controller's). Off: the median over the blocks outvotes most of them, "
+        'and on fresh seeds the dead reckoning through dropouts in moves was 1.04x worse with '
+        'it (docs/BENCHMARKS.md, seventy-second session, rule AA)', ''))
     controller_read_pair_ratio: float = field(default=3.0, metadata=field_doc(
         'with controller_inertia and controller_read_block_time: a DOF that exactly two '
         'blocks believe, with implied inertias more than this factor apart, is not read from '

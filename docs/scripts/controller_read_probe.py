@@ -17,6 +17,10 @@ frame at the heading of the read's newest estimate (surge cos²ψ Kp_N + sin²ψ
 sin²ψ Kp_N + cos²ψ Kp_E). Printed per seed: the reads' log10 error per DOF over time; at the
 end per way and DOF: the share of reads made ('read'), the median |log10(read / target)| and
 the share within ±25 %. Development seeds only, as `method_probe.py`.
+
+Stale since the sixtieth session (the pooled read calls `implied_input_gain` only before the
+pool's first full block): it stops with a message instead of printing empty summaries; the
+per-block read of today's loop is `controller_read_blocks_probe.py`.
 """
 from __future__ import annotations
 
@@ -85,6 +89,12 @@ def run_seed(scenario_name: str, seed: int, duration: float, block_time: float
         ob._odometry_loop(scenario, seed, duration, params, OdometryParams())
     finally:
         lf_state.implied_input_gain = original
+    if not any(errors.values()):
+        raise SystemExit('the spy saw no read: since the sixtieth session the loop reads the '
+                         'controller from its pool of blocks (`lf_state.pooled_input_gain`), '
+                         'which calls implied_input_gain only before its first full block. Run '
+                         'this probe at the commit of its section (docs/BENCHMARKS.md, '
+                         'forty-seventh session) or use controller_read_blocks_probe.py')
     return errors
 
 

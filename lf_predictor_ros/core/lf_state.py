@@ -51,6 +51,7 @@ from lf_predictor_ros.core.controller_gains import (
 from lf_predictor_ros.core.error_models import Covariances, calibrate
 from lf_predictor_ros.core.estimator import EstimatorStatus
 from lf_predictor_ros.core.fit_process import FitProcess, shared_fit_process
+from lf_predictor_ros.core.heading import unwrap_pose_series
 from lf_predictor_ros.core.lf_dynamics import (
     FORCE_MARGIN,
     MIN_DAMPING_RATE,
@@ -783,17 +784,15 @@ def implied_input_gain(published: list[Published], times: FloatArray, forces: Fl
 def block_manoeuvred(poses: FloatArray, sample_time: float) -> bool:
     """Did the estimates of one read block manoeuvre (`manoeuvre.manoeuvring`)?
 
-    ``poses`` (m, ndof), the heading wrapped (unwrapped here). A DP controller acts on the
-    error from its filtered setpoint η_d, which the read does not know: holding station, η_d is
-    constant and the high-pass removes it; through a setpoint move or a turn its transient is
-    left in the thrust and the PD fit reads it as stiffness and damping (rao_supply and
-    rao_swell, ten loops: blocks with a move read the surge inertia 0.17–0.90× the controller's,
-    blocks holding station 0.90–1.08×; docs/BENCHMARKS.md, seventy-second session).
+    ``poses`` (m, ndof), the heading wrapped (`heading.unwrap_pose_series` here). A DP controller
+    acts on the error from its filtered setpoint η_d, which the read does not know: holding
+    station, η_d is constant and the high-pass removes it; through a setpoint move or a turn its
+    transient is left in the thrust and the PD fit reads it as stiffness and damping (rao_supply
+    and rao_swell, ten loops: blocks with a move read the surge inertia 0.17–0.90× the
+    controller's, blocks holding station 0.90–1.08×; docs/BENCHMARKS.md, seventy-second session).
     """
-    values = np.array(poses, dtype=np.float64)
-    if values.shape[1] == 3:
-        values[:, 2] = np.unwrap(values[:, 2])
-    return manoeuvring(values, sample_time)
+    values = np.asarray(poses, dtype=np.float64)
+    return manoeuvring(unwrap_pose_series(values, values.shape[1]), sample_time)
 
 
 def _paired_runs(published: list[Published], times: FloatArray, sample_time: float
@@ -871,14 +870,14 @@ def pooled_input_gain(published: list[Published], times: FloatArray, forces: Flo
             # difference's filter up where the run began earlier
             lead = _warm_lead(start - a, grid, sample_time)
             rows = published[start - lead:start + block]
+            poses = np.array([p.pose for p in rows])
             end = float(stamps[start + block - 1])
-            if holding_only and block_manoeuvred(np.array([p.pose for p in rows[lead:]]),
-                                                 sample_time):
+            if holding_only and block_manoeuvred(poses[lead:], sample_time):
                 passed_over = True
                 continue
             try:
                 new.append(read_controller_gains(
-                    np.array([p.pose for p in rows]), np.array([p.twist for p in rows[lead:]]),
+                    poses, np.array([p.twist for p in rows[lead:]]),
                     forces[index[start:start + block]], sample_time, difference_times=grid,
                     lead=lead, earth_highpass=earth_highpass, stiffness_frame=stiffness_frame))
             except ValueError:  # non-finite values: this block says nothing

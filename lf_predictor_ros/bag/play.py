@@ -6,9 +6,10 @@
 
 For stacks without rosbag2. BAG is an `.mcap` file or a rosbag2 directory. Messages go out as
 the recorded CDR bytes (rclpy publishes serialized data directly), in log-time order, the
-message with log time t at wall time start + (t - t_first) / R. Each publisher offers the
-recorded reliability and durability (first recorded profile, rosbag2's rule) with keep_last 10,
-or reliable / volatile / keep_last 10 when the bag has no QoS metadata.
+message with log time t at wall time w_first + (t - t_first) / R, w_first being when the
+first message went out. Each publisher offers the recorded reliability and durability (first
+recorded profile, rosbag2's rule) with keep_last 10, or reliable / volatile / keep_last 10 when
+the bag has no QoS metadata.
 
 With `--clock`, `/clock` (rosgraph_msgs/Clock, reliable, keep_last 10, so it matches both
 reliable and best-effort subscribers) carries the bag time: just before each message whose log
@@ -171,23 +172,35 @@ class Player:
         return unacknowledged
 
     def play_once(self, context: Context) -> bool:
-        """Play the bag once; False if shutdown interrupted it."""
+        """Play the bag once; False if shutdown interrupted it.
+
+        The schedule starts when the first message has gone out: a stall before that (reading
+        the first chunk, a DDS writer's first send, a loaded machine) delays the whole bag
+        instead of sending its first seconds in one burst. A stall later is caught up at once.
+        """
         rate = self._options.rate
-        start_ns = self._reader.start_time_ns
-        wall_start = time.monotonic()
         self._last_clock_ns = -1
+        anchor: tuple[float, int] | None = None  # (wall time, log time) of the first message
         for message in self._reader.messages(self.topics):
-            due = wall_start + (message.log_time_ns - start_ns) / 1e9 / rate
-            if not self._wait_until(due, wall_start, start_ns, context):
+            if anchor is not None:
+                due = anchor[0] + (message.log_time_ns - anchor[1]) / 1e9 / rate
+                if not self._wait_until(due, anchor[0], anchor[1], context):
+                    return False
+            elif not context.ok():
                 return False
             self._publish_clock(message.log_time_ns)
             self._publishers[message.topic].publish(message.data)
             self.published += 1
+            if anchor is None:
+                anchor = (time.monotonic(), message.log_time_ns)
         return context.ok()
 
     def _wait_until(self, due: float, wall_start: float, start_ns: int,
                     context: Context) -> bool:
-        """Sleep until wall time `due`, publishing /clock at clock_rate meanwhile."""
+        """Sleep until wall time `due`, publishing /clock at clock_rate meanwhile.
+
+        `wall_start` is the wall time at which the bag time was `start_ns`.
+        """
         period = 1.0 / self._options.clock_rate
         while True:
             if not context.ok():

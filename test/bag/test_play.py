@@ -10,6 +10,7 @@ import time
 from typing import Any
 
 from geometry_msgs.msg import PoseStamped
+import numpy as np
 import pytest
 from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
@@ -143,6 +144,51 @@ def test_wait_for_all_acked_names_the_topics_left_unacknowledged(tmp_path: Path)
     timeouts = [t for p in node.publishers.values() for t in p.timeouts]
     assert len(timeouts) == 3 and all(0.0 <= t <= 3.0 for t in timeouts)
     assert parse_args(['play', str(bag)]).wait_for_all_acked == DEFAULT_ACK_TIMEOUT
+
+
+class _StallingPublisher:
+    """Logs when each message goes out; the first publish of all stalls `stall` seconds."""
+
+    def __init__(self, topic: str, log: list[tuple[str, float]], stall: float) -> None:
+        self.topic, self.log, self.stall = topic, log, stall
+
+    def publish(self, _data: Any) -> None:
+        if not self.log:
+            time.sleep(self.stall)  # a DDS writer's first send on a loaded machine
+        self.log.append((self.topic, time.monotonic()))
+
+
+class _StallingNode:
+    def __init__(self, stall: float) -> None:
+        self.log: list[tuple[str, float]] = []
+        self.stall = stall
+
+    def create_publisher(self, _type: Any, topic: str, _qos: Any) -> _StallingPublisher:
+        return _StallingPublisher(topic, self.log, self.stall)
+
+
+class _Context:
+    def ok(self) -> bool:
+        return True
+
+
+def test_a_stall_before_the_first_message_delays_the_bag_instead_of_bursting(
+        tmp_path: Path) -> None:
+    bag = tmp_path / 'play.mcap'
+    _write_bag(bag)
+    stall = 0.4  # [s] longer than the whole bag at RATE (225 ms)
+    node = _StallingNode(stall)
+    with BagReader(bag) as reader:
+        options = parse_args(['play', str(bag), '--rate', str(RATE)])
+        player = Player(node, reader, options)  # type: ignore[arg-type]
+        assert player.play_once(_Context())  # type: ignore[arg-type]
+    poses = [t for topic, t in node.log if topic == '/measured_pose']
+    assert len(poses) == N_POSES and player.published == 2 * N_POSES + 3  # /clock played
+    # Paced from the first message out: pose k leaves k * 50 ms / RATE after pose 0.
+    gaps = np.diff(poses)
+    expected = SAMPLE_NS / 1e9 / RATE
+    assert gaps.min() >= 0.8 * expected
+    assert poses[-1] - poses[0] == pytest.approx((N_POSES - 1) * expected, abs=0.05)
 
 
 def test_negative_ack_timeout_is_a_usage_error() -> None:

@@ -3,7 +3,7 @@
 Time base: the simulator produces one `SimSample` per output (sensor) period `sample_time`;
 inside, the vessel is integrated with RK4 at `internal_step` (sample_time must be an integer
 multiple), the command is held over the period (zero-order hold), and the shaft dynamics of the
-supply vessel are solved exactly between RK4 stages. Random streams are separate children of
+DP vessels are solved exactly between RK4 stages. Random streams are separate children of
 `np.random.SeedSequence(seed)` (waves, current, wind, drift, sensor noise, sensor faults,
 excitation), so one seed reproduces a run exactly and changing one source leaves the others.
 
@@ -16,7 +16,7 @@ Ground truth:
   of the vessel model linearized once, at the run's operating point (`vessels.*.wave_rates_fn`;
   thesis vessels: `vessels.wave_operating_speed` of the initial state and mean current, so the
   WF motion stays zero-mean while the vessel speeds up), and the total pose is twin + WF motion.
-  For the linear supply vessel this equals integrating a second vessel with the wave force
+  For the linear DP vessels this equals integrating a second vessel with the wave force
   inside; for the thesis vessels with quadratic damping it drops the rectified (second-order)
   effects: the mean force that would otherwise make vessel and twin drift apart (see the vessels
   module docstring) and the shift of the WF mean a velocity-dependent WF damping would make;
@@ -59,8 +59,8 @@ from sim_ros.physics.sea_spectrum import (
 from sim_ros.physics.sensors import SensorConfig, check_sensor_rate, sensor_errors
 from sim_ros.physics.thrusters import ThrusterConfig, allocate, generalized_thrust
 from sim_ros.physics.vessels import (
+    DpVessel,
     LinearModel,
-    SupplyVessel,
     ThesisVessel,
     WaveRatesFn,
     make_vessel,
@@ -247,14 +247,14 @@ class Scenario:
 
     name: str = 'unnamed'
     description: str = ''
-    vessel: str = 'onedof'  # 'onedof' | 'threedof' | 'supply'
+    vessel: str = 'onedof'  # 'onedof' | 'threedof' | 'supply' | 'tanker'
     sample_time: float = 0.1  # s, output/sensor period (1–100 Hz)
     internal_step: float = 0.1  # s, RK4 step; sample_time / internal_step is an integer
     duration: float = 600.0  # s
     seed: int = 0
     initial_pose: Vec3 = (0.0, 0.0, 0.0)
     initial_velocity: Vec3 = (0.0, 0.0, 0.0)
-    actuator_limit: Vec3 | None = None  # |τ| limit of the thesis vessels (supply: thrusters)
+    actuator_limit: Vec3 | None = None  # |τ| limit of the thesis vessels (DP vessels: thrusters)
     waves: WaveConfig = field(default_factory=WaveConfig)
     environment: EnvironmentConfig = field(default_factory=EnvironmentConfig)
     sensors: SensorConfig = field(default_factory=SensorConfig)
@@ -595,8 +595,8 @@ class Simulator:
         self._excitation = self._build_excitation(streams[6])
         # actuators
         self._thrusters: ThrusterConfig | None = None
-        if isinstance(self.vessel, SupplyVessel):
-            self._thrusters = ThrusterConfig()
+        if isinstance(self.vessel, DpVessel):
+            self._thrusters = self.vessel.thrusters
             self._rpm = np.zeros(self._thrusters.thrust_coeff.shape[0])
             elapsed = np.arange(2 * self._substeps + 1) * (0.5 * self._h)
             self._decay = np.exp(-elapsed / self._thrusters.shaft_time_constant)[:, None]
@@ -617,7 +617,7 @@ class Simulator:
         return self._k * self.sample_time
 
     def actuator_limit(self) -> FloatArray | None:
-        """|τ| limit per DOF: thruster capacity (supply) or scenario.actuator_limit (thesis)."""
+        """|τ| limit per DOF: thruster capacity (DP vessels), scenario.actuator_limit (thesis)."""
         if self._thrusters is not None:
             return self._thrusters.max_generalized_force()
         return None if self._limit is None else self._limit.copy()

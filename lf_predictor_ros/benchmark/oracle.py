@@ -39,7 +39,7 @@ import numpy as np
 
 from lf_predictor_ros.core.baselines.kalman import GaussMarkov, KalmanEstimator, OracleModel
 from sim_ros.physics.environment import MarkovBias
-from sim_ros.physics.vessels import SupplyVessel, ThesisVessel, make_vessel, wave_operating_speed
+from sim_ros.physics.vessels import DpVessel, ThesisVessel, make_vessel, wave_operating_speed
 from sim_ros.simulation import Scenario
 
 ORACLE_WAVE_MODELS = ('force', 'motion', 'none')
@@ -90,7 +90,7 @@ def oracle_model(scenario: Scenario, sample_time: float) -> OracleModel:
         speed = wave_operating_speed(scenario.initial_pose[2], scenario.initial_velocity,
                                      (float(mean_current[0]), float(mean_current[1])))
         hold = 'last' if round(ratio) == 1 else 'linear'
-    elif isinstance(vessel, SupplyVessel):
+    elif isinstance(vessel, DpVessel):
         mass, damping = vessel.mass.copy(), vessel.damping.copy()
         quad, speed, hold = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 'linear'
     else:  # pragma: no cover - make_vessel returns one of the two

@@ -1,4 +1,4 @@
-"""Vessel models: the thesis 1-DOF and 3-DOF models and the MSS supply vessel (3-DOF DP).
+"""Vessel models: the thesis 1-DOF and 3-DOF models and two 3-DOF DP vessels (supply, tanker).
 
 All vessels share one state layout, a list of six floats [north m, east m, ψ rad, u m/s,
 v m/s, r rad/s] (η then ν), and one input layout, eight floats
@@ -22,6 +22,19 @@ R(ψ)ᵀ f, η̇ = R(ψ) ν, linear damping, valid below about 3 m/s. M, D in SI
 M = m T⁻¹ Mbis T⁻¹, D = m √(g/L) T⁻¹ Dbis T⁻¹, T⁻¹ = diag(1, 1, L). Open-loop time constants
 (eigenvalues of M⁻¹D) ≈ 88 s, 44 s, 11.5 s.
 
+Shuttle tanker (`tanker`; our own design, not a published model: a test hull the predictor was
+never developed on, twice the supply vessel's length and five times its mass). The same linear
+model in the same nondimensional form (Fossen 2011 §7.1's bis system, as MSS supply.m), with
+L = 150 m, beam 27 m, draught 9.5 m, block coefficient 0.80: m = ρ L B T C_b = 31.55e6 kg
+(ρ = 1025 kg/m³). Mbis: surge 1.05 (5 % added mass; a slender hull's is small), sway 1.95,
+yaw 0.12 (radius of gyration with added inertia 0.35 L), sway–yaw coupling −0.06. Dbis from
+chosen open-loop time constants M_ii / D_ii of 200 s (surge: a slender hull, little damping),
+60 s (sway) and 25 s (yaw), i.e. Dbis_ii = Mbis_ii / (√(g/L) T_i), couplings −0.008 and
+−0.003. Eigen time constants ≈ 200 s, 60 s, 25 s (the supply vessel's 88, 44, 11.5 s): a
+slower vessel, not the supply vessel scaled (Froude scaling would give 123, 62, 16 s). Its
+thrusters (`TANKER_THRUSTERS`): the supply vessel's layout with lever arms for 150 m and
+larger units, 5.6 MN surge, 3.0 MN sway, 226 MN·m yaw at full RPM.
+
 First-order wave motion under force superposition (`wave_rates_fn`): the wave-frequency state
 x_WF (same layout) is the response of the model *linearized once, at the run's operating point*
 (`wave_operating_speed`), to the first-order wave force, rotated with the LF heading, and the
@@ -38,13 +51,14 @@ why the slope is held at the operating point.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 
 import numpy as np
 
 from sim_ros.physics.integrate import RatesFn, State
 from sim_ros.physics.kinematics import FloatArray, earth_to_body
+from sim_ros.physics.thrusters import ThrusterConfig
 
 # --- thesis models, eq. 5.6-5.7 ---------------------------------------------------------------
 ONEDOF_A = -0.017  # 1/m, quadratic damping coefficient a (eq. 5.6)
@@ -67,7 +81,29 @@ SUPPLY_D = SUPPLY_MASS * math.sqrt(GRAVITY / SUPPLY_LENGTH) * _T_INV @ SUPPLY_DB
 SUPPLY_CURRENT_SPEED = 0.5  # m/s, MSS SIMsupply.m
 SUPPLY_CURRENT_DIRECTION = math.radians(20.0)  # rad, β_c in MSS SIMsupply.m
 
-VESSEL_KINDS = ('onedof', 'threedof', 'supply')
+# --- shuttle tanker, our own design (module docstring) --------------------------------------
+TANKER_LENGTH = 150.0  # m, L
+TANKER_BEAM = 27.0  # m, B
+TANKER_DRAUGHT = 9.5  # m, T
+TANKER_BLOCK_COEFFICIENT = 0.80  # C_b
+SEA_WATER_DENSITY = 1025.0  # kg/m³, ρ
+TANKER_MASS = (SEA_WATER_DENSITY * TANKER_LENGTH * TANKER_BEAM * TANKER_DRAUGHT
+               * TANKER_BLOCK_COEFFICIENT)  # kg, ≈ 31.55e6
+TANKER_MBIS = np.array([[1.05, 0.0, 0.0], [0.0, 1.95, -0.06], [0.0, -0.06, 0.12]])
+TANKER_DBIS = np.array([[0.0205, 0.0, 0.0], [0.0, 0.127, -0.008], [0.0, -0.003, 0.0188]])
+_TANKER_T_INV = np.diag([1.0, 1.0, TANKER_LENGTH])
+TANKER_M = TANKER_MASS * _TANKER_T_INV @ TANKER_MBIS @ _TANKER_T_INV  # kg, kg·m, kg·m²
+TANKER_D = (TANKER_MASS * math.sqrt(GRAVITY / TANKER_LENGTH)
+            * _TANKER_T_INV @ TANKER_DBIS @ _TANKER_T_INV)
+# Two bow and two stern tunnel thrusters (lever arms [m]) and two main propellers 9 m off the
+# centre line; K [N/RPM²] 12 (750 kN at 250 RPM) and 110 (2.8 MN at 160 RPM).
+TANKER_THRUSTERS = ThrusterConfig(
+    configuration=np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 1.0],
+                            [1.0, 1.0, 1.0, 1.0, 0.0, 0.0],
+                            [62.0, 55.0, -55.0, -62.0, -9.0, 9.0]]),
+    thrust_coeff=np.array([12.0, 12.0, 12.0, 12.0, 110.0, 110.0]))
+
+VESSEL_KINDS = ('onedof', 'threedof', 'supply', 'tanker')
 # f(x_LF, x_WF, input) → ẋ_WF; input = the 8 LF inputs + first-order wave force (3, earth)
 WaveRatesFn = Callable[[Sequence[float], Sequence[float], Sequence[float]], State]
 
@@ -180,18 +216,19 @@ def wave_operating_speed(heading: float, velocity: Sequence[float],
 
 
 @dataclass(frozen=True)
-class SupplyVessel:
-    """Linear 3-DOF DP model M ν̇ + D ν_r = τ + R(ψ)ᵀ f (MSS supply.m)."""
+class DpVessel:
+    """Linear 3-DOF DP model M ν̇ + D ν_r = τ + R(ψ)ᵀ f with its thrusters (MSS supply.m's form)."""
 
     mass: FloatArray
     damping: FloatArray
+    thrusters: ThrusterConfig = field(default_factory=ThrusterConfig)
 
     def __post_init__(self) -> None:
         """Validate: 3×3, M symmetric positive definite."""
         if self.mass.shape != (3, 3) or self.damping.shape != (3, 3):
-            raise ValueError('supply vessel M and D must be 3×3')
+            raise ValueError('DP vessel M and D must be 3×3')
         if not np.allclose(self.mass, self.mass.T) or np.any(np.linalg.eigvalsh(self.mass) <= 0):
-            raise ValueError('supply vessel M must be symmetric positive definite')
+            raise ValueError('DP vessel M must be symmetric positive definite')
 
     @property
     def ndof(self) -> int:
@@ -253,16 +290,18 @@ class SupplyVessel:
         return rates
 
 
-Vessel = ThesisVessel | SupplyVessel
+Vessel = ThesisVessel | DpVessel
 
 ONEDOF = ThesisVessel((ONEDOF_A, 0.0, 0.0), (ONEDOF_B, 0.0, 0.0), ndof=1)
 THREEDOF = ThesisVessel(THREEDOF_A, THREEDOF_B, ndof=3)
-SUPPLY = SupplyVessel(SUPPLY_M.copy(), SUPPLY_D.copy())
+SUPPLY = DpVessel(SUPPLY_M.copy(), SUPPLY_D.copy())
+TANKER = DpVessel(TANKER_M.copy(), TANKER_D.copy(), TANKER_THRUSTERS)
 
 
 def make_vessel(kind: str) -> Vessel:
-    """The vessel called `kind` ('onedof', 'threedof' or 'supply')."""
-    vessels: dict[str, Vessel] = {'onedof': ONEDOF, 'threedof': THREEDOF, 'supply': SUPPLY}
+    """The vessel called `kind` ('onedof', 'threedof', 'supply' or 'tanker')."""
+    vessels: dict[str, Vessel] = {'onedof': ONEDOF, 'threedof': THREEDOF, 'supply': SUPPLY,
+                                  'tanker': TANKER}
     if kind not in vessels:
         raise ValueError(f'vessel must be one of {VESSEL_KINDS}, got {kind!r}')
     return vessels[kind]

@@ -46,7 +46,7 @@ def test_all_scenarios_load_and_validate() -> None:
 
 
 @pytest.mark.parametrize(('change', 'message'), [
-    ({'vessel': 'tanker'}, 'vessel must be one of'),
+    ({'vessel': 'barge'}, 'vessel must be one of'),
     ({'sample_time': 2.0}, '1–100 Hz'),
     ({'sample_time': 0.1, 'internal_step': 0.03}, 'integer multiple'),
     ({'waves': {'model': 'force', 'damping': 1.5}}, 'damping'),

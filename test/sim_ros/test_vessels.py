@@ -1,4 +1,4 @@
-"""Vessel dynamics: supply vessel time constants and step response, 1-DOF terminal velocity."""
+"""Vessel dynamics: DP vessels' time constants and step responses, 1-DOF terminal velocity."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -33,6 +33,53 @@ def test_supply_matrices_and_time_constants() -> None:
     assert vessels.SUPPLY_D[2, 2] == pytest.approx(3.8501e8, rel=1e-4)
     consts = vessels.SUPPLY.linearize().time_constants()
     np.testing.assert_allclose(consts, [88.0, 44.0, 11.5], rtol=0.015)
+
+
+def test_tanker_matrices_from_its_dimensions_and_chosen_time_constants() -> None:
+    """Our tanker: m = ρ L B T C_b, bis-system M and D, time constants ≈ 200 / 60 / 25 s."""
+    mass = 1025.0 * 150.0 * 27.0 * 9.5 * 0.80
+    assert vessels.TANKER_MASS == pytest.approx(mass, rel=1e-12)
+    assert mass == pytest.approx(31.5495e6, rel=1e-6)
+    assert vessels.TANKER_M[0, 0] == pytest.approx(1.05 * mass, rel=1e-12)
+    assert vessels.TANKER_M[1, 2] == pytest.approx(-0.06 * mass * 150.0, rel=1e-12)
+    assert vessels.TANKER_M[2, 2] == pytest.approx(0.12 * mass * 150.0**2, rel=1e-12)
+    rate = math.sqrt(9.81 / 150.0)  # 1/s, √(g/L)
+    assert vessels.TANKER_D[0, 0] == pytest.approx(0.0205 * mass * rate, rel=1e-12)
+    assert vessels.TANKER_D[2, 1] == pytest.approx(-0.003 * mass * rate * 150.0, rel=1e-12)
+    consts = vessels.TANKER.linearize().time_constants()
+    np.testing.assert_allclose(consts, [200.0, 60.0, 25.0], rtol=0.005)
+    # Slower than the supply vessel in every DOF, and not its Froude-scaled copy (× √(150/76.2))
+    supply = vessels.SUPPLY.linearize().time_constants()
+    assert np.all(consts > supply)
+    assert consts[0] / supply[0] > 1.5 * math.sqrt(150.0 / 76.2)
+    assert vessels.make_vessel('tanker') is vessels.TANKER
+
+
+def test_tanker_surge_step_response_first_order() -> None:
+    """Surge is decoupled on the tanker too: 63.2 % of F/D11 at T = M11/D11 ≈ 200 s."""
+    force = 2e5  # N
+    traj = np.array(_integrate(vessels.TANKER, (force, 0.0, 0.0), 800.0, 0.5))
+    u = traj[:, 3]
+    t63 = np.interp((1 - math.exp(-1)) * force / vessels.TANKER_D[0, 0], u,
+                    np.arange(len(u)) * 0.5)
+    assert t63 == pytest.approx(vessels.TANKER_M[0, 0] / vessels.TANKER_D[0, 0], rel=1e-3)
+    assert t63 == pytest.approx(200.0, rel=0.01)
+
+
+def test_tanker_thrusters_are_its_own() -> None:
+    """The simulator saturates the tanker at its thrusters' capacity, not the supply vessel's."""
+    expected = [2 * 110.0 * 160.0**2,  # two mains [N]
+                4 * 12.0 * 250.0**2,  # four tunnel thrusters [N]
+                12.0 * 250.0**2 * (62.0 + 55.0 + 55.0 + 62.0) + 110.0 * 160.0**2 * 18.0]  # N·m
+    np.testing.assert_allclose(vessels.TANKER.thrusters.max_generalized_force(), expected,
+                               rtol=1e-12)
+    limit = Simulator(Scenario(vessel='tanker', sample_time=0.1, duration=10.0),
+                      seed=0).actuator_limit()
+    assert limit is not None
+    np.testing.assert_allclose(limit, expected, rtol=1e-12)
+    supply = Simulator(Scenario(vessel='supply', sample_time=0.1, duration=10.0),
+                       seed=0).actuator_limit()
+    assert supply is not None and np.all(limit > 1.5 * supply)
 
 
 def test_supply_surge_step_response_first_order() -> None:

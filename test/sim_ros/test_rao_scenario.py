@@ -20,17 +20,20 @@ from sim_ros.simulation import (
     simulate_in_loop,
 )
 
-RAO_SCENARIOS = ['rao_supply', 'rao_swell']
+# scenario → (vessel, largest heading setpoint step [rad])
+RAO_SCENARIOS = {'rao_supply': ('supply', math.pi / 2), 'rao_swell': ('supply', math.pi / 2),
+                 'rao_tanker': ('tanker', math.pi / 3)}
 
 
 @pytest.mark.parametrize('name', RAO_SCENARIOS)
 def test_rao_scenario_loads_and_runs(name: str) -> None:
     """Loads, reports ω_p, truth − LF is the RAO motion at the LF heading, deterministic."""
     scn = load_scenario(name)
-    assert scn.waves.model == 'rao' and scn.vessel == 'supply' and scn.controller.enabled
+    vessel, largest_turn = RAO_SCENARIOS[name]
+    assert scn.waves.model == 'rao' and scn.vessel == vessel and scn.controller.enabled
     assert len(scn.controller.setpoint_schedule) >= 4
     yaw_steps = np.diff([0.0] + [row[3] for row in scn.controller.setpoint_schedule])
-    assert np.max(np.abs(yaw_steps)) == pytest.approx(math.pi / 2, abs=1e-5)
+    assert np.max(np.abs(yaw_steps)) == pytest.approx(largest_turn, abs=1e-5)
     wp = 2.0 * math.pi / scn.waves.tp
     rec = simulate(scn, duration=60.0)
     np.testing.assert_allclose(rec.wave_peak_freq, wp)

@@ -1,7 +1,8 @@
 """Exploratory: the LF augmentation's copy fitted with the thrust weights of the window alone.
 
     OMP_NUM_THREADS=1 python docs/scripts/held_copy_probe.py --scenarios threedof_open_loop \
-        --seeds 579 --variant default --variant "y025=lf_augmentation:0,0,0.00025"
+        --seeds 579 --variant "default=north_east_decoupled:false" \
+        --variant "y025=lf_augmentation:0,0,0.00025;north_east_decoupled:false"
 
 `method_probe.py` with one change in this process (nothing in the package changes): a
 retraining whose training data carry an augmentation copy (`retraining.training_data` returned
@@ -12,11 +13,16 @@ retraining is left as it is). Why: the copy adds slow motion the thrust did not 
 joint fit trades the thrust's weight for following it. On threedof_open_loop seed 579 the yaw
 output's thrust part falls 27–38 % with `lf_augmentation: [0, 0, 0.00025]` (north and east
 within 2 %), and its open-loop heading error rises 26 % (docs/BENCHMARKS.md, forty-first
-session). Development seeds only, as `method_probe.py`.
+session). Development seeds only, as `method_probe.py`. Written for the coupled fit: in 3 DOF
+every variant needs `north_east_decoupled:false` (the default since the forty-third session,
+which `hold_forces` refuses); the probe stops with that message otherwise (it had silently run
+every augmented training into an error, i.e. on the cascade fallback, until the seventy-third
+session).
 """
 from __future__ import annotations
 
 from dataclasses import replace
+import os
 from pathlib import Path
 import sys
 import threading
@@ -58,9 +64,20 @@ def solve_plain_first(net: NnarmaxNet, settings: Any,
     return first, NnarmaxNet.from_state(net.spec, first.state_dict)
 
 
+DECOUPLED_MESSAGE = (
+    'held_copy_probe: TrainSettings.hold_forces does not combine with north_east_decoupled, '
+    'the 3-DOF default since the forty-third session (every second stage would raise and the '
+    "predictor would only count it in training_errors); add 'north_east_decoupled:false' to "
+    "each variant, e.g. --variant 'y025=lf_augmentation:0,0,0.00025;north_east_decoupled:false'")
+
+
 def _train(net: NnarmaxNet, u: Any, y: Any, targets: Any, mask: Any, settings: Any,
            **kwargs: Any) -> Any:
     """Window alone first; then window and copy with its force weights held."""
+    if settings.north_east_decoupled:
+        # Raised here the predictor would swallow it (a failed training); stop the probe.
+        print(DECOUPLED_MESSAGE, file=sys.stderr, flush=True)
+        os._exit(2)
     staged = solve_plain_first(net, settings, **kwargs)
     if staged is None:
         return ORIGINAL_TRAIN(net, u, y, targets, mask, settings, **kwargs)

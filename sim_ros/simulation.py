@@ -247,7 +247,7 @@ class Scenario:
 
     name: str = 'unnamed'
     description: str = ''
-    vessel: str = 'onedof'  # 'onedof' | 'threedof' | 'supply' | 'tanker'
+    vessel: str = 'onedof'  # one of sim_ros.physics.vessels.VESSEL_KINDS
     sample_time: float = 0.1  # s, output/sensor period (1–100 Hz)
     internal_step: float = 0.1  # s, RK4 step; sample_time / internal_step is an integer
     duration: float = 600.0  # s

@@ -59,7 +59,9 @@ SUITE: dict[str, float | None] = {
     'supply_closed_loop': 1800.0,
     'rao_supply': 1800.0,
     'rao_swell': 1800.0,
-    'rao_tanker': 1800.0,  # the unseen hull: never used in development (seventy-third session)
+    # the unseen hulls, large and small: never used in development (seventy-third session)
+    'rao_tanker': 1800.0,
+    'rao_workboat': 1800.0,
     'onedof_feedback': 1800.0,
     'onedof_reference': 1800.0,
     'threedof_open_loop': 1800.0,

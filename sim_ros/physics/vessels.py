@@ -1,4 +1,4 @@
-"""Vessel models: the thesis 1-DOF and 3-DOF models and two 3-DOF DP vessels (supply, tanker).
+"""Vessel models: the thesis 1-DOF and 3-DOF models and three 3-DOF DP vessels.
 
 All vessels share one state layout, a list of six floats [north m, east m, ψ rad, u m/s,
 v m/s, r rad/s] (η then ν), and one input layout, eight floats
@@ -34,6 +34,14 @@ chosen open-loop time constants M_ii / D_ii of 200 s (surge: a slender hull, lit
 slower vessel, not the supply vessel scaled (Froude scaling would give 123, 62, 16 s). Its
 thrusters (`TANKER_THRUSTERS`): the supply vessel's layout with lever arms for 150 m and
 larger units, 5.6 MN surge, 3.0 MN sway, 226 MN·m yaw at full RPM.
+
+Workboat (`workboat`; our own design, not a published model: the other end of the size range, a
+40 m DP offshore workboat, e.g. for ROV support). L = 40 m, beam 11 m, draught 3.5 m, block
+coefficient 0.60: m = 0.947e6 kg (a sixth of the supply vessel's). Mbis: surge 1.08, sway 1.7
+(a beamy, shallow hull), yaw 0.14, coupling −0.05; Dbis from time constants of 50 s (surge),
+20 s (sway) and 6 s (yaw), couplings −0.01 and −0.004. Eigen time constants ≈ 50 s, 20 s,
+6 s: faster than the supply vessel Froude-scaled to 40 m (64, 32, 8.3 s). Thrusters: the same
+layout for 40 m with small units, 307 kN surge, 200 kN sway, 4.2 MN·m yaw.
 
 First-order wave motion under force superposition (`wave_rates_fn`): the wave-frequency state
 x_WF (same layout) is the response of the model *linearized once, at the run's operating point*
@@ -103,7 +111,28 @@ TANKER_THRUSTERS = ThrusterConfig(
                             [62.0, 55.0, -55.0, -62.0, -9.0, 9.0]]),
     thrust_coeff=np.array([12.0, 12.0, 12.0, 12.0, 110.0, 110.0]))
 
-VESSEL_KINDS = ('onedof', 'threedof', 'supply', 'tanker')
+# --- workboat, our own design (module docstring) ----------------------------------------------
+WORKBOAT_LENGTH = 40.0  # m, L
+WORKBOAT_BEAM = 11.0  # m, B
+WORKBOAT_DRAUGHT = 3.5  # m, T
+WORKBOAT_BLOCK_COEFFICIENT = 0.60  # C_b
+WORKBOAT_MASS = (SEA_WATER_DENSITY * WORKBOAT_LENGTH * WORKBOAT_BEAM * WORKBOAT_DRAUGHT
+                 * WORKBOAT_BLOCK_COEFFICIENT)  # kg, ≈ 0.947e6
+WORKBOAT_MBIS = np.array([[1.08, 0.0, 0.0], [0.0, 1.7, -0.05], [0.0, -0.05, 0.14]])
+WORKBOAT_DBIS = np.array([[0.0436, 0.0, 0.0], [0.0, 0.1716, -0.01], [0.0, -0.004, 0.0471]])
+_WORKBOAT_T_INV = np.diag([1.0, 1.0, WORKBOAT_LENGTH])
+WORKBOAT_M = WORKBOAT_MASS * _WORKBOAT_T_INV @ WORKBOAT_MBIS @ _WORKBOAT_T_INV  # kg, kg·m, kg·m²
+WORKBOAT_D = (WORKBOAT_MASS * math.sqrt(GRAVITY / WORKBOAT_LENGTH)
+              * _WORKBOAT_T_INV @ WORKBOAT_DBIS @ _WORKBOAT_T_INV)
+# Tunnel thrusters at 16, 13, −14, −17 m and two main propellers 4 m off the centre line;
+# K [N/RPM²] 0.8 (50 kN at 250 RPM) and 6 (154 kN at 160 RPM).
+WORKBOAT_THRUSTERS = ThrusterConfig(
+    configuration=np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 1.0],
+                            [1.0, 1.0, 1.0, 1.0, 0.0, 0.0],
+                            [16.0, 13.0, -14.0, -17.0, -4.0, 4.0]]),
+    thrust_coeff=np.array([0.8, 0.8, 0.8, 0.8, 6.0, 6.0]))
+
+VESSEL_KINDS = ('onedof', 'threedof', 'supply', 'tanker', 'workboat')
 # f(x_LF, x_WF, input) → ẋ_WF; input = the 8 LF inputs + first-order wave force (3, earth)
 WaveRatesFn = Callable[[Sequence[float], Sequence[float], Sequence[float]], State]
 
@@ -296,12 +325,13 @@ ONEDOF = ThesisVessel((ONEDOF_A, 0.0, 0.0), (ONEDOF_B, 0.0, 0.0), ndof=1)
 THREEDOF = ThesisVessel(THREEDOF_A, THREEDOF_B, ndof=3)
 SUPPLY = DpVessel(SUPPLY_M.copy(), SUPPLY_D.copy())
 TANKER = DpVessel(TANKER_M.copy(), TANKER_D.copy(), TANKER_THRUSTERS)
+WORKBOAT = DpVessel(WORKBOAT_M.copy(), WORKBOAT_D.copy(), WORKBOAT_THRUSTERS)
 
 
 def make_vessel(kind: str) -> Vessel:
-    """The vessel called `kind` ('onedof', 'threedof', 'supply' or 'tanker')."""
+    """The vessel called `kind` (one of `VESSEL_KINDS`)."""
     vessels: dict[str, Vessel] = {'onedof': ONEDOF, 'threedof': THREEDOF, 'supply': SUPPLY,
-                                  'tanker': TANKER}
+                                  'tanker': TANKER, 'workboat': WORKBOAT}
     if kind not in vessels:
         raise ValueError(f'vessel must be one of {VESSEL_KINDS}, got {kind!r}')
     return vessels[kind]

@@ -22,7 +22,7 @@ from sim_ros.simulation import (
 
 # scenario → (vessel, largest heading setpoint step [rad])
 RAO_SCENARIOS = {'rao_supply': ('supply', math.pi / 2), 'rao_swell': ('supply', math.pi / 2),
-                 'rao_tanker': ('tanker', math.pi / 3)}
+                 'rao_tanker': ('tanker', math.pi / 3), 'rao_workboat': ('workboat', math.pi / 2)}
 
 
 @pytest.mark.parametrize('name', RAO_SCENARIOS)
@@ -40,7 +40,7 @@ def test_rao_scenario_loads_and_runs(name: str) -> None:
     wave = rec.truth_pose - rec.truth_lf_pose
     wave[:, 2] = wrap_angles(wave[:, 2])
     assert 0.1 < float(np.std(wave[:, :2])) < 1.5
-    assert 0.002 < float(np.std(wave[:, 2])) < 0.03
+    assert 0.002 < float(np.std(wave[:, 2])) < 0.05
     sea = Simulator(scn).wave_components()
     assert sea is not None
     expected = wave_motion(sea, scn.waves.rao, rec.t, rec.truth_lf_pose[:, 2])

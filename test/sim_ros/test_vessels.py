@@ -82,6 +82,27 @@ def test_tanker_thrusters_are_its_own() -> None:
     assert supply is not None and np.all(limit > 1.5 * supply)
 
 
+def test_workboat_matrices_time_constants_and_thrusters() -> None:
+    """Our workboat: m = ρ L B T C_b, time constants ≈ 50 / 20 / 6 s, its own thrusters."""
+    mass = 1025.0 * 40.0 * 11.0 * 3.5 * 0.60
+    assert vessels.WORKBOAT_MASS == pytest.approx(mass, rel=1e-12)
+    assert vessels.WORKBOAT_M[2, 2] == pytest.approx(0.14 * mass * 40.0**2, rel=1e-12)
+    rate = math.sqrt(9.81 / 40.0)  # 1/s, √(g/L)
+    assert vessels.WORKBOAT_D[1, 1] == pytest.approx(0.1716 * mass * rate, rel=1e-12)
+    consts = vessels.WORKBOAT.linearize().time_constants()
+    np.testing.assert_allclose(consts, [50.0, 20.0, 6.0], rtol=0.005)
+    # Faster than the supply vessel Froude-scaled to 40 m in every DOF
+    froude = vessels.SUPPLY.linearize().time_constants() * math.sqrt(40.0 / 76.2)
+    assert np.all(consts < 0.8 * froude)
+    expected = [2 * 6.0 * 160.0**2, 4 * 0.8 * 250.0**2,
+                0.8 * 250.0**2 * (16.0 + 13.0 + 14.0 + 17.0) + 6.0 * 160.0**2 * 8.0]
+    limit = Simulator(Scenario(vessel='workboat', sample_time=0.1, duration=10.0),
+                      seed=0).actuator_limit()
+    assert limit is not None
+    np.testing.assert_allclose(limit, expected, rtol=1e-12)
+    assert vessels.make_vessel('workboat') is vessels.WORKBOAT
+
+
 def test_supply_surge_step_response_first_order() -> None:
     """Surge is decoupled: u(t) = F/D11 (1 − e^{−t/T}); 63.2 % is reached at T = M11/D11."""
     force = 5e4  # N

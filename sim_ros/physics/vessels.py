@@ -24,7 +24,7 @@ M = m T⁻¹ Mbis T⁻¹, D = m √(g/L) T⁻¹ Dbis T⁻¹, T⁻¹ = diag(1, 1,
 
 Shuttle tanker (`tanker`; our own design, not a published model: a test hull the predictor was
 never developed on, twice the supply vessel's length and five times its mass). The same linear
-model in the same nondimensional form (Fossen 2011 §7.1's bis system, as MSS supply.m), with
+model in the same nondimensional form (the bis system, `bis_matrices`, as MSS supply.m), with
 L = 150 m, beam 27 m, draught 9.5 m, block coefficient 0.80: m = ρ L B T C_b = 31.55e6 kg
 (ρ = 1025 kg/m³). Mbis: surge 1.05 (5 % added mass; a slender hull's is small), sway 1.95,
 yaw 0.12 (radius of gyration with added inertia 0.35 L), sway–yaw coupling −0.06. Dbis from
@@ -83,9 +83,23 @@ SUPPLY_MASS = 6000e3  # kg, m
 GRAVITY = 9.81  # m/s²
 SUPPLY_MBIS = np.array([[1.1274, 0.0, 0.0], [0.0, 1.8902, -0.0744], [0.0, -0.0744, 0.1278]])
 SUPPLY_DBIS = np.array([[0.0358, 0.0, 0.0], [0.0, 0.1183, -0.0124], [0.0, -0.0041, 0.0308]])
-_T_INV = np.diag([1.0, 1.0, SUPPLY_LENGTH])
-SUPPLY_M = SUPPLY_MASS * _T_INV @ SUPPLY_MBIS @ _T_INV  # kg, kg·m, kg·m²
-SUPPLY_D = SUPPLY_MASS * math.sqrt(GRAVITY / SUPPLY_LENGTH) * _T_INV @ SUPPLY_DBIS @ _T_INV
+
+
+def bis_matrices(mass: float, length: float, mass_bis: FloatArray,
+                 damping_bis: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """M = m T⁻¹ Mbis T⁻¹ and D = m √(g/L) T⁻¹ Dbis T⁻¹ in SI, T⁻¹ = diag(1, 1, L).
+
+    The bis system of Fossen, Sagatun & Sørensen 1996 (anchors §2, MSS supply.m): `mass` m
+    [kg], `length` L [m]; returns M [kg, kg·m, kg·m²] and D [kg/s, kg·m/s, kg·m²/s]. The
+    inputs are not modified.
+    """
+    t_inv = np.diag([1.0, 1.0, length])
+    return (np.asarray(mass * t_inv @ mass_bis @ t_inv, dtype=np.float64),
+            np.asarray(mass * math.sqrt(GRAVITY / length) * t_inv @ damping_bis @ t_inv,
+                       dtype=np.float64))
+
+
+SUPPLY_M, SUPPLY_D = bis_matrices(SUPPLY_MASS, SUPPLY_LENGTH, SUPPLY_MBIS, SUPPLY_DBIS)
 SUPPLY_CURRENT_SPEED = 0.5  # m/s, MSS SIMsupply.m
 SUPPLY_CURRENT_DIRECTION = math.radians(20.0)  # rad, β_c in MSS SIMsupply.m
 
@@ -99,10 +113,7 @@ TANKER_MASS = (SEA_WATER_DENSITY * TANKER_LENGTH * TANKER_BEAM * TANKER_DRAUGHT
                * TANKER_BLOCK_COEFFICIENT)  # kg, ≈ 31.55e6
 TANKER_MBIS = np.array([[1.05, 0.0, 0.0], [0.0, 1.95, -0.06], [0.0, -0.06, 0.12]])
 TANKER_DBIS = np.array([[0.0205, 0.0, 0.0], [0.0, 0.127, -0.008], [0.0, -0.003, 0.0188]])
-_TANKER_T_INV = np.diag([1.0, 1.0, TANKER_LENGTH])
-TANKER_M = TANKER_MASS * _TANKER_T_INV @ TANKER_MBIS @ _TANKER_T_INV  # kg, kg·m, kg·m²
-TANKER_D = (TANKER_MASS * math.sqrt(GRAVITY / TANKER_LENGTH)
-            * _TANKER_T_INV @ TANKER_DBIS @ _TANKER_T_INV)
+TANKER_M, TANKER_D = bis_matrices(TANKER_MASS, TANKER_LENGTH, TANKER_MBIS, TANKER_DBIS)
 # Two bow and two stern tunnel thrusters (lever arms [m]) and two main propellers 9 m off the
 # centre line; K [N/RPM²] 12 (750 kN at 250 RPM) and 110 (2.8 MN at 160 RPM).
 TANKER_THRUSTERS = ThrusterConfig(
@@ -120,10 +131,8 @@ WORKBOAT_MASS = (SEA_WATER_DENSITY * WORKBOAT_LENGTH * WORKBOAT_BEAM * WORKBOAT_
                  * WORKBOAT_BLOCK_COEFFICIENT)  # kg, ≈ 0.947e6
 WORKBOAT_MBIS = np.array([[1.08, 0.0, 0.0], [0.0, 1.7, -0.05], [0.0, -0.05, 0.14]])
 WORKBOAT_DBIS = np.array([[0.0436, 0.0, 0.0], [0.0, 0.1716, -0.01], [0.0, -0.004, 0.0471]])
-_WORKBOAT_T_INV = np.diag([1.0, 1.0, WORKBOAT_LENGTH])
-WORKBOAT_M = WORKBOAT_MASS * _WORKBOAT_T_INV @ WORKBOAT_MBIS @ _WORKBOAT_T_INV  # kg, kg·m, kg·m²
-WORKBOAT_D = (WORKBOAT_MASS * math.sqrt(GRAVITY / WORKBOAT_LENGTH)
-              * _WORKBOAT_T_INV @ WORKBOAT_DBIS @ _WORKBOAT_T_INV)
+WORKBOAT_M, WORKBOAT_D = bis_matrices(WORKBOAT_MASS, WORKBOAT_LENGTH, WORKBOAT_MBIS,
+                                      WORKBOAT_DBIS)
 # Tunnel thrusters at 16, 13, −14, −17 m and two main propellers 4 m off the centre line;
 # K [N/RPM²] 0.8 (50 kN at 250 RPM) and 6 (154 kN at 160 RPM).
 WORKBOAT_THRUSTERS = ThrusterConfig(
@@ -246,7 +255,7 @@ def wave_operating_speed(heading: float, velocity: Sequence[float],
 
 @dataclass(frozen=True)
 class DpVessel:
-    """Linear 3-DOF DP model M ν̇ + D ν_r = τ + R(ψ)ᵀ f with its thrusters (MSS supply.m's form)."""
+    """Linear 3-DOF DP model M ν̇ + D ν_r = τ + R(ψ)ᵀ f and its thrusters (as MSS supply.m)."""
 
     mass: FloatArray
     damping: FloatArray

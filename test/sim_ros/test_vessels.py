@@ -35,6 +35,18 @@ def test_supply_matrices_and_time_constants() -> None:
     np.testing.assert_allclose(consts, [88.0, 44.0, 11.5], rtol=0.015)
 
 
+def test_bis_matrices_reproduce_the_anchors_and_leave_their_inputs() -> None:
+    """bis_matrices on the supply vessel's Mbis, Dbis: anchors §2's SI values; inputs kept."""
+    mass_bis, damping_bis = vessels.SUPPLY_MBIS.copy(), vessels.SUPPLY_DBIS.copy()
+    mass, damping = vessels.bis_matrices(6000e3, 76.2, mass_bis, damping_bis)
+    assert mass[0, 0] == pytest.approx(6.7644e6, rel=1e-4)
+    assert mass[1, 2] == pytest.approx(-3.4016e7, rel=1e-4)
+    assert damping[0, 0] == pytest.approx(7.7071e4, rel=1e-4)
+    assert damping[1, 2] == pytest.approx(-2.0342e6, rel=1e-4)
+    np.testing.assert_array_equal(mass_bis, vessels.SUPPLY_MBIS)
+    np.testing.assert_array_equal(damping_bis, vessels.SUPPLY_DBIS)
+
+
 def test_tanker_matrices_from_its_dimensions_and_chosen_time_constants() -> None:
     """Our tanker: m = ρ L B T C_b, bis-system M and D, time constants ≈ 200 / 60 / 25 s."""
     mass = 1025.0 * 150.0 * 27.0 * 9.5 * 0.80

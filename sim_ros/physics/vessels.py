@@ -43,6 +43,12 @@ coefficient 0.60: m = 0.947e6 kg (a sixth of the supply vessel's). Mbis: surge 1
 6 s: faster than the supply vessel Froude-scaled to 40 m (64, 32, 8.3 s). Thrusters: the same
 layout for 40 m with small units, 307 kN surge, 200 kN sway, 4.2 MN·m yaw.
 
+Crew boat (`crewboat`; our own design, not a published model): a *development* hull of the
+workboat's class, for work on what fails there without screening on the test hulls (tanker,
+workboat). L = 30 m, beam 8 m, draught 2.5 m, block coefficient 0.55: m = 0.338e6 kg. Mbis:
+surge 1.1, sway 1.6, yaw 0.13, coupling −0.04; Dbis from time constants of 40 s, 15 s and 5 s,
+couplings −0.008 and −0.003. Thrusters for 30 m: 128 kN surge, 87.5 kN sway, 1.35 MN·m yaw.
+
 First-order wave motion under force superposition (`wave_rates_fn`): the wave-frequency state
 x_WF (same layout) is the response of the model *linearized once, at the run's operating point*
 (`wave_operating_speed`), to the first-order wave force, rotated with the LF heading, and the
@@ -141,7 +147,26 @@ WORKBOAT_THRUSTERS = ThrusterConfig(
                             [16.0, 13.0, -14.0, -17.0, -4.0, 4.0]]),
     thrust_coeff=np.array([0.8, 0.8, 0.8, 0.8, 6.0, 6.0]))
 
-VESSEL_KINDS = ('onedof', 'threedof', 'supply', 'tanker', 'workboat')
+# --- crew boat, our own design, the small class's development hull (module docstring) -------
+CREWBOAT_LENGTH = 30.0  # m, L
+CREWBOAT_BEAM = 8.0  # m, B
+CREWBOAT_DRAUGHT = 2.5  # m, T
+CREWBOAT_BLOCK_COEFFICIENT = 0.55  # C_b
+CREWBOAT_MASS = (SEA_WATER_DENSITY * CREWBOAT_LENGTH * CREWBOAT_BEAM * CREWBOAT_DRAUGHT
+                 * CREWBOAT_BLOCK_COEFFICIENT)  # kg, ≈ 0.338e6
+CREWBOAT_MBIS = np.array([[1.1, 0.0, 0.0], [0.0, 1.6, -0.04], [0.0, -0.04, 0.13]])
+CREWBOAT_DBIS = np.array([[0.0481, 0.0, 0.0], [0.0, 0.1865, -0.008], [0.0, -0.003, 0.0455]])
+CREWBOAT_M, CREWBOAT_D = bis_matrices(CREWBOAT_MASS, CREWBOAT_LENGTH, CREWBOAT_MBIS,
+                                      CREWBOAT_DBIS)
+# Tunnel thrusters at 12, 10, −10, −12 m and two main propellers 3 m off the centre line;
+# K [N/RPM²] 0.35 (21.9 kN at 250 RPM) and 2.5 (64 kN at 160 RPM).
+CREWBOAT_THRUSTERS = ThrusterConfig(
+    configuration=np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 1.0],
+                            [1.0, 1.0, 1.0, 1.0, 0.0, 0.0],
+                            [12.0, 10.0, -10.0, -12.0, -3.0, 3.0]]),
+    thrust_coeff=np.array([0.35, 0.35, 0.35, 0.35, 2.5, 2.5]))
+
+VESSEL_KINDS = ('onedof', 'threedof', 'supply', 'tanker', 'workboat', 'crewboat')
 # f(x_LF, x_WF, input) → ẋ_WF; input = the 8 LF inputs + first-order wave force (3, earth)
 WaveRatesFn = Callable[[Sequence[float], Sequence[float], Sequence[float]], State]
 
@@ -335,12 +360,13 @@ THREEDOF = ThesisVessel(THREEDOF_A, THREEDOF_B, ndof=3)
 SUPPLY = DpVessel(SUPPLY_M.copy(), SUPPLY_D.copy())
 TANKER = DpVessel(TANKER_M.copy(), TANKER_D.copy(), TANKER_THRUSTERS)
 WORKBOAT = DpVessel(WORKBOAT_M.copy(), WORKBOAT_D.copy(), WORKBOAT_THRUSTERS)
+CREWBOAT = DpVessel(CREWBOAT_M.copy(), CREWBOAT_D.copy(), CREWBOAT_THRUSTERS)
 
 
 def make_vessel(kind: str) -> Vessel:
     """The vessel called `kind` (one of `VESSEL_KINDS`)."""
     vessels: dict[str, Vessel] = {'onedof': ONEDOF, 'threedof': THREEDOF, 'supply': SUPPLY,
-                                  'tanker': TANKER, 'workboat': WORKBOAT}
+                                  'tanker': TANKER, 'workboat': WORKBOAT, 'crewboat': CREWBOAT}
     if kind not in vessels:
         raise ValueError(f'vessel must be one of {VESSEL_KINDS}, got {kind!r}')
     return vessels[kind]

@@ -22,7 +22,8 @@ from sim_ros.simulation import (
 
 # scenario → (vessel, largest heading setpoint step [rad])
 RAO_SCENARIOS = {'rao_supply': ('supply', math.pi / 2), 'rao_swell': ('supply', math.pi / 2),
-                 'rao_tanker': ('tanker', math.pi / 3), 'rao_workboat': ('workboat', math.pi / 2)}
+                 'rao_tanker': ('tanker', math.pi / 3), 'rao_workboat': ('workboat', math.pi / 2),
+                 'rao_crewboat': ('crewboat', math.pi / 2)}
 
 
 @pytest.mark.parametrize('name', RAO_SCENARIOS)

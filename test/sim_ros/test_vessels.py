@@ -115,6 +115,18 @@ def test_workboat_matrices_time_constants_and_thrusters() -> None:
     assert vessels.make_vessel('workboat') is vessels.WORKBOAT
 
 
+def test_crewboat_time_constants_and_thrusters() -> None:
+    """The small class's development hull: m = ρ L B T C_b, 40 / 15 / 5 s, its thrusters."""
+    assert vessels.CREWBOAT_MASS == pytest.approx(1025.0 * 30.0 * 8.0 * 2.5 * 0.55, rel=1e-12)
+    np.testing.assert_allclose(vessels.CREWBOAT.linearize().time_constants(), [40.0, 15.0, 5.0],
+                               rtol=0.005)
+    expected = [2 * 2.5 * 160.0**2, 4 * 0.35 * 250.0**2,
+                0.35 * 250.0**2 * (12.0 + 10.0 + 10.0 + 12.0) + 2.5 * 160.0**2 * 6.0]
+    np.testing.assert_allclose(vessels.CREWBOAT.thrusters.max_generalized_force(), expected,
+                               rtol=1e-12)
+    assert vessels.make_vessel('crewboat') is vessels.CREWBOAT
+
+
 def test_supply_surge_step_response_first_order() -> None:
     """Surge is decoupled: u(t) = F/D11 (1 − e^{−t/T}); 63.2 % is reached at T = M11/D11."""
     force = 5e4  # N

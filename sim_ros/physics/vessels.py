@@ -32,7 +32,7 @@ chosen open-loop time constants M_ii / D_ii of 200 s (surge: a slender hull, lit
 60 s (sway) and 25 s (yaw), i.e. Dbis_ii = Mbis_ii / (√(g/L) T_i), couplings −0.008 and
 −0.003. Eigen time constants ≈ 200 s, 60 s, 25 s (the supply vessel's 88, 44, 11.5 s): a
 slower vessel, not the supply vessel scaled (Froude scaling would give 123, 62, 16 s). Its
-thrusters (`TANKER_THRUSTERS`): the supply vessel's layout with lever arms for 150 m and
+thrusters (`tunnels_and_mains`): the supply vessel's layout with lever arms for 150 m and
 larger units, 5.6 MN surge, 3.0 MN sway, 226 MN·m yaw at full RPM.
 
 Workboat (`workboat`; our own design, not a published model: the other end of the size range, a
@@ -109,62 +109,69 @@ SUPPLY_M, SUPPLY_D = bis_matrices(SUPPLY_MASS, SUPPLY_LENGTH, SUPPLY_MBIS, SUPPL
 SUPPLY_CURRENT_SPEED = 0.5  # m/s, MSS SIMsupply.m
 SUPPLY_CURRENT_DIRECTION = math.radians(20.0)  # rad, β_c in MSS SIMsupply.m
 
-# --- shuttle tanker, our own design (module docstring) --------------------------------------
-TANKER_LENGTH = 150.0  # m, L
-TANKER_BEAM = 27.0  # m, B
-TANKER_DRAUGHT = 9.5  # m, T
-TANKER_BLOCK_COEFFICIENT = 0.80  # C_b
 SEA_WATER_DENSITY = 1025.0  # kg/m³, ρ
-TANKER_MASS = (SEA_WATER_DENSITY * TANKER_LENGTH * TANKER_BEAM * TANKER_DRAUGHT
-               * TANKER_BLOCK_COEFFICIENT)  # kg, ≈ 31.55e6
-TANKER_MBIS = np.array([[1.05, 0.0, 0.0], [0.0, 1.95, -0.06], [0.0, -0.06, 0.12]])
-TANKER_DBIS = np.array([[0.0205, 0.0, 0.0], [0.0, 0.127, -0.008], [0.0, -0.003, 0.0188]])
-TANKER_M, TANKER_D = bis_matrices(TANKER_MASS, TANKER_LENGTH, TANKER_MBIS, TANKER_DBIS)
-# Two bow and two stern tunnel thrusters (lever arms [m]) and two main propellers 9 m off the
-# centre line; K [N/RPM²] 12 (750 kN at 250 RPM) and 110 (2.8 MN at 160 RPM).
-TANKER_THRUSTERS = ThrusterConfig(
-    configuration=np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 1.0],
-                            [1.0, 1.0, 1.0, 1.0, 0.0, 0.0],
-                            [62.0, 55.0, -55.0, -62.0, -9.0, 9.0]]),
-    thrust_coeff=np.array([12.0, 12.0, 12.0, 12.0, 110.0, 110.0]))
 
-# --- workboat, our own design (module docstring) ----------------------------------------------
-WORKBOAT_LENGTH = 40.0  # m, L
-WORKBOAT_BEAM = 11.0  # m, B
-WORKBOAT_DRAUGHT = 3.5  # m, T
-WORKBOAT_BLOCK_COEFFICIENT = 0.60  # C_b
-WORKBOAT_MASS = (SEA_WATER_DENSITY * WORKBOAT_LENGTH * WORKBOAT_BEAM * WORKBOAT_DRAUGHT
-                 * WORKBOAT_BLOCK_COEFFICIENT)  # kg, ≈ 0.947e6
-WORKBOAT_MBIS = np.array([[1.08, 0.0, 0.0], [0.0, 1.7, -0.05], [0.0, -0.05, 0.14]])
-WORKBOAT_DBIS = np.array([[0.0436, 0.0, 0.0], [0.0, 0.1716, -0.01], [0.0, -0.004, 0.0471]])
-WORKBOAT_M, WORKBOAT_D = bis_matrices(WORKBOAT_MASS, WORKBOAT_LENGTH, WORKBOAT_MBIS,
-                                      WORKBOAT_DBIS)
-# Tunnel thrusters at 16, 13, −14, −17 m and two main propellers 4 m off the centre line;
-# K [N/RPM²] 0.8 (50 kN at 250 RPM) and 6 (154 kN at 160 RPM).
-WORKBOAT_THRUSTERS = ThrusterConfig(
-    configuration=np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 1.0],
-                            [1.0, 1.0, 1.0, 1.0, 0.0, 0.0],
-                            [16.0, 13.0, -14.0, -17.0, -4.0, 4.0]]),
-    thrust_coeff=np.array([0.8, 0.8, 0.8, 0.8, 6.0, 6.0]))
 
-# --- crew boat, our own design, the small class's development hull (module docstring) -------
-CREWBOAT_LENGTH = 30.0  # m, L
-CREWBOAT_BEAM = 8.0  # m, B
-CREWBOAT_DRAUGHT = 2.5  # m, T
-CREWBOAT_BLOCK_COEFFICIENT = 0.55  # C_b
-CREWBOAT_MASS = (SEA_WATER_DENSITY * CREWBOAT_LENGTH * CREWBOAT_BEAM * CREWBOAT_DRAUGHT
-                 * CREWBOAT_BLOCK_COEFFICIENT)  # kg, ≈ 0.338e6
-CREWBOAT_MBIS = np.array([[1.1, 0.0, 0.0], [0.0, 1.6, -0.04], [0.0, -0.04, 0.13]])
-CREWBOAT_DBIS = np.array([[0.0481, 0.0, 0.0], [0.0, 0.1865, -0.008], [0.0, -0.003, 0.0455]])
-CREWBOAT_M, CREWBOAT_D = bis_matrices(CREWBOAT_MASS, CREWBOAT_LENGTH, CREWBOAT_MBIS,
-                                      CREWBOAT_DBIS)
-# Tunnel thrusters at 12, 10, −10, −12 m and two main propellers 3 m off the centre line;
-# K [N/RPM²] 0.35 (21.9 kN at 250 RPM) and 2.5 (64 kN at 160 RPM).
-CREWBOAT_THRUSTERS = ThrusterConfig(
-    configuration=np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 1.0],
-                            [1.0, 1.0, 1.0, 1.0, 0.0, 0.0],
-                            [12.0, 10.0, -10.0, -12.0, -3.0, 3.0]]),
-    thrust_coeff=np.array([0.35, 0.35, 0.35, 0.35, 2.5, 2.5]))
+def tunnels_and_mains(tunnel_arms: tuple[float, float, float, float], main_offset: float,
+                      tunnel_coeff: float, main_coeff: float) -> ThrusterConfig:
+    """The supply vessel's thruster layout (anchors §2) for another hull.
+
+    Four tunnel thrusters (sway) at the lever arms `tunnel_arms` [m, + forward], two main
+    propellers (surge) `main_offset` [m] to port and starboard; thrust coefficients K
+    [N/RPM²] `tunnel_coeff` and `main_coeff` (n_max 250 and 160 RPM, `ThrusterConfig`).
+    """
+    configuration = np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 1.0],
+                              [1.0, 1.0, 1.0, 1.0, 0.0, 0.0],
+                              [*tunnel_arms, -main_offset, main_offset]])
+    return ThrusterConfig(configuration=configuration,
+                          thrust_coeff=np.array([tunnel_coeff] * 4 + [main_coeff] * 2))
+
+
+@dataclass(frozen=True)
+class HullDesign:
+    """A DP hull of our own design: main dimensions, bis coefficients and thrusters."""
+
+    length: float  # m, L
+    beam: float  # m, B
+    draught: float  # m, T
+    block_coefficient: float  # C_b
+    mass_bis: FloatArray  # Mbis
+    damping_bis: FloatArray  # Dbis
+    thrusters: ThrusterConfig
+
+    @property
+    def displacement(self) -> float:
+        """The displaced mass m = ρ L B T C_b [kg]."""
+        return (SEA_WATER_DENSITY * self.length * self.beam * self.draught
+                * self.block_coefficient)
+
+    def vessel(self) -> DpVessel:
+        """The linear DP model of this hull (`bis_matrices`) with its thrusters."""
+        mass, damping = bis_matrices(self.displacement, self.length, self.mass_bis,
+                                     self.damping_bis)
+        return DpVessel(mass, damping, self.thrusters)
+
+
+# Shuttle tanker, our own design (module docstring): m ≈ 31.55e6 kg; tunnel thrusters 750 kN,
+# mains 2.8 MN (9 m off the centre line) at full RPM.
+TANKER_DESIGN = HullDesign(
+    150.0, 27.0, 9.5, 0.80,
+    mass_bis=np.array([[1.05, 0.0, 0.0], [0.0, 1.95, -0.06], [0.0, -0.06, 0.12]]),
+    damping_bis=np.array([[0.0205, 0.0, 0.0], [0.0, 0.127, -0.008], [0.0, -0.003, 0.0188]]),
+    thrusters=tunnels_and_mains((62.0, 55.0, -55.0, -62.0), 9.0, 12.0, 110.0))
+# Workboat, our own design: m ≈ 0.947e6 kg; tunnels 50 kN, mains 154 kN (4 m off).
+WORKBOAT_DESIGN = HullDesign(
+    40.0, 11.0, 3.5, 0.60,
+    mass_bis=np.array([[1.08, 0.0, 0.0], [0.0, 1.7, -0.05], [0.0, -0.05, 0.14]]),
+    damping_bis=np.array([[0.0436, 0.0, 0.0], [0.0, 0.1716, -0.01], [0.0, -0.004, 0.0471]]),
+    thrusters=tunnels_and_mains((16.0, 13.0, -14.0, -17.0), 4.0, 0.8, 6.0))
+# Crew boat, our own design, the small class's development hull: m ≈ 0.338e6 kg; tunnels
+# 21.9 kN, mains 64 kN (3 m off).
+CREWBOAT_DESIGN = HullDesign(
+    30.0, 8.0, 2.5, 0.55,
+    mass_bis=np.array([[1.1, 0.0, 0.0], [0.0, 1.6, -0.04], [0.0, -0.04, 0.13]]),
+    damping_bis=np.array([[0.0481, 0.0, 0.0], [0.0, 0.1865, -0.008], [0.0, -0.003, 0.0455]]),
+    thrusters=tunnels_and_mains((12.0, 10.0, -10.0, -12.0), 3.0, 0.35, 2.5))
 
 VESSEL_KINDS = ('onedof', 'threedof', 'supply', 'tanker', 'workboat', 'crewboat')
 # f(x_LF, x_WF, input) → ẋ_WF; input = the 8 LF inputs + first-order wave force (3, earth)
@@ -358,9 +365,9 @@ Vessel = ThesisVessel | DpVessel
 ONEDOF = ThesisVessel((ONEDOF_A, 0.0, 0.0), (ONEDOF_B, 0.0, 0.0), ndof=1)
 THREEDOF = ThesisVessel(THREEDOF_A, THREEDOF_B, ndof=3)
 SUPPLY = DpVessel(SUPPLY_M.copy(), SUPPLY_D.copy())
-TANKER = DpVessel(TANKER_M.copy(), TANKER_D.copy(), TANKER_THRUSTERS)
-WORKBOAT = DpVessel(WORKBOAT_M.copy(), WORKBOAT_D.copy(), WORKBOAT_THRUSTERS)
-CREWBOAT = DpVessel(CREWBOAT_M.copy(), CREWBOAT_D.copy(), CREWBOAT_THRUSTERS)
+TANKER = TANKER_DESIGN.vessel()
+WORKBOAT = WORKBOAT_DESIGN.vessel()
+CREWBOAT = CREWBOAT_DESIGN.vessel()
 
 
 def make_vessel(kind: str) -> Vessel:

@@ -50,14 +50,14 @@ def test_bis_matrices_reproduce_the_anchors_and_leave_their_inputs() -> None:
 def test_tanker_matrices_from_its_dimensions_and_chosen_time_constants() -> None:
     """Our tanker: m = ρ L B T C_b, bis-system M and D, time constants ≈ 200 / 60 / 25 s."""
     mass = 1025.0 * 150.0 * 27.0 * 9.5 * 0.80
-    assert vessels.TANKER_MASS == pytest.approx(mass, rel=1e-12)
+    assert vessels.TANKER_DESIGN.displacement == pytest.approx(mass, rel=1e-12)
     assert mass == pytest.approx(31.5495e6, rel=1e-6)
-    assert vessels.TANKER_M[0, 0] == pytest.approx(1.05 * mass, rel=1e-12)
-    assert vessels.TANKER_M[1, 2] == pytest.approx(-0.06 * mass * 150.0, rel=1e-12)
-    assert vessels.TANKER_M[2, 2] == pytest.approx(0.12 * mass * 150.0**2, rel=1e-12)
+    assert vessels.TANKER.mass[0, 0] == pytest.approx(1.05 * mass, rel=1e-12)
+    assert vessels.TANKER.mass[1, 2] == pytest.approx(-0.06 * mass * 150.0, rel=1e-12)
+    assert vessels.TANKER.mass[2, 2] == pytest.approx(0.12 * mass * 150.0**2, rel=1e-12)
     rate = math.sqrt(9.81 / 150.0)  # 1/s, √(g/L)
-    assert vessels.TANKER_D[0, 0] == pytest.approx(0.0205 * mass * rate, rel=1e-12)
-    assert vessels.TANKER_D[2, 1] == pytest.approx(-0.003 * mass * rate * 150.0, rel=1e-12)
+    assert vessels.TANKER.damping[0, 0] == pytest.approx(0.0205 * mass * rate, rel=1e-12)
+    assert vessels.TANKER.damping[2, 1] == pytest.approx(-0.003 * mass * rate * 150.0, rel=1e-12)
     consts = vessels.TANKER.linearize().time_constants()
     np.testing.assert_allclose(consts, [200.0, 60.0, 25.0], rtol=0.005)
     # Slower than the supply vessel in every DOF, and not its Froude-scaled copy (× √(150/76.2))
@@ -72,9 +72,9 @@ def test_tanker_surge_step_response_first_order() -> None:
     force = 2e5  # N
     traj = np.array(_integrate(vessels.TANKER, (force, 0.0, 0.0), 800.0, 0.5))
     u = traj[:, 3]
-    t63 = np.interp((1 - math.exp(-1)) * force / vessels.TANKER_D[0, 0], u,
+    t63 = np.interp((1 - math.exp(-1)) * force / vessels.TANKER.damping[0, 0], u,
                     np.arange(len(u)) * 0.5)
-    assert t63 == pytest.approx(vessels.TANKER_M[0, 0] / vessels.TANKER_D[0, 0], rel=1e-3)
+    assert t63 == pytest.approx(vessels.TANKER.mass[0, 0] / vessels.TANKER.damping[0, 0], rel=1e-3)
     assert t63 == pytest.approx(200.0, rel=0.01)
 
 
@@ -97,10 +97,10 @@ def test_tanker_thrusters_are_its_own() -> None:
 def test_workboat_matrices_time_constants_and_thrusters() -> None:
     """Our workboat: m = ρ L B T C_b, time constants ≈ 50 / 20 / 6 s, its own thrusters."""
     mass = 1025.0 * 40.0 * 11.0 * 3.5 * 0.60
-    assert vessels.WORKBOAT_MASS == pytest.approx(mass, rel=1e-12)
-    assert vessels.WORKBOAT_M[2, 2] == pytest.approx(0.14 * mass * 40.0**2, rel=1e-12)
+    assert vessels.WORKBOAT_DESIGN.displacement == pytest.approx(mass, rel=1e-12)
+    assert vessels.WORKBOAT.mass[2, 2] == pytest.approx(0.14 * mass * 40.0**2, rel=1e-12)
     rate = math.sqrt(9.81 / 40.0)  # 1/s, √(g/L)
-    assert vessels.WORKBOAT_D[1, 1] == pytest.approx(0.1716 * mass * rate, rel=1e-12)
+    assert vessels.WORKBOAT.damping[1, 1] == pytest.approx(0.1716 * mass * rate, rel=1e-12)
     consts = vessels.WORKBOAT.linearize().time_constants()
     np.testing.assert_allclose(consts, [50.0, 20.0, 6.0], rtol=0.005)
     # Faster than the supply vessel Froude-scaled to 40 m in every DOF
@@ -117,7 +117,8 @@ def test_workboat_matrices_time_constants_and_thrusters() -> None:
 
 def test_crewboat_time_constants_and_thrusters() -> None:
     """The small class's development hull: m = ρ L B T C_b, 40 / 15 / 5 s, its thrusters."""
-    assert vessels.CREWBOAT_MASS == pytest.approx(1025.0 * 30.0 * 8.0 * 2.5 * 0.55, rel=1e-12)
+    mass = 1025.0 * 30.0 * 8.0 * 2.5 * 0.55
+    assert vessels.CREWBOAT_DESIGN.displacement == pytest.approx(mass, rel=1e-12)
     np.testing.assert_allclose(vessels.CREWBOAT.linearize().time_constants(), [40.0, 15.0, 5.0],
                                rtol=0.005)
     expected = [2 * 2.5 * 160.0**2, 4 * 0.35 * 250.0**2,

@@ -2,7 +2,9 @@
 
 Two bow and two stern tunnel thrusters and two main propellers (anchors §2):
 configuration T (3×6, rows surge, sway, yaw; yaw row = lever arms [m]), thrust coefficients
-K = diag(3.2 ×4, 31.2 ×2) [N/RPM²], thrust f_i = K_i |n_i| n_i, n in RPM.
+K = diag(3.2 ×4, 31.2 ×2) [N/RPM²], thrust f_i = K_i |n_i| n_i, n in RPM. The other DP hulls
+(`vessels.HullDesign`) have the same layout with their own lever arms and coefficients
+(`tunnels_and_mains`).
 Allocation by pseudo-inverse u = Bᵀ (B Bᵀ)⁻¹ τ with B = T K and u_i = |n_i| n_i
 (Fossen 2011 §12.3.2, unconstrained least-norm), then n_c = sign(u)√|u| saturated at n_max.
 Shaft dynamics ṅ = (n_c − n)/T_n with n_c held over a sample period are linear and solved
@@ -18,14 +20,29 @@ import numpy as np
 from sim_ros.physics.kinematics import FloatArray
 
 
-def _default_config() -> FloatArray:
+def tunnels_and_mains_layout(tunnel_arms: tuple[float, float, float, float],
+                             main_offset: float) -> FloatArray:
+    """Configuration T (3×6) of four tunnel thrusters and two main propellers.
+
+    The tunnels push sway at the lever arms `tunnel_arms` [m, + forward]; the mains push surge
+    `main_offset` [m] to port and starboard (yaw arms −offset, +offset). The supply vessel's
+    layout (anchors §2) is ((30, 22, −22, −30), 8).
+    """
     return np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 1.0],
                      [1.0, 1.0, 1.0, 1.0, 0.0, 0.0],
-                     [30.0, 22.0, -22.0, -30.0, -8.0, 8.0]])  # lever arms in m
+                     [*tunnel_arms, -main_offset, main_offset]])
+
+
+def _default_config() -> FloatArray:
+    return tunnels_and_mains_layout((30.0, 22.0, -22.0, -30.0), 8.0)  # lever arms in m
+
+
+def _coefficients(tunnel_coeff: float, main_coeff: float) -> FloatArray:
+    return np.array([tunnel_coeff] * 4 + [main_coeff] * 2)  # N/RPM²
 
 
 def _default_k() -> FloatArray:
-    return np.array([3.2, 3.2, 3.2, 3.2, 31.2, 31.2])  # N/RPM²
+    return _coefficients(3.2, 31.2)  # N/RPM²
 
 
 def _default_n_max() -> FloatArray:
@@ -68,6 +85,17 @@ class ThrusterConfig:
         """Largest |τ| per DOF if all thrusters push that DOF alone [N, N, N·m]."""
         f_max = self.thrust_coeff * self.max_rpm**2
         return np.asarray(np.abs(self.configuration) @ f_max, dtype=np.float64)
+
+
+def tunnels_and_mains(tunnel_arms: tuple[float, float, float, float], main_offset: float,
+                      tunnel_coeff: float, main_coeff: float) -> ThrusterConfig:
+    """The supply vessel's kind of thruster set for another hull (`tunnels_and_mains_layout`).
+
+    Thrust coefficients K [N/RPM²] `tunnel_coeff` and `main_coeff`; n_max 250 and 160 RPM and
+    the shaft time constant as the supply vessel's (`ThrusterConfig` defaults).
+    """
+    return ThrusterConfig(configuration=tunnels_and_mains_layout(tunnel_arms, main_offset),
+                          thrust_coeff=_coefficients(tunnel_coeff, main_coeff))
 
 
 def allocate(config: ThrusterConfig, tau: FloatArray) -> FloatArray:

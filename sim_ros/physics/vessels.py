@@ -72,7 +72,7 @@ import numpy as np
 
 from sim_ros.physics.integrate import RatesFn, State
 from sim_ros.physics.kinematics import FloatArray, earth_to_body
-from sim_ros.physics.thrusters import ThrusterConfig
+from sim_ros.physics.thrusters import ThrusterConfig, tunnels_and_mains
 
 # --- thesis models, eq. 5.6-5.7 ---------------------------------------------------------------
 ONEDOF_A = -0.017  # 1/m, quadratic damping coefficient a (eq. 5.6)
@@ -110,21 +110,6 @@ SUPPLY_CURRENT_SPEED = 0.5  # m/s, MSS SIMsupply.m
 SUPPLY_CURRENT_DIRECTION = math.radians(20.0)  # rad, β_c in MSS SIMsupply.m
 
 SEA_WATER_DENSITY = 1025.0  # kg/m³, ρ
-
-
-def tunnels_and_mains(tunnel_arms: tuple[float, float, float, float], main_offset: float,
-                      tunnel_coeff: float, main_coeff: float) -> ThrusterConfig:
-    """The supply vessel's thruster layout (anchors §2) for another hull.
-
-    Four tunnel thrusters (sway) at the lever arms `tunnel_arms` [m, + forward], two main
-    propellers (surge) `main_offset` [m] to port and starboard; thrust coefficients K
-    [N/RPM²] `tunnel_coeff` and `main_coeff` (n_max 250 and 160 RPM, `ThrusterConfig`).
-    """
-    configuration = np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 1.0],
-                              [1.0, 1.0, 1.0, 1.0, 0.0, 0.0],
-                              [*tunnel_arms, -main_offset, main_offset]])
-    return ThrusterConfig(configuration=configuration,
-                          thrust_coeff=np.array([tunnel_coeff] * 4 + [main_coeff] * 2))
 
 
 @dataclass(frozen=True)

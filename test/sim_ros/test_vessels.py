@@ -128,6 +128,16 @@ def test_crewboat_time_constants_and_thrusters() -> None:
     assert vessels.make_vessel('crewboat') is vessels.CREWBOAT
 
 
+def test_tunnels_and_mains_layout_is_the_supply_vessels() -> None:
+    """The hulls' thruster layout, at the supply vessel's lever arms, is its configuration."""
+    supply = thrusters.ThrusterConfig()
+    np.testing.assert_array_equal(
+        thrusters.tunnels_and_mains_layout((30.0, 22.0, -22.0, -30.0), 8.0),
+        supply.configuration)
+    same = thrusters.tunnels_and_mains((30.0, 22.0, -22.0, -30.0), 8.0, 3.2, 31.2)
+    np.testing.assert_array_equal(same.input_matrix, supply.input_matrix)
+
+
 def test_supply_surge_step_response_first_order() -> None:
     """Surge is decoupled: u(t) = F/D11 (1 − e^{−t/T}); 63.2 % is reached at T = M11/D11."""
     force = 5e4  # N

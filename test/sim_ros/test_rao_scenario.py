@@ -20,17 +20,20 @@ from sim_ros.simulation import (
     simulate_in_loop,
 )
 
-# scenario → (vessel, largest heading setpoint step [rad])
-RAO_SCENARIOS = {'rao_supply': ('supply', math.pi / 2), 'rao_swell': ('supply', math.pi / 2),
-                 'rao_tanker': ('tanker', math.pi / 3), 'rao_workboat': ('workboat', math.pi / 2),
-                 'rao_crewboat': ('crewboat', math.pi / 2)}
+# scenario → (vessel, largest heading setpoint step [rad], largest WF yaw std [rad]: the short
+# hulls yaw more per unit wave slope)
+RAO_SCENARIOS = {'rao_supply': ('supply', math.pi / 2, 0.03),
+                 'rao_swell': ('supply', math.pi / 2, 0.03),
+                 'rao_tanker': ('tanker', math.pi / 3, 0.03),
+                 'rao_workboat': ('workboat', math.pi / 2, 0.05),
+                 'rao_crewboat': ('crewboat', math.pi / 2, 0.05)}
 
 
 @pytest.mark.parametrize('name', RAO_SCENARIOS)
 def test_rao_scenario_loads_and_runs(name: str) -> None:
     """Loads, reports ω_p, truth − LF is the RAO motion at the LF heading, deterministic."""
     scn = load_scenario(name)
-    vessel, largest_turn = RAO_SCENARIOS[name]
+    vessel, largest_turn, yaw_std = RAO_SCENARIOS[name]
     assert scn.waves.model == 'rao' and scn.vessel == vessel and scn.controller.enabled
     assert len(scn.controller.setpoint_schedule) >= 4
     yaw_steps = np.diff([0.0] + [row[3] for row in scn.controller.setpoint_schedule])
@@ -41,7 +44,7 @@ def test_rao_scenario_loads_and_runs(name: str) -> None:
     wave = rec.truth_pose - rec.truth_lf_pose
     wave[:, 2] = wrap_angles(wave[:, 2])
     assert 0.1 < float(np.std(wave[:, :2])) < 1.5
-    assert 0.002 < float(np.std(wave[:, 2])) < 0.05
+    assert 0.002 < float(np.std(wave[:, 2])) < yaw_std
     sea = Simulator(scn).wave_components()
     assert sea is not None
     expected = wave_motion(sea, scn.waves.rao, rec.t, rec.truth_lf_pose[:, 2])
